@@ -1,0 +1,53 @@
+"""``companion`` command line: ``plan``, ``fly``, ``demo``.
+
+Each subcommand lives in ``companion.commands.<name>`` with
+``add_arguments(parser)`` and ``run(args) -> int``. Bad input of any kind
+(``InputError``) ends here as one line on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from .errors import InputError
+
+COMMANDS = {
+    "plan": "plan a coverage mission: maps -> ISOA -> way-points -> LQR trajectory -> plan.json",
+    "fly": "fly a planned mission over MAVLink against a vehicle (the bundled SITL or a flight stack)",
+    "demo": "start the bundled SITL, plan and fly a bundled mission, write out/",
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="companion", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, help_text in COMMANDS.items():
+        try:
+            module = importlib.import_module(f"companion.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"companion.commands.{name}":
+                raise
+            continue  # subcommand not built yet
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args) or 0)
+    except InputError as exc:
+        print(f"companion {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"companion {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

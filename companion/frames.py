@@ -1,0 +1,167 @@
+"""Frame and unit conversions: the only place where NED/FRD math is written.
+
+Inside the project everything is ENU world / FLU body, z up, SI units
+(DESIGN.md). MAVLink speaks NED world / FRD body, [w, x, y, z] quaternions,
+1e7 degrees, mm and cm. The MAVLink encode/decode module of each side
+(``companion.link.codec``, ``sitl.codec``) calls these functions and nothing
+else does.
+
+Conventions
+-----------
+- ENU -> NED: (x, y, z) -> (y, x, -z). The map is its own inverse.
+- FLU -> FRD: (x, y, z) -> (x, -y, -z). Also an involution.
+- Attitude: ``R_enu_flu`` maps body FLU vectors to world ENU vectors.
+  The equivalent NED/FRD rotation is ``R_ned_frd = T_ne @ R_enu_flu @ T_fb``
+  with the two constant permutation/reflection matrices below.
+- Quaternions on the wire are [w, x, y, z] (Hamilton, body FRD -> world NED).
+- Geodetic: a local tangent plane at the mission home (flat-earth, WGS-84
+  radii of curvature), adequate for fields of a few km.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# Constant frame maps (each is its own inverse).
+T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+T_FLU_FRD = np.diag([1.0, -1.0, -1.0])
+
+WGS84_A_M = 6378137.0
+WGS84_F = 1.0 / 298.257223563
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+
+
+def enu2ned(v_enu):
+    """ENU vector(s) (..., 3) -> NED vector(s) (..., 3)."""
+    v = np.asarray(v_enu, dtype=float)
+    return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
+
+
+def ned2enu(v_ned):
+    """NED vector(s) (..., 3) -> ENU vector(s) (..., 3)."""
+    return enu2ned(v_ned)
+
+
+def flu2frd(v_flu):
+    """FLU body vector(s) (..., 3) -> FRD body vector(s) (..., 3)."""
+    v = np.asarray(v_flu, dtype=float)
+    return np.stack([v[..., 0], -v[..., 1], -v[..., 2]], axis=-1)
+
+
+def frd2flu(v_frd):
+    """FRD body vector(s) (..., 3) -> FLU body vector(s) (..., 3)."""
+    return flu2frd(v_frd)
+
+
+def R_enu_flu2ned_frd(R_enu_flu):
+    """Attitude body FLU->world ENU (3x3) -> body FRD->world NED (3x3)."""
+    return T_ENU_NED @ np.asarray(R_enu_flu, dtype=float) @ T_FLU_FRD
+
+
+def R_ned_frd2enu_flu(R_ned_frd):
+    """Attitude body FRD->world NED (3x3) -> body FLU->world ENU (3x3)."""
+    return T_ENU_NED @ np.asarray(R_ned_frd, dtype=float) @ T_FLU_FRD
+
+
+def rotmat2quat_wxyz(R):
+    """Rotation matrix (3x3, proper) -> unit quaternion [w, x, y, z], w >= 0.
+
+    Shepperd's method (numerically safe for every rotation).
+    """
+    R = np.asarray(R, dtype=float)
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0.0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
+def quat_wxyz2rotmat(q):
+    """Unit quaternion [w, x, y, z] -> rotation matrix (3x3). Normalises q."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def rotmat2euler_zyx(R):
+    """Rotation matrix -> (roll, pitch, yaw) in rad, Z-Y-X (aerospace) order.
+
+    For ``R_ned_frd`` this gives MAVLink's ATTITUDE angles.
+    """
+    R = np.asarray(R, dtype=float)
+    roll = math.atan2(R[2, 1], R[2, 2])
+    pitch = -math.asin(max(-1.0, min(1.0, R[2, 0])))
+    yaw = math.atan2(R[1, 0], R[0, 0])
+    return roll, pitch, yaw
+
+
+def euler_zyx2rotmat(roll, pitch, yaw):
+    """(roll, pitch, yaw) rad, Z-Y-X order -> rotation matrix."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array([
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ])
+
+
+def yaw_enu2ned(yaw_enu_rad):
+    """Heading of the body x axis: ENU (from east, CCW) -> NED (from north, CW)."""
+    return wrap_pi(math.pi / 2.0 - yaw_enu_rad)
+
+
+def yaw_ned2enu(yaw_ned_rad):
+    """Heading of the body x axis: NED (from north, CW) -> ENU (from east, CCW)."""
+    return wrap_pi(math.pi / 2.0 - yaw_ned_rad)
+
+
+def wrap_pi(a):
+    """Wrap an angle (rad) to [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _radii_m(lat_rad):
+    s = math.sin(lat_rad)
+    den = math.sqrt(1.0 - WGS84_E2 * s * s)
+    r_n = WGS84_A_M / den  # prime vertical
+    r_m = WGS84_A_M * (1.0 - WGS84_E2) / den ** 3  # meridian
+    return r_m, r_n
+
+
+def enu2geodetic(x_east_m, y_north_m, z_up_m, lat0_deg, lon0_deg, alt0_m):
+    """Local ENU (m) about a home point -> (lat_deg, lon_deg, alt_m).
+
+    Flat-earth tangent-plane map; the inverse of ``geodetic2enu``.
+    """
+    lat0 = math.radians(lat0_deg)
+    r_m, r_n = _radii_m(lat0)
+    lat = lat0_deg + math.degrees(y_north_m / r_m)
+    lon = lon0_deg + math.degrees(x_east_m / (r_n * math.cos(lat0)))
+    return lat, lon, alt0_m + z_up_m
+
+
+def geodetic2enu(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m):
+    """(lat_deg, lon_deg, alt_m) -> local ENU (m) about a home point."""
+    lat0 = math.radians(lat0_deg)
+    r_m, r_n = _radii_m(lat0)
+    y = math.radians(lat_deg - lat0_deg) * r_m
+    x = math.radians(lon_deg - lon0_deg) * r_n * math.cos(lat0)
+    return x, y, alt_m - alt0_m
