@@ -1,0 +1,346 @@
+"""Quadrotor rigid-body plant on SE(3): the paper's eq. (20), z up, ENU/FLU.
+
+Equations (world ENU, body FLU, e3 = (0, 0, 1))::
+
+    p' = v
+    m v' = f R e3 - m g e3 - k_d (v - w)           (k_d = 0: eq. (20) exactly)
+    R' = R [Omega]x
+    J Omega' = -Omega x J Omega + tau
+
+with ``[f, tau] = A @ f_rotor`` (``companion.vehicle.allocation_matrix``),
+per-rotor thrusts limited to ``[0, max_thrust_per_rotor_n]`` and a
+first-order motor lag ``T f_i' = f_cmd_i - f_i``.
+
+Integrator (one physics step of length h, commands held constant):
+
+- motors: exact solution of the lag, ``a = exp(-h/T)``; the force and torque
+  used over the step are the exact mean of the thrust over the step;
+- Omega: classical RK4 on Euler's equation (torque constant over the step);
+- R: ``R <- R Exp(theta)`` (Rodrigues) with the fourth-order Magnus/Hermite
+  rotation vector ``theta = h/2 (W0 + W1) + h^2/12 (W0' - W1' + W0 x W1)``,
+  so R stays on SO(3) to rounding; a Newton polar step every 64 steps removes
+  the rounding drift;
+- p, v: RK4 (Simpson) quadrature of the acceleration with the thrust axis at
+  the start, middle and end of the step: exact for constant acceleration
+  (free fall, hover).
+
+Ground contact: the body origin may not go below the terrain. Touching down
+sets ``landed``: the vehicle rests level (yaw kept) with zero velocity and
+rate, motors keep spinning; it lifts off as soon as the vertical thrust
+exceeds the weight (no sinking, no sliding).
+
+The hot path is plain Python float arithmetic on purpose: numpy calls on
+3-vectors cost about 1 us each, the whole step here costs about as much as
+ten of them (see ``benchmarks/bench_sitl.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from companion.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
+
+_REORTHO_EVERY = 64
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """Physical parameters of the plant.
+
+    Attributes
+    ----------
+    vehicle : VehicleConfig
+        Mass, inertia, rotor geometry, thrust limit, motor time constant.
+    gravity_m_s2 : float
+        g (m/s^2); 0 turns gravity off (tests of the rotational dynamics).
+    drag_n_s_m : float
+        Linear drag coefficient k_d (N s/m) against the air velocity.
+    """
+
+    vehicle: VehicleConfig = VehicleConfig()
+    gravity_m_s2: float = GRAVITY_M_S2
+    drag_n_s_m: float = 0.0
+
+
+def _flat_ground(x: float, y: float) -> float:
+    return -math.inf
+
+
+class Plant:
+    """The rigid body, its four motors and the ground contact.
+
+    Parameters
+    ----------
+    params : PlantParams
+    ground_height : callable (x, y) -> z, optional
+        Terrain height (m, ENU) under a point; default no ground at all.
+    max_ground_m : float
+        An upper bound of ``ground_height`` (m): above it the lookup is skipped.
+
+    State (attributes, plain floats; read them through ``state_arrays``):
+    ``p`` (3,) position ENU (m), ``v`` (3,) velocity ENU (m/s), ``R`` (9,)
+    body FLU -> world ENU rotation, row-major, ``w`` (3,) body rate FLU
+    (rad/s), ``f`` (4,) rotor thrusts (N), ``acc`` (3,) acceleration ENU at the
+    end of the last step (m/s^2), ``landed`` (bool).
+    """
+
+    def __init__(self, params: PlantParams = PlantParams(),
+                 ground_height: Callable[[float, float], float] | None = None,
+                 max_ground_m: float = math.inf) -> None:
+        self.params = params
+        veh = params.vehicle
+        self.ground_height = ground_height or _flat_ground
+        self.max_ground_m = max_ground_m if ground_height is not None else -math.inf
+        A = allocation_matrix(veh)
+        self._A = tuple(tuple(float(a) for a in row) for row in A)
+        self._m = float(veh.mass_kg)
+        self._g = float(params.gravity_m_s2)
+        self._J = tuple(float(j) for j in veh.inertia_kg_m2)
+        self._fmax = float(veh.max_thrust_per_rotor_n)
+        self._T = float(veh.motor_time_constant_s)
+        self._kd = float(params.drag_n_s_m)
+        self._lag_h = None
+        self._lag_a = 0.0
+        self._lag_b = 0.0
+        self._count = 0
+        self.impact_speed_m_s = 0.0
+        self.set_state((0.0, 0.0, 0.0))
+
+    # ------------------------------------------------------------------ state
+    def set_state(self, p, v=(0.0, 0.0, 0.0), R=None, w=(0.0, 0.0, 0.0), f=None,
+                  landed: bool = False) -> None:
+        """Set the full state (arrays or sequences; R 3x3 body FLU -> world ENU).
+
+        ``f`` None: rotors at zero thrust.
+        """
+        self.p = tuple(float(x) for x in p)
+        self.v = tuple(float(x) for x in v)
+        if R is None:
+            self.R = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+        else:
+            self.R = tuple(float(x) for x in np.asarray(R, dtype=float).reshape(9))
+        self.w = tuple(float(x) for x in w)
+        self.f = (0.0, 0.0, 0.0, 0.0) if f is None else tuple(float(x) for x in f)
+        self.landed = bool(landed)
+        self.acc = (0.0, 0.0, 0.0)
+
+    def state_arrays(self):
+        """(p, v, R 3x3, w, acc, f) as numpy arrays (copies)."""
+        return (np.array(self.p), np.array(self.v), np.array(self.R).reshape(3, 3),
+                np.array(self.w), np.array(self.acc), np.array(self.f))
+
+    # ------------------------------------------------------------------- step
+    def step(self, cmd, h: float, wind_enu_m_s=(0.0, 0.0, 0.0)) -> None:
+        """Advance the state by ``h`` seconds with the motor commands held.
+
+        Parameters
+        ----------
+        cmd : sequence of 4 floats
+            Normalised motor commands (PX4 order), clipped to [0, 1];
+            commanded thrust ``cmd_i * max_thrust_per_rotor_n``.
+        h : float
+            Step (s).
+        wind_enu_m_s : 3 floats
+            Air velocity (ENU, m/s), used by the drag term only.
+        """
+        fmax = self._fmax
+        # --- motors: exact first-order lag, exact mean thrust over the step
+        if h != self._lag_h:
+            self._lag_h = h
+            if self._T > 0.0:
+                self._lag_a = math.exp(-h / self._T)
+                self._lag_b = self._T / h * (1.0 - self._lag_a)
+            else:
+                self._lag_a = self._lag_b = 0.0
+        la, lb = self._lag_a, self._lag_b
+        c0, c1, c2, c3 = cmd
+        c0 = fmax * (0.0 if c0 < 0.0 else 1.0 if c0 > 1.0 else c0)
+        c1 = fmax * (0.0 if c1 < 0.0 else 1.0 if c1 > 1.0 else c1)
+        c2 = fmax * (0.0 if c2 < 0.0 else 1.0 if c2 > 1.0 else c2)
+        c3 = fmax * (0.0 if c3 < 0.0 else 1.0 if c3 > 1.0 else c3)
+        f0, f1, f2, f3 = self.f
+        self.f = (c0 + (f0 - c0) * la, c1 + (f1 - c1) * la, c2 + (f2 - c2) * la, c3 + (f3 - c3) * la)
+        f0 = c0 + (f0 - c0) * lb
+        f1 = c1 + (f1 - c1) * lb
+        f2 = c2 + (f2 - c2) * lb
+        f3 = c3 + (f3 - c3) * lb
+        A0, A1, A2, A3 = self._A
+        F = A0[0] * f0 + A0[1] * f1 + A0[2] * f2 + A0[3] * f3
+        tx = A1[0] * f0 + A1[1] * f1 + A1[2] * f2 + A1[3] * f3
+        ty = A2[0] * f0 + A2[1] * f1 + A2[2] * f2 + A2[3] * f3
+        tz = A3[0] * f0 + A3[1] * f1 + A3[2] * f2 + A3[3] * f3
+
+        m, g, kd = self._m, self._g, self._kd
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self.R
+        if self.landed:
+            # Lift-off when the vertical thrust beats the weight (drag of a
+            # vehicle at rest in the wind is not enough to lift or slide it).
+            if F * r22 <= m * g:
+                self.v = (0.0, 0.0, 0.0)
+                self.w = (0.0, 0.0, 0.0)
+                self.acc = (0.0, 0.0, 0.0)
+                return
+            self.landed = False
+
+        # --- rotation: RK4 on J W' = -W x J W + tau (tau constant)
+        Jx, Jy, Jz = self._J
+        wx, wy, wz = self.w
+
+        # Euler's equation inlined (a nested function costs ~1 us per call here)
+        ix, iy, iz = 1.0 / Jx, 1.0 / Jy, 1.0 / Jz
+        cyz, czx, cxy = Jz - Jy, Jx - Jz, Jy - Jx          # (W x J W) = (cyz wy wz, czx wz wx, cxy wx wy)
+        k1x = (tx - cyz * wy * wz) * ix
+        k1y = (ty - czx * wz * wx) * iy
+        k1z = (tz - cxy * wx * wy) * iz
+        hh = 0.5 * h
+        ax, ay, az = wx + hh * k1x, wy + hh * k1y, wz + hh * k1z
+        k2x = (tx - cyz * ay * az) * ix
+        k2y = (ty - czx * az * ax) * iy
+        k2z = (tz - cxy * ax * ay) * iz
+        ax, ay, az = wx + hh * k2x, wy + hh * k2y, wz + hh * k2z
+        k3x = (tx - cyz * ay * az) * ix
+        k3y = (ty - czx * az * ax) * iy
+        k3z = (tz - cxy * ax * ay) * iz
+        ax, ay, az = wx + h * k3x, wy + h * k3y, wz + h * k3z
+        k4x = (tx - cyz * ay * az) * ix
+        k4y = (ty - czx * az * ax) * iy
+        k4z = (tz - cxy * ax * ay) * iz
+        h6 = h / 6.0
+        vx1 = wx + h6 * (k1x + 2.0 * (k2x + k3x) + k4x)
+        vy1 = wy + h6 * (k1y + 2.0 * (k2y + k3y) + k4y)
+        vz1 = wz + h6 * (k1z + 2.0 * (k2z + k3z) + k4z)
+        e1x = (tx - cyz * vy1 * vz1) * ix
+        e1y = (ty - czx * vz1 * vx1) * iy
+        e1z = (tz - cxy * vx1 * vy1) * iz
+        h12 = h * h / 12.0
+        thx = hh * (wx + vx1) + h12 * (k1x - e1x + wy * vz1 - wz * vy1)
+        thy = hh * (wy + vy1) + h12 * (k1y - e1y + wz * vx1 - wx * vz1)
+        thz = hh * (wz + vz1) + h12 * (k1z - e1z + wx * vy1 - wy * vx1)
+        self.w = (vx1, vy1, vz1)
+
+        n00, n01, n02, n10, n11, n12, n20, n21, n22 = self.R = rotate_right(self.R, thx, thy, thz)
+        self._count += 1
+        if self._count >= _REORTHO_EVERY:
+            self._count = 0
+            n00, n01, n02, n10, n11, n12, n20, n21, n22 = self.R = polar_step(self.R)
+
+        # --- translation: Simpson/RK4 quadrature, exact for constant acceleration
+        Fm = F / m
+        px, py, pz = self.p
+        ux, uy, uz = self.v
+        ax0 = Fm * r02
+        ay0 = Fm * r12
+        az0 = Fm * r22 - g
+        ax1 = Fm * n02
+        ay1 = Fm * n12
+        az1 = Fm * n22 - g
+        axm = 0.5 * (ax0 + ax1)
+        aym = 0.5 * (ay0 + ay1)
+        azm = 0.5 * (az0 + az1)
+        if kd != 0.0:
+            # Linear drag on the relative air velocity, predicted explicitly
+            # (k_d/m ~ 0.1/s: no stiffness at 1 kHz).
+            c = kd / m
+            gx, gy, gz = wind_enu_m_s
+            rx, ry, rz = ux - gx, uy - gy, uz - gz
+            ax0 -= c * rx
+            ay0 -= c * ry
+            az0 -= c * rz
+            axm -= c * (rx + hh * ax0)
+            aym -= c * (ry + hh * ay0)
+            azm -= c * (rz + hh * az0)
+            ax1 -= c * (rx + h * axm)
+            ay1 -= c * (ry + h * aym)
+            az1 -= c * (rz + h * azm)
+        hs = h * h / 6.0
+        nvx = ux + h6 * (ax0 + 4.0 * axm + ax1)
+        nvy = uy + h6 * (ay0 + 4.0 * aym + ay1)
+        nvz = uz + h6 * (az0 + 4.0 * azm + az1)
+        npx = px + h * ux + hs * (ax0 + 2.0 * axm)
+        npy = py + h * uy + hs * (ay0 + 2.0 * aym)
+        npz = pz + h * uz + hs * (az0 + 2.0 * azm)
+
+        # Terrain lookup only when low enough to touch the highest ground.
+        if npz <= self.max_ground_m and nvz <= 0.0:
+            zg = self.ground_height(npx, npy)
+            if npz <= zg:
+                self._touch_down(npx, npy, zg, nvx, nvy, nvz)
+                return
+        self.p = (npx, npy, npz)
+        self.v = (nvx, nvy, nvz)
+        self.acc = (ax1, ay1, az1)
+
+    def _touch_down(self, x, y, zg, vx, vy, vz) -> None:
+        self.impact_speed_m_s = math.sqrt(vx * vx + vy * vy + vz * vz)
+        self.p = (x, y, zg)
+        self.v = (0.0, 0.0, 0.0)
+        self.w = (0.0, 0.0, 0.0)
+        self.acc = (0.0, 0.0, 0.0)
+        r00, r10 = self.R[0], self.R[3]
+        yaw = math.atan2(r10, r00) if abs(r00) + abs(r10) > 1e-9 else 0.0
+        c, s = math.cos(yaw), math.sin(yaw)
+        self.R = (c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
+        self.landed = True
+
+
+def rotate_right(R, thx: float, thy: float, thz: float):
+    """``R Exp(theta)`` for a row-major 9-tuple R and a rotation vector theta
+    (rad, body frame): Rodrigues' formula, plain floats.
+
+    ``Exp(theta) = I + a [theta]x + b [theta]x^2`` with ``a = sin|t|/|t|``
+    and ``b = (1 - cos|t|)/|t|^2`` written as ``2 sin^2(|t|/2)/|t|^2`` (no
+    cancellation for small angles).
+    """
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+    t2 = thx * thx + thy * thy + thz * thz
+    if t2 > 1e-12:
+        ang = math.sqrt(t2)
+        a = math.sin(ang) / ang
+        s = math.sin(0.5 * ang)
+        b = 2.0 * s * s / t2
+    else:  # Taylor series, exact to rounding for |theta| < 1e-6
+        a = 1.0 - t2 / 6.0
+        b = 0.5 - t2 / 24.0
+    xx, yy, zz = thx * thx, thy * thy, thz * thz
+    xy, xz, yz = thx * thy, thx * thz, thy * thz
+    E00 = 1.0 - b * (yy + zz)
+    E11 = 1.0 - b * (xx + zz)
+    E22 = 1.0 - b * (xx + yy)
+    E01 = b * xy - a * thz
+    E10 = b * xy + a * thz
+    E02 = b * xz + a * thy
+    E20 = b * xz - a * thy
+    E12 = b * yz - a * thx
+    E21 = b * yz + a * thx
+    return (r00 * E00 + r01 * E10 + r02 * E20, r00 * E01 + r01 * E11 + r02 * E21,
+            r00 * E02 + r01 * E12 + r02 * E22,
+            r10 * E00 + r11 * E10 + r12 * E20, r10 * E01 + r11 * E11 + r12 * E21,
+            r10 * E02 + r11 * E12 + r12 * E22,
+            r20 * E00 + r21 * E10 + r22 * E20, r20 * E01 + r21 * E11 + r22 * E21,
+            r20 * E02 + r21 * E12 + r22 * E22)
+
+
+def polar_step(R):
+    """One Newton step toward the nearest rotation, ``R (3 I - R^T R) / 2``
+    (row-major 9-tuples); quadratic convergence, so one step per 64 physics
+    steps removes the rounding drift of ``rotate_right``."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+    # S = R^T R (symmetric)
+    s00 = r00 * r00 + r10 * r10 + r20 * r20
+    s11 = r01 * r01 + r11 * r11 + r21 * r21
+    s22 = r02 * r02 + r12 * r12 + r22 * r22
+    s01 = r00 * r01 + r10 * r11 + r20 * r21
+    s02 = r00 * r02 + r10 * r12 + r20 * r22
+    s12 = r01 * r02 + r11 * r12 + r21 * r22
+    m00, m11, m22 = 1.5 - 0.5 * s00, 1.5 - 0.5 * s11, 1.5 - 0.5 * s22
+    m01, m02, m12 = -0.5 * s01, -0.5 * s02, -0.5 * s12
+    return (r00 * m00 + r01 * m01 + r02 * m02, r00 * m01 + r01 * m11 + r02 * m12,
+            r00 * m02 + r01 * m12 + r02 * m22,
+            r10 * m00 + r11 * m01 + r12 * m02, r10 * m01 + r11 * m11 + r12 * m12,
+            r10 * m02 + r11 * m12 + r12 * m22,
+            r20 * m00 + r21 * m01 + r22 * m02, r20 * m01 + r21 * m11 + r22 * m12,
+            r20 * m02 + r21 * m12 + r22 * m22)

@@ -1,0 +1,240 @@
+"""Sensor models of the SITL: IMU, magnetometer, position/velocity and
+rangefinders. Body frame FLU, world ENU; the MAVLink codec converts to FRD/NED.
+
+Noise (the paper, Section 4: white noise of variance 5e-4 "on the vector
+measurements and on Omega"). The paper's vector measurements are unit
+directions, so ``vector_variance`` is the per-component variance of the
+*normalised* accelerometer and magnetometer directions: the raw vectors get
+white noise of standard deviation ``sqrt(vector_variance) * |vector|``,
+
+- accelerometer: ``a_m = R^T (a + g e3) + b_a + n_a``, std(n_a) = sqrt(var) |R^T (a + g e3)|
+  (specific force: +g along body z at rest, zero in free fall);
+- magnetometer: ``m_m = R^T m_earth + n_m``, std(n_m) = sqrt(var) |m_earth|;
+- gyroscope: ``W_m = W + b_W + n_W``, var(n_W) = ``gyro_variance``;
+- position / velocity (GNSS/mocap-like): truth + white noise of the
+  configured std (0 by default, the paper's mocap-like case);
+- rangefinders: the minimum distance over a fan of rays (centre and the four
+  edge midpoints of the field of view) cast into ``World``, plus white noise
+  ``range_std_m``; ``None`` when nothing is within ``max_m``, clamped up to
+  ``min_m`` below it.
+
+Every random draw comes from the ``numpy.random.Generator`` passed in.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.mission.sim import RangefinderConfig, SimConfig
+
+from .world import World
+
+# MAV_SENSOR_ORIENTATION -> unit direction in body FLU. The MAVLink rotations
+# are about FRD axes: YAW_k45 turns forward toward the right (-y in FLU);
+# PITCH_90 points up, PITCH_270 down.
+_DOWN, _UP = 25, 24
+
+
+def orientation_direction_flu(orientation: int) -> tuple[float, float, float]:
+    """Body FLU unit vector of a MAV_SENSOR_ORIENTATION (0..7, 24, 25)."""
+    if orientation == _DOWN:
+        return (0.0, 0.0, -1.0)
+    if orientation == _UP:
+        return (0.0, 0.0, 1.0)
+    if 0 <= orientation <= 7:
+        a = math.radians(45.0 * orientation)
+        return (_clean(math.cos(a)), _clean(-math.sin(a)), 0.0)
+    raise ValueError(f"unsupported rangefinder orientation {orientation}")
+
+
+def _clean(x: float) -> float:
+    return 0.0 if abs(x) < 1e-15 else x
+
+
+def fan_directions_flu(cfg: RangefinderConfig) -> tuple[tuple[float, float, float], ...]:
+    """Body FLU unit rays of a rangefinder: the axis, then the four edge
+    midpoints of its field of view (horizontal = about body z for a
+    horizontal sensor, about body y... i.e. along body y for up/down ones)."""
+    d = orientation_direction_flu(cfg.orientation)
+    if cfg.orientation in (_DOWN, _UP):
+        hax, vax = (0.0, 1.0, 0.0), (1.0, 0.0, 0.0)     # across-track, along-track
+    else:
+        hax = (-d[1], d[0], 0.0)                       # horizontal, perpendicular to d
+        vax = (0.0, 0.0, 1.0)
+    rays = [d]
+    th, tv = math.tan(0.5 * math.radians(cfg.hfov_deg)), math.tan(0.5 * math.radians(cfg.vfov_deg))
+    for ax, t in ((hax, th), (vax, tv)):
+        if t <= 0.0:
+            continue
+        for sgn in (1.0, -1.0):
+            r = tuple(d[i] + sgn * t * ax[i] for i in range(3))
+            n = math.sqrt(sum(x * x for x in r))
+            rays.append(tuple(x / n for x in r))
+    return tuple(rays)
+
+
+@dataclass(frozen=True)
+class RangeReading:
+    """One DISTANCE_SENSOR reading.
+
+    Attributes
+    ----------
+    sensor_id : int
+    orientation : int
+        MAV_SENSOR_ORIENTATION.
+    distance_m : float or None
+        Measured distance (m); None: no return within ``max_m``.
+    min_m, max_m : float
+        Range limits (m).
+    hfov_rad, vfov_rad : float
+        Full fields of view (rad).
+    """
+
+    sensor_id: int
+    orientation: int
+    distance_m: float | None
+    min_m: float
+    max_m: float
+    hfov_rad: float
+    vfov_rad: float
+
+
+@dataclass(frozen=True)
+class ImuSample:
+    """Accelerometer (specific force, m/s^2), gyro (rad/s), magnetometer (gauss), body FLU (3,)."""
+
+    accel_flu_m_s2: np.ndarray
+    gyro_flu_rad_s: np.ndarray
+    mag_flu_gauss: np.ndarray
+
+
+class Rangefinder:
+    """A body-fixed rangefinder with its schedule."""
+
+    def __init__(self, cfg: RangefinderConfig, first_due_us: int) -> None:
+        self.cfg = cfg
+        self.rays = fan_directions_flu(cfg)
+        self.period_us = max(1, int(round(1e6 / cfg.rate_hz)))
+        self.next_due_us = int(first_due_us)
+        self.hfov_rad = math.radians(cfg.hfov_deg)
+        self.vfov_rad = math.radians(cfg.vfov_deg)
+
+    def true_distance(self, world: World, p, R) -> float:
+        """Minimum ray distance (m, inf if none within max) from p (3-tuple) with R (row-major 9-tuple)."""
+        ox, oy, oz = p
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+        lim = self.cfg.max_m
+        best = math.inf
+        for bx, by, bz in self.rays:
+            dx = r00 * bx + r01 * by + r02 * bz
+            dy = r10 * bx + r11 * by + r12 * bz
+            dz = r20 * bx + r21 * by + r22 * bz
+            t = world.raycast(ox, oy, oz, dx, dy, dz, lim)
+            if t < best:
+                best = t
+                lim = t
+        return best
+
+
+class SensorSuite:
+    """All sensors of the vehicle (pure: state in, readings out).
+
+    Parameters
+    ----------
+    sim : SimConfig
+        Noise, Earth field and rangefinder set.
+    world : World
+    rng : numpy.random.Generator
+    """
+
+    def __init__(self, sim: SimConfig, world: World, rng: np.random.Generator) -> None:
+        self.sim = sim
+        self.world = world
+        self.rng = rng
+        nz = sim.noise
+        self.mag_earth = np.array(sim.magnetic_field_enu_gauss, dtype=float)
+        self.acc_rel_std = math.sqrt(nz.vector_variance)
+        self.mag_std = math.sqrt(nz.vector_variance) * float(np.linalg.norm(self.mag_earth))
+        self.gyro_std = math.sqrt(nz.gyro_variance)
+        self.gyro_bias = np.array(nz.gyro_bias_rad_s, dtype=float)
+        self.accel_bias = np.array(nz.accel_bias_m_s2, dtype=float)
+        self._mag = tuple(float(x) for x in self.mag_earth)
+        self._gyro_bias = tuple(float(x) for x in self.gyro_bias)
+        self._accel_bias = tuple(float(x) for x in self.accel_bias)
+        self.pos_std = nz.position_std_m
+        self.vel_std = nz.velocity_std_m_s
+        self.range_std = nz.range_std_m
+        cfgs = sim.rangefinders_or_default
+        # Stagger the first readings over one period so the ray casting of
+        # several sensors does not land on the same frame.
+        self.rangefinders = tuple(
+            Rangefinder(c, int(round(1e6 / c.rate_hz)) * k // max(1, len(cfgs))) for k, c in enumerate(cfgs))
+
+    def imu(self, R: np.ndarray, acc_enu_m_s2, omega_flu_rad_s, gravity_m_s2: float) -> ImuSample:
+        """IMU and magnetometer sample.
+
+        Parameters
+        ----------
+        R : (3, 3) body FLU -> world ENU
+        acc_enu_m_s2 : (3,) true acceleration (world)
+        omega_flu_rad_s : (3,) true body rate
+        gravity_m_s2 : g
+        """
+        R9 = tuple(float(x) for x in np.asarray(R, dtype=float).reshape(9))
+        return self.imu_floats(R9, tuple(float(x) for x in acc_enu_m_s2),
+                               tuple(float(x) for x in omega_flu_rad_s), gravity_m_s2)
+
+    def imu_floats(self, R, acc, w, gravity_m_s2: float) -> ImuSample:
+        """``imu`` on plain floats (R row-major 9-tuple, acc and w 3-tuples): the hot path."""
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+        ax, ay, az = acc[0], acc[1], acc[2] + gravity_m_s2
+        sx = r00 * ax + r10 * ay + r20 * az          # R^T (a + g e3)
+        sy = r01 * ax + r11 * ay + r21 * az
+        sz = r02 * ax + r12 * ay + r22 * az
+        mx, my, mz = self._mag
+        bx = r00 * mx + r10 * my + r20 * mz          # R^T m_earth
+        by = r01 * mx + r11 * my + r21 * mz
+        bz = r02 * mx + r12 * my + r22 * mz
+        n = self.rng.standard_normal(9).tolist()
+        ka = self.acc_rel_std * math.sqrt(sx * sx + sy * sy + sz * sz)
+        ba, bg = self._accel_bias, self._gyro_bias
+        kg, km = self.gyro_std, self.mag_std
+        return ImuSample(
+            np.array((sx + ba[0] + ka * n[0], sy + ba[1] + ka * n[1], sz + ba[2] + ka * n[2])),
+            np.array((w[0] + bg[0] + kg * n[3], w[1] + bg[1] + kg * n[4], w[2] + bg[2] + kg * n[5])),
+            np.array((bx + km * n[6], by + km * n[7], bz + km * n[8])))
+
+    def position(self, pos_enu_m, vel_enu_m_s) -> tuple[np.ndarray, np.ndarray]:
+        """(position ENU m, velocity ENU m/s) measurements (3,) each."""
+        p = np.array(pos_enu_m, dtype=float)
+        v = np.array(vel_enu_m_s, dtype=float)
+        if self.pos_std > 0:
+            p = p + self.pos_std * self.rng.standard_normal(3)
+        if self.vel_std > 0:
+            v = v + self.vel_std * self.rng.standard_normal(3)
+        return p, v
+
+    def ranges(self, time_us: int, p, R) -> tuple[RangeReading, ...]:
+        """Readings of the rangefinders due at ``time_us`` (p 3-tuple, R row-major 9-tuple)."""
+        out = []
+        for rf in self.rangefinders:
+            if time_us < rf.next_due_us:
+                continue
+            while rf.next_due_us <= time_us:
+                rf.next_due_us += rf.period_us
+            out.append(self.range_reading(rf, p, R))
+        return tuple(out)
+
+    def range_reading(self, rf: Rangefinder, p, R) -> RangeReading:
+        cfg = rf.cfg
+        d = rf.true_distance(self.world, p, R)
+        if self.range_std > 0:
+            d = d + self.range_std * float(self.rng.standard_normal())
+        if not d <= cfg.max_m:
+            dist = None
+        else:
+            dist = max(d, cfg.min_m)
+        return RangeReading(cfg.id, cfg.orientation, dist, cfg.min_m, cfg.max_m, rf.hfov_rad, rf.vfov_rad)

@@ -1,0 +1,383 @@
+"""The simulated world: terrain (DEM), vine rows (OGM extruded to a canopy
+height) and the mission's unknown obstacles, with ray casting for the
+rangefinders.
+
+Everything is in the map's local ENU frame (m). Pure: the maps come in as
+``companion.maps.grid`` objects; ``load_world`` is the only function that
+reads files.
+
+Ray casting (``World.raycast``) returns the distance along a unit ray to the
+first surface, ``math.inf`` if none within ``max_m``:
+
+- terrain: sphere tracing on the height field with its Lipschitz bound (the
+  largest slope of the bilinear DEM), exact in one step over flat ground;
+- vine rows: a grid traversal in the OGM's frame that leaps through open
+  space by the Euclidean distance transform (a distance to the nearest
+  occupied cell that is a safe lower bound, minus a cell diagonal) and
+  walks cell by cell (Amanatides-Woo) near the rows; an occupied cell is a
+  box from the DEM (at the cell centre) up to ``canopy_height_m``;
+- obstacles: analytic ray/cylinder (with caps) and ray/box (slab) tests,
+  standing on the terrain under their centre.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy import ndimage
+
+from companion.maps.grid import ElevationModel, OccupancyGrid
+from companion.mission.sim import ObstacleConfig
+
+if TYPE_CHECKING:  # pragma: no cover
+    from companion.mission.schema import Mission
+
+_INF = math.inf
+_EPS_T = 1e-9          # nudge (m) past a cell boundary during the traversal
+_HIT_EPS_M = 1e-6      # terrain sphere tracing stops this close to the ground
+_MAX_TERRAIN_ITERS = 200
+
+
+class Terrain:
+    """Bilinear height field between DEM cell centres, clamped at the edges.
+
+    NODATA cells take the value of the nearest valid cell. ``None`` for the
+    model: flat ground at ``z = 0``.
+    """
+
+    def __init__(self, dem: ElevationModel | None = None, flat_height_m: float = 0.0) -> None:
+        if dem is None:
+            self.flat = True
+            self.z = float(flat_height_m)
+            self.max_slope = 0.0
+            self.min_height_m = self.max_height_m = self.z
+            self.height = self._flat_height
+            return
+        h = np.asarray(dem.heights_m, dtype=float)
+        if h.ndim != 2 or h.size == 0:
+            raise ValueError("DEM heights must be a non-empty 2D array")
+        bad = ~np.isfinite(h)
+        if bad.all():
+            raise ValueError(f"{dem.source}: DEM has no valid cell")
+        if bad.any():
+            idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+            h = h[tuple(idx)]
+        self.flat = bool(np.all(h == h.flat[0]))
+        self.z = float(h.flat[0])
+        self.min_height_m = float(h.min())
+        self.max_height_m = float(h.max())
+        self._h = h.tolist()
+        self._x0, self._y0, self._cs = float(dem.x0_m), float(dem.y0_m), float(dem.cellsize_m)
+        self._nr, self._nc = h.shape
+        # Lipschitz bound of the bilinear interpolant: on each cell the
+        # gradient is bounded by the largest edge difference per axis.
+        gx = np.abs(np.diff(h, axis=1)).max() if h.shape[1] > 1 else 0.0
+        gy = np.abs(np.diff(h, axis=0)).max() if h.shape[0] > 1 else 0.0
+        self.max_slope = float(math.hypot(gx, gy) / self._cs)
+        self.height = self._flat_height if self.flat else self._bilinear
+
+    def _flat_height(self, x: float, y: float) -> float:
+        return self.z
+
+    def _bilinear(self, x: float, y: float) -> float:
+        fx = (x - self._x0) / self._cs
+        fy = (y - self._y0) / self._cs
+        nc1, nr1 = self._nc - 1, self._nr - 1
+        fx = 0.0 if fx < 0.0 else (nc1 if fx > nc1 else fx)
+        fy = 0.0 if fy < 0.0 else (nr1 if fy > nr1 else fy)
+        j = int(fx)
+        i = int(fy)
+        if j >= nc1:
+            j = nc1 - 1 if nc1 > 0 else 0
+        if i >= nr1:
+            i = nr1 - 1 if nr1 > 0 else 0
+        tx = fx - j
+        ty = fy - i
+        h = self._h
+        row0 = h[i]
+        row1 = h[i + 1] if nr1 > 0 else row0
+        j1 = j + 1 if nc1 > 0 else j
+        a = row0[j] + (row0[j1] - row0[j]) * tx
+        b = row1[j] + (row1[j1] - row1[j]) * tx
+        return a + (b - a) * ty
+
+    def raycast(self, ox, oy, oz, dx, dy, dz, max_m) -> float:
+        """Distance along the unit ray to the ground (inf if none within max_m)."""
+        hz = oz - self.height(ox, oy)
+        if hz <= 0.0:
+            return 0.0
+        denom = self.max_slope * math.hypot(dx, dy) - dz
+        if denom <= 0.0:
+            return _INF
+        if self.flat:
+            t = hz / -dz
+            return t if t <= max_m else _INF
+        t = 0.0
+        for _ in range(_MAX_TERRAIN_ITERS):
+            t += hz / denom
+            if t > max_m:
+                return _INF
+            hz = oz + dz * t - self.height(ox + dx * t, oy + dy * t)
+            if hz <= _HIT_EPS_M:
+                return t
+        return t  # grazing: converging from above; t is a lower bound close to the hit
+
+
+class RowField:
+    """Vine rows: occupied OGM cells extruded from the DEM to the canopy height."""
+
+    def __init__(self, grid: OccupancyGrid, terrain: Terrain, canopy_height_m: float) -> None:
+        occ = np.asarray(grid.occupied, dtype=bool)
+        self.nr, self.nc = occ.shape
+        self.res = float(grid.resolution_m)
+        self.X0, self.Y0 = float(grid.origin_xy_m[0]), float(grid.origin_xy_m[1])
+        self.c, self.s = math.cos(grid.origin_yaw_rad), math.sin(grid.origin_yaw_rad)
+        self.any = bool(occ.any())
+        self.occ = occ.tolist()
+        if self.any:
+            edt = ndimage.distance_transform_edt(~occ)
+        else:
+            edt = np.full(occ.shape, float(self.nr + self.nc))
+        # Leap length (cells) that provably stays clear of every occupied cell
+        # from any point of the cell: centre distance minus both half diagonals.
+        self.leap = (edt - 1.5).tolist()
+        rows, cols = np.nonzero(occ)
+        base = np.zeros(occ.shape)
+        if rows.size:
+            xs, ys = grid.cell_to_world(rows, cols)
+            base[rows, cols] = [terrain.height(float(x), float(y)) for x, y in zip(xs, ys)]
+        self.base = base.tolist()
+        self.canopy = float(canopy_height_m)
+
+    def _band_hit(self, r, c, oz, dz, t_en, t_ex):
+        base = self.base[r][c]
+        top = base + self.canopy
+        z = oz + dz * t_en
+        if base <= z <= top:
+            return t_en
+        if z > top and dz < 0.0:
+            tc = (top - oz) / dz
+        elif z < base and dz > 0.0:
+            tc = (base - oz) / dz
+        else:
+            return None
+        return tc if tc <= t_ex else None
+
+    def raycast(self, ox, oy, oz, dx, dy, dz, max_m) -> float:
+        if not self.any:
+            return _INF
+        res, c, s = self.res, self.c, self.s
+        ex, ey = ox - self.X0, oy - self.Y0
+        u = (c * ex + s * ey) / res          # column coordinate (cells)
+        v = (-s * ex + c * ey) / res         # row coordinate (cells)
+        du = (c * dx + s * dy) / res         # cells per metre along the ray
+        dv = (-s * dx + c * dy) / res
+        nc, nr = self.nc, self.nr
+        # Clip to the grid box [0, nc] x [0, nr] (slabs).
+        t0, t1 = 0.0, max_m
+        for q, dq, hi in ((u, du, nc), (v, dv, nr)):
+            if dq == 0.0:
+                if q < 0.0 or q >= hi:
+                    return _INF
+            else:
+                ta, tb = (0.0 - q) / dq, (hi - q) / dq
+                if ta > tb:
+                    ta, tb = tb, ta
+                if ta > t0:
+                    t0 = ta
+                if tb < t1:
+                    t1 = tb
+        if t0 > t1:
+            return _INF
+        occ, leap = self.occ, self.leap
+        sp = math.hypot(du, dv)
+        if sp * (t1 - t0) < 1e-12:   # vertical ray: one column of cells
+            r, cc = int(v), int(u)
+            if 0 <= r < nr and 0 <= cc < nc and occ[r][cc]:
+                hit = self._band_hit(r, cc, oz, dz, t0, t1)
+                return _INF if hit is None else hit
+            return _INF
+        t = t0
+        t_in = t0      # exact entry of the current cell (t itself is nudged past boundaries)
+        while t <= t1:
+            uu = u + du * t
+            vv = v + dv * t
+            cc = int(uu) if uu < nc else nc - 1
+            r = int(vv) if vv < nr else nr - 1
+            if cc < 0:
+                cc = 0
+            if r < 0:
+                r = 0
+            if occ[r][cc]:
+                t_ex = _cell_exit(uu, vv, du, dv, cc, r) + t
+                hit = self._band_hit(r, cc, oz, dz, t_in, min(t_ex, t1))
+                if hit is not None:
+                    return hit
+                t_in = t_ex
+                t = t_ex + _EPS_T
+                continue
+            lp = leap[r][cc]
+            if lp > 1.0:
+                t += lp / sp
+                t_in = t
+            else:
+                t_in = t + _cell_exit(uu, vv, du, dv, cc, r)
+                t = t_in + _EPS_T
+        return _INF
+
+
+def _cell_exit(uu, vv, du, dv, cc, r):
+    """Ray parameter (m) from (uu, vv) to the boundary of cell (r, cc)."""
+    if du > 0.0:
+        tu = (cc + 1 - uu) / du
+    elif du < 0.0:
+        tu = (cc - uu) / du
+    else:
+        tu = _INF
+    if dv > 0.0:
+        tv = (r + 1 - vv) / dv
+    elif dv < 0.0:
+        tv = (r - vv) / dv
+    else:
+        tv = _INF
+    return tu if tu < tv else tv
+
+
+class Obstacle:
+    """An obstacle of the mission's ``sim:`` section standing on the terrain."""
+
+    def __init__(self, cfg: ObstacleConfig, terrain: Terrain) -> None:
+        self.cfg = cfg
+        self.kind = cfg.type
+        self.x, self.y = float(cfg.x), float(cfg.y)
+        self.base = terrain.height(self.x, self.y)
+        self.top = self.base + float(cfg.height)
+        self.r = float(cfg.radius)
+        self.hx, self.hy = 0.5 * float(cfg.size_x), 0.5 * float(cfg.size_y)
+        yaw = math.radians(cfg.yaw_deg)
+        self.cy, self.sy = math.cos(yaw), math.sin(yaw)
+
+    def raycast(self, ox, oy, oz, dx, dy, dz, max_m) -> float:
+        if self.kind == "cylinder":
+            return self._cylinder(ox, oy, oz, dx, dy, dz, max_m)
+        return self._box(ox, oy, oz, dx, dy, dz, max_m)
+
+    def _cylinder(self, ox, oy, oz, dx, dy, dz, max_m):
+        ex, ey = ox - self.x, oy - self.y
+        r2 = self.r * self.r
+        best = _INF
+        a = dx * dx + dy * dy
+        c = ex * ex + ey * ey - r2
+        if c <= 0.0 and self.base <= oz <= self.top:
+            return 0.0
+        if a > 0.0:
+            b = ex * dx + ey * dy
+            disc = b * b - a * c
+            if disc >= 0.0:
+                t = (-b - math.sqrt(disc)) / a      # entry through the side
+                if t >= 0.0 and self.base <= oz + dz * t <= self.top:
+                    best = t
+        if dz != 0.0:                               # caps
+            for zc in (self.top, self.base):
+                t = (zc - oz) / dz
+                if 0.0 <= t < best:
+                    px, py = ex + dx * t, ey + dy * t
+                    if px * px + py * py <= r2:
+                        best = t
+        return best if best <= max_m else _INF
+
+    def _box(self, ox, oy, oz, dx, dy, dz, max_m):
+        ex, ey = ox - self.x, oy - self.y
+        c, s = self.cy, self.sy
+        lx, ly = c * ex + s * ey, -s * ex + c * ey   # box frame
+        ldx, ldy = c * dx + s * dy, -s * dx + c * dy
+        t0, t1 = 0.0, max_m
+        for q, dq, lo, hi in ((lx, ldx, -self.hx, self.hx), (ly, ldy, -self.hy, self.hy),
+                              (oz, dz, self.base, self.top)):
+            if dq == 0.0:
+                if q < lo or q > hi:
+                    return _INF
+            else:
+                ta, tb = (lo - q) / dq, (hi - q) / dq
+                if ta > tb:
+                    ta, tb = tb, ta
+                if ta > t0:
+                    t0 = ta
+                if tb < t1:
+                    t1 = tb
+                if t0 > t1:
+                    return _INF
+        return t0
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """Terrain, rows and obstacles: everything a rangefinder can see.
+
+    Build with ``World.build``; ``ground_height(x, y)`` and
+    ``raycast(origin, direction, max_m)`` are the queries.
+    """
+
+    terrain: Terrain
+    rows: RowField | None
+    obstacles: tuple[Obstacle, ...]
+    grid: OccupancyGrid | None = None
+
+    @classmethod
+    def build(cls, grid: OccupancyGrid | None = None, dem: ElevationModel | None = None,
+              obstacles: tuple[ObstacleConfig, ...] = (), canopy_height_m: float = 2.0) -> "World":
+        """Assemble a world from in-memory maps (None: flat ground at z = 0, no rows)."""
+        terrain = Terrain(dem)
+        rows = RowField(grid, terrain, canopy_height_m) if grid is not None else None
+        return cls(terrain, rows, tuple(Obstacle(o, terrain) for o in obstacles), grid)
+
+    def ground_height(self, x: float, y: float) -> float:
+        """Terrain height (m, ENU z) under (x, y)."""
+        return self.terrain.height(x, y)
+
+    def raycast(self, ox, oy, oz, dx, dy, dz, max_m: float) -> float:
+        """Distance (m) along the unit ray (dx, dy, dz) from (ox, oy, oz) to the
+        first surface of terrain, rows or obstacles; ``math.inf`` if none
+        within ``max_m``. Plain floats in and out (hot path)."""
+        best = self.terrain.raycast(ox, oy, oz, dx, dy, dz, max_m)
+        lim = best if best < max_m else max_m
+        if self.rows is not None:
+            t = self.rows.raycast(ox, oy, oz, dx, dy, dz, lim)
+            if t < best:
+                best = t
+                lim = t
+        for ob in self.obstacles:
+            t = ob.raycast(ox, oy, oz, dx, dy, dz, lim)
+            if t < best:
+                best = t
+                lim = t
+        return best
+
+    def first_free_cell_enu(self) -> tuple[float, float] | None:
+        """World (x, y) of the first free OGM cell (row-major from the
+        south-west corner), or None without a grid."""
+        if self.grid is None:
+            return None
+        rows, cols = np.nonzero(self.grid.free)
+        if rows.size == 0:
+            return None
+        x, y = self.grid.cell_to_world(rows[0], cols[0])
+        return float(x), float(y)
+
+
+def load_world(mission: "Mission") -> World:
+    """Read the mission's OGM and DEM and build its ``World`` (the I/O edge).
+
+    Raises
+    ------
+    MapError
+        A map file cannot be loaded (from the companion's loaders).
+    """
+    from companion.maps import load_dem, load_ogm  # noqa: PLC0415  (I/O only here)
+
+    grid = load_ogm(mission.map_path)
+    dem = load_dem(mission.dem_path)
+    return World.build(grid, dem, mission.sim.obstacles, mission.sim.canopy_height_m)
