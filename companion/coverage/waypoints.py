@@ -1,0 +1,146 @@
+"""Way-points with velocity and acceleration constraints (paper Sections 2.2, 2.3.1, 3.3).
+
+Placement
+    Every turning point (corner) of the coverage path is a way-point with
+    velocity 0. Along each straight run between two corners, intermediate
+    way-points are spaced ``d = speed * interval`` apart in 3D arc length
+    along the terrain-following run (1 m/s x 4 s = 4 m as the paper); they
+    are centred on the run, leaving equal end gaps ``g`` in
+    ``[g_min, g_min + d/2)``, ``g_min = max(d/2, speed * t_acc / 2)``, so
+    the vehicle has room to reach cruise speed. Their velocity is the
+    cruise speed along the run's 3D tangent; every acceleration is 0.
+    Altitude: ``z = DEM(x, y) + flight.height_agl_m``.
+Times (first way-point at t = 0)
+    ``t_acc = 1.875 speed / a_ref`` is the time a smooth (quintic) speed
+    ramp from rest to cruise takes with peak acceleration ``a_ref``
+    (default 0.5 m/s^2); the ramp covers ``speed t_acc / 2``.
+
+    * between two intermediate way-points: ``d / speed`` (= the interval);
+    * first and last piece of a run (rest <-> cruise, length ``g``):
+      ``g / speed + t_acc / 2`` (cruise time plus the time lost ramping);
+    * a run too short for intermediate points (rest to rest, length ``L``):
+      ``max(1.875 L / speed, sqrt(5.774 L / a_ref))``, the duration at which
+      the quintic rest-to-rest profile peaks at the cruise speed, or at
+      ``a_ref`` (peak speed and acceleration of that profile are
+      ``1.875 L / T`` and ``5.774 L / T^2``).
+
+    These are the durations of smooth profiles that satisfy the way-point
+    constraints exactly, so the minimum-snap LQR trajectory has little to
+    trade off and passes the way-points closely.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import PlanError
+from ..maps.grid import ElevationModel
+from ..mission.schema import FlightConfig
+from .plan import CoveragePlan
+
+#: reference peak acceleration of the speed ramps (m/s^2)
+A_REF_M_S2 = 0.5
+_QUINTIC_PEAK_V = 1.875       # max of d/dtau (10 tau^3 - 15 tau^4 + 6 tau^5)
+_QUINTIC_PEAK_A = 5.7735      # max of d2/dtau2 of the same (10 / sqrt(3))
+_DENSE_STEP_M = 0.25
+
+
+@dataclass(frozen=True, eq=False)
+class Waypoints:
+    """Time-stamped 3D way-points (ENU, SI) for the LQR trajectory (eq. 3).
+
+    Attributes
+    ----------
+    t_s : (N,) float
+        Times (s), ``t_s[0] = 0``, strictly increasing.
+    p_enu_m : (N, 3) float
+        Positions b_i (ENU, m).
+    v_enu_m_s : (N, 3) float
+        Velocity constraints v_i (ENU, m/s): 0 at corners, cruise along the run elsewhere.
+    a_enu_m_s2 : (N, 3) float
+        Acceleration constraints a_i (ENU, m/s^2): all 0 (Section 2.3.1).
+    corner : (N,) bool
+        True for turning points of the coverage path.
+    """
+
+    t_s: np.ndarray
+    p_enu_m: np.ndarray
+    v_enu_m_s: np.ndarray
+    a_enu_m_s2: np.ndarray
+    corner: np.ndarray
+
+
+def _run(a: np.ndarray, b: np.ndarray, dem: ElevationModel, agl: float):
+    """Dense terrain-following samples of the run a-b: (k, 3) points and (k,) 3D arc length."""
+    L = float(np.hypot(*(b - a)))
+    k = max(2, int(np.ceil(L / _DENSE_STEP_M)) + 1)
+    s = np.linspace(0.0, 1.0, k)[:, None]
+    xy = (1 - s) * a + s * b
+    z = dem.height_at(xy[:, 0], xy[:, 1]) + agl
+    p = np.column_stack([xy, z])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+    return p, arc
+
+
+def extract_waypoints(plan: CoveragePlan, dem: ElevationModel, flight: FlightConfig,
+                      a_ref_m_s2: float = A_REF_M_S2) -> Waypoints:
+    """Way-points of a coverage plan (placement and time allocation: module doc).
+
+    Parameters
+    ----------
+    plan : CoveragePlan
+        ``plan.path_xy_m`` (ENU, m) gives the corners.
+    dem : ElevationModel
+        Terrain heights; must cover the whole path.
+    flight : FlightConfig
+        Height above ground (m), cruise speed (m/s), way-point interval (s).
+    a_ref_m_s2 : float
+        Reference peak acceleration of the speed ramps (m/s^2).
+
+    Raises
+    ------
+    MapError
+        From ``dem.height_at`` (naming the DEM file) if the DEM does not cover the path.
+    PlanError
+        If the path has fewer than two distinct points.
+    """
+    V, dt, agl = flight.speed_m_s, flight.waypoint_interval_s, flight.height_agl_m
+    path = np.asarray(plan.path_xy_m, dtype=float)
+    if len(path) < 2:
+        raise PlanError("<plan>", "the coverage path has fewer than two points")
+    d = V * dt
+    t_acc = _QUINTIC_PEAK_V * V / a_ref_m_s2
+    g_min = max(d / 2, V * t_acc / 2)
+    p0 = np.append(path[0], dem.height_at(path[0, 0], path[0, 1]) + agl)
+    ts, ps, vs, cs = [0.0], [p0], [np.zeros(3)], [True]
+    t = 0.0
+    for a, b in zip(path[:-1], path[1:]):
+        dense, arc = _run(a, b, dem, agl)
+        S = float(arc[-1])
+        n_mid = int(np.floor((S - 2 * g_min) / d)) + 1 if S >= 2 * g_min else 0
+        if n_mid > 0:
+            g = 0.5 * (S - (n_mid - 1) * d)
+            s_mid = g + d * np.arange(n_mid)
+            x = np.interp(s_mid, arc, dense[:, 0])
+            y = np.interp(s_mid, arc, dense[:, 1])
+            z = dem.height_at(x, y) + agl
+            tangent = np.column_stack([np.interp(s_mid, arc, np.gradient(dense[:, i], arc))
+                                       for i in range(3)])
+            tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+            times = t + g / V + t_acc / 2 + dt * np.arange(n_mid)
+            ts.extend(times)
+            ps.extend(np.column_stack([x, y, z]))
+            vs.extend(V * tangent)
+            cs.extend([False] * n_mid)
+            t = times[-1] + g / V + t_acc / 2
+        else:
+            t += max(_QUINTIC_PEAK_V * S / V, np.sqrt(_QUINTIC_PEAK_A * S / a_ref_m_s2))
+        ts.append(t)
+        ps.append(dense[-1])
+        vs.append(np.zeros(3))
+        cs.append(True)
+    n = len(ts)
+    return Waypoints(t_s=np.asarray(ts), p_enu_m=np.asarray(ps), v_enu_m_s=np.asarray(vs),
+                     a_enu_m_s2=np.zeros((n, 3)), corner=np.asarray(cs))
