@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import MapError
+
 
 @dataclass(frozen=True, eq=False)
 class OccupancyGrid:
@@ -84,3 +86,99 @@ class ElevationModel:
     y0_m: float
     cellsize_m: float
     source: str = "<memory>"
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.heights_m.shape
+
+    @property
+    def extent_m(self) -> tuple[float, float, float, float]:
+        """(x_min, x_max, y_min, y_max) of the area the file covers: the outer
+        cell edges, half a cell beyond the outermost cell centres."""
+        rows, cols = self.heights_m.shape
+        h = 0.5 * self.cellsize_m
+        return (self.x0_m - h, self.x0_m + (cols - 1) * self.cellsize_m + h,
+                self.y0_m - h, self.y0_m + (rows - 1) * self.cellsize_m + h)
+
+    def _interp(self, x, y):
+        """Bilinear interpolation; returns (z, ok) with ok False outside or on NODATA.
+
+        Between cell centres this is the usual bilinear patch. In the outer
+        half cell (between the last centre and the grid edge, still inside
+        the file's extent) the edge patch is extended linearly, so a plane is
+        reproduced exactly everywhere in the extent. A NODATA cell that gets
+        a non-zero weight makes the point not covered.
+        """
+        x = np.asarray(x, dtype=float)
+        y = np.asarray(y, dtype=float)
+        x, y = np.broadcast_arrays(x, y)
+        z_grid = self.heights_m
+        rows, cols = z_grid.shape
+        x_min, x_max, y_min, y_max = self.extent_m
+        tol = 1e-9 * max(1.0, self.cellsize_m)
+        inside = (x >= x_min - tol) & (x <= x_max + tol) & (y >= y_min - tol) & (y <= y_max + tol)
+        inside &= np.isfinite(x) & np.isfinite(y)
+        fc = np.where(inside, (x - self.x0_m) / self.cellsize_m, 0.0)
+        fr = np.where(inside, (y - self.y0_m) / self.cellsize_m, 0.0)
+
+        def axis(f, n):
+            if n == 1:
+                i0 = np.zeros(f.shape, dtype=np.intp)
+                return i0, i0, np.zeros(f.shape)
+            i0 = np.clip(np.floor(f).astype(np.intp), 0, n - 2)
+            return i0, i0 + 1, f - i0
+
+        c0, c1, tx = axis(fc, cols)
+        r0, r1, ty = axis(fr, rows)
+        w = ((1 - ty) * (1 - tx), (1 - ty) * tx, ty * (1 - tx), ty * tx)
+        v = (z_grid[r0, c0], z_grid[r0, c1], z_grid[r1, c0], z_grid[r1, c1])
+        z = np.zeros(x.shape)
+        ok = inside.copy()
+        for wi, vi in zip(w, v):
+            bad = np.isnan(vi) & (wi != 0.0)
+            ok &= ~bad
+            z += wi * np.where(np.isnan(vi), 0.0, vi)
+        return z, ok
+
+    def covers(self, x, y) -> np.ndarray:
+        """True where ``height_at`` is defined: inside the extent, no NODATA used.
+
+        Parameters
+        ----------
+        x, y : array_like (broadcast together)
+            ENU map-frame coordinates (m).
+
+        Returns
+        -------
+        bool ndarray of the broadcast shape.
+        """
+        return self._interp(x, y)[1]
+
+    def height_at(self, x, y) -> np.ndarray:
+        """Terrain height (m, map z) at ENU map-frame points, bilinear between cell centres.
+
+        Parameters
+        ----------
+        x, y : array_like (broadcast together)
+            ENU map-frame coordinates (m).
+
+        Returns
+        -------
+        float ndarray of the broadcast shape.
+
+        Raises
+        ------
+        MapError
+            Naming the DEM file, if any point is outside the DEM's extent or
+            its interpolation touches a NODATA cell.
+        """
+        z, ok = self._interp(x, y)
+        if not np.all(ok):
+            xb, yb = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+            bad = np.flatnonzero(~ok.ravel())
+            i = bad[0]
+            x_min, x_max, y_min, y_max = self.extent_m
+            raise MapError(self.source, f"{bad.size} query point(s) not covered by the DEM "
+                           f"(first at x={xb.ravel()[i]:.2f}, y={yb.ravel()[i]:.2f} m; DEM covers "
+                           f"x {x_min:.2f}..{x_max:.2f}, y {y_min:.2f}..{y_max:.2f} m, NODATA excluded)")
+        return z

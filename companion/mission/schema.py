@@ -56,6 +56,7 @@ class CoverageConfig:
     safety_margin_m: float = 0.5
     orientation_step_deg: float = 1.0
     orientation_deg: float | None = None   # force the beam orientation (deg, ENU, from east)
+    min_segment_m: float = 1.0             # main segments shorter than this are not flown (m)
 
     def __post_init__(self) -> None:
         if self.line_spacing_m is not None and self.line_spacing_m <= 0:
@@ -64,6 +65,8 @@ class CoverageConfig:
             raise ValueError("coverage.safety_margin_m must be >= 0")
         if not 0 < self.orientation_step_deg <= 1.0:
             raise ValueError("coverage.orientation_step_deg must be in (0, 1]")
+        if self.min_segment_m <= 0:
+            raise ValueError("coverage.min_segment_m must be > 0")
 
 
 @dataclass(frozen=True)

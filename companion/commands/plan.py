@@ -1,0 +1,108 @@
+"""``companion plan MISSION.yaml -o plan.json [--sample-hz 10] [--plot plan.png]
+[--qgc plan.plan] [--waypoints plan.waypoints]``.
+
+Plans the mission (``companion.planner.plan_mission``), prints a short
+summary and writes the outputs. Every output is rendered in memory first and
+written only when the whole plan succeeded, each through a temporary file
+in the target directory and ``os.replace``: bad input leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+
+from ..errors import InputError
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("mission", help="mission YAML file")
+    parser.add_argument("-o", "--output", required=True, metavar="PLAN.json", help="plan.json to write")
+    parser.add_argument("--sample-hz", type=float, default=10.0,
+                        help="trajectory sampling rate in plan.json (Hz, default 10)")
+    parser.add_argument("--plot", metavar="PLAN.png", help="figure of the plan (needs the plot extra)")
+    parser.add_argument("--qgc", metavar="PLAN.plan", help="QGroundControl .plan export of the way-points")
+    parser.add_argument("--waypoints", metavar="PLAN.waypoints", help='"QGC WPL 110" export of the way-points')
+
+
+def write_atomically(outputs: dict[str, bytes]) -> None:
+    """Write every ``path -> bytes`` through a temporary file and ``os.replace``.
+
+    All temporaries are written first; only then are they renamed, so a
+    failure (bad directory, disk full) leaves none of the outputs.
+    """
+    temps: list[tuple[str, str]] = []
+    umask = os.umask(0)
+    os.umask(umask)
+    try:
+        for path, data in outputs.items():
+            target = Path(path)
+            try:
+                fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp",
+                                           dir=str(target.parent if str(target.parent) else "."))
+            except OSError as exc:
+                raise InputError(path, f"cannot write: {exc.strerror or exc}") from None
+            temps.append((tmp, path))
+            os.fchmod(fd, 0o666 & ~umask)   # mkstemp makes 0600; give the usual permissions
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+        for tmp, path in temps:
+            os.replace(tmp, path)
+        temps.clear()
+    except OSError as exc:
+        raise InputError(getattr(exc, "filename", None) or "output", f"cannot write: {exc.strerror or exc}") from None
+    finally:
+        for tmp, _ in temps:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+
+
+def run(args) -> int:
+    # Cheap checks before any work, so that a bad option costs nothing.
+    if not (math.isfinite(args.sample_hz) and args.sample_hz > 0):
+        raise InputError("--sample-hz", f"must be a positive number of Hz, got {args.sample_hz}")
+    plot_fmt = None
+    if args.plot:
+        from ..plot import supported_formats   # raises a one-line InputError without matplotlib
+        plot_fmt = Path(args.plot).suffix.lower().lstrip(".") or "png"
+        if plot_fmt not in supported_formats():
+            raise InputError(args.plot, f"unsupported figure format {plot_fmt!r} (use .png, .pdf, .svg, ...)")
+    outputs = [p for p in (args.output, args.plot, args.qgc, args.waypoints) if p]
+    if len(set(map(os.path.abspath, outputs))) != len(outputs):
+        raise InputError("command line", "the same file is given for two outputs")
+    for p in outputs:
+        parent = Path(p).parent
+        if not parent.is_dir():
+            raise InputError(p, f"cannot write: directory {str(parent)!r} does not exist")
+
+    from ..mission import load_mission
+    from ..plan_io import plan_json_text, plan_to_json_dict, qgc_plan_text, qgc_wpl_text
+    from ..planner import plan_mission
+
+    mission = load_mission(args.mission)
+    plan = plan_mission(mission)
+    doc = plan_to_json_dict(plan, mission, args.sample_hz)
+    files = {args.output: plan_json_text(doc).encode("utf-8")}
+    if args.qgc:
+        files[args.qgc] = qgc_plan_text(plan.waypoints.p_enu_m, mission).encode("utf-8")
+    if args.waypoints:
+        files[args.waypoints] = qgc_wpl_text(plan.waypoints.p_enu_m, mission).encode("utf-8")
+    if args.plot:
+        from ..plot import render_plan
+        files[args.plot] = render_plan(plan, fmt=plot_fmt, title=f"{mission.name}")
+    write_atomically(files)
+
+    st, tm = plan.stats, plan.timings_s
+    print(f"{mission.name}: {st.n_waypoints} way-points, path {st.path_length_m:.1f} m, "
+          f"duration {st.duration_s:.1f} s, coverage {100 * st.coverage_fraction:.1f} %, "
+          f"orientation {st.orientation_deg:.1f} deg")
+    print(f"  max speed {st.max_speed_m_s:.2f} m/s, max accel {st.max_accel_m_s2:.2f} m/s^2, "
+          f"way-point residual {100 * st.waypoint_residual_m:.1f} cm")
+    print(f"  timings: load {tm.load:.3f} s, coverage {tm.coverage:.3f} s, "
+          f"trajectory {tm.trajectory:.3f} s, total {tm.total:.3f} s")
+    print(f"  wrote {', '.join(files)}")
+    return 0

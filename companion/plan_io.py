@@ -1,0 +1,295 @@
+"""Plan files: plan.json (DESIGN.md), QGroundControl ``.plan`` and "QGC WPL 110".
+
+All three are produced as text in memory (the CLI writes them atomically).
+
+plan.json
+    ENU metres in the map frame, SI units. Keys: ``frame`` ("ENU"),
+    ``origin`` {lat, lon, alt_m} (the mission home = map frame origin),
+    ``path``, ``waypoints`` [{t, p, v, a, corner}], ``trajectory`` {t, p, v,
+    a, pointing} sampled at ``sample_hz``, ``stats``, ``timings_s``; plus
+    ``name``, ``sample_hz``, ``target_enu_m`` (S_p of eq. 21) and
+    ``trajectory_weights`` (the LQR weights used).
+
+QGroundControl exports
+    The way-points as MAV_CMD_NAV_WAYPOINT (16) items in
+    MAV_FRAME_GLOBAL_RELATIVE_ALT (3): latitude/longitude from the ENU
+    position through ``companion.frames.enu2geodetic`` about the mission
+    home, and **altitude relative to home**, i.e. the way-point's map-frame
+    z (the map's z = 0 is the home altitude ``home.alt_m`` AMSL; a DEM in
+    the same frame makes z = terrain + flight height). The home position
+    itself is written with its AMSL altitude (``plannedHomePosition``; item 0
+    of the WPL file, frame 0 = MAV_FRAME_GLOBAL).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .config import to_dict
+from .errors import PlanError
+from .frames import enu2geodetic
+from .mission import Mission
+
+MAV_CMD_NAV_WAYPOINT = 16
+MAV_FRAME_GLOBAL = 0
+MAV_FRAME_GLOBAL_RELATIVE_ALT = 3
+MAV_AUTOPILOT_PX4 = 12
+MAV_TYPE_QUADROTOR = 2
+
+STATS_KEYS = ("coverage_fraction", "path_length_m", "duration_s", "n_waypoints", "orientation_deg",
+              "max_speed_m_s", "max_accel_m_s2", "waypoint_residual_m")
+TIMING_KEYS = ("load", "coverage", "trajectory", "total")
+
+
+def _rows(a) -> list:
+    return np.asarray(a, dtype=float).tolist()
+
+
+def sample_times(t0: float, tf: float, sample_hz: float) -> np.ndarray:
+    """t0, t0 + 1/hz, ... up to tf, with tf itself always the last sample (s)."""
+    n = int(math.floor((tf - t0) * sample_hz + 1e-9))
+    t = t0 + np.arange(n + 1) / sample_hz
+    if tf - t[-1] > 1e-9:
+        t = np.append(t, tf)
+    else:
+        t[-1] = tf      # rounding: end exactly on the last way-point's time
+    return t
+
+
+def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
+    """The plan.json document (DESIGN.md "Files") as plain JSON types.
+
+    Parameters
+    ----------
+    plan : companion.planner.Plan
+    mission : Mission
+        For the name, origin (home) and weights.
+    sample_hz : float
+        Trajectory sampling rate (Hz), > 0.
+    """
+    if not (sample_hz > 0 and math.isfinite(sample_hz)):
+        raise PlanError("--sample-hz", f"must be a positive number, got {sample_hz}")
+    traj = plan.trajectory
+    wp = plan.waypoints
+    t = sample_times(traj.t0, traj.tf, sample_hz)
+    s = traj.sample(t)
+    home = mission.home
+    return {
+        "name": mission.name,
+        "frame": "ENU",
+        "origin": {"lat": home.lat, "lon": home.lon, "alt_m": home.alt_m},
+        "path": _rows(plan.coverage.path_xy_m),
+        "waypoints": [
+            {"t": float(ti), "p": _rows(p), "v": _rows(v), "a": _rows(a), "corner": bool(c)}
+            for ti, p, v, a, c in zip(wp.t_s, wp.p_enu_m, wp.v_enu_m_s, wp.a_enu_m_s2, wp.corner)
+        ],
+        "sample_hz": float(sample_hz),
+        "trajectory": {"t": _rows(t), "p": _rows(s.p), "v": _rows(s.v), "a": _rows(s.a),
+                       "pointing": _rows(s.pointing)},
+        "target_enu_m": _rows(plan.target_enu_m),
+        "trajectory_weights": to_dict(mission.trajectory),
+        "stats": {k: getattr(plan.stats, k) for k in STATS_KEYS},
+        "timings_s": {k: getattr(plan.timings_s, k) for k in TIMING_KEYS},
+    }
+
+
+def plan_json_text(doc: dict) -> str:
+    """Serialise a plan.json document (NaN/inf are a bug, not output)."""
+    return json.dumps(doc, allow_nan=False, separators=(",", ":")) + "\n"
+
+
+# --- reading plan.json ----------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class PlanFile:
+    """A validated plan.json (ENU metres, SI).
+
+    Attributes
+    ----------
+    origin : (lat_deg, lon_deg, alt_m)
+    path_xy_m : (K, 2)
+    waypoint_t_s : (N,), waypoint_p_enu_m, waypoint_v_enu_m_s, waypoint_a_enu_m_s2 : (N, 3), waypoint_corner : (N,) bool
+    t_s : (n,) ; p_enu_m, v_enu_m_s, a_enu_m_s2, pointing_enu : (n, 3)
+        The sampled trajectory.
+    target_enu_m : (3,) or None
+    stats, timings_s : dict
+    data : dict
+        The whole document.
+    source : str
+    """
+
+    origin: tuple[float, float, float]
+    path_xy_m: np.ndarray
+    waypoint_t_s: np.ndarray
+    waypoint_p_enu_m: np.ndarray
+    waypoint_v_enu_m_s: np.ndarray
+    waypoint_a_enu_m_s2: np.ndarray
+    waypoint_corner: np.ndarray
+    t_s: np.ndarray
+    p_enu_m: np.ndarray
+    v_enu_m_s: np.ndarray
+    a_enu_m_s2: np.ndarray
+    pointing_enu: np.ndarray
+    target_enu_m: np.ndarray | None
+    stats: dict
+    timings_s: dict
+    data: dict
+    source: str
+
+
+def _num_array(value, shape_tail: tuple[int, ...], src: str, key: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise PlanError(f"{src}: key '{key}'", "expected numbers") from None
+    if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
+        want = "(n" + "".join(f", {d}" for d in shape_tail) + ")"
+        raise PlanError(f"{src}: key '{key}'", f"expected an array of shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise PlanError(f"{src}: key '{key}'", "non-finite value")
+    return arr
+
+
+def _get(d, key: str, src: str, prefix: str = ""):
+    if not isinstance(d, dict):
+        raise PlanError(f"{src}: key '{prefix}'", "expected a mapping")
+    if key not in d:
+        raise PlanError(f"{src}: key '{prefix + '.' if prefix else ''}{key}'", "missing")
+    return d[key]
+
+
+def load_plan(path: str | Path) -> PlanFile:
+    """Read and validate a plan.json written by ``companion plan``.
+
+    Raises
+    ------
+    PlanError
+        Missing/unreadable file, not JSON, or a missing/malformed key
+        (the message names the file and the key).
+    """
+    p = Path(path)
+    src = str(p)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise PlanError(src, "no such file (plan.json)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise PlanError(src, f"cannot read: {exc}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise PlanError(f"{src}: line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
+    if not isinstance(data, dict):
+        raise PlanError(src, "expected a JSON object")
+    if _get(data, "frame", src) != "ENU":
+        raise PlanError(f"{src}: key 'frame'", f"expected 'ENU', got {data['frame']!r}")
+    origin = _get(data, "origin", src)
+    o = tuple(float(_num_array([_get(origin, k, src, "origin")], (), src, f"origin.{k}")[0])
+              for k in ("lat", "lon", "alt_m"))
+    path_xy = _num_array(_get(data, "path", src), (2,), src, "path")
+    wps = _get(data, "waypoints", src)
+    if not isinstance(wps, list) or len(wps) < 2:
+        raise PlanError(f"{src}: key 'waypoints'", "expected a list of at least 2 way-points")
+    cols = {}
+    for k, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
+        cols[k] = _num_array([_get(w, k, src, f"waypoints[{i}]") for i, w in enumerate(wps)],
+                             tail, src, f"waypoints[].{k}")
+    corner = [_get(w, "corner", src, f"waypoints[{i}]") for i, w in enumerate(wps)]
+    if not all(isinstance(c, bool) for c in corner):
+        raise PlanError(f"{src}: key 'waypoints[].corner'", "expected true or false")
+    if np.any(np.diff(cols["t"]) <= 0):
+        raise PlanError(f"{src}: key 'waypoints[].t'", "times must be strictly increasing")
+    tr = _get(data, "trajectory", src)
+    t = _num_array(_get(tr, "t", src, "trajectory"), (), src, "trajectory.t")
+    arrays = {k: _num_array(_get(tr, k, src, "trajectory"), (3,), src, f"trajectory.{k}")
+              for k in ("p", "v", "a", "pointing")}
+    for k, arr in arrays.items():
+        if arr.shape[0] != t.shape[0]:
+            raise PlanError(f"{src}: key 'trajectory.{k}'", f"{arr.shape[0]} samples for {t.shape[0]} times")
+    if t.shape[0] < 2 or np.any(np.diff(t) <= 0):
+        raise PlanError(f"{src}: key 'trajectory.t'", "expected at least 2 strictly increasing times")
+    stats = _get(data, "stats", src)
+    for k in STATS_KEYS:
+        _num_array([_get(stats, k, src, "stats")], (), src, f"stats.{k}")
+    timings = _get(data, "timings_s", src)
+    for k in TIMING_KEYS:
+        _num_array([_get(timings, k, src, "timings_s")], (), src, f"timings_s.{k}")
+    target = None
+    if "target_enu_m" in data:
+        target = _num_array([data["target_enu_m"]], (3,), src, "target_enu_m")[0]
+    return PlanFile(origin=o, path_xy_m=path_xy, waypoint_t_s=cols["t"], waypoint_p_enu_m=cols["p"],
+                    waypoint_v_enu_m_s=cols["v"], waypoint_a_enu_m_s2=cols["a"],
+                    waypoint_corner=np.array(corner, dtype=bool), t_s=t, p_enu_m=arrays["p"],
+                    v_enu_m_s=arrays["v"], a_enu_m_s2=arrays["a"], pointing_enu=arrays["pointing"],
+                    target_enu_m=target, stats=dict(stats), timings_s=dict(timings), data=data, source=src)
+
+
+# --- QGroundControl exports ------------------------------------------------------
+
+def _geodetic(p_enu_m: np.ndarray, mission: Mission) -> list[tuple[float, float, float]]:
+    """Per way-point (lat_deg, lon_deg, alt_rel_home_m)."""
+    h = mission.home
+    out = []
+    for x, y, z in np.asarray(p_enu_m, dtype=float):
+        lat, lon, _ = enu2geodetic(x, y, z, h.lat, h.lon, h.alt_m)
+        out.append((lat, lon, float(z)))
+    return out
+
+
+def qgc_plan_dict(waypoints_p_enu_m: np.ndarray, mission: Mission) -> dict:
+    """QGroundControl ``.plan`` (JSON, fileType "Plan", version 1) with one
+    SimpleItem NAV_WAYPOINT per way-point, altitudes relative to home."""
+    items = []
+    for i, (lat, lon, alt) in enumerate(_geodetic(waypoints_p_enu_m, mission)):
+        items.append({
+            "type": "SimpleItem",
+            "autoContinue": True,
+            "command": MAV_CMD_NAV_WAYPOINT,
+            "doJumpId": i + 1,
+            "frame": MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            # hold (s), acceptance radius (m), pass radius (m), yaw (NaN = unchanged -> null), lat, lon, alt
+            "params": [0, 0, 0, None, lat, lon, alt],
+            "Altitude": alt,
+            "AltitudeMode": 1,           # QGC: relative to launch (home)
+            "AMSLAltAboveTerrain": None,
+        })
+    h = mission.home
+    return {
+        "fileType": "Plan",
+        "version": 1,
+        "groundStation": "QGroundControl",
+        "geoFence": {"circles": [], "polygons": [], "version": 2},
+        "rallyPoints": {"points": [], "version": 2},
+        "mission": {
+            "version": 2,
+            "firmwareType": MAV_AUTOPILOT_PX4,
+            "vehicleType": MAV_TYPE_QUADROTOR,
+            "cruiseSpeed": mission.flight.speed_m_s,
+            "hoverSpeed": mission.flight.speed_m_s,
+            "globalPlanAltitudeMode": 1,
+            "plannedHomePosition": [h.lat, h.lon, h.alt_m],
+            "items": items,
+        },
+    }
+
+
+def qgc_plan_text(waypoints_p_enu_m: np.ndarray, mission: Mission) -> str:
+    return json.dumps(qgc_plan_dict(waypoints_p_enu_m, mission), indent=2, allow_nan=False) + "\n"
+
+
+def qgc_wpl_text(waypoints_p_enu_m: np.ndarray, mission: Mission) -> str:
+    """"QGC WPL 110" text: tab-separated ``index current frame command p1 p2 p3 p4
+    lat lon alt autocontinue``; line 0 is home (frame 0, AMSL), then the
+    way-points (frame 3, altitude relative to home)."""
+    h = mission.home
+    lines = ["QGC WPL 110",
+             f"0\t1\t{MAV_FRAME_GLOBAL}\t{MAV_CMD_NAV_WAYPOINT}\t0\t0\t0\t0\t{h.lat:.10f}\t{h.lon:.10f}\t{h.alt_m:.4f}\t1"]
+    for i, (lat, lon, alt) in enumerate(_geodetic(waypoints_p_enu_m, mission), start=1):
+        lines.append(f"{i}\t0\t{MAV_FRAME_GLOBAL_RELATIVE_ALT}\t{MAV_CMD_NAV_WAYPOINT}\t0\t0\t0\t0\t"
+                     f"{lat:.10f}\t{lon:.10f}\t{alt:.4f}\t1")
+    return "\n".join(lines) + "\n"

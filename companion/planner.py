@@ -1,0 +1,219 @@
+"""The offline planning pipeline (paper Sections 2.1-2.3.2): maps -> ISOA
+coverage -> 3D way-points -> LQR trajectory.
+
+``plan_mission`` is the one entry point used by ``companion plan``, the
+mission runner and the benchmarks. It reads the two map files named by the
+mission (the only I/O here) and chains the pure cores.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .coverage import extract_waypoints, plan_coverage
+from .errors import PlanError
+from .maps import ElevationModel, OccupancyGrid, load_dem, load_ogm
+from .mission import Mission
+from .trajectory import Trajectory, generate_trajectory
+
+#: Samples per knot interval for the speed/acceleration statistics (the pieces are
+#: smooth degree-7 polynomials over ~4 s: 16 samples find their maxima to well under 1 %).
+STATS_SAMPLES_PER_INTERVAL = 16
+
+
+@dataclass(frozen=True)
+class PlanStats:
+    """Summary figures of a plan (the plan.json ``stats``).
+
+    Attributes
+    ----------
+    coverage_fraction : float
+        Fraction of the corridors covered by the path (from the coverage planner).
+    path_length_m : float
+        Length of the 2D coverage path (m).
+    duration_s : float
+        Trajectory duration tf - t0 (s).
+    n_waypoints : int
+    orientation_deg : float
+        ISOA beam orientation (deg, ENU, counter-clockwise from east).
+    max_speed_m_s, max_accel_m_s2 : float
+        Maxima of |v| and |a| of the trajectory sampled ``STATS_SAMPLES_PER_INTERVAL``
+        times per knot interval.
+    waypoint_residual_m : float
+        Largest distance between the trajectory and a way-point position at its time (m).
+    """
+
+    coverage_fraction: float
+    path_length_m: float
+    duration_s: float
+    n_waypoints: int
+    orientation_deg: float
+    max_speed_m_s: float
+    max_accel_m_s2: float
+    waypoint_residual_m: float
+
+
+@dataclass(frozen=True)
+class PlanTimings:
+    """Wall-clock time (s, ``time.perf_counter``) of each phase of ``plan_mission``.
+
+    ``coverage`` includes the way-point extraction; ``trajectory`` includes
+    the statistics sampling.
+    """
+
+    load: float
+    coverage: float
+    trajectory: float
+    total: float
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """Everything ``plan_mission`` produced.
+
+    Attributes
+    ----------
+    grid : OccupancyGrid
+    dem : ElevationModel
+    coverage : CoveragePlan
+        ISOA result (``path_xy_m`` (N, 2) ENU m, ``orientation_deg``, ...).
+    waypoints : Waypoints
+        3D way-points (``t_s``, ``p_enu_m``, ``v_enu_m_s``, ``a_enu_m_s2``, ``corner``).
+    trajectory : Trajectory
+        LQR reference; its samples carry the pointing direction toward ``target_enu_m``.
+    target_enu_m : (3,) array
+        Pointing target S_p of eq. (21) (ENU, m).
+    stats : PlanStats
+    timings_s : PlanTimings
+    """
+
+    grid: OccupancyGrid
+    dem: ElevationModel
+    coverage: object
+    waypoints: object
+    trajectory: Trajectory
+    target_enu_m: np.ndarray
+    stats: PlanStats
+    timings_s: PlanTimings
+
+
+def free_centroid_xy(grid: OccupancyGrid) -> np.ndarray:
+    """Centroid (ENU m, (2,)) of the grid's free cells.
+
+    This is the "polygon centroid" of the paper (Section 3, S_p) for a field
+    given as a map: the mean of the free cell centres, i.e. the area centroid
+    of the flyable ground (the field minus the vine rows; unknown cells
+    outside the field do not count).
+    """
+    rows, cols = np.nonzero(grid.free)
+    if rows.size == 0:
+        raise PlanError(grid.source, "the map has no free cells")
+    # Mean of indices first, then one affine map: exact, and no (n, 2) temporaries.
+    x, y = grid.cell_to_world(rows.mean(), cols.mean())
+    return np.array([float(x), float(y)])
+
+
+def pointing_target(mission: Mission, grid: OccupancyGrid, waypoints_p_enu_m: np.ndarray) -> np.ndarray:
+    """S_p (ENU m, (3,)): the mission's ENU point, or for ``centroid`` the centroid
+    of the free cells at the mean way-point altitude."""
+    target = mission.pointing.target
+    if target == "centroid":
+        cx, cy = free_centroid_xy(grid)
+        return np.array([cx, cy, float(np.mean(waypoints_p_enu_m[:, 2]))])
+    return np.asarray(target, dtype=float)
+
+
+def densify(path_xy_m: np.ndarray, step_m: float) -> np.ndarray:
+    """The polyline's vertices plus points at most ``step_m`` apart along every segment, (M, 2)."""
+    seg = np.diff(path_xy_m, axis=0)
+    n = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / step_m).astype(np.intp))
+    idx = np.repeat(np.arange(len(seg)), n)
+    frac = np.arange(idx.size) - np.repeat(np.cumsum(n) - n, n)
+    pts = path_xy_m[idx] + seg[idx] * (frac / n[idx])[:, None]
+    return np.vstack([pts, path_xy_m[-1:]])
+
+
+def check_dem_covers(dem: ElevationModel, path_xy_m: np.ndarray) -> None:
+    """PlanError naming the DEM file unless the DEM covers the whole path.
+
+    The path is checked every half DEM cell along its segments, so a NODATA
+    hole between two vertices is found too.
+    """
+    pts = densify(path_xy_m, 0.5 * dem.cellsize_m)
+    ok = dem.covers(pts[:, 0], pts[:, 1])
+    if not np.all(ok):
+        i = int(np.flatnonzero(~ok)[0])
+        x_min, x_max, y_min, y_max = dem.extent_m
+        raise PlanError(dem.source, f"the DEM does not cover the coverage path (first uncovered point "
+                        f"x={pts[i, 0]:.2f}, y={pts[i, 1]:.2f} m; DEM extent x {x_min:.2f}..{x_max:.2f}, "
+                        f"y {y_min:.2f}..{y_max:.2f} m, NODATA cells excluded)")
+
+
+def trajectory_stats(trajectory: Trajectory,
+                     per_interval: int = STATS_SAMPLES_PER_INTERVAL) -> tuple[float, float, float]:
+    """(max |v| m/s, max |a| m/s^2, max way-point residual m) of a trajectory."""
+    knots = trajectory.knot_times_s
+    tau = np.arange(per_interval) / per_interval
+    t = np.append((knots[:-1, None] + np.diff(knots)[:, None] * tau).ravel(), knots[-1])
+    # Without the pointing target: s(t) and its derivatives are not needed here.
+    s = dataclasses.replace(trajectory, target_enu_m=None).sample(t)
+    return (float(np.linalg.norm(s.v, axis=1).max()), float(np.linalg.norm(s.a, axis=1).max()),
+            float(np.max(trajectory.waypoint_residual_m)))
+
+
+def plan_mission(mission: Mission) -> Plan:
+    """Plan a mission end to end.
+
+    Parameters
+    ----------
+    mission : Mission
+        A loaded mission (paths resolved against its file).
+
+    Returns
+    -------
+    Plan
+
+    Raises
+    ------
+    MapError
+        A map file is missing or malformed.
+    PlanError
+        No coverage path, or the DEM does not cover it (names the DEM file).
+    """
+    t_start = time.perf_counter()
+    grid = load_ogm(mission.map_path)
+    dem = load_dem(mission.dem_path)
+    t_loaded = time.perf_counter()
+
+    coverage = plan_coverage(grid, mission.coverage)
+    path = np.asarray(coverage.path_xy_m, dtype=float)
+    if path.ndim != 2 or path.shape[0] < 2:
+        raise PlanError(str(mission.map_path), "the coverage planner found no path in the free space")
+    check_dem_covers(dem, path)
+    waypoints = extract_waypoints(coverage, dem, mission.flight)
+    t_covered = time.perf_counter()
+
+    target = pointing_target(mission, grid, np.asarray(waypoints.p_enu_m))
+    trajectory = generate_trajectory(waypoints.t_s, waypoints.p_enu_m, waypoints.v_enu_m_s,
+                                     waypoints.a_enu_m_s2, mission.trajectory, target_enu_m=target)
+    max_v, max_a, residual = trajectory_stats(trajectory)
+    t_done = time.perf_counter()
+
+    stats = PlanStats(
+        coverage_fraction=float(coverage.coverage_fraction),
+        path_length_m=float(coverage.path_length_m),
+        duration_s=float(trajectory.duration_s),
+        n_waypoints=int(len(waypoints.t_s)),
+        orientation_deg=float(coverage.orientation_deg),
+        max_speed_m_s=max_v,
+        max_accel_m_s2=max_a,
+        waypoint_residual_m=residual,
+    )
+    timings = PlanTimings(load=t_loaded - t_start, coverage=t_covered - t_loaded,
+                          trajectory=t_done - t_covered, total=t_done - t_start)
+    return Plan(grid=grid, dem=dem, coverage=coverage, waypoints=waypoints, trajectory=trajectory,
+                target_enu_m=target, stats=stats, timings_s=timings)

@@ -1,0 +1,98 @@
+"""Mission loader: strict schema, error messages that name the file and key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from companion.errors import MissionError
+from companion.mission import FlightConfig, load_mission
+
+ROOT = Path(__file__).resolve().parents[1]
+
+GOOD = """\
+name: test
+map: maps/map.yaml
+dem: ../dem.asc
+home: {lat: 44.8, lon: -0.6, alt_m: 30.0}
+flight: {height_agl_m: 2.0, speed_m_s: 1.5, waypoint_interval_s: 3.0}
+coverage: {line_spacing_m: 2.5, safety_margin_m: 0.4}
+pointing: {target: [1.0, 2.0, 3.0]}
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "mission.yaml") -> Path:
+    p = tmp_path / "sub" / name
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(text)
+    return p
+
+
+def test_good_mission_values_and_relative_paths(tmp_path, monkeypatch):
+    p = write(tmp_path, GOOD)
+    monkeypatch.chdir(tmp_path)       # paths resolve against the file, not the working directory
+    m = load_mission("sub/mission.yaml")
+    assert m.flight == FlightConfig(height_agl_m=2.0, speed_m_s=1.5, waypoint_interval_s=3.0)
+    assert m.coverage.line_spacing_m == 2.5 and m.coverage.safety_margin_m == 0.4
+    assert m.pointing.target == (1.0, 2.0, 3.0)
+    assert m.home.lat == 44.8 and m.home.alt_m == 30.0
+    assert m.map_path.resolve() == (tmp_path / "sub" / "maps" / "map.yaml").resolve()
+    assert m.dem_path.resolve() == (tmp_path / "dem.asc").resolve()
+    assert p.exists()
+
+
+def test_defaults_and_centroid(tmp_path):
+    text = "name: t\nmap: m.yaml\ndem: d.asc\nhome: {lat: 0, lon: 0, alt_m: 0}\n"
+    m = load_mission(write(tmp_path, text))
+    assert m.pointing.target == "centroid"
+    assert m.coverage.line_spacing_m is None
+    assert m.flight.speed_m_s == 1.0 and m.flight.waypoint_interval_s == 4.0   # the paper's 1 m/s x 4 s
+
+
+@pytest.mark.parametrize("text, where, what", [
+    (GOOD + "colour: red\n", "key 'colour'", "unknown key"),
+    (GOOD.replace("speed_m_s: 1.5", "speed_m_s: 1.5, sped: 2"), "key 'flight.sped'", "unknown key"),
+    (GOOD.replace("height_agl_m: 2.0", "height_agl_m: high"), "key 'flight.height_agl_m'", "expected a number"),
+    (GOOD.replace("lat: 44.8", "lat: true"), "key 'home.lat'", "expected a number"),
+    (GOOD.replace("map: maps/map.yaml\n", ""), "key 'map'", "missing"),
+    (GOOD.replace("alt_m: 30.0", "alt: 30.0"), "key 'home.alt", ""),
+    (GOOD.replace("target: [1.0, 2.0, 3.0]", "target: middle"), "key 'pointing.target'", ""),
+    (GOOD.replace("speed_m_s: 1.5", "speed_m_s: -1"), "key 'flight'", "speed_m_s must be > 0"),
+    ("- just\n- a list\n", "mission.yaml", "mapping"),
+])
+def test_schema_errors_name_file_and_key(tmp_path, text, where, what):
+    p = write(tmp_path, text)
+    with pytest.raises(MissionError) as exc:
+        load_mission(p)
+    msg = str(exc.value)
+    assert msg.startswith(str(p)) and where in msg and what in msg
+    assert "\n" not in msg
+
+
+def test_bad_yaml_names_the_line(tmp_path):
+    # Line 3 opens a flow mapping that never closes; the parser reports the line where it notices.
+    text = "name: t\nmap: m.yaml\nhome: {lat: 1, lon: 2\ndem: d.asc\n"
+    p = write(tmp_path, text)
+    with pytest.raises(MissionError) as exc:
+        load_mission(p)
+    assert str(p) in str(exc.value) and "line 4" in str(exc.value)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(MissionError, match="no such file"):
+        load_mission(tmp_path / "absent.yaml")
+
+
+def test_base_dir_cannot_be_set_from_the_file(tmp_path):
+    with pytest.raises(MissionError, match="base_dir"):
+        load_mission(write(tmp_path, GOOD + "base_dir: /etc\n"))
+
+
+@pytest.mark.parametrize("name", ["flat-rectangle", "tilted-hexagon"])
+def test_bundled_missions_load(name):
+    m = load_mission(ROOT / "missions" / name / "mission.yaml")
+    assert m.name == name
+    assert m.map_path.is_file() and m.dem_path.is_file()
+    assert m.coverage.line_spacing_m == 2.5
+    assert m.sim.noise.vector_variance == 5.0e-4 and m.sim.noise.gyro_variance == 5.0e-4  # the paper's noise
