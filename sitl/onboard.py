@@ -96,7 +96,7 @@ class CascadedController:
     def __init__(self, vehicle: VehicleConfig = VehicleConfig(), gains: OnboardGains = OnboardGains(),
                  gravity_m_s2: float = GRAVITY_M_S2) -> None:
         self.vehicle = vehicle
-        self.gains = gains
+        self.gains = gains            # property: also caches the gains as plain floats
         self.g = float(gravity_m_s2)
         self.m = float(vehicle.mass_kg)
         self.J = tuple(float(j) for j in vehicle.inertia_kg_m2)
@@ -104,6 +104,23 @@ class CascadedController:
         Ainv = np.linalg.pinv(allocation_matrix(vehicle))
         self._Ainv = tuple(tuple(float(x) for x in row) for row in Ainv)   # rows: rotors
         self.reset()
+
+    @property
+    def gains(self) -> OnboardGains:
+        """The gains in use; assigning new gains takes effect at the next update."""
+        return self._gains
+
+    @gains.setter
+    def gains(self, gains: OnboardGains) -> None:
+        self._gains = gains
+        # One flat tuple of floats, unpacked into locals by update_floats
+        # (attribute and tuple-index lookups cost as much as the arithmetic).
+        G = gains
+        self._g_flat = tuple(float(x) for x in (
+            *G.pos_kp, *G.vel_kp, *G.vel_ki, *G.vel_kd, G.vel_int_limit_m_s2,
+            G.max_speed_xy_m_s, G.max_speed_up_m_s, G.max_speed_down_m_s,
+            math.tan(G.max_tilt_rad), G.min_thrust_frac,
+            *G.att_kp, *G.max_rate_rad_s, *G.rate_kp, *G.rate_ki, G.rate_int_limit_rad_s2))
 
     def reset(self) -> None:
         """Clear integrators, filters and the held yaw."""
@@ -148,50 +165,69 @@ class CascadedController:
 
         Returns a 4-tuple of normalised motor commands.
         """
-        G = self.gains
+        (kpx, kpy, kpz, kvx, kvy, kvz, kix, kiy, kiz, kdx, kdy, kdz, vlim,
+         vxy_max, vup_max, vdn_max, tan_tilt, min_frac,
+         kax, kay, kaz, mrx, mry, mrz, krx, kry, krz, kwx, kwy, kwz, il) = self._g_flat
         g, m = self.g, self.m
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+        px, py, pz = p
+        vx, vy, vz = v
 
         # ---------------- position -> velocity -> acceleration (per axis)
-        psp, vsp, asp = sp.pos_enu_m, sp.vel_enu_m_s, sp.acc_enu_m_s2
-        acc = [0.0, 0.0, 0.0]
-        vel_sp = [0.0, 0.0, 0.0]
-        vel_ctl = [False, False, False]
-        for i in range(3):
-            pi = psp[i] if psp is not None else math.nan
-            vi = vsp[i] if vsp is not None else math.nan
-            ai = asp[i] if asp is not None else math.nan
-            has_p = pi == pi
-            has_v = vi == vi
-            vs = (vi if has_v else 0.0) + (G.pos_kp[i] * (pi - p[i]) if has_p else 0.0)
-            vel_ctl[i] = has_p or has_v
-            vel_sp[i] = vs
-            acc[i] = ai if ai == ai else 0.0
+        # NaN (or a None group) = not controlled; x == x is False only for NaN.
+        psx, psy, psz = _f3(sp.pos_enu_m)
+        vfx, vfy, vfz = _f3(sp.vel_enu_m_s)
+        afx, afy, afz = _f3(sp.acc_enu_m_s2)
+        hpx, hpy, hpz = psx == psx, psy == psy, psz == psz
+        hvx, hvy, hvz = vfx == vfx, vfy == vfy, vfz == vfz
+        vsx = (vfx if hvx else 0.0) + (kpx * (psx - px) if hpx else 0.0)
+        vsy = (vfy if hvy else 0.0) + (kpy * (psy - py) if hpy else 0.0)
+        vsz = (vfz if hvz else 0.0) + (kpz * (psz - pz) if hpz else 0.0)
+        cx_on, cy_on, cz_on = hpx or hvx, hpy or hvy, hpz or hvz
+        accx = afx if afx == afx else 0.0
+        accy = afy if afy == afy else 0.0
+        accz = afz if afz == afz else 0.0
         # Speed limits (horizontal norm, then vertical), as PX4.
-        sxy = math.hypot(vel_sp[0], vel_sp[1])
-        if sxy > G.max_speed_xy_m_s:
-            k = G.max_speed_xy_m_s / sxy
-            vel_sp[0] *= k
-            vel_sp[1] *= k
-        vel_sp[2] = min(max(vel_sp[2], -G.max_speed_down_m_s), G.max_speed_up_m_s)
-        ev = [vel_sp[i] - v[i] if vel_ctl[i] else 0.0 for i in range(3)]
-        dev = [0.0, 0.0, 0.0]
-        if self._ev_prev is not None and dt > 0:
-            dev = [(ev[i] - self._ev_prev[i]) / dt for i in range(3)]
-        self._ev_prev = ev
-        for i in range(3):
-            if vel_ctl[i]:
-                acc[i] += G.vel_kp[i] * ev[i] + self._vint[i] + G.vel_kd[i] * dev[i]
-            else:
-                self._vint[i] = 0.0
+        sxy = math.hypot(vsx, vsy)
+        if sxy > vxy_max:
+            k = vxy_max / sxy
+            vsx *= k
+            vsy *= k
+        vsz = -vdn_max if vsz < -vdn_max else vsz
+        vsz = vup_max if vsz > vup_max else vsz
+        evx = vsx - vx if cx_on else 0.0
+        evy = vsy - vy if cy_on else 0.0
+        evz = vsz - vz if cz_on else 0.0
+        prev = self._ev_prev
+        if prev is not None and dt > 0:
+            dvx = (evx - prev[0]) / dt
+            dvy = (evy - prev[1]) / dt
+            dvz = (evz - prev[2]) / dt
+        else:
+            dvx = dvy = dvz = 0.0
+        self._ev_prev = [evx, evy, evz]
+        vi = self._vint
+        if cx_on:
+            accx += kvx * evx + vi[0] + kdx * dvx
+        else:
+            vi[0] = 0.0
+        if cy_on:
+            accy += kvy * evy + vi[1] + kdy * dvy
+        else:
+            vi[1] = 0.0
+        if cz_on:
+            accz += kvz * evz + vi[2] + kdz * dvz
+        else:
+            vi[2] = 0.0
 
         # ---------------- thrust vector with tilt and thrust limits
-        Fx, Fy, Fz = m * acc[0], m * acc[1], m * (acc[2] + g)
-        Fmin = G.min_thrust_frac * 4.0 * self.fmax
+        Fx, Fy, Fz = m * accx, m * accy, m * (accz + g)
+        Fmin = min_frac * 4.0 * self.fmax
         Fmax = 4.0 * self.fmax
-        Fz = min(max(Fz, Fmin), Fmax)
+        Fz = Fmin if Fz < Fmin else Fz
+        Fz = Fmax if Fz > Fmax else Fz
         txy = math.hypot(Fx, Fy)
-        tmax = Fz * math.tan(G.max_tilt_rad)
+        tmax = Fz * tan_tilt
         if txy > tmax:
             k = tmax / txy
             Fx *= k
@@ -201,24 +237,31 @@ class CascadedController:
         # ~Kp int(e_p) - dp ~ 0, and freezing it while clipped breaks that
         # balance (measured: slower settling, steady undershoot).
         if not landed:
-            lim = G.vel_int_limit_m_s2
-            for i in range(3):
-                if vel_ctl[i]:
-                    self._vint[i] = min(max(self._vint[i] + G.vel_ki[i] * ev[i] * dt, -lim), lim)
+            if cx_on:
+                x = vi[0] + kix * evx * dt
+                vi[0] = -vlim if x < -vlim else (vlim if x > vlim else x)
+            if cy_on:
+                x = vi[1] + kiy * evy * dt
+                vi[1] = -vlim if x < -vlim else (vlim if x > vlim else x)
+            if cz_on:
+                x = vi[2] + kiz * evz * dt
+                vi[2] = -vlim if x < -vlim else (vlim if x > vlim else x)
         Fn = math.sqrt(Fx * Fx + Fy * Fy + Fz * Fz)
         b3x, b3y, b3z = Fx / Fn, Fy / Fn, Fz / Fn
         thrust = Fx * r02 + Fy * r12 + Fz * r22   # projected on the current body z (PX4)
-        thrust = min(max(thrust, Fmin), Fmax)
+        thrust = Fmin if thrust < Fmin else thrust
+        thrust = Fmax if thrust > Fmax else thrust
 
         # ---------------- yaw setpoint
-        yaw_now = math.atan2(r10, r00)
-        yr = sp.yaw_rate_rad_s if (sp.yaw_rate_rad_s is not None and sp.yaw_rate_rad_s == sp.yaw_rate_rad_s) else 0.0
-        if sp.yaw_enu_rad is not None and sp.yaw_enu_rad == sp.yaw_enu_rad:
-            yaw_sp = float(sp.yaw_enu_rad)
+        yr = sp.yaw_rate_rad_s
+        yr = 0.0 if yr is None or yr != yr else float(yr)
+        ysp = sp.yaw_enu_rad
+        if ysp is not None and ysp == ysp:
+            yaw_sp = float(ysp)
             self._yaw_hold = yaw_sp
         else:
             if self._yaw_hold is None or landed:
-                self._yaw_hold = yaw_now
+                self._yaw_hold = math.atan2(r10, r00)
             self._yaw_hold += yr * dt
             yaw_sp = self._yaw_hold
         # R_d = [b1d b2d b3d]: b2d = b3d x b1c / |.|, b1d = b2d x b3d
@@ -248,33 +291,31 @@ class CascadedController:
         E01 = r00 * b2x + r10 * b2y + r20 * b2z
         E10 = r01 * b1x + r11 * b1y + r21 * b1z
         ez = 0.5 * (E10 - E01)
-        kp = G.att_kp
         # Yaw feed-forward: world-z rate expressed in the body frame (R^T e3).
-        wsx = kp[0] * ex + yr * r20
-        wsy = kp[1] * ey + yr * r21
-        wsz = kp[2] * ez + yr * r22
-        mr = G.max_rate_rad_s
-        wsx = min(max(wsx, -mr[0]), mr[0])
-        wsy = min(max(wsy, -mr[1]), mr[1])
-        wsz = min(max(wsz, -mr[2]), mr[2])
+        wsx = kax * ex + yr * r20
+        wsy = kay * ey + yr * r21
+        wsz = kaz * ez + yr * r22
+        wsx = -mrx if wsx < -mrx else (mrx if wsx > mrx else wsx)
+        wsy = -mry if wsy < -mry else (mry if wsy > mry else wsy)
+        wsz = -mrz if wsz < -mrz else (mrz if wsz > mrz else wsz)
 
         # ---------------- body rate PI + gyroscopic feed-forward
         wx, wy, wz = w
         Jx, Jy, Jz = self.J
         erx, ery, erz = wsx - wx, wsy - wy, wsz - wz
         wi = self._wint
-        ki = G.rate_ki
-        il = G.rate_int_limit_rad_s2
         if not landed:
-            wi[0] = min(max(wi[0] + ki[0] * erx * dt, -il), il)
-            wi[1] = min(max(wi[1] + ki[1] * ery * dt, -il), il)
-            wi[2] = min(max(wi[2] + ki[2] * erz * dt, -il), il)
+            x = wi[0] + kwx * erx * dt
+            wi[0] = -il if x < -il else (il if x > il else x)
+            x = wi[1] + kwy * ery * dt
+            wi[1] = -il if x < -il else (il if x > il else x)
+            x = wi[2] + kwz * erz * dt
+            wi[2] = -il if x < -il else (il if x > il else x)
         else:
             wi[0] = wi[1] = wi[2] = 0.0
-        rk = G.rate_kp
-        tx = Jx * (rk[0] * erx + wi[0]) + (wy * Jz * wz - wz * Jy * wy)
-        ty = Jy * (rk[1] * ery + wi[1]) + (wz * Jx * wx - wx * Jz * wz)
-        tz = Jz * (rk[2] * erz + wi[2]) + (wx * Jy * wy - wy * Jx * wx)
+        tx = Jx * (krx * erx + wi[0]) + (wy * Jz * wz - wz * Jy * wy)
+        ty = Jy * (kry * ery + wi[1]) + (wz * Jx * wx - wx * Jz * wz)
+        tz = Jz * (krz * erz + wi[2]) + (wx * Jy * wy - wy * Jx * wx)
         self.last_thrust_n = thrust
         self.last_torque_n_m = (tx, ty, tz)
         return self.mix(thrust, tx, ty, tz)
@@ -283,32 +324,61 @@ class CascadedController:
         """Rotor commands (4-tuple, normalised) for [f (N), tau (N m, FLU)]
         with the saturation order roll/pitch > thrust > yaw (module docstring)."""
         fmax = self.fmax
-        A = self._Ainv
-        base = [A[i][0] * thrust_n for i in range(4)]
-        rp = [A[i][1] * tx + A[i][2] * ty for i in range(4)]
-        yw = [A[i][3] * tz for i in range(4)]
+        (a00, a01, a02, a03), (a10, a11, a12, a13), (a20, a21, a22, a23), (a30, a31, a32, a33) = self._Ainv
         # 1) roll/pitch must fit in the thrust range on its own
-        span = max(rp) - min(rp)
+        q0 = a01 * tx + a02 * ty
+        q1 = a11 * tx + a12 * ty
+        q2 = a21 * tx + a22 * ty
+        q3 = a31 * tx + a32 * ty
+        span = max(q0, q1, q2, q3) - min(q0, q1, q2, q3)
         if span > fmax:
             k = fmax / span
-            rp = [x * k for x in rp]
-        u = [base[i] + rp[i] for i in range(4)]
+            q0, q1, q2, q3 = q0 * k, q1 * k, q2 * k, q3 * k
+        u0 = a00 * thrust_n + q0
+        u1 = a10 * thrust_n + q1
+        u2 = a20 * thrust_n + q2
+        u3 = a30 * thrust_n + q3
         # 2) shift the collective (least change) so that all fit
-        lo, hi = min(u), max(u)
+        lo, hi = min(u0, u1, u2, u3), max(u0, u1, u2, u3)
         if lo < 0.0:
             shift = -lo
         elif hi > fmax:
             shift = fmax - hi
         else:
             shift = 0.0
-        u = [x + shift for x in u]
+        u0 += shift
+        u1 += shift
+        u2 += shift
+        u3 += shift
         # 3) the yaw gets what is left
+        y0, y1, y2, y3 = a03 * tz, a13 * tz, a23 * tz, a33 * tz
         k = 1.0
-        for i in range(4):
-            y = yw[i]
-            if y > 0.0 and u[i] + y > fmax:
-                k = min(k, (fmax - u[i]) / y)
-            elif y < 0.0 and u[i] + y < 0.0:
-                k = min(k, -u[i] / y)
-        k = max(k, 0.0)
-        return tuple(min(max((u[i] + k * yw[i]) / fmax, 0.0), 1.0) for i in range(4))
+        for u, y in ((u0, y0), (u1, y1), (u2, y2), (u3, y3)):
+            if y > 0.0:
+                if u + y > fmax:
+                    x = (fmax - u) / y
+                    k = x if x < k else k
+            elif y < 0.0 and u + y < 0.0:
+                x = -u / y
+                k = x if x < k else k
+        k = 0.0 if k < 0.0 else k
+        o0 = (u0 + k * y0) / fmax
+        o1 = (u1 + k * y1) / fmax
+        o2 = (u2 + k * y2) / fmax
+        o3 = (u3 + k * y3) / fmax
+        return (0.0 if o0 < 0.0 else (1.0 if o0 > 1.0 else o0),
+                0.0 if o1 < 0.0 else (1.0 if o1 > 1.0 else o1),
+                0.0 if o2 < 0.0 else (1.0 if o2 > 1.0 else o2),
+                0.0 if o3 < 0.0 else (1.0 if o3 > 1.0 else o3))
+
+
+_NAN3 = (math.nan, math.nan, math.nan)
+
+
+def _f3(x):
+    """A setpoint group as three plain floats (NaN for None): numpy scalars
+    would make every operation of the cascade ~10x slower."""
+    if x is None:
+        return _NAN3
+    a, b, c = x
+    return float(a), float(b), float(c)

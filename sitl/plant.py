@@ -31,7 +31,9 @@ exceeds the weight (no sinking, no sliding).
 
 The hot path is plain Python float arithmetic on purpose: numpy calls on
 3-vectors cost about 1 us each, the whole step here costs about as much as
-ten of them (see ``benchmarks/bench_sitl.py``).
+ten of them (see ``benchmarks/bench_sitl.py``). ``Plant.advance`` runs the
+several steps of a sensor frame with the state in local variables
+(bit-for-bit the same as repeated ``step`` calls).
 """
 
 from __future__ import annotations
@@ -147,6 +149,14 @@ class Plant:
         wind_enu_m_s : 3 floats
             Air velocity (ENU, m/s), used by the drag term only.
         """
+        self.advance(cmd, h, 1, wind_enu_m_s)
+
+    def advance(self, cmd, h: float, n: int, wind_enu_m_s=(0.0, 0.0, 0.0)) -> None:
+        """``n`` physics steps of ``h`` seconds with the commands and wind held
+        (zero-order hold over a sensor frame). Bit-for-bit the same as ``n``
+        calls of ``step``; the state lives in local variables across the steps
+        because attribute and tuple traffic costs as much as the arithmetic.
+        """
         fmax = self._fmax
         # --- motors: exact first-order lag, exact mean thrust over the step
         if h != self._lag_h:
@@ -162,117 +172,171 @@ class Plant:
         c1 = fmax * (0.0 if c1 < 0.0 else 1.0 if c1 > 1.0 else c1)
         c2 = fmax * (0.0 if c2 < 0.0 else 1.0 if c2 > 1.0 else c2)
         c3 = fmax * (0.0 if c3 < 0.0 else 1.0 if c3 > 1.0 else c3)
-        f0, f1, f2, f3 = self.f
-        self.f = (c0 + (f0 - c0) * la, c1 + (f1 - c1) * la, c2 + (f2 - c2) * la, c3 + (f3 - c3) * la)
-        f0 = c0 + (f0 - c0) * lb
-        f1 = c1 + (f1 - c1) * lb
-        f2 = c2 + (f2 - c2) * lb
-        f3 = c3 + (f3 - c3) * lb
-        A0, A1, A2, A3 = self._A
-        F = A0[0] * f0 + A0[1] * f1 + A0[2] * f2 + A0[3] * f3
-        tx = A1[0] * f0 + A1[1] * f1 + A1[2] * f2 + A1[3] * f3
-        ty = A2[0] * f0 + A2[1] * f1 + A2[2] * f2 + A2[3] * f3
-        tz = A3[0] * f0 + A3[1] * f1 + A3[2] * f2 + A3[3] * f3
-
+        (A00, A01, A02, A03), (A10, A11, A12, A13), (A20, A21, A22, A23), (A30, A31, A32, A33) = self._A
         m, g, kd = self._m, self._g, self._kd
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self.R
-        if self.landed:
-            # Lift-off when the vertical thrust beats the weight (drag of a
-            # vehicle at rest in the wind is not enough to lift or slide it).
-            if F * r22 <= m * g:
-                self.v = (0.0, 0.0, 0.0)
-                self.w = (0.0, 0.0, 0.0)
-                self.acc = (0.0, 0.0, 0.0)
-                return
-            self.landed = False
-
-        # --- rotation: RK4 on J W' = -W x J W + tau (tau constant)
+        mg = m * g
         Jx, Jy, Jz = self._J
-        wx, wy, wz = self.w
-
         # Euler's equation inlined (a nested function costs ~1 us per call here)
         ix, iy, iz = 1.0 / Jx, 1.0 / Jy, 1.0 / Jz
         cyz, czx, cxy = Jz - Jy, Jx - Jz, Jy - Jx          # (W x J W) = (cyz wy wz, czx wz wx, cxy wx wy)
-        k1x = (tx - cyz * wy * wz) * ix
-        k1y = (ty - czx * wz * wx) * iy
-        k1z = (tz - cxy * wx * wy) * iz
         hh = 0.5 * h
-        ax, ay, az = wx + hh * k1x, wy + hh * k1y, wz + hh * k1z
-        k2x = (tx - cyz * ay * az) * ix
-        k2y = (ty - czx * az * ax) * iy
-        k2z = (tz - cxy * ax * ay) * iz
-        ax, ay, az = wx + hh * k2x, wy + hh * k2y, wz + hh * k2z
-        k3x = (tx - cyz * ay * az) * ix
-        k3y = (ty - czx * az * ax) * iy
-        k3z = (tz - cxy * ax * ay) * iz
-        ax, ay, az = wx + h * k3x, wy + h * k3y, wz + h * k3z
-        k4x = (tx - cyz * ay * az) * ix
-        k4y = (ty - czx * az * ax) * iy
-        k4z = (tz - cxy * ax * ay) * iz
         h6 = h / 6.0
-        vx1 = wx + h6 * (k1x + 2.0 * (k2x + k3x) + k4x)
-        vy1 = wy + h6 * (k1y + 2.0 * (k2y + k3y) + k4y)
-        vz1 = wz + h6 * (k1z + 2.0 * (k2z + k3z) + k4z)
-        e1x = (tx - cyz * vy1 * vz1) * ix
-        e1y = (ty - czx * vz1 * vx1) * iy
-        e1z = (tz - cxy * vx1 * vy1) * iz
         h12 = h * h / 12.0
-        thx = hh * (wx + vx1) + h12 * (k1x - e1x + wy * vz1 - wz * vy1)
-        thy = hh * (wy + vy1) + h12 * (k1y - e1y + wz * vx1 - wx * vz1)
-        thz = hh * (wz + vz1) + h12 * (k1z - e1z + wx * vy1 - wy * vx1)
-        self.w = (vx1, vy1, vz1)
-
-        n00, n01, n02, n10, n11, n12, n20, n21, n22 = self.R = rotate_right(self.R, thx, thy, thz)
-        self._count += 1
-        if self._count >= _REORTHO_EVERY:
-            self._count = 0
-            n00, n01, n02, n10, n11, n12, n20, n21, n22 = self.R = polar_step(self.R)
-
-        # --- translation: Simpson/RK4 quadrature, exact for constant acceleration
-        Fm = F / m
+        hs = h * h / 6.0
+        c = kd / m
+        gx, gy, gz = wind_enu_m_s
+        max_ground = self.max_ground_m
+        count = self._count
+        landed = self.landed
+        f0, f1, f2, f3 = self.f
         px, py, pz = self.p
         ux, uy, uz = self.v
-        ax0 = Fm * r02
-        ay0 = Fm * r12
-        az0 = Fm * r22 - g
-        ax1 = Fm * n02
-        ay1 = Fm * n12
-        az1 = Fm * n22 - g
-        axm = 0.5 * (ax0 + ax1)
-        aym = 0.5 * (ay0 + ay1)
-        azm = 0.5 * (az0 + az1)
-        if kd != 0.0:
-            # Linear drag on the relative air velocity, predicted explicitly
-            # (k_d/m ~ 0.1/s: no stiffness at 1 kHz).
-            c = kd / m
-            gx, gy, gz = wind_enu_m_s
-            rx, ry, rz = ux - gx, uy - gy, uz - gz
-            ax0 -= c * rx
-            ay0 -= c * ry
-            az0 -= c * rz
-            axm -= c * (rx + hh * ax0)
-            aym -= c * (ry + hh * ay0)
-            azm -= c * (rz + hh * az0)
-            ax1 -= c * (rx + h * axm)
-            ay1 -= c * (ry + h * aym)
-            az1 -= c * (rz + h * azm)
-        hs = h * h / 6.0
-        nvx = ux + h6 * (ax0 + 4.0 * axm + ax1)
-        nvy = uy + h6 * (ay0 + 4.0 * aym + ay1)
-        nvz = uz + h6 * (az0 + 4.0 * azm + az1)
-        npx = px + h * ux + hs * (ax0 + 2.0 * axm)
-        npy = py + h * uy + hs * (ay0 + 2.0 * aym)
-        npz = pz + h * uz + hs * (az0 + 2.0 * azm)
+        wx, wy, wz = self.w
+        acc = self.acc
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self.R
+        for _ in range(n):
+            m0 = c0 + (f0 - c0) * lb
+            m1 = c1 + (f1 - c1) * lb
+            m2 = c2 + (f2 - c2) * lb
+            m3 = c3 + (f3 - c3) * lb
+            f0 = c0 + (f0 - c0) * la
+            f1 = c1 + (f1 - c1) * la
+            f2 = c2 + (f2 - c2) * la
+            f3 = c3 + (f3 - c3) * la
+            F = A00 * m0 + A01 * m1 + A02 * m2 + A03 * m3
+            tx = A10 * m0 + A11 * m1 + A12 * m2 + A13 * m3
+            ty = A20 * m0 + A21 * m1 + A22 * m2 + A23 * m3
+            tz = A30 * m0 + A31 * m1 + A32 * m2 + A33 * m3
 
-        # Terrain lookup only when low enough to touch the highest ground.
-        if npz <= self.max_ground_m and nvz <= 0.0:
-            zg = self.ground_height(npx, npy)
-            if npz <= zg:
-                self._touch_down(npx, npy, zg, nvx, nvy, nvz)
-                return
-        self.p = (npx, npy, npz)
-        self.v = (nvx, nvy, nvz)
-        self.acc = (ax1, ay1, az1)
+            if landed:
+                # Lift-off when the vertical thrust beats the weight (drag of a
+                # vehicle at rest in the wind is not enough to lift or slide it).
+                if F * r22 <= mg:
+                    ux = uy = uz = wx = wy = wz = 0.0
+                    acc = (0.0, 0.0, 0.0)
+                    continue
+                landed = False
+
+            # --- rotation: RK4 on J W' = -W x J W + tau (tau constant)
+            k1x = (tx - cyz * wy * wz) * ix
+            k1y = (ty - czx * wz * wx) * iy
+            k1z = (tz - cxy * wx * wy) * iz
+            ax, ay, az = wx + hh * k1x, wy + hh * k1y, wz + hh * k1z
+            k2x = (tx - cyz * ay * az) * ix
+            k2y = (ty - czx * az * ax) * iy
+            k2z = (tz - cxy * ax * ay) * iz
+            ax, ay, az = wx + hh * k2x, wy + hh * k2y, wz + hh * k2z
+            k3x = (tx - cyz * ay * az) * ix
+            k3y = (ty - czx * az * ax) * iy
+            k3z = (tz - cxy * ax * ay) * iz
+            ax, ay, az = wx + h * k3x, wy + h * k3y, wz + h * k3z
+            k4x = (tx - cyz * ay * az) * ix
+            k4y = (ty - czx * az * ax) * iy
+            k4z = (tz - cxy * ax * ay) * iz
+            vx1 = wx + h6 * (k1x + 2.0 * (k2x + k3x) + k4x)
+            vy1 = wy + h6 * (k1y + 2.0 * (k2y + k3y) + k4y)
+            vz1 = wz + h6 * (k1z + 2.0 * (k2z + k3z) + k4z)
+            e1x = (tx - cyz * vy1 * vz1) * ix
+            e1y = (ty - czx * vz1 * vx1) * iy
+            e1z = (tz - cxy * vx1 * vy1) * iz
+            thx = hh * (wx + vx1) + h12 * (k1x - e1x + wy * vz1 - wz * vy1)
+            thy = hh * (wy + vy1) + h12 * (k1y - e1y + wz * vx1 - wx * vz1)
+            thz = hh * (wz + vz1) + h12 * (k1z - e1z + wx * vy1 - wy * vx1)
+            wx, wy, wz = vx1, vy1, vz1
+
+            # R <- R Exp(theta): ``rotate_right`` inlined (same expressions)
+            t2 = thx * thx + thy * thy + thz * thz
+            if t2 > 1e-12:
+                ang = math.sqrt(t2)
+                a = math.sin(ang) / ang
+                s = math.sin(0.5 * ang)
+                b = 2.0 * s * s / t2
+            else:
+                a = 1.0 - t2 / 6.0
+                b = 0.5 - t2 / 24.0
+            xx, yy, zz = thx * thx, thy * thy, thz * thz
+            xy, xz, yz = thx * thy, thx * thz, thy * thz
+            E00 = 1.0 - b * (yy + zz)
+            E11 = 1.0 - b * (xx + zz)
+            E22 = 1.0 - b * (xx + yy)
+            E01 = b * xy - a * thz
+            E10 = b * xy + a * thz
+            E02 = b * xz + a * thy
+            E20 = b * xz - a * thy
+            E12 = b * yz - a * thx
+            E21 = b * yz + a * thx
+            n00 = r00 * E00 + r01 * E10 + r02 * E20
+            n01 = r00 * E01 + r01 * E11 + r02 * E21
+            n02 = r00 * E02 + r01 * E12 + r02 * E22
+            n10 = r10 * E00 + r11 * E10 + r12 * E20
+            n11 = r10 * E01 + r11 * E11 + r12 * E21
+            n12 = r10 * E02 + r11 * E12 + r12 * E22
+            n20 = r20 * E00 + r21 * E10 + r22 * E20
+            n21 = r20 * E01 + r21 * E11 + r22 * E21
+            n22 = r20 * E02 + r21 * E12 + r22 * E22
+            count += 1
+            if count >= _REORTHO_EVERY:
+                count = 0
+                n00, n01, n02, n10, n11, n12, n20, n21, n22 = polar_step(
+                    (n00, n01, n02, n10, n11, n12, n20, n21, n22))
+
+            # --- translation: Simpson/RK4 quadrature, exact for constant acceleration
+            Fm = F / m
+            ax0 = Fm * r02
+            ay0 = Fm * r12
+            az0 = Fm * r22 - g
+            ax1 = Fm * n02
+            ay1 = Fm * n12
+            az1 = Fm * n22 - g
+            axm = 0.5 * (ax0 + ax1)
+            aym = 0.5 * (ay0 + ay1)
+            azm = 0.5 * (az0 + az1)
+            r00, r01, r02, r10, r11, r12, r20, r21, r22 = n00, n01, n02, n10, n11, n12, n20, n21, n22
+            if kd != 0.0:
+                # Linear drag on the relative air velocity, predicted explicitly
+                # (k_d/m ~ 0.1/s: no stiffness at 1 kHz).
+                rx, ry, rz = ux - gx, uy - gy, uz - gz
+                ax0 -= c * rx
+                ay0 -= c * ry
+                az0 -= c * rz
+                axm -= c * (rx + hh * ax0)
+                aym -= c * (ry + hh * ay0)
+                azm -= c * (rz + hh * az0)
+                ax1 -= c * (rx + h * axm)
+                ay1 -= c * (ry + h * aym)
+                az1 -= c * (rz + h * azm)
+            nvx = ux + h6 * (ax0 + 4.0 * axm + ax1)
+            nvy = uy + h6 * (ay0 + 4.0 * aym + ay1)
+            nvz = uz + h6 * (az0 + 4.0 * azm + az1)
+            npx = px + h * ux + hs * (ax0 + 2.0 * axm)
+            npy = py + h * uy + hs * (ay0 + 2.0 * aym)
+            npz = pz + h * uz + hs * (az0 + 2.0 * azm)
+
+            # Terrain lookup only when low enough to touch the highest ground.
+            if npz <= max_ground and nvz <= 0.0:
+                zg = self.ground_height(npx, npy)
+                if npz <= zg:
+                    # Touch-down: at rest, level, yaw kept (see ``_touch_down``).
+                    self.impact_speed_m_s = math.sqrt(nvx * nvx + nvy * nvy + nvz * nvz)
+                    px, py, pz = npx, npy, zg
+                    ux = uy = uz = wx = wy = wz = 0.0
+                    acc = (0.0, 0.0, 0.0)
+                    yaw = math.atan2(r10, r00) if abs(r00) + abs(r10) > 1e-9 else 0.0
+                    cy_, sy_ = math.cos(yaw), math.sin(yaw)
+                    r00, r01, r02, r10, r11, r12, r20, r21, r22 = cy_, -sy_, 0.0, sy_, cy_, 0.0, 0.0, 0.0, 1.0
+                    landed = True
+                    continue
+            px, py, pz = npx, npy, npz
+            ux, uy, uz = nvx, nvy, nvz
+            acc = (ax1, ay1, az1)
+        self.f = (f0, f1, f2, f3)
+        self.p = (px, py, pz)
+        self.v = (ux, uy, uz)
+        self.w = (wx, wy, wz)
+        self.R = (r00, r01, r02, r10, r11, r12, r20, r21, r22)
+        self.acc = acc
+        self.landed = landed
+        self._count = count
 
     def _touch_down(self, x, y, zg, vx, vy, vz) -> None:
         self.impact_speed_m_s = math.sqrt(vx * vx + vy * vy + vz * vz)

@@ -188,7 +188,12 @@ class SensorSuite:
                                tuple(float(x) for x in omega_flu_rad_s), gravity_m_s2)
 
     def imu_floats(self, R, acc, w, gravity_m_s2: float) -> ImuSample:
-        """``imu`` on plain floats (R row-major 9-tuple, acc and w 3-tuples): the hot path."""
+        """``imu`` on plain floats (R row-major 9-tuple, acc and w 3-tuples)."""
+        a, g, m = self.imu_tuples(R, acc, w, gravity_m_s2)
+        return ImuSample(np.array(a), np.array(g), np.array(m))
+
+    def imu_tuples(self, R, acc, w, gravity_m_s2: float):
+        """``imu_floats`` as three float 3-tuples (accel, gyro, mag): the hot path."""
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
         ax, ay, az = acc[0], acc[1], acc[2] + gravity_m_s2
         sx = r00 * ax + r10 * ay + r20 * az          # R^T (a + g e3)
@@ -198,14 +203,13 @@ class SensorSuite:
         bx = r00 * mx + r10 * my + r20 * mz          # R^T m_earth
         by = r01 * mx + r11 * my + r21 * mz
         bz = r02 * mx + r12 * my + r22 * mz
-        n = self.rng.standard_normal(9).tolist()
+        n0, n1, n2, n3, n4, n5, n6, n7, n8 = self.rng.standard_normal(9).tolist()
         ka = self.acc_rel_std * math.sqrt(sx * sx + sy * sy + sz * sz)
         ba, bg = self._accel_bias, self._gyro_bias
         kg, km = self.gyro_std, self.mag_std
-        return ImuSample(
-            np.array((sx + ba[0] + ka * n[0], sy + ba[1] + ka * n[1], sz + ba[2] + ka * n[2])),
-            np.array((w[0] + bg[0] + kg * n[3], w[1] + bg[1] + kg * n[4], w[2] + bg[2] + kg * n[5])),
-            np.array((bx + km * n[6], by + km * n[7], bz + km * n[8])))
+        return ((sx + ba[0] + ka * n0, sy + ba[1] + ka * n1, sz + ba[2] + ka * n2),
+                (w[0] + bg[0] + kg * n3, w[1] + bg[1] + kg * n4, w[2] + bg[2] + kg * n5),
+                (bx + km * n6, by + km * n7, bz + km * n8))
 
     def position(self, pos_enu_m, vel_enu_m_s) -> tuple[np.ndarray, np.ndarray]:
         """(position ENU m, velocity ENU m/s) measurements (3,) each."""
@@ -215,6 +219,18 @@ class SensorSuite:
             p = p + self.pos_std * self.rng.standard_normal(3)
         if self.vel_std > 0:
             v = v + self.vel_std * self.rng.standard_normal(3)
+        return p, v
+
+    def position_tuples(self, p, v):
+        """``position`` on float 3-tuples, returning float 3-tuples (same draws)."""
+        if self.pos_std > 0:
+            k = self.pos_std
+            n0, n1, n2 = self.rng.standard_normal(3).tolist()
+            p = (p[0] + k * n0, p[1] + k * n1, p[2] + k * n2)
+        if self.vel_std > 0:
+            k = self.vel_std
+            n0, n1, n2 = self.rng.standard_normal(3).tolist()
+            v = (v[0] + k * n0, v[1] + k * n1, v[2] + k * n2)
         return p, v
 
     def ranges(self, time_us: int, p, R) -> tuple[RangeReading, ...]:

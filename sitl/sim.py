@@ -10,7 +10,7 @@ companion's HIL_ACTUATOR_CONTROLS or ``Simulation.onboard``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import FrozenInstanceError, dataclass
 
 import numpy as np
 
@@ -18,57 +18,131 @@ from companion.mission.schema import Mission
 
 from .onboard import CascadedController, OnboardGains, Setpoint  # noqa: F401  (re-export)
 from .plant import Plant, PlantParams
-from .sensors import RangeReading, SensorSuite
+from .sensors import RangeReading, SensorSuite  # noqa: F401  (re-export)
 from .wind import WindModel
 from .world import World
 
 
-@dataclass(frozen=True)
-class TrueState:
-    """Ground truth of the vehicle (world ENU, body FLU).
+_set = object.__setattr__
+
+
+def _vec(x):
+    """A float tuple as a fresh (3,)/(4,) array; an array (or anything else) as given."""
+    return np.array(x) if type(x) is tuple else x
+
+
+def _mat(x):
+    """A row-major 9-tuple (or a tuple of rows) as a fresh (3, 3) array."""
+    return np.array(x).reshape(3, 3) if type(x) is tuple else x
+
+
+class _Lazy:
+    """Immutable record whose vector fields are kept as float tuples and
+    turned into numpy arrays on first access (cached).
+
+    Building the arrays of every frame eagerly costs more than the onboard
+    controller (about 0.4 us per ``np.array``), and most consumers read only
+    a few fields. Reading a field always gives the same ndarray object.
+    """
+
+    __slots__ = ()
+
+    def __setattr__(self, name, value):
+        raise FrozenInstanceError(f"cannot assign to field {name!r}")
+
+    def __delattr__(self, name):
+        raise FrozenInstanceError(f"cannot delete field {name!r}")
+
+    def __repr__(self) -> str:
+        fields = ", ".join(f"{n}={getattr(self, n)!r}" for n in self._fields)
+        return f"{type(self).__name__}({fields})"
+
+
+def _lazy_field(slot: str, convert, doc: str):
+    def get(self):
+        x = getattr(self, slot)
+        if type(x) is tuple:
+            x = convert(x)
+            _set(self, slot, x)
+        return x
+    return property(get, doc=doc)
+
+
+class TrueState(_Lazy):
+    """Ground truth of the vehicle (world ENU, body FLU); immutable.
 
     Attributes
     ----------
-    pos_enu_m, vel_enu_m_s, acc_enu_m_s2 : (3,)
-    R : (3, 3) body FLU -> world ENU
-    omega_flu_rad_s : (3,)
+    pos_enu_m, vel_enu_m_s, acc_enu_m_s2 : (3,) ndarray
+    R : (3, 3) ndarray, body FLU -> world ENU
+    omega_flu_rad_s : (3,) ndarray
     landed : bool
-    motor_thrust_n : (4,) rotor thrusts (N), PX4 order
+    motor_thrust_n : (4,) ndarray, rotor thrusts (N), PX4 order
+
+    Constructed like the former frozen dataclass (same field order); float
+    tuples are accepted and become arrays when first read.
     """
 
-    pos_enu_m: np.ndarray
-    vel_enu_m_s: np.ndarray
-    R: np.ndarray
-    omega_flu_rad_s: np.ndarray
-    acc_enu_m_s2: np.ndarray
-    landed: bool
-    motor_thrust_n: np.ndarray
+    __slots__ = ("_p", "_v", "_R", "_w", "_a", "landed", "_f")
+    _fields = ("pos_enu_m", "vel_enu_m_s", "R", "omega_flu_rad_s", "acc_enu_m_s2", "landed",
+               "motor_thrust_n")
+
+    def __init__(self, pos_enu_m, vel_enu_m_s, R, omega_flu_rad_s, acc_enu_m_s2, landed,
+                 motor_thrust_n) -> None:
+        _set(self, "_p", pos_enu_m)
+        _set(self, "_v", vel_enu_m_s)
+        _set(self, "_R", R)
+        _set(self, "_w", omega_flu_rad_s)
+        _set(self, "_a", acc_enu_m_s2)
+        _set(self, "landed", landed)
+        _set(self, "_f", motor_thrust_n)
+
+    pos_enu_m = _lazy_field("_p", _vec, "(3,) position, world ENU (m)")
+    vel_enu_m_s = _lazy_field("_v", _vec, "(3,) velocity, world ENU (m/s)")
+    R = _lazy_field("_R", _mat, "(3, 3) rotation body FLU -> world ENU")
+    omega_flu_rad_s = _lazy_field("_w", _vec, "(3,) body rate, FLU (rad/s)")
+    acc_enu_m_s2 = _lazy_field("_a", _vec, "(3,) acceleration, world ENU (m/s^2)")
+    motor_thrust_n = _lazy_field("_f", _vec, "(4,) rotor thrusts (N), PX4 order")
 
 
-@dataclass(frozen=True)
-class SensorFrame:
-    """Everything the vehicle measures at one sensor instant.
+class SensorFrame(_Lazy):
+    """Everything the vehicle measures at one sensor instant; immutable.
 
     Attributes
     ----------
     time_us : int
         Vehicle time since boot (us).
-    accel_flu_m_s2 : (3,) specific force, body FLU
-    gyro_flu_rad_s : (3,)
-    mag_flu_gauss : (3,)
-    pos_enu_m, vel_enu_m_s : (3,) position/velocity measurements
+    accel_flu_m_s2 : (3,) ndarray, specific force, body FLU
+    gyro_flu_rad_s : (3,) ndarray
+    mag_flu_gauss : (3,) ndarray
+    pos_enu_m, vel_enu_m_s : (3,) ndarray, position/velocity measurements
     ranges : tuple of RangeReading (only those due this frame)
     truth : TrueState
+
+    Constructed like the former frozen dataclass (same field order); float
+    tuples are accepted and become arrays when first read.
     """
 
-    time_us: int
-    accel_flu_m_s2: np.ndarray
-    gyro_flu_rad_s: np.ndarray
-    mag_flu_gauss: np.ndarray
-    pos_enu_m: np.ndarray
-    vel_enu_m_s: np.ndarray
-    ranges: tuple[RangeReading, ...]
-    truth: TrueState
+    __slots__ = ("time_us", "_acc", "_gyro", "_mag", "_pos", "_vel", "ranges", "truth")
+    _fields = ("time_us", "accel_flu_m_s2", "gyro_flu_rad_s", "mag_flu_gauss", "pos_enu_m",
+               "vel_enu_m_s", "ranges", "truth")
+
+    def __init__(self, time_us, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss, pos_enu_m,
+                 vel_enu_m_s, ranges, truth) -> None:
+        _set(self, "time_us", time_us)
+        _set(self, "_acc", accel_flu_m_s2)
+        _set(self, "_gyro", gyro_flu_rad_s)
+        _set(self, "_mag", mag_flu_gauss)
+        _set(self, "_pos", pos_enu_m)
+        _set(self, "_vel", vel_enu_m_s)
+        _set(self, "ranges", ranges)
+        _set(self, "truth", truth)
+
+    accel_flu_m_s2 = _lazy_field("_acc", _vec, "(3,) specific force, body FLU (m/s^2)")
+    gyro_flu_rad_s = _lazy_field("_gyro", _vec, "(3,) body rate measurement, FLU (rad/s)")
+    mag_flu_gauss = _lazy_field("_mag", _vec, "(3,) magnetic field, body FLU (gauss)")
+    pos_enu_m = _lazy_field("_pos", _vec, "(3,) position measurement, world ENU (m)")
+    vel_enu_m_s = _lazy_field("_vel", _vec, "(3,) velocity measurement, world ENU (m/s)")
 
 
 @dataclass(frozen=True)
@@ -94,7 +168,9 @@ class Simulation:
         Physics rate and sensor frame rate; physics_hz must be a multiple of sensor_hz.
     start_enu_m : (3,) or (2,), optional
         Start position; (x, y) or a z below the terrain: on the terrain.
-        Default: the first free OGM cell (or the origin), on the terrain.
+        Default: the mission's ``sim.start_enu_m``, else the free OGM cell
+        nearest to the centroid of the free space (``World.start_cell_enu``),
+        else the origin; on the terrain.
     world : World, optional
         Terrain, rows and obstacles (``sitl.world.load_world(mission)`` reads
         the mission's maps). Default: flat ground at z = 0 with the mission's
@@ -136,8 +212,8 @@ class Simulation:
     def reset(self, start_enu_m=None, yaw_rad: float = 0.0) -> None:
         """Put the vehicle landed at ``start_enu_m`` (see the constructor)."""
         if start_enu_m is None:
-            xy = self.world.first_free_cell_enu() or (0.0, 0.0)
-            start = (xy[0], xy[1], -math.inf)
+            xy = self.mission.sim.start_enu_m or self.world.start_cell_enu() or (0.0, 0.0)
+            start = (float(xy[0]), float(xy[1]), -math.inf)
         else:
             s = [float(x) for x in start_enu_m]
             start = (s[0], s[1], s[2] if len(s) > 2 else -math.inf)
@@ -156,8 +232,8 @@ class Simulation:
         """Current ground truth."""
         if self._truth is None:
             pl = self.plant
-            p, v, R, w, a, f = pl.state_arrays()
-            self._truth = TrueState(p, v, R, w, a, pl.landed, f)
+            # the plant's state tuples are immutable: holding them is a snapshot
+            self._truth = TrueState(pl.p, pl.v, pl.R, pl.w, pl.acc, pl.landed, pl.f)
         return self._truth
 
     def step_frame(self, motor_cmd_norm) -> SensorFrame:
@@ -176,10 +252,7 @@ class Simulation:
         cmd = (float(motor_cmd_norm[0]), float(motor_cmd_norm[1]),
                float(motor_cmd_norm[2]), float(motor_cmd_norm[3]))
         wind = self.wind.step(self.dt_frame_s)
-        step = self.plant.step
-        h = self.dt_physics_s
-        for _ in range(self.substeps):
-            step(cmd, h, wind)
+        self.plant.advance(cmd, self.dt_physics_s, self.substeps, wind)
         self.time_us += self.sensor_period_us
         self._truth = None
         return self._sample()
@@ -194,9 +267,11 @@ class Simulation:
 
     def _sample(self) -> SensorFrame:
         pl = self.plant
-        truth = self.truth
-        imu = self.sensors.imu_floats(pl.R, pl.acc, pl.w, self.params.plant.gravity_m_s2)
-        pos, vel = self.sensors.position(truth.pos_enu_m, truth.vel_enu_m_s)
-        ranges = self.sensors.ranges(self.time_us, pl.p, pl.R)
-        return SensorFrame(self.time_us, imu.accel_flu_m_s2, imu.gyro_flu_rad_s, imu.mag_flu_gauss,
-                           pos, vel, ranges, truth)
+        p, R = pl.p, pl.R
+        truth = self._truth = TrueState(p, pl.v, R, pl.w, pl.acc, pl.landed, pl.f)
+        sensors = self.sensors
+        # Same draws, same order as ``imu`` then ``position`` then ``ranges``.
+        acc, gyro, mag = sensors.imu_tuples(R, pl.acc, pl.w, self.params.plant.gravity_m_s2)
+        pos, vel = sensors.position_tuples(p, pl.v)
+        ranges = sensors.ranges(self.time_us, p, R)
+        return SensorFrame(self.time_us, acc, gyro, mag, pos, vel, ranges, truth)

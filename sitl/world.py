@@ -368,6 +368,36 @@ class World:
         return float(x), float(y)
 
 
+    def start_cell_enu(self) -> tuple[float, float] | None:
+        """World (x, y) of the SITL's default start cell, or None without a
+        grid or free cell.
+
+        Among the free cells on the ridge of the clearance (distance to the
+        nearest cell that is not free, the map border included: a local
+        maximum, i.e. the middle of a corridor between rows) with at least
+        half the map's largest clearance, the one nearest to the centroid of
+        all free cells (ties: the first in row-major order). Well inside the
+        mapped area and away from the rows, chosen without any planning.
+        """
+        if self.grid is None:
+            return None
+        free = np.asarray(self.grid.free, dtype=bool)
+        if not free.any():
+            return None
+        # Clearance in cells; the padding makes the map border count as not free.
+        clear = ndimage.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1]
+        rows, cols = np.nonzero(free)
+        rc, cc = rows.mean(), cols.mean()
+        # On the ridge of the clearance (the middle of a corridor between rows).
+        ridge = clear >= ndimage.maximum_filter(clear, size=3, mode="constant")
+        rows, cols = np.nonzero((clear >= 0.5 * clear.max()) & ridge)   # never empty: holds the max
+        # Centroid in cell coordinates: the grid is rigid (rotation + offset),
+        # so the nearest cell is the same in world coordinates.
+        k = int(np.argmin((rows - rc) ** 2 + (cols - cc) ** 2))
+        x, y = self.grid.cell_to_world(rows[k], cols[k])
+        return float(x), float(y)
+
+
 def load_world(mission: "Mission") -> World:
     """Read the mission's OGM and DEM and build its ``World`` (the I/O edge).
 

@@ -6,6 +6,7 @@ mission file is validated in one place.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -130,6 +131,9 @@ class SimConfig:
     an empty list: none. ``canopy_height_m``: the OGM's occupied cells are
     extruded from the DEM to this height for the rangefinders.
     ``magnetic_field_enu_gauss``: Earth field (default about Bordeaux's).
+    ``start_enu_m``: where the vehicle starts, landed, (x, y) on the map
+    frame (m); z is the terrain there. None: the SITL picks the free OGM
+    cell nearest to the centroid of the free space (it never plans).
     """
 
     obstacles: tuple[ObstacleConfig, ...] = ()
@@ -139,10 +143,13 @@ class SimConfig:
     canopy_height_m: float = 2.0
     wind: WindConfig = field(default_factory=WindConfig)
     magnetic_field_enu_gauss: tuple[float, float, float] = (0.0, 0.21, -0.42)
+    start_enu_m: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.canopy_height_m <= 0:
             raise ValueError("sim.canopy_height_m must be > 0")
+        if self.start_enu_m is not None and not all(math.isfinite(x) for x in self.start_enu_m):
+            raise ValueError("sim.start_enu_m must be finite")
         if self.rangefinders is not None:
             ids = [r.id for r in self.rangefinders]
             if len(set(ids)) != len(ids):
