@@ -1,0 +1,452 @@
+r"""Geometric SE(3) tracking controller on vector measurements (paper Section 2.4.2).
+
+World ENU, body FLU, z up (e3 = [0, 0, 1]); ``R`` maps body to world. Plant,
+eq. (20): ``x_dot = v``, ``m v_dot = f R e3 - m g e3``, ``R_dot = R S(Omega)``,
+``J Omega_dot = -Omega x J Omega + tau``.
+
+Thrust and desired attitude (eqs. 21-26)
+-----------------------------------------
+``F_d = -kx e_x - kv e_v + m (g e3 + a_d)``, ``b3d = F_d/|F_d|`` (eq. 23);
+pointing ``s = (S_p - x_d)/|S_p - x_d|`` (eq. 21), ``sc = unit(s - (s.b3d)
+b3d)`` (eq. 22), ``b2d = sc``, ``b1d = b2d x b3d``, ``R_d = [b1d, b2d,
+b3d]``. Thrust ``f = F_d . (R e3)`` with ``R e3`` estimated from the two
+vector pairs (TRIAD, primary pair the specific force), never the true attitude.
+
+Desired angular velocity (eq. 31), analytic
+--------------------------------------------
+``Omega_d = vee(R_d^T R_d_dot) = (b3d.b2d_dot, b1d.b3d_dot, b2d.b1d_dot)`` and
+its derivative from the first and second derivatives of ``b3d`` and ``sc``,
+with, for ``n = u/|u|``: ``n_dot = (I - n n^T) u_dot/|u|`` and ``n_ddot =
+(u_ddot - 2 n_dot (n.u_dot) - n (n_dot.u_dot + n.u_ddot))/|u|``. Scheme for
+the derivatives of F_d: ``e_x_dot = e_v``; ``e_v_dot = a_hat - a_d`` with
+``a_hat`` the measured acceleration (differentiated velocity); ``a_d_dot =
+jerk``; for the second derivative, the unmeasurable ``e_v_ddot`` is taken
+from the ideal closed loop ``m e_v_dot = -kx e_x - kv e_v`` differentiated,
+``e_v_ddot = -(kx e_v + kv e_v_dot)/m``, and ``a_d_ddot = snap``. Of ``s``:
+``u = S_p - x_d``, ``u_dot = -v_d``, ``u_ddot = -a_d``.
+
+Torque (eq. 27) with the signs restored
+----------------------------------------
+Measurements ``b_i = R^T r_i`` (body) of known world directions ``r_i``;
+desired ``b_i^d = R_d^T r_i``; ``z_rho = sum rho_i b_i^d x b_i`` (eq. 28),
+``e_Omega1 = Omega - Omega_d`` (29), ``e_Omega2 = Omega_d x Omega`` (30).
+The law is::
+
+    tau = Omega x J Omega + J Omega_d_dot + J z_rho - alpha J e_Omega1 - J e_Omega2
+
+i.e. ``e_Omega1_dot = z_rho - alpha e_Omega1 - e_Omega2``. Derivation: with
+``R_e = R R_d^T``, ``R_e_dot = R S(e_Omega1) R_d^T = R_e S(R_d e_Omega1)``,
+so ``omega_bar = R_d e_Omega1`` (a world-frame vector, expressed through
+R_d not R) is the body-type rate of R_e and its quaternion obeys eq. (34),
+``q_e_dot = 1/2 (q0e I + S(q_e)) omega_bar``. Differentiating,
+``omega_bar_dot = R_d (Omega_d x e_Omega1 + e_Omega1_dot) = R_d (e_Omega2 +
+e_Omega1_dot)`` because ``Omega_d x (Omega - Omega_d) = Omega_d x Omega``;
+the law above gives eq. (37), ``omega_bar_dot = -alpha omega_bar + R_d z_rho``
+(the ``-J e_Omega2`` term cancels the frame rotation). Since ``r^T R_e r =
+b.b^d = 1 - 2 |q_e x r|^2`` for unit r, ``2 q_e^T W_rho q_e = sum rho_i (1 -
+b_i . b_i^d)`` with ``W_rho = -sum rho_i S(r_i)^2``, so the Lyapunov function
+(38) is, without quaternions,
+
+    V = sum rho_i (1 - b_i . b_i^d) + 1/2 |e_Omega1|^2       (|omega_bar| = |e_Omega1|)
+
+For constant r_i, ``d/dt (b_i . b_i^d) = e_Omega1 . (b_i^d x b_i)``, so
+``V_dot = -e_Omega1 . z_rho + e_Omega1 . (z_rho - alpha e_Omega1 - e_Omega2)
+= -alpha |e_Omega1|^2`` (e_Omega2 is orthogonal to e_Omega1): eq. (41). The
+sign of the e_Omega2 term does not change V_dot, only the minus sign makes
+eq. (37) hold. Time-varying r_1 (the specific force turns with the
+acceleration) adds ``sum rho_i r_i_dot . (R_e^T ...)`` terms, small at the
+low accelerations of coverage flight.
+
+The two vectors and how their world directions are known
+---------------------------------------------------------
+(details in ``companion.control.vectors``) b_1: the accelerometer's specific
+force, against ``r_1 = unit(a_hat + g e3)`` with ``a_hat`` the vehicle's
+acceleration from the measured velocity differentiated on the vehicle clock
+(its half-frame lag advanced by the reference jerk); b_2: the magnetometer,
+against the configured Earth field ``ControlConfig.mag_field_enu_gauss``, by
+default both taken normal to the specific force (decouples yaw from tilt).
+Optional filters: a slow body-frame low-pass on b_1 (constant for a
+drag-free multirotor) and a gyro-propagated complementary filter on b_2.
+With the filters off and the raw field, this is the paper's law on raw
+vectors.
+
+Everything here is pure: the controller object holds only filter state and
+takes the vehicle's time as an argument. The hot path uses float tuples (one
+``update`` is a few tens of microseconds, see ``benchmarks/bench_control.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..vehicle import GRAVITY_M_S2, VehicleConfig
+from .config import ControlConfig
+from .mixer import Mixer
+from .vectors import AccelerationEstimator, BodyVectorFilter, Vec3, measurement_vectors, unit3
+
+# --- small float-tuple vector algebra (the hot path avoids numpy) ---------
+
+
+_ZERO = (0.0, 0.0, 0.0)
+
+
+def _cross(a, b) -> Vec3:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _dot(a, b) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _unit_d2(u, ud, udd):
+    """Unit vector n = u/|u| and its first two time derivatives.
+
+    Returns (n, n_dot, n_ddot), each (3,). See the module docstring.
+    """
+    r = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    n = (u[0] / r, u[1] / r, u[2] / r)
+    rd = n[0] * ud[0] + n[1] * ud[1] + n[2] * ud[2]
+    nd = ((ud[0] - n[0] * rd) / r, (ud[1] - n[1] * rd) / r, (ud[2] - n[2] * rd) / r)
+    rdd = nd[0] * ud[0] + nd[1] * ud[1] + nd[2] * ud[2] + n[0] * udd[0] + n[1] * udd[1] + n[2] * udd[2]
+    ndd = ((udd[0] - 2.0 * nd[0] * rd - n[0] * rdd) / r,
+           (udd[1] - 2.0 * nd[1] * rd - n[1] * rdd) / r,
+           (udd[2] - 2.0 * nd[2] * rd - n[2] * rdd) / r)
+    return n, nd, ndd
+
+
+# --- named inputs and outputs ----------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Measurements:
+    """What the vehicle sends (HIGHRES_IMU, LOCAL_POSITION_NED), converted to ENU/FLU.
+
+    Attributes
+    ----------
+    gyro_flu_rad_s : sequence (3,)
+        Angular velocity Omega, body FLU, rad/s.
+    accel_flu_m_s2 : sequence (3,)
+        Accelerometer specific force, body FLU, m/s^2.
+    mag_flu_gauss : sequence (3,)
+        Magnetometer, body FLU, gauss.
+    pos_enu_m : sequence (3,)
+        Position, world ENU, m.
+    vel_enu_m_s : sequence (3,)
+        Velocity, world ENU, m/s.
+    nav_time_s : float or None
+        Vehicle time stamp (s) of the position/velocity sample (its
+        LOCAL_POSITION_NED ``time_boot_ms``), when it differs from the IMU's;
+        None: the same as the ``t_s`` given to ``update``.
+    """
+
+    gyro_flu_rad_s: tuple
+    accel_flu_m_s2: tuple
+    mag_flu_gauss: tuple
+    pos_enu_m: tuple
+    vel_enu_m_s: tuple
+    nav_time_s: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Reference:
+    """One sample of the reference trajectory, world ENU.
+
+    Attributes
+    ----------
+    pos_enu_m, vel_enu_m_s, acc_enu_m_s2, jerk_enu_m_s3, snap_enu_m_s4 : sequence (3,)
+        x_d and its first four derivatives (m, m/s, ..., m/s^4).
+    target_enu_m : sequence (3,) or None
+        Pointing target S_p (eq. 21); None: the controller's.
+    """
+
+    pos_enu_m: tuple
+    vel_enu_m_s: tuple = (0.0, 0.0, 0.0)
+    acc_enu_m_s2: tuple = (0.0, 0.0, 0.0)
+    jerk_enu_m_s3: tuple = (0.0, 0.0, 0.0)
+    snap_enu_m_s4: tuple = (0.0, 0.0, 0.0)
+    target_enu_m: tuple | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class DesiredAttitude:
+    """R_d = [b1d, b2d, b3d] (columns, body -> world) with Omega_d and its derivative.
+
+    Attributes
+    ----------
+    R_d : tuple of 3 rows (3x3)
+        Desired attitude, ``R_d[i][j]`` = component i of column b_{j+1}d.
+    b1d, b2d, b3d : tuple (3,)
+        Columns of R_d, world ENU.
+    Omega_d, Omega_d_dot : tuple (3,)
+        vee(R_d^T R_d_dot) (rad/s) and its time derivative (rad/s^2), desired body frame.
+    """
+
+    R_d: tuple
+    b1d: Vec3
+    b2d: Vec3
+    b3d: Vec3
+    Omega_d: Vec3
+    Omega_d_dot: Vec3
+
+
+@dataclass(frozen=True, slots=True)
+class ControlOutput:
+    """One controller step.
+
+    Attributes
+    ----------
+    f_n : float
+        Collective thrust demand f (N), before the mixer.
+    tau_flu_nm : tuple (3,)
+        Torque demand (N m, body FLU), before the mixer.
+    motor_cmd : tuple (4,)
+        Normalised motor commands in [0, 1], PX4 quad-X order (after the mixer).
+    saturated : bool
+        The mixer had to modify the demand.
+    b3d, b2d : tuple (3,)
+        Desired thrust and pointing directions (world ENU).
+    R_d : tuple of 3 rows (3x3)
+        Desired attitude.
+    Omega_d : tuple (3,)
+        Desired angular velocity (rad/s, desired body frame).
+    e_x, e_v : tuple (3,)
+        Position (m) and velocity (m/s) errors, world ENU.
+    z_rho : tuple (3,)
+        Attitude error of eq. (28) (1/s^2, body).
+    V : float
+        Lyapunov function (38) from the measurements, ``sum rho_i (1 - b_i .
+        b_i^d) + |e_Omega1|^2 / 2``.
+    """
+
+    f_n: float
+    tau_flu_nm: Vec3
+    motor_cmd: tuple
+    saturated: bool
+    b3d: Vec3
+    b2d: Vec3
+    R_d: tuple
+    Omega_d: Vec3
+    e_x: Vec3
+    e_v: Vec3
+    z_rho: Vec3
+    V: float
+
+
+# --- pure pieces --------------------------------------------------------------
+
+
+def desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, b2_fallback=(0.0, 1.0, 0.0)) -> DesiredAttitude:
+    """R_d, Omega_d and Omega_d_dot from the thrust vector and the pointing vector.
+
+    Parameters
+    ----------
+    F, F_dot, F_ddot : sequence (3,)
+        Desired thrust vector F_d of eq. (23) (N, world ENU) and its first two
+        time derivatives.
+    u_s, u_s_dot, u_s_ddot : sequence (3,)
+        Unnormalised pointing vector ``S_p - x_d`` (eq. 21, m) and its first
+        two derivatives (``-v_d``, ``-a_d``).
+    b2_fallback : sequence (3,)
+        Pointing direction used, with zero derivatives, where eq. (21) or (22)
+        is undefined (at the target, or pointing along the thrust); the
+        controller passes its previous b2d.
+
+    Returns
+    -------
+    DesiredAttitude
+        eqs. (21)-(26) and (31); Omega_d_dot analytic (module docstring).
+    """
+    if _dot(F, F) < 1e-12:   # free fall demanded: no thrust direction, keep level
+        F, F_dot, F_ddot = (0.0, 0.0, 1e-6), _ZERO, _ZERO
+    b3, b3d, b3dd = _unit_d2(F, F_dot, F_ddot)
+    if _dot(u_s, u_s) > 1e-12:
+        s, sd, sdd = _unit_d2(u_s, u_s_dot, u_s_ddot)
+    else:
+        s, sd, sdd = b2_fallback, _ZERO, _ZERO
+    # w = s - (s.b3) b3 (eq. 22) and its derivatives.
+    c = _dot(s, b3)
+    cd = _dot(sd, b3) + _dot(s, b3d)
+    cdd = _dot(sdd, b3) + 2.0 * _dot(sd, b3d) + _dot(s, b3dd)
+    w = (s[0] - c * b3[0], s[1] - c * b3[1], s[2] - c * b3[2])
+    wd = tuple(sd[i] - cd * b3[i] - c * b3d[i] for i in range(3))
+    wdd = tuple(sdd[i] - cdd * b3[i] - 2.0 * cd * b3d[i] - c * b3dd[i] for i in range(3))
+    if _dot(w, w) < 1e-12:   # s along b3d: keep the previous pointing, frozen
+        c = _dot(b2_fallback, b3)
+        w = tuple(b2_fallback[i] - c * b3[i] for i in range(3))
+        wd = wdd = _ZERO
+        if _dot(w, w) < 1e-12:
+            w = _cross(b3, (1.0, 0.0, 0.0) if abs(b3[0]) < 0.9 else (0.0, 1.0, 0.0))
+    b2, b2d, b2dd = _unit_d2(w, wd, wdd)
+    b1 = _cross(b2, b3)
+    x1, x2 = _cross(b2d, b3), _cross(b2, b3d)
+    b1d = (x1[0] + x2[0], x1[1] + x2[1], x1[2] + x2[2])
+    y1, y2, y3 = _cross(b2dd, b3), _cross(b2d, b3d), _cross(b2, b3dd)
+    b1dd = tuple(y1[i] + 2.0 * y2[i] + y3[i] for i in range(3))
+    Omega_d = (_dot(b3, b2d), _dot(b1, b3d), _dot(b2, b1d))
+    Omega_d_dot = (_dot(b3d, b2d) + _dot(b3, b2dd),
+                   _dot(b1d, b3d) + _dot(b1, b3dd),
+                   _dot(b2d, b1d) + _dot(b2, b1dd))
+    R_d = ((b1[0], b2[0], b3[0]), (b1[1], b2[1], b3[1]), (b1[2], b2[2], b3[2]))
+    return DesiredAttitude(R_d, b1, b2, b3, Omega_d, Omega_d_dot)
+
+
+def attitude_torque(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, b_meas, r_world,
+                    b1d, b2d, b3d, rho, alpha: float):
+    """The attitude law (27)-(30) with the signs derived in the module docstring.
+
+    Parameters
+    ----------
+    inertia_kg_m2 : sequence (3,)
+        Diagonal of J (kg m^2, body).
+    Omega, Omega_d, Omega_d_dot : sequence (3,)
+        Measured and desired angular velocity (rad/s), desired angular acceleration (rad/s^2).
+    b_meas : sequence of (3,)
+        Measured body unit vectors b_i.
+    r_world : sequence of (3,)
+        Their world directions r_i.
+    b1d, b2d, b3d : sequence (3,)
+        Columns of R_d (world); ``b_i^d = R_d^T r_i``.
+    rho : sequence of float
+        Weights rho_i (1/s^2).
+    alpha : float
+        Damping (1/s).
+
+    Returns
+    -------
+    tau : tuple (3,)
+        Torque (N m, body).
+    z_rho : tuple (3,)
+        eq. (28).
+    V : float
+        Lyapunov function (38) in the measured form of the module docstring.
+    """
+    zx = zy = zz = 0.0
+    V = 0.0
+    for b, r, k in zip(b_meas, r_world, rho):
+        bd = (_dot(b1d, r), _dot(b2d, r), _dot(b3d, r))   # R_d^T r_i
+        zx += k * (bd[1] * b[2] - bd[2] * b[1])
+        zy += k * (bd[2] * b[0] - bd[0] * b[2])
+        zz += k * (bd[0] * b[1] - bd[1] * b[0])
+        V += k * (1.0 - _dot(b, bd))
+    Jx, Jy, Jz = inertia_kg_m2
+    wx, wy, wz = Omega
+    dx, dy, dz = Omega_d
+    e1 = (wx - dx, wy - dy, wz - dz)
+    e2 = (dy * wz - dz * wy, dz * wx - dx * wz, dx * wy - dy * wx)   # Omega_d x Omega
+    Jw = (Jx * wx, Jy * wy, Jz * wz)
+    gyro = (wy * Jw[2] - wz * Jw[1], wz * Jw[0] - wx * Jw[2], wx * Jw[1] - wy * Jw[0])
+    z = (zx, zy, zz)
+    tau = tuple(gyro[i] + inertia_kg_m2[i] * (Omega_d_dot[i] + z[i] - alpha * e1[i] - e2[i])
+                for i in range(3))
+    V += 0.5 * _dot(e1, e1)
+    return tau, z, V
+
+
+def thrust_axis_estimate(b1, b2, r1, r2) -> Vec3:
+    """``R e3`` (world) from two vector pairs by TRIAD (pair 1 exact, pair 2 completes).
+
+    Parameters
+    ----------
+    b1, b2 : sequence (3,)
+        Body unit vectors; r1, r2 : sequence (3,) their world directions.
+
+    Returns
+    -------
+    tuple (3,)
+        Estimate of the body z axis in the world frame (unit).
+    """
+    mb = unit3(_cross(b1, b2))
+    mr = unit3(_cross(r1, r2))
+    nb = _cross(b1, mb)
+    nr = _cross(r1, mr)
+    # R = [r1 mr nr] [b1 mb nb]^T, so R e3 = r1 b1_z + mr mb_z + nr nb_z.
+    return tuple(r1[i] * b1[2] + mr[i] * mb[2] + nr[i] * nb[2] for i in range(3))
+
+
+# --- the controller -----------------------------------------------------------
+
+
+class GeometricController:
+    """The paper's controller (Section 2.4.2) on vector measurements.
+
+    Parameters
+    ----------
+    vehicle : VehicleConfig
+        Mass, inertia and rotor layout (mixer).
+    cfg : ControlConfig
+        Gains and sensor settings.
+    target_enu_m : sequence (3,)
+        Pointing target S_p (eq. 21), world ENU, m.
+
+    Notes
+    -----
+    Holds the state of the small measurement filters (acceleration estimate,
+    body-vector filters) and nothing else; no clock, no I/O. Never reads
+    the attitude: see ``companion.control.vectors``.
+    """
+
+    def __init__(self, vehicle: VehicleConfig, cfg: ControlConfig, target_enu_m) -> None:
+        self.vehicle = vehicle
+        self.cfg = cfg
+        self.target_enu_m = (float(target_enu_m[0]), float(target_enu_m[1]), float(target_enu_m[2]))
+        self.mixer = Mixer(vehicle)
+        self._m = float(vehicle.mass_kg)
+        self._J = tuple(float(j) for j in vehicle.inertia_kg_m2)
+        self._g = GRAVITY_M_S2
+        self._r2 = unit3(cfg.mag_field_enu_gauss)
+        self._rho = (float(cfg.rho1), float(cfg.rho2))
+        self.accel = AccelerationEstimator(cfg.accel_filter_tau_s)
+        self._f_acc = BodyVectorFilter(cfg.accel_vector_gain_rad_s, propagate=False)
+        self._f_mag = BodyVectorFilter(cfg.mag_vector_gain_rad_s, propagate=True)
+        self._b2_prev: Vec3 = (0.0, 1.0, 0.0)
+
+    def update(self, t_s: float, meas: Measurements, ref: Reference) -> ControlOutput:
+        """One control step on one sensor frame.
+
+        Parameters
+        ----------
+        t_s : float
+            Vehicle time of the sensor frame (s).
+        meas : Measurements
+        ref : Reference
+            Reference sample at ``t_s``.
+
+        Returns
+        -------
+        ControlOutput
+        """
+        m, g = self._m, self._g
+        kx, kv = self.cfg.kx, self.cfg.kv
+        gyro = meas.gyro_flu_rad_s
+        Omega = (float(gyro[0]), float(gyro[1]), float(gyro[2]))
+        t_nav = t_s if meas.nav_time_s is None else meas.nav_time_s
+        a_hat = self.accel.update(t_nav, meas.vel_enu_m_s, ref.jerk_enu_m_s3)
+        pairs = measurement_vectors(self._f_acc.update(t_s, unit3(meas.accel_flu_m_s2), Omega),
+                                    self._f_mag.update(t_s, unit3(meas.mag_flu_gauss), Omega),
+                                    a_hat, self._r2, g, self.cfg.mag_perpendicular)
+        b1, b2, r1, r2 = pairs.b1, pairs.b2, pairs.r1, pairs.r2
+
+        p, v = meas.pos_enu_m, meas.vel_enu_m_s
+        xd, vd, ad, jd, sd = ref.pos_enu_m, ref.vel_enu_m_s, ref.acc_enu_m_s2, ref.jerk_enu_m_s3, ref.snap_enu_m_s4
+        e_x = (p[0] - xd[0], p[1] - xd[1], p[2] - xd[2])
+        e_v = (v[0] - vd[0], v[1] - vd[1], v[2] - vd[2])
+        ev_dot = (a_hat[0] - ad[0], a_hat[1] - ad[1], a_hat[2] - ad[2])
+        ev_ddot = tuple(-(kx * e_v[i] + kv * ev_dot[i]) / m for i in range(3))
+        F = (-kx * e_x[0] - kv * e_v[0] + m * ad[0],
+             -kx * e_x[1] - kv * e_v[1] + m * ad[1],
+             -kx * e_x[2] - kv * e_v[2] + m * (g + ad[2]))
+        F_dot = tuple(-kx * e_v[i] - kv * ev_dot[i] + m * jd[i] for i in range(3))
+        F_ddot = tuple(-kx * ev_dot[i] - kv * ev_ddot[i] + m * sd[i] for i in range(3))
+        Sp = self.target_enu_m if ref.target_enu_m is None else ref.target_enu_m
+        u_s = (Sp[0] - xd[0], Sp[1] - xd[1], Sp[2] - xd[2])
+        des = desired_attitude(F, F_dot, F_ddot, u_s, (-vd[0], -vd[1], -vd[2]), (-ad[0], -ad[1], -ad[2]),
+                               self._b2_prev)
+        self._b2_prev = des.b2d
+
+        tau, z, V = attitude_torque(self._J, Omega, des.Omega_d, des.Omega_d_dot, (b1, b2), (r1, r2),
+                                    des.b1d, des.b2d, des.b3d, self._rho, self.cfg.alpha)
+        f = _dot(F, thrust_axis_estimate(b1, b2, r1, r2))
+        mc = self.mixer.mix(f, tau)
+        return ControlOutput(f, tau, mc.cmd, mc.saturated, des.b3d, des.b2d, des.R_d, des.Omega_d,
+                             e_x, e_v, z, V)

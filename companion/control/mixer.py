@@ -1,0 +1,131 @@
+"""Thrust and torque -> normalised motor commands (PX4 quad-X order).
+
+The wrench ``[f, tau_x, tau_y, tau_z]`` (N, N m, body FLU) maps to rotor
+thrusts through the inverse of ``companion.vehicle.allocation_matrix``;
+``cmd_i = f_i / max_thrust_per_rotor_n`` (``companion/vehicle.py``).
+
+Saturation policy (thrust direction first). A quadrotor's thrust direction
+is its attitude, and the attitude is steered by the roll/pitch torques, so:
+
+1. the demand is achievable (every rotor in [0, f_max]): use it;
+2. otherwise scale the yaw torque down (largest factor in [0, 1]) keeping
+   collective and roll/pitch torques;
+3. if even zero yaw torque does not fit, shift the collective thrust to the
+   nearest value at which the roll/pitch torques fit (less thrust when the
+   rotors hit the top, more when they hit zero), then give back as much yaw
+   torque as fits at that collective;
+4. if the roll/pitch torques alone span more than [0, f_max], scale them
+   down together (their ratio, the axis of the correction, is kept) around
+   the mid collective, with zero yaw torque;
+5. clip to [0, 1] (guards rounding only).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..vehicle import VehicleConfig, allocation_matrix
+
+
+@dataclass(frozen=True, slots=True)
+class MotorCommand:
+    """Mixer output.
+
+    Attributes
+    ----------
+    cmd : tuple (4,)
+        Normalised motor commands in [0, 1], PX4 quad-X order.
+    f_n : float
+        Collective thrust actually commanded (N).
+    tau_flu_nm : tuple (3,)
+        Torque actually commanded (N m, body FLU).
+    saturated : bool
+        True when the demand was modified (steps 2-4 of the policy).
+    """
+
+    cmd: tuple[float, float, float, float]
+    f_n: float
+    tau_flu_nm: tuple[float, float, float]
+    saturated: bool
+
+
+class Mixer:
+    """Wrench -> motor commands for one vehicle (precomputes the inverse allocation).
+
+    Parameters
+    ----------
+    vehicle : VehicleConfig
+    """
+
+    __slots__ = ("f_max", "_inv", "_A")
+
+    def __init__(self, vehicle: VehicleConfig) -> None:
+        A = allocation_matrix(vehicle)
+        self._A = A
+        inv = np.linalg.inv(A)
+        # Columns of A^-1 as float tuples: thrust_i = sum_j inv[i][j] w_j.
+        self._inv = tuple(tuple(float(x) for x in row) for row in inv)
+        self.f_max = float(vehicle.max_thrust_per_rotor_n)
+
+    def wrench(self, thrusts_n) -> tuple[float, float, float, float]:
+        """Rotor thrusts (4,) N -> [f, tau_x, tau_y, tau_z] (N, N m, FLU)."""
+        w = self._A @ np.asarray(thrusts_n, dtype=float)
+        return (float(w[0]), float(w[1]), float(w[2]), float(w[3]))
+
+    def mix(self, f_n: float, tau_flu_nm) -> MotorCommand:
+        """Apply the saturation policy of the module docstring.
+
+        Parameters
+        ----------
+        f_n : float
+            Desired collective thrust (N).
+        tau_flu_nm : sequence (3,)
+            Desired torque (N m, body FLU).
+        """
+        inv = self._inv
+        fmax = self.f_max
+        tx, ty, tz = float(tau_flu_nm[0]), float(tau_flu_nm[1]), float(tau_flu_nm[2])
+        f = float(f_n)
+        c = [row[0] for row in inv]                    # per unit collective
+        d = [row[1] * tx + row[2] * ty for row in inv]  # roll/pitch part
+        y = [row[3] * tz for row in inv]                # yaw part
+        t = [c[i] * f + d[i] + y[i] for i in range(4)]
+        if min(t) >= 0.0 and max(t) <= fmax:
+            return MotorCommand(tuple(x / fmax for x in t), f, (tx, ty, tz), False)
+
+        # Collective + roll/pitch with no yaw; c_i is the same for all rotors
+        # of a symmetric quad-X, so the collective shifts all rotors equally.
+        base = [c[i] * f + d[i] for i in range(4)]
+        spread_fits = max(d) - min(d) <= fmax
+        if not (min(base) >= 0.0 and max(base) <= fmax):
+            if spread_fits:
+                # Nearest collective at which the roll/pitch torques fit.
+                lo = max(-d[i] / c[i] for i in range(4))
+                hi = min((fmax - d[i]) / c[i] for i in range(4))
+                f = min(max(f, lo), hi)
+                base = [c[i] * f + d[i] for i in range(4)]
+            else:
+                mu = fmax / (max(d) - min(d))
+                tx, ty = tx * mu, ty * mu
+                d = [x * mu for x in d]
+                f = (0.5 * fmax - 0.5 * (max(d) + min(d))) / c[0]
+                base = [c[i] * f + d[i] for i in range(4)]
+                tz = 0.0
+                y = [0.0] * 4
+        lam = _max_scale(base, y, fmax)
+        tz *= lam
+        t = [min(max(base[i] + lam * y[i], 0.0), fmax) for i in range(4)]
+        return MotorCommand(tuple(x / fmax for x in t), f, (tx, ty, tz), True)
+
+
+def _max_scale(base, y, fmax: float) -> float:
+    """Largest lam in [0, 1] with 0 <= base_i + lam y_i <= fmax for all i."""
+    lam = 1.0
+    for b, yi in zip(base, y):
+        if yi > 0.0:
+            lam = min(lam, (fmax - b) / yi)
+        elif yi < 0.0:
+            lam = min(lam, -b / yi)
+    return max(lam, 0.0)
