@@ -1,0 +1,139 @@
+"""``companion demo [--mission NAME|PATH] [--control companion|vehicle] [--out out/]``.
+
+No arguments needed: starts the bundled SITL (``python -m sitl``, a separate
+process, lockstep, loopback UDP on a free port), plans the bundled
+``flat-rectangle`` mission, flies it with the geometric controller, prints a
+summary table and writes ``out/``: ``plan.json``, ``flight.tlog``,
+``report.json`` and, with matplotlib (the ``plot`` extra), the paper's
+Figs. 14-18 style figures (``companion.flight_plot``).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from ..errors import InputError
+
+DEFAULT_MISSION = "flat-rectangle"
+
+
+def missions_dir() -> Path:
+    """The bundled missions (``missions/`` next to the ``companion`` package)."""
+    return Path(__file__).resolve().parents[2] / "missions"
+
+
+def resolve_mission(name_or_path: str) -> Path:
+    """A bundled mission name (``flat-rectangle``) or a mission YAML path."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml") or p.exists():
+        if p.is_dir():
+            p = p / "mission.yaml"
+        return p
+    bundled = missions_dir() / name_or_path / "mission.yaml"
+    if not bundled.exists():
+        names = sorted(d.name for d in missions_dir().iterdir() if (d / "mission.yaml").exists()) \
+            if missions_dir().is_dir() else []
+        raise InputError(f"--mission {name_or_path}", f"no such mission file or bundled mission "
+                         f"(bundled: {', '.join(names) or 'none'})")
+    return bundled
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--mission", default=DEFAULT_MISSION, metavar="NAME|PATH",
+                        help="bundled mission name or mission YAML (default %(default)s)")
+    parser.add_argument("--control", choices=("companion", "vehicle"), default="companion",
+                        help="who tracks the trajectory (default %(default)s: the geometric controller)")
+    parser.add_argument("--out", default="out", metavar="DIR", help="output directory (default %(default)s)")
+    parser.add_argument("--cut", type=float, default=None, metavar="S",
+                        help="fly only the first S seconds of the trajectory")
+    parser.add_argument("--no-plots", action="store_true", help="skip the figures")
+    parser.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def _table(rows: list[tuple[str, str]]) -> str:
+    w = max(len(k) for k, _ in rows)
+    line = "+" + "-" * (w + 2) + "+" + "-" * 34 + "+"
+    out = [line]
+    for k, v in rows:
+        out.append(f"| {k:<{w}} | {v:<32} |")
+    out.append(line)
+    return "\n".join(out)
+
+
+def run(args) -> int:
+    from sitl.api import SitlProcess
+
+    from ..mission import load_mission
+    from ..plan_io import plan_json_text, plan_to_json_dict
+    from ..progress import Progress
+    from ..report import write_report
+    from ..runner import UNUSED_STREAMS
+    from .fly import FlightPlan, execute
+
+    ATTITUDE = 30   # MAVLINK_MSG_ID_ATTITUDE: the SITL's ground-truth ODOMETRY carries the attitude
+
+    t_start = time.monotonic()
+    mission_path = resolve_mission(args.mission)
+    if args.cut is not None and not args.cut > 0:
+        raise InputError("--cut", "must be > 0 seconds")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}", "exists and is not a directory")
+    mission = load_mission(mission_path)
+
+    from ..planner import plan_mission
+
+    plan = plan_mission(mission)
+    plan_text = plan_json_text(plan_to_json_dict(plan, mission, 10.0))
+    t_planned = time.monotonic()
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "plan.json").write_text(plan_text, encoding="utf-8")
+
+    fp = FlightPlan(plan.trajectory, plan.waypoints.p_enu_m, plan.target_enu_m,
+                    float(plan.stats.coverage_fraction), plan)
+    progress = Progress(enabled=not args.quiet)
+    # speed 1 until the companion engages lockstep: the vehicle clock barely
+    # moves while the link comes up; from then on the pair runs flat out.
+    with SitlProcess(mission_path, lockstep=True, speed=1.0) as sitl:
+        result = execute(mission, fp, sitl.url, args.control, str(out / "flight.tlog"), progress, args.cut,
+                         {"mute_streams": UNUSED_STREAMS + (ATTITUDE,)})
+    rep = result.report
+    write_report(rep, out / "report.json")
+    t_flown = time.monotonic()
+
+    figures = []
+    if not args.no_plots:
+        try:
+            from ..flight_plot import write_flight_figures
+        except ImportError:   # matplotlib missing: the plot extra is optional here
+            figures = None
+        else:
+            try:
+                figures = write_flight_figures(result.log, plan, out)
+            except ImportError:
+                figures = None
+    total = time.monotonic() - t_start
+    tr = rep.tracking
+    mm = (lambda x: "n/a" if x is None else f"{x * 1000:.2f} mm")
+    rows = [
+        ("mission", f"{mission.name} ({len(plan.waypoints.t_s)} way-points)"),
+        ("control", rep.control),
+        ("completed", "yes" if rep.completed else f"NO ({rep.error or rep.phase})"),
+        ("trajectory", f"{rep.trajectory_duration_s:.1f} s, coverage {plan.stats.coverage_fraction:.0%}"),
+        ("vehicle time flown", f"{rep.sim_time_s:.1f} s ({rep.n_frames} frames)"),
+        ("max error (after settle)", mm(tr.max_error_m)),
+        ("rms error (after settle)", mm(tr.rms_error_m)),
+        ("truth source", tr.truth_source),
+        ("planning", f"{t_planned - t_start:.2f} s"),
+        ("flight wall time", f"{rep.wall_time_s:.2f} s ({rep.real_time_factor or 0:.1f}x real time)"),
+        ("demo wall time", f"{total:.2f} s"),
+    ]
+    print(_table(rows))
+    files = ["plan.json", "flight.tlog", "report.json"] + [Path(f).name for f in (figures or [])]
+    print(f"wrote {out}/: {', '.join(files)}" + ("" if figures is not None else
+                                                 " (figures skipped: install the plot extra)"))
+    if rep.error:
+        print(f"companion demo: {rep.error}", file=sys.stderr)
+    return 0 if rep.completed else 1

@@ -1,0 +1,147 @@
+"""``companion fly MISSION.yaml [--plan plan.json] [--connect udpout:127.0.0.1:14540]
+[--control companion|vehicle] [--tlog flight.tlog] [--report report.json]``.
+
+Flies a planned mission against a MAVLink vehicle (the bundled SITL or a
+flight stack); see ``companion.runner`` for the sequence.
+
+The connection string is from the companion's point of view: the bundled
+SITL listens with ``udpin:127.0.0.1:14540`` (``sitl MISSION.yaml``'s
+default), so the companion's default is ``udpout:127.0.0.1:14540`` (it
+sends first). A vehicle that sends to a fixed port instead (PX4 SITL's
+onboard link, ``udpout`` on its side) needs ``--connect udpin:0.0.0.0:PORT``.
+
+Without ``--plan`` the mission is planned here (as ``companion plan``); with
+it, the trajectory is rebuilt from the plan's way-points with the mission's
+trajectory weights (the LQR solution is exact, so it is the same trajectory).
+Exit code 0 when the flight completed (landed and disarmed), 1 when it did
+not (the report says why), 2 on bad input.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+DEFAULT_CONNECT = "udpout:127.0.0.1:14540"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("mission", help="mission YAML file")
+    parser.add_argument("--plan", metavar="PLAN.json", help="plan.json from `companion plan` (default: plan now)")
+    parser.add_argument("--connect", default=DEFAULT_CONNECT, metavar="URL",
+                        help="pymavlink connection string, companion side (default %(default)s, "
+                             "matching `sitl`'s default udpin:127.0.0.1:14540)")
+    parser.add_argument("--control", choices=("companion", "vehicle"), default="companion",
+                        help="companion: geometric controller answers every sensor frame with "
+                             "HIL_ACTUATOR_CONTROLS; vehicle: setpoints only (default %(default)s)")
+    parser.add_argument("--tlog", default="flight.tlog", metavar="FILE", help="telemetry log (default %(default)s)")
+    parser.add_argument("--report", default="report.json", metavar="FILE", help="flight report (default %(default)s)")
+    parser.add_argument("--cut", type=float, default=None, metavar="S",
+                        help="fly only the first S seconds of the trajectory")
+    parser.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+@dataclass(frozen=True, eq=False)
+class FlightPlan:
+    """What the runner needs from a plan (ENU, map frame)."""
+
+    trajectory: object
+    waypoints_p_enu_m: np.ndarray
+    target_enu_m: np.ndarray
+    coverage_fraction: float | None
+    plan: object = None          # companion.planner.Plan when planned here
+
+
+def prepare(mission, plan_path: str | None) -> FlightPlan:
+    """Plan ``mission`` or rebuild the trajectory of ``plan_path``.
+
+    Raises
+    ------
+    PlanError, MapError
+        Bad plan file or maps (one-line InputError).
+    """
+    if plan_path is None:
+        from ..planner import plan_mission
+
+        plan = plan_mission(mission)
+        return FlightPlan(plan.trajectory, np.asarray(plan.waypoints.p_enu_m, dtype=float),
+                          np.asarray(plan.target_enu_m, dtype=float), float(plan.stats.coverage_fraction), plan)
+    from ..plan_io import load_plan
+    from ..trajectory import generate_trajectory
+
+    pf = load_plan(plan_path)
+    target = pf.target_enu_m
+    if target is None:
+        # plan.json without a target: the pointing of the first sample defines a ray; use the
+        # mean way-point altitude centroid convention of the planner as the best available guess
+        target = np.array([*np.mean(pf.path_xy_m, axis=0), float(np.mean(pf.waypoint_p_enu_m[:, 2]))])
+    traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
+                               pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
+    cov = pf.stats.get("coverage_fraction")
+    return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
+                      None if cov is None else float(cov))
+
+
+def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
+            progress=None, cut_s: float | None = None, runner_overrides: dict | None = None):
+    """Open the link, fly, close. Returns ``companion.runner.FlightResult``."""
+    from ..control import GeometricController
+    from ..link import Connection, TlogWriter
+    from ..runner import MissionRunner, RunnerConfig
+
+    cfg = RunnerConfig(control=control, trajectory_cut_s=cut_s, **(runner_overrides or {}))
+    ctrl = None
+    if control == "companion":
+        ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
+    tlog = TlogWriter(tlog_path) if tlog_path else None
+    conn = Connection(connect, tlog=tlog)
+    if tlog is not None:
+        try:
+            tlog.open()
+        except OSError as exc:
+            raise InputError(str(tlog_path), f"cannot write: {exc.strerror or exc}") from None
+    try:
+        conn.open()
+        home = (mission.home.lat, mission.home.lon, mission.home.alt_m)
+        runner = MissionRunner(conn, flight_plan.trajectory, flight_plan.waypoints_p_enu_m, home,
+                               flight_plan.target_enu_m, mission.vehicle, ctrl, cfg, progress,
+                               mission.name, flight_plan.coverage_fraction)
+        return runner.run()
+    finally:
+        conn.close()
+        if tlog is not None:
+            tlog.close()
+
+
+def run(args) -> int:
+    from ..link import check_connection_string
+    from ..mission import load_mission
+    from ..progress import Progress
+    from ..report import write_report
+
+    check_connection_string(args.connect)
+    if args.cut is not None and not args.cut > 0:
+        raise InputError("--cut", "must be > 0 seconds")
+    for opt, path in (("--tlog", args.tlog), ("--report", args.report)):
+        parent = Path(path).parent
+        if not parent.is_dir():
+            raise InputError(f"{opt} {path}", f"directory {parent} does not exist")
+    mission = load_mission(args.mission)
+    fp = prepare(mission, args.plan)
+    progress = Progress(enabled=not args.quiet)
+    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut)
+    rep = result.report
+    write_report(rep, args.report)
+    tr = rep.tracking
+    err = "n/a" if tr.max_error_m is None else f"max {tr.max_error_m * 1000:.2f} mm, rms {tr.rms_error_m * 1000:.2f} mm"
+    print(f"companion fly: {'completed' if rep.completed else 'NOT completed'} ({rep.control} control), "
+          f"{rep.sim_time_s:.1f} s flown in {rep.wall_time_s:.1f} s wall, tracking {err} "
+          f"({tr.truth_source}); report {args.report}")
+    if rep.error:
+        print(f"companion fly: {rep.error}", file=sys.stderr)
+    return 0 if rep.completed else 1

@@ -1,0 +1,369 @@
+"""MAVLink encode/decode for the companion: the only companion module that
+speaks NED/FRD, wire units and MAVLink's [w, x, y, z] quaternions.
+
+Everything it returns is ENU world / FLU body, SI units (DESIGN.md "Frames
+and units"); every frame change goes through ``companion.frames``. Decoders
+take a pymavlink message object and return a small named result; encoders take
+a pymavlink ``MAVLink`` protocol object (``conn.mav``) and return the message
+object, ready for ``conn.send``.
+
+The decoders of the per-frame messages (HIGHRES_IMU, LOCAL_POSITION_NED) are
+written out component by component instead of via ``frames.frd2flu`` on a
+stacked array: they run 250 times per simulated second and the explicit form
+is several times cheaper. Their tests check them against ``companion.frames``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from .. import frames
+
+# --- MAVLink constants used by the companion (named here once) --------------
+
+MAV_FRAME_GLOBAL_INT = mavlink.MAV_FRAME_GLOBAL_INT
+MAV_FRAME_LOCAL_NED = mavlink.MAV_FRAME_LOCAL_NED
+
+#: PX4 custom main modes (``custom_mode = main << 16 | sub << 24``).
+PX4_MAIN_MODE_MANUAL = 1
+PX4_MAIN_MODE_AUTO = 4
+PX4_MAIN_MODE_OFFBOARD = 6
+PX4_SUB_MODE_AUTO_TAKEOFF = 2
+PX4_SUB_MODE_AUTO_LAND = 6
+
+#: SET_POSITION_TARGET_LOCAL_NED type_mask: use position, velocity,
+#: acceleration (as acceleration, not force) and yaw; ignore yaw rate.
+TYPE_MASK_POS_VEL_ACC_YAW = mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+
+#: HIL_ACTUATOR_CONTROLS.flags bit: this answer is a lockstep tick.
+HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP = 1
+
+_NAN16 = (float("nan"),) * 16
+
+
+# --- decoded messages ------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class ImuSample:
+    """One HIGHRES_IMU frame in body FLU.
+
+    Attributes
+    ----------
+    time_usec : int
+        Vehicle time (us since boot); the lockstep answer echoes it.
+    accel_flu_m_s2 : tuple (3,)
+        Specific force (accelerometer), body FLU, m/s^2 (hover: +g along +z).
+    gyro_flu_rad_s : tuple (3,)
+        Angular velocity Omega, body FLU, rad/s.
+    mag_flu_gauss : tuple (3,)
+        Magnetic field, body FLU, gauss.
+
+    Float tuples, not arrays: the controller's hot path is plain-float code.
+    """
+
+    time_usec: int
+    accel_flu_m_s2: tuple
+    gyro_flu_rad_s: tuple
+    mag_flu_gauss: tuple
+
+
+@dataclass(frozen=True, slots=True)
+class LocalPosition:
+    """LOCAL_POSITION_NED converted to ENU.
+
+    Attributes
+    ----------
+    time_boot_ms : int
+        Vehicle time (ms since boot).
+    pos_enu_m : tuple (3,)
+        Position about the local origin (the mission home), ENU, m.
+    vel_enu_m_s : tuple (3,)
+        Velocity, ENU, m/s.
+    """
+
+    time_boot_ms: int
+    pos_enu_m: tuple
+    vel_enu_m_s: tuple
+
+
+@dataclass(frozen=True, slots=True)
+class Attitude:
+    """Attitude (ATTITUDE or ATTITUDE_QUATERNION) as ``R_enu_flu`` (3x3, body FLU -> world ENU)."""
+
+    time_boot_ms: int
+    R_enu_flu: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleState:
+    """The vehicle's HEARTBEAT: armed flag and PX4 main/sub mode."""
+
+    armed: bool
+    main_mode: int
+    sub_mode: int
+    system_status: int
+
+    @property
+    def offboard(self) -> bool:
+        return self.main_mode == PX4_MAIN_MODE_OFFBOARD
+
+
+@dataclass(frozen=True, slots=True)
+class Range:
+    """DISTANCE_SENSOR reading.
+
+    Attributes
+    ----------
+    time_boot_ms : int
+    sensor_id : int
+    distance_m : float
+        Measured range (m); NaN when outside [min, max] (no return).
+    min_m, max_m : float
+        Sensor limits (m).
+    orientation : int
+        MAV_SENSOR_ORIENTATION (body FRD convention, as on the wire).
+    """
+
+    time_boot_ms: int
+    sensor_id: int
+    distance_m: float
+    min_m: float
+    max_m: float
+    orientation: int
+
+
+@dataclass(frozen=True, slots=True)
+class TruthState:
+    """The simulator's true state, ENU/FLU.
+
+    Attributes
+    ----------
+    time_usec : int
+        Vehicle time (us since boot).
+    pos_enu_m : tuple (3,)
+        True position about the mission home, ENU, m.
+    vel_enu_m_s : tuple (3,)
+        True velocity, ENU, m/s.
+    R_enu_flu : ndarray (3, 3) or None
+        True attitude (body FLU -> world ENU).
+    """
+
+    time_usec: int
+    pos_enu_m: tuple
+    vel_enu_m_s: tuple
+    R_enu_flu: np.ndarray | None = None
+
+
+def decode_highres_imu(msg) -> ImuSample:
+    """HIGHRES_IMU (body FRD) -> ``ImuSample`` (body FLU); FRD->FLU is (x, -y, -z)."""
+    return ImuSample(
+        time_usec=int(msg.time_usec),
+        accel_flu_m_s2=(msg.xacc, -msg.yacc, -msg.zacc),
+        gyro_flu_rad_s=(msg.xgyro, -msg.ygyro, -msg.zgyro),
+        mag_flu_gauss=(msg.xmag, -msg.ymag, -msg.zmag),
+    )
+
+
+def decode_local_position_ned(msg) -> LocalPosition:
+    """LOCAL_POSITION_NED -> ``LocalPosition`` in ENU; NED->ENU is (y, x, -z)."""
+    return LocalPosition(
+        time_boot_ms=int(msg.time_boot_ms),
+        pos_enu_m=(msg.y, msg.x, -msg.z),
+        vel_enu_m_s=(msg.vy, msg.vx, -msg.vz),
+    )
+
+
+def decode_attitude(msg) -> Attitude:
+    """ATTITUDE (Z-Y-X Euler angles of body FRD in NED, rad) -> ``R_enu_flu``."""
+    R_ned_frd = frames.euler_zyx2rotmat(msg.roll, msg.pitch, msg.yaw)
+    return Attitude(int(msg.time_boot_ms), frames.R_ned_frd2enu_flu(R_ned_frd))
+
+
+def decode_attitude_quaternion(msg) -> Attitude:
+    """ATTITUDE_QUATERNION ([w, x, y, z], body FRD -> NED) -> ``R_enu_flu``."""
+    R_ned_frd = frames.quat_wxyz2rotmat((msg.q1, msg.q2, msg.q3, msg.q4))
+    return Attitude(int(msg.time_boot_ms), frames.R_ned_frd2enu_flu(R_ned_frd))
+
+
+def decode_heartbeat(msg) -> VehicleState:
+    """HEARTBEAT -> armed flag and PX4 custom main/sub mode."""
+    custom = int(msg.custom_mode)
+    return VehicleState(
+        armed=bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED),
+        main_mode=(custom >> 16) & 0xFF,
+        sub_mode=(custom >> 24) & 0xFF,
+        system_status=int(msg.system_status),
+    )
+
+
+def decode_distance_sensor(msg) -> Range:
+    """DISTANCE_SENSOR (cm on the wire) -> ``Range`` in metres.
+
+    A reading at or beyond ``max_distance`` (or below ``min_distance``) is
+    "no return" by MAVLink convention and decodes to NaN.
+    """
+    d_cm, lo_cm, hi_cm = msg.current_distance, msg.min_distance, msg.max_distance
+    d_m = d_cm / 100.0 if lo_cm <= d_cm < hi_cm else math.nan
+    return Range(int(msg.time_boot_ms), int(msg.id), d_m, lo_cm / 100.0, hi_cm / 100.0, int(msg.orientation))
+
+
+def decode_odometry(msg) -> TruthState:
+    """ODOMETRY (pose in MAV_FRAME_LOCAL_NED, velocity in MAV_FRAME_BODY_FRD) -> ENU/FLU.
+
+    The bundled SITL sends its ground truth this way (float32 metres, so
+    the position keeps micrometre resolution, unlike SIM_STATE's 1e-7
+    degree latitude/longitude, about 1 cm). A velocity in
+    MAV_FRAME_LOCAL_NED (child frame) is accepted as well. Plain float
+    arithmetic (it runs every frame): ``R_enu_flu = T_en R_ned_frd T_fb``
+    written out, checked against ``companion.frames`` by the tests.
+    """
+    w, x, y, z = msg.q
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    # R_ned_frd from the quaternion (Hamilton, body -> world)
+    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    vx, vy, vz = msg.vx, msg.vy, msg.vz
+    if msg.child_frame_id == MAV_FRAME_LOCAL_NED:
+        vn, ve, vd = vx, vy, vz
+    else:
+        vn = r00 * vx + r01 * vy + r02 * vz
+        ve = r10 * vx + r11 * vy + r12 * vz
+        vd = r20 * vx + r21 * vy + r22 * vz
+    R = np.array(((r10, -r11, -r12), (r00, -r01, -r02), (-r20, r21, r22)))
+    return TruthState(int(msg.time_usec), (msg.y, msg.x, -msg.z), (ve, vn, -vd), R)
+
+
+def encode_odometry_truth(mav, time_usec: int, pos_enu_m, vel_enu_m_s, R_enu_flu, omega_flu_rad_s):
+    """ODOMETRY carrying a true state (the inverse of ``decode_odometry``; tests and tools).
+
+    Pose in MAV_FRAME_LOCAL_NED, velocity and rates in MAV_FRAME_BODY_FRD,
+    covariances unknown (NaN first element), estimator MAV_ESTIMATOR_TYPE_UNKNOWN.
+    """
+    R_ned_frd = frames.R_enu_flu2ned_frd(R_enu_flu)
+    p = frames.enu2ned(pos_enu_m)
+    v_frd = R_ned_frd.T @ frames.enu2ned(vel_enu_m_s)
+    w = frames.flu2frd(omega_flu_rad_s)
+    q = frames.rotmat2quat_wxyz(R_ned_frd)
+    cov = [math.nan] + [0.0] * 20
+    return mav.odometry_encode(
+        int(time_usec), MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD,
+        float(p[0]), float(p[1]), float(p[2]), [float(c) for c in q],
+        float(v_frd[0]), float(v_frd[1]), float(v_frd[2]), float(w[0]), float(w[1]), float(w[2]),
+        cov, cov, 0, mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN, 100)
+
+
+# --- encoders ---------------------------------------------------------------
+
+
+def encode_set_position_target(mav, time_boot_ms: int, pos_enu_m, vel_enu_m_s, acc_enu_m_s2,
+                               yaw_enu_rad: float, target_system: int = 1, target_component: int = 1):
+    """SET_POSITION_TARGET_LOCAL_NED from an ENU setpoint.
+
+    Parameters
+    ----------
+    mav : pymavlink MAVLink
+        Protocol object of the connection (``conn.mav``).
+    time_boot_ms : int
+        Vehicle time of the setpoint (ms since the vehicle's boot).
+    pos_enu_m, vel_enu_m_s, acc_enu_m_s2 : array_like (3,)
+        Reference position (m), velocity (m/s), acceleration (m/s^2), ENU.
+    yaw_enu_rad : float
+        Heading of the body x axis in ENU (from east, counter-clockwise).
+
+    Returns
+    -------
+    MAVLink_set_position_target_local_ned_message
+        ``MAV_FRAME_LOCAL_NED``, type_mask using position, velocity,
+        acceleration and yaw (yaw rate ignored).
+    """
+    p = frames.enu2ned(pos_enu_m)
+    v = frames.enu2ned(vel_enu_m_s)
+    a = frames.enu2ned(acc_enu_m_s2)
+    return mav.set_position_target_local_ned_encode(
+        int(time_boot_ms) & 0xFFFFFFFF, target_system, target_component, MAV_FRAME_LOCAL_NED,
+        TYPE_MASK_POS_VEL_ACC_YAW,
+        float(p[0]), float(p[1]), float(p[2]),
+        float(v[0]), float(v[1]), float(v[2]),
+        float(a[0]), float(a[1]), float(a[2]),
+        float(frames.yaw_enu2ned(yaw_enu_rad)), 0.0,
+    )
+
+
+def decode_position_target_local_ned(msg):
+    """(POSITION|SET_POSITION)_TARGET_LOCAL_NED -> (pos_enu_m, vel_enu_m_s, acc_enu_m_s2, yaw_enu_rad).
+
+    The inverse of ``encode_set_position_target`` (used by tests and replay).
+    """
+    return (
+        frames.ned2enu((msg.x, msg.y, msg.z)),
+        frames.ned2enu((msg.vx, msg.vy, msg.vz)),
+        frames.ned2enu((msg.afx, msg.afy, msg.afz)),
+        frames.yaw_ned2enu(msg.yaw),
+    )
+
+
+def encode_mission_item_int(mav, seq: int, pos_enu_m, home_lat_deg: float, home_lon_deg: float,
+                            home_alt_m: float, target_system: int = 1, target_component: int = 1,
+                            current: bool = False):
+    """MISSION_ITEM_INT (NAV_WAYPOINT, ``MAV_FRAME_GLOBAL_INT``) from an ENU way-point.
+
+    Parameters
+    ----------
+    pos_enu_m : array_like (3,)
+        Way-point about the mission home, ENU, m.
+    home_lat_deg, home_lon_deg, home_alt_m : float
+        Geodetic pose of the mission home (the map origin), WGS-84, m AMSL.
+
+    Notes
+    -----
+    The altitude is AMSL (``home_alt_m + z``), so the item does not depend
+    on where the vehicle happened to set its own home.
+    """
+    x, y, z = (float(c) for c in pos_enu_m)
+    lat, lon, alt = frames.enu2geodetic(x, y, z, home_lat_deg, home_lon_deg, home_alt_m)
+    return mav.mission_item_int_encode(
+        target_system, target_component, seq, MAV_FRAME_GLOBAL_INT, mavlink.MAV_CMD_NAV_WAYPOINT,
+        1 if current else 0, 1, 0.0, 0.0, 0.0, math.nan,
+        int(round(lat * 1e7)), int(round(lon * 1e7)), float(alt), mavlink.MAV_MISSION_TYPE_MISSION,
+    )
+
+
+def decode_mission_item_int(msg, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> np.ndarray:
+    """MISSION_ITEM_INT in ``MAV_FRAME_GLOBAL_INT`` -> ENU way-point (3,) m about home."""
+    x, y, z = frames.geodetic2enu(msg.x * 1e-7, msg.y * 1e-7, float(msg.z), home_lat_deg, home_lon_deg, home_alt_m)
+    return np.array((x, y, z))
+
+
+def encode_hil_actuator_controls(mav, time_usec: int, motor_cmd, armed: bool):
+    """HIL_ACTUATOR_CONTROLS answering one lockstep sensor frame.
+
+    Parameters
+    ----------
+    time_usec : int
+        The ``time_usec`` of the HIGHRES_IMU being answered.
+    motor_cmd : sequence of 4 floats or None
+        Normalised motor commands 0..1 in PX4 quad-X order
+        (``companion.vehicle``); None sends four NaN: a lockstep tick that
+        leaves the vehicle's own controller in charge.
+    armed : bool
+        Sets ``MAV_MODE_FLAG_SAFETY_ARMED`` in ``mode``.
+    """
+    if motor_cmd is None:
+        controls = _NAN16
+    else:
+        m0, m1, m2, m3 = motor_cmd
+        controls = (float(m0), float(m1), float(m2), float(m3)) + (0.0,) * 12
+    mode = mavlink.MAV_MODE_FLAG_HIL_ENABLED | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+    return mav.hil_actuator_controls_encode(int(time_usec), controls, mode, HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP)
+
+
+def px4_custom_mode(main_mode: int, sub_mode: int = 0) -> int:
+    """PX4 custom_mode value of a main/sub mode pair."""
+    return (main_mode << 16) | (sub_mode << 24)

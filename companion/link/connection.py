@@ -1,0 +1,301 @@
+"""A thin MAVLink 2 link to the vehicle over pymavlink's ``mavutil``.
+
+Connection strings follow pymavlink and are from the companion's point of
+view: the bundled SITL listens with ``udpin:127.0.0.1:14540`` by default, so
+the companion connects with ``udpout:127.0.0.1:14540`` (it sends first, the
+SITL learns its address from that first heartbeat). ``udpin:HOST:PORT``
+(wait for the vehicle to send), ``tcp:HOST:PORT``, ``tcpin:HOST:PORT`` and a
+serial device (``/dev/ttyACM0[,baud]``) work too.
+
+The companion is system 1, component 191 (MAV_COMP_ID_ONBOARD_COMPUTER) and
+sends HEARTBEAT as MAV_TYPE_ONBOARD_CONTROLLER / MAV_AUTOPILOT_INVALID once a
+second of vehicle time (``heartbeat_due``). Receiving never raises on bad
+bytes: undecodable data is counted in ``n_bad`` and dropped. Timeouts that
+guard the link's liveness (no answer at all) are wall-clock; everything the
+flight does is timed by the vehicle's clock in the runner.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import time
+from typing import Callable, Iterable
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from ..errors import CommandRejected, InputError, LinkError
+from .tlog import TlogWriter
+
+COMPANION_SYSTEM_ID = 1
+COMPANION_COMPONENT_ID = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
+
+_SCHEMES = ("udpin:", "udpout:", "udp:", "udpbcast:", "tcp:", "tcpin:")
+
+
+def check_connection_string(url: str) -> None:
+    """Reject strings pymavlink would silently misread (e.g. a log file path).
+
+    Raises
+    ------
+    InputError
+        Not ``udpin:/udpout:/udp:/udpbcast:/tcp:/tcpin:HOST:PORT`` nor a serial device.
+    """
+    if url.startswith(_SCHEMES):
+        rest = url.split(":", 1)[1]
+        host, sep, port = rest.rpartition(":")
+        if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise InputError(f"--connect {url}", "expected SCHEME:HOST:PORT, e.g. udpout:127.0.0.1:14540")
+        return
+    if url.startswith(("/dev/", "COM")):
+        return
+    raise InputError(f"--connect {url}", "unknown connection string (use udpout:HOST:PORT, udpin:HOST:PORT, "
+                     "tcp:HOST:PORT, tcpin:HOST:PORT or a serial device)")
+
+
+class Connection:
+    """MAVLink 2 link to one vehicle (system ``target_system``, component 1).
+
+    Parameters
+    ----------
+    url : str
+        pymavlink connection string (see the module docstring).
+    tlog : TlogWriter or None
+        Records every packet sent and received (already opened by the caller).
+    target_system, target_component : int
+        The vehicle (DESIGN.md: 1/1).
+
+    Notes
+    -----
+    The constructor does no I/O; ``open`` creates the socket.
+    """
+
+    def __init__(self, url: str, tlog: TlogWriter | None = None, target_system: int = 1,
+                 target_component: int = 1) -> None:
+        check_connection_string(url)
+        self.url = url
+        self.tlog = tlog
+        self.target_system = target_system
+        self.target_component = target_component
+        self.n_bad = 0
+        self.n_received = 0
+        self.n_sent = 0
+        self.handler: Callable[[object], None] | None = None
+        self._conn = None
+        self._mav = None
+        self._fd = None
+        self._is_udp = url.startswith(("udp",))
+        self._last_heartbeat_s: float | None = None
+
+    # --- lifetime ---------------------------------------------------------
+
+    def open(self) -> "Connection":
+        from pymavlink import mavutil  # deferred: importing mavutil is slow and sets a global dialect
+
+        os.environ["MAVLINK20"] = "1"  # mavutil picks its dialect module from this variable
+        try:
+            self._conn = mavutil.mavlink_connection(
+                self.url, source_system=COMPANION_SYSTEM_ID, source_component=COMPANION_COMPONENT_ID,
+                dialect="common", autoreconnect=True)
+        except OSError as exc:
+            raise LinkError(f"cannot open {self.url}: {exc}") from None
+        self._mav = self._conn.mav
+        self._mav.robust_parsing = True
+        try:
+            self._fd = self._conn.fd if self._conn.fd is not None else self._conn.port.fileno()
+        except AttributeError:
+            self._fd = None
+        return self
+
+    def close(self) -> None:
+        if self._conn is not None:
+            try:
+                self._conn.close()
+            except OSError:
+                pass
+            self._conn = None
+
+    def __enter__(self) -> "Connection":
+        return self.open()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def mav(self):
+        """pymavlink ``MAVLink`` protocol object (for the ``codec`` encoders)."""
+        if self._mav is None:
+            raise LinkError("connection is not open")
+        return self._mav
+
+    # --- send ---------------------------------------------------------------
+
+    def send(self, msg) -> None:
+        """Pack, send and record one message."""
+        self._mav.send(msg)
+        self.n_sent += 1
+        if self.tlog is not None:
+            self.tlog.write(msg.get_msgbuf())
+
+    def send_heartbeat(self) -> None:
+        self.send(self._mav.heartbeat_encode(
+            mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE))
+
+    def heartbeat_due(self, vehicle_time_s: float) -> None:
+        """Send the 1 Hz heartbeat if a second of vehicle time has passed since the last one."""
+        last = self._last_heartbeat_s
+        if last is None or vehicle_time_s - last >= 1.0 or vehicle_time_s < last:
+            self._last_heartbeat_s = vehicle_time_s
+            self.send_heartbeat()
+
+    # --- receive --------------------------------------------------------------
+
+    def _parse(self, data: bytes) -> list:
+        try:
+            msgs = self._mav.parse_buffer(data)
+        except Exception:  # noqa: BLE001 - pymavlink raises on some garbage; never crash the link
+            msgs = None
+            self.n_bad += 1
+            self._reset_parser()
+        if self._is_udp and self._mav.buf_len() > 0:
+            # A UDP datagram carries whole packets: leftover bytes are garbage
+            # (or a bad header claiming a long length) and must not swallow
+            # the next datagram, which in lockstep would stall the vehicle.
+            self._reset_parser()
+        if not msgs:
+            return []
+        good = []
+        for m in msgs:
+            if m.get_type() in ("BAD_DATA", "UNKNOWN") or isinstance(m, mavlink.MAVLink_bad_data):
+                self.n_bad += 1
+                continue
+            good.append(m)
+        return good
+
+    def _reset_parser(self) -> None:
+        self._mav.buf = bytearray()
+        self._mav.buf_index = 0
+        self._mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+
+    def feed(self, data: bytes) -> list:
+        """Parse raw bytes as if received (used by tests and replay); returns good messages."""
+        return self._parse(data)
+
+    def poll(self, timeout_s: float = 0.0) -> list:
+        """Receive every message available now, waiting up to ``timeout_s`` for the first.
+
+        Returns
+        -------
+        list of pymavlink messages, in arrival order; garbage dropped.
+        """
+        conn = self._conn
+        if conn is None:
+            raise LinkError("connection is not open")
+        if timeout_s > 0 and self._fd is not None:
+            try:
+                ready, _, _ = select.select((self._fd,), (), (), timeout_s)
+            except (OSError, ValueError):
+                ready = (True,)
+            if not ready:
+                return []
+        out: list = []
+        tlog = self.tlog
+        for _ in range(256):  # bound the drain so a flood cannot starve the caller
+            try:
+                data = conn.recv(65536)
+            except OSError:
+                break
+            if not data:
+                break
+            for m in self._parse(data):
+                out.append(m)
+                if tlog is not None:
+                    tlog.write(m.get_msgbuf())
+        self.n_received += len(out)
+        if not out and timeout_s > 0 and self._fd is None:
+            time.sleep(min(timeout_s, 0.001))
+        return out
+
+    def wait_for(self, predicate: Callable[[object], bool], timeout_s: float, what: str):
+        """Receive until a message satisfies ``predicate``; others go to ``self.handler``.
+
+        Raises
+        ------
+        LinkError
+            Nothing matched within ``timeout_s`` seconds of wall clock.
+        """
+        deadline = time.monotonic() + timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise LinkError(f"{self.url}: no {what} within {timeout_s:g} s")
+            found = None
+            for m in self.poll(min(left, 0.05)):
+                if found is None and predicate(m):
+                    found = m
+                elif self.handler is not None:
+                    self.handler(m)
+            if found is not None:
+                return found
+
+    def wait_heartbeat(self, timeout_s: float = 10.0):
+        """Wait for the vehicle's HEARTBEAT, sending ours once a wall second so
+        a ``udpin`` peer learns our address."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self.send_heartbeat()
+            try:
+                return self.wait_for(self._is_vehicle_heartbeat, min(1.0, max(deadline - time.monotonic(), 1e-3)),
+                                     "HEARTBEAT")
+            except LinkError:
+                if time.monotonic() >= deadline:
+                    raise LinkError(f"{self.url}: no vehicle HEARTBEAT within {timeout_s:g} s") from None
+
+    def _is_vehicle_heartbeat(self, m) -> bool:
+        return (m.get_type() == "HEARTBEAT" and m.get_srcSystem() == self.target_system
+                and m.get_srcComponent() == self.target_component)
+
+    # --- commands ---------------------------------------------------------------
+
+    def command_long(self, command: int, params: Iterable[float] = (), timeout_s: float = 5.0,
+                     retries: int = 3, what: str = ""):
+        """Send COMMAND_LONG and wait for its COMMAND_ACK.
+
+        Other messages received meanwhile go to ``self.handler`` (the runner
+        keeps answering lockstep frames while it waits).
+
+        Returns
+        -------
+        The COMMAND_ACK message (result MAV_RESULT_ACCEPTED).
+
+        Raises
+        ------
+        CommandRejected
+            The vehicle answered with another MAV_RESULT.
+        LinkError
+            No COMMAND_ACK after ``retries`` sends, ``timeout_s`` each.
+        """
+        p = [float(x) for x in params]
+        p += [0.0] * (7 - len(p))
+        for confirmation in range(max(1, retries)):
+            self.send(self._mav.command_long_encode(self.target_system, self.target_component, command,
+                                                    confirmation, *p[:7]))
+            try:
+                ack = self.wait_for(lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
+                                    timeout_s, f"COMMAND_ACK for command {command}")
+            except LinkError:
+                continue
+            if ack.result == mavlink.MAV_RESULT_IN_PROGRESS:
+                ack = self.wait_for(lambda m: m.get_type() == "COMMAND_ACK" and m.command == command
+                                    and m.result != mavlink.MAV_RESULT_IN_PROGRESS, timeout_s,
+                                    f"final COMMAND_ACK for command {command}")
+            if ack.result != mavlink.MAV_RESULT_ACCEPTED:
+                raise CommandRejected(command, int(ack.result), what)
+            return ack
+        raise LinkError(f"{self.url}: no COMMAND_ACK for command {command}{' (' + what + ')' if what else ''} "
+                        f"after {max(1, retries)} tries")
+
+    def set_message_interval(self, msg_id: int, interval_us: int, **kw):
+        """MAV_CMD_SET_MESSAGE_INTERVAL (interval in microseconds; -1 disables)."""
+        return self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, interval_us), what="set message interval",
+                                 **kw)

@@ -1,0 +1,148 @@
+"""Flight report (report.json, DESIGN.md "Files") and its tracking statistics.
+
+``tracking_stats`` is pure: arrays in, a named result out. ``write_report``
+writes the JSON atomically (temporary file + rename), so an interrupted run
+leaves no partial report.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TrackingStats:
+    """Position tracking error over the trajectory phase after settling.
+
+    Attributes
+    ----------
+    max_error_m : float or None
+        Largest Euclidean position error (m); None without samples.
+    rms_error_m : float or None
+        Root mean square of the Euclidean error (m).
+    settle_s : float
+        Time (s) after the start of the trajectory phase before the error counts.
+    n_samples : int
+        Number of samples used.
+    truth_source : str
+        Where the vehicle position came from: "sim_state" (the simulator's
+        ground truth) or "estimate" (LOCAL_POSITION_NED, when the vehicle
+        sends no ground truth, e.g. a real flight stack).
+    """
+
+    max_error_m: float | None
+    rms_error_m: float | None
+    settle_s: float
+    n_samples: int = 0
+    truth_source: str = "sim_state"
+
+
+@dataclass(frozen=True)
+class ReplanningStats:
+    """Reactive replanning summary.
+
+    Attributes
+    ----------
+    events : int
+        Number of replanning events (APF activations).
+    min_clearance_m : float or None
+        Smallest DISTANCE_SENSOR reading seen in flight (m); None if none seen.
+    max_lateral_deviation_m : float
+        Largest horizontal distance between the flown reference and the plan (m).
+    """
+
+    events: int = 0
+    min_clearance_m: float | None = None
+    max_lateral_deviation_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class FlightReport:
+    """Everything report.json holds (DESIGN.md keys first).
+
+    Attributes
+    ----------
+    completed : bool
+        The trajectory was flown to its end and the vehicle landed and disarmed.
+    control : str
+        "companion" (geometric controller, HIL_ACTUATOR_CONTROLS) or "vehicle".
+    sim_time_s : float
+        Vehicle time spent from the first to the last frame (s).
+    wall_time_s : float
+        Wall-clock duration of the flight (s).
+    tracking, replanning : see their classes
+    coverage_fraction : float or None
+        From the plan's statistics.
+    tlog : str or None
+        Path of the recorded .tlog.
+    """
+
+    completed: bool
+    control: str
+    sim_time_s: float
+    wall_time_s: float
+    tracking: TrackingStats
+    replanning: ReplanningStats = field(default_factory=ReplanningStats)
+    coverage_fraction: float | None = None
+    tlog: str | None = None
+    mission: str = ""
+    phase: str = ""
+    error: str | None = None
+    real_time_factor: float | None = None
+    n_frames: int = 0
+    trajectory_duration_s: float = 0.0
+
+    def to_dict(self) -> dict:
+        return _finite(asdict(self))
+
+
+def _finite(obj):
+    """JSON has no NaN/inf: map them to None, recursively."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def tracking_stats(t_s, err_m, t_start_s: float, settle_s: float = 5.0,
+                   truth_source: str = "sim_state") -> TrackingStats:
+    """Max and RMS of a position error series after ``t_start_s + settle_s``.
+
+    Parameters
+    ----------
+    t_s : array_like (N,)
+        Sample times (s, vehicle clock).
+    err_m : array_like (N,)
+        Euclidean position error |p_true - p_ref| (m) at those times.
+    t_start_s : float
+        Start of the trajectory phase (s, same clock).
+    settle_s : float
+        Samples before ``t_start_s + settle_s`` are ignored.
+    """
+    t = np.asarray(t_s, dtype=float)
+    e = np.asarray(err_m, dtype=float)
+    sel = (t >= t_start_s + settle_s) & np.isfinite(e)
+    if not np.any(sel):
+        return TrackingStats(None, None, float(settle_s), 0, truth_source)
+    es = e[sel]
+    return TrackingStats(float(es.max()), float(math.sqrt(float(np.mean(es * es)))), float(settle_s),
+                         int(es.size), truth_source)
+
+
+def write_report(report: FlightReport, path: str | Path) -> Path:
+    """Write ``report`` as JSON to ``path`` atomically; returns the path."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(p.name + ".part")
+    tmp.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
+    os.replace(tmp, p)
+    return p
