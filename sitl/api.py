@@ -1,0 +1,213 @@
+"""Start the SITL from Python, for tests and the demo.
+
+``SitlThread`` runs the server loop in a background thread of this process
+(cheap, shares the GIL with the caller); ``SitlProcess`` runs ``python -m
+sitl`` as a subprocess (its own interpreter: what the demo uses for speed).
+Both are context managers with ``start()``/``stop()``; ``start()`` returns
+once the links are open (readiness), so a client may connect at once.
+
+Example
+-------
+>>> with SitlProcess("missions/flat-rectangle/mission.yaml",
+...                  listen=f"udpin:127.0.0.1:{free_udp_port()}", lockstep=True, speed=0) as sitl:
+...     ...   # connect to sitl.listen
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from companion.errors import LinkError
+
+
+def free_udp_port(host: str = "127.0.0.1") -> int:
+    """A UDP port that was free a moment ago on ``host``."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def peer_url(listen: str) -> str:
+    """The connection string a client uses to reach a SITL listening on
+    ``listen`` (``udpin:H:P`` -> ``udpout:H:P``, ``tcpin:H:P`` -> ``tcp:H:P``)."""
+    if listen.startswith("udpin:"):
+        return "udpout:" + listen[len("udpin:"):]
+    if listen.startswith("tcpin:"):
+        return "tcp:" + listen[len("tcpin:"):]
+    return listen
+
+
+class SitlThread:
+    """The SITL in a daemon thread of this process.
+
+    Parameters
+    ----------
+    mission_path : str or Path
+    listen : str
+        Main link (default: a free loopback UDP port).
+    outs : sequence of str
+    lockstep : bool
+    speed : float
+        Real-time factor when free-running (0: as fast as possible).
+    seed : int or None
+    physics_hz, sensor_hz : int
+    """
+
+    def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
+                 speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
+                 sensor_hz: int = 250) -> None:
+        self.mission_path = Path(mission_path)
+        self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
+        self.outs = tuple(outs)
+        self.lockstep = lockstep
+        self.speed = speed
+        self.seed = seed
+        self.physics_hz = physics_hz
+        self.sensor_hz = sensor_hz
+        self.server = None
+        self._thread: threading.Thread | None = None
+        self.error: BaseException | None = None
+
+    @property
+    def url(self) -> str:
+        """Connection string for a client."""
+        return peer_url(self.listen)
+
+    def start(self) -> "SitlThread":
+        from companion.mission import load_mission
+
+        from .server import ServerConfig, SitlServer
+
+        mission = load_mission(self.mission_path)
+        cfg = ServerConfig(listen=self.listen, outs=self.outs, lockstep=self.lockstep, speed=self.speed,
+                           seed=self.seed, physics_hz=self.physics_hz, sensor_hz=self.sensor_hz)
+        self.server = SitlServer(mission, cfg)
+        self.server.open()   # readiness: the sockets exist when start() returns
+
+        def run():
+            try:
+                self.server.run()
+            except BaseException as exc:   # surfaced by stop()
+                self.error = exc
+
+        self._thread = threading.Thread(target=run, name="sitl", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        if self.server is None:
+            return
+        self.server.stop()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+        self.server.close()
+        self.server = None
+        if self.error is not None:
+            err, self.error = self.error, None
+            raise RuntimeError("the SITL thread failed") from err
+
+    def __enter__(self) -> "SitlThread":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+class SitlProcess:
+    """The SITL as a ``python -m sitl`` subprocess (same parameters as
+    ``SitlThread``). ``start()`` waits for the ready line; ``stop()`` sends
+    SIGTERM (then SIGKILL after ``timeout_s``)."""
+
+    READY_TIMEOUT_S = 30.0
+
+    def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
+                 speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
+                 sensor_hz: int = 250, python: str = sys.executable) -> None:
+        self.mission_path = Path(mission_path)
+        self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
+        self.outs = tuple(outs)
+        self.lockstep = lockstep
+        self.speed = speed
+        self.seed = seed
+        self.physics_hz = physics_hz
+        self.sensor_hz = sensor_hz
+        self.python = python
+        self.proc: subprocess.Popen | None = None
+        self._stderr = None
+
+    @property
+    def url(self) -> str:
+        return peer_url(self.listen)
+
+    def command(self) -> list[str]:
+        cmd = [self.python, "-m", "sitl", str(self.mission_path), "--listen", self.listen,
+               "--speed", repr(float(self.speed)), "--physics-hz", str(self.physics_hz),
+               "--sensor-hz", str(self.sensor_hz)]
+        for o in self.outs:
+            cmd += ["--out", o]
+        if self.lockstep:
+            cmd.append("--lockstep")
+        if self.seed is not None:
+            cmd += ["--seed", str(int(self.seed))]
+        return cmd
+
+    def start(self) -> "SitlProcess":
+        from .cli import READY_MARKER
+
+        env = dict(os.environ)
+        root = str(Path(__file__).resolve().parents[1])
+        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        # stderr to a file, not a pipe: a long run must never block on a full pipe.
+        self._stderr = tempfile.TemporaryFile(mode="w+")
+        self.proc = subprocess.Popen(self.command(), stdout=subprocess.PIPE, stderr=self._stderr,
+                                     text=True, env=env)
+        deadline = time.monotonic() + self.READY_TIMEOUT_S
+        line = ""
+        while time.monotonic() < deadline:
+            r, _, _ = select.select([self.proc.stdout], [], [], 0.1)
+            if r:
+                line = self.proc.stdout.readline()
+                if line.startswith(READY_MARKER):
+                    return self
+            if self.proc.poll() is not None:
+                break
+        err = ""
+        if self.proc.poll() is not None:
+            self._stderr.seek(0)
+            lines = self._stderr.read().strip().splitlines()
+            err = lines[-1] if lines else ""
+        self.stop()
+        raise LinkError(f"the SITL did not become ready: {err or line.strip() or 'timeout'}")
+
+    def stop(self, timeout_s: float = 5.0) -> int | None:
+        """Terminate the process; returns its exit code."""
+        p = self.proc
+        if p is None:
+            return None
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+            try:
+                p.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(timeout_s)
+        if p.stdout is not None:
+            p.stdout.close()
+        self._stderr.close()
+        self.proc = None
+        return p.returncode
+
+    def __enter__(self) -> "SitlProcess":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

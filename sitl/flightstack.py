@@ -1,0 +1,830 @@
+"""The SITL's flight-stack shell: arming, PX4-style modes, setpoint
+generation for takeoff/land/hold/return, offboard and actuator-stream
+freshness, failsafes, parameters and mission storage.
+
+Pure: no sockets, no clock. Everything is timed by the vehicle time handed
+in (``now_us``); the transport (``sitl.server``) turns MAVLink messages into
+calls here and the results back into MAVLink. World ENU, SI units; the
+MAVLink codec (``sitl.codec``) does every NED/wire-unit conversion.
+
+Modes (PX4 main/sub modes, ``custom_mode = main << 16 | sub << 24``)
+--------------------------------------------------------------------
+=============  ==========  ====================================================
+mode           main/sub    behaviour here
+=============  ==========  ====================================================
+MANUAL         1/0         no RC exists: behaves as POSCTL with centred sticks
+POSCTL         3/0         holds the position where it was entered
+AUTO.TAKEOFF   4/2         climbs at MPC_TKO_SPEED to the takeoff altitude,
+                           then AUTO.LOITER at that point
+AUTO.LOITER    4/3         holds a point (Hold); the boot mode
+AUTO.MISSION   4/4         refused (DENIED): missions are stored and reported
+                           only, never flown by this SITL
+AUTO.RTL       4/5         climbs to RTL_RETURN_ALT above home if lower, flies
+                           home at MPC_XY_CRUISE, then AUTO.LAND
+AUTO.LAND      4/6         descends at MPC_LAND_SPEED holding x, y
+OFFBOARD       6/0         tracks SET_POSITION_TARGET_LOCAL_NED; entry needs a
+                           setpoint stream already present (PX4 rule)
+=============  ==========  ====================================================
+
+Other PX4 modes (ALTCTL, ACRO, STABILIZED, ...) are refused with DENIED.
+
+Failsafes (announced by STATUSTEXT)
+-----------------------------------
+- Actuator stream: HIL_ACTUATOR_CONTROLS override the onboard controller
+  while armed and fresh (received within COM_HIL_TMO of vehicle time). When
+  the stream goes stale the onboard controller takes over with the current
+  mode's setpoint, re-anchored where the vehicle is (hold where it is; an
+  OFFBOARD stream that is still fresh keeps being tracked).
+- Offboard loss: in OFFBOARD, no setpoint for COM_OF_LOSS_T -> AUTO.LOITER
+  (hold where it is) for COM_FAIL_ACT_T, then COM_OBL_ACT (0 land, 1 keep
+  holding, 2 return). A mode change by the user ends the failsafe.
+- Landing: landed for COM_DISARM_LAND after having flown -> disarm; armed on
+  the ground without taking off for COM_DISARM_PRFLT -> disarm (PX4).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from .onboard import Setpoint
+
+# MAVLink enum values used by the stack (named once, from the common dialect).
+RESULT_ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
+RESULT_TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+RESULT_DENIED = mavlink.MAV_RESULT_DENIED
+RESULT_UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
+RESULT_FAILED = mavlink.MAV_RESULT_FAILED
+
+SEVERITY_CRITICAL = mavlink.MAV_SEVERITY_CRITICAL
+SEVERITY_WARNING = mavlink.MAV_SEVERITY_WARNING
+SEVERITY_NOTICE = mavlink.MAV_SEVERITY_NOTICE
+SEVERITY_INFO = mavlink.MAV_SEVERITY_INFO
+
+PARAM_TYPE_REAL32 = mavlink.MAV_PARAM_TYPE_REAL32
+PARAM_TYPE_INT32 = mavlink.MAV_PARAM_TYPE_INT32
+
+#: Normalised motor command while armed on the ground (props spinning, no lift).
+IDLE_MOTOR_CMD = 0.05
+
+#: Horizontal acceptance radius of the return leg (m).
+RTL_ACCEPT_RADIUS_M = 0.5
+
+#: Largest tilt (rad) at which arming is allowed without force.
+ARM_MAX_TILT_RAD = math.radians(30.0)
+
+MAX_MISSION_ITEMS = 2000
+
+
+class FlightMode(Enum):
+    """PX4 flight modes the SITL knows, valued (main_mode, sub_mode)."""
+
+    MANUAL = (1, 0)
+    POSCTL = (3, 0)
+    TAKEOFF = (4, 2)
+    LOITER = (4, 3)
+    MISSION = (4, 4)
+    RTL = (4, 5)
+    LAND = (4, 6)
+    OFFBOARD = (6, 0)
+
+    @property
+    def main(self) -> int:
+        return self.value[0]
+
+    @property
+    def sub(self) -> int:
+        return self.value[1]
+
+    @classmethod
+    def from_px4(cls, main_mode: int, sub_mode: int) -> "FlightMode | None":
+        """The mode of a PX4 (main, sub) pair; None if unknown.
+
+        MANUAL, POSCTL and OFFBOARD ignore the sub mode (PX4 sends 0).
+        """
+        for m in cls:
+            if m.main == main_mode and (m.main != 4 and m.sub == 0 or m.sub == sub_mode):
+                return m
+        return None
+
+    @property
+    def label(self) -> str:
+        return {1: "MANUAL", 3: "POSCTL", 6: "OFFBOARD"}.get(self.main) or f"AUTO.{self.name}"
+
+
+# --- parameters ---------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: name (<= 16 chars), MAV_PARAM_TYPE, default, bounds, meaning."""
+
+    name: str
+    param_type: int
+    default: float
+    min: float
+    max: float
+    doc: str
+
+
+_R, _I = PARAM_TYPE_REAL32, PARAM_TYPE_INT32
+
+#: The parameter set. PX4 names where PX4 has the parameter; SIM_* are the
+#: simulator's own (noise and lockstep), applied by ``sitl.server``.
+PARAM_SPECS: tuple[ParamSpec, ...] = (
+    ParamSpec("COM_OF_LOSS_T", _R, 1.0, 0.0, 60.0, "offboard setpoint loss timeout (s)"),
+    ParamSpec("COM_OBL_ACT", _I, 0, 0, 2, "offboard loss action after the hold: 0 land, 1 hold, 2 return"),
+    ParamSpec("COM_FAIL_ACT_T", _R, 5.0, 0.0, 60.0, "hold time before a failsafe action (s)"),
+    ParamSpec("COM_HIL_TMO", _R, 0.2, 0.01, 10.0, "HIL_ACTUATOR_CONTROLS freshness timeout (s)"),
+    ParamSpec("COM_DISARM_LAND", _R, 2.0, -1.0, 20.0, "auto-disarm after landing (s, <= 0 off)"),
+    ParamSpec("COM_DISARM_PRFLT", _R, 10.0, -1.0, 60.0, "auto-disarm without takeoff (s, <= 0 off)"),
+    ParamSpec("MIS_TAKEOFF_ALT", _R, 2.5, 0.1, 100.0, "default takeoff height above home (m)"),
+    ParamSpec("MPC_TKO_SPEED", _R, 1.5, 0.1, 5.0, "takeoff climb speed (m/s)"),
+    ParamSpec("MPC_LAND_SPEED", _R, 0.7, 0.1, 3.0, "landing descent speed (m/s)"),
+    ParamSpec("MPC_XY_CRUISE", _R, 5.0, 0.1, 20.0, "horizontal speed of the return leg (m/s)"),
+    ParamSpec("MPC_XY_VEL_MAX", _R, 5.0, 0.1, 20.0, "onboard controller horizontal speed limit (m/s)"),
+    ParamSpec("MPC_Z_VEL_MAX_UP", _R, 3.0, 0.1, 8.0, "onboard controller climb speed limit (m/s)"),
+    ParamSpec("MPC_Z_VEL_MAX_DN", _R, 1.5, 0.1, 4.0, "onboard controller descent speed limit (m/s)"),
+    ParamSpec("MPC_TILTMAX_AIR", _R, 35.0, 10.0, 85.0, "onboard controller tilt limit (deg)"),
+    ParamSpec("NAV_MC_ALT_RAD", _R, 0.8, 0.05, 10.0, "takeoff altitude acceptance (m)"),
+    ParamSpec("RTL_RETURN_ALT", _R, 5.0, 0.0, 150.0, "return altitude above home (m; PX4's default is 60)"),
+    ParamSpec("SIM_LS_TMO", _R, 2.0, 0.05, 60.0, "lockstep: wall-clock wait for the answer (s)"),
+    ParamSpec("SIM_VEC_VAR", _R, 5.0e-4, 0.0, 1.0, "accel/mag direction noise variance (-)"),
+    ParamSpec("SIM_GYRO_VAR", _R, 5.0e-4, 0.0, 1.0, "gyro noise variance ((rad/s)^2)"),
+    ParamSpec("SIM_POS_STD", _R, 0.0, 0.0, 10.0, "position measurement noise std (m)"),
+    ParamSpec("SIM_VEL_STD", _R, 0.0, 0.0, 10.0, "velocity measurement noise std (m/s)"),
+    ParamSpec("SIM_RNG_STD", _R, 0.0, 0.0, 10.0, "rangefinder noise std (m)"),
+)
+
+
+@dataclass(frozen=True, slots=True)
+class ParamSetResult:
+    """Outcome of a PARAM_SET: ``ok`` False -> ``reason``; ``value`` is the
+    value the parameter has afterwards (the old one when rejected)."""
+
+    ok: bool
+    value: float | int
+    reason: str = ""
+
+
+class Parameters:
+    """Named, typed parameter values with PX4's list order (by index).
+
+    Parameters
+    ----------
+    specs : tuple of ParamSpec
+    initial : dict, optional
+        Start values overriding the defaults (e.g. the mission's noise).
+    """
+
+    def __init__(self, specs: tuple[ParamSpec, ...] = PARAM_SPECS, initial: dict | None = None) -> None:
+        self.specs = tuple(specs)
+        self._index = {s.name: i for i, s in enumerate(self.specs)}
+        self._values = [self._typed(s, s.default) for s in self.specs]
+        for k, v in (initial or {}).items():
+            r = self.set(k, v)
+            if not r.ok:
+                raise ValueError(f"parameter {k}: {r.reason}")
+
+    @staticmethod
+    def _typed(spec: ParamSpec, value):
+        return int(value) if spec.param_type == PARAM_TYPE_INT32 else float(value)
+
+    def __len__(self) -> int:
+        return len(self.specs)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._index
+
+    def __getitem__(self, name: str):
+        return self._values[self._index[name]]
+
+    def index(self, name: str) -> int:
+        """Index of a parameter; KeyError if unknown."""
+        return self._index[name]
+
+    def spec(self, name: str) -> ParamSpec:
+        return self.specs[self._index[name]]
+
+    def by_index(self, i: int) -> tuple[ParamSpec, float | int]:
+        """(spec, value) of the i-th parameter; IndexError if out of range."""
+        if not 0 <= i < len(self.specs):
+            raise IndexError(i)
+        return self.specs[i], self._values[i]
+
+    def set(self, name: str, value) -> ParamSetResult:
+        """Set a parameter (typed, bounds-checked)."""
+        i = self._index.get(name)
+        if i is None:
+            return ParamSetResult(False, math.nan, f"unknown parameter {name}")
+        spec = self.specs[i]
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            return ParamSetResult(False, self._values[i], f"{name}: not a number")
+        if not math.isfinite(v):
+            return ParamSetResult(False, self._values[i], f"{name}: not finite")
+        if spec.param_type == PARAM_TYPE_INT32 and v != int(v):
+            return ParamSetResult(False, self._values[i], f"{name}: must be an integer")
+        if not spec.min <= v <= spec.max:
+            return ParamSetResult(False, self._values[i], f"{name}: outside [{spec.min:g}, {spec.max:g}]")
+        self._values[i] = self._typed(spec, v)
+        return ParamSetResult(True, self._values[i])
+
+
+# --- mission storage (the MISSION_INT protocol, pure) ----------------------
+
+
+@dataclass(frozen=True, slots=True)
+class MissionItem:
+    """One stored MISSION_ITEM_INT, in wire units as received (x, y: 1e7 deg
+    for global frames or 1e4 m for local frames; z in the item's frame)."""
+
+    seq: int
+    frame: int
+    command: int
+    current: int
+    autocontinue: int
+    param1: float
+    param2: float
+    param3: float
+    param4: float
+    x: int
+    y: int
+    z: float
+    mission_type: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class SendRequest:
+    """Reply: ask the peer for item ``seq`` (MISSION_REQUEST_INT)."""
+
+    seq: int
+    mission_type: int
+
+
+@dataclass(frozen=True, slots=True)
+class SendCount:
+    """Reply: MISSION_COUNT."""
+
+    count: int
+    mission_type: int
+
+
+@dataclass(frozen=True, slots=True)
+class SendItem:
+    """Reply: MISSION_ITEM_INT."""
+
+    item: MissionItem
+
+
+@dataclass(frozen=True, slots=True)
+class SendAck:
+    """Reply: MISSION_ACK with a MAV_MISSION_RESULT."""
+
+    result: int
+    mission_type: int
+
+
+class MissionProtocol:
+    """Mission storage with the MISSION_INT upload/download handshakes.
+
+    Only ``mission_type`` 0 (MAV_MISSION_TYPE_MISSION) is stored; fence and
+    rally lists read back empty and uploads of them are refused
+    (MAV_MISSION_UNSUPPORTED). Upload timeouts are timed by the caller's
+    clock (``tick(now_s)``): the server passes wall-clock seconds, because
+    the ground station answers in wall time whatever the simulation speed.
+
+    Methods return the list of replies to send to the peer.
+    """
+
+    RETRY_S = 0.5
+    MAX_RETRIES = 5
+
+    def __init__(self) -> None:
+        self.items: tuple[MissionItem, ...] = ()
+        self.current_seq = 0
+        self._upload: list[MissionItem] | None = None
+        self._upload_count = 0
+        self._last_s = 0.0
+        self._retries = 0
+
+    @property
+    def uploading(self) -> bool:
+        return self._upload is not None
+
+    def handle_count(self, count: int, mission_type: int, now_s: float) -> list:
+        if mission_type != mavlink.MAV_MISSION_TYPE_MISSION:
+            if count == 0:
+                return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mission_type)]
+            return [SendAck(mavlink.MAV_MISSION_UNSUPPORTED, mission_type)]
+        if count < 0 or count > MAX_MISSION_ITEMS:
+            self._upload = None
+            return [SendAck(mavlink.MAV_MISSION_NO_SPACE, mission_type)]
+        if count == 0:
+            self._upload = None
+            self.items = ()
+            self.current_seq = 0
+            return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mission_type)]
+        self._upload = []
+        self._upload_count = count
+        self._last_s = now_s
+        self._retries = 0
+        return [SendRequest(0, mission_type)]
+
+    def handle_item(self, item: MissionItem, now_s: float) -> list:
+        mt = item.mission_type
+        if self._upload is None or mt != mavlink.MAV_MISSION_TYPE_MISSION:
+            # An item nobody asked for: tell the peer the sequence is wrong.
+            return [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, mt)]
+        expected = len(self._upload)
+        if item.seq != expected:
+            # Duplicate or skipped item: ask again for the one we need.
+            self._last_s = now_s
+            return [SendRequest(expected, mt)]
+        self._upload.append(item)
+        self._last_s = now_s
+        self._retries = 0
+        if len(self._upload) < self._upload_count:
+            return [SendRequest(expected + 1, mt)]
+        self.items = tuple(self._upload)
+        self.current_seq = 0
+        self._upload = None
+        return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mt)]
+
+    def handle_request_list(self, mission_type: int) -> list:
+        if mission_type != mavlink.MAV_MISSION_TYPE_MISSION:
+            return [SendCount(0, mission_type)]
+        return [SendCount(len(self.items), mission_type)]
+
+    def handle_request(self, seq: int, mission_type: int) -> list:
+        if mission_type != mavlink.MAV_MISSION_TYPE_MISSION or not 0 <= seq < len(self.items):
+            return [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, mission_type)]
+        return [SendItem(self.items[seq])]
+
+    def handle_clear_all(self, mission_type: int) -> list:
+        if mission_type in (mavlink.MAV_MISSION_TYPE_MISSION, mavlink.MAV_MISSION_TYPE_ALL):
+            self.items = ()
+            self.current_seq = 0
+            self._upload = None
+        return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mission_type)]
+
+    def handle_set_current(self, seq: int) -> bool:
+        """MISSION_SET_CURRENT: True if ``seq`` exists."""
+        if 0 <= seq < len(self.items):
+            self.current_seq = seq
+            return True
+        return False
+
+    def tick(self, now_s: float) -> list:
+        """Re-request the awaited item after RETRY_S; give up after MAX_RETRIES."""
+        if self._upload is None or now_s - self._last_s < self.RETRY_S:
+            return []
+        self._last_s = now_s
+        self._retries += 1
+        if self._retries > self.MAX_RETRIES:
+            self._upload = None
+            return [SendAck(mavlink.MAV_MISSION_OPERATION_CANCELLED, mavlink.MAV_MISSION_TYPE_MISSION)]
+        return [SendRequest(len(self._upload), mavlink.MAV_MISSION_TYPE_MISSION)]
+
+
+# --- the flight stack ----------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class NavState:
+    """What the flight stack knows of the vehicle (world ENU, SI).
+
+    Attributes
+    ----------
+    pos_enu_m, vel_enu_m_s : (3,)
+    yaw_enu_rad : float
+        Heading of body x (from east, CCW).
+    tilt_rad : float
+        Angle between body z and world z.
+    landed : bool
+        Ground contact (the SITL's land detector is the plant's contact flag).
+    """
+
+    pos_enu_m: np.ndarray
+    vel_enu_m_s: np.ndarray
+    yaw_enu_rad: float
+    tilt_rad: float
+    landed: bool
+
+
+@dataclass(frozen=True, slots=True)
+class CommandResult:
+    """A command's MAV_RESULT and, when refused, why."""
+
+    result: int
+    reason: str = ""
+
+    @property
+    def accepted(self) -> bool:
+        return self.result == RESULT_ACCEPTED
+
+
+@dataclass(frozen=True, slots=True)
+class StatusEvent:
+    """A STATUSTEXT to announce (MAV_SEVERITY, text)."""
+
+    severity: int
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class StackOutput:
+    """What drives the motors this frame.
+
+    Attributes
+    ----------
+    armed : bool
+        False: motors stopped.
+    motor_override : tuple of 4 float, or None
+        Fresh HIL_ACTUATOR_CONTROLS: fly exactly these.
+    idle : bool
+        Armed on the ground with no climb demanded: ``IDLE_MOTOR_CMD``.
+    setpoint : Setpoint or None
+        Otherwise the onboard controller tracks this.
+    reset_controller : bool
+        The onboard controller takes over now: clear its integrators first.
+    """
+
+    armed: bool
+    motor_override: tuple | None
+    idle: bool
+    setpoint: Setpoint | None
+    reset_controller: bool
+
+
+@dataclass(frozen=True, slots=True)
+class ReceivedTarget:
+    """An offboard setpoint and its vehicle receive time."""
+
+    setpoint: Setpoint
+    time_us: int
+
+
+def setpoint_from_target(target) -> Setpoint:
+    """``codec.PositionTarget`` (per-axis NaN) -> onboard ``Setpoint``
+    (an all-NaN group becomes None)."""
+
+    def group(v):
+        return None if np.all(np.isnan(v)) else v
+
+    return Setpoint(group(target.pos_enu_m), group(target.vel_enu_m_s), group(target.acc_enu_m_s2),
+                    target.yaw_enu_rad, target.yaw_rate_enu_rad_s)
+
+
+@dataclass
+class _Anchor:
+    """Where the current mode's setpoint is anchored (mutable, internal)."""
+
+    pos: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    yaw: float = 0.0
+    z_ref: float = 0.0
+    target_z: float = 0.0
+    phase: int = 0
+
+
+class FlightStack:
+    """PX4-like flight-stack state machine (see the module docstring).
+
+    Parameters
+    ----------
+    params : Parameters
+    home_enu_m : (3,)
+        Home (takeoff and return point): the vehicle's start position.
+    """
+
+    def __init__(self, params: Parameters, home_enu_m) -> None:
+        self.params = params
+        self.home_enu_m = np.array(home_enu_m, dtype=float)
+        self.mode = FlightMode.LOITER
+        self.armed = False
+        self.events: list[StatusEvent] = []
+        self._now_us = 0
+        self._last_update_us: int | None = None
+        self._anchor = _Anchor(self.home_enu_m.copy())
+        self._need_anchor = True
+        self._hold_sp: Setpoint | None = None
+        self._offboard: ReceivedTarget | None = None
+        self._act_cmd: tuple | None = None
+        self._act_time_us = -(1 << 62)
+        self._override_active = False
+        self._failsafe: str | None = None
+        self._failsafe_t0_us = 0
+        self._armed_t_us = 0
+        self._airborne_since_arm = False
+        self._landed_since_us: int | None = None
+        self._land_announced = False
+        self._takeoff_z: float | None = None
+        self._state: NavState | None = None
+
+    # ------------------------------------------------------------------ info
+    @property
+    def custom_mode(self) -> int:
+        return self.mode.main << 16 | self.mode.sub << 24
+
+    @property
+    def system_status(self) -> int:
+        if self._failsafe is not None:
+            return mavlink.MAV_STATE_CRITICAL
+        return mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
+
+    @property
+    def landed_state(self) -> int:
+        s = self._state
+        if s is None or s.landed or not self.armed:
+            return mavlink.MAV_LANDED_STATE_ON_GROUND
+        if self.mode is FlightMode.TAKEOFF:
+            return mavlink.MAV_LANDED_STATE_TAKEOFF
+        if self.mode is FlightMode.LAND:
+            return mavlink.MAV_LANDED_STATE_LANDING
+        return mavlink.MAV_LANDED_STATE_IN_AIR
+
+    @property
+    def override_active(self) -> bool:
+        return self._override_active
+
+    @property
+    def failsafe(self) -> str | None:
+        """Name of the active failsafe ("offboard") or None."""
+        return self._failsafe
+
+    def offboard_fresh(self, now_us: int) -> bool:
+        """A setpoint arrived within COM_OF_LOSS_T."""
+        r = self._offboard
+        return r is not None and now_us - r.time_us <= self.params["COM_OF_LOSS_T"] * 1e6
+
+    def actuators_fresh(self, now_us: int) -> bool:
+        return self._act_cmd is not None and now_us - self._act_time_us <= self.params["COM_HIL_TMO"] * 1e6
+
+    def pop_events(self) -> list[StatusEvent]:
+        ev, self.events = self.events, []
+        return ev
+
+    def _say(self, severity: int, text: str) -> None:
+        self.events.append(StatusEvent(severity, text))
+
+    # ------------------------------------------------------------------ inputs
+    def offboard_setpoint(self, now_us: int, target) -> None:
+        """Record a decoded SET_POSITION_TARGET_LOCAL_NED (``codec.PositionTarget``)."""
+        self._offboard = ReceivedTarget(setpoint_from_target(target), int(now_us))
+
+    def actuator_controls(self, now_us: int, motor_cmd) -> None:
+        """Record HIL_ACTUATOR_CONTROLS motor commands (4 floats in [0, 1]); None
+        (a lockstep tick without commands) records nothing."""
+        if motor_cmd is not None:
+            self._act_cmd = tuple(motor_cmd)
+            self._act_time_us = int(now_us)
+
+    # ------------------------------------------------------------------ commands
+    def arm(self, now_us: int, state: NavState, force: bool = False) -> CommandResult:
+        """MAV_CMD_COMPONENT_ARM_DISARM(1). ``force``: param2 == 21196."""
+        if self.armed:
+            return CommandResult(RESULT_ACCEPTED)
+        if not force:
+            reason = self._prearm_failure(now_us, state)
+            if reason:
+                self._say(SEVERITY_CRITICAL, f"Arming denied: {reason}")
+                return CommandResult(RESULT_DENIED, reason)
+        self.armed = True
+        self._armed_t_us = int(now_us)
+        self._airborne_since_arm = not state.landed
+        self._landed_since_us = int(now_us) if state.landed else None
+        self._land_announced = False
+        self._state = state
+        self._enter(self.mode, state, announce=False)
+        self._say(SEVERITY_INFO, "Armed" + (" (forced)" if force else "") + f" in {self.mode.label}")
+        return CommandResult(RESULT_ACCEPTED)
+
+    def _prearm_failure(self, now_us: int, state: NavState) -> str:
+        if not state.landed:
+            return "not landed"
+        if state.tilt_rad > ARM_MAX_TILT_RAD:
+            return "vehicle not level"
+        if self.mode in (FlightMode.LAND, FlightMode.RTL):
+            return f"not armable in {self.mode.label}"
+        if self.mode is FlightMode.OFFBOARD and not self.offboard_fresh(now_us):
+            return "no offboard setpoint stream"
+        return ""
+
+    def disarm(self, now_us: int, state: NavState, force: bool = False, why: str = "") -> CommandResult:
+        """MAV_CMD_COMPONENT_ARM_DISARM(0): refused in the air unless forced."""
+        if not self.armed:
+            return CommandResult(RESULT_ACCEPTED)
+        if not state.landed and not force:
+            self._say(SEVERITY_CRITICAL, "Disarming denied: not landed")
+            return CommandResult(RESULT_DENIED, "not landed")
+        self.armed = False
+        self._override_active = False
+        self._failsafe = None
+        self._say(SEVERITY_INFO, "Disarmed" + (f" ({why})" if why else " (forced)" if force else ""))
+        return CommandResult(RESULT_ACCEPTED)
+
+    def set_mode(self, now_us: int, state: NavState, mode: FlightMode | None) -> CommandResult:
+        """DO_SET_MODE / SET_MODE with a PX4 custom mode (None: unknown)."""
+        if mode is None:
+            return CommandResult(RESULT_DENIED, "unknown or unsupported mode")
+        if mode is FlightMode.MISSION:
+            self._say(SEVERITY_WARNING, "Mission mode not available: mission stored only")
+            return CommandResult(RESULT_DENIED, "missions are stored, not flown")
+        if mode is FlightMode.OFFBOARD and not self.offboard_fresh(now_us):
+            self._say(SEVERITY_WARNING, "Offboard denied: no setpoint stream")
+            return CommandResult(RESULT_TEMPORARILY_REJECTED, "no offboard setpoint stream")
+        if mode is FlightMode.RTL and (not self.armed or state.landed):
+            return CommandResult(RESULT_DENIED, "return needs a flying vehicle")
+        if mode is FlightMode.TAKEOFF:
+            return self.takeoff(now_us, state, None)
+        if mode is self.mode and self._failsafe is None:
+            return CommandResult(RESULT_ACCEPTED)
+        self._failsafe = None
+        self._enter(mode, state)
+        return CommandResult(RESULT_ACCEPTED)
+
+    def takeoff(self, now_us: int, state: NavState, target_z_enu_m: float | None) -> CommandResult:
+        """MAV_CMD_NAV_TAKEOFF: climb to ``target_z_enu_m`` (None: home + MIS_TAKEOFF_ALT).
+
+        Disarmed: switches to AUTO.TAKEOFF; arming then takes off (PX4).
+        """
+        home_z = float(self.home_enu_m[2])
+        z = home_z + self.params["MIS_TAKEOFF_ALT"] if target_z_enu_m is None else float(target_z_enu_m)
+        if not math.isfinite(z) or not home_z < z <= home_z + 150.0:
+            return CommandResult(RESULT_DENIED, "takeoff altitude out of range")
+        self._takeoff_z = z
+        self._failsafe = None
+        self._enter(FlightMode.TAKEOFF, state)
+        return CommandResult(RESULT_ACCEPTED)
+
+    def land(self, now_us: int, state: NavState) -> CommandResult:
+        """MAV_CMD_NAV_LAND: AUTO.LAND where the vehicle is."""
+        self._failsafe = None
+        self._enter(FlightMode.LAND, state)
+        return CommandResult(RESULT_ACCEPTED)
+
+    def return_to_launch(self, now_us: int, state: NavState) -> CommandResult:
+        """MAV_CMD_NAV_RETURN_TO_LAUNCH."""
+        return self.set_mode(now_us, state, FlightMode.RTL)
+
+    # ------------------------------------------------------------------ modes
+    def _enter(self, mode: FlightMode, state: NavState, announce: bool = True) -> None:
+        changed = mode is not self.mode
+        self.mode = mode
+        self._anchor_at(state)
+        self._land_announced = False
+        if announce and changed:
+            self._say(SEVERITY_INFO, f"Mode {mode.label}")
+
+    def _anchor_at(self, state: NavState, hold_pos=None) -> None:
+        """Anchor the mode's setpoint at the vehicle (or at ``hold_pos``)."""
+        a = self._anchor
+        a.pos = np.array(state.pos_enu_m if hold_pos is None else hold_pos, dtype=float)
+        a.yaw = float(state.yaw_enu_rad)
+        a.z_ref = float(state.pos_enu_m[2])
+        a.phase = 0
+        if self.mode is FlightMode.TAKEOFF:
+            a.target_z = self._takeoff_z if self._takeoff_z is not None else (
+                float(self.home_enu_m[2]) + self.params["MIS_TAKEOFF_ALT"])
+        elif self.mode is FlightMode.RTL:
+            a.target_z = max(float(state.pos_enu_m[2]),
+                             float(self.home_enu_m[2]) + self.params["RTL_RETURN_ALT"])
+        self._hold_sp = Setpoint(a.pos.copy(), np.zeros(3), None, a.yaw, None)
+
+    # ------------------------------------------------------------------ the tick
+    def update(self, now_us: int, state: NavState) -> StackOutput:
+        """Advance the state machine to ``now_us`` and say what flies the vehicle."""
+        now_us = int(now_us)
+        dt = 0.0 if self._last_update_us is None else max(0.0, (now_us - self._last_update_us) * 1e-6)
+        self._last_update_us = now_us
+        self._now_us = now_us
+        self._state = state
+        p = self.params
+
+        if not self.armed:
+            self._override_active = False
+            return StackOutput(False, None, False, None, False)
+
+        # --- landed bookkeeping and auto-disarm
+        if state.landed:
+            if self._landed_since_us is None:
+                self._landed_since_us = now_us
+            landed_s = (now_us - self._landed_since_us) * 1e-6
+            if self._airborne_since_arm:
+                t = p["COM_DISARM_LAND"]
+                if t > 0 and landed_s >= t:
+                    self.disarm(now_us, state, why="landed")
+                    return StackOutput(False, None, False, None, False)
+            else:
+                t = p["COM_DISARM_PRFLT"]
+                if t > 0 and landed_s >= t and self.mode is not FlightMode.TAKEOFF:
+                    self.disarm(now_us, state, why="no takeoff")
+                    return StackOutput(False, None, False, None, False)
+        else:
+            self._landed_since_us = None
+            self._airborne_since_arm = True
+
+        # --- actuator override freshness
+        fresh = self.actuators_fresh(now_us)
+        reset = False
+        if fresh and not self._override_active:
+            self._override_active = True
+            self._say(SEVERITY_INFO, "Actuator override active")
+        elif not fresh and self._override_active:
+            self._override_active = False
+            reset = True
+            self._anchor_at(state)
+            self._say(SEVERITY_WARNING, "Actuator stream lost: onboard controller holds")
+
+        # --- offboard loss failsafe
+        if self.mode is FlightMode.OFFBOARD and not self.offboard_fresh(now_us):
+            self._enter(FlightMode.LOITER, state, announce=False)
+            self._failsafe = "offboard"
+            self._failsafe_t0_us = now_us
+            self._say(SEVERITY_CRITICAL, "Failsafe: offboard setpoints lost, holding")
+        if self._failsafe == "offboard" and self.mode is FlightMode.LOITER:
+            if (now_us - self._failsafe_t0_us) * 1e-6 >= p["COM_FAIL_ACT_T"]:
+                action = int(p["COM_OBL_ACT"])
+                if action == 0:
+                    self._failsafe = None
+                    self._enter(FlightMode.LAND, state, announce=False)
+                    self._say(SEVERITY_CRITICAL, "Failsafe: landing")
+                elif action == 2 and not state.landed:
+                    self._failsafe = None
+                    self._enter(FlightMode.RTL, state, announce=False)
+                    self._say(SEVERITY_CRITICAL, "Failsafe: returning")
+                else:
+                    self._failsafe = "offboard-hold"
+
+        sp, idle = self._mode_setpoint(now_us, state, dt)
+        if self._override_active:
+            return StackOutput(True, self._act_cmd, False, sp, False)
+        return StackOutput(True, None, idle, sp, reset)
+
+    def _mode_setpoint(self, now_us: int, state: NavState, dt: float) -> tuple[Setpoint | None, bool]:
+        """Setpoint of the current mode and whether the motors should idle."""
+        a = self._anchor
+        p = self.params
+        mode = self.mode
+        if mode is FlightMode.OFFBOARD:
+            sp = self._offboard.setpoint if self._offboard is not None else self._hold_sp
+            if sp.pos_enu_m is None and sp.vel_enu_m_s is None and sp.acc_enu_m_s2 is None:
+                # Yaw-only setpoint: hold the position, turn as asked.
+                sp = Setpoint(a.pos, np.zeros(3), None, sp.yaw_enu_rad, sp.yaw_rate_rad_s)
+            return sp, False
+        if mode is FlightMode.TAKEOFF:
+            v = p["MPC_TKO_SPEED"]
+            a.z_ref = min(a.z_ref + v * dt, a.target_z)
+            climbing = a.z_ref < a.target_z
+            if not climbing and abs(float(state.pos_enu_m[2]) - a.target_z) <= p["NAV_MC_ALT_RAD"]:
+                hold = (a.pos[0], a.pos[1], a.target_z)
+                self.mode = FlightMode.LOITER
+                self._anchor_at(state, hold_pos=hold)
+                self._say(SEVERITY_INFO, "Takeoff complete: Mode AUTO.LOITER")
+                return self._hold_sp, False
+            return Setpoint((a.pos[0], a.pos[1], a.z_ref), (0.0, 0.0, v if climbing else 0.0),
+                            None, a.yaw, None), False
+        if mode is FlightMode.LAND:
+            if state.landed:
+                if not self._land_announced:
+                    self._land_announced = True
+                    self._say(SEVERITY_INFO, "Landing detected")
+                return None, True
+            return Setpoint((a.pos[0], a.pos[1], math.nan), (0.0, 0.0, -p["MPC_LAND_SPEED"]),
+                            None, a.yaw, None), False
+        if mode is FlightMode.RTL:
+            return self._rtl_setpoint(state, dt), False
+        # LOITER, POSCTL, MANUAL: hold; on the ground stay on the ground.
+        if state.landed and self._hold_sp is not None and self._hold_sp.pos_enu_m[2] <= state.pos_enu_m[2] + 0.05:
+            return None, True
+        return self._hold_sp, False
+
+    def _rtl_setpoint(self, state: NavState, dt: float) -> Setpoint:
+        a = self._anchor
+        p = self.params
+        if a.phase == 0:   # climb where we are
+            a.z_ref = min(a.z_ref + p["MPC_Z_VEL_MAX_UP"] * dt, a.target_z)
+            if a.z_ref >= a.target_z and abs(float(state.pos_enu_m[2]) - a.target_z) < 0.5:
+                a.phase = 1
+            return Setpoint((a.pos[0], a.pos[1], a.z_ref), None, None, a.yaw, None)
+        # fly home: a carrot moving at MPC_XY_CRUISE
+        d = self.home_enu_m[:2] - a.pos[:2]
+        dist = float(math.hypot(d[0], d[1]))
+        v = p["MPC_XY_CRUISE"]
+        step = v * dt
+        if dist <= step:
+            a.pos[0], a.pos[1] = self.home_enu_m[0], self.home_enu_m[1]
+            vel = (0.0, 0.0, 0.0)
+        else:
+            a.pos[:2] += d / dist * step
+            vel = (d[0] / dist * v, d[1] / dist * v, 0.0)
+        here = float(math.hypot(*(self.home_enu_m[:2] - np.asarray(state.pos_enu_m[:2]))))
+        if dist <= step and here < RTL_ACCEPT_RADIUS_M:
+            self._enter(FlightMode.LAND, state, announce=False)
+            self._say(SEVERITY_INFO, "Return: home reached, landing")
+        return Setpoint((a.pos[0], a.pos[1], a.target_z), vel, None, a.yaw, None)

@@ -1,0 +1,1074 @@
+"""MAVLink transport of the SITL: ``Simulation`` + ``FlightStack`` behind
+pymavlink connections (DESIGN.md "MAVLink contract" and "Time").
+
+The vehicle is system 1, component 1, MAVLink 2, common dialect. Connection
+strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
+``tcp:...``, ``tcpin:...``). Telemetry goes to every link; replies
+(COMMAND_ACK, PARAM_VALUE on read, MISSION_*) go to the link the request
+came from, addressed to the requester.
+
+Time and pacing
+---------------
+The simulation owns the clock (``Simulation.time_us``); every rate below is
+in vehicle time. Free-running, frame k is released at
+``t0_wall + t_k / speed`` (speed 0: as fast as possible), and incoming
+messages are processed while waiting. With ``lockstep`` enabled the loop
+engages lockstep as soon as a HIL_ACTUATOR_CONTROLS with
+``flags & 1`` arrives; from then on each frame is
+
+1. compute the motor command (fresh HIL_ACTUATOR_CONTROLS or the onboard
+   controller on the flight stack's setpoint) and step one sensor period;
+2. send the telemetry due at the new vehicle time, HIGHRES_IMU last (it
+   marks the end of the frame);
+3. process incoming messages until a HIL_ACTUATOR_CONTROLS with
+   ``time_usec`` equal to that HIGHRES_IMU's arrives (it drives the next
+   frame; all-NaN controls are a tick without override). If none arrives
+   within SIM_LS_TMO seconds of wall-clock time, lockstep disengages
+   (STATUSTEXT) and the loop free-runs at ``speed`` until the peer engages
+   it again.
+
+While the vehicle clock is stalled (lockstep wait) a HEARTBEAT still goes
+out once per wall-clock second so that ground stations keep the link.
+
+Message rates (defaults, changeable by MAV_CMD_SET_MESSAGE_INTERVAL):
+HEARTBEAT 1 Hz, SYS_STATUS 1 Hz, SYSTEM_TIME 1 Hz, EXTENDED_SYS_STATE 5 Hz,
+ATTITUDE / ATTITUDE_QUATERNION / LOCAL_POSITION_NED 50 Hz,
+GLOBAL_POSITION_INT 10 Hz, GPS_RAW_INT 5 Hz, POSITION_TARGET_LOCAL_NED
+10 Hz, HOME_POSITION 0.5 Hz; HIGHRES_IMU every sensor frame (fixed: it is the
+lockstep frame marker, so its interval cannot be changed); DISTANCE_SENSOR
+at each rangefinder's own rate (an interval sets all rangefinder periods,
+-1 stops them being sent). An interval shorter than the sensor period means
+every frame.
+
+The SITL has no state estimator: ATTITUDE, the onboard controller and the
+flight stack use the true attitude; positions are the (noisy) position
+measurements; HIGHRES_IMU carries the noisy IMU.
+
+Signing: SETUP_SIGNING stores the key on every link and signs all outgoing
+messages with it; unsigned incoming messages are still accepted (a SITL
+convenience, documented), an all-zero key disables signing.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+import select
+import socket
+from struct import error as struct_error
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from companion.mission.schema import Mission
+
+from . import codec
+from .flightstack import (
+    IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
+    Parameters, SendAck, SendCount, SendItem, SendRequest, StatusEvent, SEVERITY_CRITICAL,
+    SEVERITY_INFO, SEVERITY_WARNING,
+)
+from .sim import Simulation
+from .world import load_world
+
+SYSTEM_ID = 1
+COMPONENT_ID = 1
+
+#: PX4 v1.14.0 release, as PX4 encodes it (major, minor, patch, type 0xFF).
+FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 0xFF
+
+CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+                | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
+
+_SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+            | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+            | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+            | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+            | mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+            | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+            | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY | mavlink.MAV_SYS_STATUS_AHRS
+            | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY)
+_PREARM = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+
+# Message ids used for scheduling.
+ID = mavlink
+_DEFAULT_RATES_HZ = {
+    ID.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    ID.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    ID.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
+    ID.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
+    ID.MAVLINK_MSG_ID_ATTITUDE: 50.0,
+    ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
+    ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 50.0,
+    ID.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
+    ID.MAVLINK_MSG_ID_GPS_RAW_INT: 5.0,
+    ID.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 10.0,
+    ID.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    ID.MAVLINK_MSG_ID_ODOMETRY: 0.0,        # ground truth, off unless requested
+}
+
+_HEARTBEAT_ID = ID.MAVLINK_MSG_ID_HEARTBEAT
+
+
+def _default_interval_us(mid: int) -> int:
+    hz = _DEFAULT_RATES_HZ[mid]
+    return int(round(1e6 / hz)) if hz > 0 else -1
+_ZERO4 = (0.0, 0.0, 0.0, 0.0)
+_IDLE4 = (IDLE_MOTOR_CMD,) * 4
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    """How the SITL is run.
+
+    Attributes
+    ----------
+    listen : str
+        Main link (pymavlink connection string); loopback by default.
+    outs : tuple of str
+        Extra links (e.g. ``udpout:127.0.0.1:14550`` for a ground station).
+    lockstep : bool
+        Allow lockstep with an actuator peer (DESIGN.md "Time").
+    speed : float
+        Real-time factor when free-running (0: as fast as possible).
+    seed : int or None
+        Overrides the mission's ``sim.seed``.
+    physics_hz, sensor_hz : int
+    """
+
+    listen: str = "udpin:127.0.0.1:14540"
+    outs: tuple[str, ...] = ()
+    lockstep: bool = False
+    speed: float = 1.0
+    seed: int | None = None
+    physics_hz: int = 1000
+    sensor_hz: int = 250
+
+    def __post_init__(self) -> None:
+        if not (self.speed >= 0 and math.isfinite(self.speed)):
+            raise ValueError("speed must be >= 0 (0: as fast as possible)")
+
+
+class _Link:
+    """One pymavlink connection with our own common-dialect MAVLink 2 encoder.
+
+    UDP links are read and written on the socket directly (one ``recvfrom``
+    per datagram, one ``sendto`` per message and client): mavutil's
+    per-message bookkeeping costs more than the rest of a frame's telemetry.
+    Other link types go through mavutil.
+    """
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.conn = mavutil.mavlink_connection(url, source_system=SYSTEM_ID,
+                                               source_component=COMPONENT_ID)
+        # Replace the module-global-dialect encoder by our own (common, v2):
+        # independent of MAVLINK20/MAVLINK_DIALECT and of other users of mavutil.
+        self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self.conn.mav.robust_parsing = True
+        self.conn.WIRE_PROTOCOL_VERSION = "2.0"
+        self.conn.first_byte = False
+        self.mav = self.conn.mav
+        self.udp = isinstance(self.conn, mavutil.mavudp)
+        self.server = self.udp and bool(self.conn.udp_server)
+        self.sock = self.conn.port if self.udp else None
+        self.clients = self.conn.clients if self.udp else set()
+        self.last_addr = None
+        port = getattr(self.conn, "port", None)
+        self.fd = port.fileno() if isinstance(port, socket.socket) else self.conn.fd
+
+    @property
+    def has_peer(self) -> bool:
+        return bool(self.clients) if self.server else True
+
+    def transmit(self, buf: bytes) -> None:
+        try:
+            if self.server:
+                for addr in self.clients:
+                    self.sock.sendto(buf, addr)
+            else:
+                self.conn.write(buf)
+        except OSError:
+            pass
+
+    def send(self, msg) -> None:
+        """Pack (signing if set up) and send a pymavlink message."""
+        try:
+            buf = msg.pack(self.mav)
+        except (struct_error, ValueError, TypeError, OverflowError):
+            return
+        self.mav.seq = (self.mav.seq + 1) & 0xFF
+        self.transmit(buf)
+
+    def reply(self, msg, addr=None) -> None:
+        """Send to ``addr`` or the peer whose datagram is being handled (UDP
+        server), else like ``send``."""
+        addr = addr or self.last_addr
+        if not self.server or addr is None:
+            self.send(msg)
+            return
+        try:
+            buf = msg.pack(self.mav)
+        except (struct_error, ValueError, TypeError, OverflowError):
+            return
+        self.mav.seq = (self.mav.seq + 1) & 0xFF
+        try:
+            self.sock.sendto(buf, addr)
+        except OSError:
+            pass
+
+    def send_fast(self, packer, args: tuple) -> None:
+        """Send through a ``codec.FastPacker``."""
+        try:
+            buf = packer.pack(self.mav, args)
+        except (struct_error, ValueError, TypeError, OverflowError):
+            return
+        self.transmit(buf)
+
+    def recv_datagram(self) -> bytes | None:
+        """Next UDP datagram, or None when nothing is waiting (UDP links only)."""
+        try:
+            data, addr = self.sock.recvfrom(65535)
+        except OSError:   # BlockingIOError, ECONNREFUSED after an ICMP error, ...
+            return None
+        if self.server:
+            self.clients.add(addr)
+            self.last_addr = addr
+        return data
+
+    def parse(self, data: bytes) -> list:
+        """Every message in the datagram ``data`` (BAD_DATA objects for garbage).
+
+        A datagram holds whole packets: the parser starts afresh on each, so a
+        truncated packet can never swallow the next datagram.
+        """
+        mav = self.mav
+        mav.buf = bytearray()
+        mav.buf_index = 0
+        try:
+            return mav.parse_buffer(data) or []
+        except Exception:   # pymavlink raised on garbage: drop the buffer
+            self.mav.buf = bytearray()
+            self.mav.buf_index = 0
+            return []
+
+    def receive(self):
+        """Messages of the next datagram or packet (list, maybe empty), or
+        None when nothing is waiting."""
+        if self.udp:
+            data = self.recv_datagram()
+            return None if data is None else self.parse(data)
+        msg = self.conn.recv_msg()
+        return None if msg is None else [msg]
+
+    def close(self) -> None:
+        try:
+            self.conn.close()
+        except OSError:
+            pass
+
+
+class SitlServer:
+    """The SITL: simulation + flight stack + MAVLink links.
+
+    Constructing it does no I/O; ``open()`` binds the links, ``run()`` loops
+    until ``stop()`` (thread-safe) and ``close()`` releases the sockets.
+
+    Parameters
+    ----------
+    mission : Mission
+    config : ServerConfig
+    """
+
+    def __init__(self, mission: Mission, config: ServerConfig = ServerConfig()) -> None:
+        self.mission = mission
+        self.config = config
+        self._stop = threading.Event()
+        self.links: list[_Link] = []
+        self.frames = 0
+        self.lockstep_engaged = False
+        seed = mission.sim.seed if config.seed is None else int(config.seed)
+        self.seed = seed
+        world = load_world(mission)
+        self.sim = Simulation(mission, np.random.default_rng(seed), physics_hz=config.physics_hz,
+                              sensor_hz=config.sensor_hz, world=world)
+        nz = mission.sim.noise
+        self.params = Parameters(initial={
+            "SIM_VEC_VAR": nz.vector_variance, "SIM_GYRO_VAR": nz.gyro_variance,
+            "SIM_POS_STD": nz.position_std_m, "SIM_VEL_STD": nz.velocity_std_m_s,
+            "SIM_RNG_STD": getattr(nz, "range_std_m", 0.0),
+            **self._controller_param_defaults()})
+        self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
+        self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
+        self.stack = FlightStack(self.params, self.home_enu_m)
+        self.missions = MissionProtocol()
+        self._mission_peer = None
+        self._apply_params()
+        self._frame = None
+        self._setpoint = None
+        self._onboard_flying = False
+        self._awaited_us: int | None = None
+        self._released = True
+        self._wall_epoch_us = int(time.time() * 1e6)
+        self._last_hb_wall = 0.0
+        self._rng_interval_disabled = False
+        period = self.sim.sensor_period_us
+        self._intervals = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
+        # Ground truth for the companion's tracking statistics (ODOMETRY, float32
+        # metres; SIM_STATE's 1e-7 degree lat/lon is ~1 cm): off unless requested.
+        self._intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
+        self._next_due = {mid: 0 for mid in self._intervals}
+        self._period_us = period
+        self._encoders = {
+            ID.MAVLINK_MSG_ID_HEARTBEAT: self._enc_heartbeat,
+            ID.MAVLINK_MSG_ID_SYS_STATUS: self._enc_sys_status,
+            ID.MAVLINK_MSG_ID_SYSTEM_TIME: self._enc_system_time,
+            ID.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self._enc_ext_state,
+            ID.MAVLINK_MSG_ID_ATTITUDE: self._enc_attitude,
+            ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: self._enc_attitude_q,
+            ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self._enc_lpos,
+            ID.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._enc_gpos,
+            ID.MAVLINK_MSG_ID_GPS_RAW_INT: self._enc_gps,
+            ID.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: self._enc_target,
+            ID.MAVLINK_MSG_ID_HOME_POSITION: self._enc_home,
+            ID.MAVLINK_MSG_ID_HIGHRES_IMU: self._enc_imu,
+            ID.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._enc_version,
+            ID.MAVLINK_MSG_ID_ODOMETRY: self._enc_truth,
+        }
+        self._schedule = [mid for mid in self._intervals]
+        self._fast = {
+            ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: (codec.PACK_LOCAL_POSITION_NED, self._lpos_args),
+            ID.MAVLINK_MSG_ID_ATTITUDE: (codec.PACK_ATTITUDE, self._attitude_args),
+            ID.MAVLINK_MSG_ID_ODOMETRY: (codec.PACK_ODOMETRY, self._odometry_args),
+        }
+        self._handlers = {
+            "COMMAND_LONG": self._on_command_long,
+            "COMMAND_INT": self._on_command_int,
+            "SET_MODE": self._on_set_mode,
+            "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
+            "HIL_ACTUATOR_CONTROLS": self._on_actuators,
+            "PARAM_REQUEST_LIST": self._on_param_list,
+            "PARAM_REQUEST_READ": self._on_param_read,
+            "PARAM_SET": self._on_param_set,
+            "MISSION_COUNT": self._on_mission_count,
+            "MISSION_ITEM_INT": self._on_mission_item_int,
+            "MISSION_ITEM": self._on_mission_item,
+            "MISSION_REQUEST_LIST": self._on_mission_request_list,
+            "MISSION_REQUEST_INT": self._on_mission_request,
+            "MISSION_REQUEST": self._on_mission_request,
+            "MISSION_CLEAR_ALL": self._on_mission_clear,
+            "MISSION_SET_CURRENT": self._on_mission_set_current,
+            "SETUP_SIGNING": self._on_setup_signing,
+            "TIMESYNC": self._on_timesync,
+            "PING": self._on_ping,
+        }
+        self._commands = {
+            mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm,
+            mavlink.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
+            mavlink.MAV_CMD_NAV_LAND: self._cmd_land,
+            mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._cmd_rtl,
+            mavlink.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
+            mavlink.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_interval,
+            mavlink.MAV_CMD_GET_MESSAGE_INTERVAL: self._cmd_get_interval,
+            mavlink.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
+            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_capabilities,
+            mavlink.MAV_CMD_GET_HOME_POSITION: self._cmd_home,
+            mavlink.MAV_CMD_MISSION_START: self._cmd_mission_start,
+        }
+        #: Link diagnostics: garbage seen, and what peers asked for that the
+        #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
+        self.stats = {"bad_packets": 0, "ignored": collections.Counter(), "unsupported": collections.Counter()}
+
+    # ------------------------------------------------------------------ params
+    @staticmethod
+    def _controller_param_defaults() -> dict:
+        from .onboard import OnboardGains
+        g = OnboardGains()
+        return {"MPC_XY_VEL_MAX": g.max_speed_xy_m_s, "MPC_Z_VEL_MAX_UP": g.max_speed_up_m_s,
+                "MPC_Z_VEL_MAX_DN": g.max_speed_down_m_s,
+                "MPC_TILTMAX_AIR": math.degrees(g.max_tilt_rad)}
+
+    def _apply_params(self) -> None:
+        """Push parameter values into the onboard controller and the sensors."""
+        p = self.params
+        ctl = self.sim.onboard
+        ctl.gains = dataclasses.replace(
+            ctl.gains, max_speed_xy_m_s=p["MPC_XY_VEL_MAX"], max_speed_up_m_s=p["MPC_Z_VEL_MAX_UP"],
+            max_speed_down_m_s=p["MPC_Z_VEL_MAX_DN"], max_tilt_rad=math.radians(p["MPC_TILTMAX_AIR"]))
+        s = self.sim.sensors
+        s.acc_rel_std = math.sqrt(p["SIM_VEC_VAR"])
+        s.mag_std = math.sqrt(p["SIM_VEC_VAR"]) * float(np.linalg.norm(s.mag_earth))
+        s.gyro_std = math.sqrt(p["SIM_GYRO_VAR"])
+        s.pos_std = p["SIM_POS_STD"]
+        s.vel_std = p["SIM_VEL_STD"]
+        s.range_std = p["SIM_RNG_STD"]
+
+    # ------------------------------------------------------------------ lifecycle
+    def open(self) -> None:
+        """Open every link (binds sockets). Raises OSError/ValueError on a bad address."""
+        try:
+            for url in (self.config.listen, *self.config.outs):
+                self.links.append(_Link(url))
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        for link in self.links:
+            link.close()
+        self.links = []
+
+    def stop(self) -> None:
+        """Ask ``run`` to return (thread-safe)."""
+        self._stop.set()
+
+    @property
+    def time_us(self) -> int:
+        return self.sim.time_us
+
+    def run(self, max_frames: int | None = None) -> None:
+        """The main loop (see the module docstring). Returns on ``stop()``."""
+        if self._frame is None:
+            self._frame = self.sim.step_frame(_ZERO4)
+            self._send_telemetry(self._frame)
+            if self.config.lockstep:
+                self._wait_for_first_peer()
+        self._pace_reset()
+        stop = self._stop
+        n = 0
+        while not stop.is_set():
+            self.step_once()
+            n += 1
+            if max_frames is not None and n >= max_frames:
+                break
+            if self.missions.uploading:
+                self.mission_tick()
+            if self.lockstep_engaged:
+                self._wait_for_answer()
+            else:
+                self._pace()
+
+    # ------------------------------------------------------------------ one frame
+    def step_once(self) -> None:
+        """Compute the command, step one sensor frame, send its telemetry."""
+        frame = self._frame if self._frame is not None else self.sim.step_frame(_ZERO4)
+        now = self.sim.time_us
+        out = self.stack.update(now, self._nav_state(frame))
+        self._setpoint = out.setpoint
+        sim = self.sim
+        if not out.armed:
+            self._onboard_flying = False
+            frame = sim.step_frame(_ZERO4)
+        elif out.motor_override is not None:
+            self._onboard_flying = False
+            frame = sim.step_frame(out.motor_override)
+        elif out.idle or out.setpoint is None:
+            self._onboard_flying = False
+            frame = sim.step_frame(_IDLE4)
+        else:
+            if out.reset_controller or not self._onboard_flying:
+                sim.onboard.reset()
+            self._onboard_flying = True
+            frame = sim.step_onboard(out.setpoint)
+        self._frame = frame
+        self.frames += 1
+        self._flush_events()
+        self._send_telemetry(frame)
+
+    def _nav_state(self, frame) -> NavState:
+        R = frame.truth.R
+        tilt = math.acos(max(-1.0, min(1.0, float(R[2, 2]))))
+        return NavState(frame.pos_enu_m, frame.vel_enu_m_s, math.atan2(R[1, 0], R[0, 0]), tilt,
+                        bool(frame.truth.landed))
+
+    def _send_telemetry(self, frame) -> None:
+        links = [l for l in self.links if l.has_peer]
+        now = frame.time_us
+        self._awaited_us = now
+        self._released = False
+        if not links:
+            return
+        due = self._next_due
+        iv = self._intervals
+        fast = self._fast
+        for mid in self._schedule:
+            interval = iv[mid]
+            if interval < 0 or now < due[mid]:
+                continue
+            nxt = due[mid] + interval
+            due[mid] = nxt if nxt > now else now + interval
+            f = fast.get(mid)
+            if f is not None:
+                args = f[1]()
+                for l in links:
+                    l.send_fast(f[0], args)
+                continue
+            if mid == _HEARTBEAT_ID:
+                self._last_hb_wall = time.monotonic()
+            msg = self._encoders[mid]()
+            if msg is not None:
+                for l in links:
+                    l.send(msg)
+        if frame.ranges and not self._rng_interval_disabled:
+            tb = now // 1000
+            for r in frame.ranges:
+                msg = codec.distance_sensor(links[0].mav, tb, r)
+                for l in links:
+                    l.send(msg)
+        args = self._imu_args()
+        for l in links:
+            l.send_fast(codec.PACK_HIGHRES_IMU, args)
+
+    # ------------------------------------------------------------------ encoders
+    def _mav(self):
+        return self.links[0].mav if self.links else mavlink.MAVLink(None, SYSTEM_ID, COMPONENT_ID)
+
+    def _enc_heartbeat(self):
+        st = self.stack
+        return codec.heartbeat(self._mav(), st.armed, st.custom_mode, st.system_status)
+
+    def _enc_sys_status(self):
+        health = _SENSORS
+        s = self._nav_state(self._frame)
+        if s.landed and s.tilt_rad < math.radians(30.0):
+            health |= _PREARM
+        return self._mav().sys_status_encode(_SENSORS | _PREARM, _SENSORS | _PREARM, health, 250,
+                                             16800, -1, 100, 0, 0, 0, 0, 0, 0)
+
+    def _enc_system_time(self):
+        t = self.sim.time_us
+        return self._mav().system_time_encode(self._wall_epoch_us + t, t // 1000)
+
+    def _enc_ext_state(self):
+        return self._mav().extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED, self.stack.landed_state)
+
+    def _enc_attitude(self):
+        t = self._frame.truth
+        return codec.attitude(self._mav(), self.sim.time_us // 1000, t.R, t.omega_flu_rad_s)
+
+    def _enc_attitude_q(self):
+        t = self._frame.truth
+        return codec.attitude_quaternion(self._mav(), self.sim.time_us // 1000, t.R, t.omega_flu_rad_s)
+
+    def _enc_lpos(self):
+        f = self._frame
+        return codec.local_position_ned(self._mav(), f.time_us // 1000, f.pos_enu_m, f.vel_enu_m_s)
+
+    def _enc_gpos(self):
+        f = self._frame
+        return codec.global_position_int(self._mav(), f.time_us // 1000, self.origin, self.home_enu_m,
+                                         f.pos_enu_m, f.vel_enu_m_s, codec.yaw_enu_of(f.truth.R))
+
+    def _enc_gps(self):
+        f = self._frame
+        return codec.gps_raw_int(self._mav(), f.time_us, self.origin, f.pos_enu_m, f.vel_enu_m_s)
+
+    def _enc_target(self):
+        if self._setpoint is None:
+            return None
+        return codec.position_target_local_ned(self._mav(), self.sim.time_us // 1000, self._setpoint)
+
+    def _enc_home(self):
+        return codec.home_position(self._mav(), self.origin, self.home_enu_m, self.sim.time_us)
+
+    def _imu_args(self):
+        f = self._frame
+        return codec.highres_imu_args(f.time_us, f.accel_flu_m_s2, f.gyro_flu_rad_s, f.mag_flu_gauss,
+                                      self.origin.alt_m + float(f.truth.pos_enu_m[2]))
+
+    def _enc_imu(self):
+        return mavlink.MAVLink_highres_imu_message(*self._imu_args())
+
+    def _lpos_args(self):
+        f = self._frame
+        return codec.local_position_ned_args(f.time_us // 1000, f.pos_enu_m, f.vel_enu_m_s)
+
+    def _odometry_args(self):
+        t = self._frame.truth
+        return codec.odometry_truth_args(self._frame.time_us, t.pos_enu_m, t.vel_enu_m_s, t.R, t.omega_flu_rad_s)
+
+    def _enc_odometry(self):
+        return mavlink.MAVLink_odometry_message(*self._odometry_args())
+
+    def _attitude_args(self):
+        t = self._frame.truth
+        return codec.attitude_args(self.sim.time_us // 1000, t.R, t.omega_flu_rad_s)
+
+    def _enc_truth(self):
+        t = self._frame.truth
+        return codec.odometry_truth(self._mav(), self._frame.time_us, t.pos_enu_m, t.vel_enu_m_s, t.R,
+                                    t.omega_flu_rad_s)
+
+    def _enc_version(self):
+        uid = (0x5A17 << 32) | (self.seed & 0xFFFFFFFF)
+        return self._mav().autopilot_version_encode(
+            CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid)
+
+    # ------------------------------------------------------------------ pacing
+    def _pace_reset(self) -> None:
+        self._t0_wall = time.monotonic()
+        self._t0_sim_us = self.sim.time_us
+
+    def _pace(self) -> None:
+        """Free-running: process input until frame k's wall-clock release."""
+        speed = self.config.speed
+        self._poll(0.0)
+        if speed <= 0:
+            return
+        deadline = self._t0_wall + (self.sim.time_us - self._t0_sim_us) * 1e-6 / speed
+        while not self._stop.is_set() and not self.lockstep_engaged:
+            now = time.monotonic()
+            if now >= deadline:
+                if now - deadline > 0.5:   # far behind (debugger, overload): do not sprint
+                    self._pace_reset()
+                return
+            self._poll(min(deadline - now, 0.05))
+
+    def _wait_for_answer(self) -> None:
+        """Lockstep: process input until the answer to the last HIGHRES_IMU."""
+        if not any(l.has_peer for l in self.links):
+            self.lockstep_engaged = False
+            self._pace_reset()
+            return
+        timeout = self.params["SIM_LS_TMO"]
+        start = time.monotonic()
+        while not self._released and not self._stop.is_set():
+            now = time.monotonic()
+            if now - start > timeout:
+                self.lockstep_engaged = False
+                self._say(SEVERITY_WARNING, f"Lockstep peer silent for {timeout:g} s: free-running")
+                self._pace_reset()
+                return
+            if now - self._last_hb_wall >= 1.0:
+                self._last_hb_wall = now
+                self._broadcast(self._enc_heartbeat())
+            self._poll(min(0.05, timeout - (now - start) + 1e-3), until_released=True)
+
+    def _wait_for_first_peer(self) -> None:
+        """Lockstep: hold the vehicle clock at the first frame until a peer
+        answers it, re-sending that frame's telemetry four times a wall
+        second so a peer that connects late finds it (and so the run does
+        not depend on how long the peer took to start)."""
+        last = 0.0
+        while not self._stop.is_set() and not (self.lockstep_engaged and self._released):
+            now = time.monotonic()
+            if now - last >= 0.25:
+                last = now
+                self._resend_frame()
+            self._poll(0.05, until_released=True)
+
+    def _resend_frame(self) -> None:
+        """Send every enabled stream of the current frame once, HIGHRES_IMU last."""
+        links = [l for l in self.links if l.has_peer]
+        if not links or self._frame is None:
+            return
+        for mid in self._schedule:
+            if self._intervals[mid] < 0:
+                continue
+            f = self._fast.get(mid)
+            if f is not None:
+                args = f[1]()
+                for l in links:
+                    l.send_fast(f[0], args)
+                continue
+            msg = self._encoders[mid]()
+            if msg is not None:
+                for l in links:
+                    l.send(msg)
+        args = self._imu_args()
+        for l in links:
+            l.send_fast(codec.PACK_HIGHRES_IMU, args)
+        self._last_hb_wall = time.monotonic()
+
+    def _poll(self, timeout_s: float, until_released: bool = False) -> None:
+        """Read and handle everything available; wait up to ``timeout_s`` for the first."""
+        links = self.links
+        if timeout_s > 0:
+            try:
+                ready, _, _ = select.select([l.fd for l in links], [], [], timeout_s)
+            except (OSError, ValueError):
+                return
+            if not ready:
+                return
+        for link in links:
+            for _ in range(1000):
+                try:
+                    if link.udp:
+                        data = link.recv_datagram()
+                        if data is None:
+                            break
+                        # The lockstep answer (one packet per frame) is decoded
+                        # without pymavlink's parser when alone in its datagram.
+                        ans = codec.decode_actuator_datagram(data)
+                        msgs = () if ans is not None else link.parse(data)
+                    else:
+                        ans = None
+                        msgs = link.receive()
+                        if msgs is None:
+                            break
+                except Exception:   # garbage must never stop the vehicle
+                    self.stats["bad_packets"] += 1
+                    break
+                if ans is not None:
+                    self._on_answer(ans)
+                for msg in msgs:
+                    self._handle(link, msg)
+                if until_released and self._released:
+                    return
+
+    # ------------------------------------------------------------------ dispatch
+    def _handle(self, link: _Link, msg) -> None:
+        mtype = msg.get_type()
+        handler = self._handlers.get(mtype)
+        if handler is None:
+            if mtype == "BAD_DATA":
+                self.stats["bad_packets"] += 1
+            else:
+                self.stats["ignored"][mtype] += 1
+            return
+        if msg.get_srcSystem() == SYSTEM_ID and msg.get_srcComponent() == COMPONENT_ID:
+            return   # our own echo
+        try:
+            handler(link, msg)
+        except Exception:   # never let one malformed message stop the vehicle
+            self.stats["bad_packets"] += 1
+        self._flush_events()
+
+    def _reply(self, link: _Link, msg) -> None:
+        link.reply(msg)
+
+    def _broadcast(self, msg) -> None:
+        for l in self.links:
+            if l.has_peer:
+                l.send(msg)
+
+    def _say(self, severity: int, text: str) -> None:
+        self.stack.events.append(StatusEvent(severity, text))
+        self._flush_events()
+
+    def _flush_events(self) -> None:
+        if self.stack.events:
+            for ev in self.stack.pop_events():
+                self._broadcast(codec.statustext(self._mav(), ev.severity, ev.text))
+
+    def _state(self) -> NavState:
+        return self._nav_state(self._frame)
+
+    # ------------------------------------------------------------------ commands
+    def _on_command_long(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
+        self._command(link, msg, int(msg.command), params)
+
+    def _on_command_int(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
+        self._command(link, msg, int(msg.command), params)
+
+    def _command(self, link, msg, command: int, params) -> None:
+        handler = self._commands.get(command)
+        result, after = mavlink.MAV_RESULT_UNSUPPORTED, None
+        if handler is None:
+            self.stats["unsupported"][command] += 1
+        else:
+            try:
+                result, after = handler(params)
+            except (ValueError, OverflowError, TypeError):
+                result, after = mavlink.MAV_RESULT_DENIED, None
+        self._reply(link, link.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(),
+                                                      msg.get_srcComponent()))
+        if after is not None:
+            for m in after:
+                self._reply(link, m)
+
+    def _cmd_arm(self, p):
+        now, st = self.sim.time_us, self._state()
+        force = p[1] == codec.ARM_FORCE_MAGIC
+        if p[0] == 1.0:
+            r = self.stack.arm(now, st, force)
+        elif p[0] == 0.0:
+            r = self.stack.disarm(now, st, force)
+        else:
+            return mavlink.MAV_RESULT_DENIED, None
+        return r.result, None
+
+    def _cmd_takeoff(self, p):
+        z = codec.decode_takeoff_altitude(p[6], self.origin.alt_m)
+        return self.stack.takeoff(self.sim.time_us, self._state(), z).result, None
+
+    def _cmd_land(self, p):
+        return self.stack.land(self.sim.time_us, self._state()).result, None
+
+    def _cmd_rtl(self, p):
+        return self.stack.return_to_launch(self.sim.time_us, self._state()).result, None
+
+    def _cmd_set_mode(self, p):
+        if not all(math.isfinite(x) for x in p[:3]):
+            return mavlink.MAV_RESULT_DENIED, None
+        if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return mavlink.MAV_RESULT_DENIED, None
+        mode = FlightMode.from_px4(int(p[1]), int(p[2]))
+        return self.stack.set_mode(self.sim.time_us, self._state(), mode).result, None
+
+    def _interval_target(self, mid: int):
+        if mid in self._intervals or mid in (ID.MAVLINK_MSG_ID_HIGHRES_IMU, ID.MAVLINK_MSG_ID_DISTANCE_SENSOR):
+            return True
+        return False
+
+    def _cmd_set_interval(self, p):
+        mid, iv = int(p[0]), p[1]
+        if not math.isfinite(iv):
+            return mavlink.MAV_RESULT_DENIED, None
+        iv = int(iv)
+        if mid == ID.MAVLINK_MSG_ID_HIGHRES_IMU:
+            # Fixed: it is the lockstep frame marker.
+            return (mavlink.MAV_RESULT_ACCEPTED if iv in (0, self._period_us) else mavlink.MAV_RESULT_DENIED), None
+        if mid == ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
+            self._rng_interval_disabled = iv < 0
+            for rf in self.sim.sensors.rangefinders:
+                rf.period_us = (max(1, int(round(1e6 / rf.cfg.rate_hz))) if iv <= 0
+                                else max(self._period_us, iv))
+            return mavlink.MAV_RESULT_ACCEPTED, None
+        if mid not in self._intervals:
+            return mavlink.MAV_RESULT_UNSUPPORTED, None
+        if iv == 0:
+            iv = _default_interval_us(mid) if mid in _DEFAULT_RATES_HZ else -1
+        elif iv < 0:
+            iv = -1
+        else:
+            iv = max(iv, 1)
+        self._intervals[mid] = iv
+        self._next_due[mid] = self.sim.time_us
+        return mavlink.MAV_RESULT_ACCEPTED, None
+
+    def _cmd_get_interval(self, p):
+        mid = int(p[0])
+        if mid == ID.MAVLINK_MSG_ID_HIGHRES_IMU:
+            iv = self._period_us
+        elif mid in self._intervals:
+            iv = self._intervals[mid]
+        else:
+            return mavlink.MAV_RESULT_UNSUPPORTED, None
+        return mavlink.MAV_RESULT_ACCEPTED, [self._mav().message_interval_encode(mid, iv)]
+
+    def _cmd_request_message(self, p):
+        if not math.isfinite(p[0]):
+            return mavlink.MAV_RESULT_DENIED, None
+        mid = int(p[0])
+        if mid == ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
+            f = self._frame
+            tb = self.sim.time_us // 1000
+            rf = self.sim.sensors
+            msgs = [codec.distance_sensor(self._mav(), tb, rf.range_reading(r, self.sim.plant.p, self.sim.plant.R))
+                    for r in rf.rangefinders]
+            return mavlink.MAV_RESULT_ACCEPTED, msgs
+        enc = self._encoders.get(mid)
+        if enc is None or self._frame is None:
+            return mavlink.MAV_RESULT_UNSUPPORTED, None
+        m = enc()
+        if m is None:
+            return mavlink.MAV_RESULT_FAILED, None
+        return mavlink.MAV_RESULT_ACCEPTED, [m]
+
+    def _cmd_capabilities(self, p):
+        return mavlink.MAV_RESULT_ACCEPTED, [self._enc_version()]
+
+    def _cmd_home(self, p):
+        return mavlink.MAV_RESULT_ACCEPTED, [self._enc_home()]
+
+    def _cmd_mission_start(self, p):
+        self._say(SEVERITY_WARNING, "Mission start refused: mission stored only")
+        return mavlink.MAV_RESULT_DENIED, None
+
+    def _on_set_mode(self, link, msg) -> None:
+        if msg.target_system != SYSTEM_ID:
+            return
+        if not int(msg.base_mode) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return
+        main, sub = codec.px4_modes_from_custom(msg.custom_mode)
+        self.stack.set_mode(self.sim.time_us, self._state(), FlightMode.from_px4(main, sub))
+
+    # ------------------------------------------------------------------ setpoints
+    def _on_position_target(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        f = self._frame
+        target = codec.decode_position_target(msg, codec.yaw_enu_of(f.truth.R), f.pos_enu_m)
+        if target is not None:
+            self.stack.offboard_setpoint(self.sim.time_us, target)
+
+    def _on_actuators(self, link, msg) -> None:
+        self._on_answer(codec.decode_actuator_controls(msg))
+
+    def _on_answer(self, ans: codec.ActuatorAnswer) -> None:
+        now = self.sim.time_us
+        self.stack.actuator_controls(now, ans.motor_cmd)
+        if not (ans.lockstep and self.config.lockstep):
+            return
+        if not self.lockstep_engaged:
+            self.lockstep_engaged = True
+            self._say(SEVERITY_INFO, "Lockstep engaged")
+        if ans.time_usec == self._awaited_us:
+            self._released = True
+
+    # ------------------------------------------------------------------ params
+    def _param_msg(self, mav, i: int):
+        spec, value = self.params.by_index(i)
+        return mav.param_value_encode(spec.name.encode("ascii"), codec.param_to_wire(value, spec.param_type),
+                                      spec.param_type, len(self.params), i)
+
+    def _on_param_list(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        for i in range(len(self.params)):
+            link.reply(self._param_msg(link.mav, i))
+
+    def _on_param_read(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        idx = int(msg.param_index)
+        if idx < 0:
+            name = msg.param_id
+            if name not in self.params:
+                return   # unknown: no reply, as PX4
+            idx = self.params.index(name)
+        elif idx >= len(self.params):
+            return
+        link.reply(self._param_msg(link.mav, idx))
+
+    def _on_param_set(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        name = msg.param_id
+        if name not in self.params:
+            self._say(SEVERITY_WARNING, f"Unknown parameter {name[:30]}")
+            return
+        spec = self.params.spec(name)
+        if spec.param_type == PARAM_TYPE_INT32 and int(msg.param_type) == PARAM_TYPE_INT32:
+            value = codec.param_from_wire(msg.param_value, PARAM_TYPE_INT32)
+        else:
+            value = float(msg.param_value)
+        r = self.params.set(name, value)
+        if r.ok:
+            self._apply_params()
+        else:
+            self._say(SEVERITY_WARNING, f"Param rejected: {r.reason}")
+        i = self.params.index(name)
+        for l in self.links:
+            if l.has_peer:
+                l.send(self._param_msg(l.mav, i))
+
+    # ------------------------------------------------------------------ missions
+    def _send_mission_replies(self, link, peer, replies, addr=None) -> None:
+        ts, tc = peer
+        for r in replies:
+            if isinstance(r, SendRequest):
+                m = link.mav.mission_request_int_encode(ts, tc, r.seq, r.mission_type)
+            elif isinstance(r, SendCount):
+                m = link.mav.mission_count_encode(ts, tc, r.count, r.mission_type)
+            elif isinstance(r, SendItem):
+                m = codec.mission_item_int(link.mav, ts, tc, r.item)
+            elif isinstance(r, SendAck):
+                m = link.mav.mission_ack_encode(ts, tc, r.result, r.mission_type)
+            else:   # pragma: no cover
+                continue
+            link.reply(m, addr)
+
+    def _peer(self, msg):
+        return msg.get_srcSystem(), msg.get_srcComponent()
+
+    def _on_mission_count(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        self._mission_peer = (link, self._peer(msg), link.last_addr)
+        replies = self.missions.handle_count(int(msg.count), int(getattr(msg, "mission_type", 0)),
+                                             time.monotonic())
+        self._send_mission_replies(link, self._peer(msg), replies)
+
+    def _on_mission_item_int(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        self._mission_item(link, msg, codec.mission_item_from_int(msg))
+
+    def _on_mission_item(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        item = codec.mission_item_from_float(msg)
+        if item is not None:
+            self._mission_item(link, msg, item)
+
+    def _mission_item(self, link, msg, item) -> None:
+        was = self.missions.uploading
+        replies = self.missions.handle_item(item, time.monotonic())
+        self._send_mission_replies(link, self._peer(msg), replies)
+        if was and not self.missions.uploading and self.missions.items:
+            self._say(SEVERITY_INFO, f"Mission stored: {len(self.missions.items)} items")
+
+    def _on_mission_request_list(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        replies = self.missions.handle_request_list(int(getattr(msg, "mission_type", 0)))
+        self._send_mission_replies(link, self._peer(msg), replies)
+
+    def _on_mission_request(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        replies = self.missions.handle_request(int(msg.seq), int(getattr(msg, "mission_type", 0)))
+        self._send_mission_replies(link, self._peer(msg), replies)
+
+    def _on_mission_clear(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        replies = self.missions.handle_clear_all(int(getattr(msg, "mission_type", 0)))
+        self._send_mission_replies(link, self._peer(msg), replies)
+
+    def _on_mission_set_current(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        if self.missions.handle_set_current(int(msg.seq)):
+            self._broadcast(link.mav.mission_current_encode(self.missions.current_seq,
+                                                            len(self.missions.items)))
+
+    def mission_tick(self) -> None:
+        """Resend or abandon a stalled upload (wall-clock timeouts)."""
+        if self._mission_peer is None or not self.missions.uploading:
+            return
+        replies = self.missions.tick(time.monotonic())
+        if replies:
+            link, peer, addr = self._mission_peer
+            self._send_mission_replies(link, peer, replies, addr)
+
+    # ------------------------------------------------------------------ misc
+    def _on_setup_signing(self, link, msg) -> None:
+        if msg.target_system != SYSTEM_ID:
+            return
+        key = bytes(msg.secret_key)
+        for l in self.links:
+            if not any(key):
+                l.conn.disable_signing()
+            else:
+                l.conn.setup_signing(key, sign_outgoing=True,
+                                     allow_unsigned_callback=lambda mav, msg_id: True,
+                                     initial_timestamp=int(msg.initial_timestamp) or None)
+        self._say(SEVERITY_INFO, "Signing " + ("disabled" if not any(key) else "key stored"))
+
+    def _on_timesync(self, link, msg) -> None:
+        if int(msg.tc1) != 0:
+            return   # an answer to someone else's request
+        link.reply(link.mav.timesync_encode(self.sim.time_us * 1000, int(msg.ts1)))
+
+    def _on_ping(self, link, msg) -> None:
+        if int(msg.target_system) != 0 or int(msg.target_component) != 0:
+            return   # a response, not a request
+        link.reply(link.mav.ping_encode(int(msg.time_usec), int(msg.seq), msg.get_srcSystem(),
+                                        msg.get_srcComponent()))

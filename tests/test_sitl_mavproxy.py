@@ -1,0 +1,119 @@
+"""MAVProxy (from PyPI, installed with --no-deps, unmodified) headless against
+the SITL: connect, read the mode, list the parameters, download a mission that
+was uploaded with pymavlink. Driven through its stdin; real time (speed 1)."""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+pytest.importorskip("MAVProxy.mavproxy")
+
+from sitl.api import SitlThread   # noqa: E402
+from sitl.flightstack import PARAM_SPECS   # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+MISSION = ROOT / "missions" / "flat-rectangle" / "mission.yaml"
+
+pytestmark = pytest.mark.slow
+
+WAYPOINTS = [(448000000 + 1000 * i, -6000000 - 500 * i, 2.5 + i) for i in range(3)]
+
+
+def upload_with_pymavlink(url: str) -> None:
+    c = mavutil.mavlink_connection(url, source_system=254, source_component=190)
+    c.mav = mavlink.MAVLink(c, srcSystem=254, srcComponent=190)
+    try:
+        c.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        assert c.recv_match(type="HEARTBEAT", blocking=True, timeout=5) is not None
+        c.mav.mission_count_send(1, 1, len(WAYPOINTS), 0)
+        for _ in WAYPOINTS:
+            r = c.recv_match(type="MISSION_REQUEST_INT", blocking=True, timeout=5)
+            lat, lon, alt = WAYPOINTS[r.seq]
+            c.mav.mission_item_int_send(1, 1, r.seq, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                        mavlink.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, lat, lon, alt, 0)
+        ack = c.recv_match(type="MISSION_ACK", blocking=True, timeout=5)
+        assert ack is not None and ack.type == mavlink.MAV_MISSION_ACCEPTED
+    finally:
+        c.close()
+
+
+class MavProxy:
+    """MAVProxy in a subprocess, its console read line by line."""
+
+    def __init__(self, master: str, workdir: Path) -> None:
+        cmd = [sys.executable, "-m", "MAVProxy.mavproxy", f"--master={master}", "--no-state", "--mav20",
+               "--default-modules=param,wp,mode,cmdlong"]
+        self.p = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                  text=True, bufsize=1, cwd=workdir, env=dict(os.environ, TERM="dumb"))
+        self.q: queue.Queue = queue.Queue()
+        self.out: list[str] = []
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.p.stdout:
+            self.q.put(line)
+        self.q.put(None)
+
+    def expect(self, pattern: str, timeout_s: float = 10.0) -> re.Match:
+        rx = re.compile(pattern)
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            try:
+                line = self.q.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            assert line is not None, "MAVProxy exited:\n" + "".join(self.out[-30:])
+            self.out.append(line)
+            m = rx.search(line)
+            if m:
+                return m
+        raise AssertionError(f"no {pattern!r} from MAVProxy within {timeout_s} s:\n" + "".join(self.out[-30:]))
+
+    def send(self, command: str) -> None:
+        self.p.stdin.write(command + "\n")
+        self.p.stdin.flush()
+
+    def close(self) -> None:
+        if self.p.poll() is None:
+            self.p.terminate()
+            try:
+                self.p.wait(5)
+            except subprocess.TimeoutExpired:
+                self.p.kill()
+                self.p.wait(5)
+        self.p.stdin.close()
+        self.p.stdout.close()
+
+
+def test_mavproxy_mode_params_mission(tmp_path):
+    with SitlThread(MISSION, speed=1.0) as sitl:
+        upload_with_pymavlink(sitl.url)
+        mp = MavProxy(sitl.url, tmp_path)
+        try:
+            mp.expect(r"Detected vehicle 1:1")
+            mp.expect(r"Mode LOITER")                                   # PX4 AUTO.LOITER, read from HEARTBEAT
+            n = int(mp.expect(r"Received (\d+) parameters").group(1))   # the whole list, fetched on connect
+            assert n == len(PARAM_SPECS)
+            mp.send("param show COM_OF_LOSS_T")
+            assert float(mp.expect(r"COM_OF_LOSS_T\s+(\S+)").group(1)) == pytest.approx(1.0)
+            mp.send("param show COM_OBL_ACT")                           # INT32, byte-wise as PX4
+            assert mp.expect(r"COM_OBL_ACT\s+(\S+)").group(1) == "0"
+            mp.send("wp list")
+            assert int(mp.expect(r"Requesting (\d+) waypoints").group(1)) == len(WAYPOINTS)
+            for lat, lon, alt in WAYPOINTS:
+                m = mp.expect(r"^16 6 (\S+) (\S+) (\S+)")
+                assert (float(m.group(1)), float(m.group(2)), float(m.group(3))) == \
+                    pytest.approx((lat * 1e-7, lon * 1e-7, alt), abs=1e-7)
+        finally:
+            mp.close()
