@@ -6,7 +6,8 @@ The field is 316 m x 316 m of free cells (10 ha) with 0.3 m wide rows 3 m
 apart, 300 m long, inside a one-metre occupied border (3200 x 3200 cells).
 ``--angle`` rotates the rows (deg); the map grows to hold the rotated field.
 Prints the median wall and CPU time of ``plan_coverage`` (CPU time is the
-fairer figure on a shared machine) and the plan's figures.
+fairer figure on a shared machine; run with ``OMP_NUM_THREADS=1`` for one
+core) and the plan's figures.
 """
 
 from __future__ import annotations
@@ -56,7 +57,9 @@ def main() -> None:
     print(f"grid {grid.shape[0]}x{grid.shape[1]} cells at {grid.resolution_m} m, free {area_ha:.2f} ha")
     print(f"plan_coverage: median {statistics.median(times):.3f} s over {len(times)} runs "
           f"(min {min(times):.3f}, max {max(times):.3f}); CPU median {statistics.median(cpu):.3f} s")
-    print(f"orientation {plan.orientation_deg:.3f} deg, spacing {plan.line_spacing_m:.3f} m, "
+    print(f"orientation {plan.orientation_deg:.3f} deg ({plan.orientation_source}; ISOA sweep "
+          f"{plan.isoa_orientation_deg:.3f} deg, score {plan.isoa_score_m:.1f} m vs "
+          f"{plan.orientation_score_m:.1f} m flown), spacing {plan.line_spacing_m:.3f} m, "
           f"{len(plan.main_segments)} main segments, path {plan.path_length_m:.0f} m, "
           f"coverage {plan.coverage_fraction:.4f}")
 

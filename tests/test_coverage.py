@@ -227,3 +227,130 @@ def test_open_rectangle_beam_runs_along_the_long_side():
     # 10 m wide, eroded by 0.6 m each side: 8.8 m of offsets at 2 m -> 4 or 5 lines
     assert len(plan.main_segments) in (4, 5)
     assert plan.coverage_fraction >= 0.9
+
+
+# --- row alignment: every corridor flown in its middle along its whole length ----------
+
+def max_offcentre_per_corridor(plan, info):
+    """For each corridor of a ``vineyard`` field: (number of main segments in it,
+    largest distance (m) of the segment from the corridor's centre line along
+    its whole length, covered fraction of the rows' length).
+
+    A segment is straight, so its largest distance from the (straight)
+    centre line is reached at one of its ends.
+    """
+    offs = info["offsets"]
+    mids = 0.5 * (offs[:-1] + offs[1:])
+    segs = np.array(plan.main_segments)
+    t0, d0 = to_row_frame(segs[:, 0], info)
+    t1, d1 = to_row_frame(segs[:, 1], info)
+    out = []
+    for c in mids:
+        inside = np.flatnonzero(np.abs(0.5 * (d0 + d1) - c) < (info["spacing"] - info["width"]) / 2)
+        worst = max((max(abs(d0[i] - c), abs(d1[i] - c)) for i in inside), default=np.inf)
+        half = info["length"] / 2
+        cover = sum(max(0.0, min(max(t0[i], t1[i]), half) - max(min(t0[i], t1[i]), -half))
+                    for i in inside) / info["length"]
+        out.append((len(inside), worst, cover))
+    return out
+
+
+@pytest.mark.parametrize("angle", [23.0, 30.0, 151.3])
+def test_beam_follows_tilted_rows_mid_corridor_along_their_length(angle):
+    # 40 m rows: a 1 deg error would drift 0.7 m across a corridor
+    margin = 0.5
+    grid, info = vineyard(angle_deg=angle, n_rows=6, length=40.0)
+    rows = detect_row_spacing(grid)
+    assert angle_diff_deg(rows.orientation_deg, angle) <= 0.1
+    plan = plan_coverage(grid, CoverageConfig(safety_margin_m=margin))
+    assert plan.orientation_source == "rows"
+    assert plan.orientation_deg == pytest.approx(rows.orientation_deg, abs=1e-9)
+    assert plan.isoa_orientation_deg is not None and plan.isoa_score_m > 0
+    for n_seg, worst, cover in max_offcentre_per_corridor(plan, info):
+        assert n_seg == 1
+        assert worst < 1.5 * RES
+        assert cover == pytest.approx(1.0)
+
+
+def test_given_line_spacing_equal_to_rows_also_follows_rows():
+    grid, info = vineyard(angle_deg=23.0, n_rows=6, length=40.0)
+    plan = plan_coverage(grid, CoverageConfig(safety_margin_m=0.5, line_spacing_m=3.02))
+    assert plan.orientation_source == "rows"
+    assert angle_diff_deg(plan.orientation_deg, 23.0) <= 0.1
+    for n_seg, worst, _ in max_offcentre_per_corridor(plan, info):
+        assert n_seg == 1
+        # a 0.02 m spacing error accumulates over at most 2.5 spacings from the
+        # mean phase: 0.05 m, plus the 1.5-cell tolerance
+        assert worst < 1.5 * RES + 0.05
+
+
+def test_tilted_hexagon_mission_rows_and_beam_match_the_generator():
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "missions"))
+    import generate
+    from companion.maps.ogm import load_ogm
+
+    spec = generate.tilted_hexagon()
+    root = Path(__file__).resolve().parents[1] / "missions" / spec.name
+    grid = load_ogm(root / "map.yaml")
+    rows = detect_row_spacing(grid)
+    assert angle_diff_deg(rows.orientation_deg, spec.row_angle_deg) <= 0.1
+    assert abs(rows.spacing_m - spec.row_spacing_m) <= RES
+    plan = plan_coverage(grid, CoverageConfig(line_spacing_m=spec.row_spacing_m,
+                                              safety_margin_m=spec.safety_margin_m))
+    assert plan.orientation_source == "rows"
+    assert angle_diff_deg(plan.orientation_deg, spec.row_angle_deg) <= 0.1
+    # lines v = off + (k + 1/2) s between the drawn rows v = off + k s (generator frame)
+    a = np.deg2rad(spec.row_angle_deg)
+    s, off = spec.row_spacing_m, generate.row_offset(spec)
+    poly = np.asarray(spec.polygon_m, float)
+    segs = np.array(plan.main_segments)
+    u = segs @ np.array([np.cos(a), np.sin(a)])          # (k, 2) along the rows
+    v = segs @ np.array([-np.sin(a), np.cos(a)])          # (k, 2) across
+    drawn = []
+    for k in range(-10, 11):
+        lo, hi = generate.chord(poly, off + k * s, spec.row_angle_deg, spec.headland_m - 1e-9)
+        if hi - lo >= spec.min_row_length_m:
+            drawn.append((k, lo, hi))
+    assert len(drawn) >= 3
+    for (k, lo0, hi0), (k1, lo1, hi1) in zip(drawn[:-1], drawn[1:]):
+        assert k1 == k + 1
+        centre = off + (k + 0.5) * s
+        here = np.flatnonzero(np.abs(v.mean(axis=1) - centre) < s / 2)
+        assert len(here) == 1
+        i = here[0]
+        assert np.abs(v[i] - centre).max() < 1.5 * RES
+        # flown along the whole stretch where both rows exist
+        assert u[i].min() <= max(lo0, lo1) and u[i].max() >= min(hi0, hi1)
+
+
+def test_erosion_matches_the_exact_distance_transform():
+    from scipy import ndimage
+    from companion.coverage.freespace import erode_free_space
+
+    rng = np.random.default_rng(7)
+    occ = rng.random((90, 120)) < 0.02
+    unknown = np.zeros_like(occ)
+    unknown[:, :4] = True
+    free = ~occ & ~unknown
+    free[70:, 100:] = False                      # an unknown corner
+    for margin in (0.0, 0.25, 0.3, 0.5, 0.72):
+        grid = OccupancyGrid(occupied=occ, free=free, resolution_m=RES)
+        fs = erode_free_space(grid, margin)
+        # independent: scipy's exact EDT, the outside of the map padded as non-free
+        edt = ndimage.distance_transform_edt(np.pad(free & ~occ, 1))[1:-1, 1:-1] * RES
+        expected = edt >= margin + RES - 1e-9
+        assert np.array_equal(fs.eroded, expected), margin
+
+
+def test_vectorised_visibility_matches_segment_test():
+    from companion.coverage.freespace import FreeSpace
+    from companion.coverage.gridpath import is_clear, visible_from
+
+    rng = np.random.default_rng(3)
+    mask = rng.random((60, 60)) > 0.04
+    fs = FreeSpace(eroded=mask, free=mask, resolution_m=RES, threshold_m=RES)
+    for _ in range(50):
+        a = rng.random(2) * 6
+        targets = rng.random((6, 2)) * 7 - 0.5
+        assert list(visible_from(fs, a, targets)) == [is_clear(fs, a, b) for b in targets]

@@ -27,16 +27,20 @@ block-averaged mask (cells of at most s/4, at most ~250 000 of them), then
 full resolution; at most 48 lines per phase are scored (an evenly spread
 subset: S is a statistic of the segments). At each level the orientation
 kept is the middle of the run of near-best scores (within 0.5 %) around
-the best one, the symmetric choice on a plateau. Where the rows of the map are
-known and their direction scores within 1 % of the best, the row direction
-is taken: inside the plateau of equal scores (a line can tilt within its
-corridor without being cut) it is the exact, symmetric choice.
+the best one, the symmetric choice on a plateau. All masks are cropped to
+the bounding box of the eroded cells and padded by one blocked cell, so a
+sample is one float32 multiply-add per axis, a clip and a flat ``take``.
+Which of the sweep's result and the rows' direction is flown is decided in
+:mod:`plan` (rows win when the line spacing is the row spacing).
 
-Phase: the beam is shifted so the lines follow the middle of the corridors:
-the clearance of every free cell (capped at s/2) is folded modulo the
-spacing along the normal, and the phase maximising that folded profile is
-where lines have the most room on both sides (mid-corridor for a line
-spacing equal to the row spacing).
+Phase: the beam is shifted so the lines follow the middle of the corridors.
+With known corridors (rows found, beam along them) the phase is the
+circular mean of the corridor centre offsets modulo the spacing
+(:func:`corridor_phase`). Otherwise (:func:`beam_phase`) the clearance of
+every free cell (capped at s/2, from a distance transform of the map
+subsampled to at most ~2e6 cells) is folded modulo the spacing along the
+normal, and the phase maximising that folded profile is where lines have
+the most room on both sides.
 """
 
 from __future__ import annotations
@@ -45,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .freespace import FreeSpace, lookup
+from .freespace import FreeSpace, Raster
 
 _PHASES = 4
 _MAX_LINES = 48
@@ -83,12 +87,11 @@ class Segments:
         return base + self.t0_m[:, None] * u, base + self.t1_m[:, None] * u
 
 
-def bbox_corners_g(mask: np.ndarray, cell_m: float) -> np.ndarray:
-    """(4, 2) G corners (m) of the bounding box of the True cells of ``mask``."""
-    rows = np.flatnonzero(mask.any(axis=1))
-    cols = np.flatnonzero(mask.any(axis=0))
-    x0, x1 = cols[0] * cell_m, (cols[-1] + 1) * cell_m
-    y0, y1 = rows[0] * cell_m, (rows[-1] + 1) * cell_m
+def bbox_corners_g(free: FreeSpace) -> np.ndarray:
+    """(4, 2) G corners (m) of the bounding box of the eroded cells."""
+    r0, r1, c0, c1 = free.bbox_cells
+    h = free.resolution_m
+    x0, x1, y0, y1 = c0 * h, c1 * h, r0 * h, r1 * h
     return np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])
 
 
@@ -99,42 +102,34 @@ def _ranges(corners: np.ndarray, alpha: float) -> tuple[float, float, float, flo
     return float(o.min()), float(o.max()), float(t.min()), float(t.max())
 
 
-def cut_lines(mask: np.ndarray, cell_m: float, alpha: float, offsets: np.ndarray,
-              t_lo: float, t_hi: float, step_m: float, min_segment_m: float) -> Segments:
-    """Cut beam lines into main segments: runs of True cells of ``mask``.
+def cut_lines(raster: Raster, alpha: float, offsets: np.ndarray, t_lo: float, t_hi: float,
+              step_m: float, min_segment_m: float, dtype=np.float32) -> Segments:
+    """Cut beam lines into main segments: runs of True cells of ``raster``.
 
     The lines are sampled every ``step_m`` (sub-cell at full resolution) by
     nearest-cell lookup; a segment runs from its first to its last free
     sample, so its end points are inside the mask. Segments shorter than
     ``min_segment_m`` are dropped.
     """
-    u = (np.cos(alpha), np.sin(alpha))
-    n = (-np.sin(alpha), np.cos(alpha))
     t = t_lo + step_m * np.arange(int(np.floor((t_hi - t_lo) / step_m)) + 1)
     offsets = np.asarray(offsets, dtype=float)
-    gx = offsets[:, None] * n[0] + t[None, :] * u[0]
-    gy = offsets[:, None] * n[1] + t[None, :] * u[1]
-    free = lookup(mask, cell_m, gx, gy)
-    pad = np.zeros((len(offsets), 1), dtype=bool)
-    edge = np.diff(np.concatenate([pad, free, pad], axis=1).view(np.int8), axis=1)
-    sl, si = np.nonzero(edge == 1)
-    _, ei = np.nonzero(edge == -1)
+    free = raster.sample_lines(alpha, offsets, t, dtype)
+    # one False column before each line: the flat changes of the padded rows
+    # alternate run start, run end (the end one past the last free sample)
+    # because each line starts and ends outside a run
+    n_t = len(t)
+    padded = np.zeros((len(offsets), n_t + 2), dtype=bool)
+    padded[:, 1:-1] = free
+    change = np.flatnonzero(padded[:, 1:] != padded[:, :-1])
+    si, ei = change[0::2], change[1::2]
+    sl = si // (n_t + 1)
+    si, ei = si - sl * (n_t + 1), ei - sl * (n_t + 1)
     t0, t1 = t[si], t[ei - 1]
     keep = (t1 - t0) >= min_segment_m
     return Segments(line=sl[keep], offset_m=offsets[sl[keep]], t0_m=t0[keep], t1_m=t1[keep])
 
 
-def _pool(mask: np.ndarray, f: int) -> np.ndarray:
-    """Block-average ``f x f`` blocks, True where at least half the block is True."""
-    if f <= 1:
-        return mask
-    m = np.zeros((-(-mask.shape[0] // f) * f, -(-mask.shape[1] // f) * f), dtype=bool)
-    m[: mask.shape[0], : mask.shape[1]] = mask
-    blocks = m.reshape(m.shape[0] // f, f, m.shape[1] // f, f)
-    return blocks.sum(axis=(1, 3), dtype=np.int32) * 2 >= f * f
-
-
-def _score(mask: np.ndarray, cell_m: float, corners: np.ndarray, alphas: np.ndarray,
+def _score(raster: Raster, corners: np.ndarray, alphas: np.ndarray,
            spacing_m: float, min_segment_m: float) -> np.ndarray:
     """ISOA score S (module doc) of each orientation, best over K phases."""
     out = np.zeros(len(alphas))
@@ -145,7 +140,7 @@ def _score(mask: np.ndarray, cell_m: float, corners: np.ndarray, alphas: np.ndar
             m = m[np.linspace(0, len(m) - 1, _MAX_LINES).round().astype(int)]
         k = np.arange(_PHASES)
         offs = (o_lo + spacing_m * (m[None, :] + k[:, None] / _PHASES)).ravel()
-        seg = cut_lines(mask, cell_m, a, offs, t_lo, t_hi, cell_m, min_segment_m)
+        seg = cut_lines(raster, a, offs, t_lo, t_hi, raster.cell_m, min_segment_m)
         if len(seg.line) == 0:
             continue
         phase = seg.line // len(m)
@@ -174,38 +169,66 @@ def _plateau_centre(score: np.ndarray, wrap: bool, rel_tol: float = 0.005) -> in
     return ((lo + hi) // 2) % n
 
 
-def isoa_orientation(free: FreeSpace, spacing_m: float, min_segment_m: float,
-                     step_deg: float = 1.0, row_angle_rad: float | None = None) -> float:
-    """Beam direction in G (rad, [0, pi)) by the ISOA sweep (module doc)."""
+@dataclass(frozen=True)
+class Sweep:
+    """Result of the ISOA orientation sweep.
+
+    Attributes
+    ----------
+    alpha_rad : float
+        Best beam direction in G (rad, [0, pi)).
+    score_m : float
+        Its ISOA score S (m, module doc) at full resolution.
+    """
+
+    alpha_rad: float
+    score_m: float
+
+
+def full_scores(free: FreeSpace, alphas, spacing_m: float, min_segment_m: float) -> np.ndarray:
+    """ISOA scores S (m) of the beam directions ``alphas`` (G, rad) at full resolution."""
+    return _score(free.raster(), bbox_corners_g(free), np.atleast_1d(np.asarray(alphas, float)),
+                  spacing_m, min_segment_m)
+
+
+def isoa_sweep(free: FreeSpace, spacing_m: float, min_segment_m: float,
+               step_deg: float = 1.0) -> Sweep:
+    """Beam direction by the coarse-to-fine ISOA sweep (module doc)."""
     h = free.resolution_m
-    corners = bbox_corners_g(free.eroded, h)
+    corners = bbox_corners_g(free)
     extent = corners.max(axis=0) - corners.min(axis=0)
     coarse_cell = min(spacing_m / 4, np.sqrt(extent[0] * extent[1] / _MAX_COARSE_CELLS))
     f1 = max(1, int(coarse_cell / h))
     f2 = max(1, f1 // 3)
     levels = ((f1, step_deg, 90.0), (f2, step_deg / 10, step_deg), (1, step_deg / 50, step_deg / 10))
-    best = 0.0
+    best, best_score = 0.0, 0.0
     for f, step, half in levels:
         if half >= 90.0:
             cand = np.deg2rad(np.arange(0.0, 180.0, step))
         else:
             cand = best + np.deg2rad(np.arange(-half, half + step / 2, step))
-        mask = _pool(free.eroded, f)
-        score = _score(mask, f * h, corners, cand, spacing_m, min_segment_m)
-        best = float(cand[_plateau_centre(score, wrap=half >= 90.0)])
-    if row_angle_rad is not None:
-        s_best, s_row = _score(free.eroded, h, corners, np.array([best, row_angle_rad]),
-                               spacing_m, min_segment_m)
-        if s_row >= 0.99 * s_best:
-            best = row_angle_rad
-    return best % np.pi
+        score = _score(free.raster(f), corners, cand, spacing_m, min_segment_m)
+        i = _plateau_centre(score, wrap=half >= 90.0)
+        best, best_score = float(cand[i]), float(score[i])
+    return Sweep(alpha_rad=best % np.pi, score_m=best_score)
+
+
+def corridor_phase(corridor_offsets_m: np.ndarray, spacing_m: float) -> float:
+    """Offset (m, modulo the spacing) of the beam through the corridor centres (module doc).
+
+    ``corridor_offsets_m``: corridor centre offsets along the beam normal (m).
+    The circular mean keeps corridors on both sides of the wrap-around together.
+    """
+    ang = 2 * np.pi * np.asarray(corridor_offsets_m, float) / spacing_m
+    mean = np.arctan2(np.sin(ang).mean(), np.cos(ang).mean())
+    return float((mean / (2 * np.pi) * spacing_m) % spacing_m)
 
 
 def beam_phase(free: FreeSpace, alpha: float, spacing_m: float, max_cells: int = 2_000_000) -> float:
     """Offset (m, modulo the spacing) that puts the lines mid-corridor (module doc)."""
     h = free.resolution_m
-    f = max(1, int(np.ceil(np.sqrt(free.clearance_m.size / max_cells))))
-    clr = free.clearance_m[::f, ::f]
+    f = max(1, int(np.ceil(np.sqrt(free.free.size / max_cells))))
+    clr = free.clearance_coarse(f)
     r, c = np.nonzero(clr > 0)
     w = np.minimum(clr[r, c], spacing_m / 2).astype(float)
     gx, gy = (c * f + 0.5) * h, (r * f + 0.5) * h
@@ -223,9 +246,9 @@ def main_segments(free: FreeSpace, alpha: float, spacing_m: float, phase_m: floa
                   min_segment_m: float) -> Segments:
     """All main segments of the beam at full resolution (samples every half cell)."""
     h = free.resolution_m
-    corners = bbox_corners_g(free.eroded, h)
+    corners = bbox_corners_g(free)
     o_lo, o_hi, t_lo, t_hi = _ranges(corners, alpha)
     m0 = int(np.ceil((o_lo - phase_m) / spacing_m))
     m1 = int(np.floor((o_hi - phase_m) / spacing_m))
     offsets = phase_m + spacing_m * np.arange(m0, m1 + 1)
-    return cut_lines(free.eroded, h, alpha, offsets, t_lo, t_hi, h / 2, min_segment_m)
+    return cut_lines(free.raster(), alpha, offsets, t_lo, t_hi, h / 2, min_segment_m, np.float64)

@@ -78,18 +78,24 @@ def corridor_coverage(corr: Corridors, main_g: np.ndarray, line_spacing_m: float
     a, b = a[diff <= _ALONG_TOL_RAD], b[diff <= _ALONG_TOL_RAD]
     ends = corr.centre_lines_g()
     out = np.zeros(len(corr.offset_m))
+    if len(a) == 0:
+        return out
+    # offsets of the segment ends across the rows: a segment whose two ends
+    # lie on the same side, more than half a spacing from a centre line,
+    # stays that far from all of it (the offset is linear along a segment)
+    nrm = np.array([-np.sin(corr.angle_g_rad), np.cos(corr.angle_g_rad)])
+    da, db = a @ nrm, b @ nrm
+    d_lo, d_hi = np.minimum(da, db), np.maximum(da, db)
+    half = 0.5 * line_spacing_m
     for i, (p0, p1) in enumerate(ends):
+        near = (d_lo <= corr.offset_m[i] + half) & (d_hi >= corr.offset_m[i] - half)
+        if not near.any():
+            continue
         n = max(2, int(np.ceil(np.hypot(*(p1 - p0)) / step_m)) + 1)
         s = np.linspace(0.0, 1.0, n)[:, None]
         q = (1 - s) * p0 + s * p1
-        if len(a) == 0:
-            continue
-        lo, hi = q.min(axis=0) - line_spacing_m, q.max(axis=0) + line_spacing_m
-        near = ((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo)).all(axis=1)
-        if not near.any():
-            continue
         dist = _point_segment_distance(q, a[near], b[near]).min(axis=1)
-        out[i] = float(np.mean(dist <= 0.5 * line_spacing_m))
+        out[i] = float(np.mean(dist <= half))
     return out
 
 

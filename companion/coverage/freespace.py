@@ -5,11 +5,26 @@ north along the rows, metres from the lower-left corner of cell [0, 0]
 (cell ``[r, c]`` covers ``gx in [c h, (c+1) h)``, ``gy in [r h, (r+1) h)``).
 G equals the world ENU frame shifted by the map origin and rotated by the
 map's origin yaw; :func:`grid_to_world` converts.
+
+Erosion
+    A free cell is admissible when its centre is at least ``threshold_m``
+    from the centre of every non-free cell (occupied, unknown, or outside
+    the map). That is a threshold on the exact Euclidean distance transform
+    of the free mask, but only distances below the threshold (a few cells)
+    matter, so it is computed as a dilation of the non-free cells by the
+    open disk ``dr^2 + dc^2 < (threshold / h)^2`` (cells), written as a
+    union of horizontal runs: one running OR per half-width along the
+    columns, then one OR per row offset. That is ~4 K boolean passes for a
+    radius of K cells, exact (same cells as the EDT, checked against
+    ``scipy.ndimage.distance_transform_edt`` in the tests) and ~20 x faster
+    than the full EDT on a 10 ha field at 0.1 m. The work is confined to
+    the bounding box of the free cells (plus K cells).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy import ndimage
@@ -19,16 +34,15 @@ from ..maps.grid import OccupancyGrid
 
 @dataclass(frozen=True, eq=False)
 class FreeSpace:
-    """Eroded free space and clearance of an occupancy grid.
+    """Eroded free space of an occupancy grid.
 
     Attributes
     ----------
     eroded : (rows, cols) bool
         Cells whose centre is at least ``threshold_m`` from the centre of any
         non-free cell (occupied, unknown, or outside the map).
-    clearance_m : (rows, cols) float32
-        Distance (m) from each cell centre to the nearest non-free cell centre
-        (0 on non-free cells).
+    free : (rows, cols) bool
+        The free (not occupied, not unknown) cells before erosion.
     resolution_m : float
     threshold_m : float
         ``safety_margin_m + resolution_m``: the extra cell is the slack that
@@ -38,13 +52,106 @@ class FreeSpace:
     """
 
     eroded: np.ndarray
-    clearance_m: np.ndarray
+    free: np.ndarray
     resolution_m: float
     threshold_m: float
 
     def contains(self, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
         """True where the points (G frame, m) fall in an eroded cell; False off the map."""
         return lookup(self.eroded, self.resolution_m, gx, gy)
+
+    def raster(self, f: int = 1) -> "Raster":
+        """The eroded mask cropped to its bounding box and pooled by ``f`` (:func:`pool`).
+
+        Cached per ``f`` (the planner samples the same rasters several times).
+        """
+        cache = self.__dict__.setdefault("_rasters", {})
+        if f not in cache:
+            r0, r1, c0, c1 = self.bbox_cells
+            h = self.resolution_m
+            cache[f] = Raster(pool(self.eroded[r0:r1, c0:c1], f), f * h, c0 * h, r0 * h)
+        return cache[f]
+
+    @cached_property
+    def bbox_cells(self) -> tuple[int, int, int, int]:
+        """``(r0, r1, c0, c1)``: half-open cell bounding box of the eroded cells (empty: zeros)."""
+        return bbox_cells(self.eroded)
+
+    def clearance_coarse(self, f: int) -> np.ndarray:
+        """Clearance (m) of the cells ``free[::f, ::f]``, from a distance transform at ``f h``.
+
+        Distance from each sampled free cell to the nearest non-free sampled
+        cell (or the map's outside), float32, 0 on non-free cells. It is the
+        clearance of the map subsampled every ``f`` cells, so it is off by up
+        to ``f h``: meant for statistics (the beam phase), not for safety.
+        """
+        sub = np.pad(self.free[::f, ::f], 1)
+        return (ndimage.distance_transform_edt(sub)[1:-1, 1:-1] * (f * self.resolution_m)).astype(np.float32)
+
+
+class Raster:
+    """A bool mask (cells of ``cell_m``, lower-left corner at G ``(x0_m, y0_m)``)
+    padded by one False cell, for fast nearest-cell sampling at G points.
+
+    Points off the mask read the padding (False), so no bounds mask is
+    needed: the cell indices are clipped into the padded array.
+    """
+
+    def __init__(self, mask: np.ndarray, cell_m: float, x0_m: float, y0_m: float):
+        self.rows, self.cols = mask.shape
+        self.flat = np.pad(mask, 1).ravel()
+        self.cell_m, self.x0_m, self.y0_m = float(cell_m), float(x0_m), float(y0_m)
+
+    def sample_lines(self, alpha: float, offsets: np.ndarray, t: np.ndarray,
+                     dtype=np.float32) -> np.ndarray:
+        """(lines, samples) bool: the mask at ``offsets[i] n + t[j] u`` (G, m)."""
+        u0, u1 = np.cos(alpha), np.sin(alpha)
+        n0, n1 = -u1, u0
+        inv = 1.0 / self.cell_m
+        # cell coordinates shifted by the one-cell padding
+        ax = ((offsets * n0 - self.x0_m) * inv + 1.0).astype(dtype)
+        ay = ((offsets * n1 - self.y0_m) * inv + 1.0).astype(dtype)
+        bx, by = (t * (u0 * inv)).astype(dtype), (t * (u1 * inv)).astype(dtype)
+        x = ax[:, None] + bx[None, :]
+        y = ay[:, None] + by[None, :]
+        # truncation equals floor on [0, inf); anything below 1 is padding or beyond
+        np.clip(x, 0, self.cols + 1, out=x)
+        np.clip(y, 0, self.rows + 1, out=y)
+        it = np.int32 if self.flat.size < 2**31 else np.int64
+        idx = y.astype(it)
+        idx *= self.cols + 2
+        idx += x.astype(it)
+        return self.flat.take(idx)
+
+
+def pool(mask: np.ndarray, f: int) -> np.ndarray:
+    """Block-average ``f x f`` blocks, True where at least half the block is True.
+
+    The mask is padded with False to whole blocks; the block sums are built
+    from ``2 f`` strided slice additions (rows, then columns), much cheaper
+    than a reduction over a 4-D reshaped view.
+    """
+    if f <= 1:
+        return mask
+    m = np.zeros((-(-mask.shape[0] // f) * f, -(-mask.shape[1] // f) * f), dtype=bool)
+    m[: mask.shape[0], : mask.shape[1]] = mask
+    dt = np.uint8 if f * f < 256 else np.int32
+    rows = m[0::f].astype(dt)
+    for i in range(1, f):
+        rows += m[i::f]
+    acc = rows[:, 0::f].copy()
+    for j in range(1, f):
+        acc += rows[:, j::f]
+    return acc.astype(np.int32) * 2 >= f * f
+
+
+def bbox_cells(mask: np.ndarray) -> tuple[int, int, int, int]:
+    """Half-open ``(r0, r1, c0, c1)`` bounding box of the True cells of ``mask`` (zeros if none)."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if len(rows) == 0:
+        return 0, 0, 0, 0
+    cols = np.flatnonzero(mask[rows[0]: rows[-1] + 1].any(axis=0))
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
 
 
 def lookup(mask: np.ndarray, cell_m: float, gx, gy) -> np.ndarray:
@@ -58,19 +165,79 @@ def lookup(mask: np.ndarray, cell_m: float, gx, gy) -> np.ndarray:
     return out
 
 
-def erode_free_space(grid: OccupancyGrid, safety_margin_m: float) -> FreeSpace:
-    """Erode the free cells of ``grid`` by ``safety_margin_m`` (one exact EDT).
+def disk_half_widths(radius_cells: float) -> np.ndarray:
+    """Half-widths of the open disk ``dr^2 + dc^2 < radius^2`` (cells), per row offset.
 
-    Unknown cells and the outside of the map are not free (the grid is padded
-    by one non-free cell so the map border counts as an obstacle).
+    Returns ``(2K + 1,)`` int, ``K = ceil(radius) - 1`` the largest row offset
+    inside the disk: entry ``K + dr`` is the largest ``dc >= 0`` with
+    ``dr^2 + dc^2 < radius^2``. A relative tolerance of 1e-9 treats a
+    distance equal to the radius as outside (clearance exactly at the
+    threshold is admissible, as with ``edt >= threshold``).
+    """
+    r2 = float(radius_cells) ** 2 * (1.0 - 1e-9)
+    k = max(0, int(np.ceil(np.sqrt(r2))) - 1) if r2 > 0 else -1
+    if k < 0:
+        return np.zeros(0, dtype=np.int64)
+    dr = np.arange(-k, k + 1)
+    w = np.floor(np.sqrt(np.maximum(r2 - dr * dr, 0.0))).astype(np.int64)
+    # floor(sqrt) may land on the boundary itself: step inside (strict <)
+    w -= (w * w + dr * dr >= r2)
+    return w
+
+
+def dilate_runs(mask: np.ndarray, half_widths: np.ndarray, outside: bool) -> np.ndarray:
+    """Dilate a bool mask by the symmetric set ``{(dr, dc): |dc| <= w[K + dr]}``.
+
+    ``half_widths`` has ``2K + 1`` entries (row offsets -K..K; -1 = no cell in
+    that row). ``outside``: value of the cells beyond the array. Exact, with
+    O(K) whole-array boolean passes (module doc).
+    """
+    w = np.asarray(half_widths, dtype=np.int64)
+    if len(w) == 0:
+        return mask.copy()
+    k = (len(w) - 1) // 2
+    p = max(k, int(w.max()), 0)
+    rows, cols = mask.shape
+    padded = np.full((rows + 2 * p, cols + 2 * p), outside, dtype=bool)
+    padded[p: p + rows, p: p + cols] = mask
+    # runs[v] = padded dilated along the columns by half-width v (all rows kept)
+    runs = {0: padded[:, p: p + cols]}
+    acc = runs[0].copy()
+    needed = set(w.tolist())
+    for v in range(1, int(w.max()) + 1):
+        acc |= padded[:, p + v: p + v + cols]
+        acc |= padded[:, p - v: p - v + cols]
+        if v in needed:
+            runs[v] = acc.copy()
+    out = np.zeros((rows, cols), dtype=bool)
+    for i, v in enumerate(w.tolist()):
+        if v >= 0:
+            dr = i - k
+            out |= runs[v][p + dr: p + dr + rows]
+    return out
+
+
+def erode_free_space(grid: OccupancyGrid, safety_margin_m: float) -> FreeSpace:
+    """Erode the free cells of ``grid`` by ``safety_margin_m`` (module doc).
+
+    Unknown cells and the outside of the map are not free (the map border
+    counts as an obstacle).
     """
     h = float(grid.resolution_m)
-    free = np.zeros((grid.shape[0] + 2, grid.shape[1] + 2), dtype=bool)
-    free[1:-1, 1:-1] = grid.free & ~grid.occupied
-    clearance = ndimage.distance_transform_edt(free)[1:-1, 1:-1].astype(np.float32) * np.float32(h)
+    free = grid.free & ~grid.occupied
     threshold = float(safety_margin_m) + h
-    return FreeSpace(eroded=clearance >= threshold, clearance_m=clearance,
-                     resolution_m=h, threshold_m=threshold)
+    widths = disk_half_widths(threshold / h)
+    eroded = np.zeros(free.shape, dtype=bool)
+    r0, r1, c0, c1 = bbox_cells(free)
+    if r1 > r0:
+        # non-free cells further than K cells from the free bounding box
+        # cannot reach into it: work on the box grown by K (clipped to the map)
+        k = max(len(widths) // 2, int(widths.max()) if len(widths) else 0)
+        a0, a1 = max(0, r0 - k), min(free.shape[0], r1 + k)
+        b0, b1 = max(0, c0 - k), min(free.shape[1], c1 + k)
+        sub = free[a0:a1, b0:b1]
+        eroded[a0:a1, b0:b1] = sub & ~dilate_runs(~sub, widths, outside=True)
+    return FreeSpace(eroded=eroded, free=free, resolution_m=h, threshold_m=threshold)
 
 
 def grid_to_world(grid: OccupancyGrid, gxy: np.ndarray) -> np.ndarray:

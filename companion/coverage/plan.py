@@ -7,13 +7,31 @@ Polytechnica Hungarica 15(2), 2018):
 1. erode the free space by the safety margin (:mod:`freespace`);
 2. find the vine rows (:mod:`rows`); the line spacing is the configured one
    or, if unset, the detected row spacing;
-3. choose the beam orientation by the ISOA sweep (:mod:`beam`) unless the
-   configuration forces it, and the beam phase that puts the lines mid
-   corridor;
+3. choose the beam orientation (rule below) and the beam phase that puts
+   the lines mid corridor (:mod:`beam`);
 4. cut the beam lines into main segments (:mod:`beam`);
 5. join them into one boustrophedon path with auxiliary connections
    (:mod:`boustrophedon`, :mod:`gridpath`);
 6. measure the corridor coverage (:mod:`corridors`).
+
+Orientation rule
+    * ``coverage.orientation_deg`` set: that direction, no sweep
+      (``orientation_source = "config"``).
+    * Otherwise the ISOA sweep always runs and its best direction and score
+      are reported (``isoa_orientation_deg``, ``isoa_score_m``). Then, if
+      vine rows were detected and the line spacing matches the row spacing
+      (given or detected, within ``SPACING_MATCH_REL`` = 5 %), the beam runs
+      along the rows' direction (``orientation_source = "rows"``) and its
+      phase is taken from the corridor centres: each corridor is then flown
+      once, along its whole length, in its middle. ISOA alone cannot
+      guarantee that: a beam tilted by a degree or two is cut no more often
+      inside a long corridor (the score has a plateau there) yet drifts
+      ``L tan(err)`` across it. ``orientation_score_m`` is the ISOA score of
+      the flown direction, for comparison with ``isoa_score_m``.
+    * With rows but another line spacing, the rows' direction is still
+      taken when its score is within 1 % of the sweep's best (inside the
+      plateau it is the exact, symmetric choice); otherwise the sweep's
+      direction (``orientation_source = "isoa"``).
 """
 
 from __future__ import annotations
@@ -25,11 +43,16 @@ import numpy as np
 from ..errors import PlanError
 from ..maps.grid import OccupancyGrid
 from ..mission.schema import CoverageConfig
-from .beam import beam_phase, isoa_orientation, main_segments
+from .beam import beam_phase, corridor_phase, full_scores, isoa_sweep, main_segments
 from .boustrophedon import join_segments
 from .corridors import coverage_fraction, find_corridors
 from .freespace import erode_free_space, grid_to_world
-from .rows import detect_rows
+from .rows import WRAP_TOL_DEG, detect_rows
+
+#: relative tolerance within which the line spacing counts as the row spacing
+SPACING_MATCH_REL = 0.05
+#: the rows' direction is kept (spacing mismatch) when it scores within this share of the best
+_ROW_SCORE_REL = 0.99
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,6 +82,17 @@ class CoveragePlan:
         Detected row spacing (m), None if the map shows no periodic rows.
     corridors_xy_m : (k, 2, 2) float
         Corridor centre lines (ENU, m) used by the coverage measure.
+    orientation_source : str
+        Why ``orientation_deg`` was flown: ``"config"``, ``"rows"`` or
+        ``"isoa"`` (module doc, orientation rule).
+    isoa_orientation_deg : float or None
+        Best direction of the ISOA sweep (ENU deg, [0, 180)); None if forced.
+    isoa_score_m : float or None
+        ISOA score S (m, :mod:`beam`) of that direction at full resolution.
+    orientation_score_m : float or None
+        ISOA score of the flown direction; None if forced.
+    row_orientation_deg : float or None
+        Detected row direction (ENU deg, [0, 180)), None without rows.
     """
 
     path_xy_m: np.ndarray
@@ -71,6 +105,17 @@ class CoveragePlan:
     path_length_m: float
     row_spacing_m: float | None = None
     corridors_xy_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    orientation_source: str = "isoa"
+    isoa_orientation_deg: float | None = None
+    isoa_score_m: float | None = None
+    orientation_score_m: float | None = None
+    row_orientation_deg: float | None = None
+
+
+def _enu_deg(alpha_g_rad: float, yaw_rad: float) -> float:
+    """Direction in G (rad) -> ENU degrees from east in [0, 180) (``WRAP_TOL_DEG`` below 180 -> 0)."""
+    deg = float(np.rad2deg(alpha_g_rad + yaw_rad) % 180.0)
+    return 0.0 if deg >= 180.0 - WRAP_TOL_DEG else deg
 
 
 def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig) -> CoveragePlan:
@@ -96,34 +141,43 @@ def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig) -> CoveragePlan:
         raise PlanError(grid.source, f"no free space left after eroding by the safety margin "
                                      f"{cfg.safety_margin_m} m")
     rows = detect_rows(grid)
+    has_rows = rows is not None and len(rows.offsets_m) >= 2
     if cfg.line_spacing_m is not None:
         spacing = float(cfg.line_spacing_m)
-    elif rows is not None and len(rows.offsets_m) >= 2:
+    elif has_rows:
         spacing = rows.spacing_m
     else:
         raise PlanError(grid.source, "cannot detect vine rows to derive the line spacing; "
                                      "set coverage.line_spacing_m")
     yaw = grid.origin_yaw_rad
+    corr = find_corridors(rows)
+    sweep = score_flown = None
     if cfg.orientation_deg is not None:
-        alpha = float(np.deg2rad(cfg.orientation_deg) - yaw) % np.pi
+        alpha, source = float(np.deg2rad(cfg.orientation_deg) - yaw) % np.pi, "config"
     else:
-        alpha = isoa_orientation(free, spacing, cfg.min_segment_m, cfg.orientation_step_deg,
-                                 rows.angle_g_rad if rows is not None else None)
-    phase = beam_phase(free, alpha, spacing)
+        sweep = isoa_sweep(free, spacing, cfg.min_segment_m, cfg.orientation_step_deg)
+        alpha, source, score_flown = sweep.alpha_rad, "isoa", sweep.score_m
+        if has_rows:
+            score_rows = float(full_scores(free, rows.angle_g_rad, spacing, cfg.min_segment_m)[0])
+            matched = abs(spacing - rows.spacing_m) <= SPACING_MATCH_REL * rows.spacing_m
+            if matched or score_rows >= _ROW_SCORE_REL * sweep.score_m:
+                alpha, source, score_flown = rows.angle_g_rad, "rows", score_rows
+    if source == "rows" and corr is not None:
+        phase = corridor_phase(corr.offset_m, spacing)
+    else:
+        phase = beam_phase(free, alpha, spacing)
     seg = main_segments(free, alpha, spacing, phase, cfg.min_segment_m)
     if len(seg.line) == 0:
         raise PlanError(grid.source, f"no main segment of at least {cfg.min_segment_m} m fits "
                                      "in the eroded free space")
     starts, ends = seg.endpoints_g(alpha)
     route = join_segments(free, starts, ends, seg.line, grid.source)
-    corr = find_corridors(rows)
     frac = coverage_fraction(corr, free, route.main_g, spacing)
     path = grid_to_world(grid, route.vertices_g)
     main_w = grid_to_world(grid, route.main_g)
-    orientation = float(np.rad2deg(alpha + yaw) % 180.0)
     return CoveragePlan(
         path_xy_m=path,
-        orientation_deg=0.0 if orientation >= 180.0 - 1e-12 else orientation,
+        orientation_deg=_enu_deg(alpha, yaw),
         line_spacing_m=spacing,
         main_segments=[(tuple(map(float, m[0])), tuple(map(float, m[1]))) for m in main_w],
         aux_paths=[grid_to_world(grid, a) for a in route.aux_g],
@@ -132,4 +186,9 @@ def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig) -> CoveragePlan:
         path_length_m=float(np.sum(np.hypot(*np.diff(path, axis=0).T))),
         row_spacing_m=None if rows is None else rows.spacing_m,
         corridors_xy_m=np.zeros((0, 2, 2)) if corr is None else grid_to_world(grid, corr.centre_lines_g()),
+        orientation_source=source,
+        isoa_orientation_deg=None if sweep is None else _enu_deg(sweep.alpha_rad, yaw),
+        isoa_score_m=None if sweep is None else sweep.score_m,
+        orientation_score_m=score_flown,
+        row_orientation_deg=rows.orientation_deg if has_rows else None,
     )
