@@ -109,11 +109,15 @@ def free_centroid_xy(grid: OccupancyGrid) -> np.ndarray:
     of the flyable ground (the field minus the vine rows; unknown cells
     outside the field do not count).
     """
-    rows, cols = np.nonzero(grid.free)
-    if rows.size == 0:
+    free = grid.free
+    n = np.count_nonzero(free)
+    if n == 0:
         raise PlanError(grid.source, "the map has no free cells")
-    # Mean of indices first, then one affine map: exact, and no (n, 2) temporaries.
-    x, y = grid.cell_to_world(rows.mean(), cols.mean())
+    # Mean of indices from the row/column marginals, then one affine map:
+    # exact, and no index arrays over the whole grid.
+    row_mean = float(np.arange(free.shape[0]) @ np.count_nonzero(free, axis=1)) / n
+    col_mean = float(np.arange(free.shape[1]) @ np.count_nonzero(free, axis=0)) / n
+    x, y = grid.cell_to_world(row_mean, col_mean)
     return np.array([float(x), float(y)])
 
 
