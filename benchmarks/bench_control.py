@@ -180,15 +180,15 @@ def main(argv=None) -> int:
         return 0
     d = ControlConfig()
     raw = dataclasses.replace(d, accel_vector_gain_rad_s=0.0, mag_vector_gain_rad_s=0.0)
-    paper = dataclasses.replace(raw, mag_perpendicular=False)
+    paper = dataclasses.replace(raw, mag_perpendicular=False, attitude_law="paper")
     lee = dataclasses.replace(d, kx=16.0, kv=5.6)
-    cases = (("default", d), ("unfiltered vectors", raw), ("unfiltered, raw field", paper),
+    cases = (("default", d), ("unfiltered vectors", raw), ("paper law, unfiltered, raw", paper),
              ("default, kx=16 kv=5.6", lee))
     print(f"closed loop, {args.duration:.0f} s, noise variance 5e-4, error after 5 s:")
     for name, cfg in cases:
         for tname, tr in (("circle r=1.25 m, 1 m/s", circle()), ("lissajous 20 m, 1 m/s", lissajous())):
             r = simulate(cfg, tr, args.duration)
-            print(f"{name:22s} {tname:24s} max {r['max_mm']:6.2f} mm  rms {r['rms_mm']:6.2f} mm  "
+            print(f"{name:27s} {tname:24s} max {r['max_mm']:6.2f} mm  rms {r['rms_mm']:6.2f} mm  "
                   f"cmd [{r['cmd_min']:.2f}, {r['cmd_max']:.2f}]  yaw-saturated {100 * r['saturated_frac']:.0f}%  "
                   f"max attitude error {r['att_max_deg']:.2f} deg")
     return 0

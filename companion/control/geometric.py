@@ -57,6 +57,24 @@ eq. (37) hold. Time-varying r_1 (the specific force turns with the
 acceleration) adds ``sum rho_i r_i_dot . (R_e^T ...)`` terms, small at the
 low accelerations of coverage flight.
 
+What the controller uses by default (``ControlConfig.attitude_law``)
+-------------------------------------------------------------------
+The law above acts on ``R_e = R R_d^T`` through ``R_d``. With the specific
+force as vector 1, ``r_1 = R e3`` turns with the body, and ``z_1 = rho_1
+(R_d^T R e3) x e3`` is the tilt error in desired-frame axes: a yaw error psi
+rotates the roll/pitch correction by psi. This vehicle's yaw saturates at
+0.25 rad/s^2, so when the pointing of eq. (21) swings fast (passing 1.25 m
+from S_p at 1 m/s) the yaw lags by ~40 deg, the tilt loop loses its damping
+(stiffness ``rho1 e^{i psi}`` against alpha) and the position took 100 mm
+spikes. By default the torque is therefore :func:`attitude_torque_decoupled`:
+the same gains, every term in the body frame, the thrust direction
+controlled independently of the yaw error (decoupled-yaw geometric control,
+Gamagedara et al. 2019), ``Omega_d`` moved into the body frame with ``R^T
+R_d`` obtained from the vector pairs. ``attitude_law = "paper"`` keeps the
+law above. Separately, the pointing reference is made flyable
+(``companion.control.pointing``: eq. 21 exactly where the vehicle can
+follow it, yaw-rate/acceleration limited elsewhere).
+
 The two vectors and how their world directions are known
 ---------------------------------------------------------
 (details in ``companion.control.vectors``) b_1: the accelerometer's specific
@@ -83,6 +101,7 @@ from dataclasses import dataclass
 from ..vehicle import GRAVITY_M_S2, VehicleConfig
 from .config import ControlConfig
 from .mixer import Mixer
+from .pointing import PointingGovernor
 from .vectors import AccelerationEstimator, BodyVectorFilter, Vec3, measurement_vectors, unit3
 
 # --- small float-tuple vector algebra (the hot path avoids numpy) ---------
@@ -343,6 +362,140 @@ def attitude_torque(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, b_meas, r_world,
     return tau, z, V
 
 
+def body_coordinates(w, b1, b2, r1, r2) -> Vec3:
+    """``R^T w``: a world vector's body coordinates from two vector pairs (TRIAD).
+
+    Parameters
+    ----------
+    w : sequence (3,)
+        World vector (ENU).
+    b1, b2 : sequence (3,)
+        Body unit vectors ``b_i = R^T r_i``; r1, r2 : their world directions.
+        Pair 1 is matched exactly, pair 2 completes the frame.
+
+    Returns
+    -------
+    tuple (3,)
+        ``R^T w`` (body FLU), exact when the pairs are.
+    """
+    mb = unit3(_cross(b1, b2))
+    mr = unit3(_cross(r1, r2))
+    nb = _cross(b1, mb)
+    nr = _cross(r1, mr)
+    c1, c2, c3 = _dot(w, r1), _dot(w, mr), _dot(w, nr)
+    return tuple(c1 * b1[i] + c2 * mb[i] + c3 * nb[i] for i in range(3))
+
+
+@dataclass(frozen=True, slots=True)
+class DecoupledTorque:
+    """Output of :func:`attitude_torque_decoupled`.
+
+    Attributes
+    ----------
+    tau : tuple (3,)
+        Torque (N m, body FLU).
+    z : tuple (3,)
+        Attitude error term (1/s^2, body): ``rho1 (e3 x d) + rho2 sin(psi_e) e3``.
+    e_Omega : tuple (3,)
+        ``Omega - Q Omega_d`` (rad/s, body).
+    tilt_rad : float
+        Angle between the body thrust axis and b3d.
+    yaw_err_rad : float
+        psi_e, the rotation about the body z axis left after the tilt.
+    V : float
+        ``rho1 (1 - d_z) + rho2 (1 - cos psi_e) + |e_Omega|^2 / 2``.
+    """
+
+    tau: Vec3
+    z: Vec3
+    e_Omega: Vec3
+    tilt_rad: float
+    yaw_err_rad: float
+    V: float
+
+
+def attitude_torque_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho,
+                              alpha: float) -> DecoupledTorque:
+    r"""Attitude law with the thrust direction decoupled from the yaw (tilt first).
+
+    The paper's law (27) acts on the full error ``R_e = R R_d^T`` expressed
+    through ``R_d``: its restoring torque ``J z_rho`` and ``Omega - Omega_d``
+    are desired-frame vectors applied in the body frame. That is exact while
+    the yaw follows, but a yaw error psi rotates the roll/pitch correction by
+    psi (stiffness ``W e^{i psi}`` against damping alpha: with rho1 = 200,
+    alpha = 12 the tilt loop loses its damping near psi = 45 deg). On a vehicle
+    whose yaw saturates, a lagging yaw then drags the thrust direction and the
+    position. Here every term is in the body frame and the attitude error is
+    split, as in the "decoupled yaw" geometric controller of Gamagedara,
+    Bisheban, Kaufman and Lee (ACC 2019) and the tilt-prioritised law of
+    Brescianini and D'Andrea, so the thrust direction is controlled the same
+    whatever the yaw error.
+
+    With ``Q = R^T R_d = [q1 q2 q3]`` (the desired axes in body coordinates,
+    from the vector measurements by :func:`body_coordinates`, never the
+    attitude), ``d = q3 = R^T b3d``:
+
+    - tilt: ``z_t = rho1 e3 x d`` (magnitude rho1 sin of the tilt error);
+    - yaw: ``Q = Q_xy Rz(psi_e)`` with ``Q_xy`` the smallest rotation taking
+      e3 to d (axis in the body xy plane), ``z_y = rho2 sin(psi_e) e3``;
+    - ``Omega_d^b = Q Omega_d`` (eq. 31's Omega_d moved to the body frame),
+      ``e_Omega = Omega - Omega_d^b``, and since ``d/dt (Q Omega_d) = Q
+      Omega_d_dot - Omega x Q Omega_d``::
+
+          tau = Omega x J Omega + J (Q Omega_d_dot - Omega x Omega_d^b + z - alpha e_Omega)
+
+      i.e. ``e_Omega_dot = z - alpha e_Omega`` (the analogue of eq. 35).
+
+    Lyapunov: ``d_dot = d x e_Omega`` (b3d turns with the desired rate), so
+    ``d/dt rho1 (1 - d_z) = -e_Omega . z_t``, and for the yaw ``d/dt rho2 (1
+    - cos psi_e) = -e_Omega . z_y`` (exact for d = e3), hence ``V_dot = -alpha
+    |e_Omega|^2`` as eq. (41). The tilt subsystem's torque involves the yaw
+    error only through the damping of ``Q Omega_d`` (which is the correct
+    body-frame desired rate); a yaw torque that the mixer cuts (yaw-first
+    desaturation) leaves it untouched.
+
+    Parameters
+    ----------
+    inertia_kg_m2 : sequence (3,)
+        Diagonal of J.
+    Omega, Omega_d, Omega_d_dot : sequence (3,)
+        Measured rate (body), desired rate and its derivative (desired frame, eq. 31).
+    q1, q2, q3 : sequence (3,)
+        b1d, b2d, b3d in body coordinates.
+    rho : (rho1, rho2)
+        Tilt and yaw stiffness (1/s^2).
+    alpha : float
+        Damping (1/s).
+    """
+    dx, dy, dz = q3
+    kx, ky = -dy, dx                       # k = e3 x d (k_z = 0)
+    s_t = math.sqrt(kx * kx + ky * ky)
+    tilt = math.atan2(s_t, dz)
+    # Q_xy^T q1 = q1 - k x q1 + k x (k x q1) / (1 + d_z): q1 with the tilt undone.
+    v = q1
+    if dz > -1.0 + 1e-9:
+        kv = (ky * v[2], -kx * v[2], kx * v[1] - ky * v[0])                   # k x v
+        kkv = (ky * kv[2], -kx * kv[2], kx * kv[1] - ky * kv[0])              # k x (k x v)
+        w = 1.0 / (1.0 + dz)
+        vx, vy = v[0] - kv[0] + w * kkv[0], v[1] - kv[1] + w * kkv[1]
+        psi = math.atan2(vy, vx)
+    else:                                  # upside down: tilt first, no yaw error
+        psi = 0.0
+    r1, r2 = rho
+    z = (r1 * kx, r1 * ky, r2 * math.sin(psi))
+    Od = tuple(Omega_d[0] * q1[i] + Omega_d[1] * q2[i] + Omega_d[2] * q3[i] for i in range(3))
+    Odd = tuple(Omega_d_dot[0] * q1[i] + Omega_d_dot[1] * q2[i] + Omega_d_dot[2] * q3[i] for i in range(3))
+    wx, wy, wz = Omega
+    e = (wx - Od[0], wy - Od[1], wz - Od[2])
+    WxOd = _cross(Omega, Od)
+    Jx, Jy, Jz = inertia_kg_m2
+    Jw = (Jx * wx, Jy * wy, Jz * wz)
+    gyro = (wy * Jw[2] - wz * Jw[1], wz * Jw[0] - wx * Jw[2], wx * Jw[1] - wy * Jw[0])
+    tau = tuple(gyro[i] + inertia_kg_m2[i] * (Odd[i] - WxOd[i] + z[i] - alpha * e[i]) for i in range(3))
+    V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * _dot(e, e)
+    return DecoupledTorque(tau, z, e, tilt, psi, V)
+
+
 def thrust_axis_estimate(b1, b2, r1, r2) -> Vec3:
     """``R e3`` (world) from two vector pairs by TRIAD (pair 1 exact, pair 2 completes).
 
@@ -400,6 +553,11 @@ class GeometricController:
         self._f_acc = BodyVectorFilter(cfg.accel_vector_gain_rad_s, propagate=False)
         self._f_mag = BodyVectorFilter(cfg.mag_vector_gain_rad_s, propagate=True)
         self._b2_prev: Vec3 = (0.0, 1.0, 0.0)
+        self._decoupled = cfg.attitude_law == "decoupled"
+        self.pointing = None
+        if cfg.pointing_limit:
+            a_max = cfg.pointing_yaw_accel_fraction * self.mixer.yaw_torque_limit(self._m * self._g) / self._J[2]
+            self.pointing = PointingGovernor(cfg.pointing_yaw_rate_max_rad_s, a_max)
 
     def update(self, t_s: float, meas: Measurements, ref: Reference) -> ControlOutput:
         """One control step on one sensor frame.
@@ -440,12 +598,22 @@ class GeometricController:
         F_ddot = tuple(-kx * ev_dot[i] - kv * ev_ddot[i] + m * sd[i] for i in range(3))
         Sp = self.target_enu_m if ref.target_enu_m is None else ref.target_enu_m
         u_s = (Sp[0] - xd[0], Sp[1] - xd[1], Sp[2] - xd[2])
-        des = desired_attitude(F, F_dot, F_ddot, u_s, (-vd[0], -vd[1], -vd[2]), (-ad[0], -ad[1], -ad[2]),
-                               self._b2_prev)
+        u_s_dot, u_s_ddot = (-vd[0], -vd[1], -vd[2]), (-ad[0], -ad[1], -ad[2])
+        if self.pointing is not None and _dot(u_s, u_s) > 1e-12:
+            # eq. (21) made flyable (companion.control.pointing): a unit vector
+            # with consistent derivatives passes desired_attitude's _unit_d2 unchanged.
+            u_s, u_s_dot, u_s_ddot = self.pointing.update(t_s, *_unit_d2(u_s, u_s_dot, u_s_ddot))
+        des = desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, self._b2_prev)
         self._b2_prev = des.b2d
 
-        tau, z, V = attitude_torque(self._J, Omega, des.Omega_d, des.Omega_d_dot, (b1, b2), (r1, r2),
-                                    des.b1d, des.b2d, des.b3d, self._rho, self.cfg.alpha)
+        if self._decoupled:
+            q = [body_coordinates(bd, b1, b2, r1, r2) for bd in (des.b1d, des.b2d, des.b3d)]
+            res = attitude_torque_decoupled(self._J, Omega, des.Omega_d, des.Omega_d_dot, q[0], q[1], q[2],
+                                            self._rho, self.cfg.alpha)
+            tau, z, V = res.tau, res.z, res.V
+        else:
+            tau, z, V = attitude_torque(self._J, Omega, des.Omega_d, des.Omega_d_dot, (b1, b2), (r1, r2),
+                                        des.b1d, des.b2d, des.b3d, self._rho, self.cfg.alpha)
         f = _dot(F, thrust_axis_estimate(b1, b2, r1, r2))
         mc = self.mixer.mix(f, tau)
         return ControlOutput(f, tau, mc.cmd, mc.saturated, des.b3d, des.b2d, des.R_d, des.Omega_d,

@@ -74,6 +74,19 @@ class Mixer:
         w = self._A @ np.asarray(thrusts_n, dtype=float)
         return (float(w[0]), float(w[1]), float(w[2]), float(w[3]))
 
+    def yaw_torque_limit(self, f_n: float) -> float:
+        """Largest yaw torque |tau_z| (N m) at collective ``f_n`` (N) with zero roll/pitch torque.
+
+        The yaw authority of the vehicle: every rotor stays in [0, f_max].
+        For this module's quad-X, ``4 c_tau min(f/4, f_max - f/4)``.
+        """
+        lim = float("inf")
+        for row in self._inv:
+            base, y = row[0] * float(f_n), abs(row[3])
+            if y > 0.0:
+                lim = min(lim, min(base, self.f_max - base) / y)
+        return max(lim, 0.0)
+
     def mix(self, f_n: float, tau_flu_nm) -> MotorCommand:
         """Apply the saturation policy of the module docstring.
 
