@@ -81,7 +81,10 @@ def _run(args) -> int:
     config = ServerConfig(listen=args.listen, outs=tuple(args.out), lockstep=args.lockstep,
                           speed=args.speed, seed=args.seed, physics_hz=args.physics_hz,
                           sensor_hz=args.sensor_hz)
-    server = SitlServer(mission, config)
+    try:
+        server = SitlServer(mission, config)
+    except ValueError as exc:   # e.g. a sim value outside a parameter's range
+        raise InputError(args.mission, str(exc)) from None
     try:
         server.open()
     except (OSError, ValueError) as exc:

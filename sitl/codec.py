@@ -341,12 +341,25 @@ def attitude(mav, time_boot_ms: int, R_enu_flu, omega_flu_rad_s):
     return mav.attitude_encode(*attitude_args(time_boot_ms, R_enu_flu, omega_flu_rad_s))
 
 
-def attitude_quaternion(mav, time_boot_ms: int, R_enu_flu, omega_flu_rad_s):
-    """ATTITUDE_QUATERNION: [w, x, y, z] of body FRD -> world NED, FRD rates."""
-    q = frames.rotmat2quat_wxyz(frames.R_enu_flu2ned_frd(R_enu_flu))
+def attitude_quaternion_args(time_boot_ms: int, R_enu_flu, omega_flu_rad_s) -> tuple:
+    """ATTITUDE_QUATERNION fields: [w, x, y, z] of body FRD -> world NED
+    (``R_ned_frd`` written out as in ``odometry_truth_args``), FRD rates."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = _rows(R_enu_flu)
+    q = quat_wxyz_of(r10, -r11, -r12, r00, -r01, -r02, -r20, r21, r22)
     wx, wy, wz = omega_flu_rad_s
-    return mav.attitude_quaternion_encode(time_boot_ms, q[0], q[1], q[2], q[3],
-                                          wx, -wy, -wz, [1.0, 0.0, 0.0, 0.0])
+    return (int(time_boot_ms), q[0], q[1], q[2], q[3], float(wx), -float(wy), -float(wz), _Q_IDENTITY)
+
+
+def attitude_quaternion(mav, time_boot_ms: int, R_enu_flu, omega_flu_rad_s):
+    """ATTITUDE_QUATERNION message (see ``attitude_quaternion_args``)."""
+    return mav.attitude_quaternion_encode(*attitude_quaternion_args(time_boot_ms, R_enu_flu, omega_flu_rad_s))
+
+
+def _rows(R):
+    return R.tolist() if hasattr(R, "tolist") else R
+
+
+_Q_IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
 def local_position_ned_args(time_boot_ms: int, pos_enu_m, vel_enu_m_s) -> tuple:
@@ -394,8 +407,7 @@ def odometry_truth_args(time_us: int, pos_enu_m, vel_enu_m_s, R_enu_flu, omega_f
     written out: rows (r1, r0, -r2) of R with columns 1 and 2 negated. The
     body velocity is ``R_enu_flu^T v_enu`` (FLU) mapped to FRD.
     """
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R_enu_flu.tolist() if hasattr(R_enu_flu, "tolist") \
-        else R_enu_flu
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = _rows(R_enu_flu)
     x, y, z = pos_enu_m
     ve, vn, vu = vel_enu_m_s
     wx, wy, wz = omega_flu_rad_s
@@ -465,8 +477,8 @@ def home_position(mav, origin: GeoOrigin, home_enu_m, time_us: int):
                                     [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, time_us)
 
 
-def distance_sensor(mav, time_boot_ms: int, reading):
-    """DISTANCE_SENSOR (cm) from a ``RangeReading`` (see the module notes)."""
+def distance_sensor_args(time_boot_ms: int, reading) -> tuple:
+    """DISTANCE_SENSOR fields (cm) from a ``RangeReading`` (see the module notes)."""
     min_cm = int(round(reading.min_m * 100.0))
     max_cm = int(round(reading.max_m * 100.0))
     d = reading.distance_m
@@ -474,11 +486,18 @@ def distance_sensor(mav, time_boot_ms: int, reading):
         dist_cm, quality = max_cm + 1, 1
     else:
         dist_cm, quality = int(round(d * 100.0)), 100
-    return mav.distance_sensor_encode(
-        time_boot_ms, min_cm, max_cm, min(max(dist_cm, 0), 65535),
-        mavlink.MAV_DISTANCE_SENSOR_LASER, int(reading.sensor_id) & 0xFF,
-        int(reading.orientation), 255, float(reading.hfov_rad), float(reading.vfov_rad),
-        [0.0, 0.0, 0.0, 0.0], quality)
+    return (int(time_boot_ms), min_cm, max_cm, min(max(dist_cm, 0), 65535),
+            mavlink.MAV_DISTANCE_SENSOR_LASER, int(reading.sensor_id) & 0xFF,
+            int(reading.orientation), 255, float(reading.hfov_rad), float(reading.vfov_rad),
+            _Q_ZERO, quality)
+
+
+_Q_ZERO = (0.0, 0.0, 0.0, 0.0)
+
+
+def distance_sensor(mav, time_boot_ms: int, reading):
+    """DISTANCE_SENSOR message (see ``distance_sensor_args``)."""
+    return mav.distance_sensor_encode(*distance_sensor_args(time_boot_ms, reading))
 
 
 def position_target_local_ned(mav, time_boot_ms: int, setpoint):
@@ -637,6 +656,8 @@ PACK_HIGHRES_IMU = FastPacker(mavlink.MAVLink_highres_imu_message)
 PACK_LOCAL_POSITION_NED = FastPacker(mavlink.MAVLink_local_position_ned_message)
 PACK_ATTITUDE = FastPacker(mavlink.MAVLink_attitude_message)
 PACK_ODOMETRY = FastPacker(mavlink.MAVLink_odometry_message)
+PACK_ATTITUDE_QUATERNION = FastPacker(mavlink.MAVLink_attitude_quaternion_message)
+PACK_DISTANCE_SENSOR = FastPacker(mavlink.MAVLink_distance_sensor_message)
 
 
 _HIL_CLASS = mavlink.MAVLink_hil_actuator_controls_message

@@ -155,9 +155,9 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("SIM_LS_TMO", _R, 2.0, 0.05, 60.0, "lockstep: wall-clock wait for the answer (s)"),
     ParamSpec("SIM_VEC_VAR", _R, 5.0e-4, 0.0, 1.0, "accel/mag direction noise variance (-)"),
     ParamSpec("SIM_GYRO_VAR", _R, 5.0e-4, 0.0, 1.0, "gyro noise variance ((rad/s)^2)"),
-    ParamSpec("SIM_POS_STD", _R, 0.0, 0.0, 10.0, "position measurement noise std (m)"),
-    ParamSpec("SIM_VEL_STD", _R, 0.0, 0.0, 10.0, "velocity measurement noise std (m/s)"),
-    ParamSpec("SIM_RNG_STD", _R, 0.0, 0.0, 10.0, "rangefinder noise std (m)"),
+    ParamSpec("SIM_POS_STD", _R, 0.0, 0.0, 100.0, "position measurement noise std (m)"),
+    ParamSpec("SIM_VEL_STD", _R, 0.0, 0.0, 100.0, "velocity measurement noise std (m/s)"),
+    ParamSpec("SIM_RNG_STD", _R, 0.0, 0.0, 100.0, "rangefinder noise std (m)"),
 )
 
 

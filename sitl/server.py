@@ -12,9 +12,13 @@ Time and pacing
 The simulation owns the clock (``Simulation.time_us``); every rate below is
 in vehicle time. Free-running, frame k is released at
 ``t0_wall + t_k / speed`` (speed 0: as fast as possible), and incoming
-messages are processed while waiting. With ``lockstep`` enabled the loop
-engages lockstep as soon as a HIL_ACTUATOR_CONTROLS with
-``flags & 1`` arrives; from then on each frame is
+messages are processed while waiting. With ``lockstep`` enabled the vehicle
+clock does not start until a peer answers the first frame: its telemetry
+(HIGHRES_IMU last) is re-sent four times a wall second, commands, parameters
+and missions are served meanwhile, and the first HIL_ACTUATOR_CONTROLS with
+``flags & 1`` and that frame's ``time_usec`` engages lockstep. So a lockstep
+run does not depend on how long the peer took to connect (same seed, same
+answers: the same flight). From then on each frame is
 
 1. compute the motor command (fresh HIL_ACTUATOR_CONTROLS or the onboard
    controller on the flight stack's setpoint) and step one sensor period;
@@ -24,8 +28,13 @@ engages lockstep as soon as a HIL_ACTUATOR_CONTROLS with
    ``time_usec`` equal to that HIGHRES_IMU's arrives (it drives the next
    frame; all-NaN controls are a tick without override). If none arrives
    within SIM_LS_TMO seconds of wall-clock time, lockstep disengages
-   (STATUSTEXT) and the loop free-runs at ``speed`` until the peer engages
-   it again.
+   (STATUSTEXT) and the loop free-runs at ``speed`` until a lockstep answer
+   engages it again (from the frame being sent then).
+
+A frame's telemetry goes out as one UDP datagram holding several whole
+MAVLink packets in order (``_Link.BATCH_BYTES``), so the peer is woken once
+per frame; every MAVLink parser (pymavlink, MAVSDK, MAVProxy, QGC) reads
+several packets from one datagram.
 
 While the vehicle clock is stalled (lockstep wait) a HEARTBEAT still goes
 out once per wall-clock second so that ground stations keep the link.
@@ -34,7 +43,9 @@ Message rates (defaults, changeable by MAV_CMD_SET_MESSAGE_INTERVAL):
 HEARTBEAT 1 Hz, SYS_STATUS 1 Hz, SYSTEM_TIME 1 Hz, EXTENDED_SYS_STATE 5 Hz,
 ATTITUDE / ATTITUDE_QUATERNION / LOCAL_POSITION_NED 50 Hz,
 GLOBAL_POSITION_INT 10 Hz, GPS_RAW_INT 5 Hz, POSITION_TARGET_LOCAL_NED
-10 Hz, HOME_POSITION 0.5 Hz; HIGHRES_IMU every sensor frame (fixed: it is the
+10 Hz, HOME_POSITION 0.5 Hz, ODOMETRY off (when requested: the true state,
+pose in LOCAL_NED, velocity in BODY_FRD, for tracking-error reports);
+HIGHRES_IMU every sensor frame (fixed: it is the
 lockstep frame marker, so its interval cannot be changed); DISTANCE_SENSOR
 at each rangefinder's own rate (an interval sets all rangefinder periods,
 -1 stops them being sent). An interval shorter than the sensor period means
@@ -70,7 +81,7 @@ from companion.mission.schema import Mission
 from . import codec
 from .flightstack import (
     IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
-    Parameters, SendAck, SendCount, SendItem, SendRequest, StatusEvent, SEVERITY_CRITICAL,
+    Parameters, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
     SEVERITY_INFO, SEVERITY_WARNING,
 )
 from .sim import Simulation
@@ -161,9 +172,11 @@ class _Link:
     """One pymavlink connection with our own common-dialect MAVLink 2 encoder.
 
     UDP links are read and written on the socket directly (one ``recvfrom``
-    per datagram, one ``sendto`` per message and client): mavutil's
-    per-message bookkeeping costs more than the rest of a frame's telemetry.
-    Other link types go through mavutil.
+    per datagram; one ``sendto`` per client for a frame's telemetry, see
+    ``BATCH_BYTES``, and per reply): mavutil's per-message bookkeeping costs
+    more than the rest of a frame's telemetry. A ``udpin`` link serves every
+    address that has sent it something; replies go to the requester only.
+    Other link types (TCP, serial) go through mavutil.
     """
 
     def __init__(self, url: str) -> None:
@@ -182,6 +195,8 @@ class _Link:
         self.sock = self.conn.port if self.udp else None
         self.clients = self.conn.clients if self.udp else set()
         self.last_addr = None
+        self._batch: list | None = None
+        self._batch_len = 0
         port = getattr(self.conn, "port", None)
         self.fd = port.fileno() if isinstance(port, socket.socket) else self.conn.fd
 
@@ -189,7 +204,34 @@ class _Link:
     def has_peer(self) -> bool:
         return bool(self.clients) if self.server else True
 
+    #: A frame's telemetry is sent as few datagrams of at most this many
+    #: bytes (several whole MAVLink packets each, in order): on loopback one
+    #: ``sendto`` costs as much as encoding several messages, mostly by waking
+    #: the receiver, so a frame is one wake-up instead of four or five.
+    BATCH_BYTES = 1200
+
+    def begin_frame(self) -> None:
+        self._batch = []
+        self._batch_len = 0
+
+    def end_frame(self) -> None:
+        if self._batch:
+            self._transmit_now(b"".join(self._batch))
+        self._batch = None
+
     def transmit(self, buf: bytes) -> None:
+        batch = self._batch
+        if batch is None:
+            self._transmit_now(buf)
+            return
+        if self._batch_len + len(buf) > self.BATCH_BYTES and batch:
+            self._transmit_now(b"".join(batch))
+            batch.clear()
+            self._batch_len = 0
+        batch.append(buf)
+        self._batch_len += len(buf)
+
+    def _transmit_now(self, buf: bytes) -> None:
         try:
             if self.server:
                 for addr in self.clients:
@@ -320,6 +362,7 @@ class SitlServer:
         self._wall_epoch_us = int(time.time() * 1e6)
         self._last_hb_wall = 0.0
         self._rng_interval_disabled = False
+        self._last_ranges: dict = {}
         period = self.sim.sensor_period_us
         self._intervals = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
         # Ground truth for the companion's tracking statistics (ODOMETRY, float32
@@ -348,6 +391,7 @@ class SitlServer:
             ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: (codec.PACK_LOCAL_POSITION_NED, self._lpos_args),
             ID.MAVLINK_MSG_ID_ATTITUDE: (codec.PACK_ATTITUDE, self._attitude_args),
             ID.MAVLINK_MSG_ID_ODOMETRY: (codec.PACK_ODOMETRY, self._odometry_args),
+            ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: (codec.PACK_ATTITUDE_QUATERNION, self._attitude_q_args),
         }
         self._handlers = {
             "COMMAND_LONG": self._on_command_long,
@@ -480,6 +524,9 @@ class SitlServer:
             frame = sim.step_onboard(out.setpoint)
         self._frame = frame
         self.frames += 1
+        if frame.ranges:
+            for r in frame.ranges:
+                self._last_ranges[r.sensor_id] = r
         self._flush_events()
         self._send_telemetry(frame)
 
@@ -499,6 +546,8 @@ class SitlServer:
         due = self._next_due
         iv = self._intervals
         fast = self._fast
+        for l in links:
+            l.begin_frame()
         for mid in self._schedule:
             interval = iv[mid]
             if interval < 0 or now < due[mid]:
@@ -520,12 +569,13 @@ class SitlServer:
         if frame.ranges and not self._rng_interval_disabled:
             tb = now // 1000
             for r in frame.ranges:
-                msg = codec.distance_sensor(links[0].mav, tb, r)
+                args = codec.distance_sensor_args(tb, r)
                 for l in links:
-                    l.send(msg)
+                    l.send_fast(codec.PACK_DISTANCE_SENSOR, args)
         args = self._imu_args()
         for l in links:
             l.send_fast(codec.PACK_HIGHRES_IMU, args)
+            l.end_frame()
 
     # ------------------------------------------------------------------ encoders
     def _mav(self):
@@ -590,6 +640,10 @@ class SitlServer:
     def _lpos_args(self):
         f = self._frame
         return codec.local_position_ned_args(f.time_us // 1000, f.pos_enu_m, f.vel_enu_m_s)
+
+    def _attitude_q_args(self):
+        t = self._frame.truth
+        return codec.attitude_quaternion_args(self.sim.time_us // 1000, t.R, t.omega_flu_rad_s)
 
     def _odometry_args(self):
         t = self._frame.truth
@@ -670,6 +724,8 @@ class SitlServer:
         links = [l for l in self.links if l.has_peer]
         if not links or self._frame is None:
             return
+        for l in links:
+            l.begin_frame()
         for mid in self._schedule:
             if self._intervals[mid] < 0:
                 continue
@@ -686,6 +742,7 @@ class SitlServer:
         args = self._imu_args()
         for l in links:
             l.send_fast(codec.PACK_HIGHRES_IMU, args)
+            l.end_frame()
         self._last_hb_wall = time.monotonic()
 
     def _poll(self, timeout_s: float, until_released: bool = False) -> None:
@@ -866,12 +923,11 @@ class SitlServer:
             return mavlink.MAV_RESULT_DENIED, None
         mid = int(p[0])
         if mid == ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
-            f = self._frame
+            # the latest reading of each rangefinder (no extra ray cast: that
+            # would draw noise from the simulation's generator)
             tb = self.sim.time_us // 1000
-            rf = self.sim.sensors
-            msgs = [codec.distance_sensor(self._mav(), tb, rf.range_reading(r, self.sim.plant.p, self.sim.plant.R))
-                    for r in rf.rangefinders]
-            return mavlink.MAV_RESULT_ACCEPTED, msgs
+            msgs = [codec.distance_sensor(self._mav(), tb, r) for _, r in sorted(self._last_ranges.items())]
+            return (mavlink.MAV_RESULT_ACCEPTED if msgs else mavlink.MAV_RESULT_FAILED), msgs or None
         enc = self._encoders.get(mid)
         if enc is None or self._frame is None:
             return mavlink.MAV_RESULT_UNSUPPORTED, None

@@ -103,6 +103,37 @@ def test_attitude_quaternion_east_is_yaw_90(mav):
     assert (m.q1, m.q2, m.q3, m.q4) == pytest.approx((h, 0.0, 0.0, h), abs=1e-6)
 
 
+def random_rotations(n, seed=6):
+    """Uniform random rotations (normalised Gaussian quaternions, an independent construction)."""
+    rng = np.random.default_rng(seed)
+    for q in rng.normal(size=(n, 4)):
+        yield frames.quat_wxyz2rotmat(q / np.linalg.norm(q))
+
+
+def test_float_quaternion_paths_match_frames(mav):
+    for R in random_rotations(50):
+        R_nf = frames.R_enu_flu2ned_frd(R)
+        ref = frames.rotmat2quat_wxyz(R_nf)
+        m = codec.attitude_quaternion(mav, 0, R, (0.0, 0.0, 0.0))
+        assert (m.q1, m.q2, m.q3, m.q4) == pytest.approx(tuple(ref), abs=1e-12)
+
+
+def test_odometry_truth_round_trip(mav):
+    """Ground truth in ODOMETRY (pose NED, velocity body FRD) decodes back to ENU/FLU."""
+    rng = np.random.default_rng(7)
+    for R in random_rotations(10, seed=8):
+        p, v, w = rng.normal(size=(3, 3)) * np.array([[10.0], [2.0], [1.0]])
+        args = codec.odometry_truth_args(77, p, v, R, w)
+        msg = roundtrip(mav, mavlink.MAVLink_odometry_message(*args))
+        assert (msg.frame_id, msg.child_frame_id) == (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD)
+        np.testing.assert_allclose([msg.x, msg.y, msg.z], frames.enu2ned(p), atol=1e-5)
+        R_nf = frames.quat_wxyz2rotmat(msg.q)
+        np.testing.assert_allclose(frames.R_ned_frd2enu_flu(R_nf), R, atol=1e-6)
+        # body FRD velocity rotated back to the world gives the NED velocity
+        np.testing.assert_allclose(R_nf @ [msg.vx, msg.vy, msg.vz], frames.enu2ned(v), atol=1e-5)
+        np.testing.assert_allclose([msg.rollspeed, msg.pitchspeed, msg.yawspeed], frames.flu2frd(w), atol=1e-6)
+
+
 def test_global_position_and_heading(mav):
     origin = codec.GeoOrigin(44.8, -0.6, 30.0)
     home = (0.0, 0.0, 0.5)
@@ -247,6 +278,9 @@ def test_fast_packer_is_byte_identical_to_pymavlink():
         (codec.PACK_LOCAL_POSITION_NED, codec.local_position_ned_args(999, (1.0, 2.0, 3.0), (0, 0, 0))),
         (codec.PACK_LOCAL_POSITION_NED, codec.local_position_ned_args(0, (0, 0, 0), (0, 0, 0))),
         (codec.PACK_ATTITUDE, codec.attitude_args(5, np.eye(3), (0.1, 0.2, 0.3))),
+        (codec.PACK_ATTITUDE_QUATERNION, codec.attitude_quaternion_args(5, np.eye(3), (0.1, 0.2, 0.3))),
+        (codec.PACK_DISTANCE_SENSOR, codec.distance_sensor_args(9, RangeReading(1, 0, 2.5, 0.1, 10.0, 0.1, 0.1))),
+        (codec.PACK_ODOMETRY, codec.odometry_truth_args(9, (1, 2, 3), (0.5, 0, 0), np.eye(3), (0, 0, 0.1))),
     ]
     for seq, (packer, args) in enumerate(cases * 2):
         ref = packer.msg_class(*args).pack(a)

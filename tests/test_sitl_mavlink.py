@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 import os
 import socket
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -16,7 +18,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion import frames
-from sitl.api import SitlThread
+from sitl.api import SitlProcess, SitlThread
 from sitl.flightstack import PARAM_SPECS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -273,6 +275,68 @@ def test_offboard_takeoff_hold_land_disarm(gcs):
     assert abs(lp.z - p0.z) < 0.05
     for t in ("Mode OFFBOARD", "Armed in OFFBOARD", "Mode AUTO.LAND", "Landing detected"):
         assert t in gcs.texts
+
+
+def test_failsafes_actuator_stream_then_offboard_loss(gcs):
+    assert gcs.set_param("COM_FAIL_ACT_T", 1.0).param_value == pytest.approx(1.0)
+    p0, sp = offboard_flight(gcs, 2.0)
+    gcs.pump(1.5, sp)
+    z0 = -gcs.recv("LOCAL_POSITION_NED", 3.0).z
+    assert z0 == pytest.approx(-p0.z + 2.0, abs=0.1)
+    # Direct actuation overrides the onboard controller: 4 x 0.4 x 25 N < m g, it sinks.
+    def sp_and_motors():
+        sp()
+        gcs.mav.hil_actuator_controls_send(0, [0.4] * 4 + [0.0] * 12, 0, 0)
+    gcs.pump(0.25, sp_and_motors, period=0.01)
+    sunk = -gcs.recv("LOCAL_POSITION_NED", 3.0).z
+    assert sunk < z0 - 0.1 and "Actuator override active" in gcs.texts
+    # Stream stops: the onboard controller takes over and holds the (still fresh) setpoint.
+    gcs.pump(1.0, sp)
+    assert "Actuator stream lost: onboard controller holds" in gcs.texts
+    assert -gcs.recv("LOCAL_POSITION_NED", 3.0).z == pytest.approx(-p0.z + 2.0, abs=0.1)
+    # Setpoints stop: hold (AUTO.LOITER) for COM_FAIL_ACT_T, then land and disarm.
+    hold = gcs.recv("HEARTBEAT", 3.0, lambda m: mavutil.mode_string_v10(m) == "LOITER")
+    assert hold is not None and hold.system_status == mavlink.MAV_STATE_CRITICAL
+    assert "Failsafe: offboard setpoints lost, holding" in gcs.texts
+    assert gcs.recv("HEARTBEAT", 3.0, lambda m: mavutil.mode_string_v10(m) == "LAND") is not None
+    assert "Failsafe: landing" in gcs.texts
+    assert gcs.recv("HEARTBEAT", 5.0, lambda m: not m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED) is not None
+    assert abs(gcs.recv("LOCAL_POSITION_NED", 3.0).z - p0.z) < 0.05
+
+
+def test_extra_output_link(tmp_path):
+    sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sink.bind(("127.0.0.1", 0))
+    sink.settimeout(3.0)
+    out = f"udpout:127.0.0.1:{sink.getsockname()[1]}"
+    try:
+        with SitlThread(MISSION, outs=[out], speed=4.0):
+            rx = mavlink.MAVLink(None)
+            types = set()
+            end = time.monotonic() + 3.0
+            while not {"HEARTBEAT", "HIGHRES_IMU"} <= types and time.monotonic() < end:
+                for m in rx.parse_buffer(sink.recv(65535)) or []:
+                    types.add(m.get_type())
+            assert {"HEARTBEAT", "HIGHRES_IMU"} <= types      # a ground station on --out sees the vehicle
+    finally:
+        sink.close()
+
+
+def test_cli_bad_input_and_clean_stop(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    run = lambda *a: subprocess.run([sys.executable, "-m", "sitl", *a], capture_output=True, text=True,   # noqa: E731
+                                    env=env, timeout=60)
+    r = run(str(tmp_path / "nope.yaml"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "nope.yaml: no such file" in r.stderr
+    r = run(str(MISSION), "--listen", "udpin:localhost")
+    assert r.returncode == 2 and "--listen" in r.stderr and r.stderr.count("\n") == 1
+    r = run(str(MISSION), "--sensor-hz", "300")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    with SitlProcess(MISSION, speed=1.0) as proc:
+        c = Client(proc.url)
+        c.hello()
+        c.close()
+        assert proc.stop() == 0                               # SIGTERM: clean exit
 
 
 def test_garbage_never_crashes_then_flies(sitl, gcs):
