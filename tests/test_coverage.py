@@ -18,7 +18,8 @@ from companion.maps.grid import OccupancyGrid
 from companion.mission.schema import CoverageConfig
 
 RES = 0.1
-LCAS = Path("/work/shared/data/lcas-vineyard-stage0/vineyard_stage0_map.yaml")
+# A real SLAM map of a simulated vineyard (LCAS bacchus_lcas, MIT; see its README).
+LCAS = Path(__file__).parent / "data" / "lcas-vineyard-stage0" / "vineyard_stage0_map.yaml"
 
 
 def vineyard(angle_deg=0.0, n_rows=5, spacing=3.0, length=20.0, width=0.3, head=4.0, border=1.0,
@@ -100,7 +101,6 @@ def test_detect_row_spacing_other_spacing():
     assert angle_diff_deg(orientation, -12.0) <= 1.0
 
 
-@pytest.mark.skipif(not LCAS.exists(), reason="LCAS map not available")
 def test_detect_row_spacing_on_lcas_laser_map():
     from companion.maps.ogm import load_ogm
     grid = load_ogm(LCAS)
