@@ -12,9 +12,10 @@ Sequence (every time is the vehicle's, from HIGHRES_IMU ``time_usec``)::
                DO_SET_MODE OFFBOARD, ARM
     takeoff    smooth segments (7th-order, C3 smoothstep): a vertical climb
                from the ground position to the height of the trajectory's
-               first point, then a level transfer to that point (the SITL
-               starts the vehicle where the map is free, not necessarily
-               under the first way-point)
+               first point, then a level transfer to that point (the vehicle
+               may start anywhere free); launched within
+               ``LAUNCH_TOLERANCE_M`` of the first point (``companion demo``
+               sets it down there), just the climb to that point
     hold       hover there ``hold_s`` (the takeoff transient dies out)
     trajectory the planned trajectory
     hover      ``hover_s`` at its last point
@@ -63,6 +64,10 @@ PHASES = ("connect", "setup", "upload", "preflight", "takeoff", "hold", "traject
 _PHASE_CODE = {p: i for i, p in enumerate(PHASES)}
 
 _SENSOR_DOWN = mavlink.MAV_SENSOR_ROTATION_PITCH_270
+
+#: A vehicle armed within this horizontal distance (m) of the trajectory's
+#: first point climbs straight to it (no separate level transfer).
+LAUNCH_TOLERANCE_M = 0.05
 
 #: Streams the runner never reads (muted by ``companion demo``).
 UNUSED_STREAMS = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
@@ -313,6 +318,7 @@ class MissionRunner:
         self._nav_t = None
         self._truth = None
         self._R_true = None
+        self._odom = None               # last ODOMETRY, not yet decoded
         self.truth_source = "estimate"
         self._controlling = False
         self._next_sp_t = -math.inf
@@ -357,10 +363,18 @@ class MissionRunner:
     def _on_odometry(self, m) -> None:
         if m.get_srcComponent() != self.conn.target_component:
             return
-        t = codec.decode_odometry(m)
-        self._truth = t.pos_enu_m
-        self._R_true = t.R_enu_flu
+        # Decoded when used (``_truth_update``, after the frame's answer went
+        # out): the controller never reads the true state.
+        self._odom = m
         self.truth_source = "sim_truth"
+
+    def _truth_update(self) -> None:
+        m = self._odom
+        if m is not None:
+            self._odom = None
+            t = codec.decode_odometry(m)
+            self._truth = t.pos_enu_m
+            self._R_true = t.R_enu_flu
 
     def _on_attitude(self, m) -> None:
         if self.truth_source != "sim_truth":
@@ -417,11 +431,13 @@ class MissionRunner:
                 except (ValueError, ZeroDivisionError, OverflowError):
                     # a non-finite or degenerate measurement: let the vehicle fly this frame
                     self.n_control_faults += 1
-        conn.send(codec.encode_hil_actuator_controls(conn.mav, t_us, cmd, self.armed))
+        conn.send_actuators(t_us, cmd, self.armed)
         if ref is not None:
             self._record(t, ref, out)
 
     def _record(self, t: float, ref: RefSample, out) -> None:
+        if self._odom is not None:
+            self._truth_update()
         truth = self._truth if self._truth is not None else self._pos
         est = self._pos if self._pos is not None else _NAN3
         if truth is not None:
@@ -468,7 +484,7 @@ class MissionRunner:
             return self._hold_last
         if ph == "takeoff":
             dt = t - self._t_arm
-            if dt < self._climb_T:
+            if dt < self._climb_T or self._transfer_T <= 0.0:
                 p, v, a, j, s = smooth_segment(self._climb_from, self._climb_top, self._climb_T, dt)
             else:
                 p, v, a, j, s = smooth_segment(self._climb_top, self._hold_first.p, self._transfer_T,
@@ -621,14 +637,21 @@ class MissionRunner:
         t_arm = self.t_s
         self._t_arm = t_arm
         self._climb_from = tuple(self._pos)
-        self._climb_top = (self._pos[0], self._pos[1], max(first.p[2], self._pos[2]))
-        self._climb_T = climb_duration_s(self._climb_top[2] - self._pos[2], cfg.climb_speed_m_s)
-        self._transfer_T = climb_duration_s(math.dist(self._climb_top, first.p), cfg.transfer_speed_m_s, 1.0)
+        if math.dist(self._pos[:2], first.p[:2]) < LAUNCH_TOLERANCE_M:
+            # Launched under the first point (``companion demo``): one climb
+            # straight to it, no level transfer.
+            self._climb_top = tuple(first.p)
+            self._transfer_T = 0.0
+        else:
+            self._climb_top = (self._pos[0], self._pos[1], max(first.p[2], self._pos[2]))
+            self._transfer_T = climb_duration_s(math.dist(self._climb_top, first.p), cfg.transfer_speed_m_s, 1.0)
+        self._climb_T = climb_duration_s(math.dist(self._climb_from, self._climb_top), cfg.climb_speed_m_s)
         self._t_hold = t_arm + self._climb_T + self._transfer_T
         # Heading of the body y axis (the pointing axis b2) at arming, from the
         # vehicle's attitude report; the takeoff turns it toward s0.
         s0 = first.s
         psi1 = math.atan2(s0[1], s0[0])
+        self._truth_update()
         R = self._R_true
         psi0 = psi1 if R is None else math.atan2(R[1, 1], R[0, 1])
         self._psi_arm = psi0

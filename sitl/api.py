@@ -15,6 +15,7 @@ Example
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import signal
@@ -46,6 +47,18 @@ def peer_url(listen: str) -> str:
     return listen
 
 
+def _check_start(start):
+    """``start`` as (x_m, y_m, yaw_deg) floats, or None; ValueError if malformed."""
+    if start is None:
+        return None
+    st = tuple(float(v) for v in start)
+    if len(st) == 2:
+        st += (0.0,)
+    if len(st) != 3 or not all(math.isfinite(v) for v in st):
+        raise ValueError("start must be (x_m, y_m[, yaw_deg]), finite numbers")
+    return st
+
+
 class SitlThread:
     """The SITL in a daemon thread of this process.
 
@@ -60,11 +73,14 @@ class SitlThread:
         Real-time factor when free-running (0: as fast as possible).
     seed : int or None
     physics_hz, sensor_hz : int
+    start : (x_m, y_m) or (x_m, y_m, yaw_deg), optional
+        Launch position on the map (ENU metres, z from the DEM) and heading
+        (ENU degrees from east, counter-clockwise); ``sitl --start``.
     """
 
     def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
                  speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
-                 sensor_hz: int = 250) -> None:
+                 sensor_hz: int = 250, start=None) -> None:
         self.mission_path = Path(mission_path)
         self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
         self.outs = tuple(outs)
@@ -73,6 +89,7 @@ class SitlThread:
         self.seed = seed
         self.physics_hz = physics_hz
         self.sensor_hz = sensor_hz
+        self.start_pose = _check_start(start)
         self.server = None
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
@@ -89,7 +106,8 @@ class SitlThread:
 
         mission = load_mission(self.mission_path)
         cfg = ServerConfig(listen=self.listen, outs=self.outs, lockstep=self.lockstep, speed=self.speed,
-                           seed=self.seed, physics_hz=self.physics_hz, sensor_hz=self.sensor_hz)
+                           seed=self.seed, physics_hz=self.physics_hz, sensor_hz=self.sensor_hz,
+                           start=self.start_pose)
         self.server = SitlServer(mission, cfg)
         self.server.open()   # readiness: the sockets exist when start() returns
 
@@ -125,13 +143,19 @@ class SitlThread:
 class SitlProcess:
     """The SITL as a ``python -m sitl`` subprocess (same parameters as
     ``SitlThread``). ``start()`` waits for the ready line; ``stop()`` sends
-    SIGTERM (then SIGKILL after ``timeout_s``)."""
+    SIGTERM (then SIGKILL after ``timeout_s``).
+
+    ``start="later"`` lets a caller launch the process before it knows the
+    launch pose (the process imports its modules meanwhile): ``launch()``,
+    then ``set_start((x, y, yaw_deg))`` (``sitl --start -`` reads it from
+    stdin), then ``wait_ready()``.
+    """
 
     READY_TIMEOUT_S = 30.0
 
     def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
                  speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
-                 sensor_hz: int = 250, python: str = sys.executable) -> None:
+                 sensor_hz: int = 250, python: str = sys.executable, start=None) -> None:
         self.mission_path = Path(mission_path)
         self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
         self.outs = tuple(outs)
@@ -141,6 +165,8 @@ class SitlProcess:
         self.physics_hz = physics_hz
         self.sensor_hz = sensor_hz
         self.python = python
+        self.deferred = isinstance(start, str) and start == "later"
+        self.start_pose = None if self.deferred else _check_start(start)
         self.proc: subprocess.Popen | None = None
         self._stderr = None
 
@@ -158,18 +184,45 @@ class SitlProcess:
             cmd.append("--lockstep")
         if self.seed is not None:
             cmd += ["--seed", str(int(self.seed))]
+        if self.deferred:
+            cmd.append("--start=-")
+        elif self.start_pose is not None:
+            # one token "--start=..." so a negative X is not taken for an option
+            cmd.append("--start=" + ",".join(repr(v) for v in self.start_pose))
         return cmd
 
     def start(self) -> "SitlProcess":
-        from .cli import READY_MARKER
+        """Launch and wait until the SITL is ready (its sockets are open)."""
+        return self.launch().wait_ready()
 
+    def launch(self) -> "SitlProcess":
+        """Start the process without waiting for it."""
         env = dict(os.environ)
         root = str(Path(__file__).resolve().parents[1])
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         # stderr to a file, not a pipe: a long run must never block on a full pipe.
         self._stderr = tempfile.TemporaryFile(mode="w+")
         self.proc = subprocess.Popen(self.command(), stdout=subprocess.PIPE, stderr=self._stderr,
+                                     stdin=subprocess.PIPE if self.deferred else subprocess.DEVNULL,
                                      text=True, env=env)
+        return self
+
+    def set_start(self, start) -> None:
+        """The launch pose of a ``start="later"`` process: (x_m, y_m[, yaw_deg])."""
+        pose = _check_start(start)
+        if not self.deferred or self.proc is None or self.proc.stdin is None:
+            raise RuntimeError("set_start() needs start='later' and launch()")
+        self.start_pose = pose
+        try:
+            self.proc.stdin.write(",".join(repr(v) for v in pose) + "\n")
+            self.proc.stdin.close()
+        except OSError:   # the process already died: wait_ready() reports why
+            pass
+
+    def wait_ready(self) -> "SitlProcess":
+        """Wait for the ready line; LinkError (with the SITL's last stderr line) if it exits or times out."""
+        from .cli import READY_MARKER
+
         deadline = time.monotonic() + self.READY_TIMEOUT_S
         line = ""
         while time.monotonic() < deadline:
@@ -200,8 +253,12 @@ class SitlProcess:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait(timeout_s)
-        if p.stdout is not None:
-            p.stdout.close()
+        for f in (p.stdout, p.stdin):
+            if f is not None:
+                try:
+                    f.close()
+                except OSError:
+                    pass
         self._stderr.close()
         self.proc = None
         return p.returncode

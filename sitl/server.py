@@ -67,6 +67,7 @@ import dataclasses
 import math
 import select
 import socket
+import struct
 from struct import error as struct_error
 import threading
 import time
@@ -153,6 +154,10 @@ class ServerConfig:
     seed : int or None
         Overrides the mission's ``sim.seed``.
     physics_hz, sensor_hz : int
+    start : (x_m, y_m, yaw_deg) or None
+        Launch position (ENU metres on the map; z from the DEM) and heading
+        (ENU degrees, body x from east, counter-clockwise). None: the
+        mission's ``sim.start_enu_m`` or the default free cell, heading east.
     """
 
     listen: str = "udpin:127.0.0.1:14540"
@@ -162,10 +167,18 @@ class ServerConfig:
     seed: int | None = None
     physics_hz: int = 1000
     sensor_hz: int = 250
+    start: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if not (self.speed >= 0 and math.isfinite(self.speed)):
             raise ValueError("speed must be >= 0 (0: as fast as possible)")
+        if self.start is not None:
+            st = tuple(float(v) for v in self.start)
+            if len(st) == 2:
+                st = st + (0.0,)
+            if len(st) != 3 or not all(math.isfinite(v) for v in st):
+                raise ValueError("start must be (x_m, y_m[, yaw_deg]), finite")
+            object.__setattr__(self, "start", st)
 
 
 class _Link:
@@ -193,6 +206,13 @@ class _Link:
         self.udp = isinstance(self.conn, mavutil.mavudp)
         self.server = self.udp and bool(self.conn.udp_server)
         self.sock = self.conn.port if self.udp else None
+        self._rcvtimeo = None
+        if self.udp:
+            # Blocking socket with a kernel receive timeout: waiting for the
+            # lockstep answer is one recvfrom() (``recv_datagram(wait=True)``)
+            # instead of select() + recvfrom(); MSG_DONTWAIT reads without waiting.
+            self.sock.setblocking(True)
+            self._set_rcvtimeo(0.05)
         self.clients = self.conn.clients if self.udp else set()
         self.last_addr = None
         self._batch: list | None = None
@@ -275,11 +295,23 @@ class _Link:
             return
         self.transmit(buf)
 
-    def recv_datagram(self) -> bytes | None:
-        """Next UDP datagram, or None when nothing is waiting (UDP links only)."""
+    def _set_rcvtimeo(self, timeout_s: float) -> None:
+        sec = int(timeout_s)
+        usec = max(int((timeout_s - sec) * 1e6), 1 if sec == 0 else 0)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("@ll", sec, usec))
+        self._rcvtimeo = timeout_s
+
+    def recv_datagram(self, wait_s: float = 0.0) -> bytes | None:
+        """Next UDP datagram, waiting up to ``wait_s`` seconds (0: only what is
+        queued now), or None (UDP links only)."""
         try:
-            data, addr = self.sock.recvfrom(65535)
-        except OSError:   # BlockingIOError, ECONNREFUSED after an ICMP error, ...
+            if wait_s > 0:
+                if wait_s != self._rcvtimeo:
+                    self._set_rcvtimeo(wait_s)
+                data, addr = self.sock.recvfrom(65535)
+            else:
+                data, addr = self.sock.recvfrom(65535, socket.MSG_DONTWAIT)
+        except OSError:   # timeout/EAGAIN, ECONNREFUSED after an ICMP error, EINTR, ...
             return None
         if self.server:
             self.clients.add(addr)
@@ -340,8 +372,12 @@ class SitlServer:
         seed = mission.sim.seed if config.seed is None else int(config.seed)
         self.seed = seed
         world = load_world(mission)
+        start_xy, start_yaw = None, 0.0
+        if config.start is not None:
+            start_xy, start_yaw = config.start[:2], math.radians(config.start[2])
         self.sim = Simulation(mission, np.random.default_rng(seed), physics_hz=config.physics_hz,
-                              sensor_hz=config.sensor_hz, world=world)
+                              sensor_hz=config.sensor_hz, world=world, start_enu_m=start_xy,
+                              start_yaw_rad=start_yaw)
         nz = mission.sim.noise
         self.params = Parameters(initial={
             "SIM_VEC_VAR": nz.vector_variance, "SIM_GYRO_VAR": nz.gyro_variance,
@@ -712,10 +748,13 @@ class SitlServer:
         second so a peer that connects late finds it (and so the run does
         not depend on how long the peer took to start)."""
         last = 0.0
+        n_peers = 0
         while not self._stop.is_set() and not (self.lockstep_engaged and self._released):
             now = time.monotonic()
-            if now - last >= 0.25:
+            peers = sum(len(l.clients) for l in self.links)
+            if now - last >= 0.25 or peers > n_peers:   # at once for a new peer
                 last = now
+                n_peers = peers
                 self._resend_frame()
             self._poll(0.05, until_released=True)
 
@@ -748,6 +787,9 @@ class SitlServer:
     def _poll(self, timeout_s: float, until_released: bool = False) -> None:
         """Read and handle everything available; wait up to ``timeout_s`` for the first."""
         links = self.links
+        if timeout_s > 0 and len(links) == 1 and links[0].udp:
+            self._poll_one(links[0], timeout_s, until_released)
+            return
         if timeout_s > 0:
             try:
                 ready, _, _ = select.select([l.fd for l in links], [], [], timeout_s)
@@ -780,6 +822,28 @@ class SitlServer:
                     self._handle(link, msg)
                 if until_released and self._released:
                     return
+
+    def _poll_one(self, link: _Link, timeout_s: float, until_released: bool) -> None:
+        """``_poll`` for a single UDP link: the first read blocks in the kernel
+        (SO_RCVTIMEO) instead of in select(), later reads do not wait."""
+        # A steady timeout value avoids a setsockopt() per frame.
+        wait = 0.05 if timeout_s >= 0.05 else timeout_s
+        for k in range(1000):
+            try:
+                data = link.recv_datagram(wait if k == 0 else 0.0)
+                if data is None:
+                    return
+                ans = codec.decode_actuator_datagram(data)
+                msgs = () if ans is not None else link.parse(data)
+            except Exception:   # garbage must never stop the vehicle
+                self.stats["bad_packets"] += 1
+                return
+            if ans is not None:
+                self._on_answer(ans)
+            for msg in msgs:
+                self._handle(link, msg)
+            if until_released and self._released:
+                return
 
     # ------------------------------------------------------------------ dispatch
     def _handle(self, link: _Link, msg) -> None:

@@ -403,3 +403,115 @@ def test_mission_rejected_and_link_timeout():
     finally:
         rx.close()
         conn.close()
+
+
+# --- fast framing of the per-frame messages (codec.split_datagram / pack_hil_actuator_controls) ---
+
+
+def _random_fields(rng, msg_class):
+    """Random field values (``*_encode`` argument order) that survive a float32/int round trip."""
+    vals = []
+    for name, ftype, n in zip(msg_class.fieldnames, msg_class.fieldtypes,
+                              [msg_class.array_lengths[msg_class.ordered_fieldnames.index(f)]
+                               for f in msg_class.fieldnames]):
+        def one():
+            if ftype == "float":
+                return float(np.float32(rng.normal(0, 100)))
+            bits = {"uint8_t": 8, "int8_t": 8, "uint16_t": 16, "uint32_t": 32, "uint64_t": 63}[ftype]
+            v = int(rng.integers(0, 2 ** bits))
+            return v - 128 if ftype == "int8_t" and v >= 128 else v
+        vals.append([one() for _ in range(n)] if n else one())
+    return vals
+
+
+@pytest.mark.parametrize("cls", [mavlink.MAVLink_highres_imu_message, mavlink.MAVLink_local_position_ned_message,
+                                 mavlink.MAVLink_odometry_message, mavlink.MAVLink_distance_sensor_message])
+def test_fast_decoders_match_pymavlink(cls):
+    rng = np.random.default_rng(7)
+    mav = _vehicle_mav()
+    for k in range(40):
+        fields = _random_fields(rng, cls)
+        if k % 4 == 0:   # trailing zeros: MAVLink 2 truncates the payload
+            fields[-1] = [0] * len(fields[-1]) if isinstance(fields[-1], list) else 0
+        buf = bytes(cls(*fields).pack(mav))
+        ref = mavlink.MAVLink(None).parse_buffer(buf)[0]
+        parts = list(codec.split_datagram(buf))
+        assert len(parts) == 1 and isinstance(parts[0], codec.FastMessage)
+        m = parts[0]
+        assert m.get_type() == ref.get_type() and m.get_msgId() == ref.get_msgId()
+        assert (m.get_srcSystem(), m.get_srcComponent()) == (1, 1)
+        assert bytes(m.get_msgbuf()) == buf
+        for name in cls.fieldnames:
+            a, b = getattr(m, name), getattr(ref, name)
+            assert a == b or (isinstance(a, float) and math.isnan(a) and math.isnan(b)), name
+        assert m.to_dict() == {k2: v for k2, v in ref.to_dict().items()}
+
+
+def test_split_datagram_order_garbage_and_fallback():
+    mav = _vehicle_mav()
+    lpos = bytes(mav.local_position_ned_encode(5, 1, 2, 3, 4, 5, 6).pack(mav))
+    hb = bytes(mav.heartbeat_encode(2, 12, 0, 0, 3).pack(mav))
+    imu = bytes(mav.highres_imu_encode(7, *([0.5] * 13), 0, 0).pack(mav))
+    parts = list(codec.split_datagram(lpos + hb + imu))
+    # fast types decoded, the heartbeat handed over as its own packet, order kept
+    assert [type(p) is bytes for p in parts] == [False, True, False]
+    assert parts[1] == hb and parts[0].time_boot_ms == 5 and parts[2].time_usec == 7
+    bad = bytearray(lpos)
+    bad[-1] ^= 0xFF                                       # CRC failure: the rest goes to pymavlink
+    parts = list(codec.split_datagram(hb + bytes(bad) + imu))
+    assert parts == [hb, bytes(bad) + imu]
+    assert list(codec.split_datagram(lpos[:-3])) == [lpos[:-3]]          # truncated
+    assert list(codec.split_datagram(b"\x01\x02" + lpos)) == [b"\x01\x02" + lpos]   # garbage first
+    rng = np.random.default_rng(3)
+    for _ in range(200):                                  # noise never raises
+        for p in codec.split_datagram(rng.bytes(int(rng.integers(1, 400)))):
+            assert isinstance(p, (bytes, codec.FastMessage))
+
+
+@pytest.mark.parametrize("cmd,armed", [(None, True), ((0.1, 0.2, 0.3, 0.4), True), ((0.0, 0.0, 0.0, 0.0), False),
+                                       ((1.0, 0.999, 0.5, 0.25), False)])
+def test_hil_actuator_packer_is_byte_identical(cmd, armed):
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
+    rng = np.random.default_rng(11)
+    for seq in (0, 1, 200, 255):
+        mav.seq = seq
+        t = int(rng.integers(0, 2 ** 63))
+        c = None if cmd is None else tuple(float(np.float32(x)) for x in cmd)
+        ref = bytes(codec.encode_hil_actuator_controls(mav, t, c, armed).pack(mav))
+        assert codec.pack_hil_actuator_controls(seq, 1, 191, t, c, armed) == ref
+
+
+def test_fast_link_round_trip_over_udp_with_tlog(tmp_path):
+    """The raw-socket path: frames decoded fast, others by pymavlink, answers
+    packed by struct; every packet recorded in the .tlog in order."""
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    vehicle.bind(("127.0.0.1", 0))
+    vehicle.settimeout(2.0)
+    port = vehicle.getsockname()[1]
+    tlog = TlogWriter(tmp_path / "f.tlog").open()
+    conn = Connection(f"udpout:127.0.0.1:{port}", tlog=tlog).open()
+    mav = _vehicle_mav()
+    try:
+        conn.send_heartbeat()
+        _, peer = vehicle.recvfrom(4096)
+        for k in range(3):
+            frame = (mav.local_position_ned_encode(k, 1.0, 2.0, -3.0, 0, 0, 0).pack(mav)
+                     + mav.heartbeat_encode(2, 12, 0, 0, 3).pack(mav)
+                     + mav.highres_imu_encode(1000 * k, *([0.25] * 13), 0, 0).pack(mav))
+            vehicle.sendto(bytes(frame), peer)
+            got = []
+            deadline = time.monotonic() + 2.0
+            while not (got and got[-1].get_type() == "HIGHRES_IMU") and time.monotonic() < deadline:
+                got += conn.poll(0.05)
+            assert [m.get_type() for m in got] == ["LOCAL_POSITION_NED", "HEARTBEAT", "HIGHRES_IMU"]
+            conn.send_actuators(got[-1].time_usec, (0.5, 0.5, 0.5, 0.5), True)
+            data = vehicle.recv(4096)
+            ans = mavlink.MAVLink(None).parse_buffer(data)[0]
+            assert ans.get_type() == "HIL_ACTUATOR_CONTROLS" and ans.time_usec == 1000 * k
+            assert list(ans.controls[:4]) == [0.5] * 4 and ans.flags == 1
+    finally:
+        conn.close()
+        tlog.close()
+        vehicle.close()
+    types = [r.msg.get_type() for r in read_tlog(tmp_path / "f.tlog")]
+    assert types == ["HEARTBEAT"] + ["LOCAL_POSITION_NED", "HEARTBEAT", "HIGHRES_IMU", "HIL_ACTUATOR_CONTROLS"] * 3

@@ -456,3 +456,24 @@ def test_signing(gcs):
     assert rx.parse_buffer(bytes(m.get_msgbuf()))[0].get_signed()    # verifies with the key
     gcs.mav.setup_signing_send(1, 1, bytes(32), 0)                   # all-zero key: off
     assert gcs.recv("HIGHRES_IMU", 3.0, lambda m: not signed(m)) is not None
+
+
+def test_launch_pose_option(capsys):
+    """``--start X,Y[,YAW_DEG]``: the vehicle is set down there (z on the ground), heading
+    YAW_DEG from east; malformed values are one line and exit 2."""
+    from sitl.cli import main, parse_start
+
+    assert parse_start("3, -4") == (3.0, -4.0, 0.0)
+    assert parse_start("3,4,90") == (3.0, 4.0, 90.0)
+    for bad in ("x,2", "1", "1,2,3,4", "nan,1", "1,inf"):
+        assert main([str(MISSION), "--start", bad]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--start" in err
+    with SitlThread(MISSION, speed=0.0, start=(6.5, 4.25, 90.0)) as s:
+        t = s.server.sim.truth
+        assert tuple(t.pos_enu_m[:2]) == pytest.approx((6.5, 4.25), abs=1e-12)
+        assert t.landed and t.pos_enu_m[2] == pytest.approx(s.server.sim.world.ground_height(6.5, 4.25))
+        # body x (first column of R_enu_flu) points north for a heading of 90 deg
+        assert np.asarray(t.R)[:, 0] == pytest.approx([0.0, 1.0, 0.0], abs=1e-12)
+    p = SitlProcess(MISSION, start=(-1.5, 2.0))
+    assert "--start=-1.5,2.0,0.0" in p.command()

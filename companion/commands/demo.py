@@ -10,6 +10,7 @@ Figs. 14-18 style figures (``companion.flight_plot``).
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from pathlib import Path
@@ -52,6 +53,30 @@ def add_arguments(parser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
 
+def launch_pose(trajectory, target_enu_m) -> tuple[float, float, float]:
+    """Where a user sets the drone down: under the trajectory's first point,
+    facing its first pointing direction.
+
+    Returns
+    -------
+    (x_m, y_m, yaw_deg) : ENU map metres and the heading of the body x axis
+    (ENU degrees from east, CCW) for which the pointing axis (body y, b2 of
+    eq. 22 with b3 vertical) lies along the horizontal part of s(t0).
+    """
+    import numpy as np
+
+    from ..runner import pointing_at, setpoint_yaw_enu
+
+    smp = trajectory.sample(np.array([float(trajectory.t0)]))
+    p0 = tuple(float(c) for c in smp.p[0])
+    if smp.pointing is not None:
+        s0 = tuple(float(c) for c in smp.pointing[0])
+    else:
+        s0 = pointing_at(p0, tuple(float(c) for c in target_enu_m))
+    yaw = setpoint_yaw_enu(s0, (0.0, 0.0, 0.0))
+    return (p0[0], p0[1], math.degrees(yaw))
+
+
 def _table(rows: list[tuple[str, str]]) -> str:
     w = max(len(k) for k, _ in rows)
     line = "+" + "-" * (w + 2) + "+" + "-" * 34 + "+"
@@ -65,6 +90,23 @@ def _table(rows: list[tuple[str, str]]) -> str:
 def run(args) -> int:
     from sitl.api import SitlProcess
 
+    t_start = time.monotonic()
+    mission_path = resolve_mission(args.mission)
+    if args.cut is not None and not args.cut > 0:
+        raise InputError("--cut", "must be > 0 seconds")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}", "exists and is not a directory")
+    # The SITL process starts now (it imports and loads its world while we
+    # plan) and gets its launch pose once the plan exists.
+    sitl = SitlProcess(mission_path, lockstep=True, speed=1.0, start="later").launch()
+    try:
+        return _plan_and_fly(args, mission_path, out, sitl, t_start)
+    finally:
+        sitl.stop()
+
+
+def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
     from ..mission import load_mission
     from ..plan_io import plan_json_text, plan_to_json_dict
     from ..progress import Progress
@@ -74,13 +116,6 @@ def run(args) -> int:
 
     ATTITUDE = 30   # MAVLINK_MSG_ID_ATTITUDE: the SITL's ground-truth ODOMETRY carries the attitude
 
-    t_start = time.monotonic()
-    mission_path = resolve_mission(args.mission)
-    if args.cut is not None and not args.cut > 0:
-        raise InputError("--cut", "must be > 0 seconds")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}", "exists and is not a directory")
     mission = load_mission(mission_path)
 
     from ..planner import plan_mission
@@ -94,11 +129,17 @@ def run(args) -> int:
     fp = FlightPlan(plan.trajectory, plan.waypoints.p_enu_m, plan.target_enu_m,
                     float(plan.stats.coverage_fraction), plan)
     progress = Progress(enabled=not args.quiet)
-    # speed 1 until the companion engages lockstep: the vehicle clock barely
-    # moves while the link comes up; from then on the pair runs flat out.
-    with SitlProcess(mission_path, lockstep=True, speed=1.0) as sitl:
+    # The vehicle starts where a user would set it down: under the first
+    # way-point, facing the first pointing direction (take-off = climb + hold).
+    # The SITL runs at speed 1 until the companion engages lockstep (the
+    # vehicle clock barely moves while the link comes up), then flat out.
+    sitl.set_start(launch_pose(plan.trajectory, plan.target_enu_m))
+    sitl.wait_ready()
+    try:
         result = execute(mission, fp, sitl.url, args.control, str(out / "flight.tlog"), progress, args.cut,
                          {"mute_streams": UNUSED_STREAMS + (ATTITUDE,)})
+    finally:
+        sitl.stop()
     rep = result.report
     write_report(rep, out / "report.json")
     t_flown = time.monotonic()

@@ -19,12 +19,15 @@ from __future__ import annotations
 
 import os
 import select
+import socket
+import struct
 import time
 from typing import Callable, Iterable
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from ..errors import CommandRejected, InputError, LinkError
+from . import codec
 from .tlog import TlogWriter
 
 COMPANION_SYSTEM_ID = 1
@@ -86,6 +89,10 @@ class Connection:
         self._fd = None
         self._is_udp = url.startswith(("udp",))
         self._last_heartbeat_s: float | None = None
+        self._sock = None          # UDP socket read/written directly (see ``open``)
+        self._dest = None          # udpout: the vehicle's resolved address
+        self._rcvtimeo = None      # the socket's current SO_RCVTIMEO (s)
+        self._rx_log = None        # (time_usec, packets) received, not yet in the tlog
 
     # --- lifetime ---------------------------------------------------------
 
@@ -105,9 +112,24 @@ class Connection:
             self._fd = self._conn.fd if self._conn.fd is not None else self._conn.port.fileno()
         except AttributeError:
             self._fd = None
+        if isinstance(self._conn, mavutil.mavudp) and not self._conn.broadcast:
+            # Read and write the UDP socket directly: a blocking socket with a
+            # kernel receive timeout (SO_RCVTIMEO) waits for the next frame in
+            # one recvfrom() instead of select() + recvfrom() + a failing
+            # recvfrom(); MSG_DONTWAIT polls without waiting.
+            self._sock = self._conn.port
+            self._sock.setblocking(True)
+            if not self._conn.udp_server:
+                host, port = self._conn.destination_addr
+                try:
+                    self._dest = (socket.gethostbyname(host), port)
+                except OSError as exc:
+                    raise LinkError(f"cannot resolve {self.url}: {exc}") from None
         return self
 
     def close(self) -> None:
+        self._flush_rx()
+        self._sock = None
         if self._conn is not None:
             try:
                 self._conn.close()
@@ -132,10 +154,55 @@ class Connection:
 
     def send(self, msg) -> None:
         """Pack, send and record one message."""
-        self._mav.send(msg)
+        if self._sock is None:
+            self._mav.send(msg)
+        else:
+            mav = self._mav
+            buf = msg.pack(mav)
+            mav.seq = (mav.seq + 1) % 256
+            mav.total_packets_sent += 1
+            mav.total_bytes_sent += len(buf)
+            self._write(buf)
         self.n_sent += 1
         if self.tlog is not None:
+            self._flush_rx()
             self.tlog.write(msg.get_msgbuf())
+
+    def _flush_rx(self) -> None:
+        """Record the packets of the last datagram received (deferred until
+        after the answer went out: in lockstep the vehicle waits for it)."""
+        rx = self._rx_log
+        if rx is not None:
+            self._rx_log = None
+            if self.tlog is not None:
+                self.tlog.write_many(rx[1], rx[0])
+
+    def _write(self, buf: bytes) -> None:
+        if self._dest is not None:
+            try:
+                self._sock.sendto(buf, self._dest)
+            except OSError:   # e.g. ECONNREFUSED left by an ICMP error: UDP is lossy anyway
+                pass
+        else:
+            self._conn.write(buf)
+
+    def send_actuators(self, time_usec: int, motor_cmd, armed: bool) -> None:
+        """Send and record ``codec.encode_hil_actuator_controls(mav, time_usec,
+        motor_cmd, armed)``, packed by ``codec.pack_hil_actuator_controls``
+        (the lockstep answer: once per sensor frame)."""
+        mav = self._mav
+        if self._sock is None or mav.signing.sign_outgoing:
+            self.send(codec.encode_hil_actuator_controls(mav, time_usec, motor_cmd, armed))
+            return
+        buf = codec.pack_hil_actuator_controls(mav.seq, mav.srcSystem, mav.srcComponent, time_usec, motor_cmd,
+                                               armed)
+        mav.seq = (mav.seq + 1) % 256
+        mav.total_packets_sent += 1
+        self._write(buf)
+        self.n_sent += 1
+        if self.tlog is not None:
+            self._flush_rx()
+            self.tlog.write(buf)
 
     def send_heartbeat(self) -> None:
         self.send(self._mav.heartbeat_encode(
@@ -181,6 +248,61 @@ class Connection:
         """Parse raw bytes as if received (used by tests and replay); returns good messages."""
         return self._parse(data)
 
+    def _parse_datagram(self, data: bytes) -> list:
+        """Messages of one UDP datagram: the per-frame types decoded by
+        ``codec.split_datagram``, everything else by pymavlink (``_parse``)."""
+        if self._mav.signing.secret_key is not None:
+            return self._parse(data)
+        out = []
+        for part in codec.split_datagram(data):
+            if type(part) is bytes:
+                out += self._parse(part)
+            else:
+                out.append(part)
+        return out
+
+    def _set_rcvtimeo(self, timeout_s: float) -> None:
+        sec = int(timeout_s)
+        usec = max(int((timeout_s - sec) * 1e6), 1 if sec == 0 else 0)
+        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("@ll", sec, usec))
+        self._rcvtimeo = timeout_s
+
+    def _poll_udp(self, timeout_s: float) -> list:
+        """``poll`` on the raw UDP socket: the next datagram, waiting up to
+        ``timeout_s``, then whatever else is already queued."""
+        self._flush_rx()
+        sock = self._sock
+        conn = self._conn
+        server = conn.udp_server
+        out: list = []
+        wait = timeout_s > 0
+        if wait and timeout_s != self._rcvtimeo:
+            self._set_rcvtimeo(timeout_s)
+        for k in range(256):  # bound the drain so a flood cannot starve the caller
+            try:
+                if wait and k == 0:
+                    data, addr = sock.recvfrom(65536)
+                else:
+                    data, addr = sock.recvfrom(65536, socket.MSG_DONTWAIT)
+            except OSError:   # timeout / nothing queued (EAGAIN), ECONNREFUSED, EINTR
+                break
+            if server:
+                conn.clients.add(addr)
+                conn.clients_last_alive[addr] = time.time()
+            if data:
+                out += self._parse_datagram(data)
+            # In lockstep the vehicle sends one datagram per frame, ending with
+            # HIGHRES_IMU, and waits for the answer: return it at once instead
+            # of paying for a drain read that finds nothing.
+            if out and out[-1].get_type() == "HIGHRES_IMU":
+                break
+        if out:
+            self.n_received += len(out)
+            if self.tlog is not None:
+                self._flush_rx()
+                self._rx_log = (int(time.time() * 1e6), [m.get_msgbuf() for m in out])
+        return out
+
     def poll(self, timeout_s: float = 0.0) -> list:
         """Receive every message available now, waiting up to ``timeout_s`` for the first.
 
@@ -191,6 +313,8 @@ class Connection:
         conn = self._conn
         if conn is None:
             raise LinkError("connection is not open")
+        if self._sock is not None:
+            return self._poll_udp(timeout_s)
         if timeout_s > 0 and self._fd is not None:
             try:
                 ready, _, _ = select.select((self._fd,), (), (), timeout_s)

@@ -65,6 +65,20 @@ class TlogWriter:
             self._file.flush()
             self._next_flush = now + self.flush_interval_s
 
+    def write_many(self, packets, time_usec: int | None = None) -> None:
+        """Record several raw packets with one timestamp (default: now) in one write."""
+        if self._file is None or not packets:
+            return
+        if time_usec is None:
+            time_usec = int(time.time() * 1e6)
+        ts = _TS.pack(time_usec)
+        self._file.write(ts + ts.join(packets))   # ts p0 ts p1 ... ts pn
+        self.n_records += len(packets)
+        now = time.monotonic()
+        if now >= self._next_flush:
+            self._file.flush()
+            self._next_flush = now + self.flush_interval_s
+
     def flush(self) -> None:
         if self._file is not None:
             self._file.flush()
