@@ -41,7 +41,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.signal import find_peaks
 
 from ..errors import PlanError
 from ..maps.grid import OccupancyGrid
@@ -240,6 +239,8 @@ def _rows_at(pts: np.ndarray, alpha: float, h: float, min_spacing_m: float):
     # not height, so the pedestal of a wall crossing every row is ignored)
     width = max(3, int(round(0.3 / h)) | 1)
     smooth = np.convolve(prof, np.ones(width) / width, mode="same")
+    from scipy.signal import find_peaks  # lazy: scipy.signal costs ~0.4 s to import
+
     peaks, _ = find_peaks(smooth, prominence=0.2 * smooth.max(), distance=max(1, int(0.5 * period / h)))
     offsets, spans = [], []
     num = den = 0.0
