@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 import time
+from array import array
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -232,13 +233,22 @@ class FlightLog:
                + [f"est_{c}" for c in "xyz"] + [f"R{i}{j}" for i in range(3) for j in range(3)]
                + [f"{b}_{c}" for b in ("b1d", "b2d", "b3d") for c in "xyz"] + ["f"]
                + [f"s_{c}" for c in "xyz"])
-    rows: list = field(default_factory=list)
+    #: The rows back to back (C doubles): appending floats to one growing
+    #: buffer costs less per frame than building a row tuple.
+    data: array = field(default_factory=lambda: array("d"))
+
+    @property
+    def rows(self) -> list[tuple]:
+        """The rows as tuples (a copy)."""
+        a = self.array()
+        return [tuple(r) for r in a.tolist()]
 
     def array(self) -> np.ndarray:
         """(N, len(COLUMNS)) float array (NaN where a value was unknown)."""
-        if not self.rows:
-            return np.empty((0, len(self.COLUMNS)))
-        return np.array(self.rows, dtype=float)
+        n = len(self.COLUMNS)
+        if len(self.data) % n:
+            raise ValueError("FlightLog: partial row")
+        return np.frombuffer(self.data, dtype=float).reshape(-1, n).copy()
 
     def column(self, name: str) -> np.ndarray:
         return self.array()[:, self.COLUMNS.index(name)]
@@ -372,13 +382,11 @@ class MissionRunner:
         m = self._odom
         if m is not None:
             self._odom = None
-            t = codec.decode_odometry(m)
-            self._truth = t.pos_enu_m
-            self._R_true = t.R_enu_flu
+            self._truth, self._R_true = codec.decode_odometry_pose(m)
 
     def _on_attitude(self, m) -> None:
         if self.truth_source != "sim_truth":
-            self._R_true = codec.decode_attitude(m).R_enu_flu
+            self._R_true = tuple(codec.decode_attitude(m).R_enu_flu.ravel().tolist())
 
     def _on_heartbeat(self, m) -> None:
         if m.get_srcComponent() != self.conn.target_component:
@@ -450,15 +458,18 @@ class MissionRunner:
         else:
             truth = _NAN3
         R = self._R_true
-        Rflat = _NAN9 if R is None else tuple(R.ravel().tolist())
+        ext = self.log.data.extend   # one flat row of FlightLog.COLUMNS
+        ext((t, _PHASE_CODE[self.phase]))
+        ext(ref.p)
+        ext(truth)
+        ext(est)
+        ext(_NAN9 if R is None else R)
         if out is not None:
-            ctrl = out.R_d[0] + out.R_d[1] + out.R_d[2]   # rows of R_d
-            # columns b1d, b2d, b3d from the rows
-            ctrl = (ctrl[0], ctrl[3], ctrl[6], ctrl[1], ctrl[4], ctrl[7], ctrl[2], ctrl[5], ctrl[8], out.f_n)
+            (a, b, c), (d, e, f), (g, h, i) = out.R_d   # rows of R_d -> columns b1d, b2d, b3d
+            ext((a, d, g, b, e, h, c, f, i, out.f_n))
         else:
-            ctrl = _NAN_CTRL
-        self.log.rows.append((t, _PHASE_CODE[self.phase]) + tuple(ref.p) + tuple(truth) + tuple(est) + Rflat
-                             + ctrl + tuple(ref.s))
+            ext(_NAN_CTRL)
+        ext(ref.s)
 
     # --- the reference, by phase --------------------------------------------------------
 
@@ -539,6 +550,7 @@ class MissionRunner:
     def _pump_until(self, predicate, what: str) -> None:
         """Handle messages until ``predicate()``; LinkError after ``link_timeout_s`` of silence."""
         last = time.monotonic()
+        next_show, shown = last, None
         conn = self.conn
         on = self.on_message
         while not predicate():
@@ -550,7 +562,10 @@ class MissionRunner:
                     on(m)
             elif now - last > self.cfg.link_timeout_s:
                 raise LinkError(f"{conn.url}: vehicle silent for {self.cfg.link_timeout_s:g} s while {what}")
-            self._show()
+            if now >= next_show or self.phase != shown:   # 20 updates a second are enough
+                next_show = now + 0.05
+                shown = self.phase
+                self._show()
 
     def _show(self) -> None:
         frac = 0.0
@@ -577,6 +592,8 @@ class MissionRunner:
         wall0 = time.monotonic()
         conn = self.conn
         conn.handler = self.on_message
+        # every frame is answered in lockstep: replies are handled with the next frame
+        conn.frame_sync = True
         error = None
         try:
             self._fly()
@@ -652,8 +669,8 @@ class MissionRunner:
         s0 = first.s
         psi1 = math.atan2(s0[1], s0[0])
         self._truth_update()
-        R = self._R_true
-        psi0 = psi1 if R is None else math.atan2(R[1, 1], R[0, 1])
+        R = self._R_true   # row-major 9-tuple
+        psi0 = psi1 if R is None else math.atan2(R[4], R[1])
         self._psi_arm = psi0
         self._dpsi = (psi1 - psi0 + math.pi) % (2.0 * math.pi) - math.pi
         self._t_traj = self._t_hold + cfg.hold_s

@@ -41,6 +41,7 @@ Wire conventions chosen here (documented once)
 from __future__ import annotations
 
 import math
+import operator
 import struct
 from dataclasses import dataclass
 
@@ -330,8 +331,17 @@ def highres_imu(mav, time_us: int, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss
 
 
 def attitude_args(time_boot_ms: int, R_enu_flu, omega_flu_rad_s) -> tuple:
-    """ATTITUDE fields: Z-Y-X Euler angles of R_ned_frd (rad) and body FRD rates."""
-    roll, pitch, yaw = frames.rotmat2euler_zyx(frames.R_enu_flu2ned_frd(R_enu_flu))
+    """ATTITUDE fields: Z-Y-X Euler angles of R_ned_frd (rad) and body FRD rates.
+
+    ``frames.rotmat2euler_zyx(frames.R_enu_flu2ned_frd(R))`` written out on
+    floats (``R_ned_frd`` as in ``odometry_truth_args``: only exact sign
+    changes, so the angles are bit-identical). ``R_enu_flu``: (3, 3), rows,
+    or a row-major 9-tuple.
+    """
+    r00, _, _, r10, _, _, r20, r21, r22 = _flat9(R_enu_flu)
+    roll = math.atan2(r21, r22)
+    pitch = -math.asin(max(-1.0, min(1.0, -r20)))
+    yaw = math.atan2(r00, r10)
     wx, wy, wz = omega_flu_rad_s
     return (int(time_boot_ms), roll, pitch, yaw, float(wx), -float(wy), -float(wz))
 
@@ -343,8 +353,9 @@ def attitude(mav, time_boot_ms: int, R_enu_flu, omega_flu_rad_s):
 
 def attitude_quaternion_args(time_boot_ms: int, R_enu_flu, omega_flu_rad_s) -> tuple:
     """ATTITUDE_QUATERNION fields: [w, x, y, z] of body FRD -> world NED
-    (``R_ned_frd`` written out as in ``odometry_truth_args``), FRD rates."""
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = _rows(R_enu_flu)
+    (``R_ned_frd`` written out as in ``odometry_truth_args``), FRD rates.
+    ``R_enu_flu``: (3, 3), rows, or a row-major 9-tuple."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _flat9(R_enu_flu)
     q = quat_wxyz_of(r10, -r11, -r12, r00, -r01, -r02, -r20, r21, r22)
     wx, wy, wz = omega_flu_rad_s
     return (int(time_boot_ms), q[0], q[1], q[2], q[3], float(wx), -float(wy), -float(wz), _Q_IDENTITY)
@@ -355,8 +366,15 @@ def attitude_quaternion(mav, time_boot_ms: int, R_enu_flu, omega_flu_rad_s):
     return mav.attitude_quaternion_encode(*attitude_quaternion_args(time_boot_ms, R_enu_flu, omega_flu_rad_s))
 
 
-def _rows(R):
-    return R.tolist() if hasattr(R, "tolist") else R
+def _flat9(R) -> tuple:
+    """R (a (3, 3) array, three rows, or a row-major 9-tuple as ``sitl.plant``
+    keeps it) as nine floats, row-major."""
+    if type(R) is tuple and len(R) == 9:
+        return R
+    if hasattr(R, "ravel"):
+        return tuple(R.ravel().tolist())
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R
+    return (r00, r01, r02, r10, r11, r12, r20, r21, r22)
 
 
 _Q_IDENTITY = (1.0, 0.0, 0.0, 0.0)
@@ -406,8 +424,9 @@ def odometry_truth_args(time_us: int, pos_enu_m, vel_enu_m_s, R_enu_flu, omega_f
     ``R_ned_frd = T_ne R_enu_flu T_fb`` (``frames.R_enu_flu2ned_frd``) is
     written out: rows (r1, r0, -r2) of R with columns 1 and 2 negated. The
     body velocity is ``R_enu_flu^T v_enu`` (FLU) mapped to FRD.
+    ``R_enu_flu``: (3, 3), rows, or a row-major 9-tuple.
     """
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = _rows(R_enu_flu)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _flat9(R_enu_flu)
     x, y, z = pos_enu_m
     ve, vn, vu = vel_enu_m_s
     wx, wy, wz = omega_flu_rad_s
@@ -627,6 +646,11 @@ class FastPacker:
         self.order = tuple((names.index(n), int(k)) for n, k in
                            zip(msg_class.ordered_fieldnames, msg_class.array_lengths))
         self.has_arrays = any(k for _, k in self.order)
+        # scalar-only types: the wire order as one C-level getter
+        idx = [i for i, _ in self.order]
+        self._reorder = operator.itemgetter(*idx) if len(idx) > 1 else (lambda a, i=idx[0]: (a[i],))
+        self._id_lo = self.msgid & 0xFFFF
+        self._id_hi = self.msgid >> 16
 
     def pack(self, mav, args: tuple) -> bytes:
         """Frame ``args`` (in ``*_encode`` argument order) with ``mav``'s
@@ -642,12 +666,13 @@ class FastPacker:
                     else:
                         flat.append(args[i])
             else:
-                flat = [args[i] for i, _ in self.order]
+                flat = self._reorder(args)
             payload = self.payload.pack(*flat).rstrip(b"\0") or b"\0"
             head = _V2_HEADER.pack(0xFD, len(payload), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent,
-                                   self.msgid & 0xFFFF, self.msgid >> 16)
+                                   self._id_lo, self._id_hi)
             body = head + payload
-            buf = body + _CRC16.pack(_crc_x25(body[1:] + self.crc_extra))
+            crc_in = body[1:] + self.crc_extra
+            buf = body + _CRC16.pack(_mcrf4xx(crc_in, 0xFFFF) if _mcrf4xx is not None else _crc_x25(crc_in))
         mav.seq = (mav.seq + 1) & 0xFF
         return buf
 

@@ -185,6 +185,8 @@ class Parameters:
         self.specs = tuple(specs)
         self._index = {s.name: i for i, s in enumerate(self.specs)}
         self._values = [self._typed(s, s.default) for s in self.specs]
+        #: Incremented by every successful ``set``: lets a reader cache derived values.
+        self.version = 0
         for k, v in (initial or {}).items():
             r = self.set(k, v)
             if not r.ok:
@@ -233,6 +235,7 @@ class Parameters:
         if not spec.min <= v <= spec.max:
             return ParamSetResult(False, self._values[i], f"{name}: outside [{spec.min:g}, {spec.max:g}]")
         self._values[i] = self._typed(spec, v)
+        self.version += 1
         return ParamSetResult(True, self._values[i])
 
 
@@ -462,6 +465,9 @@ class StackOutput:
     reset_controller: bool
 
 
+_DISARMED_OUTPUT = StackOutput(False, None, False, None, False)
+
+
 @dataclass(frozen=True, slots=True)
 class ReceivedTarget:
     """An offboard setpoint and its vehicle receive time."""
@@ -525,6 +531,9 @@ class FlightStack:
         self._land_announced = False
         self._takeoff_z: float | None = None
         self._state: NavState | None = None
+        self._params_version = -1        # freshness limits (us), cached per parameter version
+        self._hil_tmo_us = self._of_loss_us = 0.0
+        self._out: StackOutput | None = None   # last output, reused while unchanged
 
     # ------------------------------------------------------------------ info
     @property
@@ -557,13 +566,23 @@ class FlightStack:
         """Name of the active failsafe ("offboard") or None."""
         return self._failsafe
 
+    def _limits(self) -> None:
+        p = self.params
+        self._params_version = p.version
+        self._of_loss_us = p["COM_OF_LOSS_T"] * 1e6
+        self._hil_tmo_us = p["COM_HIL_TMO"] * 1e6
+
     def offboard_fresh(self, now_us: int) -> bool:
         """A setpoint arrived within COM_OF_LOSS_T."""
         r = self._offboard
-        return r is not None and now_us - r.time_us <= self.params["COM_OF_LOSS_T"] * 1e6
+        if self._params_version != self.params.version:
+            self._limits()
+        return r is not None and now_us - r.time_us <= self._of_loss_us
 
     def actuators_fresh(self, now_us: int) -> bool:
-        return self._act_cmd is not None and now_us - self._act_time_us <= self.params["COM_HIL_TMO"] * 1e6
+        if self._params_version != self.params.version:
+            self._limits()
+        return self._act_cmd is not None and now_us - self._act_time_us <= self._hil_tmo_us
 
     def pop_events(self) -> list[StatusEvent]:
         ev, self.events = self.events, []
@@ -581,7 +600,7 @@ class FlightStack:
         """Record HIL_ACTUATOR_CONTROLS motor commands (4 floats in [0, 1]); None
         (a lockstep tick without commands) records nothing."""
         if motor_cmd is not None:
-            self._act_cmd = tuple(motor_cmd)
+            self._act_cmd = motor_cmd if type(motor_cmd) is tuple else tuple(motor_cmd)
             self._act_time_us = int(now_us)
 
     # ------------------------------------------------------------------ commands
@@ -708,7 +727,7 @@ class FlightStack:
 
         if not self.armed:
             self._override_active = False
-            return StackOutput(False, None, False, None, False)
+            return _DISARMED_OUTPUT
 
         # --- landed bookkeeping and auto-disarm
         if state.landed:
@@ -762,9 +781,18 @@ class FlightStack:
                     self._failsafe = "offboard-hold"
 
         sp, idle = self._mode_setpoint(now_us, state, dt)
+        o = self._out
         if self._override_active:
-            return StackOutput(True, self._act_cmd, False, sp, False)
-        return StackOutput(True, None, idle, sp, reset)
+            cmd = self._act_cmd
+            if o is not None and o.motor_override is cmd and o.setpoint is sp:
+                return o   # frozen: reusing the last output equals building a new one
+            o = self._out = StackOutput(True, cmd, False, sp, False)
+            return o
+        if (o is not None and o.motor_override is None and o.setpoint is sp and o.idle is idle
+                and o.reset_controller is reset):
+            return o
+        o = self._out = StackOutput(True, None, idle, sp, reset)
+        return o
 
     def _mode_setpoint(self, now_us: int, state: NavState, dt: float) -> tuple[Setpoint | None, bool]:
         """Setpoint of the current mode and whether the motors should idle."""

@@ -406,6 +406,8 @@ class SitlServer:
         self._intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
         self._next_due = {mid: 0 for mid in self._intervals}
         self._period_us = period
+        self._every_frame: tuple = ()     # streams due every frame (interval <= sensor period)
+        self._due_min = 0                 # earliest due time of the other enabled streams
         self._encoders = {
             ID.MAVLINK_MSG_ID_HEARTBEAT: self._enc_heartbeat,
             ID.MAVLINK_MSG_ID_SYS_STATUS: self._enc_sys_status,
@@ -423,6 +425,7 @@ class SitlServer:
             ID.MAVLINK_MSG_ID_ODOMETRY: self._enc_truth,
         }
         self._schedule = [mid for mid in self._intervals]
+        self._reschedule()
         self._fast = {
             ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: (codec.PACK_LOCAL_POSITION_NED, self._lpos_args),
             ID.MAVLINK_MSG_ID_ATTITUDE: (codec.PACK_ATTITUDE, self._attitude_args),
@@ -567,41 +570,45 @@ class SitlServer:
         self._send_telemetry(frame)
 
     def _nav_state(self, frame) -> NavState:
-        R = frame.truth.R
-        tilt = math.acos(max(-1.0, min(1.0, float(R[2, 2]))))
-        return NavState(frame.pos_enu_m, frame.vel_enu_m_s, math.atan2(R[1, 0], R[0, 0]), tilt,
-                        bool(frame.truth.landed))
+        # Floats, not arrays: the truth is read from the plant (it only moves
+        # in ``step_frame``, so between frames it is ``frame.truth``) and the
+        # measurements from the frame's float tuples (``sim.SensorFrame``
+        # builds its arrays lazily; nobody else reads them every frame).
+        pl = self.sim.plant
+        R = pl.R   # row-major 9-tuple, body FLU -> world ENU
+        tilt = math.acos(max(-1.0, min(1.0, R[8])))
+        return NavState(frame._pos, frame._vel, math.atan2(R[3], R[0]), tilt, bool(pl.landed))
+
+    def _reschedule(self) -> None:
+        """Split the enabled streams into those due every frame (interval at
+        most the sensor period: frame times are multiples of it) and the rest,
+        whose earliest due time ``_due_min`` lets a frame skip the scan."""
+        iv, due, period = self._intervals, self._next_due, self._period_us
+        self._every_frame = tuple(m for m in self._schedule if 0 <= iv[m] <= period)
+        slow = [due[m] for m in self._schedule if iv[m] > period]
+        self._due_min = min(slow) if slow else math.inf
 
     def _send_telemetry(self, frame) -> None:
-        links = [l for l in self.links if l.has_peer]
         now = frame.time_us
         self._awaited_us = now
         self._released = False
+        links = [l for l in self.links if l.has_peer]
         if not links:
             return
-        due = self._next_due
-        iv = self._intervals
-        fast = self._fast
         for l in links:
             l.begin_frame()
-        for mid in self._schedule:
-            interval = iv[mid]
-            if interval < 0 or now < due[mid]:
-                continue
-            nxt = due[mid] + interval
-            due[mid] = nxt if nxt > now else now + interval
-            f = fast.get(mid)
-            if f is not None:
-                args = f[1]()
-                for l in links:
-                    l.send_fast(f[0], args)
-                continue
-            if mid == _HEARTBEAT_ID:
-                self._last_hb_wall = time.monotonic()
-            msg = self._encoders[mid]()
-            if msg is not None:
-                for l in links:
-                    l.send(msg)
+        if now >= self._due_min:
+            self._send_due(now, links)
+        else:   # only the every-frame streams: same messages, same order as the scan
+            fast = self._fast
+            for mid in self._every_frame:
+                f = fast.get(mid)
+                if f is not None:
+                    args = f[1]()
+                    for l in links:
+                        l.send_fast(f[0], args)
+                else:
+                    self._send_encoded(mid, links)
         if frame.ranges and not self._rng_interval_disabled:
             tb = now // 1000
             for r in frame.ranges:
@@ -612,6 +619,39 @@ class SitlServer:
         for l in links:
             l.send_fast(codec.PACK_HIGHRES_IMU, args)
             l.end_frame()
+
+    def _send_due(self, now: int, links) -> None:
+        """Send every stream due at ``now`` in schedule order; advance its due time."""
+        due = self._next_due
+        iv = self._intervals
+        fast = self._fast
+        due_min = math.inf
+        period = self._period_us
+        for mid in self._schedule:
+            interval = iv[mid]
+            if interval < 0:
+                continue
+            if now >= due[mid]:
+                nxt = due[mid] + interval
+                due[mid] = nxt if nxt > now else now + interval
+                f = fast.get(mid)
+                if f is not None:
+                    args = f[1]()
+                    for l in links:
+                        l.send_fast(f[0], args)
+                else:
+                    self._send_encoded(mid, links)
+            if interval > period and due[mid] < due_min:
+                due_min = due[mid]
+        self._due_min = due_min
+
+    def _send_encoded(self, mid: int, links) -> None:
+        if mid == _HEARTBEAT_ID:
+            self._last_hb_wall = time.monotonic()
+        msg = self._encoders[mid]()
+        if msg is not None:
+            for l in links:
+                l.send(msg)
 
     # ------------------------------------------------------------------ encoders
     def _mav(self):
@@ -665,32 +705,35 @@ class SitlServer:
     def _enc_home(self):
         return codec.home_position(self._mav(), self.origin, self.home_enu_m, self.sim.time_us)
 
+    # The per-frame argument builders read float tuples: the frame's
+    # measurement slots and the plant's state (= ``self._frame.truth``, see
+    # ``_nav_state``), not the arrays ``SensorFrame``/``TrueState`` build lazily.
     def _imu_args(self):
         f = self._frame
-        return codec.highres_imu_args(f.time_us, f.accel_flu_m_s2, f.gyro_flu_rad_s, f.mag_flu_gauss,
-                                      self.origin.alt_m + float(f.truth.pos_enu_m[2]))
+        return codec.highres_imu_args(f.time_us, f._acc, f._gyro, f._mag,
+                                      self.origin.alt_m + self.sim.plant.p[2])
 
     def _enc_imu(self):
         return mavlink.MAVLink_highres_imu_message(*self._imu_args())
 
     def _lpos_args(self):
         f = self._frame
-        return codec.local_position_ned_args(f.time_us // 1000, f.pos_enu_m, f.vel_enu_m_s)
+        return codec.local_position_ned_args(f.time_us // 1000, f._pos, f._vel)
 
     def _attitude_q_args(self):
-        t = self._frame.truth
-        return codec.attitude_quaternion_args(self.sim.time_us // 1000, t.R, t.omega_flu_rad_s)
+        pl = self.sim.plant
+        return codec.attitude_quaternion_args(self.sim.time_us // 1000, pl.R, pl.w)
 
     def _odometry_args(self):
-        t = self._frame.truth
-        return codec.odometry_truth_args(self._frame.time_us, t.pos_enu_m, t.vel_enu_m_s, t.R, t.omega_flu_rad_s)
+        pl = self.sim.plant
+        return codec.odometry_truth_args(self._frame.time_us, pl.p, pl.v, pl.R, pl.w)
 
     def _enc_odometry(self):
         return mavlink.MAVLink_odometry_message(*self._odometry_args())
 
     def _attitude_args(self):
-        t = self._frame.truth
-        return codec.attitude_args(self.sim.time_us // 1000, t.R, t.omega_flu_rad_s)
+        pl = self.sim.plant
+        return codec.attitude_args(self.sim.time_us // 1000, pl.R, pl.w)
 
     def _enc_truth(self):
         t = self._frame.truth
@@ -724,12 +767,19 @@ class SitlServer:
 
     def _wait_for_answer(self) -> None:
         """Lockstep: process input until the answer to the last HIGHRES_IMU."""
+        start = time.monotonic()
+        links = self.links
+        if len(links) == 1 and links[0].udp and links[0].has_peer:
+            # The usual frame: one read brings the answer (no heartbeat check:
+            # the telemetry carried this frame's heartbeat if one was due).
+            self._poll_one(links[0], 0.05, True)
+            if self._released:
+                return
         if not any(l.has_peer for l in self.links):
             self.lockstep_engaged = False
             self._pace_reset()
             return
         timeout = self.params["SIM_LS_TMO"]
-        start = time.monotonic()
         while not self._released and not self._stop.is_set():
             now = time.monotonic()
             if now - start > timeout:
@@ -970,6 +1020,7 @@ class SitlServer:
             iv = max(iv, 1)
         self._intervals[mid] = iv
         self._next_due[mid] = self.sim.time_us
+        self._reschedule()
         return mavlink.MAV_RESULT_ACCEPTED, None
 
     def _cmd_get_interval(self, p):

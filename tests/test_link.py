@@ -187,6 +187,10 @@ def test_odometry_truth_round_trip():
     np.testing.assert_allclose(t.pos_enu_m, p, atol=1e-6)
     np.testing.assert_allclose(t.vel_enu_m_s, v, atol=1e-6)
     np.testing.assert_allclose(t.R_enu_flu, R, atol=1e-6)
+    # the runner's float-only pose decode gives the same numbers, R row-major
+    pos, R9 = codec.decode_odometry_pose(m)
+    assert pos == tuple(t.pos_enu_m)
+    assert R9 == tuple(t.R_enu_flu.ravel().tolist())
 
 
 # --- tlog ----------------------------------------------------------------------------
@@ -479,6 +483,38 @@ def test_hil_actuator_packer_is_byte_identical(cmd, armed):
         c = None if cmd is None else tuple(float(np.float32(x)) for x in cmd)
         ref = bytes(codec.encode_hil_actuator_controls(mav, t, c, armed).pack(mav))
         assert codec.pack_hil_actuator_controls(seq, 1, 191, t, c, armed) == ref
+
+
+@pytest.mark.parametrize("sync", [False, True])
+def test_frame_sync_returns_a_reply_with_the_next_frame(sync):
+    """Lockstep determinism: with ``frame_sync`` an immediate reply (here a
+    COMMAND_ACK) that arrives alone comes back from ``poll`` together with the
+    next frame datagram, however late that one arrives; without it, alone."""
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    vehicle.bind(("127.0.0.1", 0))
+    vehicle.settimeout(2.0)
+    port = vehicle.getsockname()[1]
+    conn = Connection(f"udpout:127.0.0.1:{port}").open()
+    conn.frame_sync = sync
+    mav = _vehicle_mav()
+    try:
+        conn.send_heartbeat()
+        _, peer = vehicle.recvfrom(4096)
+        ack = mav.command_ack_encode(176, 0, 0, 0, 1, 191).pack(mav)
+        frame = mav.highres_imu_encode(4000, *([0.25] * 13), 0, 0).pack(mav)
+        vehicle.sendto(ack, peer)
+        timer = threading.Timer(0.1, lambda: vehicle.sendto(frame, peer))
+        timer.start()
+        got = [m.get_type() for m in conn.poll(0.5)]
+        timer.join()
+        if sync:
+            assert got == ["COMMAND_ACK", "HIGHRES_IMU"]
+        else:
+            assert got == ["COMMAND_ACK"]
+            assert [m.get_type() for m in conn.poll(0.5)] == ["HIGHRES_IMU"]
+    finally:
+        conn.close()
+        vehicle.close()
 
 
 def test_fast_link_round_trip_over_udp_with_tlog(tmp_path):

@@ -1,4 +1,4 @@
-"""companion.runner pure helpers: the takeoff segment and the setpoint yaw."""
+"""companion.runner pure helpers: the takeoff segment, the setpoint yaw, the flight log."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.runner import climb_duration_s, pointing_at, setpoint_yaw_enu, smooth_segment
+from companion.runner import FlightLog, climb_duration_s, pointing_at, setpoint_yaw_enu, smooth_segment
 
 
 def test_smooth_segment_ends_at_rest_and_derivatives_are_consistent():
@@ -44,3 +44,19 @@ def test_setpoint_yaw_from_pointing():
     # a forward acceleration tilts b3d but the heading of b1d stays put
     assert setpoint_yaw_enu((0.0, 1.0, 0.0), (0.0, 2.0, 0.0)) == pytest.approx(0.0, abs=1e-12)
     assert pointing_at((0, 0, 1), (3, 4, 1)) == pytest.approx((0.6, 0.8, 0.0))
+
+
+def test_flight_log_rows_from_flat_buffer():
+    log = FlightLog()
+    n = len(FlightLog.COLUMNS)
+    assert log.array().shape == (0, n)
+    rows = [tuple(float(k * 100 + j) for j in range(n)) for k in range(3)]
+    for r in rows:
+        log.data.extend(r)
+    a = log.array()
+    assert a.shape == (3, n)
+    assert log.rows == rows
+    np.testing.assert_array_equal(log.column("ref_y"), [k * 100 + FlightLog.COLUMNS.index("ref_y") for k in range(3)])
+    log.data.extend((1.0, 2.0))            # a partial row is a bug, not data
+    with pytest.raises(ValueError):
+        log.array()

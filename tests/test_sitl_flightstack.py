@@ -149,6 +149,19 @@ def test_actuator_override_and_loss(stack):
     assert not out.reset_controller                             # only once
 
 
+def test_override_timeout_follows_a_parameter_change(stack):
+    # the freshness limits are cached per parameter version: a PARAM_SET between
+    # frames must take effect at the next frame
+    stack.arm(0, ground(), force=True)
+    cmd = (0.5, 0.5, 0.5, 0.5)
+    stack.actuator_controls(0, cmd)
+    assert stack.update(0, ground()).motor_override == cmd
+    assert stack.params.set("COM_HIL_TMO", 1.0).ok
+    assert stack.update(int(0.9 * S), air()).motor_override == cmd     # fresh under the new 1 s
+    assert stack.params.set("COM_HIL_TMO", 0.5).ok
+    assert stack.update(int(0.9 * S) + 1, air()).motor_override is None  # stale under 0.5 s
+
+
 def test_override_needs_armed(stack):
     stack.actuator_controls(0, (1.0, 1.0, 1.0, 1.0))
     out = stack.update(0, ground())

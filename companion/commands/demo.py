@@ -1,4 +1,4 @@
-"""``companion demo [--mission NAME|PATH] [--control companion|vehicle] [--out out/]``.
+"""``companion demo [--mission NAME|PATH] [--control companion|vehicle] [--out out/] [--seed N]``.
 
 No arguments needed: starts the bundled SITL (``python -m sitl``, a separate
 process, lockstep, loopback UDP on a free port), plans the bundled
@@ -49,6 +49,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--out", default="out", metavar="DIR", help="output directory (default %(default)s)")
     parser.add_argument("--cut", type=float, default=None, metavar="S",
                         help="fly only the first S seconds of the trajectory")
+    parser.add_argument("--seed", type=int, default=None, metavar="N",
+                        help="seed of the SITL's noise and wind (default: the mission's sim.seed)")
     parser.add_argument("--no-plots", action="store_true", help="skip the figures")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -99,7 +101,7 @@ def run(args) -> int:
         raise InputError(f"--out {out}", "exists and is not a directory")
     # The SITL process starts now (it imports and loads its world while we
     # plan) and gets its launch pose once the plan exists.
-    sitl = SitlProcess(mission_path, lockstep=True, speed=1.0, start="later").launch()
+    sitl = SitlProcess(mission_path, lockstep=True, speed=1.0, seed=args.seed, start="later").launch()
     try:
         return _plan_and_fly(args, mission_path, out, sitl, t_start)
     finally:

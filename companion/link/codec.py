@@ -242,6 +242,24 @@ def decode_odometry(msg) -> TruthState:
     return TruthState(int(msg.time_usec), (msg.y, msg.x, -msg.z), (ve, vn, -vd), R)
 
 
+def decode_odometry_pose(msg) -> tuple:
+    """Position and attitude of an ODOMETRY, as floats (the runner's per-frame
+    ground truth: ``decode_odometry`` without the velocity and the array).
+
+    Returns
+    -------
+    (pos_enu_m, R_enu_flu) : a 3-tuple (m) and the rotation body FLU -> world
+    ENU as a row-major 9-tuple; the same numbers as ``decode_odometry``.
+    """
+    w, x, y, z = msg.q
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    return (msg.y, msg.x, -msg.z), (r10, -r11, -r12, r00, -r01, -r02, -r20, r21, r22)
+
+
 def encode_odometry_truth(mav, time_usec: int, pos_enu_m, vel_enu_m_s, R_enu_flu, omega_flu_rad_s):
     """ODOMETRY carrying a true state (the inverse of ``decode_odometry``; tests and tools).
 
@@ -481,29 +499,32 @@ FAST_DECODERS = {d.msgid: d for d in (FastDecoder(c) for c in (
     mavlink.MAVLink_odometry_message, mavlink.MAVLink_distance_sensor_message))}
 
 
-def split_datagram(data: bytes, fast: bool = True):
-    """Walk the MAVLink 2 packets of one UDP datagram.
+def split_datagram(data: bytes, fast: bool = True) -> list:
+    """The MAVLink 2 packets of one UDP datagram, in order.
 
-    Yields ``FastMessage`` objects for the types of ``FAST_DECODERS`` and raw
-    ``bytes`` for every other packet, in order. A well-framed unsigned packet
-    with a good CRC is yielded alone; at the first byte that does not start
-    one (MAVLink 1, signed packets, garbage, bad CRC, unknown id, truncation)
-    the rest of the datagram is yielded as one ``bytes`` object for
-    pymavlink's robust parser, so garbage is handled exactly as before.
-    ``fast=False`` yields every good packet as bytes.
+    ``FastMessage`` objects for the types of ``FAST_DECODERS`` and raw
+    ``bytes`` for every other packet. A well-framed unsigned packet with a
+    good CRC is one item; at the first byte that does not start one
+    (MAVLink 1, signed packets, garbage, bad CRC, unknown id, truncation)
+    the rest of the datagram is one ``bytes`` item for pymavlink's robust
+    parser, so garbage is handled exactly as before. ``fast=False`` gives
+    every good packet as bytes. (A list, not a generator: it runs for every
+    frame and a generator's resumptions cost more than the list.)
     """
     n = len(data)
     i = 0
+    out = []
     decoders = FAST_DECODERS if fast else {}
     mmap = mavlink.mavlink_map
+    crc = _mcrf4xx if _mcrf4xx is not None else (lambda b, _init: x25_crc(b))
     while i < n:
         if n - i < 12 or data[i] != 0xFD or data[i + 2] != 0:
-            yield data[i:]
-            return
+            out.append(data[i:])
+            return out
         end = i + 12 + data[i + 1]
         if end > n:
-            yield data[i:]
-            return
+            out.append(data[i:])
+            return out
         msgid = data[i + 7] | data[i + 8] << 8 | data[i + 9] << 16
         dec = decoders.get(msgid)
         if dec is not None:
@@ -511,18 +532,19 @@ def split_datagram(data: bytes, fast: bool = True):
         else:
             cls = mmap.get(msgid)
             if cls is None:
-                yield data[i:]
-                return
+                out.append(data[i:])
+                return out
             extra = bytes((cls.crc_extra,))
-        if x25_crc(data[i + 1:end - 2] + extra) != (data[end - 2] | data[end - 1] << 8):
-            yield data[i:]
-            return
+        if crc(data[i + 1:end - 2] + extra, 0xFFFF) != (data[end - 2] | data[end - 1] << 8):
+            out.append(data[i:])
+            return out
         packet = data[i:end]
         if dec is not None:
-            yield dec.decode(packet, data[i + 10:end - 2], data[i + 5], data[i + 6])
+            out.append(dec.decode(packet, data[i + 10:end - 2], data[i + 5], data[i + 6]))
         else:
-            yield packet
+            out.append(packet)
         i = end
+    return out
 
 
 _HIL_PAYLOAD = struct.Struct("<QQ16fB")

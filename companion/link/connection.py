@@ -93,6 +93,12 @@ class Connection:
         self._dest = None          # udpout: the vehicle's resolved address
         self._rcvtimeo = None      # the socket's current SO_RCVTIMEO (s)
         self._rx_log = None        # (time_usec, packets) received, not yet in the tlog
+        #: Lockstep (set by the runner): a datagram that does not end a sensor
+        #: frame (an immediate reply such as COMMAND_ACK or MISSION_REQUEST) is
+        #: returned together with the vehicle's next frame datagram, so that
+        #: whatever the caller does in reaction always follows the same frame
+        #: whatever the arrival timing (UDP): same seed, same flight.
+        self.frame_sync = False
 
     # --- lifetime ---------------------------------------------------------
 
@@ -269,7 +275,9 @@ class Connection:
 
     def _poll_udp(self, timeout_s: float) -> list:
         """``poll`` on the raw UDP socket: the next datagram, waiting up to
-        ``timeout_s``, then whatever else is already queued."""
+        ``timeout_s``, then whatever else is already queued (with
+        ``frame_sync``: up to the end of the next sensor frame, each read
+        waiting up to ``timeout_s``)."""
         self._flush_rx()
         sock = self._sock
         conn = self._conn
@@ -278,9 +286,13 @@ class Connection:
         wait = timeout_s > 0
         if wait and timeout_s != self._rcvtimeo:
             self._set_rcvtimeo(timeout_s)
+        sync = wait and self.frame_sync
+        sync_until = None
         for k in range(256):  # bound the drain so a flood cannot starve the caller
+            if sync and k == 1:
+                sync_until = time.monotonic() + timeout_s
             try:
-                if wait and k == 0:
+                if wait and (k == 0 or (sync and time.monotonic() < sync_until)):
                     data, addr = sock.recvfrom(65536)
                 else:
                     data, addr = sock.recvfrom(65536, socket.MSG_DONTWAIT)
