@@ -13,7 +13,8 @@ commands NAV_TAKEOFF to 2 m, so the SITL's own cascaded controller flies
 HIL_ACTUATOR_CONTROLS (lockstep flag, no override) straight from the datagram
 bytes, doing as little as possible itself. Each run measures ``--seconds`` of
 vehicle time after lockstep engages; prints per-run and median frames/s and
-real-time factor, plus the SITL's CPU time per frame (from /proc). Target
+real-time factor, plus the SITL's CPU time per frame (from /proc). ``--free``: no
+lockstep; the SITL free-runs at ``--speed 0`` and the peer only listens. Target
 (issue 3): >= 50x real time.
 """
 
@@ -58,8 +59,10 @@ def _proc_cpu_s(pid: int) -> tuple[float, float]:
     return int(fields[11]) / tck, int(fields[12]) / tck
 
 
-def one_run(mission: str, seconds: float) -> dict:
-    with SitlProcess(mission, lockstep=True, speed=0.0) as sitl:
+def one_run(mission: str, seconds: float, lockstep: bool = True) -> dict:
+    """One measured run. ``lockstep=False``: the SITL free-runs at ``--speed 0``
+    (no actuator peer, nothing waits) and the peer only reads the telemetry."""
+    with SitlProcess(mission, lockstep=lockstep, speed=0.0) as sitl:
         host, port = sitl.listen.split(":", 1)[1].rsplit(":", 1)
         addr = (host, int(port))
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -83,6 +86,7 @@ def one_run(mission: str, seconds: float) -> dict:
         t_first = None
         wall0 = cpu0 = None
         n_target = None
+        t0_pending = True
         while True:
             data = sock.recv(65536)
             last = _last_packet(data)
@@ -94,10 +98,14 @@ def one_run(mission: str, seconds: float) -> dict:
             # a few frames in, send the commands once
             if cmds and frames in (5, 10):
                 send(cmds.pop(0))
-            answer(t_us)
-            frames += 1
-            if frames == 250:   # 1 s of vehicle time: lockstep engaged, take-off started
+            if lockstep:
+                answer(t_us)
+                frames += 1
+            else:  # free running: datagrams may be dropped; count vehicle frames
+                frames = (t_us - t_first) // 4000 + 1
+            if t0_pending and frames >= 250:   # 1 s of vehicle time: lockstep engaged, take-off started
                 wall0, cpu0, t0 = time.perf_counter(), _proc_cpu_s(sitl.proc.pid), t_us
+                n0, t0_pending = frames, False
                 n_target = frames + int(seconds * 250)
             if n_target is not None and frames >= n_target:
                 wall = time.perf_counter() - wall0
@@ -105,7 +113,7 @@ def one_run(mission: str, seconds: float) -> dict:
                 usr, sys_ = u1 - cpu0[0], s1 - cpu0[1]
                 cpu = usr + sys_
                 vt = (t_us - t0) * 1e-6
-                n = frames - 250
+                n = frames - n0
                 sock.close()
                 return {"frames_per_s": n / wall, "rtf": vt / wall, "sitl_cpu_us_per_frame": cpu / n * 1e6,
                         "wall_us_per_frame": wall / n * 1e6, "sitl_sys_us_per_frame": sys_ / n * 1e6}
@@ -119,17 +127,20 @@ def main() -> int:
     ap.add_argument("--mission", default=str(ROOT / "missions/flat-rectangle/mission.yaml"))
     ap.add_argument("--seconds", type=float, default=60.0, help="vehicle seconds per run")
     ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--free", action="store_true",
+                    help="no lockstep: the SITL free-runs at --speed 0 (onboard controller, telemetry over UDP)")
     args = ap.parse_args()
     res = []
     for k in range(args.runs):
-        r = one_run(args.mission, args.seconds)
+        r = one_run(args.mission, args.seconds, lockstep=not args.free)
         res.append(r)
         print(f"run {k + 1}: {r['frames_per_s']:.0f} frames/s, {r['rtf']:.1f}x real time, "
               f"wall {r['wall_us_per_frame']:.0f} us/frame, SITL CPU {r['sitl_cpu_us_per_frame']:.0f} us/frame "
               f"({r['sitl_sys_us_per_frame']:.0f} system)",
               flush=True)
     med = {k: statistics.median(r[k] for r in res) for k in res[0]}
-    print(f"median of {args.runs}: {med['frames_per_s']:.0f} frames/s, {med['rtf']:.1f}x real time "
+    mode = "free-running --speed 0" if args.free else "lockstep"
+    print(f"median of {args.runs} ({mode}): {med['frames_per_s']:.0f} frames/s, {med['rtf']:.1f}x real time "
           f"(target >= 50x), SITL CPU {med['sitl_cpu_us_per_frame']:.0f} us/frame")
     return 0
 
