@@ -13,6 +13,8 @@ From a ``companion.runner.FlightLog``:
 
 from __future__ import annotations
 
+import multiprocessing
+import os
 from pathlib import Path
 
 import numpy as np
@@ -56,83 +58,111 @@ def write_flight_figures(log, plan, out_dir) -> list[str]:
     Rd = np.transpose(Bd, (0, 2, 1))          # columns b1d, b2d, b3d
     s = a[:, [col["s_x"], col["s_y"], col["s_z"]]]
     traj = a[:, col["phase"]] == _PHASE_CODE["trajectory"]
-    paths = []
+    # Traces that are smooth at the figure's resolution are drawn from every
+    # k-th sample (at most ~4000 points a line: the figures look the same and
+    # take a fraction of the time); the error traces keep every sample so
+    # that no peak is lost.
+    k = slice(None, None, max(1, len(t) // 4000))
 
     def save(fig, name):
         p = out / name
         FigureCanvasAgg(fig)
         fig.savefig(p, dpi=110)
-        paths.append(str(p))
 
-    fig = Figure(figsize=(8, 6))
-    ax = fig.add_subplot(projection="3d")
-    ax.plot(*ref.T, "k--", lw=1, label="reference")
-    ax.plot(*tru.T, "C0", lw=1, label="flown")
-    ax.scatter(*np.asarray(plan.waypoints.p_enu_m).T, s=8, c="C3", label="way-points")
-    ax.scatter(*plan.target_enu_m, marker="*", s=60, c="C2", label="pointing target")
-    ax.set_xlabel("x east [m]")
-    ax.set_ylabel("y north [m]")
-    ax.set_zlabel("z up [m]")
-    ax.legend(loc="upper left", fontsize=8)
-    ax.set_title("3D path")
-    save(fig, "path3d.png")
+    def fig_path3d():
+        fig = Figure(figsize=(8, 6))
+        ax = fig.add_subplot(projection="3d")
+        ax.plot(*ref[k].T, "k--", lw=1, label="reference")
+        ax.plot(*tru[k].T, "C0", lw=1, label="flown")
+        ax.scatter(*np.asarray(plan.waypoints.p_enu_m).T, s=8, c="C3", label="way-points")
+        ax.scatter(*plan.target_enu_m, marker="*", s=60, c="C2", label="pointing target")
+        ax.set_xlabel("x east [m]")
+        ax.set_ylabel("y north [m]")
+        ax.set_zlabel("z up [m]")
+        ax.legend(loc="upper left", fontsize=8)
+        ax.set_title("3D path")
+        save(fig, "path3d.png")
 
-    fig = Figure(figsize=(9, 7))
-    for i, c in enumerate("xyz"):
-        ax = fig.add_subplot(3, 1, i + 1)
-        ax.plot(t, ref[:, i], "k--", lw=1, label="reference")
-        ax.plot(t, tru[:, i], "C0", lw=1, label="true")
-        ax.set_ylabel(f"{c} [m]")
+    def fig_position():
+        fig = Figure(figsize=(9, 7))
+        for i, c in enumerate("xyz"):
+            ax = fig.add_subplot(3, 1, i + 1)
+            ax.plot(t[k], ref[k, i], "k--", lw=1, label="reference")
+            ax.plot(t[k], tru[k, i], "C0", lw=1, label="true")
+            ax.set_ylabel(f"{c} [m]")
+            ax.grid(alpha=0.3)
+        ax.set_xlabel("time since takeoff [s]")
+        fig.axes[0].legend(fontsize=8)
+        fig.axes[0].set_title("Position tracking")
+        save(fig, "position.png")
+
+    def fig_attitude():
+        fig = Figure(figsize=(9, 7))
+        eu, eud = _euler_deg(R[k]), _euler_deg(Rd[k])
+        for i, name in enumerate(("roll", "pitch", "yaw")):
+            ax = fig.add_subplot(3, 1, i + 1)
+            ax.plot(t[k], eud[:, i], "k--", lw=1, label="desired R_d")
+            ax.plot(t[k], eu[:, i], "C1", lw=1, label="true R")
+            ax.set_ylabel(f"{name} [deg]")
+            ax.grid(alpha=0.3)
+        ax.set_xlabel("time since takeoff [s]")
+        fig.axes[0].legend(fontsize=8)
+        fig.axes[0].set_title("Attitude tracking (Z-Y-X angles of R, ENU/FLU)")
+        save(fig, "attitude.png")
+
+    def fig_errors():
+        fig = Figure(figsize=(9, 6))
+        e = tru - ref
+        ax = fig.add_subplot(2, 1, 1)
+        for i, c in enumerate("xyz"):
+            ax.plot(t[traj], 1000 * e[traj, i], lw=1, label=f"e_{c}")
+        ax.set_ylabel("error [mm]")
+        ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
-    ax.set_xlabel("time since takeoff [s]")
-    fig.axes[0].legend(fontsize=8)
-    fig.axes[0].set_title("Position tracking")
-    save(fig, "position.png")
-
-    fig = Figure(figsize=(9, 7))
-    eu, eud = _euler_deg(R), _euler_deg(Rd)
-    for i, name in enumerate(("roll", "pitch", "yaw")):
-        ax = fig.add_subplot(3, 1, i + 1)
-        ax.plot(t, eud[:, i], "k--", lw=1, label="desired R_d")
-        ax.plot(t, eu[:, i], "C1", lw=1, label="true R")
-        ax.set_ylabel(f"{name} [deg]")
+        ax.set_title("Position error over the trajectory")
+        ax = fig.add_subplot(2, 1, 2)
+        ax.plot(t[traj], 1000 * np.linalg.norm(e[traj], axis=1), "C3", lw=1)
+        ax.set_ylabel("|e_x| [mm]")
+        ax.set_xlabel("time since takeoff [s]")
         ax.grid(alpha=0.3)
-    ax.set_xlabel("time since takeoff [s]")
-    fig.axes[0].legend(fontsize=8)
-    fig.axes[0].set_title("Attitude tracking (Z-Y-X angles of R, ENU/FLU)")
-    save(fig, "attitude.png")
+        save(fig, "errors.png")
 
-    fig = Figure(figsize=(9, 6))
-    e = tru - ref
-    ax = fig.add_subplot(2, 1, 1)
-    for i, c in enumerate("xyz"):
-        ax.plot(t[traj], 1000 * e[traj, i], lw=1, label=f"e_{c}")
-    ax.set_ylabel("error [mm]")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    ax.set_title("Position error over the trajectory")
-    ax = fig.add_subplot(2, 1, 2)
-    ax.plot(t[traj], 1000 * np.linalg.norm(e[traj], axis=1), "C3", lw=1)
-    ax.set_ylabel("|e_x| [mm]")
-    ax.set_xlabel("time since takeoff [s]")
-    ax.grid(alpha=0.3)
-    save(fig, "errors.png")
+    def fig_directions():
+        fig = Figure(figsize=(9, 7))
+        b2, b3 = R[:, :, 1], R[:, :, 2]
+        for i, c in enumerate("xyz"):
+            ax = fig.add_subplot(3, 2, 2 * i + 1)
+            ax.plot(t[k], s[k, i], "k--", lw=1, label="s (pointing)")
+            ax.plot(t[k], b2[k, i], "C2", lw=1, label="b2 = R e2")
+            ax.set_ylabel(c)
+            ax.grid(alpha=0.3)
+            ax = fig.add_subplot(3, 2, 2 * i + 2)
+            ax.plot(t[k], Rd[k, i, 2], "k--", lw=1, label="b3d")
+            ax.plot(t[k], b3[k, i], "C4", lw=1, label="b3 = R e3")
+            ax.grid(alpha=0.3)
+        fig.axes[0].set_title("Pointing direction")
+        fig.axes[1].set_title("Thrust direction")
+        fig.axes[0].legend(fontsize=7)
+        fig.axes[1].legend(fontsize=7)
+        save(fig, "directions.png")
 
-    fig = Figure(figsize=(9, 7))
-    b2, b3 = R[:, :, 1], R[:, :, 2]
-    for i, c in enumerate("xyz"):
-        ax = fig.add_subplot(3, 2, 2 * i + 1)
-        ax.plot(t, s[:, i], "k--", lw=1, label="s (pointing)")
-        ax.plot(t, b2[:, i], "C2", lw=1, label="b2 = R e2")
-        ax.set_ylabel(c)
-        ax.grid(alpha=0.3)
-        ax = fig.add_subplot(3, 2, 2 * i + 2)
-        ax.plot(t, Rd[:, i, 2], "k--", lw=1, label="b3d")
-        ax.plot(t, b3[:, i], "C4", lw=1, label="b3 = R e3")
-        ax.grid(alpha=0.3)
-    fig.axes[0].set_title("Pointing direction")
-    fig.axes[1].set_title("Thrust direction")
-    fig.axes[0].legend(fontsize=7)
-    fig.axes[1].legend(fontsize=7)
-    save(fig, "directions.png")
-    return paths
+    jobs = [fig_path3d, fig_position, fig_attitude, fig_errors, fig_directions]
+    _run_parallel(jobs)
+    return [str(out / f"{n}.png") for n in ("path3d", "position", "attitude", "errors", "directions")]
+
+
+def _run_parallel(jobs) -> None:
+    """Run the figure jobs on two cores (a forked child takes every other
+    one); serially where fork is unavailable or the child fails."""
+    if len(jobs) < 2 or (os.cpu_count() or 1) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        for job in jobs:
+            job()
+        return
+    child = multiprocessing.get_context("fork").Process(target=lambda: [job() for job in jobs[::2]])
+    child.start()
+    for job in jobs[1::2]:
+        job()
+    child.join()
+    if child.exitcode != 0:
+        for job in jobs[::2]:
+            job()
