@@ -128,8 +128,7 @@ def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / "plan.json").write_text(plan_text, encoding="utf-8")
 
-    fp = FlightPlan(plan.trajectory, plan.waypoints.p_enu_m, plan.target_enu_m,
-                    float(plan.stats.coverage_fraction), plan)
+    fp = FlightPlan.from_plan(plan)
     progress = Progress(enabled=not args.quiet)
     # The vehicle starts where a user would set it down: under the first
     # way-point, facing the first pointing direction (take-off = climb + hold).

@@ -42,7 +42,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--tlog", default="flight.tlog", metavar="FILE", help="telemetry log (default %(default)s)")
     parser.add_argument("--report", default="report.json", metavar="FILE", help="flight report (default %(default)s)")
     parser.add_argument("--cut", type=float, default=None, metavar="S",
-                        help="fly only the first S seconds of the trajectory")
+                        help="fly only the way-points up to S seconds into the trajectory, the last one made a stop "
+                             "(the trajectory is re-solved so it ends at rest)")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
 
@@ -55,6 +56,41 @@ class FlightPlan:
     target_enu_m: np.ndarray
     coverage_fraction: float | None
     plan: object = None          # companion.planner.Plan when planned here
+    waypoints_t_s: np.ndarray | None = None
+    waypoints_v_enu_m_s: np.ndarray | None = None
+    waypoints_a_enu_m_s2: np.ndarray | None = None
+
+    @classmethod
+    def from_plan(cls, plan) -> "FlightPlan":
+        """From a ``companion.planner.Plan``."""
+        w = plan.waypoints
+        return cls(plan.trajectory, np.asarray(w.p_enu_m, dtype=float), np.asarray(plan.target_enu_m, dtype=float),
+                   float(plan.stats.coverage_fraction), plan, np.asarray(w.t_s, dtype=float),
+                   np.asarray(w.v_enu_m_s, dtype=float), np.asarray(w.a_enu_m_s2, dtype=float))
+
+    def cut(self, cut_s: float, config) -> "FlightPlan":
+        """The way-points up to the first one at or after ``cut_s`` seconds
+        (so the flight lasts at least ``cut_s``), the last made a stop (v = a = 0), and the LQR trajectory re-solved through
+        them with ``config`` (TrajectoryConfig): a short mission that ends at
+        rest instead of a reference that halts at cruise speed."""
+        from ..trajectory import generate_trajectory
+
+        t = self.waypoints_t_s
+        n = min(len(t), max(2, int(np.searchsorted(t, t[0] + cut_s, side="left")) + 1))
+        t = t[:n].copy()
+        p = self.waypoints_p_enu_m[:n]
+        v = self.waypoints_v_enu_m_s[:n].copy()
+        a = self.waypoints_a_enu_m_s2[:n].copy()
+        speed = float(np.linalg.norm(v[-1]))
+        if speed > 0.0:
+            # The new stop ends a run: its piece also has to ramp down, which
+            # ``companion.coverage.extract_waypoints`` pays for with half a
+            # smooth ramp, t_acc / 2 = 0.5 * 1.875 V / a_ref (a_ref = 0.5 m/s^2).
+            t[-1] += 0.5 * 1.875 * speed / 0.5
+        v[-1] = 0.0
+        a[-1] = 0.0
+        traj = generate_trajectory(t, p, v, a, config, target_enu_m=self.target_enu_m)
+        return FlightPlan(traj, p, self.target_enu_m, None, None, t, v, a)
 
 
 def prepare(mission, plan_path: str | None) -> FlightPlan:
@@ -68,9 +104,7 @@ def prepare(mission, plan_path: str | None) -> FlightPlan:
     if plan_path is None:
         from ..planner import plan_mission
 
-        plan = plan_mission(mission)
-        return FlightPlan(plan.trajectory, np.asarray(plan.waypoints.p_enu_m, dtype=float),
-                          np.asarray(plan.target_enu_m, dtype=float), float(plan.stats.coverage_fraction), plan)
+        return FlightPlan.from_plan(plan_mission(mission))
     from ..plan_io import load_plan
     from ..trajectory import generate_trajectory
 
@@ -84,7 +118,8 @@ def prepare(mission, plan_path: str | None) -> FlightPlan:
                                pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")
     return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
-                      None if cov is None else float(cov))
+                      None if cov is None else float(cov), None, pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
+                      pf.waypoint_a_enu_m_s2)
 
 
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
@@ -94,7 +129,9 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
     from ..link import Connection, TlogWriter
     from ..runner import MissionRunner, RunnerConfig
 
-    cfg = RunnerConfig(control=control, trajectory_cut_s=cut_s, **(runner_overrides or {}))
+    if cut_s is not None:
+        flight_plan = flight_plan.cut(cut_s, mission.trajectory)
+    cfg = RunnerConfig(control=control, **(runner_overrides or {}))
     ctrl = None
     if control == "companion":
         ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
