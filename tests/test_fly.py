@@ -33,3 +33,23 @@ def test_cut_keeps_a_prefix_and_ends_at_rest(flat, cut_s):
     end = cut.trajectory.sample(np.array([cut.waypoints_t_s[-1]]))
     assert np.linalg.norm(end.v[0]) < 0.02          # m/s, soft constraint with S_v = 60
     assert np.linalg.norm(end.p[0] - cut.waypoints_p_enu_m[-1]) < 0.01
+
+
+def test_pointing_target_recovered_from_rays():
+    from companion.commands.fly import pointing_target_from_rays
+
+    rng = np.random.default_rng(3)
+    target = np.array([4.0, -2.0, 1.5])
+    p = rng.uniform(-10, 10, size=(50, 3))
+    s = (target - p) / np.linalg.norm(target - p, axis=1, keepdims=True)
+    np.testing.assert_allclose(pointing_target_from_rays(p, s, "x"), target, atol=1e-9)
+
+
+def test_pointing_target_from_parallel_rays_is_an_error():
+    from companion.commands.fly import pointing_target_from_rays
+    from companion.errors import PlanError
+
+    p = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
+    s = np.tile([0.0, 1.0, 0.0], (3, 1))
+    with pytest.raises(PlanError):
+        pointing_target_from_rays(p, s, "plan.json")

@@ -111,15 +111,40 @@ def prepare(mission, plan_path: str | None) -> FlightPlan:
     pf = load_plan(plan_path)
     target = pf.target_enu_m
     if target is None:
-        # plan.json without a target: the pointing of the first sample defines a ray; use the
-        # mean way-point altitude centroid convention of the planner as the best available guess
-        target = np.array([*np.mean(pf.path_xy_m, axis=0), float(np.mean(pf.waypoint_p_enu_m[:, 2]))])
+        # A plan.json without ``target_enu_m`` (it is not in DESIGN.md's
+        # minimum): S_p is where the pointing rays of eq. (21) meet.
+        target = pointing_target_from_rays(pf.p_enu_m, pf.pointing_enu, str(plan_path))
     traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
                                pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")
     return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
                       None if cov is None else float(cov), None, pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
                       pf.waypoint_a_enu_m_s2)
+
+
+def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
+    """S_p (ENU m, (3,)) from sampled positions and pointing directions.
+
+    Eq. (21) makes every s(t) point from x_d(t) at S_p, so S_p is the point
+    nearest to all the rays in the least-squares sense:
+    sum_k (I - s_k s_k^T) S_p = sum_k (I - s_k s_k^T) p_k.
+
+    Raises
+    ------
+    PlanError
+        The rays are (nearly) parallel, so they do not fix a point.
+    """
+    from ..errors import PlanError
+
+    p = np.asarray(p_enu_m, dtype=float)
+    s = np.asarray(s_enu, dtype=float)
+    s = s / np.linalg.norm(s, axis=1, keepdims=True)
+    M = np.eye(3)[None] - s[:, :, None] * s[:, None, :]       # projectors normal to each ray
+    A = M.sum(axis=0)
+    b = np.einsum("kij,kj->i", M, p)
+    if np.linalg.cond(A) > 1e8:
+        raise PlanError(source, "no target_enu_m and the pointing directions do not meet at a point")
+    return np.linalg.solve(A, b)
 
 
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
