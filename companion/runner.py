@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from .control.geometric import GeometricController, Measurements, Reference
+from .control.geometric import GeometricController
 from .errors import CommandRejected, LinkError
 from .link import codec
 from .link.connection import Connection
@@ -408,6 +408,7 @@ class MissionRunner:
         self.statustext.append(str(m.text))
 
     def _on_imu(self, m) -> None:
+        # The per-frame path (250 Hz, lockstep: the vehicle waits for our answer).
         t_us = int(m.time_usec)
         t = t_us * 1e-6
         conn = self.conn
@@ -421,7 +422,7 @@ class MissionRunner:
         self.n_frames += 1
         conn.heartbeat_due(t)
         self._advance_phase(t)
-        ref = self._reference(t)
+        ref = self._traj_ref(t) if self.phase == "trajectory" else self._reference(t)
         cmd = None
         out = None
         if ref is not None:
@@ -431,11 +432,14 @@ class MissionRunner:
                     conn.mav, t_us // 1000, ref.p, ref.v, ref.a, setpoint_yaw_enu(ref.s, ref.a),
                     conn.target_system, conn.target_component))
             if self._controlling and self._pos is not None:
-                meas = Measurements((m.xgyro, -m.ygyro, -m.zgyro), (m.xacc, -m.yacc, -m.zacc),
-                                    (m.xmag, -m.ymag, -m.zmag), self._pos, self._vel, self._nav_t)
+                ctrl = self.ctrl
                 try:
-                    out = self.ctrl.update(t, meas, Reference(ref.p, ref.v, ref.a, ref.jerk, ref.snap, ref.target))
-                    cmd = out.motor_cmd
+                    # GeometricController.update on float tuples (no Measurements /
+                    # Reference / ControlOutput per frame); FLU = FRD with y, z negated.
+                    cmd = ctrl.update_fast(t, (m.xgyro, -m.ygyro, -m.zgyro), (m.xacc, -m.yacc, -m.zacc),
+                                           (m.xmag, -m.ymag, -m.zmag), self._pos, self._vel, self._nav_t,
+                                           ref.p, ref.v, ref.a, ref.jerk, ref.snap, ref.target)
+                    out = ctrl.last_desired
                 except (ValueError, ZeroDivisionError, OverflowError):
                     # a non-finite or degenerate measurement: let the vehicle fly this frame
                     self.n_control_faults += 1
@@ -444,31 +448,29 @@ class MissionRunner:
             self._record(t, ref, out)
 
     def _record(self, t: float, ref: RefSample, out) -> None:
+        """Append one FlightLog row; ``out``: the controller's ``last_desired`` (b1d, b2d, b3d, f) or None."""
         if self._odom is not None:
             self._truth_update()
         truth = self._truth if self._truth is not None else self._pos
         est = self._pos if self._pos is not None else _NAN3
+        phase = self.phase
         if truth is not None:
             p = ref.p
             err = math.sqrt((truth[0] - p[0]) ** 2 + (truth[1] - p[1]) ** 2 + (truth[2] - p[2]) ** 2)
             self._last_err = err
-            if self.phase == "trajectory":
+            if phase == "trajectory":
                 self._errors_t.append(t)
                 self._errors.append(err)
         else:
             truth = _NAN3
         R = self._R_true
         ext = self.log.data.extend   # one flat row of FlightLog.COLUMNS
-        ext((t, _PHASE_CODE[self.phase]))
+        ext((t, _PHASE_CODE[phase]))
         ext(ref.p)
         ext(truth)
         ext(est)
         ext(_NAN9 if R is None else R)
-        if out is not None:
-            (a, b, c), (d, e, f), (g, h, i) = out.R_d   # rows of R_d -> columns b1d, b2d, b3d
-            ext((a, d, g, b, e, h, c, f, i, out.f_n))
-        else:
-            ext(_NAN_CTRL)
+        ext(_NAN_CTRL if out is None else out)   # b1d, b2d, b3d (columns of R_d), f
         ext(ref.s)
 
     # --- the reference, by phase --------------------------------------------------------

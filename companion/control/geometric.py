@@ -89,8 +89,12 @@ With the filters off and the raw field, this is the paper's law on raw
 vectors.
 
 Everything here is pure: the controller object holds only filter state and
-takes the vehicle's time as an argument. The hot path uses float tuples (one
-``update`` is a few tens of microseconds, see ``benchmarks/bench_control.py``).
+takes the vehicle's time as an argument. The pure functions below are the
+specification (``GeometricController.update_reference`` composes them); the
+250 Hz path ``GeometricController.update_fast`` is the same arithmetic
+unrolled into float locals, in the same order, so it gives the same numbers
+to the last bit (``tests/test_control_fast.py``) in ~17 us instead of ~45 us
+(``python benchmarks/bench_control.py --timing``).
 """
 
 from __future__ import annotations
@@ -558,9 +562,348 @@ class GeometricController:
         if cfg.pointing_limit:
             a_max = cfg.pointing_yaw_accel_fraction * self.mixer.yaw_torque_limit(self._m * self._g) / self._J[2]
             self.pointing = PointingGovernor(cfg.pointing_yaw_rate_max_rad_s, a_max)
+        # Floats for update_fast (an int gain multiplies exactly as its float).
+        self._kx, self._kv, self._alpha = float(cfg.kx), float(cfg.kv), float(cfg.alpha)
+        self._r2u = unit3(self._r2)      # measurement_vectors normalises r_2 once more
+        self._perp = bool(cfg.mag_perpendicular)
+        self.last_desired = None
+        self._last_detail = None
 
     def update(self, t_s: float, meas: Measurements, ref: Reference) -> ControlOutput:
         """One control step on one sensor frame.
+
+        Parameters
+        ----------
+        t_s : float
+            Vehicle time of the sensor frame (s).
+        meas : Measurements
+        ref : Reference
+            Reference sample at ``t_s``.
+
+        Returns
+        -------
+        ControlOutput
+
+        Notes
+        -----
+        A wrapper of :meth:`update_fast` (the same numbers, bit for bit, as
+        :meth:`update_reference`, the composition of this module's pure
+        functions), plus the named output.
+        """
+        gy, ac, mg, v = meas.gyro_flu_rad_s, meas.accel_flu_m_s2, meas.mag_flu_gauss, meas.vel_enu_m_s
+        cmd = self.update_fast(t_s, (float(gy[0]), float(gy[1]), float(gy[2])),
+                               (float(ac[0]), float(ac[1]), float(ac[2])),
+                               (float(mg[0]), float(mg[1]), float(mg[2])), meas.pos_enu_m,
+                               (float(v[0]), float(v[1]), float(v[2])), meas.nav_time_s,
+                               ref.pos_enu_m, ref.vel_enu_m_s, ref.acc_enu_m_s2, ref.jerk_enu_m_s3,
+                               ref.snap_enu_m_s4, ref.target_enu_m)
+        b1x, b1y, b1z, b2x, b2y, b2z, b3x, b3y, b3z, f = self.last_desired
+        tau, saturated, Omega_d, e_x, e_v, z, V = self._last_detail
+        if V is None:   # decoupled law: V from (d_z, psi_e, e_Omega), see attitude_torque_decoupled
+            dz, psi, e = z[3], z[4], z[5]
+            r1, r2 = self._rho
+            V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * _dot(e, e)
+            z = z[:3]
+        R_d = ((b1x, b2x, b3x), (b1y, b2y, b3y), (b1z, b2z, b3z))
+        cmd = (float(cmd[0]), float(cmd[1]), float(cmd[2]), float(cmd[3]))   # as Mixer.mix (numpy inputs)
+        return ControlOutput(f, tau, cmd, saturated, (b3x, b3y, b3z), (b2x, b2y, b2z), R_d, Omega_d,
+                             e_x, e_v, z, V)
+
+    def update_fast(self, t_s, gyro, accel, mag, pos, vel, nav_t, xd, vd, ad, jd, sd, target=None):
+        """:meth:`update` on plain float tuples, returning only the motor commands (the 250 Hz path).
+
+        Parameters
+        ----------
+        t_s : float
+            Vehicle time of the sensor frame (s).
+        gyro, accel, mag : tuple of 3 floats
+            Omega (rad/s), specific force (m/s^2), magnetic field (gauss), body FLU.
+        pos, vel : sequence (3,)
+            Position (m) and velocity (m/s of Python floats), world ENU.
+        nav_t : float or None
+            Time stamp of pos/vel (``Measurements.nav_time_s``).
+        xd, vd, ad, jd, sd : sequence (3,)
+            Reference position and its four derivatives (``Reference``), world ENU.
+        target : sequence (3,) or None
+            Pointing target S_p (None: the controller's).
+
+        Returns
+        -------
+        tuple (4,)
+            Normalised motor commands (``ControlOutput.motor_cmd``).
+
+        Notes
+        -----
+        Side outputs: ``self.last_desired`` = (b1d, b2d, b3d, f) flattened
+        (10 floats: the columns of R_d, world ENU, and the collective
+        thrust, N), for logging. Raises ValueError where a measured or
+        derived direction is zero or not finite.
+
+        Every line is :meth:`update_reference` (the pure functions of this
+        module composed) with the 3-vectors unrolled into float locals, the
+        float operations kept in the same order so the result is identical
+        to the last bit (``tests/test_control_fast.py`` checks it); shared
+        sub-expressions (the TRIAD frames, computed three times by
+        ``body_coordinates`` and once more by ``thrust_axis_estimate``) are
+        computed once, and values only ``ControlOutput`` needs (V) are left
+        to :meth:`update`. Rare branches (free fall, pointing undefined or
+        along the thrust, the "paper" law) call the pure functions.
+        """
+        sqrt = math.sqrt
+        m, g, kx, kv = self._m, self._g, self._kx, self._kv
+        wx, wy, wz = gyro
+
+        # --- AccelerationEstimator.update (state kept in self.accel) -----------------
+        acc = self.accel
+        tn = t_s if nav_t is None else nav_t
+        vx, vy, vz = vel
+        t_prev = acc._t
+        if t_prev is None:
+            acc._t, acc._v = tn, (vx, vy, vz)
+            ahx, ahy, ahz = acc._a
+        else:
+            dt = tn - t_prev
+            if dt <= 0.0:
+                ahx, ahy, ahz = acc._a
+            else:
+                px, py, pz = acc._v
+                dx, dy, dz = (vx - px) / dt, (vy - py) / dt, (vz - pz) / dt
+                tau_a = acc.tau_s
+                if tau_a > 0.0:
+                    beta = 1.0 - math.exp(-dt / tau_a)
+                    ax, ay, az = acc._a
+                    ax, ay, az = ax + beta * (dx - ax), ay + beta * (dy - ay), az + beta * (dz - az)
+                else:
+                    ax, ay, az = dx, dy, dz
+                acc._a = (ax, ay, az)
+                acc._t, acc._v = tn, (vx, vy, vz)
+                lag = 0.5 * dt + tau_a
+                ahx, ahy, ahz = ax + lag * jd[0], ay + lag * jd[1], az + lag * jd[2]
+
+        # --- measurement_vectors(filtered accel, filtered mag, a_hat, ...) ------------
+        x, y, z = accel
+        n = sqrt(x * x + y * y + z * z)
+        if not n > 0.0:
+            raise ValueError("cannot normalise a zero (or non-finite) vector")
+        fa = self._f_acc.step(t_s, x / n, y / n, z / n, wx, wy, wz)
+        x, y, z = mag
+        n = sqrt(x * x + y * y + z * z)
+        if not n > 0.0:
+            raise ValueError("cannot normalise a zero (or non-finite) vector")
+        fm = self._f_mag.step(t_s, x / n, y / n, z / n, wx, wy, wz)
+        # both filters have stepped before anything below may raise (as in update_reference)
+        x, y, z = fa
+        n = sqrt(x * x + y * y + z * z)
+        if not n > 0.0:
+            raise ValueError("cannot normalise a zero (or non-finite) vector")
+        m1x, m1y, m1z = x / n, y / n, z / n                       # b_1 (body)
+        z = ahz + g
+        n = sqrt(ahx * ahx + ahy * ahy + z * z)
+        if not n > 0.0:
+            raise ValueError("cannot normalise a zero (or non-finite) vector")
+        r1x, r1y, r1z = ahx / n, ahy / n, z / n                   # r_1 (world)
+        x, y, z = fm
+        n = sqrt(x * x + y * y + z * z)
+        if not n > 0.0:
+            raise ValueError("cannot normalise a zero (or non-finite) vector")
+        m2x, m2y, m2z = x / n, y / n, z / n                       # b_2 (body)
+        r2x, r2y, r2z = self._r2u                                  # r_2 (world)
+        if self._perp:
+            c = m2x * m1x + m2y * m1y + m2z * m1z
+            x, y, z = m2x - c * m1x, m2y - c * m1y, m2z - c * m1z
+            n = sqrt(x * x + y * y + z * z)
+            if not n > 0.0:
+                raise ValueError("cannot normalise a zero (or non-finite) vector")
+            m2x, m2y, m2z = x / n, y / n, z / n
+            c = r2x * r1x + r2y * r1y + r2z * r1z
+            x, y, z = r2x - c * r1x, r2y - c * r1y, r2z - c * r1z
+            n = sqrt(x * x + y * y + z * z)
+            if not n > 0.0:
+                raise ValueError("cannot normalise a zero (or non-finite) vector")
+            r2x, r2y, r2z = x / n, y / n, z / n
+
+        # --- errors and F_d with its derivatives (eq. 23) ------------------------------
+        xd0, xd1, xd2 = xd
+        vd0, vd1, vd2 = vd
+        ad0, ad1, ad2 = ad
+        p0, p1, p2 = pos
+        ex0, ex1, ex2 = p0 - xd0, p1 - xd1, p2 - xd2
+        ev0, ev1, ev2 = vx - vd0, vy - vd1, vz - vd2
+        ea0, ea1, ea2 = ahx - ad0, ahy - ad1, ahz - ad2            # e_v_dot
+        ej0 = -(kx * ev0 + kv * ea0) / m                           # e_v_ddot
+        ej1 = -(kx * ev1 + kv * ea1) / m
+        ej2 = -(kx * ev2 + kv * ea2) / m
+        F0 = -kx * ex0 - kv * ev0 + m * ad0
+        F1 = -kx * ex1 - kv * ev1 + m * ad1
+        F2 = -kx * ex2 - kv * ev2 + m * (g + ad2)
+        Fd0 = -kx * ev0 - kv * ea0 + m * jd[0]
+        Fd1 = -kx * ev1 - kv * ea1 + m * jd[1]
+        Fd2 = -kx * ev2 - kv * ea2 + m * jd[2]
+        Fdd0 = -kx * ea0 - kv * ej0 + m * sd[0]
+        Fdd1 = -kx * ea1 - kv * ej1 + m * sd[1]
+        Fdd2 = -kx * ea2 - kv * ej2 + m * sd[2]
+
+        # --- pointing u_s = S_p - x_d (eq. 21), governed ------------------------------
+        Sp = self.target_enu_m if target is None else target
+        u0, u1, u2 = Sp[0] - xd0, Sp[1] - xd1, Sp[2] - xd2
+        ud0, ud1, ud2 = -vd0, -vd1, -vd2
+        udd0, udd1, udd2 = -ad0, -ad1, -ad2
+        uu = u0 * u0 + u1 * u1 + u2 * u2
+        if self.pointing is not None and uu > 1e-12:
+            # _unit_d2(u_s, u_s_dot, u_s_ddot)
+            r = sqrt(uu)
+            n0, n1, n2 = u0 / r, u1 / r, u2 / r
+            rd = n0 * ud0 + n1 * ud1 + n2 * ud2
+            nd0, nd1, nd2 = (ud0 - n0 * rd) / r, (ud1 - n1 * rd) / r, (ud2 - n2 * rd) / r
+            rdd = nd0 * ud0 + nd1 * ud1 + nd2 * ud2 + n0 * udd0 + n1 * udd1 + n2 * udd2
+            s_, sd_, sdd_ = self.pointing.update(
+                t_s, (n0, n1, n2), (nd0, nd1, nd2),
+                ((udd0 - 2.0 * nd0 * rd - n0 * rdd) / r, (udd1 - 2.0 * nd1 * rd - n1 * rdd) / r,
+                 (udd2 - 2.0 * nd2 * rd - n2 * rdd) / r))
+            u0, u1, u2 = s_
+            ud0, ud1, ud2 = sd_
+            udd0, udd1, udd2 = sdd_
+            uu = u0 * u0 + u1 * u1 + u2 * u2
+
+        # --- desired_attitude (eqs. 21-26, 31) ---------------------------------------
+        FF = F0 * F0 + F1 * F1 + F2 * F2
+        fallback = not FF >= 1e-12 or not uu > 1e-12
+        if not fallback:
+            # b3 = _unit_d2(F, F_dot, F_ddot)
+            r = sqrt(FF)
+            b3x, b3y, b3z = F0 / r, F1 / r, F2 / r
+            rd = b3x * Fd0 + b3y * Fd1 + b3z * Fd2
+            b3dx, b3dy, b3dz = (Fd0 - b3x * rd) / r, (Fd1 - b3y * rd) / r, (Fd2 - b3z * rd) / r
+            rdd = b3dx * Fd0 + b3dy * Fd1 + b3dz * Fd2 + b3x * Fdd0 + b3y * Fdd1 + b3z * Fdd2
+            b3ddx = (Fdd0 - 2.0 * b3dx * rd - b3x * rdd) / r
+            b3ddy = (Fdd1 - 2.0 * b3dy * rd - b3y * rdd) / r
+            b3ddz = (Fdd2 - 2.0 * b3dz * rd - b3z * rdd) / r
+            # s = _unit_d2(u_s, ...)
+            r = sqrt(uu)
+            s0, s1, s2 = u0 / r, u1 / r, u2 / r
+            rd = s0 * ud0 + s1 * ud1 + s2 * ud2
+            sd0, sd1, sd2 = (ud0 - s0 * rd) / r, (ud1 - s1 * rd) / r, (ud2 - s2 * rd) / r
+            rdd = sd0 * ud0 + sd1 * ud1 + sd2 * ud2 + s0 * udd0 + s1 * udd1 + s2 * udd2
+            sdd0 = (udd0 - 2.0 * sd0 * rd - s0 * rdd) / r
+            sdd1 = (udd1 - 2.0 * sd1 * rd - s1 * rdd) / r
+            sdd2 = (udd2 - 2.0 * sd2 * rd - s2 * rdd) / r
+            # w = s - (s.b3) b3 (eq. 22) and its derivatives
+            c = s0 * b3x + s1 * b3y + s2 * b3z
+            cd = (sd0 * b3x + sd1 * b3y + sd2 * b3z) + (s0 * b3dx + s1 * b3dy + s2 * b3dz)
+            cdd = ((sdd0 * b3x + sdd1 * b3y + sdd2 * b3z) + 2.0 * (sd0 * b3dx + sd1 * b3dy + sd2 * b3dz)
+                   + (s0 * b3ddx + s1 * b3ddy + s2 * b3ddz))
+            w0, w1, w2 = s0 - c * b3x, s1 - c * b3y, s2 - c * b3z
+            fallback = w0 * w0 + w1 * w1 + w2 * w2 < 1e-12
+        if not fallback:
+            wd0, wd1, wd2 = sd0 - cd * b3x - c * b3dx, sd1 - cd * b3y - c * b3dy, sd2 - cd * b3z - c * b3dz
+            wdd0 = sdd0 - cdd * b3x - 2.0 * cd * b3dx - c * b3ddx
+            wdd1 = sdd1 - cdd * b3y - 2.0 * cd * b3dy - c * b3ddy
+            wdd2 = sdd2 - cdd * b3z - 2.0 * cd * b3dz - c * b3ddz
+            # b2 = _unit_d2(w, w_dot, w_ddot)
+            r = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+            b2x, b2y, b2z = w0 / r, w1 / r, w2 / r
+            rd = b2x * wd0 + b2y * wd1 + b2z * wd2
+            b2dx, b2dy, b2dz = (wd0 - b2x * rd) / r, (wd1 - b2y * rd) / r, (wd2 - b2z * rd) / r
+            rdd = b2dx * wd0 + b2dy * wd1 + b2dz * wd2 + b2x * wdd0 + b2y * wdd1 + b2z * wdd2
+            b2ddx = (wdd0 - 2.0 * b2dx * rd - b2x * rdd) / r
+            b2ddy = (wdd1 - 2.0 * b2dy * rd - b2y * rdd) / r
+            b2ddz = (wdd2 - 2.0 * b2dz * rd - b2z * rdd) / r
+            # b1 = b2 x b3 and its derivatives
+            b1x, b1y, b1z = b2y * b3z - b2z * b3y, b2z * b3x - b2x * b3z, b2x * b3y - b2y * b3x
+            b1dx = (b2dy * b3z - b2dz * b3y) + (b2y * b3dz - b2z * b3dy)
+            b1dy = (b2dz * b3x - b2dx * b3z) + (b2z * b3dx - b2x * b3dz)
+            b1dz = (b2dx * b3y - b2dy * b3x) + (b2x * b3dy - b2y * b3dx)
+            b1ddx = (b2ddy * b3z - b2ddz * b3y) + 2.0 * (b2dy * b3dz - b2dz * b3dy) + (b2y * b3ddz - b2z * b3ddy)
+            b1ddy = (b2ddz * b3x - b2ddx * b3z) + 2.0 * (b2dz * b3dx - b2dx * b3dz) + (b2z * b3ddx - b2x * b3ddz)
+            b1ddz = (b2ddx * b3y - b2ddy * b3x) + 2.0 * (b2dx * b3dy - b2dy * b3dx) + (b2x * b3ddy - b2y * b3ddx)
+            Od0 = b3x * b2dx + b3y * b2dy + b3z * b2dz
+            Od1 = b1x * b3dx + b1y * b3dy + b1z * b3dz
+            Od2 = b2x * b1dx + b2y * b1dy + b2z * b1dz
+            Odd0 = (b3dx * b2dx + b3dy * b2dy + b3dz * b2dz) + (b3x * b2ddx + b3y * b2ddy + b3z * b2ddz)
+            Odd1 = (b1dx * b3dx + b1dy * b3dy + b1dz * b3dz) + (b1x * b3ddx + b1y * b3ddy + b1z * b3ddz)
+            Odd2 = (b2dx * b1dx + b2dy * b1dy + b2dz * b1dz) + (b2x * b1ddx + b2y * b1ddy + b2z * b1ddz)
+        else:
+            des = desired_attitude((F0, F1, F2), (Fd0, Fd1, Fd2), (Fdd0, Fdd1, Fdd2), (u0, u1, u2),
+                                   (ud0, ud1, ud2), (udd0, udd1, udd2), self._b2_prev)
+            b1x, b1y, b1z = des.b1d
+            b2x, b2y, b2z = des.b2d
+            b3x, b3y, b3z = des.b3d
+            Od0, Od1, Od2 = des.Omega_d
+            Odd0, Odd1, Odd2 = des.Omega_d_dot
+        self._b2_prev = (b2x, b2y, b2z)
+
+        # --- TRIAD frames of the two pairs (body_coordinates, thrust_axis_estimate) ---
+        x, y, z = m1y * m2z - m1z * m2y, m1z * m2x - m1x * m2z, m1x * m2y - m1y * m2x
+        n = sqrt(x * x + y * y + z * z)
+        if not n > 0.0:
+            raise ValueError("cannot normalise a zero (or non-finite) vector")
+        mbx, mby, mbz = x / n, y / n, z / n
+        x, y, z = r1y * r2z - r1z * r2y, r1z * r2x - r1x * r2z, r1x * r2y - r1y * r2x
+        n = sqrt(x * x + y * y + z * z)
+        if not n > 0.0:
+            raise ValueError("cannot normalise a zero (or non-finite) vector")
+        mrx, mry, mrz = x / n, y / n, z / n
+        nbx, nby, nbz = m1y * mbz - m1z * mby, m1z * mbx - m1x * mbz, m1x * mby - m1y * mbx
+        nrx, nry, nrz = r1y * mrz - r1z * mry, r1z * mrx - r1x * mrz, r1x * mry - r1y * mrx
+
+        J0, J1, J2 = self._J
+        if self._decoupled:
+            # q_j = R^T b_jd (body_coordinates)
+            c1 = b1x * r1x + b1y * r1y + b1z * r1z
+            c2 = b1x * mrx + b1y * mry + b1z * mrz
+            c3 = b1x * nrx + b1y * nry + b1z * nrz
+            q10, q11, q12 = (c1 * m1x + c2 * mbx + c3 * nbx, c1 * m1y + c2 * mby + c3 * nby,
+                             c1 * m1z + c2 * mbz + c3 * nbz)
+            c1 = b2x * r1x + b2y * r1y + b2z * r1z
+            c2 = b2x * mrx + b2y * mry + b2z * mrz
+            c3 = b2x * nrx + b2y * nry + b2z * nrz
+            q20, q21, q22 = (c1 * m1x + c2 * mbx + c3 * nbx, c1 * m1y + c2 * mby + c3 * nby,
+                             c1 * m1z + c2 * mbz + c3 * nbz)
+            c1 = b3x * r1x + b3y * r1y + b3z * r1z
+            c2 = b3x * mrx + b3y * mry + b3z * mrz
+            c3 = b3x * nrx + b3y * nry + b3z * nrz
+            dx, dy, dz = (c1 * m1x + c2 * mbx + c3 * nbx, c1 * m1y + c2 * mby + c3 * nby,
+                          c1 * m1z + c2 * mbz + c3 * nbz)   # q3 = R^T b3d
+            # attitude_torque_decoupled (tilt angle not needed here)
+            kx_, ky_ = -dy, dx
+            if dz > -1.0 + 1e-9:
+                kv0, kv1, kv2 = ky_ * q12, -kx_ * q12, kx_ * q11 - ky_ * q10
+                kkv0, kkv1 = ky_ * kv2, -kx_ * kv2
+                w = 1.0 / (1.0 + dz)
+                psi = math.atan2(q11 - kv1 + w * kkv1, q10 - kv0 + w * kkv0)
+            else:
+                psi = 0.0
+            rho1, rho2 = self._rho
+            z0, z1, z2 = rho1 * kx_, rho1 * ky_, rho2 * math.sin(psi)
+            o0 = Od0 * q10 + Od1 * q20 + Od2 * dx
+            o1 = Od0 * q11 + Od1 * q21 + Od2 * dy
+            o2 = Od0 * q12 + Od1 * q22 + Od2 * dz
+            oo0 = Odd0 * q10 + Odd1 * q20 + Odd2 * dx
+            oo1 = Odd0 * q11 + Odd1 * q21 + Odd2 * dy
+            oo2 = Odd0 * q12 + Odd1 * q22 + Odd2 * dz
+            e0, e1, e2 = wx - o0, wy - o1, wz - o2
+            Jw0, Jw1, Jw2 = J0 * wx, J1 * wy, J2 * wz
+            alpha = self._alpha
+            tx = (wy * Jw2 - wz * Jw1) + J0 * (oo0 - (wy * o2 - wz * o1) + z0 - alpha * e0)
+            ty = (wz * Jw0 - wx * Jw2) + J1 * (oo1 - (wz * o0 - wx * o2) + z1 - alpha * e1)
+            tz = (wx * Jw1 - wy * Jw0) + J2 * (oo2 - (wx * o1 - wy * o0) + z2 - alpha * e2)
+            zV = (z0, z1, z2, dz, psi, (e0, e1, e2))
+            V = None
+        else:
+            (tx, ty, tz), zV, V = attitude_torque(self._J, gyro, (Od0, Od1, Od2), (Odd0, Odd1, Odd2),
+                                                  ((m1x, m1y, m1z), (m2x, m2y, m2z)),
+                                                  ((r1x, r1y, r1z), (r2x, r2y, r2z)), (b1x, b1y, b1z),
+                                                  (b2x, b2y, b2z), (b3x, b3y, b3z), self._rho, self._alpha)
+        # f = F . (R e3), R e3 = r1 b1_z + mr mb_z + nr nb_z (thrust_axis_estimate)
+        f = (F0 * (r1x * m1z + mrx * mbz + nrx * nbz) + F1 * (r1y * m1z + mry * mbz + nry * nbz)
+             + F2 * (r1z * m1z + mrz * mbz + nrz * nbz))
+        cmd, saturated = self.mixer.mix_fast(f, tx, ty, tz)
+        self.last_desired = (b1x, b1y, b1z, b2x, b2y, b2z, b3x, b3y, b3z, f)
+        self._last_detail = ((tx, ty, tz), saturated, (Od0, Od1, Od2), (ex0, ex1, ex2), (ev0, ev1, ev2), zV, V)
+        return cmd
+
+    def update_reference(self, t_s: float, meas: Measurements, ref: Reference) -> ControlOutput:
+        """:meth:`update` as the plain composition of this module's pure functions (slower; the specification).
 
         Parameters
         ----------

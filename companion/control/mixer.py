@@ -59,7 +59,7 @@ class Mixer:
     vehicle : VehicleConfig
     """
 
-    __slots__ = ("f_max", "_inv", "_A")
+    __slots__ = ("f_max", "_inv", "_A", "_coef")
 
     def __init__(self, vehicle: VehicleConfig) -> None:
         A = allocation_matrix(vehicle)
@@ -68,6 +68,9 @@ class Mixer:
         # Columns of A^-1 as float tuples: thrust_i = sum_j inv[i][j] w_j.
         self._inv = tuple(tuple(float(x) for x in row) for row in inv)
         self.f_max = float(vehicle.max_thrust_per_rotor_n)
+        # The same numbers unrolled for mix_fast: (c_i, p_i, q_i, s_i) are
+        # the weights of f, tau_x, tau_y, tau_z in rotor i's thrust.
+        self._coef = tuple(row[j] for j in range(4) for row in self._inv)
 
     def wrench(self, thrusts_n) -> tuple[float, float, float, float]:
         """Rotor thrusts (4,) N -> [f, tau_x, tau_y, tau_z] (N, N m, FLU)."""
@@ -131,6 +134,107 @@ class Mixer:
         tz *= lam
         t = [min(max(base[i] + lam * y[i], 0.0), fmax) for i in range(4)]
         return MotorCommand(tuple(x / fmax for x in t), f, (tx, ty, tz), True)
+
+
+    def mix_fast(self, f, tx, ty, tz):
+        """:meth:`mix` on plain floats, for the 250 Hz loop: ``(cmd (4,), saturated)``.
+
+        The same policy and the same floating-point operations in the same
+        order as :meth:`mix` (so bit-identical results), unrolled for the
+        quad's four rotors; ``min``/``max`` are spelled as the comparisons
+        the builtins make (``x < current`` / ``x > current``, first wins).
+        The rare step 4 (roll/pitch alone do not fit) is delegated to
+        :meth:`mix`.
+
+        Parameters
+        ----------
+        f : float
+            Desired collective thrust (N).
+        tx, ty, tz : float
+            Desired torque (N m, body FLU).
+        """
+        c0, c1, c2, c3, p0, p1, p2, p3, q0, q1, q2, q3, s0, s1, s2, s3 = self._coef
+        fmax = self.f_max
+        d0, d1, d2, d3 = p0 * tx + q0 * ty, p1 * tx + q1 * ty, p2 * tx + q2 * ty, p3 * tx + q3 * ty
+        y0, y1, y2, y3 = s0 * tz, s1 * tz, s2 * tz, s3 * tz
+        b0, b1, b2, b3 = c0 * f + d0, c1 * f + d1, c2 * f + d2, c3 * f + d3
+        t0, t1, t2, t3 = b0 + y0, b1 + y1, b2 + y2, b3 + y3
+        lo = t0
+        if t1 < lo:
+            lo = t1
+        if t2 < lo:
+            lo = t2
+        if t3 < lo:
+            lo = t3
+        hi = t0
+        if t1 > hi:
+            hi = t1
+        if t2 > hi:
+            hi = t2
+        if t3 > hi:
+            hi = t3
+        if lo >= 0.0 and hi <= fmax:
+            return (t0 / fmax, t1 / fmax, t2 / fmax, t3 / fmax), False
+
+        lo = b0
+        if b1 < lo:
+            lo = b1
+        if b2 < lo:
+            lo = b2
+        if b3 < lo:
+            lo = b3
+        hi = b0
+        if b1 > hi:
+            hi = b1
+        if b2 > hi:
+            hi = b2
+        if b3 > hi:
+            hi = b3
+        if not (lo >= 0.0 and hi <= fmax):
+            dmin = dmax = d0
+            for x in (d1, d2, d3):
+                if x < dmin:
+                    dmin = x
+                if x > dmax:
+                    dmax = x
+            if not dmax - dmin <= fmax:
+                mc = self.mix(f, (tx, ty, tz))
+                return mc.cmd, mc.saturated
+            # Nearest collective at which the roll/pitch torques fit.
+            lo = -d0 / c0
+            for x in (-d1 / c1, -d2 / c2, -d3 / c3):
+                if x > lo:
+                    lo = x
+            hi = (fmax - d0) / c0
+            for x in ((fmax - d1) / c1, (fmax - d2) / c2, (fmax - d3) / c3):
+                if x < hi:
+                    hi = x
+            if lo > f:
+                f = lo
+            if hi < f:
+                f = hi
+            b0, b1, b2, b3 = c0 * f + d0, c1 * f + d1, c2 * f + d2, c3 * f + d3
+        lam = 1.0
+        for b, yi in ((b0, y0), (b1, y1), (b2, y2), (b3, y3)):
+            if yi > 0.0:
+                x = (fmax - b) / yi
+                if x < lam:
+                    lam = x
+            elif yi < 0.0:
+                x = -b / yi
+                if x < lam:
+                    lam = x
+        if 0.0 > lam:
+            lam = 0.0
+        out = []
+        for b, yi in ((b0, y0), (b1, y1), (b2, y2), (b3, y3)):
+            x = b + lam * yi
+            if 0.0 > x:
+                x = 0.0
+            if fmax < x:
+                x = fmax
+            out.append(x / fmax)
+        return tuple(out), True
 
 
 def _max_scale(base, y, fmax: float) -> float:

@@ -232,30 +232,45 @@ class BodyVectorFilter:
 
         Returns the filtered unit vector (3,), body FLU.
         """
+        if self.propagate:
+            wx, wy, wz = float(gyro_flu_rad_s[0]), float(gyro_flu_rad_s[1]), float(gyro_flu_rad_s[2])
+        else:
+            wx = wy = wz = 0.0
+        return self.step(t_s, b_meas[0], b_meas[1], b_meas[2], wx, wy, wz)
+
+    def step(self, t_s: float, mx: float, my: float, mz: float, wx: float, wy: float, wz: float) -> Vec3:
+        """:meth:`update` on floats: measured unit vector (mx, my, mz) and gyro (rad/s), body FLU.
+
+        Returns the filtered unit vector (3,), body FLU.
+        """
         k = self.gain_rad_s
         if k == 0.0 or self._b is None or self._t is None:
-            self._t, self._b, self._n = t_s, b_meas, 1
-            return b_meas
+            b = (mx, my, mz)
+            self._t, self._b, self._n = t_s, b, 1
+            return b
         dt = t_s - self._t
         if dt <= 0.0:
             return self._b
         self._t = t_s
-        self._n += 1
+        n = self._n + 1
+        self._n = n
         bx, by, bz = self._b
         # Exact first-order blend (stable for any dt); while fewer than
         # 1/(k dt) samples have been seen, the running mean instead, so a small
         # k does not keep the noise of the first sample for 1/k seconds.
-        beta = max(1.0 - math.exp(-k * dt), 1.0 / self._n)
+        beta = 1.0 - math.exp(-k * dt)
+        mean = 1.0 / n
+        if mean > beta:        # max(beta, 1/n)
+            beta = mean
         if self.propagate:
-            wx, wy, wz = float(gyro_flu_rad_s[0]), float(gyro_flu_rad_s[1]), float(gyro_flu_rad_s[2])
             # b_dot = b x Omega (a world-fixed vector seen from a rotating body).
             bx, by, bz = (bx + dt * (by * wz - bz * wy),
                           by + dt * (bz * wx - bx * wz),
                           bz + dt * (bx * wy - by * wx))
-        mx, my, mz = b_meas
         bx += beta * (mx - bx)
         by += beta * (my - by)
         bz += beta * (mz - bz)
         n = math.sqrt(bx * bx + by * by + bz * bz)
-        self._b = (bx / n, by / n, bz / n)
-        return self._b
+        b = (bx / n, by / n, bz / n)
+        self._b = b
+        return b
