@@ -187,8 +187,6 @@ class RunnerConfig:
         Vehicle time allowed for landing and disarming.
     link_timeout_s : float
         Wall-clock seconds without any message before ``LinkError``.
-    trajectory_cut_s : float or None
-        Fly only the first ``trajectory_cut_s`` of the trajectory (tests, demos).
     request_truth : bool
         Ask the vehicle for its ground-truth ODOMETRY every frame.
     mute_streams : tuple of int
@@ -208,7 +206,6 @@ class RunnerConfig:
     settle_s: float = 5.0
     landing_timeout_s: float = 30.0
     link_timeout_s: float = 10.0
-    trajectory_cut_s: float | None = None
     request_truth: bool = True
     mute_streams: tuple[int, ...] = ()
 
@@ -309,11 +306,7 @@ class MissionRunner:
         self.coverage_fraction = coverage_fraction
         self.log = FlightLog()
 
-        t0 = float(trajectory.t0)
-        tf = float(trajectory.tf)
-        if config.trajectory_cut_s is not None:
-            tf = min(tf, t0 + float(config.trajectory_cut_s))
-        self._traj_t0, self._traj_tf = t0, tf
+        self._traj_t0, self._traj_tf = float(trajectory.t0), float(trajectory.tf)
         self.phase = "connect"
         self.t_s = None                 # vehicle time of the last frame (s)
         self._t_first = None
