@@ -59,7 +59,29 @@ def _check_start(start):
     return st
 
 
-class SitlThread:
+class _SitlOptions:
+    """What both ways of running the SITL share: the mission and the options
+    of the ``sitl`` command line (see ``SitlThread``)."""
+
+    def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
+                 speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
+                 sensor_hz: int = 250) -> None:
+        self.mission_path = Path(mission_path)
+        self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
+        self.outs = tuple(outs)
+        self.lockstep = lockstep
+        self.speed = speed
+        self.seed = seed
+        self.physics_hz = physics_hz
+        self.sensor_hz = sensor_hz
+
+    @property
+    def url(self) -> str:
+        """Connection string for a client."""
+        return peer_url(self.listen)
+
+
+class SitlThread(_SitlOptions):
     """The SITL in a daemon thread of this process.
 
     Parameters
@@ -78,26 +100,12 @@ class SitlThread:
         (ENU degrees from east, counter-clockwise); ``sitl --start``.
     """
 
-    def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
-                 speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
-                 sensor_hz: int = 250, start=None) -> None:
-        self.mission_path = Path(mission_path)
-        self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
-        self.outs = tuple(outs)
-        self.lockstep = lockstep
-        self.speed = speed
-        self.seed = seed
-        self.physics_hz = physics_hz
-        self.sensor_hz = sensor_hz
+    def __init__(self, mission_path, *, start=None, **options) -> None:
+        super().__init__(mission_path, **options)
         self.start_pose = _check_start(start)
         self.server = None
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
-
-    @property
-    def url(self) -> str:
-        """Connection string for a client."""
-        return peer_url(self.listen)
 
     def start(self) -> "SitlThread":
         from companion.mission import load_mission
@@ -140,7 +148,7 @@ class SitlThread:
         self.stop()
 
 
-class SitlProcess:
+class SitlProcess(_SitlOptions):
     """The SITL as a ``python -m sitl`` subprocess (same parameters as
     ``SitlThread``). ``start()`` waits for the ready line; ``stop()`` sends
     SIGTERM (then SIGKILL after ``timeout_s``).
@@ -153,26 +161,13 @@ class SitlProcess:
 
     READY_TIMEOUT_S = 30.0
 
-    def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
-                 speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
-                 sensor_hz: int = 250, python: str = sys.executable, start=None) -> None:
-        self.mission_path = Path(mission_path)
-        self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
-        self.outs = tuple(outs)
-        self.lockstep = lockstep
-        self.speed = speed
-        self.seed = seed
-        self.physics_hz = physics_hz
-        self.sensor_hz = sensor_hz
+    def __init__(self, mission_path, *, python: str = sys.executable, start=None, **options) -> None:
+        super().__init__(mission_path, **options)
         self.python = python
         self.deferred = isinstance(start, str) and start == "later"
         self.start_pose = None if self.deferred else _check_start(start)
         self.proc: subprocess.Popen | None = None
         self._stderr = None
-
-    @property
-    def url(self) -> str:
-        return peer_url(self.listen)
 
     def command(self) -> list[str]:
         cmd = [self.python, "-m", "sitl", str(self.mission_path), "--listen", self.listen,
