@@ -19,7 +19,7 @@ from companion.mission.schema import CoverageConfig
 
 RES = 0.1
 # A real SLAM map of a simulated vineyard (LCAS bacchus_lcas, MIT; see its README).
-LCAS = Path(__file__).parent / "data" / "lcas-vineyard-stage0" / "vineyard_stage0_map.yaml"
+LCAS = Path(__file__).resolve().parents[1] / "missions" / "lcas-stage0" / "vineyard_stage0_map.yaml"
 
 
 def vineyard(angle_deg=0.0, n_rows=5, spacing=3.0, length=20.0, width=0.3, head=4.0, border=1.0,
@@ -354,3 +354,40 @@ def test_vectorised_visibility_matches_segment_test():
         a = rng.random(2) * 6
         targets = rng.random((6, 2)) * 7 - 0.5
         assert list(visible_from(fs, a, targets)) == [is_clear(fs, a, b) for b in targets]
+
+
+def test_lcas_mission_flies_each_detected_corridor_once_inside_free_space():
+    """The bundled real SLAM map: rows from sparse laser hits, spacing detected.
+
+    Independent reference: the vine rows are the clusters of occupied cells'
+    y (east-west rows, gaps > 1 m between clusters); each corridor between
+    two consecutive rows must hold exactly one main segment, near its middle.
+    """
+    from companion.maps.ogm import load_ogm
+
+    grid = load_ogm(LCAS)
+    margin = 0.5
+    plan = plan_coverage(grid, CoverageConfig(safety_margin_m=margin))
+    assert abs(plan.line_spacing_m - 3.0) <= 0.1
+    r, c = np.nonzero(grid.occupied)
+    x, y = grid.cell_to_world(r, c)
+    inside = (np.abs(x) < 10) & (np.abs(y) < 11)      # the vineyard block, not the map's border hits
+    ys = np.sort(y[inside])
+    rows = [np.median(g) for g in np.split(ys, np.flatnonzero(np.diff(ys) > 1.0) + 1) if g.size > 20]
+    assert len(rows) >= 5
+    segs = np.array(plan.main_segments)
+    seg_y = segs[:, :, 1].mean(axis=1)
+    for lo, hi in zip(rows[:-1], rows[1:]):
+        mid = 0.5 * (lo + hi)
+        between = (seg_y > lo) & (seg_y < hi)
+        assert between.sum() == 1, f"corridor {lo:.2f}..{hi:.2f} m: {between.sum()} main segments"
+        assert abs(seg_y[between][0] - mid) <= 0.3
+    # every path point keeps the margin from any cell that is not free
+    path = plan.path_xy_m
+    pts = np.concatenate([np.linspace(a, b, max(2, int(np.linalg.norm(b - a) / 0.02)))
+                          for a, b in zip(path[:-1], path[1:])])
+    nr, nc = np.nonzero(~grid.free)
+    nx, ny = grid.cell_to_world(nr, nc)
+    near = (np.abs(nx) < 15) & (np.abs(ny) < 15)
+    d, _ = cKDTree(np.column_stack([nx[near], ny[near]])).query(pts)
+    assert d.min() >= margin - grid.resolution_m / 2
