@@ -11,7 +11,9 @@ sensor frames) as a subprocess. The peer (this script) arms the vehicle and
 commands NAV_TAKEOFF to 2 m, so the SITL's own cascaded controller flies
 (take-off, then hold) while the peer answers every HIGHRES_IMU with a NaN-tick
 HIL_ACTUATOR_CONTROLS (lockstep flag, no override) straight from the datagram
-bytes, doing as little as possible itself. Each run measures ``--seconds`` of
+bytes, doing as little as possible itself; like the SITL (SIM_LS_SPIN) and the
+companion (RunnerConfig.spin_us) it busy-polls its socket for 300 us before
+sleeping in the kernel. Each run measures ``--seconds`` of
 vehicle time after lockstep engages; prints per-run and median frames/s and
 real-time factor, plus the SITL's CPU time per frame (from /proc). ``--free``: no
 lockstep; the SITL free-runs at ``--speed 0`` and the peer only listens. Target
@@ -87,8 +89,23 @@ def one_run(mission: str, seconds: float, lockstep: bool = True) -> dict:
         wall0 = cpu0 = None
         n_target = None
         t0_pending = True
+        sock.setblocking(False)
+        def recv():
+            # spin on the socket (the SITL answers within tens of microseconds), then block
+            t_end = time.perf_counter() + 300e-6
+            while time.perf_counter() < t_end:
+                try:
+                    return sock.recv(65536)
+                except BlockingIOError:
+                    pass
+            sock.settimeout(5.0)
+            try:
+                return sock.recv(65536)
+            finally:
+                sock.setblocking(False)
+
         while True:
-            data = sock.recv(65536)
+            data = recv()
             last = _last_packet(data)
             if last is None or last[0] != _IMU_ID:
                 continue

@@ -45,6 +45,7 @@ Pure helpers (``smooth_segment``, ``setpoint_yaw_enu``) come first; the
 from __future__ import annotations
 
 import math
+import os
 import time
 from array import array
 from dataclasses import dataclass, field
@@ -194,6 +195,10 @@ class RunnerConfig:
         runner does not use, to save both sides the encoding and parsing
         (the demo mutes ATTITUDE_QUATERNION, GLOBAL_POSITION_INT, ...; leave
         empty when a ground station shares the vehicle's streams).
+    spin_us : float
+        Busy-poll this long (microseconds) for the vehicle's next frame
+        before sleeping in the kernel (``Connection.spin_s``); used only on
+        a machine with two or more cores, where the vehicle runs on another.
     """
 
     control: str = "companion"
@@ -208,12 +213,15 @@ class RunnerConfig:
     link_timeout_s: float = 10.0
     request_truth: bool = True
     mute_streams: tuple[int, ...] = ()
+    spin_us: float = 300.0
 
     def __post_init__(self) -> None:
         if self.control not in ("companion", "vehicle"):
             raise ValueError("control must be 'companion' or 'vehicle'")
         if not self.setpoint_hz >= 20.0:
             raise ValueError("setpoint_hz must be >= 20 (PX4 offboard)")
+        if not self.spin_us >= 0.0:
+            raise ValueError("spin_us must be >= 0")
 
 
 @dataclass
@@ -589,6 +597,7 @@ class MissionRunner:
         conn.handler = self.on_message
         # every frame is answered in lockstep: replies are handled with the next frame
         conn.frame_sync = True
+        conn.spin_s = self.cfg.spin_us * 1e-6 if (os.cpu_count() or 1) >= 2 else 0.0
         error = None
         try:
             self._fly()

@@ -153,6 +153,8 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("NAV_MC_ALT_RAD", _R, 0.8, 0.05, 10.0, "takeoff altitude acceptance (m)"),
     ParamSpec("RTL_RETURN_ALT", _R, 5.0, 0.0, 150.0, "return altitude above home (m; PX4's default is 60)"),
     ParamSpec("SIM_LS_TMO", _R, 2.0, 0.05, 60.0, "lockstep: wall-clock wait for the answer (s)"),
+    ParamSpec("SIM_LS_SPIN", _R, 300.0, 0.0, 5000.0,
+              "lockstep: busy-poll for the answer this long before sleeping (us; 0 off)"),
     ParamSpec("SIM_VEC_VAR", _R, 5.0e-4, 0.0, 1.0, "accel/mag direction noise variance (-)"),
     ParamSpec("SIM_GYRO_VAR", _R, 5.0e-4, 0.0, 1.0, "gyro noise variance ((rad/s)^2)"),
     ParamSpec("SIM_POS_STD", _R, 0.0, 0.0, 100.0, "position measurement noise std (m)"),
