@@ -115,7 +115,7 @@ class SitlThread(_SitlOptions):
         mission = load_mission(self.mission_path)
         cfg = ServerConfig(listen=self.listen, outs=self.outs, lockstep=self.lockstep, speed=self.speed,
                            seed=self.seed, physics_hz=self.physics_hz, sensor_hz=self.sensor_hz,
-                           start=self.start_pose)
+                           start=self.start_pose, spin=False)
         self.server = SitlServer(mission, cfg)
         self.server.open()   # readiness: the sockets exist when start() returns
 

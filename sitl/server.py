@@ -160,6 +160,10 @@ class ServerConfig:
         Launch position (ENU metres on the map; z from the DEM) and heading
         (ENU degrees, body x from east, counter-clockwise). None: the
         mission's ``sim.start_enu_m`` or the default free cell, heading east.
+    spin : bool
+        Busy-poll for lockstep answers (SIM_LS_SPIN). False when the peer
+        shares this process (``SitlThread``): a spinning thread would only
+        compete with it for the interpreter lock.
     """
 
     listen: str = "udpin:127.0.0.1:14540"
@@ -170,6 +174,7 @@ class ServerConfig:
     physics_hz: int = 1000
     sensor_hz: int = 250
     start: tuple[float, float, float] | None = None
+    spin: bool = True
 
     def __post_init__(self) -> None:
         if not (self.speed >= 0 and math.isfinite(self.speed)):
@@ -517,7 +522,7 @@ class SitlServer:
         s.range_std = p["SIM_RNG_STD"]
         # Spinning for the lockstep answer only pays when the peer runs on
         # another core; on one core it would only delay the peer.
-        self._spin_s = p["SIM_LS_SPIN"] * 1e-6 if (os.cpu_count() or 1) >= 2 else 0.0
+        self._spin_s = p["SIM_LS_SPIN"] * 1e-6 if self.config.spin and (os.cpu_count() or 1) >= 2 else 0.0
 
     # ------------------------------------------------------------------ lifecycle
     def open(self) -> None:
