@@ -32,10 +32,17 @@ Wire conventions chosen here (documented once)
 - SET_POSITION_TARGET_LOCAL_NED: ``type_mask`` bits as MAVLink's
   POSITION_TARGET_TYPEMASK; an ignored or non-finite component becomes NaN
   per axis (PX4's trajectory_setpoint convention). With FORCE_SET the
-  acceleration fields are ignored, as PX4 does (force setpoints are not
-  supported there either). Frames: MAV_FRAME_LOCAL_NED, and
-  MAV_FRAME_BODY_NED (velocity/acceleration rotated by the current heading,
-  position as an offset from the current position, as PX4).
+  acceleration fields are ignored and the rest is used (PX4 and ArduCopter
+  do not support force setpoints either, but reject the whole message when
+  it also uses the acceleration). Frames: MAV_FRAME_LOCAL_NED, and
+  MAV_FRAME_BODY_NED as ArduCopter reads it: velocity, acceleration and
+  position rotated by the current heading, the position an offset from the
+  current position, the yaw an offset from the current heading (clockwise).
+  PX4 differs: it ignores the position and keeps the yaw absolute (MAVLink's
+  own text: BODY_NED positions are LOCAL_NED); the usual body-velocity
+  setpoint (MAVSDK ``set_velocity_body``: position and yaw ignored) means the
+  same on all three. Every other frame (LOCAL_OFFSET_NED, BODY_OFFSET_NED,
+  BODY_FRD, ...) is rejected, as PX4 does.
 """
 
 from __future__ import annotations

@@ -128,7 +128,12 @@ def test_distance_sensor_cm_to_m_and_no_return():
     m = mav.distance_sensor_encode(100, 20, 500, 137, 0, 3, mavlink.MAV_SENSOR_ROTATION_NONE, 0)
     r = codec.decode_distance_sensor(_wire(m, mav))
     assert (r.distance_m, r.min_m, r.max_m, r.sensor_id) == (1.37, 0.2, 5.0, 3)
+    # exactly max_distance is a valid range (PX4); max + 1 cm is "no return"
     m = mav.distance_sensor_encode(100, 20, 500, 500, 0, 3, 0, 0)
+    assert codec.decode_distance_sensor(_wire(m, mav)).distance_m == 5.0
+    m = mav.distance_sensor_encode(100, 20, 500, 501, 0, 3, 0, 0)
+    assert math.isnan(codec.decode_distance_sensor(_wire(m, mav)).distance_m)
+    m = mav.distance_sensor_encode(100, 20, 500, 19, 0, 3, 0, 0)
     assert math.isnan(codec.decode_distance_sensor(_wire(m, mav)).distance_m)
 
 

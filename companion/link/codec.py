@@ -206,11 +206,12 @@ def decode_heartbeat(msg) -> VehicleState:
 def decode_distance_sensor(msg) -> Range:
     """DISTANCE_SENSOR (cm on the wire) -> ``Range`` in metres.
 
-    A reading at or beyond ``max_distance`` (or below ``min_distance``) is
-    "no return" by MAVLink convention and decodes to NaN.
+    A reading beyond ``max_distance`` (PX4 and the bundled SITL send
+    ``max_distance + 1`` for "no return") or below ``min_distance`` decodes
+    to NaN; a reading of exactly ``max_distance`` is a valid range, as in PX4.
     """
     d_cm, lo_cm, hi_cm = msg.current_distance, msg.min_distance, msg.max_distance
-    d_m = d_cm / 100.0 if lo_cm <= d_cm < hi_cm else math.nan
+    d_m = d_cm / 100.0 if lo_cm <= d_cm <= hi_cm else math.nan
     return Range(int(msg.time_boot_ms), int(msg.id), d_m, lo_cm / 100.0, hi_cm / 100.0, int(msg.orientation))
 
 
