@@ -44,6 +44,9 @@ MAV_TYPE_QUADROTOR = 2
 STATS_KEYS = ("coverage_fraction", "path_length_m", "duration_s", "n_waypoints", "orientation_deg",
               "max_speed_m_s", "max_accel_m_s2", "waypoint_residual_m")
 TIMING_KEYS = ("load", "coverage", "trajectory", "total")
+#: Most trajectory samples plan.json may hold (a 10 ha field at 10 Hz needs ~4e5):
+#: beyond it --sample-hz is a typo and the document would not fit in memory.
+MAX_SAMPLES = 2_000_000
 
 
 def _rows(a) -> list:
@@ -75,6 +78,10 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
     if not (sample_hz > 0 and math.isfinite(sample_hz)):
         raise PlanError("--sample-hz", f"must be a positive number, got {sample_hz}")
     traj = plan.trajectory
+    n_samples = (traj.tf - traj.t0) * sample_hz
+    if n_samples > MAX_SAMPLES:
+        raise PlanError("--sample-hz", f"{sample_hz:g} Hz over {traj.tf - traj.t0:.1f} s would be "
+                        f"{n_samples:.3g} samples (at most {MAX_SAMPLES}); use a lower rate")
     wp = plan.waypoints
     t = sample_times(traj.t0, traj.tf, sample_hz)
     s = traj.sample(t)

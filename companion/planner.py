@@ -23,6 +23,9 @@ from .trajectory import Trajectory, generate_trajectory
 #: Samples per knot interval for the speed/acceleration statistics (the pieces are
 #: smooth degree-7 polynomials over ~4 s: 16 samples find their maxima to well under 1 %).
 STATS_SAMPLES_PER_INTERVAL = 16
+#: Most way-points a plan may have (path length / (speed x interval)); beyond it the
+#: mission's speed or way-point interval is a typo, not a plan (memory would run out).
+MAX_WAYPOINTS = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -157,6 +160,22 @@ def check_dem_covers(dem: ElevationModel, path_xy_m: np.ndarray) -> None:
                         f"y {y_min:.2f}..{y_max:.2f} m, NODATA cells excluded)")
 
 
+def check_sizes(mission: Mission, grid: OccupancyGrid) -> None:
+    """PlanError unless the coverage settings fit the map's cell size.
+
+    The erosion disk and the beam of lines are sized in cells: a safety margin
+    wider than the whole grid leaves no free space (said here, before the disk
+    is built), and lines closer than one cell cannot be told apart on the grid.
+    """
+    cov = mission.coverage
+    if cov.safety_margin_m / grid.resolution_m > max(grid.shape):
+        raise PlanError(grid.source, f"no free space left after eroding by the safety margin "
+                        f"{cov.safety_margin_m} m (wider than the map)")
+    if cov.line_spacing_m is not None and cov.line_spacing_m < grid.resolution_m:
+        raise PlanError(f"{mission.source}: key 'coverage.line_spacing_m'",
+                        f"{cov.line_spacing_m:g} m is below the map resolution {grid.resolution_m:g} m")
+
+
 def trajectory_stats(trajectory: Trajectory,
                      per_interval: int = STATS_SAMPLES_PER_INTERVAL) -> tuple[float, float, float]:
     """(max |v| m/s, max |a| m/s^2, max way-point residual m) of a trajectory."""
@@ -186,18 +205,25 @@ def plan_mission(mission: Mission) -> Plan:
     MapError
         A map file is missing or malformed.
     PlanError
-        No coverage path, or the DEM does not cover it (names the DEM file).
+        No coverage path, the DEM does not cover it (names the DEM file), or the
+        coverage/flight settings do not fit the map (``check_sizes``, ``MAX_WAYPOINTS``).
     """
     t_start = time.perf_counter()
     grid = load_ogm(mission.map_path)
     dem = load_dem(mission.dem_path)
     t_loaded = time.perf_counter()
 
+    check_sizes(mission, grid)
     coverage = plan_coverage(grid, mission.coverage)
     path = np.asarray(coverage.path_xy_m, dtype=float)
     if path.ndim != 2 or path.shape[0] < 2:
         raise PlanError(str(mission.map_path), "the coverage planner found no path in the free space")
     check_dem_covers(dem, path)
+    spacing_m = mission.flight.speed_m_s * mission.flight.waypoint_interval_s
+    if float(coverage.path_length_m) / spacing_m > MAX_WAYPOINTS:
+        raise PlanError(f"{mission.source}: keys 'flight.speed_m_s', 'flight.waypoint_interval_s'",
+                        f"way-points every {spacing_m:g} m along a {float(coverage.path_length_m):.1f} m path "
+                        f"would be more than {MAX_WAYPOINTS}")
     waypoints = extract_waypoints(coverage, dem, mission.flight)
     t_covered = time.perf_counter()
 

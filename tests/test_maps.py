@@ -140,6 +140,8 @@ def test_relative_image_path_is_relative_to_yaml(tmp_path, monkeypatch):
     ("thresholds", "free_thresh"),
     ("mode", "mode"),
     ("header", "header"),
+    ("huge_resolution", "reaches"),
+    ("huge_origin", "reaches"),
 ])
 def test_malformed_map_names_file_and_problem(tmp_path, case, needle):
     y = write_map(tmp_path, PIX)
@@ -171,6 +173,10 @@ def test_malformed_map_names_file_and_problem(tmp_path, case, needle):
         y.write_text(text + "mode: fuzzy\n")
     elif case == "header":
         img.write_bytes(b"P5\n3 x\n255\n" + bytes(6))
+    elif case == "huge_resolution":     # YAML 1.1 needs the exponent's sign for a float
+        y.write_text(text.replace("resolution: 1.0", "resolution: 1.0e+300"))
+    elif case == "huge_origin":
+        y.write_text(text.replace("origin: [0.0, 0.0, 0.0]", "origin: [0.0, -2.0e+7, 0.0]"))
     with pytest.raises(MapError) as exc:
         load_ogm(y)
     msg = str(exc.value)
@@ -264,6 +270,10 @@ def test_nodata_and_outside(tmp_path):
     ("ncols 2\nnrows 2\nxllcorner 0\nxllcenter 0\nyllcorner 0\ncellsize 1\n1 2\n3 4\n", "xllcorner / xllcenter"),
     ("ncols 2.5\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2\n3 4\n", "ncols"),
     ("ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\nfoo 3\n1 2\n3 4\n", "line 6"),
+    # Magnitudes beyond any terrain / local frame (they overflowed the planner's arithmetic).
+    ("ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2\n3 1e200\n", "height value 1e+200"),
+    ("ncols 2\nnrows 2\nxllcorner -1e300\nyllcorner 0\ncellsize 1\n1 2\n3 4\n", "reaches"),
+    ("ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1e300\n1 2\n3 4\n", "reaches"),
 ])
 def test_malformed_dem(tmp_path, text, needle):
     p = tmp_path / "bad.asc"

@@ -60,6 +60,14 @@ def test_defaults_and_centroid(tmp_path):
     (GOOD.replace("target: [1.0, 2.0, 3.0]", "target: middle"), "key 'pointing.target'", ""),
     (GOOD.replace("speed_m_s: 1.5", "speed_m_s: -1"), "key 'flight'", "speed_m_s must be > 0"),
     ("- just\n- a list\n", "mission.yaml", "mapping"),
+    ("", "mission.yaml", "mapping"),
+    (GOOD.replace("height_agl_m: 2.0", "height_agl_m: .nan"), "key 'flight.height_agl_m'", "finite"),
+    (GOOD.replace("lat: 44.8", "lat: .inf"), "key 'home.lat'", "finite"),
+    # Huge lengths overflowed the planner's grid arithmetic (tracebacks) before the bounds.
+    (GOOD.replace("height_agl_m: 2.0", "height_agl_m: 1.0e+300"), "key 'flight'", "height_agl_m must be in"),
+    (GOOD.replace("line_spacing_m: 2.5", "line_spacing_m: 1.0e+300"), "key 'coverage'", "line_spacing_m must be in"),
+    (GOOD.replace("safety_margin_m: 0.4", "safety_margin_m: 1.0e+300"), "key 'coverage'", "safety_margin_m must be"),
+    (GOOD.replace("alt_m: 30.0", "alt_m: 1.0e+308"), "key 'home'", "alt_m"),
 ])
 def test_schema_errors_name_file_and_key(tmp_path, text, where, what):
     p = write(tmp_path, text)
@@ -87,6 +95,13 @@ def test_missing_file(tmp_path):
 def test_base_dir_cannot_be_set_from_the_file(tmp_path):
     with pytest.raises(MissionError, match="base_dir"):
         load_mission(write(tmp_path, GOOD + "base_dir: /etc\n"))
+    with pytest.raises(MissionError, match="source"):
+        load_mission(write(tmp_path, GOOD + "source: x.yaml\n"))
+
+
+def test_source_is_the_file(tmp_path):
+    p = write(tmp_path, GOOD)
+    assert load_mission(p).source == str(p)
 
 
 @pytest.mark.parametrize("name", ["flat-rectangle", "tilted-hexagon"])

@@ -3,6 +3,8 @@ checked against independent computations."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import shutil
 import subprocess
@@ -14,7 +16,7 @@ import pytest
 
 from companion.cli import main
 from companion.errors import PlanError
-from companion.frames import geodetic2enu
+from companion.frames import enu2geodetic, geodetic2enu
 from companion.maps import load_dem, load_ogm
 from companion.mission import load_mission
 from companion.plan_io import load_plan
@@ -95,6 +97,65 @@ def test_bad_sample_rate_and_missing_output_dir(capsys, tmp_path):
     assert not (tmp_path / "no").exists()
 
 
+def _sub(name: str, old: str, new: str):
+    def mutate(d: Path) -> None:
+        f = d / name
+        assert old in f.read_text()
+        f.write_text(f.read_text().replace(old, new))
+    return mutate
+
+
+def _pgm_all(value: int):
+    def mutate(d: Path) -> None:
+        raw = (d / "map.pgm").read_bytes()
+        head = raw[: raw.index(b"255\n") + 4]               # P5 250 x 120, 8 bit, one byte per pixel
+        (d / "map.pgm").write_bytes(head + bytes([value]) * (len(raw) - len(head)))
+    return mutate
+
+
+@pytest.mark.parametrize("mutate, needle", [
+    # A map with no free cell: all unknown (205 = p 0.2 is between the thresholds) / all occupied.
+    (_pgm_all(205), "map.yaml: no free space"),
+    (_pgm_all(0), "map.yaml: no free space"),
+    # Each of these ended in a traceback (overflow / out of memory) before.
+    (_sub("mission.yaml", "speed_m_s: 1.0", "speed_m_s: 1.0e-300"), "flight.speed_m_s"),
+    (_sub("mission.yaml", "waypoint_interval_s: 4.0", "waypoint_interval_s: 1.0e-9"), "waypoint_interval_s"),
+    (_sub("mission.yaml", "line_spacing_m: 2.5", "line_spacing_m: 1.0e-300"), "below the map resolution"),
+    (_sub("map.yaml", "resolution: 0.1", "resolution: 1.0e-300"), "map.yaml: no free space"),
+    (_sub("dem.asc", "0.0000", "1e200"), "dem.asc: height value"),
+], ids=["all-unknown", "all-occupied", "tiny-speed", "tiny-interval", "tiny-spacing", "tiny-resolution",
+        "huge-heights"])
+def test_nasty_inputs_one_line_nothing_written(capsys, tmp_path, mutate, needle):
+    m = copy_mission(tmp_path)
+    mutate(m.parent)
+    run_bad(capsys, tmp_path, [], m, needle)
+
+
+def test_late_write_failures_leave_nothing(capsys, tmp_path):
+    m = MISSIONS / "flat-rectangle" / "mission.yaml"
+    # An output that is a directory: found before planning; it used to be found at the last
+    # rename, after plan.json had been put in place, and the message named the temporary.
+    (tmp_path / "out" / "d.plan").mkdir(parents=True)
+    line = run_bad(capsys, tmp_path, ["--qgc", str(tmp_path / "out" / "d.plan")], m, "d.plan: cannot write")
+    assert ".tmp" not in line
+    run_bad(capsys, tmp_path, ["-o", str(tmp_path / "out")], m, "out: cannot write")
+    # A directory where no file can be created (even as root): fails in the write phase, after
+    # the plan, with plan.json's temporary already written -- and removed again.
+    if Path("/proc").is_dir() and not argparse_plot_missing():
+        line = run_bad(capsys, tmp_path, ["--plot", "/proc/companion-test.png"], m, "/proc/companion-test.png")
+        assert ".tmp" not in line
+    # More samples than plan.json can hold.
+    run_bad(capsys, tmp_path, ["--sample-hz", "1e9"], m, "--sample-hz")
+
+
+def argparse_plot_missing() -> bool:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        return True
+    return False
+
+
 def test_plot_without_matplotlib(capsys, tmp_path, monkeypatch):
     for mod in [k for k in sys.modules if k == "matplotlib" or k.startswith("matplotlib.")]:
         monkeypatch.delitem(sys.modules, mod)
@@ -128,9 +189,11 @@ def planned(request, tmp_path_factory):
         argv += ["--plot", str(out / "p.png")]
     except ImportError:
         pass
-    assert main(argv) == 0
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        assert main(argv) == 0
     return {"name": name, "out": out, "mission": load_mission(mission_path),
-            "doc": json.loads((out / "plan.json").read_text())}
+            "doc": json.loads((out / "plan.json").read_text()), "stdout": stdout.getvalue()}
 
 
 def test_plan_json_keys(planned):
@@ -221,6 +284,79 @@ def test_qgc_exports_round_trip(planned):
         back.append(geodetic2enu(float(f[8]), float(f[9]), home.alt_m + float(f[10]),
                                  home.lat, home.lon, home.alt_m))
     assert np.abs(np.array(back) - wp).max() < 0.01
+
+
+def test_plan_json_types_and_finite(planned):
+    doc = planned["doc"]
+    json.dumps(doc, allow_nan=False)                     # no NaN / inf anywhere
+    assert all(isinstance(doc["origin"][k], float) for k in ("lat", "lon", "alt_m"))
+    assert all(len(xy) == 2 for xy in doc["path"])
+    for w in doc["waypoints"]:
+        assert isinstance(w["t"], float) and isinstance(w["corner"], bool)
+        assert all(len(w[k]) == 3 for k in ("p", "v", "a"))
+    n = len(doc["trajectory"]["t"])
+    assert all(len(doc["trajectory"][k]) == n and len(doc["trajectory"][k][0]) == 3
+               for k in ("p", "v", "a", "pointing"))
+    assert isinstance(doc["stats"]["n_waypoints"], int)
+    assert all(isinstance(v, float) for k, v in doc["stats"].items() if k != "n_waypoints")
+    assert all(isinstance(v, float) and v >= 0 for v in doc["timings_s"].values())
+
+
+def test_summary_line(planned):
+    out, st, tm = planned["stdout"], planned["doc"]["stats"], planned["doc"]["timings_s"]
+    first = out.splitlines()[0]
+    assert f"{st['n_waypoints']} way-points" in first
+    assert f"path {st['path_length_m']:.1f} m" in first and f"duration {st['duration_s']:.1f} s" in first
+    assert f"coverage {100 * st['coverage_fraction']:.1f} %" in first
+    assert f"orientation {st['orientation_deg']:.1f} deg" in first
+    assert "timings:" in out and f"total {tm['total']:.3f} s" in out
+
+
+def test_qgc_plan_matches_the_loader_schema(planned):
+    """The keys and JSON types QGroundControl's loader checks (PlanMasterController /
+    MissionController::_loadJsonMissionFileV2 / MissionItem::load / SimpleMissionItem::load:
+    a number-typed key may be null, meaning NaN)."""
+    qgc = json.loads((planned["out"] / "p.plan").read_text())
+    num = (int, float)
+    assert qgc["fileType"] == "Plan" and qgc["version"] == 1 and isinstance(qgc["groundStation"], str)
+    assert qgc["geoFence"] == {"circles": [], "polygons": [], "version": 2}
+    assert qgc["rallyPoints"] == {"points": [], "version": 2}
+    mis = qgc["mission"]
+    assert mis["version"] == 2
+    for k in ("firmwareType", "vehicleType", "cruiseSpeed", "hoverSpeed", "globalPlanAltitudeMode"):
+        assert isinstance(mis[k], num) and not isinstance(mis[k], bool)
+    assert len(mis["plannedHomePosition"]) == 3 and all(isinstance(v, num) for v in mis["plannedHomePosition"])
+    assert len(mis["items"]) >= 1
+    home = planned["mission"].home
+    wp = np.array([w["p"] for w in planned["doc"]["waypoints"]])
+    for i, (it, p) in enumerate(zip(mis["items"], wp)):
+        assert it["type"] == "SimpleItem" and it["autoContinue"] is True and it["doJumpId"] == i + 1
+        assert it["command"] == 16 and it["frame"] == 3                    # NAV_WAYPOINT, relative altitude
+        assert len(it["params"]) == 7 and all(v is None or isinstance(v, num) for v in it["params"])
+        assert it["AltitudeMode"] == 1                                     # QGC AltitudeModeRelative
+        assert isinstance(it["Altitude"], num) and it["AMSLAltAboveTerrain"] is None
+        lat, lon, _ = enu2geodetic(p[0], p[1], p[2], home.lat, home.lon, home.alt_m)
+        assert it["params"][4:7] == pytest.approx([lat, lon, p[2]], abs=1e-9)
+        assert it["Altitude"] == pytest.approx(p[2])
+
+
+def test_wpl_loads_in_pymavlink(planned):
+    """MAVProxy's ``wp load`` reader: item 0 is home (current, frame GLOBAL, AMSL altitude),
+    then one NAV_WAYPOINT per way-point at the position enu2geodetic gives, relative altitude."""
+    mavwp = pytest.importorskip("pymavlink.mavwp")
+    loader = mavwp.MAVWPLoader()
+    wp = np.array([w["p"] for w in planned["doc"]["waypoints"]])
+    assert loader.load(str(planned["out"] / "p.waypoints")) == len(wp) + 1
+    home = planned["mission"].home
+    h = loader.wp(0)
+    assert (h.seq, h.current, h.frame, h.command) == (0, 1, 0, 16)
+    assert (h.x, h.y, h.z) == pytest.approx((home.lat, home.lon, home.alt_m))
+    for i, p in enumerate(wp, start=1):
+        it = loader.wp(i)
+        assert (it.seq, it.current, it.frame, it.command, it.autocontinue) == (i, 0, 3, 16, 1)
+        lat, lon, _ = enu2geodetic(p[0], p[1], p[2], home.lat, home.lon, home.alt_m)
+        assert it.x == pytest.approx(lat, abs=1e-9) and it.y == pytest.approx(lon, abs=1e-9)   # ~0.1 mm
+        assert it.z == pytest.approx(p[2], abs=1e-4)
 
 
 def test_plot_written(planned):

@@ -9,6 +9,7 @@ in the target directory and ``os.replace``: bad input leaves nothing behind.
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import tempfile
@@ -36,23 +37,27 @@ def write_atomically(outputs: dict[str, bytes]) -> None:
     temps: list[tuple[str, str]] = []
     umask = os.umask(0)
     os.umask(umask)
+    path = "output"
     try:
         for path, data in outputs.items():
             target = Path(path)
-            try:
-                fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp",
-                                           dir=str(target.parent if str(target.parent) else "."))
-            except OSError as exc:
-                raise InputError(path, f"cannot write: {exc.strerror or exc}") from None
+            fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp",
+                                       dir=str(target.parent if str(target.parent) else "."))
             temps.append((tmp, path))
             os.fchmod(fd, 0o666 & ~umask)   # mkstemp makes 0600; give the usual permissions
             with os.fdopen(fd, "wb") as f:
                 f.write(data)
+        # A rename onto a directory fails; find it before any rename, so that no
+        # output is replaced when another one cannot be.
+        for tmp, path in temps:
+            if Path(path).is_dir():
+                raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), path)
         for tmp, path in temps:
             os.replace(tmp, path)
         temps.clear()
     except OSError as exc:
-        raise InputError(getattr(exc, "filename", None) or "output", f"cannot write: {exc.strerror or exc}") from None
+        # Name the output the user gave, never the temporary.
+        raise InputError(path, f"cannot write: {exc.strerror or exc}") from None
     finally:
         for tmp, _ in temps:
             try:
@@ -78,6 +83,9 @@ def run(args) -> int:
         parent = Path(p).parent
         if not parent.is_dir():
             raise InputError(p, f"cannot write: directory {str(parent)!r} does not exist")
+        if Path(p).is_dir():
+            # Checked up front: the final renames cannot be undone one by one.
+            raise InputError(p, "cannot write: is a directory")
 
     from ..mission import load_mission
     from ..plan_io import plan_json_text, plan_to_json_dict, qgc_plan_text, qgc_wpl_text

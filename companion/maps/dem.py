@@ -20,6 +20,11 @@ import numpy as np
 from ..errors import MapError
 from .grid import ElevationModel
 
+#: Largest coordinate (m, +-) and height (m, +-) accepted: beyond them the grid is a
+#: typo (a local metric frame wider than the Earth, heights beyond any terrain).
+MAX_COORD_M = 1.0e7
+MAX_HEIGHT_M = 1.0e5
+
 _KEYS = ("ncols", "nrows", "xllcorner", "xllcenter", "yllcorner", "yllcenter", "cellsize", "nodata_value")
 
 
@@ -96,6 +101,11 @@ def load_dem(path: str | Path) -> ElevationModel:
     x0 = header["xllcenter"] if "xllcenter" in header else header["xllcorner"] + half
     y0 = header["yllcenter"] if "yllcenter" in header else header["yllcorner"] + half
 
+    reach = max(abs(x0), abs(y0)) + math.hypot(nrows, ncols) * cell
+    if reach > MAX_COORD_M:
+        raise MapError(src, f"the grid reaches {reach:.3g} m from the frame origin (more than {MAX_COORD_M:g} m; "
+                       "check xll*/yll*, cellsize)")
+
     tokens = " ".join(lines[i:]).split()
     if len(tokens) != nrows * ncols:
         raise MapError(src, f"expected {nrows} x {ncols} = {nrows * ncols} values after the header, "
@@ -109,6 +119,9 @@ def load_dem(path: str | Path) -> ElevationModel:
         raise MapError(src, "height values must be finite (use NODATA_value for holes)")
     if "nodata_value" in header:
         z[z == header["nodata_value"]] = np.nan
+    known = z[~np.isnan(z)]
+    if known.size and np.abs(known).max() > MAX_HEIGHT_M:
+        raise MapError(src, f"height value {known[np.argmax(np.abs(known))]:g} m beyond +-{MAX_HEIGHT_M:g} m")
     return ElevationModel(heights_m=np.ascontiguousarray(z[::-1]), x0_m=float(x0), y0_m=float(y0),
                           cellsize_m=float(cell), source=src)
 

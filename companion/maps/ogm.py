@@ -40,6 +40,9 @@ from .grid import OccupancyGrid
 _REQUIRED = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
 _OPTIONAL = ("mode",)
 _MODES = ("trinary", "scale", "raw")
+#: Largest map coordinate (m, +-): a local metric frame wider than the Earth is a
+#: typo in ``origin`` or ``resolution``, and the planner's grid arithmetic would overflow.
+MAX_COORD_M = 1.0e7
 
 
 def _number(data: dict, key: str, src: str) -> float:
@@ -245,6 +248,12 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
     if not img_path.is_absolute():
         img_path = ypath.parent / img_path
     img = read_pgm(img_path)
+    h, w = img.values.shape
+    reach = max(abs(float(origin[0])), abs(float(origin[1]))) + math.hypot(h, w) * resolution
+    if reach > MAX_COORD_M:
+        raise MapError(f"{src}: keys 'origin', 'resolution'",
+                       f"the {w} x {h} grid reaches {reach:.3g} m from the frame origin "
+                       f"(more than {MAX_COORD_M:g} m)")
     occupied, free = classify(img.values, img.maxval, bool(negate), occ_t, free_t, mode)
     # Image row 0 is north; grid row 0 is south.
     return OccupancyGrid(

@@ -37,7 +37,8 @@ def load_mission(path: str | Path) -> Mission:
         raise MissionError(f"{p}{':' + line.strip() if line else ''}", f"not valid YAML: {problem}") from None
     if not isinstance(data, dict):
         raise MissionError(str(p), "expected a mapping of mission keys at the top level")
-    if "base_dir" in data:
-        raise MissionError(f"{p}: key 'base_dir'", "unknown key (set by the loader)")
+    for key in ("base_dir", "source"):
+        if key in data:
+            raise MissionError(f"{p}: key '{key}'", "unknown key (set by the loader)")
     mission = from_dict(Mission, data, str(p))
-    return dataclasses.replace(mission, base_dir=str(p.resolve().parent))
+    return dataclasses.replace(mission, base_dir=str(p.resolve().parent), source=str(p))

@@ -15,6 +15,13 @@ from ..vehicle import VehicleConfig
 from ..trajectory.config import TrajectoryConfig
 from .sim import SimConfig
 
+#: Upper bounds of the lengths a vineyard mission can sensibly hold (m): flight
+#: height, line spacing and safety margin; beyond them the grid arithmetic of the
+#: planner overflows instead of failing with a message.
+MAX_LENGTH_M = 1000.0
+#: Home altitude bound (m AMSL, +-).
+MAX_ALTITUDE_M = 1.0e5
+
 
 @dataclass(frozen=True)
 class HomeConfig:
@@ -29,6 +36,8 @@ class HomeConfig:
             raise ValueError(f"home.lat {self.lat} is outside [-90, 90]")
         if not -180.0 <= self.lon <= 180.0:
             raise ValueError(f"home.lon {self.lon} is outside [-180, 180]")
+        if not -MAX_ALTITUDE_M <= self.alt_m <= MAX_ALTITUDE_M:
+            raise ValueError(f"home.alt_m {self.alt_m} is outside [-{MAX_ALTITUDE_M:g}, {MAX_ALTITUDE_M:g}] m")
 
 
 @dataclass(frozen=True)
@@ -40,8 +49,8 @@ class FlightConfig:
     waypoint_interval_s: float = 4.0
 
     def __post_init__(self) -> None:
-        if self.height_agl_m <= 0:
-            raise ValueError("flight.height_agl_m must be > 0")
+        if not 0 < self.height_agl_m <= MAX_LENGTH_M:
+            raise ValueError(f"flight.height_agl_m must be in (0, {MAX_LENGTH_M:g}] m")
         if self.speed_m_s <= 0:
             raise ValueError("flight.speed_m_s must be > 0")
         if self.waypoint_interval_s <= 0:
@@ -59,10 +68,10 @@ class CoverageConfig:
     min_segment_m: float = 1.0             # main segments shorter than this are not flown (m)
 
     def __post_init__(self) -> None:
-        if self.line_spacing_m is not None and self.line_spacing_m <= 0:
-            raise ValueError("coverage.line_spacing_m must be > 0")
-        if self.safety_margin_m < 0:
-            raise ValueError("coverage.safety_margin_m must be >= 0")
+        if self.line_spacing_m is not None and not 0 < self.line_spacing_m <= MAX_LENGTH_M:
+            raise ValueError(f"coverage.line_spacing_m must be in (0, {MAX_LENGTH_M:g}] m")
+        if not 0 <= self.safety_margin_m <= MAX_LENGTH_M:
+            raise ValueError(f"coverage.safety_margin_m must be in [0, {MAX_LENGTH_M:g}] m")
         if not 0 < self.orientation_step_deg <= 1.0:
             raise ValueError("coverage.orientation_step_deg must be in (0, 1]")
         if self.min_segment_m <= 0:
@@ -93,6 +102,7 @@ class Mission:
     sim: SimConfig = field(default_factory=SimConfig)
     description: str = ""
     base_dir: str = "."   # set by the loader: directory of the mission file
+    source: str = "<mission>"   # set by the loader: the mission file (for error messages)
 
     @property
     def map_path(self) -> Path:
