@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import types
 import typing
 from typing import Any, Literal, Union
@@ -19,6 +20,7 @@ from typing import Any, Literal, Union
 from .errors import MissionError
 
 _NONE = type(None)
+_YAML11_FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
 
 
 def _kind(value: Any) -> str:
@@ -72,6 +74,10 @@ def _convert(tp: Any, value: Any, source: str, key: str, error: type[Exception])
     if dataclasses.is_dataclass(tp):
         return from_dict(tp, value, source, key, error)
     if tp is float:
+        if isinstance(value, str) and _YAML11_FLOAT.fullmatch(value.strip()):
+            # YAML 1.1 (PyYAML) reads 5e-4 and 1e3 as strings: it wants a
+            # dot and a signed exponent (5.0e-4). Accept what is plainly a number.
+            value = float(value)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise error(where, f"expected a number, got {_kind(value)}")
         if not math.isfinite(value):

@@ -111,3 +111,13 @@ def test_bundled_missions_load(name):
     assert m.map_path.is_file() and m.dem_path.is_file()
     assert m.coverage.line_spacing_m == 2.5
     assert m.sim.noise.vector_variance == 5.0e-4 and m.sim.noise.gyro_variance == 5.0e-4  # the paper's noise
+
+
+def test_exponent_numbers_without_a_dot_are_numbers(tmp_path):
+    """YAML 1.1 (PyYAML) reads 5e-4 as a string; the schema takes it as 0.0005."""
+    text = GOOD + "sim: {noise: {vector_variance: 5e-4, gyro_variance: 2E-3}}\n"
+    m = load_mission(write(tmp_path, text))
+    assert m.sim.noise.vector_variance == 0.0005
+    assert m.sim.noise.gyro_variance == 0.002
+    with pytest.raises(MissionError, match=r"sim\.noise\.vector_variance.*string \('5e-4x'\)"):
+        load_mission(write(tmp_path, GOOD + "sim: {noise: {vector_variance: 5e-4x}}\n"))
