@@ -303,6 +303,9 @@ class MissionProtocol:
     (MAV_MISSION_UNSUPPORTED). Upload timeouts are timed by the caller's
     clock (``tick(now_s)``): the server passes wall-clock seconds, because
     the ground station answers in wall time whatever the simulation speed.
+    An out-of-sequence item is answered by requesting the awaited one again;
+    the last item re-sent after the upload's ACCEPTED (the peer lost the ACK)
+    is acknowledged again, as PX4 does.
 
     Methods return the list of replies to send to the peer.
     """
@@ -315,6 +318,9 @@ class MissionProtocol:
         self.current_seq = 0
         self._upload: list[MissionItem] | None = None
         self._upload_count = 0
+        #: Item count of the upload just completed (None after any other
+        #: transfer): a re-sent last item means the peer lost our ACK.
+        self._acked_count: int | None = None
         self._last_s = 0.0
         self._retries = 0
 
@@ -323,6 +329,7 @@ class MissionProtocol:
         return self._upload is not None
 
     def handle_count(self, count: int, mission_type: int, now_s: float) -> list:
+        self._acked_count = None
         if mission_type != mavlink.MAV_MISSION_TYPE_MISSION:
             if count == 0:
                 return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mission_type)]
@@ -343,6 +350,11 @@ class MissionProtocol:
 
     def handle_item(self, item: MissionItem, now_s: float) -> list:
         mt = item.mission_type
+        if (self._upload is None and mt == mavlink.MAV_MISSION_TYPE_MISSION
+                and self._acked_count is not None and item.seq == self._acked_count - 1):
+            # The last item again after our ACCEPTED: the peer lost the ACK
+            # and retries; acknowledge again, as PX4 does (PX4 PR #9547).
+            return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mt)]
         if self._upload is None or mt != mavlink.MAV_MISSION_TYPE_MISSION:
             # An item nobody asked for: tell the peer the sequence is wrong.
             return [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, mt)]
@@ -359,9 +371,11 @@ class MissionProtocol:
         self.items = tuple(self._upload)
         self.current_seq = 0
         self._upload = None
+        self._acked_count = len(self.items)
         return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mt)]
 
     def handle_request_list(self, mission_type: int) -> list:
+        self._acked_count = None
         if mission_type != mavlink.MAV_MISSION_TYPE_MISSION:
             return [SendCount(0, mission_type)]
         return [SendCount(len(self.items), mission_type)]
@@ -376,6 +390,7 @@ class MissionProtocol:
             self.items = ()
             self.current_seq = 0
             self._upload = None
+            self._acked_count = None
         return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mission_type)]
 
     def handle_set_current(self, seq: int) -> bool:
@@ -670,14 +685,22 @@ class FlightStack:
         return CommandResult(RESULT_ACCEPTED)
 
     def takeoff(self, now_us: int, state: NavState, target_z_enu_m: float | None) -> CommandResult:
-        """MAV_CMD_NAV_TAKEOFF: climb to ``target_z_enu_m`` (None: home + MIS_TAKEOFF_ALT).
+        """MAV_CMD_NAV_TAKEOFF: climb to ``target_z_enu_m`` (None, or not above
+        home: home + MIS_TAKEOFF_ALT; more than 150 m above home: DENIED).
 
         Disarmed: switches to AUTO.TAKEOFF; arming then takes off (PX4).
         """
         home_z = float(self.home_enu_m[2])
-        z = home_z + self.params["MIS_TAKEOFF_ALT"] if target_z_enu_m is None else float(target_z_enu_m)
-        if not math.isfinite(z) or not home_z < z <= home_z + 150.0:
+        z_min = home_z + self.params["MIS_TAKEOFF_ALT"]
+        z = z_min if target_z_enu_m is None else float(target_z_enu_m)
+        if not math.isfinite(z) or z > home_z + 150.0:
             return CommandResult(RESULT_DENIED, "takeoff altitude out of range")
+        if z <= home_z:
+            # Not above home (e.g. param7 = 0, or a relative altitude sent
+            # where PX4 expects AMSL): PX4 takes off to its minimum takeoff
+            # altitude with a warning rather than refusing.
+            self._say(SEVERITY_WARNING, f"Using minimum takeoff altitude: {z_min - home_z:.2f} m")
+            z = z_min
         self._takeoff_z = z
         self._failsafe = None
         self._enter(FlightMode.TAKEOFF, state)

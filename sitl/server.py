@@ -985,8 +985,10 @@ class SitlServer:
         else:
             try:
                 result, after = handler(params)
-            except (ValueError, OverflowError, TypeError):
+            except (ValueError, OverflowError, TypeError):   # unusable parameters
                 result, after = mavlink.MAV_RESULT_DENIED, None
+            except Exception:   # a fault of ours: still exactly one ACK (command protocol)
+                result, after = mavlink.MAV_RESULT_FAILED, None
         self._reply(link, link.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(),
                                                       msg.get_srcComponent()))
         if after is not None:

@@ -187,8 +187,15 @@ def test_takeoff_ramp_then_hold_at_target(stack):
 
 
 def test_takeoff_altitude_bounds(stack):
-    assert stack.takeoff(0, ground(), -1.0).result == RESULT_DENIED
+    assert stack.takeoff(0, ground(), 151.0).result == RESULT_DENIED        # > 150 m above home
+    assert stack.takeoff(0, ground(), float("inf")).result == RESULT_DENIED
     assert stack.takeoff(0, ground(), 2.0).accepted
+    assert stack._anchor.target_z == pytest.approx(2.0)                      # honoured as asked
+    # At or below home (param7 = 0 AMSL, or an ArduPilot-style relative value):
+    # PX4 takes off to home + MIS_TAKEOFF_ALT with a warning instead of refusing.
+    assert stack.takeoff(0, ground(), -1.0).accepted
+    assert stack._anchor.target_z == pytest.approx(0.0 + stack.params["MIS_TAKEOFF_ALT"])
+    assert any(t.startswith("Using minimum takeoff altitude") for t in texts(stack))
 
 
 def test_land_idles_then_disarms(stack):
@@ -266,6 +273,20 @@ def test_mission_upload_download_clear():
     assert mp.handle_count(2, 1, 0.0) == [SendAck(mavlink.MAV_MISSION_UNSUPPORTED, 1)]
     assert mp.handle_clear_all(0) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 0)]
     assert mp.items == ()
+
+
+def test_mission_lost_ack_duplicate_last_item_is_acked_again():
+    # PX4 (PR #9547): the peer re-sends the last item when our ACCEPTED got lost.
+    mp = MissionProtocol()
+    mp.handle_count(2, 0, 0.0)
+    mp.handle_item(item(0), 0.1)
+    assert mp.handle_item(item(1), 0.2) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 0)]
+    assert mp.handle_item(item(1), 0.3) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 0)]
+    assert mp.items == (item(0), item(1))
+    # any other stray item, or the last one after another transfer, is still an error
+    assert mp.handle_item(item(0), 0.4) == [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, 0)]
+    mp.handle_request_list(0)
+    assert mp.handle_item(item(1), 0.5) == [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, 0)]
 
 
 def test_mission_upload_retries_then_gives_up():
