@@ -43,7 +43,7 @@ class Progress:
     def format(phase: str, fraction: float, error_m: float | None, events: int, sim_time_s: float) -> str:
         err = "  -  " if error_m is None or not math.isfinite(error_m) else f"{error_m * 1000:7.1f} mm"
         pct = max(0.0, min(1.0, fraction)) * 100.0
-        return f"[{phase:<9}] {pct:5.1f}%  t={sim_time_s:7.1f} s  error {err}  events {events}"
+        return f"[{phase:<10}] {pct:5.1f}%  t={sim_time_s:7.1f} s  error {err}  events {events}"
 
     def update(self, phase: str, fraction: float, error_m: float | None = None, events: int = 0,
                sim_time_s: float = 0.0, force: bool = False) -> None:
