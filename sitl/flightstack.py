@@ -160,6 +160,8 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("SIM_POS_STD", _R, 0.0, 0.0, 100.0, "position measurement noise std (m)"),
     ParamSpec("SIM_VEL_STD", _R, 0.0, 0.0, 100.0, "velocity measurement noise std (m/s)"),
     ParamSpec("SIM_RNG_STD", _R, 0.0, 0.0, 100.0, "rangefinder noise std (m)"),
+    ParamSpec("SIM_RNG_HZ", _R, 0.0, 0.0, 1000.0,
+              "rangefinder sample and DISTANCE_SENSOR rate (Hz; 0: leave each sensor's rate as it is)"),
 )
 
 

@@ -520,6 +520,9 @@ class SitlServer:
         s.pos_std = p["SIM_POS_STD"]
         s.vel_std = p["SIM_VEL_STD"]
         s.range_std = p["SIM_RNG_STD"]
+        if p["SIM_RNG_HZ"] > 0:   # 0 leaves the configured (or SET_MESSAGE_INTERVAL) rates alone
+            for rf in s.rangefinders:
+                rf.period_us = max(self.sim.sensor_period_us, int(round(1e6 / p["SIM_RNG_HZ"])))
         # Spinning for the lockstep answer only pays when the peer runs on
         # another core; on one core it would only delay the peer.
         self._spin_s = p["SIM_LS_SPIN"] * 1e-6 if self.config.spin and (os.cpu_count() or 1) >= 2 else 0.0

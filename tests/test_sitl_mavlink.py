@@ -477,3 +477,25 @@ def test_launch_pose_option(capsys):
         assert np.asarray(t.R)[:, 0] == pytest.approx([0.0, 1.0, 0.0], abs=1e-12)
     p = SitlProcess(MISSION, start=(-1.5, 2.0))
     assert "--start=-1.5,2.0,0.0" in p.command()
+
+
+def test_rangefinder_rate_parameter(sitl, gcs):
+    """SIM_RNG_HZ sets every rangefinder's rate (vehicle time); 0 leaves the rates as they are."""
+    def median_period_ms(seconds=1.0):
+        t = {}
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            m = gcs.recv("DISTANCE_SENSOR", 0.5)
+            if m is not None:
+                t.setdefault(m.id, []).append(m.time_boot_ms)
+        return {i: float(np.median(np.diff(v))) for i, v in t.items() if len(v) > 3}
+
+    configured = {rf.cfg.id: 1000.0 / rf.cfg.rate_hz for rf in sitl.server.sim.sensors.rangefinders}
+    assert gcs.set_param("SIM_RNG_HZ", 50.0).param_value == pytest.approx(50.0)
+    periods = median_period_ms()
+    assert periods and all(p == pytest.approx(20.0, abs=4.0) for p in periods.values())
+    assert gcs.set_param("SIM_RNG_HZ", 0.0).param_value == 0.0
+    # the configured rates come back only through SET_MESSAGE_INTERVAL(0) (default rate)
+    assert gcs.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR, 0) == 0
+    periods = median_period_ms()
+    assert periods and all(p == pytest.approx(configured[i], abs=4.0) for i, p in periods.items())
