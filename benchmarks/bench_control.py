@@ -181,9 +181,10 @@ def main(argv=None) -> int:
     d = ControlConfig()
     raw = dataclasses.replace(d, accel_vector_gain_rad_s=0.0, mag_vector_gain_rad_s=0.0)
     paper = dataclasses.replace(raw, mag_perpendicular=False, attitude_law="paper")
-    lee = dataclasses.replace(d, kx=16.0, kv=5.6)
+    lee = dataclasses.replace(d, kx=16.0, kv=5.6, ki=0.0)   # Lee et al.'s PD (ki=60 is unstable with it)
+    noint = dataclasses.replace(d, ki=0.0)
     cases = (("default", d), ("unfiltered vectors", raw), ("paper law, unfiltered, raw", paper),
-             ("default, kx=16 kv=5.6", lee))
+             ("default, kx=16 kv=5.6 ki=0", lee), ("default, ki=0", noint))
     print(f"closed loop, {args.duration:.0f} s, noise variance 5e-4, error after 5 s:")
     for name, cfg in cases:
         for tname, tr in (("circle r=1.25 m, 1 m/s", circle()), ("lissajous 20 m, 1 m/s", lissajous())):

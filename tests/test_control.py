@@ -305,8 +305,13 @@ def test_mixer_saturation_keeps_thrust_direction_first():
 # --- closed loop with an independent plant (eq. 20, solve_ivp) ----------------------------
 
 
-def _fly(cfg, ref_fn, target, duration_s, p0, rng=None, noise_var=0.0, frame_hz=250.0):
-    """Sample-and-hold loop: controller at frame_hz, plant by solve_ivp between frames."""
+def _fly(cfg, ref_fn, target, duration_s, p0, rng=None, noise_var=0.0, frame_hz=250.0, ext_force_n=(0.0, 0.0, 0.0),
+         return_controller=False):
+    """Sample-and-hold loop: controller at frame_hz, plant by solve_ivp between frames.
+
+    ``ext_force_n``: a constant external force (N, world ENU) on the plant,
+    seen by the accelerometer like drag (it is part of the specific force)."""
+    Fext = np.asarray(ext_force_n, float)
     m, J = VEH.mass_kg, VEH.J
     A = allocation_matrix(VEH)
     ctl = GeometricController(VEH, cfg, target)
@@ -319,7 +324,7 @@ def _fly(cfg, ref_fn, target, duration_s, p0, rng=None, noise_var=0.0, frame_hz=
 
     def rhs(t, y, w):
         v, R, W = y[3:6], y[6:15].reshape(3, 3), y[15:18]
-        a = w[0] / m * R[:, 2] - G * E3
+        a = w[0] / m * R[:, 2] - G * E3 + Fext / m
         Wd = np.linalg.solve(J, w[1:] - np.cross(W, J @ W))
         return np.concatenate([v, a, (R @ hat(W)).ravel(), Wd])
 
@@ -327,7 +332,7 @@ def _fly(cfg, ref_fn, target, duration_s, p0, rng=None, noise_var=0.0, frame_hz=
         t = k * dt
         p, v, R, W = y[:3], y[3:6], y[6:15].reshape(3, 3), y[15:18]
         w = A @ thrusts
-        sf = R.T @ (w[0] / m * R[:, 2])           # specific force of the held thrust (drag-free)
+        sf = R.T @ (w[0] / m * R[:, 2] + Fext / m)   # specific force: held thrust + external force
         mag = R.T @ MAG_ENU
         gyro = W.copy()
         if sig > 0:
@@ -342,6 +347,8 @@ def _fly(cfg, ref_fn, target, duration_s, p0, rng=None, noise_var=0.0, frame_hz=
         y = solve_ivp(rhs, (t, t + dt), y, args=(w,), rtol=1e-9, atol=1e-11).y[:, -1]
         U, _, Vt = np.linalg.svd(y[6:15].reshape(3, 3))   # keep R on SO(3)
         y[6:15] = (U @ Vt).ravel()
+    if return_controller:
+        return np.array(log), ctl
     return np.array(log)
 
 
@@ -349,12 +356,16 @@ def _straight(t, h=1.5):
     return Reference((1.0 * t, 0.0, h), (1.0, 0.0, 0.0))
 
 
-def test_noiseless_closed_loop_converges_below_1mm_on_straight_segment():
+@pytest.mark.parametrize("ki, t_conv", [(0.0, 3.0), (ControlConfig().ki, 5.0)], ids=["pd", "with-integral"])
+def test_noiseless_closed_loop_converges_below_1mm_on_straight_segment(ki, t_conv):
     # Start at rest, level, 10 cm off a reference already moving at 1 m/s.
-    log = _fly(ControlConfig(), _straight, (10.0, 20.0, 0.0), 5.0, np.array([0.0, 0.1, 1.4]))
+    # The PD loop (poles 3.45 rad/s) is within 1 mm after 3 s; the integral
+    # term learns part of the transient (it integrates once |e_x| < 0.1 m) and
+    # gives it back through its slower pair (-1.19 +- 1.28j): 5 s.
+    log = _fly(ControlConfig(ki=ki), _straight, (10.0, 20.0, 0.0), t_conv + 1.0, np.array([0.0, 0.1, 1.4]))
     t, err = log[:, 0], log[:, 1]
     assert err[0] == pytest.approx(math.hypot(0.1, 0.1))
-    assert np.max(err[t >= 3.0]) < 1e-3
+    assert np.max(err[t >= t_conv]) < 1e-3
     assert log[:, 2].min() >= 0.0 and log[:, 3].max() <= 1.0
 
 
@@ -367,6 +378,67 @@ def test_noisy_closed_loop_tracks_within_paper_bound():
                rng=rng, noise_var=5e-4)
     t, err = log[:, 0], log[:, 1]
     assert np.max(err[t >= 5.0]) < 2.8e-3
+
+
+# --- integral action against a constant force (wind drag) --------------------------------
+
+
+def _hover(t, p=(1.0, 2.0, 1.5)):
+    return Reference(p)
+
+
+@pytest.mark.parametrize("ki", [0.0, 60.0])
+def test_constant_force_steady_error_is_F_over_kx_without_and_zero_with_integral(ki):
+    # Hover under a constant horizontal force F (a steady wind's drag). At rest
+    # the thrust equals F_d, so -kx e_x - ki e_i + F = 0: by hand e_x = F/kx
+    # (0.67 N / 60 N/m = 11.2 mm) without the integral, 0 with it (ki e_i = F).
+    F = np.array([0.6, 0.3, 0.0])
+    cfg = ControlConfig(ki=ki)
+    p_ref = np.array([1.0, 2.0, 1.5])
+    log, ctl = _fly(cfg, _hover, (10.0, 20.0, 0.0), 12.0, p_ref.copy(), ext_force_n=F, return_controller=True)
+    t, err = log[:, 0], log[:, 1]
+    steady = err[t >= 10.0]
+    if ki == 0.0:
+        assert np.all(np.abs(steady / (np.linalg.norm(F) / cfg.kx) - 1.0) < 0.10)
+    else:
+        assert np.max(steady) < 0.5e-3
+        # and the integral carries the force: ki e_i = F (to the residual error's kx e_x)
+        assert np.allclose(ki * np.array(ctl.integral_m_s), F, atol=0.05)
+
+
+def test_integral_step_bound_zone_and_reset():
+    from companion.control.geometric import integral_step
+
+    # Inside the zone: forward Euler, e_i + dt e_x.
+    e_i, active = integral_step((0.0, 0.0, 0.0), (0.01, -0.02, 0.0), 0.004, 60.0, 4.0, 0.1)
+    assert active and np.allclose(e_i, (4e-5, -8e-5, 0.0), rtol=0, atol=1e-18)
+    # Outside the zone (|e_x| = 0.2 m > 0.1 m): frozen.
+    e_i, active = integral_step((1e-3, 0.0, 0.0), (0.2, 0.0, 0.0), 0.004, 60.0, 4.0, 0.1)
+    assert not active and e_i == (1e-3, 0.0, 0.0)
+    # On the bound: projected onto |ki e_i| = limit, direction kept (3-4-0 triangle).
+    e_i, active = integral_step((0.3, 0.4, 0.0), (0.0, 0.0, 0.0), 0.004, 10.0, 2.0, 0.1)
+    assert not active and np.allclose(e_i, (0.12, 0.16, 0.0), atol=1e-15)
+    # A repeated time stamp does nothing; reset() clears the controller's integral.
+    assert integral_step((0.1, 0.0, 0.0), (0.05, 0.0, 0.0), 0.0, 60.0, 4.0, 0.1) == ((0.1, 0.0, 0.0), False)
+    ctl = GeometricController(VEH, ControlConfig(ki=60.0), (10.0, 20.0, 0.0))
+    meas = Measurements((0.0, 0.0, 0.0), (0.0, 0.0, G), (0.0, 0.21, -0.42), (0.05, 0.0, 1.5), (0.0, 0.0, 0.0))
+    for k in range(3):
+        ctl.update(0.004 * k, meas, Reference((0.0, 0.0, 1.5)))
+    assert np.allclose(ctl.integral_m_s, (2 * 0.004 * 0.05, 0.0, 0.0), atol=1e-15)   # two steps
+    ctl.reset()
+    assert ctl.integral_m_s == (0.0, 0.0, 0.0)
+
+
+def test_integral_gain_keeps_the_translational_loop_stable():
+    # m s^3 + kv s^2 + kx s + ki (Routh: kv kx > m ki) with the default gains.
+    cfg = ControlConfig()
+    m = VEH.mass_kg
+    assert cfg.ki > 0 and cfg.kv * cfg.kx > m * cfg.ki
+    assert np.all(np.roots([m, cfg.kv, cfg.kx, cfg.ki]).real < 0)
+    # Lee et al.'s kx, kv = 16, 5.6 with this ki: kv kx / m = 20.6 < 60, refused.
+    assert np.any(np.roots([m, 5.6, 16.0, cfg.ki]).real > 0)
+    with pytest.raises(ValueError, match="ki"):
+        GeometricController(VEH, ControlConfig(kx=16.0, kv=5.6), (10.0, 20.0, 0.0))
 
 
 # --- yaw decoupling and the feasible pointing reference (fast pointing swings) ----------

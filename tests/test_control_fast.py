@@ -23,7 +23,10 @@ CONFIGS = {
     "default": ControlConfig(),
     "paper": ControlConfig(attitude_law="paper", mag_perpendicular=False, accel_vector_gain_rad_s=0.0,
                            mag_vector_gain_rad_s=0.0, pointing_limit=False),
-    "lowpass": ControlConfig(accel_filter_tau_s=0.02, kx=16, kv=5.6),   # int gains, a filtered a_hat
+    "lowpass": ControlConfig(accel_filter_tau_s=0.02, kx=16, kv=5.6, ki=10),   # int gains, a filtered a_hat
+    "no-integral": ControlConfig(ki=0.0),
+    # integral on and off its bound and in and out of its zone (position noise 10 mm)
+    "integral-clamped": ControlConfig(ki=300.0, integral_limit_fraction=0.002, integral_zone_m=0.015),
 }
 
 

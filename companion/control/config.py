@@ -51,9 +51,17 @@ class ControlConfig:
         Low-pass gain (1/s) on the measured specific-force direction in the
         body frame, which is constant (e3) for a drag-free multirotor: its
         noise is pure noise, and the position error follows its low-frequency
-        part, so the gain is low (0.2: 5 s). With aerodynamic drag the true
-        direction drifts with the airspeed and a larger gain follows it.
-        0: unfiltered (the paper).
+        part, so the gain is low (0.05: 20 s). With aerodynamic drag D the
+        true direction is ``unit(f e3 + R^T D)``; the part of it the filter
+        has not followed makes the TRIAD estimate put the thrust axis along
+        the total specific force ``(f R e3 + D)/m`` (``r_1``, from the
+        velocity), so the attitude loop steers the total non-gravity force,
+        drag included, onto b3d: the drag changes faster than 1/gain are
+        rejected like an acceleration feedback, the slower part (which the
+        filter follows) is a force disturbance for the integral term.
+        A faster gain is therefore worse under drag, not better (windy
+        flat-rectangle, ki = 0: gain 1.0 -> 20.1 mm max, 0.2 -> 16.2 mm,
+        0.02 -> 14.4 mm). 0: unfiltered (the paper).
     mag_vector_gain_rad_s : float
         Correction gain (1/s) of the gyro-propagated complementary filter on
         the measured magnetic-field direction. It mainly quiets the yaw
@@ -62,6 +70,26 @@ class ControlConfig:
         Use the field's component normal to the specific force as the second
         vector (decouples yaw from tilt; ``companion.control.vectors``).
         False: the raw field, as the paper.
+
+    ki : float
+        Integral gain k_i (N/(m s)) on the position error, the term ``-k_i
+        e_i`` added to eq. (23) (``companion.control.geometric`` docstring):
+        it removes the steady error ``F/kx`` that a constant disturbance
+        force F (wind drag) leaves. The closed loop ``m s^3 + kv s^2 + kx s +
+        ki`` is stable for ``ki < kv kx / m`` (Routh: 415); 60 puts its slow
+        pair at -1.19 +- 1.28j (damping 0.68) and keeps 7x margin. 0: off
+        (the paper's law).
+    integral_limit_fraction : float
+        Anti-windup bound: ``|k_i e_i| <= integral_limit_fraction m g`` (the
+        integral is projected back onto that ball), in (0, 1).
+    integral_zone_m : float
+        Conditional integration: the integral only accumulates while
+        ``|e_x|`` is below this (m), so that the large errors of the take-off
+        (the vehicle on the ground while the reference climbs) or of a
+        hand-over do not wind it up. It must exceed the largest steady error
+        the bound can cancel, ``integral_limit_fraction m g / kx`` (71 mm
+        with the defaults), or a strong steady wind would never be
+        integrated. The runner may also call ``GeometricController.reset()``.
 
     attitude_law : str
         "decoupled" (default): the thrust direction is controlled in the body
@@ -83,13 +111,20 @@ class ControlConfig:
 
     Mission figures (``python benchmarks/track_inprocess.py``: the planned
     trajectories of the bundled missions on the SITL plant in-process, the
-    paper's noise, mission seeds): max error after 5 s 0.84 mm
-    (flat-rectangle) and 0.87 mm (tilted-hexagon).
+    paper's noise, mission seeds): max error after 5 s 0.41 mm
+    (flat-rectangle) and 0.52 mm (tilted-hexagon); 0.84 / 0.87 mm with ki =
+    0 and accel_vector_gain_rad_s = 0.2 (the previous defaults). Over MAVLink
+    (``python benchmarks/paper_reproduction.py``) 0.35 / 0.29 mm. With wind
+    (flat-rectangle with ``sim.wind: {mean_enu_m_s: [2, 1, 0], gust_std_m_s:
+    0.5, gust_time_constant_s: 2, drag_n_s_m: 0.3}``, ``companion demo``)
+    5.0 mm max / 2.0 mm RMS against 15.9 / 11.2 mm without the integral and
+    13.2 / 8.5 mm for the SITL's cascaded controller.
 
     Figures (``python benchmarks/bench_control.py``, in-process plant, 250 Hz
     sample and hold, the paper's noise, 25 s on 1 m/s paths): max position
-    error after 5 s about 0.8 mm with these defaults, 3.2-4.1 mm with the
-    vector filters off, 3.5-3.7 mm with Lee et al.'s kx, kv = 16, 5.6.
+    error after 5 s about 0.5 mm with these defaults (0.85 mm with ki = 0),
+    3.4 mm with the vector filters off, 3.5-3.7 mm with Lee et al.'s kx, kv
+    = 16, 5.6 (and ki = 0: 60 is beyond their Routh bound, 20.6).
     """
 
     kx: float = 60.0
@@ -99,9 +134,12 @@ class ControlConfig:
     alpha: float = 12.0
     mag_field_enu_gauss: tuple[float, float, float] = (0.0, 0.21, -0.42)
     accel_filter_tau_s: float = 0.0
-    accel_vector_gain_rad_s: float = 0.2
+    accel_vector_gain_rad_s: float = 0.05
     mag_vector_gain_rad_s: float = 1.0
     mag_perpendicular: bool = True
+    ki: float = 60.0
+    integral_limit_fraction: float = 0.1
+    integral_zone_m: float = 0.1
     attitude_law: str = "decoupled"
     pointing_limit: bool = True
     pointing_yaw_rate_max_rad_s: float = 1.0
@@ -114,6 +152,12 @@ class ControlConfig:
         for name in ("accel_filter_tau_s", "accel_vector_gain_rad_s", "mag_vector_gain_rad_s"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"control.{name} must be >= 0")
+        if not self.ki >= 0:
+            raise ValueError("control.ki must be >= 0")
+        if not 0 < self.integral_limit_fraction < 1:
+            raise ValueError("control.integral_limit_fraction must be in (0, 1)")
+        if not self.integral_zone_m > 0:
+            raise ValueError("control.integral_zone_m must be > 0")
         if self.attitude_law not in ("decoupled", "paper"):
             raise ValueError("control.attitude_law must be 'decoupled' or 'paper'")
         if not self.pointing_yaw_rate_max_rad_s > 0:

@@ -21,8 +21,10 @@ with, for ``n = u/|u|``: ``n_dot = (I - n n^T) u_dot/|u|`` and ``n_ddot =
 the derivatives of F_d: ``e_x_dot = e_v``; ``e_v_dot = a_hat - a_d`` with
 ``a_hat`` the measured acceleration (differentiated velocity); ``a_d_dot =
 jerk``; for the second derivative, the unmeasurable ``e_v_ddot`` is taken
-from the ideal closed loop ``m e_v_dot = -kx e_x - kv e_v`` differentiated,
-``e_v_ddot = -(kx e_v + kv e_v_dot)/m``, and ``a_d_ddot = snap``. Of ``s``:
+from the ideal closed loop ``m e_v_dot = -kx e_x - kv e_v - ki e_i + d``
+(d a constant disturbance) differentiated, ``e_v_ddot = -(kx e_v + kv
+e_v_dot + ki e_i_dot)/m``, and ``a_d_ddot = snap``; the integral adds ``-ki
+e_i_dot`` to F_d_dot and ``-ki e_i_ddot`` to F_d_ddot. Of ``s``:
 ``u = S_p - x_d``, ``u_dot = -v_d``, ``u_ddot = -a_d``.
 
 Torque (eq. 27) with the signs restored
@@ -521,6 +523,48 @@ def thrust_axis_estimate(b1, b2, r1, r2) -> Vec3:
     return tuple(r1[i] * b1[2] + mr[i] * mb[2] + nr[i] * nb[2] for i in range(3))
 
 
+_INTEGRAL_DT_MAX_S = 0.1   # a gap in the frames longer than this integrates as 0.1 s
+
+
+def integral_step(e_i, e_x, dt: float, ki: float, limit_n: float, zone_m: float):
+    """One step of the position-error integral of the integral term (module docstring).
+
+    Parameters
+    ----------
+    e_i : sequence (3,)
+        Integral so far (m s, world ENU).
+    e_x : sequence (3,)
+        Position error (m, world ENU) of this frame.
+    dt : float
+        Vehicle time since the previous frame (s); <= 0: no step.
+    ki : float
+        Integral gain (N/(m s)), > 0.
+    limit_n : float
+        Bound on ``|ki e_i|`` (N).
+    zone_m : float
+        Integrate only while ``|e_x| < zone_m`` (m).
+
+    Returns
+    -------
+    e_i : tuple (3,)
+        The new integral (m s), ``e_i + dt e_x`` projected onto ``|ki e_i| <= limit_n``.
+    active : bool
+        The integral moved freely (``e_i_dot = e_x``); False: frozen or on
+        the bound (its derivative is then taken as 0).
+    """
+    ex0, ex1, ex2 = e_x
+    if not dt > 0.0 or not ex0 * ex0 + ex1 * ex1 + ex2 * ex2 < zone_m * zone_m:
+        return (e_i[0], e_i[1], e_i[2]), False
+    if dt > _INTEGRAL_DT_MAX_S:
+        dt = _INTEGRAL_DT_MAX_S
+    i0, i1, i2 = e_i[0] + dt * ex0, e_i[1] + dt * ex1, e_i[2] + dt * ex2
+    n = ki * math.sqrt(i0 * i0 + i1 * i1 + i2 * i2)
+    if n > limit_n:
+        c = limit_n / n
+        return (i0 * c, i1 * c, i2 * c), False
+    return (i0, i1, i2), True
+
+
 # --- the controller -----------------------------------------------------------
 
 
@@ -566,8 +610,43 @@ class GeometricController:
         self._kx, self._kv, self._alpha = float(cfg.kx), float(cfg.kv), float(cfg.alpha)
         self._r2u = unit3(self._r2)      # measurement_vectors normalises r_2 once more
         self._perp = bool(cfg.mag_perpendicular)
+        self._ki = float(cfg.ki)
+        if not self._ki * self._m < cfg.kv * cfg.kx:
+            # Routh on m s^3 + kv s^2 + kx s + ki: the translational loop would be unstable.
+            raise ValueError(f"control.ki must be < kv kx / m = {cfg.kv * cfg.kx / self._m:.4g} N/(m s)")
+        self._i_limit = float(cfg.integral_limit_fraction) * self._m * self._g
+        self._i_zone = float(cfg.integral_zone_m)
+        self._e_i: Vec3 = _ZERO
+        self._t_i: float | None = None
         self.last_desired = None
         self._last_detail = None
+
+    @property
+    def integral_m_s(self) -> Vec3:
+        """The position-error integral e_i (m s, world ENU); ``ki e_i`` is its force (N)."""
+        return self._e_i
+
+    def reset(self) -> None:
+        """Clear the integral of the position error (e.g. at a hand-over).
+
+        The measurement filters keep their state (they follow the sensors,
+        not the reference).
+        """
+        self._e_i = _ZERO
+        self._t_i = None
+
+    def _integrate(self, t_s: float, e_x) -> tuple:
+        """Advance e_i to the frame at ``t_s`` (vehicle clock); returns (e_i, active)."""
+        t_prev = self._t_i
+        if t_prev is None:
+            self._t_i = t_s
+            return self._e_i, False
+        dt = t_s - t_prev
+        if dt > 0.0:
+            self._t_i = t_s
+        e_i, active = integral_step(self._e_i, e_x, dt, self._ki, self._i_limit, self._i_zone)
+        self._e_i = e_i
+        return e_i, active
 
     def update(self, t_s: float, meas: Measurements, ref: Reference) -> ControlOutput:
         """One control step on one sensor frame.
@@ -730,18 +809,60 @@ class GeometricController:
         ex0, ex1, ex2 = p0 - xd0, p1 - xd1, p2 - xd2
         ev0, ev1, ev2 = vx - vd0, vy - vd1, vz - vd2
         ea0, ea1, ea2 = ahx - ad0, ahy - ad1, ahz - ad2            # e_v_dot
-        ej0 = -(kx * ev0 + kv * ea0) / m                           # e_v_ddot
-        ej1 = -(kx * ev1 + kv * ea1) / m
-        ej2 = -(kx * ev2 + kv * ea2) / m
-        F0 = -kx * ex0 - kv * ev0 + m * ad0
-        F1 = -kx * ex1 - kv * ev1 + m * ad1
-        F2 = -kx * ex2 - kv * ev2 + m * (g + ad2)
-        Fd0 = -kx * ev0 - kv * ea0 + m * jd[0]
-        Fd1 = -kx * ev1 - kv * ea1 + m * jd[1]
-        Fd2 = -kx * ev2 - kv * ea2 + m * jd[2]
-        Fdd0 = -kx * ea0 - kv * ej0 + m * sd[0]
-        Fdd1 = -kx * ea1 - kv * ej1 + m * sd[1]
-        Fdd2 = -kx * ea2 - kv * ej2 + m * sd[2]
+        ki = self._ki
+        if ki > 0.0:
+            # self._integrate / integral_step, inlined
+            i0, i1, i2 = self._e_i
+            active = False
+            t_prev = self._t_i
+            if t_prev is None:
+                self._t_i = t_s
+            else:
+                dt = t_s - t_prev
+                if dt > 0.0:
+                    self._t_i = t_s
+                    zone = self._i_zone
+                    if ex0 * ex0 + ex1 * ex1 + ex2 * ex2 < zone * zone:
+                        if dt > _INTEGRAL_DT_MAX_S:
+                            dt = _INTEGRAL_DT_MAX_S
+                        i0, i1, i2 = i0 + dt * ex0, i1 + dt * ex1, i2 + dt * ex2
+                        n = ki * sqrt(i0 * i0 + i1 * i1 + i2 * i2)
+                        lim = self._i_limit
+                        if n > lim:
+                            c = lim / n
+                            i0, i1, i2 = i0 * c, i1 * c, i2 * c
+                        else:
+                            active = True
+                        self._e_i = (i0, i1, i2)
+            if active:                                             # e_i_dot = e_x, e_i_ddot = e_v
+                id0, id1, id2, idd0, idd1, idd2 = ex0, ex1, ex2, ev0, ev1, ev2
+            else:
+                id0 = id1 = id2 = idd0 = idd1 = idd2 = 0.0
+            ej0 = -(kx * ev0 + kv * ea0 + ki * id0) / m            # e_v_ddot
+            ej1 = -(kx * ev1 + kv * ea1 + ki * id1) / m
+            ej2 = -(kx * ev2 + kv * ea2 + ki * id2) / m
+            F0 = -kx * ex0 - kv * ev0 - ki * i0 + m * ad0
+            F1 = -kx * ex1 - kv * ev1 - ki * i1 + m * ad1
+            F2 = -kx * ex2 - kv * ev2 - ki * i2 + m * (g + ad2)
+            Fd0 = -kx * ev0 - kv * ea0 - ki * id0 + m * jd[0]
+            Fd1 = -kx * ev1 - kv * ea1 - ki * id1 + m * jd[1]
+            Fd2 = -kx * ev2 - kv * ea2 - ki * id2 + m * jd[2]
+            Fdd0 = -kx * ea0 - kv * ej0 - ki * idd0 + m * sd[0]
+            Fdd1 = -kx * ea1 - kv * ej1 - ki * idd1 + m * sd[1]
+            Fdd2 = -kx * ea2 - kv * ej2 - ki * idd2 + m * sd[2]
+        else:
+            ej0 = -(kx * ev0 + kv * ea0) / m                       # e_v_ddot
+            ej1 = -(kx * ev1 + kv * ea1) / m
+            ej2 = -(kx * ev2 + kv * ea2) / m
+            F0 = -kx * ex0 - kv * ev0 + m * ad0
+            F1 = -kx * ex1 - kv * ev1 + m * ad1
+            F2 = -kx * ex2 - kv * ev2 + m * (g + ad2)
+            Fd0 = -kx * ev0 - kv * ea0 + m * jd[0]
+            Fd1 = -kx * ev1 - kv * ea1 + m * jd[1]
+            Fd2 = -kx * ev2 - kv * ea2 + m * jd[2]
+            Fdd0 = -kx * ea0 - kv * ej0 + m * sd[0]
+            Fdd1 = -kx * ea1 - kv * ej1 + m * sd[1]
+            Fdd2 = -kx * ea2 - kv * ej2 + m * sd[2]
 
         # --- pointing u_s = S_p - x_d (eq. 21), governed ------------------------------
         Sp = self.target_enu_m if target is None else target
@@ -933,12 +1054,24 @@ class GeometricController:
         e_x = (p[0] - xd[0], p[1] - xd[1], p[2] - xd[2])
         e_v = (v[0] - vd[0], v[1] - vd[1], v[2] - vd[2])
         ev_dot = (a_hat[0] - ad[0], a_hat[1] - ad[1], a_hat[2] - ad[2])
-        ev_ddot = tuple(-(kx * e_v[i] + kv * ev_dot[i]) / m for i in range(3))
-        F = (-kx * e_x[0] - kv * e_v[0] + m * ad[0],
-             -kx * e_x[1] - kv * e_v[1] + m * ad[1],
-             -kx * e_x[2] - kv * e_v[2] + m * (g + ad[2]))
-        F_dot = tuple(-kx * e_v[i] - kv * ev_dot[i] + m * jd[i] for i in range(3))
-        F_ddot = tuple(-kx * ev_dot[i] - kv * ev_ddot[i] + m * sd[i] for i in range(3))
+        ki = self._ki
+        if ki > 0.0:
+            # the integral term: F_d gains -ki e_i, F_d_dot -ki e_i_dot, F_d_ddot -ki e_i_ddot
+            e_i, active = self._integrate(t_s, e_x)
+            ei_dot, ei_ddot = (e_x, e_v) if active else (_ZERO, _ZERO)
+            ev_ddot = tuple(-(kx * e_v[i] + kv * ev_dot[i] + ki * ei_dot[i]) / m for i in range(3))
+            F = (-kx * e_x[0] - kv * e_v[0] - ki * e_i[0] + m * ad[0],
+                 -kx * e_x[1] - kv * e_v[1] - ki * e_i[1] + m * ad[1],
+                 -kx * e_x[2] - kv * e_v[2] - ki * e_i[2] + m * (g + ad[2]))
+            F_dot = tuple(-kx * e_v[i] - kv * ev_dot[i] - ki * ei_dot[i] + m * jd[i] for i in range(3))
+            F_ddot = tuple(-kx * ev_dot[i] - kv * ev_ddot[i] - ki * ei_ddot[i] + m * sd[i] for i in range(3))
+        else:
+            ev_ddot = tuple(-(kx * e_v[i] + kv * ev_dot[i]) / m for i in range(3))
+            F = (-kx * e_x[0] - kv * e_v[0] + m * ad[0],
+                 -kx * e_x[1] - kv * e_v[1] + m * ad[1],
+                 -kx * e_x[2] - kv * e_v[2] + m * (g + ad[2]))
+            F_dot = tuple(-kx * e_v[i] - kv * ev_dot[i] + m * jd[i] for i in range(3))
+            F_ddot = tuple(-kx * ev_dot[i] - kv * ev_ddot[i] + m * sd[i] for i in range(3))
         Sp = self.target_enu_m if ref.target_enu_m is None else ref.target_enu_m
         u_s = (Sp[0] - xd[0], Sp[1] - xd[1], Sp[2] - xd[2])
         u_s_dot, u_s_ddot = (-vd[0], -vd[1], -vd[2]), (-ad[0], -ad[1], -ad[2])
