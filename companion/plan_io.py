@@ -33,6 +33,7 @@ import numpy as np
 from .config import to_dict
 from .errors import PlanError
 from .frames import enu2geodetic
+from .textfile import read_text
 from .mission import Mission
 
 MAV_CMD_NAV_WAYPOINT = 16
@@ -181,12 +182,7 @@ def load_plan(path: str | Path) -> PlanFile:
     """
     p = Path(path)
     src = str(p)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise PlanError(src, "no such file (plan.json)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise PlanError(src, f"cannot read: {exc}") from None
+    text = read_text(p, PlanError, "plan.json")
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MapError
+from ..textfile import read_text
 from .grid import ElevationModel
 
 #: Largest coordinate (m, +-) and height (m, +-) accepted: beyond them the grid is a
@@ -49,12 +50,7 @@ def load_dem(path: str | Path) -> ElevationModel:
     """
     p = Path(path)
     src = str(p)
-    try:
-        text = p.read_text(encoding="ascii", errors="strict")
-    except FileNotFoundError:
-        raise MapError(src, "no such file (elevation model)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MapError(src, f"cannot read as an ASCII grid: {exc}") from None
+    text = read_text(p, MapError, "elevation model", encoding="ascii", unreadable="cannot read as an ASCII grid")
 
     lines = text.splitlines()
     header: dict[str, float] = {}

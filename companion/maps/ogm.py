@@ -32,9 +32,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ..errors import MapError
+from ..textfile import parse_yaml, read_text
 from .grid import OccupancyGrid
 
 _REQUIRED = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
@@ -196,18 +196,7 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
     """
     ypath = Path(yaml_path)
     src = str(ypath)
-    try:
-        text = ypath.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise MapError(src, "no such file (occupancy grid YAML)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MapError(src, f"cannot read: {exc}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{src}: line {mark.line + 1}" if mark is not None else src
-        raise MapError(where, f"not valid YAML: {getattr(exc, 'problem', None) or 'parse error'}") from None
+    data = parse_yaml(read_text(ypath, MapError, "occupancy grid YAML"), src, MapError)
     if not isinstance(data, dict):
         raise MapError(src, "expected a mapping of map_server keys")
     for key in data:

@@ -5,10 +5,9 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import yaml
-
 from ..config import from_dict
 from ..errors import MissionError
+from ..textfile import parse_yaml, read_text
 from .schema import Mission
 
 
@@ -22,19 +21,7 @@ def load_mission(path: str | Path) -> Mission:
         the file and the key).
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise MissionError(str(p), "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MissionError(str(p), f"cannot read: {exc}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f" line {mark.line + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or "invalid YAML"
-        raise MissionError(f"{p}{':' + line.strip() if line else ''}", f"not valid YAML: {problem}") from None
+    data = parse_yaml(read_text(p, MissionError), str(p), MissionError)
     if not isinstance(data, dict):
         raise MissionError(str(p), "expected a mapping of mission keys at the top level")
     for key in ("base_dir", "source"):
