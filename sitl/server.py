@@ -887,10 +887,7 @@ class SitlServer:
                         data = link.recv_datagram()
                         if data is None:
                             break
-                        # The lockstep answer (one packet per frame) is decoded
-                        # without pymavlink's parser when alone in its datagram.
-                        ans = codec.decode_actuator_datagram(data)
-                        msgs = () if ans is not None else link.parse(data)
+                        ans, msgs = self._decode_datagram(link, data)
                     else:
                         ans = None
                         msgs = link.receive()
@@ -899,11 +896,7 @@ class SitlServer:
                 except Exception:   # garbage must never stop the vehicle
                     self.stats["bad_packets"] += 1
                     break
-                if ans is not None:
-                    self._on_answer(ans)
-                for msg in msgs:
-                    self._handle(link, msg)
-                if until_released and self._released:
+                if self._dispatch(link, ans, msgs, until_released):
                     return
 
     def _poll_one(self, link: _Link, timeout_s: float, until_released: bool, spin_s: float = 0.0) -> None:
@@ -917,17 +910,29 @@ class SitlServer:
                 data = link.recv_datagram(wait if k == 0 else 0.0, spin_s if k == 0 else 0.0)
                 if data is None:
                     return
-                ans = codec.decode_actuator_datagram(data)
-                msgs = () if ans is not None else link.parse(data)
+                ans, msgs = self._decode_datagram(link, data)
             except Exception:   # garbage must never stop the vehicle
                 self.stats["bad_packets"] += 1
                 return
-            if ans is not None:
-                self._on_answer(ans)
-            for msg in msgs:
-                self._handle(link, msg)
-            if until_released and self._released:
+            if self._dispatch(link, ans, msgs, until_released):
                 return
+
+    @staticmethod
+    def _decode_datagram(link: _Link, data: bytes):
+        """(lockstep answer or None, messages) of one UDP datagram: the answer
+        (one packet per frame) is decoded without pymavlink's parser when it
+        is alone in its datagram."""
+        ans = codec.decode_actuator_datagram(data)
+        return ans, (() if ans is not None else link.parse(data))
+
+    def _dispatch(self, link: _Link, ans, msgs, until_released: bool) -> bool:
+        """Act on a decoded datagram; True when the caller should stop reading
+        (``until_released`` and the lockstep answer has released the frame)."""
+        if ans is not None:
+            self._on_answer(ans)
+        for msg in msgs:
+            self._handle(link, msg)
+        return until_released and self._released
 
     # ------------------------------------------------------------------ dispatch
     def _handle(self, link: _Link, msg) -> None:
