@@ -213,16 +213,11 @@ class SensorSuite:
 
     def position(self, pos_enu_m, vel_enu_m_s) -> tuple[np.ndarray, np.ndarray]:
         """(position ENU m, velocity ENU m/s) measurements (3,) each."""
-        p = np.array(pos_enu_m, dtype=float)
-        v = np.array(vel_enu_m_s, dtype=float)
-        if self.pos_std > 0:
-            p = p + self.pos_std * self.rng.standard_normal(3)
-        if self.vel_std > 0:
-            v = v + self.vel_std * self.rng.standard_normal(3)
-        return p, v
+        p, v = self.position_tuples(tuple(float(x) for x in pos_enu_m), tuple(float(x) for x in vel_enu_m_s))
+        return np.array(p), np.array(v)
 
     def position_tuples(self, p, v):
-        """``position`` on float 3-tuples, returning float 3-tuples (same draws)."""
+        """``position`` on float 3-tuples, returning float 3-tuples: the hot path."""
         if self.pos_std > 0:
             k = self.pos_std
             n0, n1, n2 = self.rng.standard_normal(3).tolist()
