@@ -31,7 +31,7 @@ class TlogWriter:
     path : str or Path
         Output file (created or truncated by ``open``).
     flush_interval_s : float
-        Longest wall-clock time between flushes (<= 1 s per DESIGN.md).
+        Longest wall-clock time between flushes (<= 1 s, docs/tlog.md).
 
     Notes
     -----
