@@ -73,7 +73,10 @@ class FlightReport:
     Attributes
     ----------
     completed : bool
-        The trajectory was flown to its end and the vehicle landed and disarmed.
+        The trajectory was flown to its end and the vehicle landed and
+        disarmed, with no violation (``companion.flight.monitor``): it stayed
+        armed, airborne, in the mode we asked for, did not crash, and the
+        tracking error stayed within the bound.
     control : str
         "companion" (geometric controller, HIL_ACTUATOR_CONTROLS) or "vehicle".
     sim_time_s : float
@@ -85,6 +88,25 @@ class FlightReport:
         From the plan's statistics.
     tlog : str or None
         Path of the recorded .tlog.
+    crashed : bool
+        The vehicle reported a crash (STATUSTEXT CRITICAL "CRASH...").
+    crash : dict or None
+        ``{t_s, text}`` of the crash report.
+    violation : dict or None
+        The first violation (``Violation.to_dict``): why the flight is not completed.
+    planned_coverage_fraction : float or None
+        The plan's coverage; ``coverage_fraction`` is what was flown of it
+        (planned coverage times ``path_flown_fraction``).
+    path_flown_fraction : float or None
+        Fraction of the planned coverage path the vehicle passed within 0.5 m of.
+    degraded : dict or None
+        When the inner loop was handed back to the vehicle's controller: time and reason.
+    interrupted : str or None
+        The signal that stopped the flight.
+    link : dict or None
+        Link statistics (messages received, rejected, bad bytes).
+    resumed_from_s : float or None
+        ``--attach resume``: trajectory time (s from its start) the flight resumed at.
     """
 
     completed: bool
@@ -101,6 +123,15 @@ class FlightReport:
     real_time_factor: float | None = None
     n_frames: int = 0
     trajectory_duration_s: float = 0.0
+    crashed: bool = False
+    crash: dict | None = None
+    violation: dict | None = None
+    planned_coverage_fraction: float | None = None
+    path_flown_fraction: float | None = None
+    degraded: dict | None = None
+    interrupted: str | None = None
+    link: dict | None = None
+    resumed_from_s: float | None = None
 
     def to_dict(self) -> dict:
         """The report.json document: ``format_version`` first, then the fields."""
