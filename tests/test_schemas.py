@@ -29,6 +29,7 @@ from companion.commands.demo import missions_dir
 from companion.errors import PlanError
 from companion.format_version import check_format_version
 from companion.plan_io import PLAN_FORMAT_VERSION, load_plan
+from companion.flight.monitor import FlightMonitor, Violation
 from companion.report import (REPORT_FORMAT_VERSION, FlightReport, ReplanningStats, TrackingStats,
                               tracking_stats, write_report)
 
@@ -81,8 +82,20 @@ def _report_doc(**changes) -> dict:
                        tracking=tracking_stats([1.0, 7.0, 8.0], [0.5, 0.003, 0.004], 0.0),
                        replanning=ReplanningStats(0, 2.2, 0.0), coverage_fraction=1.0, tlog="out/flight.tlog",
                        mission="flat-rectangle", phase="done", real_time_factor=32.5, n_frames=32500,
-                       trajectory_duration_s=118.9)
+                       trajectory_duration_s=118.9, planned_coverage_fraction=1.0, path_flown_fraction=1.0,
+                       link={"received": 250_000, "sent": 40_000, "bad": 0})
     return json.loads(json.dumps(dataclasses.replace(rep, **changes).to_dict()))
+
+
+def _crashed_report_doc() -> dict:
+    """The report of a crash, its ``crash`` and ``violation`` made by the flight monitor itself."""
+    monitor = FlightMonitor()
+    monitor.armed(3.0, 6 << 16)
+    monitor.on_statustext(42.5, 2, "CRASH: vehicle hit the ground at 3.1 m/s")
+    return _report_doc(completed=False, phase="trajectory", error=monitor.first.detail, crashed=True,
+                       crash=monitor.crash, violation=monitor.first.to_dict(), coverage_fraction=0.4,
+                       path_flown_fraction=0.4, degraded={"t_s": 20.0, "reason": "frame jitter",
+                                                          "jitter_p95_s": 0.012, "frames_lost": 3})
 
 
 # --- the schemas themselves --------------------------------------------------------
@@ -110,6 +123,12 @@ def test_plan_of_every_bundled_mission_validates_and_loads(mission, tmp_path_fac
     assert next(iter(doc)) == "format_version"           # first key: readable with `head`
     pf = load_plan(planned["path"])
     assert pf.waypoint_t_s.shape[0] == doc["stats"]["n_waypoints"]
+
+
+def test_report_of_a_crashed_flight_validates():
+    doc = _crashed_report_doc()
+    assert _errors(REPORT, doc) == []
+    assert doc["violation"]["kind"] == "crash" and doc["crash"]["t_s"] == 42.5
 
 
 def test_report_of_a_failed_flight_validates(tmp_path):
@@ -192,7 +211,25 @@ REPORT_BREAKAGES = [
     ("tlog", 0), ("phase", "flying"), ("n_frames", 1.5),
     ("error", "vehicle silent"),          # completed with an error
     ("phase", "landing"),                 # completed before the end
+    ("crashed", True),                    # completed after a crash
+    ("violation", {"t_s": 1.0, "kind": "tracking", "detail": "x", "action": "land", "values": {}}),
+    ("link.received", -1), ("link.bad", _DELETE), ("link", 3), ("planned_coverage_fraction", 1.5),
+    ("path_flown_fraction", -0.1), ("resumed_from_s", -1.0), ("interrupted", 2),
+    ("degraded", {"t_s": 3.0}), ("crash", {"t_s": 1.0}),
 ]
+
+CRASHED_BREAKAGES = [
+    ("violation.action", "fly"), ("violation.kind", None), ("violation.values", []),
+    ("violation.extra", 1), ("crash.text", None), ("crash.t_s", "42"), ("crashed", "yes"),
+    ("degraded.reason", _DELETE), ("degraded.frames_lost", -3),
+]
+
+
+@pytest.mark.parametrize("path,value", CRASHED_BREAKAGES, ids=[f"{p}={v!r}" for p, v in CRASHED_BREAKAGES])
+def test_report_schema_rejects_a_broken_crash_report(path, value):
+    doc = _crashed_report_doc()
+    _set(doc, path, value)
+    assert _errors(REPORT, doc)
 
 
 @pytest.mark.parametrize("path,value", REPORT_BREAKAGES, ids=[f"{p}={v!r}" for p, v in REPORT_BREAKAGES])
@@ -218,14 +255,23 @@ def test_schemas_accept_later_minor_versions_where_growth_is_expected(plan_doc):
     plan_doc["timings_s"]["sorties"] = 0.01
     assert _errors(PLAN, plan_doc) == []
     doc = _report_doc()
-    doc.update(format_version="1.1", crashed=False, link={"packets_lost": 0})
+    doc.update(format_version="1.1", sorties=[{"completed": True}])
     doc["replanning"]["event_list"] = [{"t_s": 12.0}]
+    doc["link"]["auth_rejected"] = 0
+    assert _errors(REPORT, doc) == []
+    doc = _crashed_report_doc()
+    doc["degraded"]["rtt_s"] = 0.01
     assert _errors(REPORT, doc) == []
     # a flight that did not complete may stop in any phase with an error
     assert _errors(REPORT, _report_doc(completed=False, phase="landing", error="no COMMAND_ACK")) == []
 
 
 # --- writers, schemas and pages name the same keys ------------------------------------
+
+def _is_object(sub: dict) -> bool:
+    t = sub.get("type")
+    return t == "object" or (isinstance(t, list) and "object" in t)
+
 
 def _schema_keys(schema: dict, prefix: str = "") -> dict[str, dict]:
     """dotted key -> sub-schema of every object property ('[]' for array items)."""
@@ -235,7 +281,7 @@ def _schema_keys(schema: dict, prefix: str = "") -> dict[str, dict]:
         while "$ref" in sub:
             sub = root["$defs"][sub["$ref"].rsplit("/", 1)[1]]
         out[prefix + key] = sub
-        if sub.get("type") == "object":
+        if _is_object(sub) and "properties" in sub:
             out.update(_schema_keys({**sub, "$defs": root.get("$defs", {})}, f"{prefix}{key}."))
         items = sub.get("items", {})
         if items.get("type") == "object":
@@ -269,12 +315,21 @@ def test_plan_writer_and_schema_have_the_same_keys(tmp_path_factory):
 
 
 def test_report_fields_and_schema_have_the_same_keys():
-    fields = {f.name for f in dataclasses.fields(FlightReport)}
-    fields |= {f"tracking.{f.name}" for f in dataclasses.fields(TrackingStats)}
-    fields |= {f"replanning.{f.name}" for f in dataclasses.fields(ReplanningStats)}
-    assert fields | {"format_version"} == set(_schema_keys(REPORT_SCHEMA))
-    assert _doc_keys(_report_doc()) == set(_schema_keys(REPORT_SCHEMA))
-    _every_object_requires_all_its_properties(REPORT_SCHEMA)
+    props = REPORT_SCHEMA["properties"]
+    top = {f.name for f in dataclasses.fields(FlightReport)} | {"format_version"}
+    assert set(props) == set(REPORT_SCHEMA["required"]) == top
+    for key, cls in (("tracking", TrackingStats), ("replanning", ReplanningStats), ("violation", Violation)):
+        assert set(props[key]["properties"]) == set(props[key]["required"]) == {f.name for f in dataclasses.fields(cls)}
+    crash = _crashed_report_doc()["crash"]           # the monitor's own dict
+    assert set(props["crash"]["properties"]) == set(props["crash"]["required"]) == set(crash)
+    # every key of a report with every optional object filled is in the schema
+    assert _doc_keys(_crashed_report_doc()) <= set(_schema_keys(REPORT_SCHEMA))
+
+
+def test_example_on_the_report_page_validates():
+    text = (DOCS / "report-json.md").read_text(encoding="utf-8")
+    example = json.loads(text.split("```json", 1)[1].split("```", 1)[0])
+    assert _errors(REPORT, example) == []
 
 
 def test_report_phase_enum_is_the_runners_phases():
