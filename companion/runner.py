@@ -138,7 +138,8 @@ class MissionRunner:
                         last_t, last_clock = t, now
                         if cfg.control == "companion" and core.period_us:
                             if health is None:
-                                health = LinkHealth(core.period_us * 1e-6)
+                                health = LinkHealth(core.period_us * 1e-6, lockstep=core.vehicle_lockstep)
+                            health.lockstep = core.vehicle_lockstep
                             why = health.observe(now, t)
                             if why is not None and core.phase in ("takeoff", "hold", "trajectory", "hover"):
                                 core.degrade(why, jitter_p95_s=health.jitter_p95_s, frames_lost=health.n_lost)

@@ -168,3 +168,34 @@ def test_path_coverage_counts_what_was_passed_within_the_radius():
     second = sum(1 for p in cov.points if p[0] == 10.0 and 0 < p[1] and math.hypot(0, p[1] - 0.3) <= 0.5)
     assert cov.fraction() == pytest.approx((21 + second) / n)
     assert cov.fraction() < 0.6
+
+
+@pytest.mark.parametrize("n", [0, 1, 46, 47, 48, 94, 400])
+def test_setup_record_round_trips_through_statustext_chunks(n):
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from companion.flight.setup_record import SETUP_TEXT_ID, parse_setup, setup_chunks
+
+    setup = {"mission": "x" * n, "cut_s": 8.0, "runner": {"attach": "refuse"}}
+    enc = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
+    dec = mavlink.MAVLink(None)
+    texts = []
+    for text, seq in setup_chunks(setup):
+        buf = enc.statustext_encode(7, text, SETUP_TEXT_ID, seq).pack(enc)   # over the wire and back
+        m = dec.decode(bytearray(buf))
+        texts.append((m.text, m.id, m.chunk_seq))
+    assert parse_setup(reversed(texts)) == setup       # order of arrival does not matter
+    with pytest.raises(ValueError):
+        parse_setup(texts[1:] if len(texts) > 1 else [(texts[0][0] + "x" * 60, SETUP_TEXT_ID, 0)])
+
+
+def test_link_health_trusts_a_lockstep_vehicle_until_its_frames_skip():
+    dt = 0.004
+    rng = np.random.default_rng(2)
+    # lockstep under load: the vehicle clock about as fast as the wall clock, bursts of delay
+    h = LinkHealth(dt, lockstep=True)
+    assert all(h.observe(k * dt + 0.03 * rng.random(), k * dt) is None for k in range(2000))
+    # the same vehicle once it has fallen back to free running (frames lost) is judged
+    h = LinkHealth(dt, lockstep=True)
+    verdicts = [h.observe(k * dt + 0.03 * rng.random(), k * dt) for k in range(0, 4000, 2)]
+    assert any(v is not None for v in verdicts)

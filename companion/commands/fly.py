@@ -177,8 +177,36 @@ def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
+def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | None, overrides: dict) -> dict:
+    """The flight's setup record (``companion.flight.setup_record``): what ``companion replay``
+    needs to rebuild this flight from its .tlog and the same mission (and plan) files."""
+    import hashlib
+
+    from .. import __version__
+
+    def digest(path) -> str | None:
+        try:
+            return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+        except OSError:
+            return None
+
+    return {
+        "format": "companion-setup/1",
+        "version": __version__,
+        "mission": mission.name,
+        "mission_sha": digest(mission.source),
+        "map_sha": digest(mission.map_path),
+        "dem_sha": digest(mission.dem_path),
+        "plan_sha": digest(plan_path) if plan_path else None,
+        "control": control,
+        "cut_s": cut_s,
+        "runner": {k: (list(v) if isinstance(v, tuple) else v) for k, v in sorted(overrides.items())},
+    }
+
+
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
-            progress=None, cut_s: float | None = None, runner_overrides: dict | None = None):
+            progress=None, cut_s: float | None = None, runner_overrides: dict | None = None,
+            plan_path: str | None = None):
     """Open the link, fly, close. Returns ``companion.runner.FlightResult``."""
     from ..control import GeometricController
     from ..link import Connection, TlogWriter
@@ -194,7 +222,8 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
                           (mission.home.lat, mission.home.lon, mission.home.alt_m),
                           tuple(float(x) for x in flight_plan.target_enu_m),
                           tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
-                          flight_plan.coverage_fraction, flight_plan.path_xy_m)
+                          flight_plan.coverage_fraction, flight_plan.path_xy_m,
+                          flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}))
     core = FlightCore(inputs, cfg, mission.vehicle, ctrl)
     from ..errors import LinkError
 
@@ -231,7 +260,8 @@ def run(args) -> int:
     mission = load_mission(args.mission)
     fp = prepare(mission, args.plan)
     progress = Progress(enabled=not args.quiet)
-    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, overrides)
+    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, overrides,
+                     args.plan)
     rep = result.report
     write_report(rep, args.report)
     tr = rep.tracking

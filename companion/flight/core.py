@@ -67,6 +67,7 @@ from .config import RunnerConfig
 from .coverage import PathCoverage
 from .log import ErrorStats, FlightLog
 from .monitor import FlightMonitor, MonitorConfig, Violation
+from .setup_record import MAV_SEVERITY_DEBUG, SETUP_TEXT_ID, setup_chunks
 from .reference import (RefSample, TrajectoryWindow, at_rest, climb_duration_s, pointing_at,
                         setpoint_yaw_enu, smooth_segment)
 
@@ -90,7 +91,9 @@ _NAN3 = (math.nan, math.nan, math.nan)
 _NAN9 = (math.nan,) * 9
 _NAN_CTRL = (math.nan,) * 10
 _Z3 = (0.0, 0.0, 0.0)
-_NAN4 = (math.nan,) * 4
+#: STATUSTEXT prefixes of the events that come from outside the core (replay re-injects them).
+INTERRUPT_PREFIX = "companion: interrupted by "
+DEGRADE_PREFIX = "companion: inner loop to vehicle: "
 
 
 @dataclass(frozen=True)
@@ -115,6 +118,9 @@ class FlightInputs:
     path_xy_m : (M, 2) array or None
         The plan's 2D coverage path; the report's flown coverage is the
         planned coverage times the fraction of this path actually flown.
+    setup : dict or None
+        How this flight was set up (``companion.flight.setup_record``): sent
+        at connection so the .tlog describes its own flight.
     """
 
     trajectory: object
@@ -125,6 +131,7 @@ class FlightInputs:
     mission_name: str = ""
     coverage_fraction: float | None = None
     path_xy_m: object = None
+    setup: dict | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -249,6 +256,11 @@ class FlightCore:
         self._ack = None
         self._ack_for = None
         self._mission_msg = None
+        self._param = None
+        self._param_for = None
+        #: The vehicle waits for every answer (the bundled SITL's SIM_LOCKSTEP = 1):
+        #: link delay then costs wall time, not control (``companion.flight.health``).
+        self.vehicle_lockstep = False
         self._proc = self._procedure()
         self._waiting = None
         self._dispatch = {
@@ -264,6 +276,7 @@ class FlightCore:
             "MISSION_REQUEST_INT": self._on_mission_msg,
             "MISSION_REQUEST": self._on_mission_msg,
             "MISSION_ACK": self._on_mission_msg,
+            "PARAM_VALUE": self._on_param_value,
         }
         #: Optional tap on the controller's inputs (tests check them against the link).
         self.input_tap = None
@@ -290,6 +303,9 @@ class FlightCore:
         if self.finished:
             return
         self.interrupted = reason
+        # Said on the wire (and so in the .tlog, where replay finds it).
+        self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_WARNING,
+                                              f"{INTERRUPT_PREFIX}{reason}"[:50].encode()))
         self.monitor.fail(self.t_s, "interrupted", f"interrupted by {reason}", self.cfg.on_failure)
         self._stop(self.cfg.on_failure)
 
@@ -307,7 +323,7 @@ class FlightCore:
         self.degraded = {"t_s": self.t_s, "reason": reason, **values}
         self._controlling = False
         self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_WARNING,
-                                              f"companion: inner loop to vehicle: {reason}"[:50].encode()))
+                                              f"{DEGRADE_PREFIX}{reason}"[:50].encode()))
 
     @property
     def heartbeat_wanted(self) -> bool:
@@ -434,6 +450,19 @@ class FlightCore:
             self._emit(items[seq])
             last_sent = seq
 
+    def _param_read(self, name: str, tries: int = 2):
+        """PARAM_REQUEST_READ (generator): the PARAM_VALUE, or None when the vehicle has no such parameter."""
+        self._param_for = name
+        for _ in range(tries):
+            self._param = None
+            self._emit(self.enc.param_request_read_encode(self.ts, self.tc, name.encode(), -1))
+            t0 = self.t_s
+            yield lambda: self._param is not None or self._elapsed(t0) > self.cfg.command_timeout_s
+            if self._param is not None:
+                break
+        self._param_for = None
+        return self._param
+
     def _set_interval(self, msg_id: int, interval_us: float, optional: bool = False):
         return (yield from self._command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, interval_us),
                                          "set message interval", retries=1 if optional else 3, optional=optional))
@@ -444,6 +473,9 @@ class FlightCore:
         cfg = self.cfg
         yield lambda: self.vstate is not None
         self.phase = "setup"
+        if self.inputs.setup is not None:
+            for text, seq in setup_chunks(self.inputs.setup):
+                self._emit(self.enc.statustext_encode(MAV_SEVERITY_DEBUG, text, SETUP_TEXT_ID, seq))
         yield lambda: self.period_us is not None
         yield from self._set_interval(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, self.period_us)
         if cfg.request_truth:
@@ -452,6 +484,8 @@ class FlightCore:
             yield from self._set_interval(mid, -1, optional=True)
         for mid, hz in cfg.low_rate_streams:
             yield from self._set_interval(mid, 1e6 / hz, optional=True)
+        pv = yield from self._param_read("SIM_LOCKSTEP")
+        self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv) == 1
         yield lambda: self._pos is not None
         if self.armed:
             yield from self._attach()
@@ -702,6 +736,10 @@ class FlightCore:
 
     def _on_mission_msg(self, m) -> None:
         self._mission_msg = m
+
+    def _on_param_value(self, m) -> None:
+        if self._param_for is not None and m.param_id == self._param_for:
+            self._param = m
 
     def _react(self, v: Violation) -> None:
         if v.action == "land":

@@ -9,8 +9,12 @@ estimates, from the arrival (wall) times of the sensor frames and their vehicle
 time stamps, the extra delay of each frame and the frames lost, and says when
 the inner loop should be handed back to the vehicle's own controller.
 
-- The clock ratio (vehicle seconds per wall second over the last window)
-  tells lockstep/faster-than-real-time (> ``lockstep_ratio``): no verdict.
+- A vehicle that says it runs in lockstep (the bundled SITL's parameter
+  SIM_LOCKSTEP = 1) waits for every answer: no verdict, as long as its clock
+  shows no lost frames (a lockstep SITL falls back to free running when
+  answers stop coming; then its frames skip and the checks below apply).
+- Otherwise the clock ratio (vehicle seconds per wall second over the last
+  window) tells faster-than-real-time running (> ``lockstep_ratio``): no verdict.
 - Jitter: ``(wall_k - t_k) - min_window(wall - t)``, the delay of frame k
   beyond the fastest frame of the window (a constant base delay cancels).
 - Lost frames: gaps in the vehicle time stamps beyond 1.5 periods.
@@ -37,8 +41,9 @@ class HealthConfig:
 class LinkHealth:
     """Sliding-window jitter and loss of the sensor frames (see the module docstring)."""
 
-    def __init__(self, period_s: float, cfg: HealthConfig = HealthConfig()) -> None:
+    def __init__(self, period_s: float, cfg: HealthConfig = HealthConfig(), lockstep: bool = False) -> None:
         self.period_s = float(period_s)
+        self.lockstep = lockstep
         self.cfg = cfg
         self._w: deque = deque()          # (wall_s, t_s)
         self.n_lost = 0
@@ -70,7 +75,7 @@ class LinkHealth:
             return None   # a verdict every 25 frames is enough (0.1 s at 250 Hz)
         dwall = wall_s - w[0][0]
         self.ratio = (t_s - w[0][1]) / dwall
-        if self.ratio > cfg.lockstep_ratio:
+        if self.ratio > cfg.lockstep_ratio or (self.lockstep and not self._lost):
             return None
         offs = sorted(a - b for a, b in w)
         base = offs[0]
