@@ -1,5 +1,5 @@
 """MAVLink transport of the SITL: ``Simulation`` + ``FlightStack`` behind
-pymavlink connections (DESIGN.md "MAVLink contract" and "Time").
+pymavlink connections (docs/mavlink.md).
 
 The vehicle is system 1, component 1, MAVLink 2, common dialect. Connection
 strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
@@ -150,7 +150,7 @@ class ServerConfig:
     outs : tuple of str
         Extra links (e.g. ``udpout:127.0.0.1:14550`` for a ground station).
     lockstep : bool
-        Allow lockstep with an actuator peer (DESIGN.md "Time").
+        Allow lockstep with an actuator peer (docs/mavlink.md "Time and lockstep").
     speed : float
         Real-time factor when free-running (0: as fast as possible).
     seed : int or None

@@ -140,8 +140,8 @@ def prepare(mission, plan_path: str | None) -> FlightPlan:
     pf = load_plan(plan_path)
     target = pf.target_enu_m
     if target is None:
-        # A plan.json without ``target_enu_m`` (it is not in DESIGN.md's
-        # minimum): S_p is where the pointing rays of eq. (21) meet.
+        # A plan.json without ``target_enu_m`` (the loader does not require
+        # it, docs/plan-json.md): S_p is where the pointing rays of eq. (21) meet.
         target = pointing_target_from_rays(pf.p_enu_m, pf.pointing_enu, str(plan_path))
     traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
                                pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
