@@ -134,8 +134,12 @@ def test_heartbeat_and_telemetry(gcs):
     assert np.all(np.diff(t) == 4000)              # every 250 Hz frame, vehicle time
     zacc = np.mean([m.zacc for m in imus])
     assert zacc == pytest.approx(-9.81, abs=0.05)   # at rest: specific force -g along FRD z
-    att = gcs.recv("ATTITUDE", 3.0)
-    assert abs(att.roll) < 1e-6 and abs(att.pitch) < 1e-6
+    # ATTITUDE is the onboard estimate (sim.onboard_state: estimate): level
+    # within what one second of alignment on the paper's noise leaves
+    # (a few mrad), not the exact true attitude
+    att = gcs.recv("ATTITUDE", 3.0, lambda m: m.time_boot_ms > 2500)
+    assert abs(att.roll) < 0.02 and abs(att.pitch) < 0.02
+    assert (att.roll, att.pitch) != (0.0, 0.0)
 
 
 def test_every_command_is_acked(gcs):
