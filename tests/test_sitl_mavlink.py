@@ -446,6 +446,28 @@ def test_lockstep_time_stalls_without_answers():
         c.close()
 
 
+def test_actuator_controls_without_the_lockstep_flag_do_not_engage_lockstep():
+    """HIL_ACTUATOR_CONTROLS with flags & 1 == 0 answer nothing: the vehicle
+    clock stays on the first frame and lockstep stays off; the same answer
+    with the flag engages it (PX4's HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP)."""
+    with SitlThread(MISSION, lockstep=True, speed=0.0) as s:
+        c = Client(s.url, sysid=1, compid=191)
+        c.mav.heartbeat_send(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        first = c.recv("HIGHRES_IMU", 5.0)
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:       # answer every (re-sent) frame, flag clear
+            m = c.recv("HIGHRES_IMU", 0.3)
+            t = first.time_usec if m is None else m.time_usec
+            c.mav.hil_actuator_controls_send(t, [NAN] * 16, 0, 0)
+        assert not s.server.lockstep_engaged
+        assert s.server.time_us == first.time_usec          # vehicle time did not move
+        assert "Lockstep engaged" not in c.texts
+        c.mav.hil_actuator_controls_send(first.time_usec, [NAN] * 16, 0, 1)
+        nxt = c.recv("HIGHRES_IMU", 3.0, lambda m: m.time_usec > first.time_usec)
+        assert nxt is not None and s.server.lockstep_engaged
+        c.close()
+
+
 def signed(m) -> bool:
     return bool(m.get_msgbuf()[2] & mavlink.MAVLINK_IFLAG_SIGNED)
 
