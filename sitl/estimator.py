@@ -13,10 +13,14 @@ filter"), its corrections written as world-frame rotation vectors sigma::
     R <- R Exp([(W_m - b) dt + R^T sigma]x)          (propagation + correction)
     b <- b - k_b R^T sigma                            (bias: integral of the correction)
 
-(the correction computed at one frame enters the next frame's propagation:
-one exponential per frame; R^T sigma is the body-frame form of the
-world-frame rotation sigma, Exp(sigma) R = R Exp(R^T sigma))
-with ``k_b`` = 0.3 /s. (For a correction acting directly, k_b = 0.51/tau
+The correction computed at one frame enters the next frame's propagation
+(one exponential per frame; R^T sigma is the body-frame form of the
+world-frame rotation sigma, Exp(sigma) R = R Exp(R^T sigma)); each bias
+component is clamped to +-0.15 rad/s (PX4's EKF2_GYR_B_LIM). The first
+attitude comes from one accelerometer/magnetometer sample at rest
+(``initial_attitude``, TRIAD with the vertical first); for the first 2 s the
+time constants are ten times shorter and the bias is not integrated
+(alignment). k_b = 0.3 /s. (For a correction acting directly, k_b = 0.51/tau
 would give the bias-error dynamics ``e'' + e'/tau + k_b e/tau = 0`` a
 damping of 0.7; the tilt correction below passes through the velocity
 filter's bias estimate, a further lag, so k_b is lower: with tau = 0.7 s
@@ -133,6 +137,11 @@ class EstimatorConfig:
             raise ValueError("accel_mode must be specific_force or inclinometer")
         if min(self.tilt_time_constant_s, self.yaw_time_constant_s, self.max_history_s) <= 0:
             raise ValueError("estimator time constants must be > 0")
+        if min(self.accel_noise_m_s2_rthz, self.accel_bias_walk_m_s2_rts, self.pos_std_xy_m, self.pos_std_z_m,
+               self.vel_std_m_s, self.align_s, self.gyro_bias_gain_per_s) < 0:
+            raise ValueError("estimator noise figures and gains must be >= 0")
+        if not (self.gyro_bias_limit_rad_s > 0 and self.align_speedup >= 1):
+            raise ValueError("gyro_bias_limit_rad_s must be > 0 and align_speedup >= 1")
 
 
 @dataclass(frozen=True, slots=True)

@@ -59,10 +59,13 @@ stamped with its measurement time (repeated, same time_boot_ms, until the
 next delivery); with ``sim.onboard_state: estimate`` (default) ATTITUDE,
 ATTITUDE_QUATERNION and GLOBAL_POSITION_INT carry the onboard estimator's
 attitude, bias-corrected rates and position, as PX4 reports its EKF's, and
-the onboard controller and flight stack use the estimate (ground contact
-stands for the land detector); with ``truth`` they carry and use the true
-state ("true state" mode, the SITL without an estimator). ODOMETRY is
-always the ground truth.
+the onboard controller and flight stack use the estimate; with ``truth``
+they carry and use the true state ("true state" mode, the SITL without an
+estimator). Truth kept in estimate mode, where a real stack has equivalent
+information: the plant's ground contact stands for the land detector
+(landed state, auto-disarm, integrator freeze), and home is the true start
+point (a real stack takes its estimate at arming, within the sensors'
+centimetres here). ODOMETRY is always the ground truth.
 
 Signing: SETUP_SIGNING stores the key on every link and signs all outgoing
 messages with it; unsigned incoming messages are still accepted (a SITL
