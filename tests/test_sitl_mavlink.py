@@ -291,13 +291,22 @@ def test_failsafes_actuator_stream_then_offboard_loss(gcs):
     def sp_and_motors():
         sp()
         gcs.mav.hil_actuator_controls_send(0, [0.4] * 4 + [0.0] * 12, 0, 0)
-    gcs.pump(0.25, sp_and_motors, period=0.01)
-    sunk = -gcs.recv("LOCAL_POSITION_NED", 3.0).z
+    # (pumped until it has sunk: a loaded machine slows the free-running SITL's wall pacing)
+    end = time.monotonic() + 5.0
+    sunk = z0
+    while sunk >= z0 - 0.1 and time.monotonic() < end:
+        gcs.pump(0.05, sp_and_motors, period=0.01)
+        sunk = -gcs.recv("LOCAL_POSITION_NED", 3.0).z
     assert sunk < z0 - 0.1 and "Actuator override active" in gcs.texts
     # Stream stops: the onboard controller takes over and holds the (still fresh) setpoint.
-    gcs.pump(1.0, sp)
+    gcs.pump(0.3, sp)
     assert "Actuator stream lost: onboard controller holds" in gcs.texts
-    assert -gcs.recv("LOCAL_POSITION_NED", 3.0).z == pytest.approx(-p0.z + 2.0, abs=0.1)
+    back = None
+    end = time.monotonic() + 5.0
+    while back is None and time.monotonic() < end:
+        gcs.pump(0.05, sp)
+        back = gcs.recv("LOCAL_POSITION_NED", 0.5, lambda m: abs(-m.z - (-p0.z + 2.0)) < 0.1)
+    assert back is not None
     # Setpoints stop: hold (AUTO.LOITER) for COM_FAIL_ACT_T, then land and disarm.
     hold = gcs.recv("HEARTBEAT", 3.0, lambda m: mavutil.mode_string_v10(m) == "LOITER")
     assert hold is not None and hold.system_status == mavlink.MAV_STATE_CRITICAL
