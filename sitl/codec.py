@@ -317,7 +317,8 @@ def highres_imu_args(time_us: int, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss
 
     Body FLU -> FRD is (x, -y, -z) (``frames.flu2frd``), written out per
     component. ``time_usec`` is vehicle time; accelerometer = specific force
-    (m/s^2), gyro rad/s, magnetometer gauss. Barometer fields follow the ISA
+    (m/s^2; g R^T e3 with ``sim.vector_sensors: paper``, ``sitl.sensors``),
+    gyro rad/s, magnetometer gauss. Barometer fields follow the ISA
     from the altitude AMSL (hPa, m, degC).
     """
     ax, ay, az = accel_flu_m_s2
