@@ -108,6 +108,31 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "sim.noise.gyro_bias_rad_s": ("rad/s", "", "Constant gyro bias, body FLU."),
     "sim.noise.accel_bias_m_s2": ("m/s^2", "", "Constant accelerometer bias, body FLU."),
     "sim.noise.range_std_m": ("m", ">= 0", "Rangefinder white noise."),
+    "sim.noise.gyro_noise_density_rad_s_rthz": ("rad/s/sqrt(Hz)", ">= 0", "Gyro white-noise density; per-sample "
+                                                "std = density * sqrt(sensor rate). Overrides the profile's."),
+    "sim.noise.accel_noise_density_m_s2_rthz": ("m/s^2/sqrt(Hz)", ">= 0", "Accelerometer white-noise density."),
+    "sim.noise.gyro_bias_turn_on_std_rad_s": ("rad/s", ">= 0", "Std of the seeded turn-on gyro bias, per axis."),
+    "sim.noise.accel_bias_turn_on_std_m_s2": ("m/s^2", ">= 0", "Std of the seeded turn-on accelerometer bias "
+                                              "(after calibration), per axis."),
+    "sim.noise.gyro_bias_walk_rad_s_rts": ("rad/s/sqrt(s)", ">= 0", "Gyro bias random walk (drift)."),
+    "sim.noise.accel_bias_walk_m_s2_rts": ("m/s^2/sqrt(s)", ">= 0", "Accelerometer bias random walk (drift)."),
+    "sim.noise.mag_noise_std_gauss": ("gauss", ">= 0", "Magnetometer white noise per axis (replaces the paper's "
+                                      "direction noise when given)."),
+    "sim.noise.mag_hard_iron_gauss": ("gauss", "", "Constant magnetic disturbance of the airframe, body FLU."),
+    "sim.noise.mag_thrust_gauss_per_n": ("gauss/N", "", "Magnetic disturbance proportional to the total rotor "
+                                         "thrust (motor currents), body FLU."),
+    "sim.noise.position_z_std_m": ("m", ">= 0", "Vertical position noise (default: position_std_m)."),
+    "sim.noise.gnss_rate_hz": ("Hz", "> 0", "Rate of the position/velocity fixes (default: every sensor frame)."),
+    "sim.noise.gnss_latency_s": ("s", "[0, 1)", "Delay between a fix's measurement and its delivery; "
+                                 "LOCAL_POSITION_NED carries the measurement time."),
+    "sim.vector_sensors": ("", "physical | paper", "physical: the accelerometer measures the specific force; "
+                           "paper: two unit vectors of constant inertial directions (g R^T e3 in the accelerometer "
+                           "fields, |m| R^T m_hat in the magnetometer's), the paper's Section 3.4 model."),
+    "sim.sensor_profile": ("", "null | icm42688p-bmm150-zedf9p", "A named realistic sensor set (IMU TDK "
+                           "ICM-42688-P, magnetometer Bosch BMM150, GNSS u-blox ZED-F9P class RTK); `noise` keys "
+                           "override its values."),
+    "sim.onboard_state": ("", "estimate | truth", "What the SITL's own cascaded controller flies on: its onboard "
+                          "estimator's output from the noisy sensors, or the true state (labelled so)."),
     "sim.seed": ("", "integer >= 0 (not checked by the loader)", "Seed of the SITL's noise and wind "
                  "(`--seed` overrides it)."),
     "sim.rangefinders": ("", "", "Body-fixed rangefinders (one DISTANCE_SENSOR id each); null: forward, "
