@@ -22,7 +22,8 @@ the centre to the solid minus ``r`` (negative: penetration).
 
 Signed distances are exact for the cylinder and the box (inside: minus the
 distance to the nearest face), exact for the union of cells outside it
-(inside a cell: that cell's signed distance), and for the terrain the
+(inside it, some value <= 0: the least of the cells' own signed distances,
+not the depth below the union's surface), and for the terrain the
 distance to the tangent plane of the height field under the point,
 ``(z - h(x, y)) / sqrt(1 + |grad h|^2)``: exact over a planar patch, a
 first-order approximation over a curved one.
@@ -187,8 +188,8 @@ class ExtrudedCells:
         return math.hypot(horiz, above) if above > 0.0 else horiz
 
     def signed_distance_m(self, px: float, py: float, pz: float, max_m: float = math.inf) -> float:
-        """Distance (m) from the point to the nearest cell box; inside a box,
-        minus the distance to that box's nearest face. ``inf`` without cells.
+        """Distance (m) from the point to the nearest cell box; inside the
+        cells, the least of the cells' signed distances (<= 0). ``inf`` without cells.
 
         Exact when the result is at most ``max_m``; otherwise some value
         above ``max_m`` (the search stops at that radius).

@@ -115,13 +115,10 @@ class CrashEvent:
         """The STATUSTEXT: ``CRASH: cylinder #1 at E10.00 N3.75 U1.20, 1.02 m/s``
         (vehicle centre, ENU metres on the map; speed at contact), shortened
         (fewer words, then fewer decimals) to fit 50 characters."""
-        x, y, z = self.pos_enu_m
-        v = self.speed_m_s
         w = self.what
-        for fmt in ("CRASH: {w} at E{x:.2f} N{y:.2f} U{z:.2f}, {v:.2f} m/s",
-                    "CRASH: {w} E{x:.2f} N{y:.2f} U{z:.2f} {v:.2f}m/s",
-                    "CRASH {w} E{x:.1f} N{y:.1f} U{z:.1f} {v:.1f}m/s",
-                    "CRASH {w} E{x:.0f} N{y:.0f} U{z:.0f} {v:.0f}m/s"):
+        for fmt, nd in (("CRASH: {w} at E{x} N{y} U{z}, {v} m/s", 2), ("CRASH: {w} E{x} N{y} U{z} {v}m/s", 2),
+                        ("CRASH {w} E{x} N{y} U{z} {v}m/s", 1), ("CRASH {w} E{x} N{y} U{z} {v}m/s", 0)):
+            x, y, z, v = (f"{round(c, nd) + 0.0:.{nd}f}" for c in (*self.pos_enu_m, self.speed_m_s))  # no "-0.00"
             t = fmt.format(w=w, x=x, y=y, z=z, v=v)
             if len(t) <= STATUSTEXT_MAX_CHARS:
                 return t

@@ -588,6 +588,8 @@ class FlightStack:
         s = self._state
         if s is None or s.landed or not self.armed:
             return mavlink.MAV_LANDED_STATE_ON_GROUND
+        if self.crash_event is not None:
+            return mavlink.MAV_LANDED_STATE_IN_AIR   # falling
         if self.mode is FlightMode.TAKEOFF:
             return mavlink.MAV_LANDED_STATE_TAKEOFF
         if self.mode is FlightMode.LAND:
