@@ -113,7 +113,9 @@ class Terrain:
         """Distance along the unit ray to the ground (inf if none within max_m)."""
         hz = oz - self.height(ox, oy)
         if hz <= 0.0:
-            return 0.0
+            if hz < 0.0 or dz <= 0.0:
+                return 0.0               # under the ground, or on it looking into it
+            hz = _HIT_EPS_M * 2.0        # on the ground looking up: trace from just above it
         denom = self.max_slope * math.hypot(dx, dy) - dz
         if denom <= 0.0:
             return _INF
