@@ -355,3 +355,22 @@ def test_collision_keys_in_a_mission_file(tmp_path):
                  "sim: {collision: {vehicle_radius_m: -1}}\n")
     with pytest.raises(MissionError, match="vehicle_radius_m"):
         load_mission(p)
+
+
+@pytest.mark.parametrize("kind, index, pos, vel", [
+    ("cylinder", 0, (10.0, 3.75, 1.2), (0.6, 0.8, 0.2)),
+    ("box", 11, (-1234.567, 9876.54, 123.4), (0.0, 0.0, -12.0)),
+    ("cylinder", 99, (-12345.678, -12345.678, 1234.5), (30.0, 0.0, 0.0)),
+    ("row", None, (3.0, 1.558, 1.5), (0.0, 1.0, 0.0)),
+    ("terrain", None, (0.5, -2e-17, 0.0), (0.0, 0.0, -6.26)),
+])
+def test_the_companion_reads_the_crash_text_back(kind, index, pos, vel):
+    from companion.link.crash_text import parse_crash
+
+    e = CrashEvent(5, kind, index, pos, vel)
+    got = parse_crash(e.text)
+    assert got.kind == kind and got.obstacle_index == index and got.what == e.what
+    tol = 0.5 if "E-12346" in e.text else 0.05 if "E-1234.6" in e.text else 0.005
+    np.testing.assert_allclose(got.pos_enu_m, pos, atol=tol)
+    assert got.speed_m_s == pytest.approx(e.speed_m_s, abs=tol)
+    assert parse_crash("Disarmed (crashed)") is None and parse_crash("Land denied: crashed") is None
