@@ -5,6 +5,7 @@ SITL reports."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 
 from companion.cli import main
 from companion.commands.demo import missions_dir
+from companion.commands.fly import EXIT_FAILED
 from companion.geometry import scene_from_maps
 from companion.link.tlog import read_tlog
 from companion.maps import load_dem, load_ogm
@@ -95,7 +97,10 @@ def test_demo_without_a_replanner_ends_in_the_crash_the_sitl_reports(tmp_path, c
     mission.write_text(text)
     out = tmp_path / "out"
     rc = main(["demo", "--mission", str(mission), "--cut", "8", "--out", str(out), "--no-plots", "--quiet"])
-    assert rc == 1
+    assert rc == EXIT_FAILED
+    rep = json.loads((out / "report.json").read_text())
+    assert not rep["completed"] and rep["crashed"] and rep["violation"]["kind"] == "crash"
+    assert rep["crash"]["text"].startswith("CRASH: box #1")
     recs = [r.msg for r in read_tlog(out / "flight.tlog")
             if r.msg.get_srcSystem() == 1 and r.msg.get_srcComponent() == 1]
     texts = [(m.severity, m.text) for m in recs if m.get_type() == "STATUSTEXT"]
@@ -104,7 +109,12 @@ def test_demo_without_a_replanner_ends_in_the_crash_the_sitl_reports(tmp_path, c
     # flying west, the crate's east face is at x = 19.4, its top 0.3 m below the
     # flight: the sphere touches the top edge sqrt(r^2 - 0.3^2) = 0.325 m before it
     assert crash[0].startswith("CRASH: box #1 at E19.72 N8.75 U1.50"), crash
-    hb = [m for m in recs if m.get_type() == "HEARTBEAT"]
-    assert hb[-1].system_status == 6 and not hb[-1].base_mode & 128         # EMERGENCY, disarmed
-    assert "Disarmed (crashed)" in [t for _, t in texts]
-    assert "land" in capsys.readouterr().err                                 # the runner's landing was refused
+    # HEARTBEAT: EMERGENCY from the crash on, never before
+    k = next(i for i, m in enumerate(recs) if m.get_type() == "STATUSTEXT" and m.text.startswith("CRASH"))
+    status = [(i, m.system_status) for i, m in enumerate(recs) if m.get_type() == "HEARTBEAT"]
+    assert all(st != 6 for i, st in status if i < k)
+    assert [st for i, st in status if i > k] and all(st == 6 for i, st in status if i > k)
+    assert "CRASH: box #1" in capsys.readouterr().err
+    # the report's crash time is the frame that carried the text (HIGHRES_IMU closes a frame)
+    frame_end = next(m.time_usec for m in recs[k:] if m.get_type() == "HIGHRES_IMU")
+    assert rep["crash"]["t_s"] == pytest.approx(frame_end * 1e-6, abs=0.0041)
