@@ -170,6 +170,14 @@ class ExtrudedCells:
         ex, ey = px - self.x0, py - self.y0
         return self.c * ex + self.s * ey, -self.s * ex + self.c * ey
 
+    def top_at_m(self, px: float, py: float) -> float | None:
+        """Top (m, ENU z) of the occupied cell under (px, py); None if that cell is not occupied."""
+        u, v = self._to_grid_m(px, py)
+        i, j = math.floor(v / self.res), math.floor(u / self.res)
+        if 0 <= i < self.nr and 0 <= j < self.nc and self.occ[i, j]:
+            return float(self.base[i, j]) + self.canopy_height_m
+        return None
+
     def lower_bound_m(self, px: float, py: float, pz: float) -> float:
         """A lower bound (m) of the distance from the point to the cells; cheap."""
         if not self.any:

@@ -520,6 +520,7 @@ def distance_sensor_args(time_boot_ms: int, reading) -> tuple:
         dist_cm, quality = max_cm + 1, 1
     else:
         dist_cm, quality = int(round(d * 100.0)), 100
+    # (getattr: readings of other makers, e.g. tests, may lack the mounting fields)
     std_cm = 100.0 * float(getattr(reading, "noise_std_m", 0.0))
     cov = min(int(round(std_cm * std_cm)), 254)
     return (int(time_boot_ms), min_cm, max_cm, min(max(dist_cm, 0), 65535),

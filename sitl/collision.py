@@ -253,14 +253,9 @@ class CollisionMonitor:
                 if (isinstance(ob, Box) and _inside_box_xy(ob, x, y)) or (
                         isinstance(ob, Cylinder) and math.hypot(x - ob.x_m, y - ob.y_m) <= ob.radius_m):
                     best = ob.top_z_m
-        rows = scene.rows
-        if rows is not None and rows.any:
-            u, v = rows._to_grid_m(x, y)
-            i, j = math.floor(v / rows.res), math.floor(u / rows.res)
-            if 0 <= i < rows.nr and 0 <= j < rows.nc and rows.occ[i, j]:
-                top = float(rows.base[i, j]) + rows.canopy_height_m
-                if best < top <= z + CONTACT_EPS_M:
-                    best = top
+        top = scene.rows.top_at_m(x, y) if scene.rows is not None else None
+        if top is not None and best < top <= z + CONTACT_EPS_M:
+            best = top
         return min(best, z)
 
 

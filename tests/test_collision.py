@@ -374,3 +374,12 @@ def test_the_companion_reads_the_crash_text_back(kind, index, pos, vel):
     np.testing.assert_allclose(got.pos_enu_m, pos, atol=tol)
     assert got.speed_m_s == pytest.approx(e.speed_m_s, abs=tol)
     assert parse_crash("Disarmed (crashed)") is None and parse_crash("Land denied: crashed") is None
+
+
+def test_rest_height_on_a_row():
+    occ = np.zeros((40, 60), dtype=bool)
+    occ[20:24, 10:50] = True
+    grid = OccupancyGrid(occ, ~occ, 0.1, (0.0, 0.0), 0.0)
+    sim = _sim(radius=0.3, grid=grid)
+    assert sim.collisions.rest_height_m(3.0, 2.2, 3.0) == pytest.approx(2.0)   # on the canopy (2 m rows)
+    assert sim.collisions.rest_height_m(3.0, 1.5, 3.0) == 0.0

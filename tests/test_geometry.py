@@ -218,3 +218,9 @@ def test_empty_scene():
     cl = scene.clearance((1.0, 2.0, 3.0), 0.5)
     assert cl.obstacle_m == math.inf and cl.obstacle_index is None and cl.rows_m == math.inf
     assert cl.terrain_m == pytest.approx(2.5)
+
+
+def test_top_of_the_cell_under_a_point():
+    cells, _ = _row_cells()
+    assert cells.top_at_m(2.0, 1.1) == pytest.approx(2.3)
+    assert cells.top_at_m(2.0, 1.5) is None and cells.top_at_m(-1.0, 1.1) is None
