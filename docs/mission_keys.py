@@ -138,15 +138,40 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "sim.rangefinders": ("", "", "Body-fixed rangefinders (one DISTANCE_SENSOR id each); null: forward, "
                          "left, right and down; []: none."),
     "sim.rangefinders[].id": ("", "[0, 255]", "DISTANCE_SENSOR id, unique."),
-    "sim.rangefinders[].orientation": ("", "0-7, 24 or 25", "MAV_SENSOR_ORIENTATION: 0 forward, 2 right, "
-                                       "4 back, 6 left, 24 up, 25 down."),
+    "sim.rangefinders[].orientation": ("", "0-7, 24, 25 or 100", "MAV_SENSOR_ORIENTATION: 0 forward, 2 right, "
+                                       "4 back, 6 left (rotations about FRD axes, as PX4), odd values the "
+                                       "diagonals, 24 up, 25 down; 100 (CUSTOM): the rotation is "
+                                       "`rotation_flu_deg` or `quaternion_flu_wxyz`."),
     "sim.rangefinders[].min_m": ("m", "[0, max_m)", "Shortest range."),
-    "sim.rangefinders[].max_m": ("m", "> min_m", "Longest range; beyond it: no return."),
+    "sim.rangefinders[].max_m": ("m", "> min_m, at most 655", "Longest range; beyond it: no return."),
+    "sim.rangefinders[].position_flu_m": ("m", "each in [-10, 10]", "Mounting point from the centre of mass, "
+                                          "body FLU (x forward, y left, z up); the rays start there."),
+    "sim.rangefinders[].rotation_flu_deg": ("deg", "with orientation 100 only",
+                                            "Mounting rotation [roll, pitch, yaw]: Z-Y-X Euler angles about the "
+                                            "body FLU axes taking the sensor frame (beam along its x, horizontal "
+                                            "field of view across its y) to the body: yaw 90 looks left, pitch "
+                                            "-30 forward and up, pitch 30 forward and down. Orientation 100 needs "
+                                            "exactly one of this and `quaternion_flu_wxyz`."),
+    "sim.rangefinders[].quaternion_flu_wxyz": ("", "not zero, with orientation 100 only",
+                                               "The same rotation as a quaternion [w, x, y, z], sensor frame -> "
+                                               "body FLU (normalised when used); DISTANCE_SENSOR carries it in "
+                                               "FRD (docs/mavlink.md)."),
     "sim.rangefinders[].hfov_deg": ("deg", "[0, 180)", "Horizontal field of view (full angle)."),
     "sim.rangefinders[].vfov_deg": ("deg", "[0, 180)", "Vertical field of view (full angle)."),
     "sim.rangefinders[].rate_hz": ("Hz", "> 0", "Measurement rate (vehicle time)."),
-    "sim.canopy_height_m": ("m", "> 0", "Occupied map cells are extruded to this height for the "
-                            "rangefinders."),
+    "sim.canopy_height_m": ("m", "> 0", "Occupied map cells are extruded to this height above the terrain "
+                            "for the rangefinders and the crash check."),
+    "sim.collision.enabled": ("", "", "false: nothing is a crash (the SITL before issue 8)."),
+    "sim.collision.vehicle_radius_m": ("m", "(0, 10] or null", "Radius of the vehicle sphere about its centre "
+                                       "of mass: touching an obstacle or a vine row with it is a crash; null: "
+                                       "`vehicle.arm_m` + 0.127 (a 10-inch propeller), 0.442 m by default."),
+    "sim.collision.touchdown_max_down_m_s": ("m/s", ">= 0", "A touchdown (the centre of mass, where the landing "
+                                             "gear is, reaching the terrain) faster than this downward is a crash."),
+    "sim.collision.touchdown_max_horizontal_m_s": ("m/s", ">= 0", "A touchdown faster than this sideways is "
+                                                   "a crash."),
+    "sim.collision.touchdown_unplanned_max_m_s": ("m/s", ">= 0", "A touchdown while not landing (armed, not "
+                                                  "AUTO.LAND, the active setpoint more than 0.2 m above the "
+                                                  "terrain or climbing) faster than this is a crash."),
     "sim.wind.mean_enu_m_s": ("m/s", "", "Mean wind, ENU."),
     "sim.wind.gust_std_m_s": ("m/s", ">= 0", "Stationary standard deviation of the gusts, per axis."),
     "sim.wind.gust_time_constant_s": ("s", "> 0", "Correlation time of the gusts."),

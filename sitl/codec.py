@@ -22,11 +22,19 @@ Wire conventions chosen here (documented once)
   ``base_mode`` always has ``MAV_MODE_FLAG_CUSTOM_MODE_ENABLED``.
 - DISTANCE_SENSOR: centimetres; a reading with no return (nothing within
   ``max_m``) is sent as ``current_distance = max_distance + 1`` cm with
-  ``signal_quality = 1`` (MAVLink: 1 = invalid signal). This is what PX4's
-  rangefinder drivers publish for "out of range": a value outside
-  ``[min_distance, max_distance]``, which every PX4 consumer (EKF2, obstacle
-  avoidance) treats as "no valid reading". Valid readings have
-  ``signal_quality = 100``.
+  ``signal_quality = 1`` (MAVLink: 1 = invalid signal). DISTANCE_SENSOR's own
+  definition does not say how to send "no return"; ``max_distance + 1`` is
+  OBSTACLE_DISTANCE's definition of "no obstacle", and a value outside
+  ``[min_distance, max_distance]`` is what every PX4 consumer (EKF2,
+  collision prevention) treats as "no valid reading". Valid readings have
+  ``signal_quality = 100``. ``covariance`` is the range noise variance in
+  cm^2 (rounded, at most 254; 255 would mean unknown). ``quaternion`` is
+  the sensor's mounting rotation, sensor frame -> body FRD, [w, x, y, z]
+  with w >= 0 (MAVLink: "zero-rotation is along the vehicle body x-axis";
+  required for MAV_SENSOR_ROTATION_CUSTOM). It is sent for every sensor, the
+  enum's own rotation for the others (MAVLink asks for it only with CUSTOM
+  and says "0 if invalid"; PX4 sends zeros there): a reader can always use
+  it, or use ``orientation`` unless it is 100.
 - NAV_TAKEOFF ``param7`` is an altitude AMSL (m), as PX4; NaN means "the
   default takeoff height" (MIS_TAKEOFF_ALT above home).
 - SET_POSITION_TARGET_LOCAL_NED: ``type_mask`` bits as MAVLink's
@@ -513,13 +521,38 @@ def distance_sensor_args(time_boot_ms: int, reading) -> tuple:
         dist_cm, quality = max_cm + 1, 1
     else:
         dist_cm, quality = int(round(d * 100.0)), 100
+    # (getattr: readings of other makers, e.g. tests, may lack the mounting fields)
+    std_cm = 100.0 * float(getattr(reading, "noise_std_m", 0.0))
+    cov = min(int(round(std_cm * std_cm)), 254)
     return (int(time_boot_ms), min_cm, max_cm, min(max(dist_cm, 0), 65535),
             mavlink.MAV_DISTANCE_SENSOR_LASER, int(reading.sensor_id) & 0xFF,
-            int(reading.orientation), 255, float(reading.hfov_rad), float(reading.vfov_rad),
-            _Q_ZERO, quality)
+            int(reading.orientation), cov, float(reading.hfov_rad), float(reading.vfov_rad),
+            mount_quaternion_frd(getattr(reading, "mount_rotation_flu", _I9)), quality)
 
 
-_Q_ZERO = (0.0, 0.0, 0.0, 0.0)
+_I9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+_MOUNT_Q: dict[tuple, tuple] = {}
+
+
+def mount_quaternion_frd(mount_rotation_flu) -> tuple:
+    """Quaternion [w, x, y, z] (w >= 0) of a mounting rotation sensor -> body,
+    given sensor -> body FLU (row-major 9-tuple), in FRD on both sides
+    (``R_frd = T R_flu T``, T = diag(1, -1, -1)). Cached: a vehicle has a few
+    sensors and this runs for every reading."""
+    key = tuple(mount_rotation_flu)
+    q = _MOUNT_Q.get(key)
+    if q is None:
+        T = frames.T_FLU_FRD
+        R_frd = T @ np.array(key, dtype=float).reshape(3, 3) @ T
+        q = _MOUNT_Q[key] = tuple(float(c) for c in frames.rotmat2quat_wxyz(R_frd))
+    return q
+
+
+def mount_rotation_flu_of(quaternion_frd) -> np.ndarray:
+    """Inverse of ``mount_quaternion_frd``: [w, x, y, z] sensor -> body FRD ->
+    (3, 3) rotation sensor -> body FLU."""
+    T = frames.T_FLU_FRD
+    return T @ frames.quat_wxyz2rotmat(quaternion_frd) @ T
 
 
 def distance_sensor(mav, time_boot_ms: int, reading):

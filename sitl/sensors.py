@@ -44,9 +44,13 @@ both modes
 - position / velocity: ``sitl.gnss.GnssReceiver`` (white noise, rate and
   latency; exact and every frame by default, the paper's mocap-like case);
 - rangefinders: the minimum distance over a fan of rays (centre and the four
-  edge midpoints of the field of view) cast into ``World``, plus white noise
+  edge midpoints of the field of view) cast into ``World`` from the sensor's
+  mounting position (``position_flu_m``, body FLU), plus white noise
   ``range_std_m``; ``None`` when nothing is within ``max_m``, clamped up to
-  ``min_m`` below it.
+  ``min_m`` below it. The mounting rotation (sensor frame: beam along x,
+  horizontal field of view across y, vertical across z -> body FLU) comes
+  from the MAV_SENSOR_ORIENTATION or, for CUSTOM (100), from the mission's
+  ``rotation_flu_deg`` / ``quaternion_flu_wxyz``.
 
 Every random draw comes from the ``numpy.random.Generator`` passed in.
 """
@@ -58,53 +62,75 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.mission.sim import RangefinderConfig, SimConfig
+from companion import frames
+from companion.mission.sim import SENSOR_ROTATION_CUSTOM, RangefinderConfig, SimConfig
 
 from .gnss import GnssReceiver
 from .profiles import SensorModel, resolve_sensor_model
 from .world import World
 
-# MAV_SENSOR_ORIENTATION -> unit direction in body FLU. The MAVLink rotations
-# are about FRD axes: YAW_k45 turns forward toward the right (-y in FLU);
-# PITCH_90 points up, PITCH_270 down.
+# MAV_SENSOR_ORIENTATION -> Z-Y-X Euler angles (roll, pitch, yaw; deg) of the
+# mounting about the body **FLU** axes. The enum's rotations are about FRD
+# axes (YAW_90 turns forward toward the right, PITCH_270 points down, as PX4
+# reads them); about FLU axes pitch and yaw change sign.
 _DOWN, _UP = 25, 24
-
-
-def orientation_direction_flu(orientation: int) -> tuple[float, float, float]:
-    """Body FLU unit vector of a MAV_SENSOR_ORIENTATION (0..7, 24, 25)."""
-    if orientation == _DOWN:
-        return (0.0, 0.0, -1.0)
-    if orientation == _UP:
-        return (0.0, 0.0, 1.0)
-    if 0 <= orientation <= 7:
-        a = math.radians(45.0 * orientation)
-        return (_clean(math.cos(a)), _clean(-math.sin(a)), 0.0)
-    raise ValueError(f"unsupported rangefinder orientation {orientation}")
+_ENUM_EULER_FLU_DEG = {**{k: (0.0, 0.0, -45.0 * k) for k in range(8)},
+                       _UP: (0.0, -90.0, 0.0), _DOWN: (0.0, 90.0, 0.0)}
 
 
 def _clean(x: float) -> float:
     return 0.0 if abs(x) < 1e-15 else x
 
 
-def fan_directions_flu(cfg: RangefinderConfig) -> tuple[tuple[float, float, float], ...]:
-    """Body FLU unit rays of a rangefinder: the axis, then the four edge
-    midpoints of its field of view (horizontal = about body z for a
-    horizontal sensor, about body y... i.e. along body y for up/down ones)."""
-    d = orientation_direction_flu(cfg.orientation)
-    if cfg.orientation in (_DOWN, _UP):
-        hax, vax = (0.0, 1.0, 0.0), (1.0, 0.0, 0.0)     # across-track, along-track
+def _rot9(R) -> tuple:
+    return tuple(_clean(float(x)) for x in np.asarray(R, dtype=float).reshape(9))
+
+
+def mount_rotation_flu(cfg: RangefinderConfig) -> tuple:
+    """Rotation sensor frame -> body FLU (row-major 9-tuple) of a rangefinder.
+
+    The sensor frame has the beam along x, the horizontal field of view
+    across y and the vertical one across z. MAV_SENSOR_ORIENTATION values use
+    the enum's angles; CUSTOM (100) the mission's ``rotation_flu_deg``
+    (Z-Y-X Euler, FLU) or ``quaternion_flu_wxyz`` (normalised).
+    """
+    if cfg.orientation == SENSOR_ROTATION_CUSTOM:
+        if cfg.quaternion_flu_wxyz is not None:
+            return _rot9(frames.quat_wxyz2rotmat(cfg.quaternion_flu_wxyz))
+        roll, pitch, yaw = (math.radians(a) for a in cfg.rotation_flu_deg)
+    elif cfg.orientation in _ENUM_EULER_FLU_DEG:
+        roll, pitch, yaw = (math.radians(a) for a in _ENUM_EULER_FLU_DEG[cfg.orientation])
     else:
-        hax = (-d[1], d[0], 0.0)                       # horizontal, perpendicular to d
-        vax = (0.0, 0.0, 1.0)
-    rays = [d]
+        raise ValueError(f"unsupported rangefinder orientation {cfg.orientation}")
+    return _rot9(frames.euler_zyx2rotmat(roll, pitch, yaw))
+
+
+def orientation_direction_flu(orientation: int) -> tuple[float, float, float]:
+    """Body FLU unit vector of a MAV_SENSOR_ORIENTATION (0..7, 24, 25)."""
+    if orientation not in _ENUM_EULER_FLU_DEG:
+        raise ValueError(f"unsupported rangefinder orientation {orientation}")
+    R = mount_rotation_flu(RangefinderConfig(id=0, orientation=orientation))
+    return (R[0], R[3], R[6])
+
+
+def fan_directions_flu(cfg: RangefinderConfig) -> tuple[tuple[float, float, float], ...]:
+    """Body FLU unit rays of a rangefinder: the axis, then the edge midpoints
+    of its field of view (horizontal: across the sensor's y, vertical:
+    across its z; a zero field of view adds no rays)."""
+    R = mount_rotation_flu(cfg)
     th, tv = math.tan(0.5 * math.radians(cfg.hfov_deg)), math.tan(0.5 * math.radians(cfg.vfov_deg))
-    for ax, t in ((hax, th), (vax, tv)):
-        if t <= 0.0:
-            continue
-        for sgn in (1.0, -1.0):
-            r = tuple(d[i] + sgn * t * ax[i] for i in range(3))
-            n = math.sqrt(sum(x * x for x in r))
-            rays.append(tuple(x / n for x in r))
+    local = [(1.0, 0.0, 0.0)]
+    for sgn in (1.0, -1.0):
+        if th > 0.0:
+            local.append((1.0, sgn * th, 0.0))
+    for sgn in (1.0, -1.0):
+        if tv > 0.0:
+            local.append((1.0, 0.0, sgn * tv))
+    rays = []
+    for a, b, c in local:
+        n = math.sqrt(a * a + b * b + c * c)
+        a, b, c = a / n, b / n, c / n
+        rays.append(tuple(_clean(R[3 * i] * a + R[3 * i + 1] * b + R[3 * i + 2] * c) for i in range(3)))
     return tuple(rays)
 
 
@@ -123,6 +149,10 @@ class RangeReading:
         Range limits (m).
     hfov_rad, vfov_rad : float
         Full fields of view (rad).
+    mount_rotation_flu : tuple (9,)
+        Rotation sensor frame -> body FLU, row-major (``mount_rotation_flu``).
+    noise_std_m : float
+        Standard deviation of the range noise (m).
     """
 
     sensor_id: int
@@ -132,6 +162,8 @@ class RangeReading:
     max_m: float
     hfov_rad: float
     vfov_rad: float
+    mount_rotation_flu: tuple = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    noise_std_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -148,16 +180,25 @@ class Rangefinder:
 
     def __init__(self, cfg: RangefinderConfig, first_due_us: int) -> None:
         self.cfg = cfg
+        self.mount_rotation_flu = mount_rotation_flu(cfg)
         self.rays = fan_directions_flu(cfg)
+        self.position_flu_m = tuple(float(x) for x in cfg.position_flu_m)
+        self._offset = any(self.position_flu_m)
         self.period_us = max(1, int(round(1e6 / cfg.rate_hz)))
         self.next_due_us = int(first_due_us)
         self.hfov_rad = math.radians(cfg.hfov_deg)
         self.vfov_rad = math.radians(cfg.vfov_deg)
 
     def true_distance(self, world: World, p, R) -> float:
-        """Minimum ray distance (m, inf if none within max) from p (3-tuple) with R (row-major 9-tuple)."""
+        """Minimum ray distance (m, inf if none within max) from the sensor
+        mounted on a body at p (3-tuple, ENU) with R (row-major 9-tuple, body FLU -> ENU)."""
         ox, oy, oz = p
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+        if self._offset:
+            bx, by, bz = self.position_flu_m
+            ox += r00 * bx + r01 * by + r02 * bz
+            oy += r10 * bx + r11 * by + r12 * bz
+            oz += r20 * bx + r21 * by + r22 * bz
         lim = self.cfg.max_m
         best = math.inf
         for bx, by, bz in self.rays:
@@ -323,4 +364,5 @@ class SensorSuite:
             dist = None
         else:
             dist = max(d, cfg.min_m)
-        return RangeReading(cfg.id, cfg.orientation, dist, cfg.min_m, cfg.max_m, rf.hfov_rad, rf.vfov_rad)
+        return RangeReading(cfg.id, cfg.orientation, dist, cfg.min_m, cfg.max_m, rf.hfov_rad, rf.vfov_rad,
+                            rf.mount_rotation_flu, float(self.range_std))

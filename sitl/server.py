@@ -427,6 +427,7 @@ class SitlServer:
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
         self.stack = FlightStack(self.params, self.home_enu_m)
+        self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
         self.missions = MissionProtocol()
         self._mission_peer = None
         self._apply_params()
@@ -610,11 +611,24 @@ class SitlServer:
             frame = sim.step_onboard(out.setpoint)
         self._frame = frame
         self.frames += 1
+        if sim.crash is not None and not self.stack.crashed:
+            self._on_crash(sim.crash)
         if frame.ranges:
             for r in frame.ranges:
                 self._last_ranges[r.sensor_id] = r
         self._flush_events()
         self._send_telemetry(frame)
+
+    def _on_crash(self, event) -> None:
+        """Tell the flight stack (STATUSTEXT, EMERGENCY) and announce the new
+        system status in this frame's HEARTBEAT."""
+        self.stack.crash(self.sim.time_us, event)
+        self._next_due[_HEARTBEAT_ID] = self.sim.time_us
+        self._due_min = self.sim.time_us
+
+    def _landing_intended(self) -> bool:
+        p = self.sim.plant.p
+        return self.stack.landing_intended(self.sim.world.ground_height(p[0], p[1]))
 
     def _nav_state(self, frame) -> NavState:
         # Floats, not arrays: the truth is read from the plant (it only moves

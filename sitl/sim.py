@@ -24,6 +24,9 @@ import numpy as np
 from companion.mission.schema import Mission
 
 from .estimator import Estimate, EstimatorConfig, OnboardEstimator
+from companion.mission.sim import vehicle_radius_m
+
+from .collision import CollisionMonitor, CrashEvent
 from .onboard import CascadedController, OnboardGains, Setpoint  # noqa: F401  (re-export)
 from .plant import Plant, PlantParams
 from .sensors import RangeReading, SensorSuite  # noqa: F401  (re-export)
@@ -198,6 +201,15 @@ class Simulation:
         Gains of ``onboard``.
 
     The vehicle starts landed with the motors stopped.
+
+    Crashes (issue 8, ``sitl.collision``; off with ``sim.collision.enabled:
+    false``): after every frame the vehicle sphere's path over the frame is
+    checked against the obstacles and rows, and a touchdown against the
+    touchdown limits (``landing_intent``, a callable set by the flight-stack
+    shell, says whether the vehicle was landing; without one every touchdown
+    counts as a landing and only the speed limits apply). A crash stops the
+    rotors for good (``Plant.crash``) and is kept in ``crash`` (a
+    ``CrashEvent``) until ``reset``.
     """
 
     def __init__(self, mission: Mission, rng: np.random.Generator, *, physics_hz: int = 1000,
@@ -233,6 +245,12 @@ class Simulation:
         self.dt_physics_s = 1.0 / physics_hz
         self.dt_frame_s = self.sensor_period_us * 1e-6
         self.time_us = 0
+        col = sim.collision
+        self.vehicle_radius_m = vehicle_radius_m(sim, mission.vehicle.arm_m)
+        self.collisions = (CollisionMonitor(self.world.geometry, self.vehicle_radius_m, col)
+                           if col.enabled and self.world.geometry is not None else None)
+        self.landing_intent = None
+        self.crash: CrashEvent | None = None
         self.reset(start_enu_m, start_yaw_rad)
 
     # ----------------------------------------------------------------------
@@ -252,6 +270,7 @@ class Simulation:
         else:
             self.plant.set_state(start, R=R, landed=False)
         self.onboard.reset()
+        self.crash = None
         self._truth = None
         pl = self.plant
         self.sensors.gnss.reset(pl.p, pl.v)
@@ -284,10 +303,35 @@ class Simulation:
         cmd = (float(motor_cmd_norm[0]), float(motor_cmd_norm[1]),
                float(motor_cmd_norm[2]), float(motor_cmd_norm[3]))
         wind = self.wind.step(self.dt_frame_s)
-        self.plant.advance(cmd, self.dt_physics_s, self.substeps, wind)
+        pl = self.plant
+        p0, landed0, touchdowns0 = pl.p, pl.landed, pl.touchdowns
+        pl.advance(cmd, self.dt_physics_s, self.substeps, wind)
+        if self.collisions is not None and not pl.crashed:
+            self._check_contacts(p0, landed0, touchdowns0)
         self.time_us += self.sensor_period_us
         self._truth = None
         return self._sample()
+
+    def _check_contacts(self, p0, landed0: bool, touchdowns0: int) -> None:
+        """Crash the vehicle if this frame's motion hit something (module notes)."""
+        pl = self.plant
+        mon = self.collisions
+        if not (landed0 and pl.landed):
+            c = mon.sweep(p0, pl.p)
+            if c is not None:
+                f = c.fraction
+                pos = tuple(a + f * (b - a) for a, b in zip(p0, pl.p))
+                self._crashed(c.kind, c.obstacle_index, pos, pl.v, f)
+                return
+        if pl.touchdowns != touchdowns0:
+            landing = True if self.landing_intent is None else bool(self.landing_intent())
+            if mon.touchdown_is_crash(pl.impact_vel_enu_m_s, landing):
+                self._crashed("terrain", None, pl.p, pl.impact_vel_enu_m_s, 1.0)
+
+    def _crashed(self, kind: str, index, pos, vel, fraction: float) -> None:
+        t_us = self.time_us + int(round(fraction * self.sensor_period_us))
+        self.crash = CrashEvent(t_us, kind, index, tuple(float(x) for x in pos), tuple(float(v) for v in vel))
+        self.plant.crash(pos, self.collisions.rest_height_m(*pos))
 
     def step_onboard(self, sp: Setpoint) -> SensorFrame:
         """One frame flown by the onboard controller on the estimate (or, with

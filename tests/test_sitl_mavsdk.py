@@ -78,8 +78,9 @@ def test_mavsdk_offboard_flight(vehicle):
     offboard.start()
     assert wait_until(lambda: tel.flight_mode() == FlightMode.OFFBOARD, 3.0)
 
-    # climb 2 m, then fly 2 m north and 1 m east at that height
-    target = (p0.north_m + 2.0, p0.east_m + 1.0, p0.down_m - 2.0)
+    # climb 2 m, then fly 0.5 m north and 2 m east at that height (along the
+    # corridor: its rows stand 1.05 m either side, the vehicle's radius is 0.442 m)
+    target = (p0.north_m + 0.5, p0.east_m + 2.0, p0.down_m - 2.0)
     offboard.set_position_ned(PositionNedYaw(*target, 90.0))
 
     def there():

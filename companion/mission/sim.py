@@ -140,8 +140,9 @@ class NoiseConfig:
 
 # MAV_SENSOR_ORIENTATION values a body-fixed rangefinder may use (pymavlink
 # common dialect): NONE (forward) 0, YAW_45..YAW_315 1..7, PITCH_90 (up) 24,
-# PITCH_270 (down) 25.
-RANGEFINDER_ORIENTATIONS = (0, 1, 2, 3, 4, 5, 6, 7, 24, 25)
+# PITCH_270 (down) 25, CUSTOM 100 (the mounting rotation is given).
+SENSOR_ROTATION_CUSTOM = 100
+RANGEFINDER_ORIENTATIONS = (0, 1, 2, 3, 4, 5, 6, 7, 24, 25, SENSOR_ROTATION_CUSTOM)
 
 
 @dataclass(frozen=True)
@@ -149,8 +150,22 @@ class RangefinderConfig:
     """A body-fixed rangefinder (one DISTANCE_SENSOR id).
 
     ``orientation`` is a MAV_SENSOR_ORIENTATION: 0 forward, 2 right (yaw 90,
-    FRD convention), 4 back, 6 left, 25 down (pitch 270), 24 up (pitch 90),
-    odd values the diagonals. Fields of view are full angles (deg).
+    FRD convention, as PX4), 4 back, 6 left, 25 down (pitch 270), 24 up
+    (pitch 90), odd values the diagonals; 100 (MAV_SENSOR_ROTATION_CUSTOM):
+    the mounting rotation is given by exactly one of
+
+    - ``rotation_flu_deg``: [roll, pitch, yaw] (deg), Z-Y-X Euler angles about
+      the body **FLU** axes (x forward, y left, z up; right-handed), taking
+      the sensor frame (beam along its x, horizontal field of view across its
+      y, vertical across its z) to the body: yaw +90 looks left, pitch -30
+      looks forward and 30 deg up, pitch +30 forward and 30 deg down;
+    - ``quaternion_flu_wxyz``: the same rotation as a quaternion [w, x, y, z]
+      (sensor frame -> body FLU; normalised when used).
+
+    (On the wire MAVLink gives the CUSTOM quaternion in body FRD; the SITL's
+    codec converts.) ``position_flu_m``: where the sensor sits, body FLU (m)
+    from the centre of mass; rays start there. Fields of view are full
+    angles (deg).
     """
 
     id: int
@@ -160,6 +175,9 @@ class RangefinderConfig:
     hfov_deg: float = 5.0
     vfov_deg: float = 5.0
     rate_hz: float = 25.0
+    position_flu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation_flu_deg: tuple[float, float, float] | None = None
+    quaternion_flu_wxyz: tuple[float, float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if not 0 <= self.id <= 255:
@@ -168,10 +186,22 @@ class RangefinderConfig:
             raise ValueError(f"rangefinder orientation must be one of {RANGEFINDER_ORIENTATIONS}")
         if not 0 <= self.min_m < self.max_m:
             raise ValueError("rangefinder needs 0 <= min_m < max_m")
+        if self.max_m > 655.0:
+            raise ValueError("rangefinder max_m must be <= 655 m (DISTANCE_SENSOR carries uint16 cm)")
         if not (0 <= self.hfov_deg < 180 and 0 <= self.vfov_deg < 180):
             raise ValueError("rangefinder fields of view must be in [0, 180) deg")
         if self.rate_hz <= 0:
             raise ValueError("rangefinder rate_hz must be > 0")
+        if not all(math.isfinite(x) and abs(x) <= 10.0 for x in self.position_flu_m):
+            raise ValueError("rangefinder position_flu_m must be finite, within 10 m of the centre")
+        given = (self.rotation_flu_deg is not None) + (self.quaternion_flu_wxyz is not None)
+        if self.orientation == SENSOR_ROTATION_CUSTOM and given != 1:
+            raise ValueError("rangefinder orientation 100 (custom) needs exactly one of "
+                             "rotation_flu_deg or quaternion_flu_wxyz")
+        if self.orientation != SENSOR_ROTATION_CUSTOM and given:
+            raise ValueError("rangefinder rotation_flu_deg/quaternion_flu_wxyz need orientation 100 (custom)")
+        if self.quaternion_flu_wxyz is not None and not math.hypot(*self.quaternion_flu_wxyz) > 1e-6:
+            raise ValueError("rangefinder quaternion_flu_wxyz must not be zero")
 
 
 def default_rangefinders() -> tuple[RangefinderConfig, ...]:
@@ -206,6 +236,41 @@ class WindConfig:
             raise ValueError("wind.gust_time_constant_s must be > 0")
 
 
+#: Propeller radius (m) assumed for the vehicle sphere when
+#: ``sim.collision.vehicle_radius_m`` is not given: a 10-inch propeller.
+DEFAULT_PROP_RADIUS_M = 0.127
+
+
+@dataclass(frozen=True)
+class CollisionConfig:
+    """What counts as a crash in the SITL (issue 8).
+
+    The vehicle is a sphere of ``vehicle_radius_m`` about its centre of mass
+    (None: ``vehicle.arm_m`` + a 10-inch propeller, 0.315 + 0.127 = 0.442 m
+    for the paper's vehicle). Touching an obstacle or a vine row (the OGM's
+    occupied cells extruded to ``sim.canopy_height_m``) is a crash. A
+    touchdown (the centre of mass reaching the terrain, where the landing gear
+    is) is a crash when faster than ``touchdown_max_down_m_s`` downward or
+    ``touchdown_max_horizontal_m_s`` sideways, or, when the vehicle was not
+    landing (see ``sitl.collision``), faster than ``touchdown_unplanned_max_m_s``.
+    ``enabled: false`` turns all of it off (the SITL then lets the vehicle
+    pass through obstacles, as before issue 8).
+    """
+
+    enabled: bool = True
+    vehicle_radius_m: float | None = None
+    touchdown_max_down_m_s: float = 1.0
+    touchdown_max_horizontal_m_s: float = 0.5
+    touchdown_unplanned_max_m_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        if self.vehicle_radius_m is not None and not 0 < self.vehicle_radius_m <= 10.0:
+            raise ValueError("sim.collision.vehicle_radius_m must be in (0, 10] m")
+        for name in ("touchdown_max_down_m_s", "touchdown_max_horizontal_m_s", "touchdown_unplanned_max_m_s"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"sim.collision.{name} must be >= 0")
+
+
 @dataclass(frozen=True)
 class SimConfig:
     """Simulation-only settings of a mission.
@@ -217,6 +282,7 @@ class SimConfig:
     ``start_enu_m``: where the vehicle starts, landed, (x, y) on the map
     frame (m); z is the terrain there. None: the SITL picks the free OGM
     cell nearest to the centroid of the free space (it never plans).
+    ``collision``: the crash rules (``CollisionConfig``).
     """
 
     obstacles: tuple[ObstacleConfig, ...] = ()
@@ -230,6 +296,7 @@ class SimConfig:
     vector_sensors: Literal["physical", "paper"] = "physical"
     sensor_profile: Literal[SENSOR_PROFILES] | None = None
     onboard_state: Literal["estimate", "truth"] = "estimate"
+    collision: CollisionConfig = field(default_factory=CollisionConfig)
 
     def __post_init__(self) -> None:
         if self.sensor_profile is not None and self.sensor_profile not in SENSOR_PROFILES:
@@ -253,3 +320,10 @@ class SimConfig:
     @property
     def rangefinders_or_default(self) -> tuple[RangefinderConfig, ...]:
         return default_rangefinders() if self.rangefinders is None else self.rangefinders
+
+
+def vehicle_radius_m(sim: SimConfig, arm_m: float) -> float:
+    """Radius (m) of the vehicle sphere: ``sim.collision.vehicle_radius_m``,
+    else the arm length ``arm_m`` (``vehicle.arm_m``) plus ``DEFAULT_PROP_RADIUS_M``."""
+    r = sim.collision.vehicle_radius_m
+    return float(r) if r is not None else float(arm_m) + DEFAULT_PROP_RADIUS_M
