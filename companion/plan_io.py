@@ -103,6 +103,7 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
         "trajectory_weights": to_dict(mission.trajectory),
         "stats": {k: getattr(plan.stats, k) for k in STATS_KEYS},
         "timings_s": {k: getattr(plan.timings_s, k) for k in TIMING_KEYS},
+        "warnings": list(plan.warnings),
     }
 
 

@@ -92,6 +92,9 @@ class Plan:
         Pointing target S_p of eq. (21) (ENU, m).
     stats : PlanStats
     timings_s : PlanTimings
+    warnings : tuple of str
+        Things the user should know that did not stop the plan (main segments
+        that cannot be reached and are not flown, ...), one line each.
     """
 
     grid: OccupancyGrid
@@ -102,6 +105,7 @@ class Plan:
     target_enu_m: np.ndarray
     stats: PlanStats
     timings_s: PlanTimings
+    warnings: tuple[str, ...] = ()
 
 
 def free_centroid_xy(grid: OccupancyGrid) -> np.ndarray:
@@ -246,4 +250,4 @@ def plan_mission(mission: Mission) -> Plan:
     timings = PlanTimings(load=t_loaded - t_start, coverage=t_covered - t_loaded,
                           trajectory=t_done - t_covered, total=t_done - t_start)
     return Plan(grid=grid, dem=dem, coverage=coverage, waypoints=waypoints, trajectory=trajectory,
-                target_enu_m=target, stats=stats, timings_s=timings)
+                target_enu_m=target, stats=stats, timings_s=timings, warnings=tuple(coverage.warnings))

@@ -12,6 +12,7 @@ from __future__ import annotations
 import errno
 import math
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -104,6 +105,8 @@ def run(args) -> int:
         files[args.plot] = render_plan(plan, fmt=plot_fmt, title=f"{mission.name}")
     write_atomically(files)
 
+    for w in plan.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     st, tm = plan.stats, plan.timings_s
     print(f"{mission.name}: {st.n_waypoints} way-points, path {st.path_length_m:.1f} m, "
           f"duration {st.duration_s:.1f} s, coverage {100 * st.coverage_fraction:.1f} %, "

@@ -72,6 +72,13 @@ class FreeSpace:
             cache[f] = Raster(pool(self.eroded[r0:r1, c0:c1], f), f * h, c0 * h, r0 * h)
         return cache[f]
 
+    def block_graph(self):
+        """The exact coarse connectivity of the eroded cells (:class:`blockgraph.BlockGraph`), built once."""
+        if "_block_graph" not in self.__dict__:
+            from .blockgraph import build_block_graph
+            self.__dict__["_block_graph"] = build_block_graph(self.eroded, self.bbox_cells)
+        return self.__dict__["_block_graph"]
+
     @cached_property
     def bbox_cells(self) -> tuple[int, int, int, int]:
         """``(r0, r1, c0, c1)``: half-open cell bounding box of the eroded cells (empty: zeros)."""
