@@ -175,15 +175,17 @@ def draw_field(seed: int, size_m: float | None = None, resolution_m: float = 0.1
         c = 0.5 * (lo + hi)
         return c + (rng.uniform(-0.5, 0.5, 2) * frac * (hi - lo))
 
+    sc = min(1.0, size / 100.0)             # features shrink with small fields
     if kind in ("buildings", "mixed"):
         for _ in range(int(rng.integers(1, 5))):
             cx, cy = random_point()
-            b = points_in_polygon(X, Y, _rect(cx, cy, rng.uniform(4, 15), rng.uniform(4, 12), rng.uniform(0, 180)))
+            b = points_in_polygon(X, Y, _rect(cx, cy, sc * rng.uniform(4, 15), sc * rng.uniform(4, 12),
+                                              rng.uniform(0, 180)))
             (touch if rng.random() < 0.5 else walls)[...] |= b
     if kind in ("ponds", "mixed"):
         for _ in range(int(rng.integers(1, 4))):
             cx, cy = random_point()
-            ax, ay = rng.uniform(2, 8, 2)
+            ax, ay = sc * rng.uniform(2, 8, 2)
             t = math.radians(rng.uniform(0, 180))
             u = (X - cx) * math.cos(t) + (Y - cy) * math.sin(t)
             v = -(X - cx) * math.sin(t) + (Y - cy) * math.cos(t)
