@@ -250,4 +250,5 @@ def plan_mission(mission: Mission) -> Plan:
     timings = PlanTimings(load=t_loaded - t_start, coverage=t_covered - t_loaded,
                           trajectory=t_done - t_covered, total=t_done - t_start)
     return Plan(grid=grid, dem=dem, coverage=coverage, waypoints=waypoints, trajectory=trajectory,
-                target_enu_m=target, stats=stats, timings_s=timings, warnings=tuple(coverage.warnings))
+                target_enu_m=target, stats=stats, timings_s=timings,
+                warnings=tuple(grid.warnings) + tuple(coverage.warnings))
