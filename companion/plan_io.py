@@ -11,14 +11,13 @@ plan.json
     ``trajectory_weights`` (the LQR weights used).
 
 QGroundControl exports
-    The way-points as MAV_CMD_NAV_WAYPOINT (16) items in
-    MAV_FRAME_GLOBAL_RELATIVE_ALT (3): latitude/longitude from the ENU
-    position through ``companion.frames.enu2geodetic`` about the mission
-    home, and **altitude relative to home**, i.e. the way-point's map-frame
-    z (the map's z = 0 is the home altitude ``home.alt_m`` AMSL; a DEM in
-    the same frame makes z = terrain + flight height). The home position
-    itself is written with its AMSL altitude (``plannedHomePosition``; item 0
-    of the WPL file, frame 0 = MAV_FRAME_GLOBAL).
+    The flight-ready mission of ``companion.mission_items`` (take-off, speed,
+    ROI at S_p, the way-points with yaw toward S_p, RTL; AMSL altitudes in
+    MAV_FRAME_GLOBAL, which do not depend on where the vehicle arms; the
+    inclusion fence in the .plan), latitude/longitude through
+    ``companion.frames.enu2geodetic`` about the mission home. The home
+    position is written with its AMSL altitude (``plannedHomePosition``;
+    item 0 of the WPL file, frame 0 = MAV_FRAME_GLOBAL).
 """
 
 from __future__ import annotations
@@ -32,13 +31,14 @@ import numpy as np
 
 from .config import to_dict
 from .errors import PlanError
-from .frames import enu2geodetic
 from .textfile import read_text
 from .mission import Mission
 
 MAV_CMD_NAV_WAYPOINT = 16
 MAV_FRAME_GLOBAL = 0
 MAV_FRAME_GLOBAL_RELATIVE_ALT = 3
+#: QGroundControl's AltitudeMode for MAV_FRAME_GLOBAL (QGroundControlQmlGlobal::AltitudeModeAbsolute)
+QGC_ALTITUDE_MODE_ABSOLUTE = 2
 MAV_AUTOPILOT_PX4 = 12
 MAV_TYPE_QUADROTOR = 2
 
@@ -235,65 +235,85 @@ def load_plan(path: str | Path) -> PlanFile:
 
 # --- QGroundControl exports ------------------------------------------------------
 
-def _geodetic(p_enu_m: np.ndarray, mission: Mission) -> list[tuple[float, float, float]]:
-    """Per way-point (lat_deg, lon_deg, alt_rel_home_m)."""
+def flight_items(plan, mission: Mission, waypoints_p_enu_m: np.ndarray | None = None,
+                 launch_enu_m: np.ndarray | None = None):
+    """The flight-ready items (``companion.mission_items``) of a plan (or of a sortie's
+    way-points), with the inclusion fence around the field (simplified to half the
+    safety margin, so the path keeps at least half the margin from the fence)."""
+    from .coverage.boundary import field_boundary
+    from .mission_items import build_flight_items
+
     h = mission.home
+    wp = plan.waypoints.p_enu_m if waypoints_p_enu_m is None else waypoints_p_enu_m
+    tol = max(0.5 * mission.coverage.safety_margin_m, plan.grid.resolution_m)
+    fence = field_boundary(plan.grid, tol)
+    return build_flight_items(wp, plan.target_enu_m, (h.lat, h.lon, h.alt_m), mission.flight.speed_m_s,
+                              launch_enu_m=launch_enu_m, fence_enu_m=fence)
+
+
+def _json_num(v: float):
+    return None if isinstance(v, float) and math.isnan(v) else v
+
+
+def qgc_plan_dict(items, speed_m_s: float) -> dict:
+    """QGroundControl ``.plan`` (JSON, fileType "Plan", version 1): one SimpleItem per
+    mission item (AMSL altitudes, QGC AltitudeMode 2), the inclusion fence in
+    ``geoFence.polygons`` (module doc of ``companion.mission_items``)."""
     out = []
-    for x, y, z in np.asarray(p_enu_m, dtype=float):
-        lat, lon, _ = enu2geodetic(x, y, z, h.lat, h.lon, h.alt_m)
-        out.append((lat, lon, float(z)))
-    return out
-
-
-def qgc_plan_dict(waypoints_p_enu_m: np.ndarray, mission: Mission) -> dict:
-    """QGroundControl ``.plan`` (JSON, fileType "Plan", version 1) with one
-    SimpleItem NAV_WAYPOINT per way-point, altitudes relative to home."""
-    items = []
-    for i, (lat, lon, alt) in enumerate(_geodetic(waypoints_p_enu_m, mission)):
-        items.append({
+    for i, it in enumerate(items.mission):
+        positional = it.frame == MAV_FRAME_GLOBAL
+        out.append({
             "type": "SimpleItem",
-            "autoContinue": True,
-            "command": MAV_CMD_NAV_WAYPOINT,
+            "autoContinue": bool(it.autocontinue),
+            "command": it.command,
             "doJumpId": i + 1,
-            "frame": MAV_FRAME_GLOBAL_RELATIVE_ALT,
-            # hold (s), acceptance radius (m), pass radius (m), yaw (NaN = unchanged -> null), lat, lon, alt
-            "params": [0, 0, 0, None, lat, lon, alt],
-            "Altitude": alt,
-            "AltitudeMode": 1,           # QGC: relative to launch (home)
+            "frame": it.frame,
+            "params": [_json_num(float(v)) for v in it.params] + [it.lat_deg, it.lon_deg, it.alt_m],
+            "Altitude": it.alt_m if positional else 0,
+            "AltitudeMode": QGC_ALTITUDE_MODE_ABSOLUTE,
             "AMSLAltAboveTerrain": None,
         })
-    h = mission.home
+    fence = []
+    if len(items.fence_latlon_deg):
+        fence = [{"inclusion": True, "polygon": [[float(a), float(b)] for a, b in items.fence_latlon_deg],
+                  "version": 1}]
+    lat, lon, alt = items.home
     return {
         "fileType": "Plan",
         "version": 1,
         "groundStation": "QGroundControl",
-        "geoFence": {"circles": [], "polygons": [], "version": 2},
+        "geoFence": {"circles": [], "polygons": fence, "version": 2},
         "rallyPoints": {"points": [], "version": 2},
         "mission": {
             "version": 2,
             "firmwareType": MAV_AUTOPILOT_PX4,
             "vehicleType": MAV_TYPE_QUADROTOR,
-            "cruiseSpeed": mission.flight.speed_m_s,
-            "hoverSpeed": mission.flight.speed_m_s,
-            "globalPlanAltitudeMode": 1,
-            "plannedHomePosition": [h.lat, h.lon, h.alt_m],
-            "items": items,
+            "cruiseSpeed": speed_m_s,
+            "hoverSpeed": speed_m_s,
+            "globalPlanAltitudeMode": QGC_ALTITUDE_MODE_ABSOLUTE,
+            "plannedHomePosition": [lat, lon, alt],
+            "items": out,
         },
     }
 
 
-def qgc_plan_text(waypoints_p_enu_m: np.ndarray, mission: Mission) -> str:
-    return json.dumps(qgc_plan_dict(waypoints_p_enu_m, mission), indent=2, allow_nan=False) + "\n"
+def qgc_plan_text(items, speed_m_s: float) -> str:
+    return json.dumps(qgc_plan_dict(items, speed_m_s), indent=2, allow_nan=False) + "\n"
 
 
-def qgc_wpl_text(waypoints_p_enu_m: np.ndarray, mission: Mission) -> str:
+def _wpl_num(v: float) -> str:
+    return "nan" if math.isnan(v) else f"{v:.8g}"
+
+
+def qgc_wpl_text(items) -> str:
     """"QGC WPL 110" text: tab-separated ``index current frame command p1 p2 p3 p4
-    lat lon alt autocontinue``; line 0 is home (frame 0, AMSL), then the
-    way-points (frame 3, altitude relative to home)."""
-    h = mission.home
+    lat lon alt autocontinue``; line 0 is the planned home (frame 0, AMSL), then
+    the mission items (AMSL altitudes). The format has no fence."""
+    lat0, lon0, alt0 = items.home
     lines = ["QGC WPL 110",
-             f"0\t1\t{MAV_FRAME_GLOBAL}\t{MAV_CMD_NAV_WAYPOINT}\t0\t0\t0\t0\t{h.lat:.10f}\t{h.lon:.10f}\t{h.alt_m:.4f}\t1"]
-    for i, (lat, lon, alt) in enumerate(_geodetic(waypoints_p_enu_m, mission), start=1):
-        lines.append(f"{i}\t0\t{MAV_FRAME_GLOBAL_RELATIVE_ALT}\t{MAV_CMD_NAV_WAYPOINT}\t0\t0\t0\t0\t"
-                     f"{lat:.10f}\t{lon:.10f}\t{alt:.4f}\t1")
+             f"0\t1\t{MAV_FRAME_GLOBAL}\t{MAV_CMD_NAV_WAYPOINT}\t0\t0\t0\t0\t{lat0:.10f}\t{lon0:.10f}\t{alt0:.4f}\t1"]
+    for i, it in enumerate(items.mission, start=1):
+        p = "\t".join(_wpl_num(float(v)) for v in it.params)
+        lines.append(f"{i}\t0\t{it.frame}\t{it.command}\t{p}\t{it.lat_deg:.10f}\t{it.lon_deg:.10f}\t"
+                     f"{it.alt_m:.4f}\t{1 if it.autocontinue else 0}")
     return "\n".join(lines) + "\n"

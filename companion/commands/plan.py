@@ -89,17 +89,19 @@ def run(args) -> int:
             raise InputError(p, "cannot write: is a directory")
 
     from ..mission import load_mission
-    from ..plan_io import plan_json_text, plan_to_json_dict, qgc_plan_text, qgc_wpl_text
+    from ..plan_io import flight_items, plan_json_text, plan_to_json_dict, qgc_plan_text, qgc_wpl_text
     from ..planner import plan_mission
 
     mission = load_mission(args.mission)
     plan = plan_mission(mission)
     doc = plan_to_json_dict(plan, mission, args.sample_hz)
     files = {args.output: plan_json_text(doc).encode("utf-8")}
-    if args.qgc:
-        files[args.qgc] = qgc_plan_text(plan.waypoints.p_enu_m, mission).encode("utf-8")
-    if args.waypoints:
-        files[args.waypoints] = qgc_wpl_text(plan.waypoints.p_enu_m, mission).encode("utf-8")
+    if args.qgc or args.waypoints:
+        items = flight_items(plan, mission)
+        if args.qgc:
+            files[args.qgc] = qgc_plan_text(items, mission.flight.speed_m_s).encode("utf-8")
+        if args.waypoints:
+            files[args.waypoints] = qgc_wpl_text(items).encode("utf-8")
     if args.plot:
         from ..plot import render_plan
         files[args.plot] = render_plan(plan, fmt=plot_fmt, title=f"{mission.name}")
