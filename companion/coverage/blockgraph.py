@@ -49,48 +49,63 @@ class BlockGraph:
         Block edge ``f`` (cells).
     r0, c0 : int
         Grid cell of the lower-left corner of the covered window (the eroded
-        bounding box); ``sub`` covers rows ``r0 .. r0 + sub.shape[0]`` etc.
-    sub : (R, C) int32
-        Sub-component id (1..K) of each eroded cell of the window, 0 elsewhere.
+        bounding box); block ``(i, j)`` covers rows ``r0 + i f ..`` and
+        columns ``c0 + j f ..``.
+    shape : (rows, cols)
+        Size of the covered window (cells).
+    labels : (nbr, nbc, f, f) int32
+        Sub-component id (1..K) of each eroded cell, block by block; 0 elsewhere.
     graph : (K + 1, K + 1) csr_matrix
-        Symmetric adjacency between sub-components, weights the distance (cells)
-        between their centroids; node 0 is unused.
+        Symmetric adjacency between sub-components, weights the distance
+        (cells) between their blocks' centres; node 0 is unused.
     component : (K + 1,) int
         Connected component of each sub-component (-1 for node 0).
-    centroid_rc : (K + 1, 2) float
-        Centroid (row, col, grid cells) of each sub-component.
+    block_of : (K + 1, 2) int
+        Block (i, j) of each sub-component.
     """
 
     block: int
     r0: int
     c0: int
-    sub: np.ndarray
+    shape: tuple[int, int]
+    labels: np.ndarray
     graph: csr_matrix
     component: np.ndarray
-    centroid_rc: np.ndarray
+    block_of: np.ndarray
 
     def sub_at(self, r: int, c: int) -> int:
         """Sub-component id of grid cell (r, c); 0 if not eroded or outside the window."""
         rr, cc = r - self.r0, c - self.c0
-        if 0 <= rr < self.sub.shape[0] and 0 <= cc < self.sub.shape[1]:
-            return int(self.sub[rr, cc])
+        if 0 <= rr < self.shape[0] and 0 <= cc < self.shape[1]:
+            f = self.block
+            return int(self.labels[rr // f, cc // f, rr % f, cc % f])
         return 0
 
     def components_of(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Component id of each grid cell (arrays), -1 where not eroded."""
+        f = self.block
         rr = np.asarray(rows, dtype=np.int64) - self.r0
         cc = np.asarray(cols, dtype=np.int64) - self.c0
-        ok = (rr >= 0) & (rr < self.sub.shape[0]) & (cc >= 0) & (cc < self.sub.shape[1])
+        ok = (rr >= 0) & (rr < self.shape[0]) & (cc >= 0) & (cc < self.shape[1])
         out = np.full(rr.shape, -1, dtype=np.int64)
-        s = self.sub[rr[ok], cc[ok]]
+        r, c = rr[ok], cc[ok]
+        s = self.labels[r // f, c // f, r % f, c % f]
         out[ok] = np.where(s > 0, self.component[s], -1)
         return out
+
+    def window(self, i0: int, i1: int, j0: int, j1: int) -> np.ndarray:
+        """Sub-component ids of blocks ``[i0, i1) x [j0, j1)`` as a (rows, cols) cell array
+        (clipped to the window), whose cell (0, 0) is grid cell (r0 + i0 f, c0 + j0 f)."""
+        f = self.block
+        b = self.labels[i0:i1, j0:j1]
+        out = b.transpose(0, 2, 1, 3).reshape((i1 - i0) * f, (j1 - j0) * f)
+        return out[: self.shape[0] - i0 * f, : self.shape[1] - j0 * f]
 
     def corridor(self, s_from: int, s_to: int) -> np.ndarray | None:
         """Sub-component ids of a shortest graph path from ``s_from`` to ``s_to``
         plus their graph neighbours (room to smooth the fine path); None if
         the two are not connected."""
-        if self.component[s_from] != self.component[s_to] or s_from <= 0 or s_to <= 0:
+        if s_from <= 0 or s_to <= 0 or self.component[s_from] != self.component[s_to]:
             return None
         if s_from == s_to:
             nodes = np.array([s_from])
@@ -98,7 +113,7 @@ class BlockGraph:
             # Dijkstra bounded by a distance limit (cells) that doubles until
             # the target is settled: the search stays local for the usual
             # short connection and still reaches any connected target.
-            straight = float(np.hypot(*(self.centroid_rc[s_to] - self.centroid_rc[s_from])))
+            straight = float(np.hypot(*(self.block_of[s_to] - self.block_of[s_from]))) * self.block
             limit = 2.0 * straight + 4.0 * self.block
             while True:
                 dist, pred = dijkstra(self.graph, directed=True, indices=s_from, return_predecessors=True,
@@ -121,42 +136,55 @@ def block_size(n_cells: int) -> int:
     return max(_MIN_BLOCK, int(np.ceil(np.sqrt(n_cells / _TARGET_BLOCKS))))
 
 
+def _pairs(a: np.ndarray, b: np.ndarray, k: int) -> np.ndarray | None:
+    """Unique undirected keys ``min * (k + 1) + max`` of the labelled pairs (a, b), a != b."""
+    m = (a > 0) & (b > 0) & (a != b)
+    if not m.any():
+        return None
+    lo = np.minimum(a[m], b[m]).astype(np.int64)
+    return np.unique(lo * (k + 1) + np.maximum(a[m], b[m]))
+
+
 def build_block_graph(eroded: np.ndarray, bbox: tuple[int, int, int, int]) -> BlockGraph:
     """Block graph (module doc) of ``eroded`` inside the half-open box ``(r0, r1, c0, c1)``."""
     r0, r1, c0, c1 = bbox
     win = eroded[r0:r1, c0:c1]
     f = block_size(win.size)
     nbr, nbc = -(-win.shape[0] // f), -(-win.shape[1] // f)
-    padded = np.zeros((nbr * f, nbc * f), dtype=bool)
-    padded[: win.shape[0], : win.shape[1]] = win
     # the blocks as a stack of f x f images; a structure that only links
     # cells within one image labels every block's pieces separately
-    stack = padded.reshape(nbr, f, nbc, f).transpose(0, 2, 1, 3).reshape(nbr * nbc, f, f)
+    padded = np.zeros((nbr * f, nbc * f), dtype=bool)
+    padded[: win.shape[0], : win.shape[1]] = win
+    stack = np.ascontiguousarray(padded.reshape(nbr, f, nbc, f).transpose(0, 2, 1, 3))
+    del padded
     structure = np.zeros((3, 3, 3), dtype=bool)
     structure[1] = True
-    lab3, k = ndimage.label(stack, structure=structure)
-    sub = lab3.reshape(nbr, nbc, f, f).transpose(0, 2, 1, 3).reshape(nbr * f, nbc * f)
-    sub = np.ascontiguousarray(sub[: win.shape[0], : win.shape[1]]).astype(np.int32, copy=False)
-
-    rows, cols = sub.shape
-    pairs = []
-    for dr, dc in _FORWARD:
-        a = sub[0: rows - dr, max(0, -dc): cols - max(0, dc)]
-        b = sub[dr: rows, max(0, dc): cols - max(0, -dc)]
-        m = (a > 0) & (b > 0) & (a != b)
-        if m.any():
-            lo, hi = np.minimum(a[m], b[m]).astype(np.int64), np.maximum(a[m], b[m])
-            pairs.append(np.unique(lo * (k + 1) + hi))
-    # centroids of the sub-components (grid cells)
-    rr, cc = np.nonzero(sub)
-    lab = sub[rr, cc]
-    cnt = np.bincount(lab, minlength=k + 1).astype(float)
-    cnt[0] = 1.0
-    cen = np.column_stack([np.bincount(lab, rr, k + 1) / cnt + r0, np.bincount(lab, cc, k + 1) / cnt + c0])
-    if pairs:
-        key = np.unique(np.concatenate(pairs))
+    lab, k = ndimage.label(stack.reshape(nbr * nbc, f, f), structure=structure, output=np.int32)
+    del stack
+    B = lab.reshape(nbr, nbc, f, f)
+    # edges between sub-components of neighbouring blocks: only the blocks' border
+    # cells can touch across a boundary (8-connectivity: side neighbours and corners)
+    keys = []
+    right, left = B[:, :-1, :, f - 1], B[:, 1:, :, 0]               # (nbr, nbc - 1, f)
+    top, bottom = B[:-1, :, f - 1, :], B[1:, :, 0, :]               # (nbr - 1, nbc, f)
+    for d in (-1, 0, 1):
+        lo, hi = max(0, -d), f - max(0, d)
+        keys.append(_pairs(right[..., lo:hi], left[..., lo + d: hi + d], k))
+        keys.append(_pairs(top[..., lo:hi], bottom[..., lo + d: hi + d], k))
+    keys.append(_pairs(B[:-1, :-1, f - 1, f - 1], B[1:, 1:, 0, 0], k))      # up-right corner
+    keys.append(_pairs(B[:-1, 1:, f - 1, 0], B[1:, :-1, 0, f - 1], k))       # up-left corner
+    keys = [x for x in keys if x is not None]
+    # block of each sub-component: labels are numbered in scan order and no label
+    # spans two blocks, so the ids of block b are (max id before b, max id of b]
+    block_of = np.zeros((k + 1, 2), dtype=np.int64)
+    if k:
+        top_id = np.maximum.accumulate(lab.reshape(nbr * nbc, f * f).max(axis=1))
+        owner = np.searchsorted(top_id, np.arange(1, k + 1), side="left")
+        block_of[1:] = np.column_stack([owner // nbc, owner % nbc])
+    if keys:
+        key = np.unique(np.concatenate(keys))
         u, v = key // (k + 1), key % (k + 1)
-        w = np.maximum(np.hypot(*(cen[u] - cen[v]).T), 1e-6)
+        w = np.maximum(np.hypot(*(block_of[u] - block_of[v]).T) * f, 1e-6)
         graph = coo_matrix((np.concatenate([w, w]), (np.concatenate([u, v]), np.concatenate([v, u]))),
                            shape=(k + 1, k + 1)).tocsr()
     else:
@@ -164,4 +192,5 @@ def build_block_graph(eroded: np.ndarray, bbox: tuple[int, int, int, int]) -> Bl
     _, comp = connected_components(graph, directed=False)
     comp = comp.astype(np.int64)
     comp[0] = -1
-    return BlockGraph(block=f, r0=r0, c0=c0, sub=sub, graph=graph, component=comp, centroid_rc=cen)
+    return BlockGraph(block=f, r0=r0, c0=c0, shape=win.shape, labels=B, graph=graph, component=comp,
+                      block_of=block_of)

@@ -32,10 +32,11 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from ..errors import PlanError
-from .blockgraph import BlockGraph
-from .freespace import FreeSpace, lookup
+from .freespace import FreeSpace
 
 _SQRT2 = float(np.sqrt(2.0))
+#: points tested at once by the string pulling before it gallops
+_WINDOW = 64
 #: 8-neighbourhood offsets (dr, dc) and step lengths (cells).
 _NEIGHBOURS = ((0, 1, 1.0), (0, -1, 1.0), (1, 0, 1.0), (-1, 0, 1.0),
                (1, 1, _SQRT2), (1, -1, _SQRT2), (-1, 1, _SQRT2), (-1, -1, _SQRT2))
@@ -60,7 +61,7 @@ def visible_from(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> np.ndar
     first = np.concatenate([[0], np.cumsum(n)[:-1]])
     s = (np.arange(len(seg)) - first[seg]) / np.maximum(n[seg] - 1, 1)
     p = a + s[:, None] * (targets[seg] - a)
-    ok = lookup(free.eroded, h, p[:, 0], p[:, 1])
+    ok = free.raster().sample_points(p[:, 0], p[:, 1])
     return np.logical_and.reduceat(ok, first) if len(seg) else np.zeros(0, dtype=bool)
 
 
@@ -104,42 +105,41 @@ def cell_path(mask: np.ndarray, src: tuple[int, int], dst: tuple[int, int]) -> n
 
 
 def simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
-    """String pulling of a polyline whose consecutive points see each other (module doc, step 4)."""
+    """String pulling of a polyline whose consecutive points see each other (module doc, step 4).
+
+    From each kept point the next kept point is the last one before the first
+    hidden one: found with one vectorised test of the next ``_WINDOW`` points
+    (most connections are that short), then by galloping and bisection.
+    """
     pts = np.asarray(pts, float)
     n = len(pts)
     out = [0]
     i = 0
     while i < n - 1:
-        lo, step = i + 1, 1           # pts[lo] is visible from pts[i]
-        hi = n                        # first index known not to be (n: none)
-        while lo + step < n:
-            if visible_from(free, pts[i], pts[lo + step][None])[0]:
-                lo += step
-                step *= 2
-            else:
-                hi = lo + step
-                break
-        while hi - lo > 1 and lo + 1 < n:
-            mid = (lo + hi) // 2
-            if visible_from(free, pts[i], pts[mid][None])[0]:
-                lo = mid
-            else:
-                hi = mid
+        ahead = pts[i + 1: min(n, i + 1 + _WINDOW)]
+        vis = visible_from(free, pts[i], ahead)
+        hidden = np.flatnonzero(~vis[1:])          # pts[i + 1] is visible by assumption
+        if len(hidden) or i + 1 + _WINDOW >= n:
+            lo = i + 1 + (int(hidden[0]) if len(hidden) else len(vis) - 1)
+        else:
+            lo, step = i + _WINDOW, _WINDOW       # all of the window is visible: gallop on
+            hi = n
+            while lo + step < n:
+                if visible_from(free, pts[i], pts[lo + step][None])[0]:
+                    lo += step
+                    step *= 2
+                else:
+                    hi = lo + step
+                    break
+            while hi - lo > 1 and lo + 1 < n:
+                mid = (lo + hi) // 2
+                if visible_from(free, pts[i], pts[mid][None])[0]:
+                    lo = mid
+                else:
+                    hi = mid
         out.append(lo)
         i = lo
     return pts[out]
-
-
-def _corridor_window(bg: BlockGraph, corridor: np.ndarray) -> tuple[int, int, int, int]:
-    """Half-open grid-cell box (r0, r1, c0, c1) of the blocks holding ``corridor``."""
-    f = bg.block
-    br = np.floor((bg.centroid_rc[corridor, 0] - bg.r0) / f).astype(np.int64)
-    bc = np.floor((bg.centroid_rc[corridor, 1] - bg.c0) / f).astype(np.int64)
-    r0 = bg.r0 + int(br.min()) * f
-    c0 = bg.c0 + int(bc.min()) * f
-    r1 = min(bg.r0 + (int(br.max()) + 1) * f, bg.r0 + bg.sub.shape[0])
-    c1 = min(bg.c0 + (int(bc.max()) + 1) * f, bg.c0 + bg.sub.shape[1])
-    return r0, r1, c0, c1
 
 
 def aux_path(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>") -> np.ndarray:
@@ -161,9 +161,11 @@ def aux_path(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>
     if corridor is None:
         raise PlanError(source, f"no collision-free connection from ({a[0]:.2f}, {a[1]:.2f}) to "
                                 f"({b[0]:.2f}, {b[1]:.2f}) m (grid frame) in the eroded free space")
-    r0, r1, c0, c1 = _corridor_window(bg, corridor)
-    sub = bg.sub[r0 - bg.r0: r1 - bg.r0, c0 - bg.c0: c1 - bg.c0]
-    mask = np.isin(sub, corridor)
+    blocks = bg.block_of[corridor]
+    i0, j0 = blocks.min(axis=0)
+    i1, j1 = blocks.max(axis=0) + 1
+    r0, c0 = bg.r0 + int(i0) * bg.block, bg.c0 + int(j0) * bg.block
+    mask = np.isin(bg.window(int(i0), int(i1), int(j0), int(j1)), corridor)
     cells = cell_path(mask, (ra - r0, ca - c0), (rb - r0, cb - c0))
     if cells is None:   # cannot happen: the corridor holds a fine path (module doc)
         raise PlanError(source, f"internal: no path in the corridor from ({a[0]:.2f}, {a[1]:.2f}) "
