@@ -18,6 +18,7 @@ from .coverage import extract_waypoints, plan_coverage
 from .errors import PlanError
 from .maps import ElevationModel, OccupancyGrid, load_dem, load_ogm
 from .mission import Mission
+from .sorties import plan_sorties
 from .trajectory import Trajectory, generate_trajectory
 
 #: Samples per knot interval for the speed/acceleration statistics (the pieces are
@@ -65,7 +66,7 @@ class PlanTimings:
     """Wall-clock time (s, ``time.perf_counter``) of each phase of ``plan_mission``.
 
     ``coverage`` includes the way-point extraction; ``trajectory`` includes
-    the statistics sampling.
+    the statistics sampling and the sortie split.
     """
 
     load: float
@@ -95,6 +96,8 @@ class Plan:
     warnings : tuple of str
         Things the user should know that did not stop the plan (main segments
         that cannot be reached and are not flown, ...), one line each.
+    sorties : SortiePlan or None
+        The plan split into battery-sized sorties (``companion.sorties``).
     """
 
     grid: OccupancyGrid
@@ -106,6 +109,7 @@ class Plan:
     stats: PlanStats
     timings_s: PlanTimings
     warnings: tuple[str, ...] = ()
+    sorties: object = None
 
 
 def free_centroid_xy(grid: OccupancyGrid) -> np.ndarray:
@@ -235,6 +239,7 @@ def plan_mission(mission: Mission) -> Plan:
     trajectory = generate_trajectory(waypoints.t_s, waypoints.p_enu_m, waypoints.v_enu_m_s,
                                      waypoints.a_enu_m_s2, mission.trajectory, target_enu_m=target)
     max_v, max_a, residual = trajectory_stats(trajectory)
+    sorties = plan_sorties(coverage, waypoints, dem, mission.flight, mission.vehicle, mission.energy, grid, mission.source)
     t_done = time.perf_counter()
 
     stats = PlanStats(
@@ -251,4 +256,4 @@ def plan_mission(mission: Mission) -> Plan:
                           trajectory=t_done - t_covered, total=t_done - t_start)
     return Plan(grid=grid, dem=dem, coverage=coverage, waypoints=waypoints, trajectory=trajectory,
                 target_enu_m=target, stats=stats, timings_s=timings,
-                warnings=tuple(grid.warnings) + tuple(coverage.warnings))
+                warnings=tuple(grid.warnings) + tuple(coverage.warnings), sorties=sorties)

@@ -93,13 +93,15 @@ class BlockGraph:
         out[ok] = np.where(s > 0, self.component[s], -1)
         return out
 
-    def window(self, i0: int, i1: int, j0: int, j1: int) -> np.ndarray:
-        """Sub-component ids of blocks ``[i0, i1) x [j0, j1)`` as a (rows, cols) cell array
-        (clipped to the window), whose cell (0, 0) is grid cell (r0 + i0 f, c0 + j0 f)."""
+    def cells_of(self, subs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Grid rows and columns (int64 arrays) of the cells of the sub-components ``subs``."""
         f = self.block
-        b = self.labels[i0:i1, j0:j1]
-        out = b.transpose(0, 2, 1, 3).reshape((i1 - i0) * f, (j1 - j0) * f)
-        return out[: self.shape[0] - i0 * f, : self.shape[1] - j0 * f]
+        nbc = self.labels.shape[1]
+        bi, bj = self.block_of[subs].T
+        ub = np.unique(bi * nbc + bj)
+        sel = np.isin(self.labels[ub // nbc, ub % nbc], subs)
+        m, lr, lc = np.nonzero(sel)
+        return self.r0 + (ub[m] // nbc) * f + lr, self.c0 + (ub[m] % nbc) * f + lc
 
     def corridor(self, s_from: int, s_to: int) -> np.ndarray | None:
         """Sub-component ids of a shortest graph path from ``s_from`` to ``s_to``

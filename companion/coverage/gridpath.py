@@ -13,9 +13,11 @@ cell. Otherwise:
    far round it goes: narrow passages, rounded corners at the safety margin
    and pockets reachable only the long way round are all found, at full
    resolution, with no pooling that could close a passage.
-3. The shortest 8-connected cell path inside the corridor is found with
-   ``scipy.sparse.csgraph.dijkstra`` on a CSR graph built without sorting
-   (neighbour indices by array shifts).
+3. The cheapest 8-connected cell path over the corridor's cells is found
+   with ``scipy.sparse.csgraph.dijkstra`` on a CSR graph of those cells only
+   (neighbours by ``searchsorted`` on their linear indices); cells near the
+   corridor's edge cost more, so the path keeps off the staircase edge of
+   the eroded space where there is room (:func:`cell_path`).
 4. The cell path is simplified by line-of-sight shortcutting (string
    pulling): from each kept point, the farthest point still visible is
    found by galloping (1, 2, 4, ... points ahead) then bisection, with one
@@ -37,9 +39,13 @@ from .freespace import FreeSpace
 _SQRT2 = float(np.sqrt(2.0))
 #: points tested at once by the string pulling before it gallops
 _WINDOW = 64
+#: cells this close to the edge of the eroded space cost _EDGE_COST times more to cross
+_EDGE_CELLS = 2
+_EDGE_COST = 4.0
 #: 8-neighbourhood offsets (dr, dc) and step lengths (cells).
 _NEIGHBOURS = ((0, 1, 1.0), (0, -1, 1.0), (1, 0, 1.0), (-1, 0, 1.0),
                (1, 1, _SQRT2), (1, -1, _SQRT2), (-1, 1, _SQRT2), (-1, -1, _SQRT2))
+NEIGHBOURS_4 = _NEIGHBOURS[:4]
 
 
 def is_clear(free: FreeSpace, a: np.ndarray, b: np.ndarray) -> bool:
@@ -65,51 +71,80 @@ def visible_from(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> np.ndar
     return np.logical_and.reduceat(ok, first) if len(seg) else np.zeros(0, dtype=bool)
 
 
-def grid_graph(mask: np.ndarray) -> tuple[csr_matrix, np.ndarray, np.ndarray]:
-    """Directed CSR graph of the 8-connected True cells of ``mask``.
+def cell_graph(rr: np.ndarray, cc: np.ndarray, neighbours=None,
+               edge_cells: int | None = None) -> tuple[csr_matrix, np.ndarray]:
+    """Directed CSR graph of 8-connected grid cells given by their rows and columns.
 
-    Returns the graph (edge weights in cells: 1 or sqrt 2) and the (n,) row
-    and column of each node (nodes in raster order). Built from eight
-    shifted lookups of a padded index array, so the CSR rows come out in
-    order and nothing is sorted.
+    The cells are sorted by linear index and each one's eight neighbours are
+    found by ``searchsorted``, so only the listed cells are touched (a long
+    diagonal corridor costs its own cells, not its bounding box). Edge
+    weight: the step (1 or sqrt 2 cells) times the cost of the cell stepped
+    into: ``_EDGE_COST`` within ``edge_cells`` (default ``_EDGE_CELLS``) of a
+    cell that is not listed, 1 elsewhere (cell_path's doc). ``neighbours``:
+    (dr, dc, step) offsets, default the 8-neighbourhood. Returns the graph
+    and the order that sorts the input cells into node order.
     """
-    rows, cols = mask.shape
-    fr, fc = np.nonzero(mask)
-    n = len(fr)
-    idx = np.full((rows + 2, cols + 2), -1, dtype=np.int64)
-    idx[fr + 1, fc + 1] = np.arange(n)
-    nb = np.stack([idx[fr + 1 + dr, fc + 1 + dc] for dr, dc, _ in _NEIGHBOURS], axis=1)
-    w = np.broadcast_to(np.array([s for _, _, s in _NEIGHBOURS]), nb.shape)
+    neighbours = _NEIGHBOURS if neighbours is None else neighbours
+    edge_cells = _EDGE_CELLS if edge_cells is None else edge_cells
+    width = int(cc.max()) + 3
+    lin = (rr.astype(np.int64) + 1) * width + (cc.astype(np.int64) + 1)
+    order = np.argsort(lin, kind="stable")
+    lin = lin[order]
+    n = len(lin)
+    nb = np.empty((n, len(neighbours)), dtype=np.int64)
+    for k, (dr, dc, _) in enumerate(neighbours):
+        t = lin + dr * width + dc
+        pos = np.minimum(np.searchsorted(lin, t), n - 1)
+        nb[:, k] = np.where(lin[pos] == t, pos, -1)
     ok = nb >= 0
+    if edge_cells > 0:
+        inner = ok.all(axis=1)
+        for _ in range(edge_cells - 1):
+            inner = inner & np.where(ok, inner[np.where(ok, nb, 0)], False).all(axis=1)
+        cost = np.where(inner, 1.0, _EDGE_COST)
+    else:
+        cost = np.ones(n)
+    step = np.array([s for _, _, s in neighbours])
+    w = step[None, :] * cost[np.where(ok, nb, 0)]
     indptr = np.concatenate([[0], np.cumsum(ok.sum(axis=1))])
-    return csr_matrix((w[ok], nb[ok], indptr), shape=(n, n)), fr, fc
+    return csr_matrix((w[ok], nb[ok], indptr), shape=(n, n)), order
 
 
-def cell_path(mask: np.ndarray, src: tuple[int, int], dst: tuple[int, int]) -> np.ndarray | None:
-    """(k, 2) rows/cols of a shortest 8-connected path in ``mask`` from src to dst, or None."""
-    if not (mask[src] and mask[dst]):
+def cell_path(rr: np.ndarray, cc: np.ndarray, src: tuple[int, int], dst: tuple[int, int]) -> np.ndarray | None:
+    """(k, 2) rows/cols of a cheapest 8-connected path over the listed cells from src to dst, or None.
+
+    Cells within ``_EDGE_CELLS`` of the edge of the listed set cost
+    ``_EDGE_COST`` times more: the path keeps off the staircase edge of the
+    eroded space where it can (where straight shortcuts are visible, so
+    string pulling leaves few corners, each of which is a stop for the
+    way-points), and still takes a passage narrower than that when it must.
+    """
+    rr = np.asarray(rr, dtype=np.int64)
+    cc = np.asarray(cc, dtype=np.int64)
+    hit_s = np.flatnonzero((rr == src[0]) & (cc == src[1]))
+    hit_d = np.flatnonzero((rr == dst[0]) & (cc == dst[1]))
+    if len(hit_s) == 0 or len(hit_d) == 0:
         return None
-    graph, fr, fc = grid_graph(mask)
-    rows, cols = mask.shape
-    lin = fr * cols + fc
-    i_src = int(np.searchsorted(lin, src[0] * cols + src[1]))
-    i_dst = int(np.searchsorted(lin, dst[0] * cols + dst[1]))
+    graph, order = cell_graph(rr, cc)
+    rank = np.empty(len(order), dtype=np.int64)
+    rank[order] = np.arange(len(order))
+    i_src, i_dst = int(rank[hit_s[0]]), int(rank[hit_d[0]])
     dist, pred = dijkstra(graph, directed=True, indices=i_src, return_predecessors=True)
     if not np.isfinite(dist[i_dst]):
         return None
     path = [i_dst]
     while path[-1] != i_src:
         path.append(int(pred[path[-1]]))
-    path = np.array(path[::-1])
-    return np.column_stack([fr[path], fc[path]])
+    nodes = order[np.array(path[::-1])]
+    return np.column_stack([rr[nodes], cc[nodes]])
 
 
 def simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
     """String pulling of a polyline whose consecutive points see each other (module doc, step 4).
 
-    From each kept point the next kept point is the last one before the first
-    hidden one: found with one vectorised test of the next ``_WINDOW`` points
-    (most connections are that short), then by galloping and bisection.
+    From each kept point the next kept point is the farthest visible one of
+    the next ``_WINDOW`` points (one vectorised test; most connections are
+    that short); when all of them are visible, galloping and bisection go on.
     """
     pts = np.asarray(pts, float)
     n = len(pts)
@@ -118,9 +153,9 @@ def simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
     while i < n - 1:
         ahead = pts[i + 1: min(n, i + 1 + _WINDOW)]
         vis = visible_from(free, pts[i], ahead)
-        hidden = np.flatnonzero(~vis[1:])          # pts[i + 1] is visible by assumption
-        if len(hidden) or i + 1 + _WINDOW >= n:
-            lo = i + 1 + (int(hidden[0]) if len(hidden) else len(vis) - 1)
+        vis[0] = True                              # pts[i + 1] is visible by assumption
+        if not vis.all() or i + 1 + _WINDOW >= n:
+            lo = i + 1 + int(np.flatnonzero(vis)[-1])
         else:
             lo, step = i + _WINDOW, _WINDOW       # all of the window is visible: gallop on
             hi = n
@@ -161,14 +196,10 @@ def aux_path(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>
     if corridor is None:
         raise PlanError(source, f"no collision-free connection from ({a[0]:.2f}, {a[1]:.2f}) to "
                                 f"({b[0]:.2f}, {b[1]:.2f}) m (grid frame) in the eroded free space")
-    blocks = bg.block_of[corridor]
-    i0, j0 = blocks.min(axis=0)
-    i1, j1 = blocks.max(axis=0) + 1
-    r0, c0 = bg.r0 + int(i0) * bg.block, bg.c0 + int(j0) * bg.block
-    mask = np.isin(bg.window(int(i0), int(i1), int(j0), int(j1)), corridor)
-    cells = cell_path(mask, (ra - r0, ca - c0), (rb - r0, cb - c0))
+    rr, cc = bg.cells_of(corridor)
+    cells = cell_path(rr, cc, (ra, ca), (rb, cb))
     if cells is None:   # cannot happen: the corridor holds a fine path (module doc)
         raise PlanError(source, f"internal: no path in the corridor from ({a[0]:.2f}, {a[1]:.2f}) "
                                 f"to ({b[0]:.2f}, {b[1]:.2f}) m")
-    centres = np.column_stack([(c0 + cells[:, 1] + 0.5) * h, (r0 + cells[:, 0] + 0.5) * h])
+    centres = np.column_stack([(cells[:, 1] + 0.5) * h, (cells[:, 0] + 0.5) * h])
     return simplify(free, np.vstack([a, centres, b]))

@@ -108,6 +108,9 @@ class CoveragePlan:
         Main segments (ENU, m) left out because no path reaches them (module doc).
     warnings : tuple of str
         One line per group of dropped segments, naming where they are.
+    free_space : FreeSpace or None
+        The eroded free space itself (with its cached rasters and block graph),
+        for later connections (sortie transits).
     """
 
     path_xy_m: np.ndarray
@@ -127,6 +130,7 @@ class CoveragePlan:
     row_orientation_deg: float | None = None
     dropped_segments: list = field(default_factory=list)
     warnings: tuple[str, ...] = ()
+    free_space: object = None
 
 
 def _enu_deg(alpha_g_rad: float, yaw_rad: float) -> float:
@@ -214,6 +218,7 @@ def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig) -> CoveragePlan:
         row_orientation_deg=rows.orientation_deg if has_rows else None,
         dropped_segments=dropped,
         warnings=warnings,
+        free_space=free,
     )
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Literal
 
 from ..control.config import ControlConfig
+from ..energy import EnergyConfig
 from ..vehicle import VehicleConfig
 from ..trajectory.config import TrajectoryConfig
 from .sim import SimConfig
@@ -42,11 +43,16 @@ class HomeConfig:
 
 @dataclass(frozen=True)
 class FlightConfig:
-    """Flight height above the terrain, cruise speed and way-point spacing in time."""
+    """Flight height above the terrain, cruise speed and way-point spacing in time.
+
+    ``transit_speed_m_s``: speed of the transits between the launch point and
+    the corridors of a sortie (nothing is covered there), default 3 m/s.
+    """
 
     height_agl_m: float = 1.5
     speed_m_s: float = 1.0
     waypoint_interval_s: float = 4.0
+    transit_speed_m_s: float = 3.0
 
     def __post_init__(self) -> None:
         if not 0 < self.height_agl_m <= MAX_LENGTH_M:
@@ -55,6 +61,8 @@ class FlightConfig:
             raise ValueError("flight.speed_m_s must be > 0")
         if self.waypoint_interval_s <= 0:
             raise ValueError("flight.waypoint_interval_s must be > 0")
+        if not 0 < self.transit_speed_m_s <= 30.0:
+            raise ValueError("flight.transit_speed_m_s must be in (0, 30] m/s")
 
 
 @dataclass(frozen=True)
@@ -99,6 +107,7 @@ class Mission:
     trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
     control: ControlConfig = field(default_factory=ControlConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    energy: EnergyConfig = field(default_factory=EnergyConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     description: str = ""
     base_dir: str = "."   # set by the loader: directory of the mission file
