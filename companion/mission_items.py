@@ -106,7 +106,8 @@ def yaw_to_target_deg(p_enu_m: np.ndarray, target_enu_m: np.ndarray) -> np.ndarr
 def build_flight_items(waypoints_p_enu_m: np.ndarray, target_enu_m: np.ndarray,
                        home: tuple[float, float, float], speed_m_s: float,
                        launch_enu_m: np.ndarray | None = None,
-                       fence_enu_m: np.ndarray | None = None, end: str = "rtl") -> FlightItems:
+                       fence_enu_m: np.ndarray | None = None, end: str = "rtl",
+                       speed_changes=None) -> FlightItems:
     """The mission of the module table from ENU way-points (map frame, m).
 
     Parameters
@@ -124,6 +125,9 @@ def build_flight_items(waypoints_p_enu_m: np.ndarray, target_enu_m: np.ndarray,
         Inclusion fence polygon (ENU, m).
     end : {"rtl", "land"}
         RETURN_TO_LAUNCH, or NAV_LAND at the launch point.
+    speed_changes : sequence of (way-point index, speed m/s), optional
+        A DO_CHANGE_SPEED before each of those way-points (a sortie's transit
+        and coverage speeds); default one, ``speed_m_s``, before the first.
     """
     lat0, lon0, alt0 = (float(v) for v in home)
     wp = np.asarray(waypoints_p_enu_m, float)
@@ -134,12 +138,19 @@ def build_flight_items(waypoints_p_enu_m: np.ndarray, target_enu_m: np.ndarray,
 
     launch = wp[0, :2] if launch_enu_m is None else np.asarray(launch_enu_m, float)[:2]
     nan = math.nan
+    changes = dict((int(i), float(v)) for i, v in (speed_changes or ((0, speed_m_s),)))
+
+    def speed_item(v: float) -> MissionItem:
+        return MissionItem(MAV_CMD_DO_CHANGE_SPEED, MAV_FRAME_MISSION, (SPEED_TYPE_GROUND, v, -1.0, 0.0))
+
     items = [MissionItem(MAV_CMD_NAV_TAKEOFF, MAV_FRAME_GLOBAL, (0.0, nan, nan, nan),
                          *geo(launch[0], launch[1], wp[0, 2])),
-             MissionItem(MAV_CMD_DO_CHANGE_SPEED, MAV_FRAME_MISSION, (SPEED_TYPE_GROUND, float(speed_m_s), -1.0, 0.0)),
+             speed_item(changes.pop(0, float(speed_m_s))),
              MissionItem(MAV_CMD_DO_SET_ROI_LOCATION, MAV_FRAME_GLOBAL, (0.0, nan, nan, nan), *geo(*target_enu_m))]
     yaw = yaw_to_target_deg(wp, target_enu_m)
-    for p, psi in zip(wp, yaw):
+    for i, (p, psi) in enumerate(zip(wp, yaw)):
+        if i in changes:
+            items.append(speed_item(changes[i]))
         items.append(MissionItem(MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL, (0.0, 0.0, 0.0, float(psi)), *geo(*p)))
     if end == "land":
         items.append(MissionItem(MAV_CMD_NAV_LAND, MAV_FRAME_GLOBAL, (0.0, 0.0, 0.0, nan),

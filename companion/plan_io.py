@@ -22,6 +22,7 @@ QGroundControl exports
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass
@@ -92,10 +93,7 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
         "frame": "ENU",
         "origin": {"lat": home.lat, "lon": home.lon, "alt_m": home.alt_m},
         "path": _rows(plan.coverage.path_xy_m),
-        "waypoints": [
-            {"t": float(ti), "p": _rows(p), "v": _rows(v), "a": _rows(a), "corner": bool(c)}
-            for ti, p, v, a, c in zip(wp.t_s, wp.p_enu_m, wp.v_enu_m_s, wp.a_enu_m_s2, wp.corner)
-        ],
+        "waypoints": _waypoints_json(wp),
         "sample_hz": float(sample_hz),
         "trajectory": {"t": _rows(t), "p": _rows(s.p), "v": _rows(s.v), "a": _rows(s.a),
                        "pointing": _rows(s.pointing)},
@@ -104,6 +102,36 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
         "stats": {k: getattr(plan.stats, k) for k in STATS_KEYS},
         "timings_s": {k: getattr(plan.timings_s, k) for k in TIMING_KEYS},
         "warnings": list(plan.warnings),
+        **sorties_json(plan, mission),
+    }
+
+
+def _waypoints_json(w) -> list:
+    return [{"t": float(ti), "p": _rows(p), "v": _rows(v), "a": _rows(a), "corner": bool(c)}
+            for ti, p, v, a, c in zip(w.t_s, w.p_enu_m, w.v_enu_m_s, w.a_enu_m_s2, w.corner)]
+
+
+def sorties_json(plan, mission: Mission) -> dict:
+    """plan.json's ``energy`` summary and ``sorties`` (``companion.sorties``)."""
+    from .energy import cruise_power_w, hover_power_w
+
+    sp = plan.sorties
+    if sp is None:
+        return {}
+    cfg = mission.energy
+    return {
+        "energy": {"hover_power_w": hover_power_w(mission.vehicle, cfg),
+                   "cruise_power_w": float(cruise_power_w(mission.flight.speed_m_s, mission.vehicle, cfg)),
+                   "transit_power_w": float(cruise_power_w(mission.flight.transit_speed_m_s, mission.vehicle, cfg)),
+                   "battery_wh": cfg.battery_wh, "usable_wh": cfg.usable_wh,
+                   "total_energy_wh": sp.total_energy_wh, "total_duration_s": sp.total_duration_s,
+                   "max_mission_items": cfg.max_mission_items},
+        "launch_enu_m": _rows(sp.launch_xy_m),
+        "sorties": [{"index": s.index, "segments": list(s.segments), "energy_wh": s.energy.energy_wh,
+                     "duration_s": s.energy.duration_s, "n_items": s.n_items,
+                     "speed_changes": [[int(i), float(v)] for i, v in s.speed_changes],
+                     "path": _rows(s.path_xy_m), "waypoints": _waypoints_json(s.waypoints)}
+                    for s in sp.sorties],
     }
 
 
@@ -130,6 +158,9 @@ class PlanFile:
     data : dict
         The whole document.
     source : str
+    sorties : list of dict
+        Per sortie: ``waypoint_t_s``, ``waypoint_p_enu_m``, ``waypoint_v_enu_m_s``,
+        ``waypoint_a_enu_m_s2`` arrays (empty list for a plan.json without sorties).
     """
 
     origin: tuple[float, float, float]
@@ -149,6 +180,7 @@ class PlanFile:
     timings_s: dict
     data: dict
     source: str
+    sorties: list = dataclasses.field(default_factory=list)
 
 
 def _num_array(value, shape_tail: tuple[int, ...], src: str, key: str) -> np.ndarray:
@@ -226,29 +258,63 @@ def load_plan(path: str | Path) -> PlanFile:
     target = None
     if "target_enu_m" in data:
         target = _num_array([data["target_enu_m"]], (3,), src, "target_enu_m")[0]
+    sorties = []
+    raw_sorties = data.get("sorties", [])
+    if not isinstance(raw_sorties, list):
+        raise PlanError(f"{src}: key 'sorties'", "expected a list")
+    for j, so in enumerate(raw_sorties):
+        ws = _get(so, "waypoints", src, f"sorties[{j}]")
+        if not isinstance(ws, list) or len(ws) < 2:
+            raise PlanError(f"{src}: key 'sorties[{j}].waypoints'", "expected a list of at least 2 way-points")
+        cols_s = {}
+        for k_, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
+            cols_s[k_] = _num_array([_get(w, k_, src, f"sorties[{j}].waypoints[{i}]") for i, w in enumerate(ws)],
+                                    tail, src, f"sorties[{j}].waypoints[].{k_}")
+        if np.any(np.diff(cols_s["t"]) <= 0):
+            raise PlanError(f"{src}: key 'sorties[{j}].waypoints[].t'", "times must be strictly increasing")
+        sorties.append({"waypoint_t_s": cols_s["t"], "waypoint_p_enu_m": cols_s["p"],
+                        "waypoint_v_enu_m_s": cols_s["v"], "waypoint_a_enu_m_s2": cols_s["a"]})
     return PlanFile(origin=o, path_xy_m=path_xy, waypoint_t_s=cols["t"], waypoint_p_enu_m=cols["p"],
                     waypoint_v_enu_m_s=cols["v"], waypoint_a_enu_m_s2=cols["a"],
                     waypoint_corner=np.array(corner, dtype=bool), t_s=t, p_enu_m=arrays["p"],
                     v_enu_m_s=arrays["v"], a_enu_m_s2=arrays["a"], pointing_enu=arrays["pointing"],
-                    target_enu_m=target, stats=dict(stats), timings_s=dict(timings), data=data, source=src)
+                    target_enu_m=target, stats=dict(stats), timings_s=dict(timings), data=data, source=src,
+                    sorties=sorties)
 
 
 # --- QGroundControl exports ------------------------------------------------------
 
-def flight_items(plan, mission: Mission, waypoints_p_enu_m: np.ndarray | None = None,
-                 launch_enu_m: np.ndarray | None = None):
-    """The flight-ready items (``companion.mission_items``) of a plan (or of a sortie's
-    way-points), with the inclusion fence around the field (simplified to half the
+def flight_items(plan, mission: Mission, sortie=None, fence_enu_m: np.ndarray | None = None):
+    """The flight-ready items (``companion.mission_items``) of one sortie of a plan
+    (``plan.sorties.sorties[i]``; default: the whole route, launched under its first
+    way-point), with the inclusion fence around the field (simplified to half the
     safety margin, so the path keeps at least half the margin from the fence)."""
-    from .coverage.boundary import field_boundary
     from .mission_items import build_flight_items
 
     h = mission.home
-    wp = plan.waypoints.p_enu_m if waypoints_p_enu_m is None else waypoints_p_enu_m
-    tol = max(0.5 * mission.coverage.safety_margin_m, plan.grid.resolution_m)
-    fence = field_boundary(plan.grid, tol)
-    return build_flight_items(wp, plan.target_enu_m, (h.lat, h.lon, h.alt_m), mission.flight.speed_m_s,
-                              launch_enu_m=launch_enu_m, fence_enu_m=fence)
+    fence = field_fence(plan, mission) if fence_enu_m is None else fence_enu_m
+    if sortie is None:
+        return build_flight_items(plan.waypoints.p_enu_m, plan.target_enu_m, (h.lat, h.lon, h.alt_m),
+                                  mission.flight.speed_m_s, fence_enu_m=fence)
+    return build_flight_items(sortie.waypoints.p_enu_m, plan.target_enu_m, (h.lat, h.lon, h.alt_m),
+                              mission.flight.speed_m_s, launch_enu_m=plan.sorties.launch_xy_m,
+                              fence_enu_m=fence, speed_changes=sortie.speed_changes)
+
+
+def field_fence(plan, mission: Mission) -> np.ndarray:
+    """(K, 2) ENU inclusion fence around the field (``coverage.boundary``)."""
+    from .coverage.boundary import field_boundary
+
+    return field_boundary(plan.grid, max(0.5 * mission.coverage.safety_margin_m, plan.grid.resolution_m))
+
+
+def sortie_file(path: str, index: int, count: int) -> str:
+    """The export file of sortie ``index`` (1-based): ``path`` itself for a single
+    sortie, else ``<stem>-sortie<index><suffix>`` beside it."""
+    if count == 1:
+        return path
+    p = Path(path)
+    return str(p.with_name(f"{p.stem}-sortie{index}{p.suffix}"))
 
 
 def _json_num(v: float):

@@ -30,8 +30,11 @@ def exported(tmp_path_factory):
                      "--waypoints", str(out / "p.waypoints")]) == 0
     mission = load_mission(MISSION)
     doc = json.loads((out / "plan.json").read_text())
+    assert len(doc["sorties"]) == 1          # so the files are named as given
+    sortie = doc["sorties"][0]
     return {"out": out, "mission": mission, "doc": doc, "qgc": json.loads((out / "p.plan").read_text()),
-            "wp": np.array([w["p"] for w in doc["waypoints"]]), "target": np.array(doc["target_enu_m"])}
+            "sortie": sortie, "wp": np.array([w["p"] for w in sortie["waypoints"]]),
+            "target": np.array(doc["target_enu_m"])}
 
 
 def enu(lat, lon, alt, home):
@@ -39,15 +42,31 @@ def enu(lat, lon, alt, home):
 
 
 def test_item_sequence_positions_speed_roi_and_yaw(exported):
+    """Take-off at the launch point, the transit speed, the ROI at S_p, the sortie's
+    way-points with the coverage speed from the first corridor and the transit speed
+    again from the last corridor's end, then RTL."""
     items = exported["qgc"]["mission"]["items"]
     home, wp, target = exported["mission"].home, exported["wp"], exported["target"]
+    flight = exported["mission"].flight
+    changes = dict(exported["sortie"]["speed_changes"])
+    assert changes[0] == flight.transit_speed_m_s
+    expected = [22, 178, 195]
+    for i in range(len(wp)):
+        if i in changes and i != 0:
+            expected.append(178)
+        expected.append(16)
     cmds = [it["command"] for it in items]
-    assert cmds == [22, 178, 195] + [16] * len(wp) + [20]            # takeoff, speed, ROI, way-points, RTL
+    assert cmds == expected + [20]
     takeoff, speed, roi = items[0], items[1], items[2]
-    assert np.allclose(enu(*takeoff["params"][4:7], home), wp[0], atol=1e-3)     # over the first way-point
-    assert speed["params"][:3] == [1, exported["mission"].flight.speed_m_s, -1]  # ground speed, m/s, throttle kept
+    launch = np.array(exported["doc"]["launch_enu_m"])
+    assert np.allclose(enu(*takeoff["params"][4:7], home)[:2], launch, atol=1e-3)
+    assert enu(*takeoff["params"][4:7], home)[2] == pytest.approx(wp[0][2], abs=1e-3)
+    assert np.allclose(wp[0][:2], launch, atol=1e-6) and np.allclose(wp[-1][:2], launch, atol=1e-6)
+    assert speed["params"][:3] == [1, flight.transit_speed_m_s, -1]     # ground speed, m/s, throttle kept
+    speeds = [it["params"][1] for it in items if it["command"] == 178]
+    assert speeds == [flight.transit_speed_m_s, flight.speed_m_s, flight.transit_speed_m_s]
     assert np.allclose(enu(*roi["params"][4:7], home), target, atol=1e-3)
-    for it, p in zip(items[3:-1], wp):
+    for it, p in zip([it for it in items if it["command"] == 16], wp):
         assert np.allclose(enu(*it["params"][4:7], home), p, atol=1e-3)
         d = target[:2] - p[:2]
         yaw = math.degrees(math.atan2(d[0], d[1])) % 360.0        # from north, clockwise
@@ -103,7 +122,7 @@ def test_inclusion_fence_contains_the_path_with_margin(exported):
     home = mission.home
     fence = np.array([enu(lat, lon, 0.0, home)[:2] for lat, lon in polys[0]["polygon"]])
     assert len(fence) >= 3
-    path = np.array(doc["path"])
+    path = np.array(exported["sortie"]["path"])
     dense = np.vstack([np.linspace(p, q, 50) for p, q in zip(path[:-1], path[1:])])
     assert _inside(fence, dense).all()
     # the path keeps the safety margin from the field; the fence is simplified by half of it
@@ -225,4 +244,4 @@ def test_mission_int_encoding_of_the_items_round_trips(exported):
     for seq, it in enumerate(items.fence):
         m = parser.parse_char(codec.encode_mission_item(mav, seq, it, mission_type=mavlink.MAV_MISSION_TYPE_FENCE).pack(mav))
         assert (m.command, m.param1, m.mission_type) == (5001, 3.0, mavlink.MAV_MISSION_TYPE_FENCE)
-    assert len(doc["waypoints"]) + 4 == len(items.mission)
+    assert len(exported["wp"]) + 4 == len(items.mission)
