@@ -16,7 +16,8 @@ import numpy as np
 
 from .coverage import extract_waypoints, plan_coverage
 from .errors import PlanError
-from .maps import ElevationModel, OccupancyGrid, load_dem, load_ogm
+from .maps import ElevationModel, OccupancyGrid
+from .maps.field import load_mission_maps
 from .mission import Mission
 from .sorties import plan_sorties
 from .trajectory import Trajectory, generate_trajectory
@@ -217,15 +218,14 @@ def plan_mission(mission: Mission) -> Plan:
         coverage/flight settings do not fit the map (``check_sizes``, ``MAX_WAYPOINTS``).
     """
     t_start = time.perf_counter()
-    grid = load_ogm(mission.map_path)
-    dem = load_dem(mission.dem_path)
+    grid, dem = load_mission_maps(mission)
     t_loaded = time.perf_counter()
 
     check_sizes(mission, grid)
     coverage = plan_coverage(grid, mission.coverage)
     path = np.asarray(coverage.path_xy_m, dtype=float)
     if path.ndim != 2 or path.shape[0] < 2:
-        raise PlanError(str(mission.map_path), "the coverage planner found no path in the free space")
+        raise PlanError(grid.source, "the coverage planner found no path in the free space")
     check_dem_covers(dem, path)
     spacing_m = mission.flight.speed_m_s * mission.flight.waypoint_interval_s
     if float(coverage.path_length_m) / spacing_m > MAX_WAYPOINTS:
