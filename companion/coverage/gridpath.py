@@ -19,10 +19,10 @@ cell. Otherwise:
    corridor's edge cost more, so the path keeps off the staircase edge of
    the eroded space where there is room (:func:`cell_path`).
 4. The cell path is simplified by line-of-sight shortcutting (string
-   pulling): from each kept point, the farthest point still visible is
-   found by galloping (1, 2, 4, ... points ahead) then bisection, with one
-   vectorised visibility test per probe, so a path of ``n`` cells costs
-   ``O(k log n)`` tests for ``k`` kept points. Consecutive cell centres see
+   pulling): from each kept point, a far visible point is found by testing
+   many candidates per vectorised call (the next points, then points
+   64, 128, 256, ... ahead, then evenly spaced probes in the last gap), a
+   few calls per kept point (:func:`simplify`). Consecutive cell centres see
    each other (a diagonal step's samples at 1/3 and 2/3 lie in its two
    cells), so every kept point sees the next one.
 """
@@ -37,8 +37,10 @@ from ..errors import PlanError
 from .freespace import FreeSpace
 
 _SQRT2 = float(np.sqrt(2.0))
-#: points tested at once by the string pulling before it gallops
+#: points tested at once by the string pulling before it looks further ahead
 _WINDOW = 64
+#: points tested at once when the string pulling narrows a gap
+_PROBES = 32
 #: cells this close to the edge of the eroded space cost _EDGE_COST times more to cross
 _EDGE_CELLS = 2
 _EDGE_COST = 4.0
@@ -142,36 +144,37 @@ def cell_path(rr: np.ndarray, cc: np.ndarray, src: tuple[int, int], dst: tuple[i
 def simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
     """String pulling of a polyline whose consecutive points see each other (module doc, step 4).
 
-    From each kept point the next kept point is the farthest visible one of
-    the next ``_WINDOW`` points (one vectorised test; most connections are
-    that short); when all of them are visible, galloping and bisection go on.
+    From each kept point, one vectorised visibility test of the next
+    ``_WINDOW`` points and of points ``_WINDOW 2^k`` ahead picks the farthest
+    visible candidate; the gap up to the next candidate is then narrowed by
+    testing ``_PROBES`` evenly spaced points at once (a few rounds). A few
+    calls per kept point, each testing many segments.
     """
     pts = np.asarray(pts, float)
     n = len(pts)
     out = [0]
     i = 0
     while i < n - 1:
-        ahead = pts[i + 1: min(n, i + 1 + _WINDOW)]
-        vis = visible_from(free, pts[i], ahead)
-        vis[0] = True                              # pts[i + 1] is visible by assumption
-        if not vis.all() or i + 1 + _WINDOW >= n:
-            lo = i + 1 + int(np.flatnonzero(vis)[-1])
-        else:
-            lo, step = i + _WINDOW, _WINDOW       # all of the window is visible: gallop on
-            hi = n
-            while lo + step < n:
-                if visible_from(free, pts[i], pts[lo + step][None])[0]:
-                    lo += step
-                    step *= 2
-                else:
-                    hi = lo + step
-                    break
-            while hi - lo > 1 and lo + 1 < n:
-                mid = (lo + hi) // 2
-                if visible_from(free, pts[i], pts[mid][None])[0]:
-                    lo = mid
-                else:
-                    hi = mid
+        near = np.arange(i + 1, min(n, i + 1 + _WINDOW))
+        far = i + _WINDOW * 2 ** np.arange(1, 40)
+        cand = np.unique(np.concatenate([near, far[far < n], [n - 1]]))
+        vis = visible_from(free, pts[i], pts[cand])
+        vis[0] = True                               # pts[i + 1] is visible by assumption
+        k = int(np.flatnonzero(vis)[-1])
+        lo = int(cand[k])
+        hi = int(cand[k + 1]) if k + 1 < len(cand) else n
+        while hi - lo > 1:
+            probe = np.unique(np.linspace(lo, hi, _PROBES + 2)[1:-1].astype(np.int64))
+            probe = probe[(probe > lo) & (probe < hi)]
+            if len(probe) == 0:
+                break
+            v = visible_from(free, pts[i], pts[probe])
+            if v.any():
+                j = int(np.flatnonzero(v)[-1])
+                lo = int(probe[j])
+                hi = int(probe[j + 1]) if j + 1 < len(probe) else hi
+            else:
+                hi = int(probe[0])
         out.append(lo)
         i = lo
     return pts[out]

@@ -12,7 +12,8 @@ share one end. One shortest-path tree from that point serves them all:
   plan instead of two per sortie).
 - A transit to a point ``q`` walks the predecessors back from the nearest
   reachable pooled cell whose centre ``q`` sees, then is simplified by string
-  pulling (``gridpath.simplify``). When no such cell is near ``q`` (a passage
+  pulling (``gridpath.simplify``): on the pooled mask first (clear there is
+  clear in the fine mask), then on the fine mask over the few points left. When no such cell is near ``q`` (a passage
   narrower than a pooled cell), ``gridpath.aux_path`` finds the exact
   connection instead.
 
@@ -51,6 +52,7 @@ class TransitTree:
     dist: np.ndarray       # (n,) pooled steps from the root (inf: unreachable)
     pred: np.ndarray       # (n,) predecessor node, -9999 at the root / unreachable
     source: str
+    pooled: FreeSpace | None = None   # the pooled mask as a FreeSpace in the pooled frame
 
     def _centre_g(self, r, c) -> np.ndarray:
         cell = self.pool * self.free.resolution_m
@@ -96,7 +98,12 @@ class TransitTree:
             chain.append(int(self.pred[chain[-1]]))
         chain = np.array(chain[::-1])
         centres = self._centre_g(self.rows[chain], self.cols[chain])
-        return simplify(self.free, np.vstack([self.root_g, centres, q_g]))
+        # string pulling on the pooled mask first (pooled cells are wholly eroded, so a
+        # segment clear there is clear in the fine mask; half the samples), then on the
+        # fine mask over the few points left, with the two end hops
+        off = np.array([self.c0, self.r0]) * self.free.resolution_m
+        coarse = simplify(self.pooled, centres - off) + off
+        return simplify(self.free, np.vstack([self.root_g, coarse, q_g]))
 
 
 def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>") -> TransitTree:
@@ -138,4 +145,6 @@ def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>
     if start is None:
         return tree
     dist, pred = dijkstra(graph, directed=True, indices=start, return_predecessors=True)
-    return TransitTree(free, np.asarray(root_g, float), p, r0, c0, lin, width, rows, cols, dist, pred, source)
+    pooled_fs = FreeSpace(eroded=pooled, free=pooled, resolution_m=p * h, threshold_m=free.threshold_m)
+    return TransitTree(free, np.asarray(root_g, float), p, r0, c0, lin, width, rows, cols, dist, pred, source,
+                       pooled_fs)
