@@ -35,8 +35,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
-from scipy.spatial import cKDTree
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -46,21 +44,6 @@ import corpus  # noqa: E402  (missions/corpus.py)
 
 from companion.mission import load_mission  # noqa: E402
 from companion.planner import plan_mission  # noqa: E402
-
-
-def min_clearance_m(grid, path_xy_m: np.ndarray, step_m: float) -> float:
-    """Smallest distance (m) from the path sampled every ``step_m`` to a non-free cell centre."""
-    nf = np.pad(~grid.free, 1, constant_values=True)
-    border = nf & ndimage.binary_dilation(~nf, structure=np.ones((3, 3), bool))
-    r, c = np.nonzero(border)
-    x, y = grid.cell_to_world(r - 1, c - 1)
-    tree = cKDTree(np.column_stack([x, y]))
-    pts = [path_xy_m[:1]]
-    for p, q in zip(path_xy_m[:-1], path_xy_m[1:]):
-        n = max(2, int(np.ceil(np.hypot(*(q - p)) / step_m)) + 1)
-        t = np.linspace(0.0, 1.0, n)[1:, None]
-        pts.append((1 - t) * p + t * q)
-    return float(tree.query(np.vstack(pts))[0].min())
 
 
 def run_one(f: corpus.Field, workdir: Path) -> dict:
@@ -74,7 +57,7 @@ def run_one(f: corpus.Field, workdir: Path) -> dict:
     check = corpus.check_coverage(f, plan.coverage.path_xy_m)
     row.update(failed="", coverage=check.fraction, reachable=check.reachable_samples,
                corridor=check.corridor_samples, planner_coverage=plan.stats.coverage_fraction,
-               clearance_m=min_clearance_m(plan.grid, np.asarray(plan.coverage.path_xy_m), f.resolution_m / 4),
+               clearance_m=corpus.path_clearance_m(plan.grid, np.asarray(plan.coverage.path_xy_m), f.resolution_m / 4),
                margin_m=f.safety_margin_m, dropped=len(plan.coverage.dropped_segments),
                t_total=plan.timings_s.total, t_coverage=plan.timings_s.coverage,
                n_waypoints=plan.stats.n_waypoints)

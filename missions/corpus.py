@@ -318,6 +318,24 @@ def check_coverage(f: Field, path_xy_m: np.ndarray) -> CoverageCheck:
                          covered_samples=int(np.count_nonzero(d <= s / 4)))
 
 
+def path_clearance_m(grid, path_xy_m: np.ndarray, step_m: float) -> float:
+    """Smallest distance (m) from the path (sampled every ``step_m``) to the centre of a
+    non-free cell, the map's outside included (a KD-tree of the non-free cells that touch
+    free ones: the nearest non-free cell to a free point is one of those)."""
+    nf = np.pad(~grid.free, 1, constant_values=True)
+    border = nf & ndimage.binary_dilation(~nf, structure=np.ones((3, 3), bool))
+    r, c = np.nonzero(border)
+    x, y = grid.cell_to_world(r - 1, c - 1)
+    tree = cKDTree(np.column_stack([x, y]))
+    path = np.asarray(path_xy_m, float)
+    pts = [path[:1]]
+    for p, q in zip(path[:-1], path[1:]):
+        n = max(2, int(np.ceil(np.hypot(*(q - p)) / step_m)) + 1)
+        t = np.linspace(0.0, 1.0, n)[1:, None]
+        pts.append((1 - t) * p + t * q)
+    return float(tree.query(np.vstack(pts))[0].min())
+
+
 # --- files ---------------------------------------------------------------------
 
 def write_field(f: Field, out: str | Path) -> Path:

@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy import ndimage
-from scipy.spatial import cKDTree
 
 from companion.coverage import plan_coverage
 from companion.coverage.freespace import erode_free_space
@@ -30,20 +29,8 @@ RES = 0.1
 
 
 def clearance_m(grid: OccupancyGrid, path_xy_m: np.ndarray, step_m: float = RES / 4) -> float:
-    """Smallest distance (m) from the path (sampled every ``step_m``) to the centre of a
-    non-free cell, the map's outside included (a KD-tree of the non-free cells that touch
-    free ones: the nearest non-free cell to a free point is one of those)."""
-    nf = np.pad(~grid.free, 1, constant_values=True)
-    border = nf & ndimage.binary_dilation(~nf, structure=np.ones((3, 3), bool))
-    r, c = np.nonzero(border)
-    x, y = grid.cell_to_world(r - 1, c - 1)
-    tree = cKDTree(np.column_stack([x, y]))
-    pts = [path_xy_m[:1]]
-    for p, q in zip(path_xy_m[:-1], path_xy_m[1:]):
-        n = max(2, int(np.ceil(np.hypot(*(q - p)) / step_m)) + 1)
-        t = np.linspace(0.0, 1.0, n)[1:, None]
-        pts.append((1 - t) * p + t * q)
-    return float(tree.query(np.vstack(pts))[0].min())
+    """Smallest distance (m) from the path to a non-free cell centre (``corpus.path_clearance_m``)."""
+    return corpus.path_clearance_m(grid, path_xy_m, step_m)
 
 
 @pytest.mark.parametrize("seed", range(10))

@@ -134,8 +134,9 @@ def _rings_kml(text: str, src: str):
     return polys, lines
 
 
-def _inside(x: np.ndarray, y: np.ndarray, ring: np.ndarray) -> np.ndarray:
-    """Even-odd point in polygon (vectorised over points, loop over the ring's edges)."""
+def points_in_polygon(x: np.ndarray, y: np.ndarray, ring: np.ndarray) -> np.ndarray:
+    """Even-odd point in polygon: x, y broadcast; ring (K, 2). Vectorised over the points,
+    a loop over the ring's edges."""
     inside = np.zeros(np.broadcast(x, y).shape, dtype=bool)
     a = ring
     b = np.roll(ring, -1, axis=0)
@@ -180,12 +181,12 @@ def rasterize_field(boundary: list[np.ndarray], exclusions: list[np.ndarray], ro
     for r0 in range(0, rows, chunk):
         yc = y_lo + (np.arange(r0, min(rows, r0 + chunk)) + 0.5) * resolution_m
         X, Y = np.meshgrid(xc, yc)
-        inside = _inside(X, Y, outer)
+        inside = points_in_polygon(X, Y, outer)
         for hole in boundary[1:]:
-            inside &= ~_inside(X, Y, hole)
+            inside &= ~points_in_polygon(X, Y, hole)
         blocked = ~inside
         for ex in exclusions:
-            blocked |= _inside(X, Y, ex)
+            blocked |= points_in_polygon(X, Y, ex)
         vine = np.zeros(X.shape, dtype=bool)
         for line in rows_xy:
             for (ax, ay), (bx, by) in zip(line[:-1], line[1:]):
