@@ -169,6 +169,19 @@ def check_dem_covers(dem: ElevationModel, path_xy_m: np.ndarray) -> None:
                         f"y {y_min:.2f}..{y_max:.2f} m, NODATA cells excluded)")
 
 
+def check_dem_overlaps(dem: ElevationModel, grid: OccupancyGrid) -> None:
+    """PlanError naming the DEM when it does not overlap the map at all: a
+    georeferenced DEM (UTM, Lambert-93, ...) read as local coordinates, said
+    before planning instead of as "does not cover the path" afterwards."""
+    rows, cols = grid.shape
+    cx, cy = grid.cell_to_world(np.array([0, 0, rows - 1, rows - 1]), np.array([0, cols - 1, 0, cols - 1]))
+    x_min, x_max, y_min, y_max = dem.extent_m
+    if cx.max() < x_min or cx.min() > x_max or cy.max() < y_min or cy.min() > y_max:
+        raise PlanError(dem.source, f"the DEM (x {x_min:.0f}..{x_max:.0f}, y {y_min:.0f}..{y_max:.0f} m) does not "
+                        f"overlap the map (x {cx.min():.0f}..{cx.max():.0f}, y {cy.min():.0f}..{cy.max():.0f} m); "
+                        "if it is georeferenced (UTM, ...), give the mission key dem_crs or a .prj file")
+
+
 def check_sizes(mission: Mission, grid: OccupancyGrid) -> None:
     """PlanError unless the coverage settings fit the map's cell size.
 
@@ -222,6 +235,7 @@ def plan_mission(mission: Mission) -> Plan:
     t_loaded = time.perf_counter()
 
     check_sizes(mission, grid)
+    check_dem_overlaps(dem, grid)
     coverage = plan_coverage(grid, mission.coverage)
     path = np.asarray(coverage.path_xy_m, dtype=float)
     if path.ndim != 2 or path.shape[0] < 2:

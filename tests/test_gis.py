@@ -288,3 +288,14 @@ def test_home_heading_rotates_local_maps_into_enu(tmp_path):
         r1, c1 = (int(round(v)) for v in rot[0].world_to_cell(-y, x))
         assert (r0, c0) == (r1, c1)
     assert math.isclose(rot[0].origin_yaw_rad, plain[0].origin_yaw_rad + math.pi / 2)
+
+
+def test_utm_asc_without_a_crs_is_named_before_planning(tmp_path, capsys):
+    """A UTM-referenced ASCII grid without .prj or dem_crs is read as local metres: it
+    lies half a million metres away from the map; said up front, with the remedy."""
+    m = _geo_mission(tmp_path, "dem: dem.asc")
+    (m.parent / "dem.asc").write_text("ncols 3\nnrows 3\nxllcorner 500000\nyllcorner 4960000\ncellsize 50\n"
+                                      + "35 35 35\n" * 3)
+    rc = main(["plan", str(m), "-o", str(tmp_path / "p.json")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "dem.asc" in err[0] and "does not overlap" in err[0] and "dem_crs" in err[0]
