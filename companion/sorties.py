@@ -6,7 +6,9 @@ consecutive main segments ``m_s .. m_e`` with the connections between them,
 reached from the launch point ``L`` by a transit in the eroded free space
 (``coverage.transit``: one shortest-path tree from ``L`` serves every
 transit; it never crosses a vine row) at ``flight.transit_speed_m_s``, and
-closed by the transit back to ``L``. Sorties therefore split the route at corridor
+closed by the transit back to ``L``. The way out of a sortie that starts
+where the previous one ended is that sortie's way back, reversed, plus the
+route's own connection to the next corridor. Sorties therefore split the route at corridor
 ends, and every corridor is flown whole in exactly one sortie.
 
 Greedy split: from the first unflown segment, add segments while the
@@ -258,9 +260,15 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
 
     def transit(kind: str, i: int) -> tuple[np.ndarray, Waypoints]:
         if (kind, i) not in cache:
-            q = mains[i][0] if kind == "out" else mains[i][-1]
-            path = grid_to_world(grid, tree.path_to(world_to_grid(grid, q)))
-            path = path if kind == "out" else path[::-1]
+            if kind == "out" and ("back", i - 1) in cache:
+                # the previous sortie came back from the end of segment i - 1: the way out
+                # is that way reversed plus the route's own connection to segment i (no search)
+                back_path = cache[("back", i - 1)][0]
+                path = np.vstack([back_path[::-1], auxs[i - 1][1:]])
+            else:
+                q = mains[i][0] if kind == "out" else mains[i][-1]
+                path = grid_to_world(grid, tree.path_to(world_to_grid(grid, q)))
+                path = path if kind == "out" else path[::-1]
             path, _, _ = _join_runs([(path, Vt)])
             if len(path) < 2:
                 path = np.vstack([path, path[-1:] + 1e-3])      # launch at the corridor end itself
