@@ -52,6 +52,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=None, metavar="N",
                         help="seed of the SITL's noise and wind (default: the mission's sim.seed)")
     parser.add_argument("--no-plots", action="store_true", help="skip the figures")
+    from .fly import add_safety_arguments
+
+    add_safety_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
 
@@ -114,10 +117,11 @@ def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
     from ..progress import Progress
     from ..report import write_report
     from ..runner import UNUSED_STREAMS
-    from .fly import FlightPlan, execute
+    from .fly import EXIT_FAILED, FlightPlan, execute, safety_overrides
 
     ATTITUDE = 30   # MAVLINK_MSG_ID_ATTITUDE: the SITL's ground-truth ODOMETRY carries the attitude
 
+    overrides = safety_overrides(args)
     mission = load_mission(mission_path)
 
     from ..planner import plan_mission
@@ -138,7 +142,7 @@ def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
     sitl.wait_ready()
     try:
         result = execute(mission, fp, sitl.url, args.control, str(out / "flight.tlog"), progress, args.cut,
-                         {"mute_streams": UNUSED_STREAMS + (ATTITUDE,)})
+                         {"mute_streams": UNUSED_STREAMS + (ATTITUDE,), **overrides})
     finally:
         sitl.stop()
     rep = result.report
@@ -176,6 +180,6 @@ def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
     files = ["plan.json", "flight.tlog", "report.json"] + [Path(f).name for f in (figures or [])]
     print(f"wrote {out}/: {', '.join(files)}" + ("" if figures is not None else
                                                  " (figures skipped: install the plot extra)"))
-    if rep.error:
-        print(f"companion demo: {rep.error}", file=sys.stderr)
-    return 0 if rep.completed else 1
+    if not rep.completed:
+        print(f"companion demo: NOT completed: {rep.error or rep.phase}", file=sys.stderr)
+    return 0 if rep.completed else EXIT_FAILED

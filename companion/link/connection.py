@@ -66,7 +66,7 @@ class Connection:
     tlog : TlogWriter or None
         Records every packet sent and received (already opened by the caller).
     target_system, target_component : int
-        The vehicle (DESIGN.md: 1/1).
+        The vehicle (1/1, docs/mavlink.md "Who is who").
 
     Notes
     -----
@@ -104,6 +104,13 @@ class Connection:
         #: usually arrives within tens of microseconds, less than a process
         #: wake-up costs. Only worth it with the vehicle on another core.
         self.spin_s = 0.0
+        #: Time stamp (us) for the .tlog records: the runner maps the vehicle's
+        #: clock onto the wall clock (``MissionRunner._stamp_us``); None: wall clock.
+        self.clock: Callable[[], int] | None = None
+
+    def _stamp(self) -> int:
+        c = self.clock
+        return c() if c is not None else int(time.time() * 1e6)
 
     # --- lifetime ---------------------------------------------------------
 
@@ -177,7 +184,7 @@ class Connection:
         self.n_sent += 1
         if self.tlog is not None:
             self._flush_rx()
-            self.tlog.write(msg.get_msgbuf())
+            self.tlog.write(msg.get_msgbuf(), self._stamp())
 
     def _flush_rx(self) -> None:
         """Record the packets of the last datagram received (deferred until
@@ -186,7 +193,7 @@ class Connection:
         if rx is not None:
             self._rx_log = None
             if self.tlog is not None:
-                self.tlog.write_many(rx[1], rx[0])
+                self.tlog.write_many(rx, self._stamp())
 
     def _write(self, buf: bytes) -> None:
         if self._dest is not None:
@@ -213,7 +220,7 @@ class Connection:
         self.n_sent += 1
         if self.tlog is not None:
             self._flush_rx()
-            self.tlog.write(buf)
+            self.tlog.write(buf, self._stamp())
 
     def send_heartbeat(self) -> None:
         self.send(self._mav.heartbeat_encode(
@@ -329,7 +336,8 @@ class Connection:
             self.n_received += len(out)
             if self.tlog is not None:
                 self._flush_rx()
-                self._rx_log = (int(time.time() * 1e6), [m.get_msgbuf() for m in out])
+                # stamped when written (after the frame was handled: its vehicle time)
+                self._rx_log = [m.get_msgbuf() for m in out]
         return out
 
     def poll(self, timeout_s: float = 0.0) -> list:
@@ -363,7 +371,7 @@ class Connection:
             for m in self._parse(data):
                 out.append(m)
                 if tlog is not None:
-                    tlog.write(m.get_msgbuf())
+                    tlog.write(m.get_msgbuf(), self._stamp())
         self.n_received += len(out)
         if not out and timeout_s > 0 and self._fd is None:
             time.sleep(min(timeout_s, 0.001))

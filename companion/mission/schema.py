@@ -1,4 +1,4 @@
-"""Mission file schema (DESIGN.md "Mission YAML"): frozen dataclasses.
+"""Mission file schema (docs/mission.md): frozen dataclasses.
 
 The field comes from ``map`` (a Nav2 map YAML) or ``field`` (GeoJSON/KML);
 ``dem`` is a local ASCII grid or a georeferenced raster (``dem_crs`` when the
