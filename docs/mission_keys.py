@@ -33,15 +33,49 @@ END = "<!-- END mission keys -->"
 #: dotted key -> (unit, range, meaning). ``[]`` marks the items of a list.
 NOTES: dict[str, tuple[str, str, str]] = {
     "name": ("", "", "Mission name (plan.json `name`, report.json `mission`)."),
-    "map": ("", "", "Occupancy grid: ROS map_server YAML, relative to the mission file."),
-    "dem": ("", "", "Elevation model: ESRI ASCII grid, relative to the mission file, same frame as the map."),
+    "map": ("", "exactly one of map, field", "Occupancy grid: a Nav2 / ROS map_server YAML (image in any "
+            "format Nav2 reads: PGM, PNG, BMP, TIFF, ...), relative to the mission file."),
+    "field": ("", "exactly one of map, field", "A field as vectors instead of `map` (GeoJSON or KML, "
+              "WGS-84), rasterised by companion/maps/field.py."),
+    "field.file": ("", "", "The GeoJSON or KML file, relative to the mission file: the boundary polygon, "
+                   "exclusion polygons (occupied), row lines (occupied)."),
+    "field.resolution_m": ("m", "0.01 to 10 (checked with the field)", "Cell size of the rasterised field."),
+    "field.row_width_m": ("m", "above 0, at most 10 (checked with the field)",
+                          "Width of the vine rows drawn from the row lines."),
+    "field.border_m": ("m", "0 to 100 (checked with the field)", "Unknown border around the boundary in the "
+                       "raster."),
+    "dem": ("", "", "Elevation model: an ESRI/GDAL ASCII grid in the map's local frame, or a "
+            "georeferenced raster (GeoTIFF, or any raster with a .prj, or with dem_crs; the gis extra), "
+            "relative to the mission file."),
+    "dem_crs": ("", "", "CRS of a DEM file that has none (`EPSG:32631`, WKT); null: local or the "
+                "file's own."),
     "description": ("", "", "Free text."),
     "home.lat": ("deg", "[-90, 90]", "WGS-84 latitude of the map frame's origin."),
     "home.lon": ("deg", "[-180, 180]", "WGS-84 longitude of the map frame's origin."),
     "home.alt_m": ("m AMSL", "[-1e5, 1e5]", "Altitude of the map frame's z = 0."),
+    "home.heading_deg": ("deg", "[-360, 360]", "Compass bearing of the local map files' x axis "
+                         "(clockwise from north; 90 = east): local maps are rotated into ENU."),
     "flight.height_agl_m": ("m", "(0, 1000]", "Flight height above the terrain (DEM)."),
     "flight.speed_m_s": ("m/s", "> 0", "Cruise speed along the rows."),
     "flight.waypoint_interval_s": ("s", "> 0", "Time between way-points on a run."),
+    "flight.transit_speed_m_s": ("m/s", "(0, 30]", "Speed of a sortie's transits between the launch "
+                                 "point and its corridors."),
+    "energy.battery_capacity_ah": ("Ah", "> 0", "Battery capacity."),
+    "energy.battery_voltage_v": ("V", "> 0", "Nominal battery voltage (cells = V / 3.7)."),
+    "energy.reserve_fraction": ("", "[0, 1)", "Share of the capacity a sortie leaves unused."),
+    "energy.rotor_radius_m": ("m", "> 0", "Rotor radius (momentum theory, companion/energy.py)."),
+    "energy.figure_of_merit": ("", "(0, 1]", "Rotor figure of merit (ideal over actual power)."),
+    "energy.drive_efficiency": ("", "(0, 1]", "Motor and ESC efficiency (shaft over battery power)."),
+    "energy.drag_area_m2": ("m^2", ">= 0", "Parasite drag area CdA."),
+    "energy.avionics_power_w": ("W", ">= 0", "Power of everything but the rotors."),
+    "energy.air_density_kg_m3": ("kg/m^3", "> 0", "Air density."),
+    "energy.climb_speed_m_s": ("m/s", "> 0", "Vertical speed of take-off and landing."),
+    "energy.internal_resistance_ohm": ("ohm", ">= 0", "Pack resistance (the SITL's terminal voltage)."),
+    "energy.max_mission_items": ("", "integer >= 8 (checked in the loader)", "Mission items the vehicle "
+                                 "holds (the bundled SITL: 2000); every sortie's mission fits."),
+    "energy.launch_xy_m": ("m", "", "Launch point of every sortie, ENU [x, y]; null: the admissible "
+                           "point nearest to the centroid of the free cells."),
+    "energy.split": ("", "", "`auto`: battery-sized sorties; `none`: the whole route as one sortie."),
     "coverage.line_spacing_m": ("m", "(0, 1000] or null",
                                 "Distance between coverage lines; null: the detected row spacing."),
     "coverage.safety_margin_m": ("m", "[0, 1000]", "Free space eroded around obstacles before planning."),
@@ -207,7 +241,18 @@ def _type_name(tp) -> str:
             inner = "mapping" if dataclasses.is_dataclass(args[0]) else _type_name(args[0])
             return f"list of {inner}"
         return "[" + ", ".join(_type_name(a) for a in args) + "]"
+    if dataclasses.is_dataclass(tp):
+        return "mapping"
     return {float: "number", int: "integer", bool: "boolean", str: "string"}[tp]
+
+
+def _optional_dataclass(tp):
+    """X for ``X | None`` with X a dataclass (an optional section), else None."""
+    if typing.get_origin(tp) in (Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(args) == 1 and dataclasses.is_dataclass(args[0]):
+            return args[0]
+    return None
 
 
 def _default(f: dataclasses.Field) -> str:
@@ -260,6 +305,9 @@ def leaf_fields(cls=None, prefix: str = ""):
             out += leaf_fields(tp, key + ".")
             continue
         out.append((key, tp, f))
+        section = _optional_dataclass(tp)
+        if section is not None:
+            out += leaf_fields(section, key + ".")
         item = _list_item_class(tp)
         if item is not None:
             out += leaf_fields(item, key + "[].")

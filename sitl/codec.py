@@ -783,3 +783,23 @@ def odometry_truth(mav, time_us: int, pos_enu_m, vel_enu_m_s, R_enu_flu, omega_f
         float(p[0]), float(p[1]), float(p[2]), [float(c) for c in q],
         float(v_frd[0]), float(v_frd[1]), float(v_frd[2]), float(w[0]), float(w[1]), float(w[2]),
         cov, cov, 0, mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN, 100)
+
+
+def sys_status(mav, sensors_present: int, sensors_enabled: int, sensors_health: int, voltage_v: float,
+               current_a: float, remaining: float):
+    """SYS_STATUS with the battery: volts -> mV, amperes -> cA, 0..1 -> %."""
+    return mav.sys_status_encode(sensors_present, sensors_enabled, sensors_health, 250,
+                                 int(round(voltage_v * 1000.0)), int(round(current_a * 100.0)),
+                                 int(round(100.0 * min(max(remaining, 0.0), 1.0))), 0, 0, 0, 0, 0, 0)
+
+
+def battery_status(mav, cells: int, voltage_v: float, current_a: float, consumed_ah: float,
+                   consumed_wh: float, remaining: float):
+    """BATTERY_STATUS (id 0, all functions, LiPo): per-cell mV (UINT16_MAX for cells
+    the pack does not have), cA, mAh, hJ, %."""
+    cell_mv = int(round(voltage_v / cells * 1000.0))
+    volts = [cell_mv if i < cells else 65535 for i in range(10)]
+    return mav.battery_status_encode(0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO,
+                                     32767, volts, int(round(current_a * 100.0)),
+                                     int(round(consumed_ah * 1000.0)), int(round(consumed_wh * 36.0)),
+                                     int(round(100.0 * min(max(remaining, 0.0), 1.0))))

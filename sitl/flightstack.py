@@ -333,7 +333,8 @@ class MissionProtocol:
     RETRY_S = 0.5
     MAX_RETRIES = 5
 
-    def __init__(self) -> None:
+    def __init__(self, max_items: int = MAX_MISSION_ITEMS) -> None:
+        self.max_items = int(max_items)
         self.items: tuple[MissionItem, ...] = ()
         self.current_seq = 0
         self._upload: list[MissionItem] | None = None
@@ -354,7 +355,7 @@ class MissionProtocol:
             if count == 0:
                 return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mission_type)]
             return [SendAck(mavlink.MAV_MISSION_UNSUPPORTED, mission_type)]
-        if count < 0 or count > MAX_MISSION_ITEMS:
+        if count < 0 or count > self.max_items:
             self._upload = None
             return [SendAck(mavlink.MAV_MISSION_NO_SPACE, mission_type)]
         if count == 0:

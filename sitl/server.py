@@ -40,7 +40,7 @@ While the vehicle clock is stalled (lockstep wait) a HEARTBEAT still goes
 out once per wall-clock second so that ground stations keep the link.
 
 Message rates (defaults, changeable by MAV_CMD_SET_MESSAGE_INTERVAL):
-HEARTBEAT 1 Hz, SYS_STATUS 1 Hz, SYSTEM_TIME 1 Hz, EXTENDED_SYS_STATE 5 Hz,
+HEARTBEAT 1 Hz, SYS_STATUS and BATTERY_STATUS 1 Hz (sitl/battery.py), SYSTEM_TIME 1 Hz, EXTENDED_SYS_STATE 5 Hz,
 ATTITUDE / ATTITUDE_QUATERNION / LOCAL_POSITION_NED 50 Hz,
 GLOBAL_POSITION_INT 10 Hz, GPS_RAW_INT 5 Hz, POSITION_TARGET_LOCAL_NED
 10 Hz, HOME_POSITION 0.5 Hz, ODOMETRY off (when requested: the true state,
@@ -94,6 +94,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.mission.schema import Mission
 
 from . import codec
+from .battery import Battery
 from .flightstack import (
     IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
     Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
@@ -129,6 +130,7 @@ ID = mavlink
 _DEFAULT_RATES_HZ = {
     ID.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
     ID.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    ID.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
     ID.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
     ID.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
     ID.MAVLINK_MSG_ID_ATTITUDE: 50.0,
@@ -428,7 +430,8 @@ class SitlServer:
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
         self.stack = FlightStack(self.params, self.home_enu_m)
         self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
-        self.missions = MissionProtocol()
+        self.missions = MissionProtocol(mission.energy.max_mission_items)
+        self.battery = Battery(mission.energy)
         self._mission_peer = None
         self._apply_params()
         self._frame = None
@@ -452,6 +455,7 @@ class SitlServer:
         self._encoders = {
             ID.MAVLINK_MSG_ID_HEARTBEAT: self._enc_heartbeat,
             ID.MAVLINK_MSG_ID_SYS_STATUS: self._enc_sys_status,
+            ID.MAVLINK_MSG_ID_BATTERY_STATUS: self._enc_battery,
             ID.MAVLINK_MSG_ID_SYSTEM_TIME: self._enc_system_time,
             ID.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self._enc_ext_state,
             ID.MAVLINK_MSG_ID_ATTITUDE: self._enc_attitude,
@@ -610,6 +614,7 @@ class SitlServer:
             self._onboard_flying = True
             frame = sim.step_onboard(out.setpoint)
         self._frame = frame
+        self.battery.drain(sim.plant.f, sim.dt_frame_s)
         self.frames += 1
         if sim.crash is not None and not self.stack.crashed:
             self._on_crash(sim.crash)
@@ -738,8 +743,14 @@ class SitlServer:
         s = self._nav_state(self._frame)
         if s.landed and s.tilt_rad < math.radians(30.0):
             health |= _PREARM
-        return self._mav().sys_status_encode(_SENSORS | _PREARM, _SENSORS | _PREARM, health, 250,
-                                             16800, -1, 100, 0, 0, 0, 0, 0, 0)
+        b = self.battery
+        return codec.sys_status(self._mav(), _SENSORS | _PREARM, _SENSORS | _PREARM, health, b.voltage_v,
+                                b.current_a, b.remaining)
+
+    def _enc_battery(self):
+        b = self.battery
+        return codec.battery_status(self._mav(), b.cells, b.voltage_v, b.current_a, b.consumed_ah,
+                                    b.consumed_wh, b.remaining)
 
     def _enc_system_time(self):
         t = self.sim.time_us

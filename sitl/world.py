@@ -423,8 +423,8 @@ def load_world(mission: "Mission") -> World:
     MapError
         A map file cannot be loaded (from the companion's loaders).
     """
-    from companion.maps import load_dem, load_ogm  # noqa: PLC0415  (I/O only here)
+    from companion.maps.field import load_mission_maps  # noqa: PLC0415  (I/O only here)
 
-    grid = load_ogm(mission.map_path)
-    dem = load_dem(mission.dem_path)
+    # the planner's loader: Nav2 maps or vector fields, local or georeferenced DEMs, home heading
+    grid, dem = load_mission_maps(mission)
     return World.build(grid, dem, mission.sim.obstacles, mission.sim.canopy_height_m)

@@ -250,7 +250,7 @@ def test_report_schema_rejects_a_missing_key(key):
 def test_schemas_accept_later_minor_versions_where_growth_is_expected(plan_doc):
     assert _errors(PLAN, plan_doc) == []                 # the cut document is valid as it is
     # a 1.x file may add keys at the top level and in the open objects
-    plan_doc.update(format_version="1.3", sorties=[{"waypoints": [0, 5]}])
+    plan_doc.update(format_version="1.3", replans=[{"waypoints": [0, 5]}])
     plan_doc["stats"]["n_sorties"] = 1
     plan_doc["timings_s"]["sorties"] = 0.01
     assert _errors(PLAN, plan_doc) == []

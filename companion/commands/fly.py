@@ -13,6 +13,9 @@ onboard link, ``udpout`` on its side) needs ``--connect udpin:0.0.0.0:PORT``.
 Without ``--plan`` the mission is planned here (as ``companion plan``); with
 it, the trajectory is rebuilt from the plan's way-points with the mission's
 trajectory weights (the LQR solution is exact, so it is the same trajectory).
+``--sortie N`` flies sortie N of the plan (``companion.sorties``: from the
+launch point through its transit, its corridors, and back) instead of the
+whole route; the runner flies it like any trajectory.
 Exit code 0 when the flight completed (every check of
 ``companion.flight.monitor`` held: armed, airborne, in our mode, no crash,
 error within ``--max-error``; landed and disarmed), 3 when it did not (the
@@ -47,6 +50,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--cut", type=float, default=None, metavar="S",
                         help="fly only the way-points up to S seconds into the trajectory, the last one made a stop "
                              "(the trajectory is re-solved so it ends at rest)")
+    parser.add_argument("--sortie", type=int, default=None, metavar="N",
+                        help="fly only sortie N (1-based) of the plan: from the launch point, its corridors, "
+                             "back to the launch point")
     add_safety_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -122,18 +128,45 @@ class FlightPlan:
         return FlightPlan(traj, p, self.target_enu_m, self.coverage_fraction, t, v, a, self.path_xy_m)
 
 
-def prepare(mission, plan_path: str | None) -> FlightPlan:
-    """Plan ``mission`` or rebuild the trajectory of ``plan_path``.
+def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config,
+                       path_xy_m=None) -> FlightPlan:
+    """The FlightPlan of one sortie's way-points (ENU map frame): the LQR trajectory
+    through them with the mission's weights; the runner flies it like a whole plan."""
+    from ..trajectory import generate_trajectory
+
+    t, p, v, a = (np.asarray(x, dtype=float) for x in (t_s, p_enu_m, v_enu_m_s, a_enu_m_s2))
+    traj = generate_trajectory(t, p, v, a, config, target_enu_m=target_enu_m)
+    return FlightPlan(traj, p, np.asarray(target_enu_m, dtype=float), None, t, v, a,
+                      None if path_xy_m is None else np.asarray(path_xy_m, dtype=float))
+
+
+def _pick_sortie(count: int, sortie: int, source: str) -> int:
+    if not 1 <= sortie <= count:
+        raise InputError("--sortie", f"{sortie} is not a sortie of {source} (it has {count})")
+    return sortie - 1
+
+
+def prepare(mission, plan_path: str | None, sortie: int | None = None) -> FlightPlan:
+    """Plan ``mission`` or rebuild the trajectory of ``plan_path``; ``sortie`` (1-based)
+    picks one sortie of the plan instead of the whole route.
 
     Raises
     ------
     PlanError, MapError
         Bad plan file or maps (one-line InputError).
+    InputError
+        ``--sortie`` is not a sortie of the plan.
     """
     if plan_path is None:
         from ..planner import plan_mission
 
-        return FlightPlan.from_plan(plan_mission(mission))
+        plan = plan_mission(mission)
+        if sortie is None:
+            return FlightPlan.from_plan(plan)
+        so = plan.sorties.sorties[_pick_sortie(len(plan.sorties.sorties), sortie, mission.name)]
+        w = so.waypoints
+        return sortie_flight_plan(w.t_s, w.p_enu_m, w.v_enu_m_s, w.a_enu_m_s2, plan.target_enu_m,
+                                  mission.trajectory, so.path_xy_m)
     from ..plan_io import load_plan
     from ..trajectory import generate_trajectory
 
@@ -143,6 +176,10 @@ def prepare(mission, plan_path: str | None) -> FlightPlan:
         # A plan.json without ``target_enu_m`` (the loader does not require
         # it, docs/plan-json.md): S_p is where the pointing rays of eq. (21) meet.
         target = pointing_target_from_rays(pf.p_enu_m, pf.pointing_enu, str(plan_path))
+    if sortie is not None:
+        so = pf.sorties[_pick_sortie(len(pf.sorties), sortie, str(plan_path))]
+        return sortie_flight_plan(so["waypoint_t_s"], so["waypoint_p_enu_m"], so["waypoint_v_enu_m_s"],
+                                  so["waypoint_a_enu_m_s2"], target, mission.trajectory)
     traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
                                pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")
@@ -194,7 +231,7 @@ def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | No
         "version": __version__,
         "mission": mission.name,
         "mission_sha": digest(mission.source),
-        "map_sha": digest(mission.map_path),
+        "map_sha": digest(mission.map_path if mission.map is not None else mission.field_path),
         "dem_sha": digest(mission.dem_path),
         "plan_sha": digest(plan_path) if plan_path else None,
         "control": control,
@@ -259,8 +296,10 @@ def run(args) -> int:
         raise InputError("--cut", "must be > 0 seconds")
     check_output_paths((("--tlog", args.tlog), ("--report", args.report)))
     overrides = safety_overrides(args)
+    if args.sortie is not None and args.sortie < 1:
+        raise InputError("--sortie", f"sorties are numbered from 1, got {args.sortie}")
     mission = load_mission(args.mission)
-    fp = prepare(mission, args.plan)
+    fp = prepare(mission, args.plan, args.sortie)
     progress = Progress(enabled=not args.quiet)
     result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, overrides,
                      args.plan)

@@ -364,6 +364,21 @@ def encode_mission_item_int(mav, seq: int, pos_enu_m, home_lat_deg: float, home_
     )
 
 
+def encode_mission_item(mav, seq: int, item, target_system: int = 1, target_component: int = 1,
+                        mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION, current: bool = False):
+    """MISSION_ITEM_INT from a ``companion.mission_items.MissionItem`` (degrees, m AMSL).
+
+    Latitude/longitude become 1e7 degrees here (the only place they may).
+    ``mission_type``: MAV_MISSION_TYPE_MISSION or MAV_MISSION_TYPE_FENCE.
+    """
+    p1, p2, p3, p4 = (float(v) for v in item.params)
+    return mav.mission_item_int_encode(
+        target_system, target_component, seq, int(item.frame), int(item.command), 1 if current else 0,
+        1 if item.autocontinue else 0, p1, p2, p3, p4,
+        int(round(item.lat_deg * 1e7)), int(round(item.lon_deg * 1e7)), float(item.alt_m), mission_type,
+    )
+
+
 def decode_mission_item_int(msg, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> np.ndarray:
     """MISSION_ITEM_INT in ``MAV_FRAME_GLOBAL_INT`` -> ENU way-point (3,) m about home."""
     x, y, z = frames.geodetic2enu(msg.x * 1e-7, msg.y * 1e-7, float(msg.z), home_lat_deg, home_lon_deg, home_alt_m)
