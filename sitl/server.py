@@ -55,9 +55,16 @@ The SITL has no state estimator: ATTITUDE, the onboard controller and the
 flight stack use the true attitude; positions are the (noisy) position
 measurements; HIGHRES_IMU carries the noisy IMU.
 
-Signing: SETUP_SIGNING stores the key on every link and signs all outgoing
-messages with it; unsigned incoming messages are still accepted (a SITL
-convenience, documented), an all-zero key disables signing.
+Who may control the vehicle (``sitl.auth``): control messages are accepted
+only from configured controllers (by system/component ids, on a control
+link, from the address they first came from), others are ignored with one
+STATUSTEXT per source; read-only requests are open to anyone. ``--out``
+links are telemetry-only, ``--control-out`` links carry control too.
+
+Signing (MAVLink 2): with ``signing_key`` every outgoing packet is signed,
+control must carry a valid, fresh signature and SETUP_SIGNING is refused.
+Without it, SETUP_SIGNING from a controller stores a key the same way (an
+all-zero key, sent signed, turns signing off again).
 """
 
 from __future__ import annotations
@@ -82,6 +89,12 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.mission.schema import Mission
 
 from . import codec
+from companion.link.signing import (
+    SignatureVerifier, disable_outgoing_signing, enable_outgoing_signing, signing_timestamp,
+)
+from companion.link.sockets import is_udp_url, open_udp
+
+from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller
 from .flightstack import (
     IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
     Parameters, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
@@ -164,6 +177,18 @@ class ServerConfig:
         Busy-poll for lockstep answers (SIM_LS_SPIN). False when the peer
         shares this process (``SitlThread``): a spinning thread would only
         compete with it for the interpreter lock.
+    control_outs : tuple of str
+        Extra links that may carry control (``outs`` are telemetry-only);
+        see ``sitl.auth``.
+    controllers : tuple of sitl.auth.Controller or None
+        Who may control the vehicle (None: ``sitl.auth.DEFAULT_CONTROLLERS``).
+    signing_key : bytes or None
+        32-byte MAVLink 2 signing key: every outgoing packet is signed,
+        control must be signed, SETUP_SIGNING is refused.
+    max_clients : int
+        Peers a ``udpin`` link serves at most (``sitl.auth.ClientTable``).
+    client_timeout_s : float
+        Wall-clock seconds of silence after which a ``udpin`` peer is dropped.
     """
 
     listen: str = "udpin:127.0.0.1:14540"
@@ -175,8 +200,19 @@ class ServerConfig:
     sensor_hz: int = 250
     start: tuple[float, float, float] | None = None
     spin: bool = True
+    control_outs: tuple[str, ...] = ()
+    controllers: tuple[Controller, ...] | None = None
+    signing_key: bytes | None = None
+    max_clients: int = 8
+    client_timeout_s: float = 10.0
 
     def __post_init__(self) -> None:
+        if self.signing_key is not None and len(self.signing_key) != 32:
+            raise ValueError("signing_key must be 32 bytes")
+        if not (isinstance(self.max_clients, int) and 1 <= self.max_clients <= 1024):
+            raise ValueError("max_clients must be an integer in [1, 1024]")
+        if not (math.isfinite(self.client_timeout_s) and 0.1 <= self.client_timeout_s <= 3600):
+            raise ValueError("client_timeout_s must be in [0.1, 3600] s")
         if not (self.speed >= 0 and math.isfinite(self.speed)):
             raise ValueError("speed must be >= 0 (0: as fast as possible)")
         if self.start is not None:
@@ -189,43 +225,64 @@ class ServerConfig:
 
 
 class _Link:
-    """One pymavlink connection with our own common-dialect MAVLink 2 encoder.
+    """One MAVLink link with our own common-dialect MAVLink 2 encoder.
 
-    UDP links are read and written on the socket directly (one ``recvfrom``
-    per datagram; one ``sendto`` per client for a frame's telemetry, see
-    ``BATCH_BYTES``, and per reply): mavutil's per-message bookkeeping costs
-    more than the rest of a frame's telemetry. A ``udpin`` link serves every
-    address that has sent it something; replies go to the requester only.
-    Other link types (TCP, serial) go through mavutil.
+    UDP links are our own sockets (``companion.link.sockets.open_udp``: a
+    ``udpin`` port in use is an error, ``udpout`` is connected to its peer so
+    nobody else can write to it), read and written directly (one
+    ``recvfrom`` per datagram; one ``sendto`` per client for a frame's
+    telemetry, see ``BATCH_BYTES``, and per reply): mavutil's per-message
+    bookkeeping costs more than the rest of a frame's telemetry. A ``udpin``
+    link serves the addresses that sent it something, at most
+    ``max_clients`` of them, expiring after ``client_timeout_s`` of silence
+    (``sitl.auth.ClientTable``); replies go to the requester only. Other
+    link types (TCP, serial) go through mavutil.
+
+    Incoming packets are parsed by a ``MAVLink`` object without a key
+    (``parser``): signatures are checked by ``sitl.auth`` with our rules;
+    ``mav`` packs (and signs, when signing is on).
     """
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, control: bool = True, max_clients: int = 8,
+                 client_timeout_s: float = 10.0, option: str = "--listen") -> None:
         self.url = url
-        self.conn = mavutil.mavlink_connection(url, source_system=SYSTEM_ID,
-                                               source_component=COMPONENT_ID)
-        # Replace the module-global-dialect encoder by our own (common, v2):
-        # independent of MAVLINK20/MAVLINK_DIALECT and of other users of mavutil.
-        self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
-        self.conn.mav.robust_parsing = True
-        self.conn.WIRE_PROTOCOL_VERSION = "2.0"
-        self.conn.first_byte = False
-        self.mav = self.conn.mav
-        self.udp = isinstance(self.conn, mavutil.mavudp)
-        self.server = self.udp and bool(self.conn.udp_server)
-        self.sock = self.conn.port if self.udp else None
+        self.control = control
+        self.udp = is_udp_url(url)
+        self.conn = None
+        self.clients = ClientTable(max_clients, client_timeout_s)
+        if self.udp:
+            us = open_udp(url, option)
+            self.sock = us.sock
+            self.server = us.server
+            self.peer = us.peer
+            self.fd = self.sock.fileno()
+            self.mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        else:
+            self.conn = mavutil.mavlink_connection(url, source_system=SYSTEM_ID,
+                                                   source_component=COMPONENT_ID)
+            # Replace the module-global-dialect encoder by our own (common, v2):
+            # independent of MAVLINK20/MAVLINK_DIALECT and of other users of mavutil.
+            self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+            self.conn.WIRE_PROTOCOL_VERSION = "2.0"
+            self.conn.first_byte = False
+            self.mav = self.conn.mav
+            self.sock = None
+            self.server = False
+            self.peer = None
+            port = getattr(self.conn, "port", None)
+            self.fd = port.fileno() if isinstance(port, socket.socket) else self.conn.fd
+        self.mav.robust_parsing = True
+        self.parser = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self.parser.robust_parsing = True
         self._rcvtimeo = None
         if self.udp:
             # Blocking socket with a kernel receive timeout: waiting for the
             # lockstep answer is one recvfrom() (``recv_datagram(wait=True)``)
             # instead of select() + recvfrom(); MSG_DONTWAIT reads without waiting.
-            self.sock.setblocking(True)
             self._set_rcvtimeo(0.05)
-        self.clients = self.conn.clients if self.udp else set()
         self.last_addr = None
         self._batch: list | None = None
         self._batch_len = 0
-        port = getattr(self.conn, "port", None)
-        self.fd = port.fileno() if isinstance(port, socket.socket) else self.conn.fd
 
     @property
     def has_peer(self) -> bool:
@@ -263,6 +320,8 @@ class _Link:
             if self.server:
                 for addr in self.clients:
                     self.sock.sendto(buf, addr)
+            elif self.sock is not None:
+                self.sock.send(buf)
             else:
                 self.conn.write(buf)
         except OSError:
@@ -328,8 +387,8 @@ class _Link:
                             continue
                     else:
                         if self.server:
-                            self.clients.add(addr)
-                            self.last_addr = addr
+                            self.clients.admit(addr, time.monotonic())
+                        self.last_addr = addr
                         return data
                     break
             if wait_s > 0:
@@ -341,8 +400,8 @@ class _Link:
         except OSError:   # timeout/EAGAIN, ECONNREFUSED after an ICMP error, EINTR, ...
             return None
         if self.server:
-            self.clients.add(addr)
-            self.last_addr = addr
+            self.clients.admit(addr, time.monotonic())
+        self.last_addr = addr
         return data
 
     def parse(self, data: bytes) -> list:
@@ -351,14 +410,14 @@ class _Link:
         A datagram holds whole packets: the parser starts afresh on each, so a
         truncated packet can never swallow the next datagram.
         """
-        mav = self.mav
+        mav = self.parser
         mav.buf = bytearray()
         mav.buf_index = 0
         try:
             return mav.parse_buffer(data) or []
         except Exception:   # pymavlink raised on garbage: drop the buffer
-            self.mav.buf = bytearray()
-            self.mav.buf_index = 0
+            mav.buf = bytearray()
+            mav.buf_index = 0
             return []
 
     def receive(self):
@@ -367,12 +426,26 @@ class _Link:
         if self.udp:
             data = self.recv_datagram()
             return None if data is None else self.parse(data)
-        msg = self.conn.recv_msg()
-        return None if msg is None else [msg]
+        # A stream (TCP, serial): packets may span reads, so the parser keeps its buffer.
+        try:
+            data = self.conn.recv(4096)
+        except OSError:
+            return None
+        if not data:
+            return None
+        try:
+            return self.parser.parse_buffer(data) or []
+        except Exception:   # pymavlink raised on garbage: drop the buffer
+            self.parser.buf = bytearray()
+            self.parser.buf_index = 0
+            return []
 
     def close(self) -> None:
         try:
-            self.conn.close()
+            if self.sock is not None:
+                self.sock.close()
+            else:
+                self.conn.close()
         except OSError:
             pass
 
@@ -425,6 +498,7 @@ class SitlServer:
         self._wall_epoch_us = int(time.time() * 1e6)
         self._last_hb_wall = 0.0
         self._rng_interval_disabled = False
+        self._text_id = 0                 # STATUSTEXT id of the last text sent in chunks
         self._last_ranges: dict = {}
         period = self.sim.sensor_period_us
         self._intervals = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
@@ -496,6 +570,13 @@ class SitlServer:
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
         self.stats = {"bad_packets": 0, "ignored": collections.Counter(), "unsupported": collections.Counter()}
+        #: Who may control the vehicle (``sitl.auth``); its ``counts`` are the
+        #: accepted and ignored control messages.
+        self.auth = ControlPolicy(
+            (config.listen, *config.control_outs),
+            DEFAULT_CONTROLLERS if config.controllers is None else config.controllers,
+            None if config.signing_key is None else SignatureVerifier(config.signing_key),
+            key_locked=config.signing_key is not None)
 
     # ------------------------------------------------------------------ params
     @staticmethod
@@ -530,12 +611,20 @@ class SitlServer:
     # ------------------------------------------------------------------ lifecycle
     def open(self) -> None:
         """Open every link (binds sockets). Raises OSError/ValueError on a bad address."""
+        cfg = self.config
+        specs = ([(cfg.listen, True, "--listen")] + [(u, False, "--out") for u in cfg.outs]
+                 + [(u, True, "--control-out") for u in cfg.control_outs])
         try:
-            for url in (self.config.listen, *self.config.outs):
-                self.links.append(_Link(url))
+            for url, control, option in specs:
+                self.links.append(_Link(url, control, cfg.max_clients, cfg.client_timeout_s, option))
         except BaseException:
             self.close()
             raise
+        if cfg.signing_key is not None:
+            ts = signing_timestamp(time.time())
+            self.auth.verifier.timestamp = ts
+            for i, link in enumerate(self.links):
+                enable_outgoing_signing(link.mav, cfg.signing_key, i, ts)
 
     def close(self) -> None:
         for link in self.links:
@@ -917,13 +1006,18 @@ class SitlServer:
             if self._dispatch(link, ans, msgs, until_released):
                 return
 
-    @staticmethod
-    def _decode_datagram(link: _Link, data: bytes):
+    def _decode_datagram(self, link: _Link, data: bytes):
         """(lockstep answer or None, messages) of one UDP datagram: the answer
         (one packet per frame) is decoded without pymavlink's parser when it
-        is alone in its datagram."""
+        is alone in its datagram (and dropped unless its sender may control)."""
         ans = codec.decode_actuator_datagram(data)
-        return ans, (() if ans is not None else link.parse(data))
+        if ans is None:
+            return None, link.parse(data)
+        v = self.auth.authorize(link.url, link.last_addr, "HIL_ACTUATOR_CONTROLS", None, data[5], data[6],
+                                data, time.monotonic())
+        if (v.bindings_changed or v.report or not v.accepted) and not self._verdict(v):
+            return None, ()
+        return ans, ()
 
     def _dispatch(self, link: _Link, ans, msgs, until_released: bool) -> bool:
         """Act on a decoded datagram; True when the caller should stop reading
@@ -937,20 +1031,38 @@ class SitlServer:
     # ------------------------------------------------------------------ dispatch
     def _handle(self, link: _Link, msg) -> None:
         mtype = msg.get_type()
+        if mtype == "BAD_DATA":
+            self.stats["bad_packets"] += 1
+            return
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        now = time.monotonic()
+        self.auth.observe(link.url, link.last_addr, sysid, compid, now)
         handler = self._handlers.get(mtype)
         if handler is None:
-            if mtype == "BAD_DATA":
-                self.stats["bad_packets"] += 1
-            else:
-                self.stats["ignored"][mtype] += 1
+            self.stats["ignored"][mtype] += 1
             return
-        if msg.get_srcSystem() == SYSTEM_ID and msg.get_srcComponent() == COMPONENT_ID:
+        if sysid == SYSTEM_ID and compid == COMPONENT_ID:
             return   # our own echo
+        command = msg.command if mtype in ("COMMAND_LONG", "COMMAND_INT") else None
+        v = self.auth.authorize(link.url, link.last_addr, mtype, command, sysid, compid, msg.get_msgbuf(), now)
+        if v.bindings_changed or v.report or not v.accepted:
+            if not self._verdict(v):
+                return
         try:
             handler(link, msg)
         except Exception:   # never let one malformed message stop the vehicle
             self.stats["bad_packets"] += 1
         self._flush_events()
+
+    def _verdict(self, v) -> bool:
+        """Act on a ``sitl.auth.Verdict`` (pins, STATUSTEXT); returns ``v.accepted``."""
+        if v.bindings_changed:
+            for link in self.links:
+                if link.server:
+                    link.clients.pinned = self.auth.bound_addresses(link.url)
+        if v.report:
+            self._say(SEVERITY_WARNING if not v.accepted else SEVERITY_INFO, v.report)
+        return v.accepted
 
     def _reply(self, link: _Link, msg) -> None:
         link.reply(msg)
@@ -967,7 +1079,12 @@ class SitlServer:
     def _flush_events(self) -> None:
         if self.stack.events:
             for ev in self.stack.pop_events():
-                self._broadcast(codec.statustext(self._mav(), ev.severity, ev.text))
+                if len(ev.text) <= codec.STATUSTEXT_CHUNK:
+                    self._broadcast(codec.statustext(self._mav(), ev.severity, ev.text))
+                else:
+                    self._text_id = self._text_id % 65535 + 1
+                    for m in codec.statustext_chunks(self._mav(), ev.severity, ev.text, self._text_id):
+                        self._broadcast(m)
 
     def _state(self) -> NavState:
         return self._nav_state(self._frame)
@@ -1262,16 +1379,20 @@ class SitlServer:
 
     # ------------------------------------------------------------------ misc
     def _on_setup_signing(self, link, msg) -> None:
-        if msg.target_system != SYSTEM_ID:
+        # Reaches here only from a controller, and never with a key from the
+        # command line (``sitl.auth``). From now on control must be signed.
+        if msg.target_system != SYSTEM_ID or self.auth.key_locked:
             return
         key = bytes(msg.secret_key)
-        for l in self.links:
-            if not any(key):
-                l.conn.disable_signing()
-            else:
-                l.conn.setup_signing(key, sign_outgoing=True,
-                                     allow_unsigned_callback=lambda mav, msg_id: True,
-                                     initial_timestamp=int(msg.initial_timestamp) or None)
+        if not any(key):
+            self.auth.set_signing(None)
+            for l in self.links:
+                disable_outgoing_signing(l.mav)
+        else:
+            ts = int(msg.initial_timestamp) or signing_timestamp(time.time())
+            self.auth.set_signing(SignatureVerifier(key, ts))
+            for i, l in enumerate(self.links):
+                enable_outgoing_signing(l.mav, key, i, ts)
         self._say(SEVERITY_INFO, "Signing " + ("disabled" if not any(key) else "key stored"))
 
     def _on_timesync(self, link, msg) -> None:
