@@ -65,10 +65,12 @@ class _SitlOptions:
 
     def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
                  speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
-                 sensor_hz: int = 250) -> None:
+                 sensor_hz: int = 250, control_outs=(), signing_key_file=None) -> None:
         self.mission_path = Path(mission_path)
         self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
         self.outs = tuple(outs)
+        self.control_outs = tuple(control_outs)
+        self.signing_key_file = None if signing_key_file is None else str(signing_key_file)
         self.lockstep = lockstep
         self.speed = speed
         self.seed = seed
@@ -90,6 +92,11 @@ class SitlThread(_SitlOptions):
     listen : str
         Main link (default: a free loopback UDP port).
     outs : sequence of str
+        Telemetry-only links.
+    control_outs : sequence of str
+        Extra links that carry control too (``sitl --control-out``).
+    signing_key_file : str or Path, optional
+        MAVLink 2 signing key file (``sitl --signing-key``).
     lockstep : bool
     speed : float
         Real-time factor when free-running (0: as fast as possible).
@@ -113,9 +120,13 @@ class SitlThread(_SitlOptions):
         from .server import ServerConfig, SitlServer
 
         mission = load_mission(self.mission_path)
+        key = None
+        if self.signing_key_file is not None:
+            from companion.link.signing import load_signing_key
+            key = load_signing_key(self.signing_key_file)
         cfg = ServerConfig(listen=self.listen, outs=self.outs, lockstep=self.lockstep, speed=self.speed,
                            seed=self.seed, physics_hz=self.physics_hz, sensor_hz=self.sensor_hz,
-                           start=self.start_pose, spin=False)
+                           start=self.start_pose, spin=False, control_outs=self.control_outs, signing_key=key)
         self.server = SitlServer(mission, cfg)
         self.server.open()   # readiness: the sockets exist when start() returns
 
@@ -175,6 +186,10 @@ class SitlProcess(_SitlOptions):
                "--sensor-hz", str(self.sensor_hz)]
         for o in self.outs:
             cmd += ["--out", o]
+        for o in self.control_outs:
+            cmd += ["--control-out", o]
+        if self.signing_key_file is not None:
+            cmd += ["--signing-key", self.signing_key_file]
         if self.lockstep:
             cmd.append("--lockstep")
         if self.seed is not None:

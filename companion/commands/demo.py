@@ -51,6 +51,9 @@ def add_arguments(parser) -> None:
                         help="fly only the first S seconds of the trajectory")
     parser.add_argument("--seed", type=int, default=None, metavar="N",
                         help="seed of the SITL's noise and wind (default: the mission's sim.seed)")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="MAVLink 2 signing key file for both the SITL and the companion "
+                             "(32 raw bytes, or a passphrase as MAVProxy's signing setup)")
     parser.add_argument("--no-plots", action="store_true", help="skip the figures")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -94,14 +97,25 @@ def run(args) -> int:
 
     t_start = time.monotonic()
     mission_path = resolve_mission(args.mission)
-    if args.cut is not None and not args.cut > 0:
-        raise InputError("--cut", "must be > 0 seconds")
+    if args.cut is not None and not (math.isfinite(args.cut) and args.cut > 0):
+        raise InputError(f"--cut {args.cut}", "must be a finite number of seconds > 0")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out}", "exists and is not a directory")
+    if not out.exists() and not out.parent.is_dir():
+        raise InputError(f"--out {out}", f"directory {out.parent} does not exist")
+    if out.is_dir():
+        from .fly import check_output_paths
+        check_output_paths([("--out", out / n) for n in ("plan.json", "flight.tlog", "report.json")])
+    key = None
+    if args.signing_key is not None:
+        from ..link.signing import load_signing_key
+        key = load_signing_key(args.signing_key)
+    args.signing_key_bytes = key
     # The SITL process starts now (it imports and loads its world while we
     # plan) and gets its launch pose once the plan exists.
-    sitl = SitlProcess(mission_path, lockstep=True, speed=1.0, seed=args.seed, start="later").launch()
+    sitl = SitlProcess(mission_path, lockstep=True, speed=1.0, seed=args.seed, start="later",
+                       signing_key_file=args.signing_key).launch()
     try:
         return _plan_and_fly(args, mission_path, out, sitl, t_start)
     finally:
@@ -138,7 +152,7 @@ def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
     sitl.wait_ready()
     try:
         result = execute(mission, fp, sitl.url, args.control, str(out / "flight.tlog"), progress, args.cut,
-                         {"mute_streams": UNUSED_STREAMS + (ATTITUDE,)})
+                         {"mute_streams": UNUSED_STREAMS + (ATTITUDE,)}, signing_key=args.signing_key_bytes)
     finally:
         sitl.stop()
     rep = result.report

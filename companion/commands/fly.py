@@ -19,6 +19,8 @@ not (the report says why), 2 on bad input.
 
 from __future__ import annotations
 
+import math
+import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +30,33 @@ import numpy as np
 from ..errors import InputError
 
 DEFAULT_CONNECT = "udpout:127.0.0.1:14540"
+
+
+def check_output_paths(outputs) -> None:
+    """Fail before any work when an output cannot be written where asked.
+
+    Parameters
+    ----------
+    outputs : iterable of (option, path)
+        E.g. ``(("--tlog", "flight.tlog"), ("--report", "report.json"))``.
+
+    Raises
+    ------
+    InputError
+        A path is a directory, its directory does not exist, or two options
+        name the same file (one line naming the option and path).
+    """
+    seen = {}
+    for opt, path in outputs:
+        p = Path(path)
+        if p.is_dir():
+            raise InputError(f"{opt} {path}", "is a directory (give a file name)")
+        if not p.parent.is_dir():
+            raise InputError(f"{opt} {path}", f"directory {p.parent} does not exist")
+        key = os.path.abspath(p)
+        if key in seen:
+            raise InputError(f"{opt} {path}", f"is also given as {seen[key]}")
+        seen[key] = opt
 
 
 def add_arguments(parser) -> None:
@@ -44,6 +73,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--cut", type=float, default=None, metavar="S",
                         help="fly only the way-points up to S seconds into the trajectory, the last one made a stop "
                              "(the trajectory is re-solved so it ends at rest)")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="MAVLink 2 signing key file (32 raw bytes, or a passphrase hashed with SHA-256 as "
+                             "MAVProxy's signing setup): sign everything, accept only signed vehicle messages")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
 
@@ -148,8 +180,14 @@ def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
 
 
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
-            progress=None, cut_s: float | None = None, runner_overrides: dict | None = None):
-    """Open the link, fly, close. Returns ``companion.runner.FlightResult``."""
+            progress=None, cut_s: float | None = None, runner_overrides: dict | None = None,
+            signing_key: bytes | None = None):
+    """Open the link, fly, close. Returns ``companion.runner.FlightResult``.
+
+    The link is opened before the tlog is created: a link that cannot be
+    opened (unknown host, port in use, refused) is bad input and leaves no
+    file behind.
+    """
     from ..control import GeometricController
     from ..link import Connection, TlogWriter
     from ..runner import MissionRunner, RunnerConfig
@@ -161,14 +199,15 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
     if control == "companion":
         ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
     tlog = TlogWriter(tlog_path) if tlog_path else None
-    conn = Connection(connect, tlog=tlog)
+    conn = Connection(connect, tlog=tlog, signing_key=signing_key)
+    conn.open()
     if tlog is not None:
         try:
             tlog.open()
         except OSError as exc:
+            conn.close()
             raise InputError(str(tlog_path), f"cannot write: {exc.strerror or exc}") from None
     try:
-        conn.open()
         home = (mission.home.lat, mission.home.lon, mission.home.alt_m)
         runner = MissionRunner(conn, flight_plan.trajectory, flight_plan.waypoints_p_enu_m, home,
                                flight_plan.target_enu_m, mission.vehicle, ctrl, cfg, progress,
@@ -187,16 +226,17 @@ def run(args) -> int:
     from ..report import write_report
 
     check_connection_string(args.connect)
-    if args.cut is not None and not args.cut > 0:
-        raise InputError("--cut", "must be > 0 seconds")
-    for opt, path in (("--tlog", args.tlog), ("--report", args.report)):
-        parent = Path(path).parent
-        if not parent.is_dir():
-            raise InputError(f"{opt} {path}", f"directory {parent} does not exist")
+    if args.cut is not None and not (math.isfinite(args.cut) and args.cut > 0):
+        raise InputError(f"--cut {args.cut}", "must be a finite number of seconds > 0")
+    check_output_paths((("--tlog", args.tlog), ("--report", args.report)))
+    key = None
+    if args.signing_key is not None:
+        from ..link.signing import load_signing_key
+        key = load_signing_key(args.signing_key)
     mission = load_mission(args.mission)
     fp = prepare(mission, args.plan)
     progress = Progress(enabled=not args.quiet)
-    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut)
+    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, signing_key=key)
     rep = result.report
     write_report(rep, args.report)
     tr = rep.tracking
