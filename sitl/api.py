@@ -65,12 +65,15 @@ class _SitlOptions:
 
     def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
                  speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
-                 sensor_hz: int = 250, control_outs=(), signing_key_file=None) -> None:
+                 sensor_hz: int = 250, control_outs=(), signing_key_file=None, max_clients: int = 8,
+                 client_timeout_s: float = 10.0) -> None:
         self.mission_path = Path(mission_path)
         self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
         self.outs = tuple(outs)
         self.control_outs = tuple(control_outs)
         self.signing_key_file = None if signing_key_file is None else str(signing_key_file)
+        self.max_clients = int(max_clients)
+        self.client_timeout_s = float(client_timeout_s)
         self.lockstep = lockstep
         self.speed = speed
         self.seed = seed
@@ -97,6 +100,8 @@ class SitlThread(_SitlOptions):
         Extra links that carry control too (``sitl --control-out``).
     signing_key_file : str or Path, optional
         MAVLink 2 signing key file (``sitl --signing-key``).
+    max_clients, client_timeout_s
+        ``sitl --max-clients``, ``--client-timeout``.
     lockstep : bool
     speed : float
         Real-time factor when free-running (0: as fast as possible).
@@ -126,7 +131,8 @@ class SitlThread(_SitlOptions):
             key = load_signing_key(self.signing_key_file)
         cfg = ServerConfig(listen=self.listen, outs=self.outs, lockstep=self.lockstep, speed=self.speed,
                            seed=self.seed, physics_hz=self.physics_hz, sensor_hz=self.sensor_hz,
-                           start=self.start_pose, spin=False, control_outs=self.control_outs, signing_key=key)
+                           start=self.start_pose, spin=False, control_outs=self.control_outs, signing_key=key,
+                           max_clients=self.max_clients, client_timeout_s=self.client_timeout_s)
         self.server = SitlServer(mission, cfg)
         self.server.open()   # readiness: the sockets exist when start() returns
 
@@ -190,6 +196,7 @@ class SitlProcess(_SitlOptions):
             cmd += ["--control-out", o]
         if self.signing_key_file is not None:
             cmd += ["--signing-key", self.signing_key_file]
+        cmd += ["--max-clients", str(self.max_clients), "--client-timeout", repr(self.client_timeout_s)]
         if self.lockstep:
             cmd.append("--lockstep")
         if self.seed is not None:

@@ -179,28 +179,47 @@ def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
+def open_link(connect: str, tlog_path: str | None, signing_key: bytes | None = None):
+    """The vehicle link, opened (the tlog not yet: ``execute`` creates it).
+
+    Raises
+    ------
+    InputError
+        Unknown host, port in use, connection refused: one line, nothing written.
+    """
+    from ..link import Connection, TlogWriter
+
+    tlog = TlogWriter(tlog_path) if tlog_path else None
+    return Connection(connect, tlog=tlog, signing_key=signing_key).open()
+
+
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
             progress=None, cut_s: float | None = None, runner_overrides: dict | None = None,
-            signing_key: bytes | None = None):
-    """Open the link, fly, close. Returns ``companion.runner.FlightResult``.
+            signing_key: bytes | None = None, conn=None):
+    """Open the link (unless ``conn``, from ``open_link``, is given), fly, close.
+    Returns ``companion.runner.FlightResult``.
 
     The link is opened before the tlog is created: a link that cannot be
     opened (unknown host, port in use, refused) is bad input and leaves no
     file behind.
     """
     from ..control import GeometricController
-    from ..link import Connection, TlogWriter
     from ..runner import MissionRunner, RunnerConfig
 
-    if cut_s is not None:
-        flight_plan = flight_plan.cut(cut_s, mission.trajectory)
-    cfg = RunnerConfig(control=control, **(runner_overrides or {}))
-    ctrl = None
-    if control == "companion":
-        ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
-    tlog = TlogWriter(tlog_path) if tlog_path else None
-    conn = Connection(connect, tlog=tlog, signing_key=signing_key)
-    conn.open()
+    try:
+        if cut_s is not None:
+            flight_plan = flight_plan.cut(cut_s, mission.trajectory)
+        cfg = RunnerConfig(control=control, **(runner_overrides or {}))
+        ctrl = None
+        if control == "companion":
+            ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
+    except BaseException:
+        if conn is not None:
+            conn.close()
+        raise
+    if conn is None:
+        conn = open_link(connect, tlog_path, signing_key)
+    tlog = conn.tlog
     if tlog is not None:
         try:
             tlog.open()
@@ -234,9 +253,15 @@ def run(args) -> int:
         from ..link.signing import load_signing_key
         key = load_signing_key(args.signing_key)
     mission = load_mission(args.mission)
-    fp = prepare(mission, args.plan)
+    # The link first: a bad --connect (unknown host, port in use, refused) fails before any planning.
+    conn = open_link(args.connect, args.tlog, key)
+    try:
+        fp = prepare(mission, args.plan)
+    except BaseException:
+        conn.close()
+        raise
     progress = Progress(enabled=not args.quiet)
-    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, signing_key=key)
+    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, conn=conn)
     rep = result.report
     write_report(rep, args.report)
     tr = rep.tracking

@@ -1,0 +1,142 @@
+"""Where the SITL's and the companion's sockets are bound, read from the kernel
+(/proc), not from our own objects; ports in use; bounded, expiring udpin
+clients over real UDP."""
+
+from __future__ import annotations
+
+import os
+import re
+import socket
+import struct
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from companion.errors import InputError
+from companion.link import Connection
+from sitl.api import SitlProcess, SitlThread, free_udp_port
+from test_sitl_mavlink import MISSION, Client
+
+pytestmark = pytest.mark.skipif(not Path("/proc/net/udp").exists(), reason="needs Linux /proc")
+
+
+def _addr(hexpair: str) -> tuple[str, int]:
+    ip, port = hexpair.split(":")
+    return socket.inet_ntoa(struct.pack("<I", int(ip, 16))), int(port, 16)
+
+
+def inet_sockets(pid: int) -> list[tuple[str, tuple, tuple]]:
+    """Every IPv4/IPv6 UDP and TCP socket process ``pid`` holds: (proto, local, remote)."""
+    inodes = set()
+    fd_dir = Path(f"/proc/{pid}/fd")
+    for fd in fd_dir.iterdir():
+        try:
+            m = re.fullmatch(r"socket:\[(\d+)\]", os.readlink(fd))
+        except OSError:
+            continue
+        if m:
+            inodes.add(int(m.group(1)))
+    out = []
+    for proto in ("udp", "tcp", "udp6", "tcp6"):
+        lines = Path(f"/proc/{pid}/net/{proto}").read_text().splitlines()[1:]
+        for line in lines:
+            f = line.split()
+            if int(f[9]) not in inodes:
+                continue
+            if proto.endswith("6"):
+                out.append((proto, (f[1],), (f[2],)))     # any IPv6 socket is a finding
+            else:
+                out.append((proto, _addr(f[1]), _addr(f[2])))
+    return out
+
+
+def test_every_sitl_socket_is_loopback_and_udpout_connected():
+    ports = [free_udp_port() for _ in range(3)]
+    with SitlProcess(MISSION, listen=f"udpin:127.0.0.1:{ports[0]}", outs=(f"udpout:127.0.0.1:{ports[1]}",),
+                     control_outs=(f"udpout:127.0.0.1:{ports[2]}",), speed=1.0) as sitl:
+        socks = inet_sockets(sitl.proc.pid)
+    assert sorted(socks) == sorted([
+        ("udp", ("127.0.0.1", ports[0]), ("0.0.0.0", 0)),              # udpin: bound, open to peers
+        ("udp", (socks_local(socks, ports[1])), ("127.0.0.1", ports[1])),   # udpout: connected
+        ("udp", (socks_local(socks, ports[2])), ("127.0.0.1", ports[2])),
+    ])
+    assert all(local[0] == "127.0.0.1" for _, local, _ in socks)
+
+
+def socks_local(socks, remote_port):
+    return next(local for _, local, remote in socks if remote == ("127.0.0.1", remote_port))
+
+
+def test_every_companion_socket_is_loopback():
+    before = {s for s in inet_sockets(os.getpid())}
+    port = free_udp_port()
+    conns = [Connection(f"udpout:127.0.0.1:{port}").open(), Connection(f"udpin:127.0.0.1:{free_udp_port()}").open()]
+    try:
+        new = [s for s in inet_sockets(os.getpid()) if s not in before]
+    finally:
+        for c in conns:
+            c.close()
+    assert len(new) == 2
+    out = [s for s in new if s[2] != ("0.0.0.0", 0)]
+    assert len(out) == 1 and out[0][1][0] == "127.0.0.1" and out[0][2] == ("127.0.0.1", port)
+    listen = [s for s in new if s[2] == ("0.0.0.0", 0)]
+    assert len(listen) == 1 and listen[0][1][0] == "127.0.0.1"
+
+
+def test_ports_in_use_are_one_line_errors(tmp_path, capsys):
+    """A second SITL on a port in use, and a companion udpin on one: exit 2, one
+    line naming the flag and the port, nothing written (no flight.tlog)."""
+    from companion.cli import main as companion_main
+    from sitl.cli import main as sitl_main
+
+    with SitlThread(MISSION, speed=1.0) as sitl:
+        port = int(sitl.listen.rsplit(":", 1)[1])
+        assert sitl_main([str(MISSION), "--listen", sitl.listen]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--listen" in err and f"port {port} is already in use" in err
+        cwd = os.getcwd()
+        os.chdir(tmp_path)
+        try:
+            rc = companion_main(["fly", str(MISSION), "--connect", f"udpin:127.0.0.1:{port}", "--quiet"])
+        finally:
+            os.chdir(cwd)
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("\n") == 1 and "--connect" in err and "already in use" in err
+        assert list(tmp_path.iterdir()) == []
+
+
+def test_udpin_clients_bounded_expiring_controller_kept():
+    with SitlThread(MISSION, speed=2.0, max_clients=4, client_timeout_s=1.0) as sitl:
+        gcs = Client(sitl.url)
+        gcs.hello()
+        assert gcs.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_HOME_POSITION,
+                           500_000) == 0    # control: binds (and pins) the ground station
+        host, port = sitl.listen.split(":")[1:]
+        flood = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(40)]
+        mav = mavlink.MAVLink(None, 77, 1)
+        hb = bytes(mav.heartbeat_encode(6, 8, 0, 0, 4).pack(mav))
+        try:
+            for s in flood:
+                s.sendto(hb, (host, int(port)))
+            gcs.pump(0.3)
+            clients = sitl.server.links[0].clients
+            assert len(clients) == 4 and ("127.0.0.1", gcs.conn.port.getsockname()[1]) in clients
+            assert clients.n_evicted >= 40 - 3
+            assert gcs.recv("HIGHRES_IMU", 1.0) is not None          # the controller still gets telemetry
+            time.sleep(1.6)                                          # the flood falls silent
+            gcs.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            gcs.pump(0.3)
+            assert set(clients) == {("127.0.0.1", gcs.conn.port.getsockname()[1])}
+        finally:
+            for s in flood:
+                s.close()
+            gcs.close()
+
+
+def test_unresolvable_host_is_one_line_error():
+    with pytest.raises(InputError) as exc:
+        Connection("udpout:no.such.host.invalid:1").open()
+    assert "--connect udpout:no.such.host.invalid:1" in str(exc.value) and "resolve" in str(exc.value)
