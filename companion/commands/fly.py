@@ -141,6 +141,8 @@ def prepare(mission, plan_path: str | None) -> FlightPlan:
     from ..trajectory import generate_trajectory
 
     pf = load_plan(plan_path)
+    from ..preflight import check_plan_file
+    check_plan_file(pf, mission)      # on the map, above the terrain, for this field (companion/preflight.py)
     target = pf.target_enu_m
     if target is None:
         # A plan.json without ``target_enu_m`` (it is not in DESIGN.md's
