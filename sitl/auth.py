@@ -314,7 +314,8 @@ class ClientTable:
     already there, the least recently heard unpinned one is dropped for it
     (a flood of new source ports costs at most ``max_clients`` sends per
     message, and never locks a newcomer out). Clients silent for longer than
-    ``expiry_s`` are dropped at the next admission after a sweep interval.
+    ``expiry_s`` are dropped at the next admission after a sweep interval
+    (1 s, or half of ``expiry_s`` if shorter).
     Pinned addresses (bound controllers, ``ControlPolicy.bound_addresses``)
     are never dropped, so a controller that waits for the vehicle keeps
     receiving it.
@@ -337,6 +338,7 @@ class ClientTable:
         self._last: dict = {}
         self.pinned: set = set()
         self._next_sweep = 0.0
+        self._sweep_every = min(self.SWEEP_INTERVAL_S, self.expiry_s / 2)
         self.n_evicted = 0
         self.n_expired = 0
 
@@ -372,7 +374,7 @@ class ClientTable:
 
     def sweep(self, now_s: float) -> None:
         """Drop unpinned clients silent for more than ``expiry_s``."""
-        self._next_sweep = now_s + self.SWEEP_INTERVAL_S
+        self._next_sweep = now_s + self._sweep_every
         old = [a for a, t in self._last.items() if now_s - t > self.expiry_s and a not in self.pinned]
         for a in old:
             del self._last[a]

@@ -259,7 +259,7 @@ class _Link:
             self.mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         else:
             self.conn = mavutil.mavlink_connection(url, source_system=SYSTEM_ID,
-                                                   source_component=COMPONENT_ID)
+                                                   source_component=COMPONENT_ID, retries=0)
             # Replace the module-global-dialect encoder by our own (common, v2):
             # independent of MAVLINK20/MAVLINK_DIALECT and of other users of mavutil.
             self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)

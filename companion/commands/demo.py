@@ -111,19 +111,20 @@ def run(args) -> int:
     if args.signing_key is not None:
         from ..link.signing import load_signing_key
         key = load_signing_key(args.signing_key)
-    args.signing_key_bytes = key
+    from ..mission import load_mission
+
+    mission = load_mission(mission_path)     # bad input fails here, before the SITL starts
     # The SITL process starts now (it imports and loads its world while we
     # plan) and gets its launch pose once the plan exists.
     sitl = SitlProcess(mission_path, lockstep=True, speed=1.0, seed=args.seed, start="later",
                        signing_key_file=args.signing_key).launch()
     try:
-        return _plan_and_fly(args, mission_path, out, sitl, t_start)
+        return _plan_and_fly(args, mission, out, sitl, t_start, key)
     finally:
         sitl.stop()
 
 
-def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
-    from ..mission import load_mission
+def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None) -> int:
     from ..plan_io import plan_json_text, plan_to_json_dict
     from ..progress import Progress
     from ..report import write_report
@@ -131,8 +132,6 @@ def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
     from .fly import FlightPlan, execute
 
     ATTITUDE = 30   # MAVLINK_MSG_ID_ATTITUDE: the SITL's ground-truth ODOMETRY carries the attitude
-
-    mission = load_mission(mission_path)
 
     from ..planner import plan_mission
 
@@ -152,7 +151,7 @@ def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
     sitl.wait_ready()
     try:
         result = execute(mission, fp, sitl.url, args.control, str(out / "flight.tlog"), progress, args.cut,
-                         {"mute_streams": UNUSED_STREAMS + (ATTITUDE,)}, signing_key=args.signing_key_bytes)
+                         {"mute_streams": UNUSED_STREAMS + (ATTITUDE,)}, signing_key=signing_key)
     finally:
         sitl.stop()
     rep = result.report

@@ -155,7 +155,7 @@ class Connection:
             try:
                 self._conn = mavutil.mavlink_connection(
                     self.url, source_system=COMPANION_SYSTEM_ID, source_component=COMPANION_COMPONENT_ID,
-                    dialect="common", autoreconnect=True)
+                    dialect="common", autoreconnect=True, retries=0)   # one attempt: no "sleeping" retries on stdout
             except OSError as exc:
                 raise InputError(f"--connect {self.url}", f"cannot connect: {exc.strerror or exc}") from None
             self._mav = self._conn.mav

@@ -128,7 +128,7 @@ def check_sim_ranges(sim) -> None:
         if r is None:
             raise ValueError(f"sim.{key}: no physical range is defined (companion/mission/sim_ranges.py)")
         if isinstance(value, tuple):
-            vals = [math.sqrt(sum(float(x) ** 2 for x in value))] if r.norm else [float(x) for x in value]
+            vals = [math.hypot(*(float(x) for x in value))] if r.norm else [float(x) for x in value]
         else:
             vals = [float(value)]
         for x in vals:
