@@ -31,16 +31,22 @@ A control message is accepted only if all of these hold:
 4. without signing: it comes from the address the controller's first
    accepted control message came from (its binding). A binding moves to a
    new address only after the bound one has been silent for
-   ``rebind_after_s`` (a restarted companion takes over; a second process
-   spoofing the ids from another port is ignored). With signing a valid
-   signature is the proof and the binding follows it at once.
+   ``rebind_after_s`` both in wall-clock time and in vehicle time (a
+   restarted companion takes over; a second process spoofing the ids from
+   another port is ignored). Vehicle time matters because in lockstep the
+   companion only speaks when the vehicle does: a SITL busy with a backlog
+   of datagrams has not heard it, but its clock has not moved either. With
+   signing a valid signature is the proof and the binding follows it at once.
 
 Ignored control messages are counted, and the first one from each source
 (link, address, system, component) is reported once by STATUSTEXT
 (``Verdict.report``), at most ``MAX_REPORTED_SOURCES`` sources.
 
 Without signing the ids are not authenticated: whoever sends first from a
-controller's ids holds the binding. Signing closes that.
+controller's ids holds the binding, and a configured controller that is not
+connected (say the default ground station 255/190 when only the companion
+flies) can be claimed by any process that reaches a control link. Signing
+closes that; without it, list only the controllers in use (``--controller``).
 """
 
 from __future__ import annotations
@@ -152,6 +158,7 @@ class _Binding:
     link: str
     addr: object
     last_s: float
+    last_vehicle_s: float
 
 
 class ControlPolicy:
@@ -167,8 +174,8 @@ class ControlPolicy:
     key_locked : bool
         The key came from the command line: SETUP_SIGNING is refused.
     rebind_after_s : float
-        Silence (wall-clock seconds, the link's liveness) of a bound address
-        after which another address may take the controller over.
+        Silence of a bound address, in wall-clock seconds and in vehicle
+        seconds both, after which another address may take the controller over.
     """
 
     MAX_REPORTED_SOURCES = 64
@@ -193,6 +200,9 @@ class ControlPolicy:
         self._overflow_reported = False
         #: accepted control messages, and ignored ones by reason (bounded: the reasons are fixed).
         self.counts: collections.Counter = collections.Counter()
+        #: accepted control messages by source (link, address, sysid, compid): only
+        #: bound sources are ever accepted, so this holds one entry per binding.
+        self.accepted_from: collections.Counter = collections.Counter()
 
     # ------------------------------------------------------------------ signing
     @property
@@ -215,15 +225,16 @@ class ControlPolicy:
         b = self._bindings.get((sysid, compid))
         return None if b is None else (b.link, b.addr)
 
-    def observe(self, link: str, addr, sysid: int, compid: int, now_s: float) -> None:
+    def observe(self, link: str, addr, sysid: int, compid: int, now_s: float, vehicle_s: float = 0.0) -> None:
         """Any message from ``addr`` on ``link``: keeps a binding there alive."""
         b = self._bindings.get((sysid, compid))
         if b is not None and b.addr == addr and b.link == link:
             b.last_s = now_s
+            b.last_vehicle_s = vehicle_s
 
     # ------------------------------------------------------------------ decisions
     def authorize(self, link: str, addr, msg_type: str, command: int | None, sysid: int, compid: int,
-                  packet: bytes | None, now_s: float) -> Verdict:
+                  packet: bytes | None, now_s: float, vehicle_s: float = 0.0) -> Verdict:
         """Decide on one incoming message.
 
         Parameters
@@ -242,6 +253,8 @@ class ControlPolicy:
             The raw packet (signature checks), None if unknown.
         now_s : float
             Wall-clock seconds (monotonic), for the binding timeout.
+        vehicle_s : float
+            Vehicle time (s), for the binding timeout.
         """
         if not is_control(msg_type, command):
             return _ACCEPT
@@ -262,27 +275,43 @@ class ControlPolicy:
                 reason = _SIG_REASONS.get(check.verdict if check is not None else "unsigned", "bad signature")
                 return self._ignore(link, addr, msg_type, ids, reason)
             if b is not None and b.link == link and b.addr == addr:
-                b.last_s = now_s
-                self.counts["accepted"] += 1
+                b.last_s, b.last_vehicle_s = now_s, vehicle_s
+                self._accepted(link, addr, ids)
                 return _ACCEPT
-            self._bindings[ids] = _Binding(link, addr, now_s)
-            self.counts["accepted"] += 1
+            self._bindings[ids] = _Binding(link, addr, now_s, vehicle_s)
+            self._accepted(link, addr, ids)
             return Verdict(True, bindings_changed=True)
         if b is None:
-            self._bindings[ids] = _Binding(link, addr, now_s)
-            self.counts["accepted"] += 1
+            self._bindings[ids] = _Binding(link, addr, now_s, vehicle_s)
+            self._accepted(link, addr, ids)
             return Verdict(True, bindings_changed=True)
         if b.link == link and b.addr == addr:
-            b.last_s = now_s
-            self.counts["accepted"] += 1
+            b.last_s, b.last_vehicle_s = now_s, vehicle_s
+            self._accepted(link, addr, ids)
             return _ACCEPT
-        if now_s - b.last_s > self.rebind_after_s:
-            self._bindings[ids] = _Binding(link, addr, now_s)
-            self.counts["accepted"] += 1
+        if now_s - b.last_s > self.rebind_after_s and vehicle_s - b.last_vehicle_s > self.rebind_after_s:
+            self._bindings[ids] = _Binding(link, addr, now_s, vehicle_s)
+            self._accepted(link, addr, ids)
             self.counts["rebound"] += 1
-            return Verdict(True, report=f"controller {sysid}/{compid} moved to {_where(link, addr)}",
+            return Verdict(True, report=f"controller {sysid}/{compid} moved, now {_where(link, addr)}",
                            bindings_changed=True)
         return self._ignore(link, addr, msg_type, ids, "controller ids in use from another address")
+
+    def _accepted(self, link: str, addr, ids) -> None:
+        self.counts["accepted"] += 1
+        self.accepted_from[(link, addr, ids[0], ids[1])] += 1
+
+    def summary(self) -> dict:
+        """JSON-ready counts: control accepted by source, ignored by reason, bindings moved."""
+        return {
+            "accepted": self.counts["accepted"],
+            "accepted_from": [{"link": k[0], "address": None if k[1] is None else f"{k[1][0]}:{k[1][1]}",
+                               "sysid": k[2], "compid": k[3], "messages": n}
+                              for k, n in self.accepted_from.items()],
+            "ignored": {k: v for k, v in self.counts.items() if k not in ("accepted", "rebound")},
+            "rebound": self.counts["rebound"],
+            "signing": self.signing,
+        }
 
     def _ignore(self, link: str, addr, msg_type: str, ids, reason: str) -> Verdict:
         self.counts[reason] += 1

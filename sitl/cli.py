@@ -19,7 +19,8 @@ string) on control links; read-only requests from anyone. ``--signing-key
 FILE`` (32 raw bytes, or a passphrase as MAVProxy's ``signing setup``)
 signs everything sent and requires signed control. A ``udpin`` link serves
 at most ``--max-clients`` peers, dropping those silent for
-``--client-timeout`` seconds (wall clock).
+``--client-timeout`` seconds (wall clock). ``--stats FILE`` writes, on
+exit, who controlled the vehicle and what was ignored (JSON).
 
 Loopback addresses by default (a ``udpout`` link is connected to its
 peer, so nobody else can write to it). Bad input (mission file, maps,
@@ -35,10 +36,12 @@ statistics are written to FILE on exit (a developer aid).
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import signal
 import sys
+from pathlib import Path
 
 from companion.errors import InputError
 
@@ -65,6 +68,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="peers a udpin link serves at most (default %(default)s)")
     p.add_argument("--client-timeout", type=float, default=10.0, metavar="S",
                    help="drop a udpin peer silent for S wall-clock seconds (default %(default)s)")
+    p.add_argument("--stats", default=None, metavar="FILE",
+                   help="on exit, write link statistics as JSON (control accepted by source, ignored by reason)")
     p.add_argument("--lockstep", action="store_true",
                    help="lockstep with the peer that answers HIGHRES_IMU with HIL_ACTUATOR_CONTROLS")
     p.add_argument("--speed", type=float, default=1.0,
@@ -189,6 +194,11 @@ def _run(args) -> int:
     if args.signing_key is not None:
         from companion.link.signing import load_signing_key
         key = load_signing_key(args.signing_key)
+    if args.stats is not None:
+        sp = Path(args.stats)
+        if sp.is_dir() or not sp.parent.is_dir():
+            raise InputError(f"--stats {args.stats}", "is a directory" if sp.is_dir()
+                             else f"directory {sp.parent} does not exist")
     if args.physics_hz <= 0 or args.sensor_hz <= 0 or args.physics_hz % args.sensor_hz:
         raise InputError("--physics-hz/--sensor-hz", "physics rate must be a positive multiple of the sensor rate")
     if 1_000_000 % args.sensor_hz:
@@ -239,6 +249,10 @@ def _run(args) -> int:
         server.run()
     finally:
         server.close()
+        if args.stats is not None:
+            tmp = Path(args.stats + ".part")
+            tmp.write_text(json.dumps(server.link_report(), indent=1) + "\n", encoding="utf-8")
+            os.replace(tmp, args.stats)
         if profiler is not None:
             profiler.disable()
             profiler.dump_stats(profile_path)

@@ -639,6 +639,19 @@ class SitlServer:
     def time_us(self) -> int:
         return self.sim.time_us
 
+    def link_report(self) -> dict:
+        """JSON-ready link statistics: who controlled the vehicle and what was
+        ignored (``sitl.auth``), garbage, message types not handled, clients."""
+        return {
+            "control": self.auth.summary(),
+            "bad_packets": self.stats["bad_packets"],
+            "ignored_types": dict(self.stats["ignored"]),
+            "unsupported_commands": {str(k): v for k, v in self.stats["unsupported"].items()},
+            "links": [{"url": l.url, "control": l.control, "clients": len(l.clients),
+                       "clients_evicted": l.clients.n_evicted, "clients_expired": l.clients.n_expired}
+                      for l in self.links],
+        }
+
     def run(self, max_frames: int | None = None) -> None:
         """The main loop (see the module docstring). Returns on ``stop()``."""
         if self._frame is None:
@@ -1014,7 +1027,7 @@ class SitlServer:
         if ans is None:
             return None, link.parse(data)
         v = self.auth.authorize(link.url, link.last_addr, "HIL_ACTUATOR_CONTROLS", None, data[5], data[6],
-                                data, time.monotonic())
+                                data, time.monotonic(), self.sim.time_us * 1e-6)
         if (v.bindings_changed or v.report or not v.accepted) and not self._verdict(v):
             return None, ()
         return ans, ()
@@ -1035,8 +1048,8 @@ class SitlServer:
             self.stats["bad_packets"] += 1
             return
         sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
-        now = time.monotonic()
-        self.auth.observe(link.url, link.last_addr, sysid, compid, now)
+        now, vehicle_s = time.monotonic(), self.sim.time_us * 1e-6
+        self.auth.observe(link.url, link.last_addr, sysid, compid, now, vehicle_s)
         handler = self._handlers.get(mtype)
         if handler is None:
             self.stats["ignored"][mtype] += 1
@@ -1044,7 +1057,8 @@ class SitlServer:
         if sysid == SYSTEM_ID and compid == COMPONENT_ID:
             return   # our own echo
         command = msg.command if mtype in ("COMMAND_LONG", "COMMAND_INT") else None
-        v = self.auth.authorize(link.url, link.last_addr, mtype, command, sysid, compid, msg.get_msgbuf(), now)
+        v = self.auth.authorize(link.url, link.last_addr, mtype, command, sysid, compid, msg.get_msgbuf(), now,
+                                vehicle_s)
         if v.bindings_changed or v.report or not v.accepted:
             if not self._verdict(v):
                 return

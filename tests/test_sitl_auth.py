@@ -78,17 +78,25 @@ def test_telemetry_link_and_per_link_controller():
 
 
 def test_binding_foreign_port_rebind_after_silence_and_observe():
+    """(wall s, vehicle s) pairs: a binding moves only after 3 s of silence in both."""
     p = policy(rebind_after_s=3.0)
-    assert p.authorize(LISTEN, A, "HIL_ACTUATOR_CONTROLS", None, 1, 191, None, 10.0).accepted
+    assert p.authorize(LISTEN, A, "HIL_ACTUATOR_CONTROLS", None, 1, 191, None, 10.0, 100.0).accepted
     assert p.binding(1, 191) == (LISTEN, A)
-    v = p.authorize(LISTEN, B, "HIL_ACTUATOR_CONTROLS", None, 1, 191, None, 11.0)   # spoofed ids, other port
+    v = p.authorize(LISTEN, B, "HIL_ACTUATOR_CONTROLS", None, 1, 191, None, 11.0, 101.0)   # spoofed, other port
     assert not v.accepted and v.reason == "controller ids in use from another address"
-    p.observe(LISTEN, A, 1, 191, 12.5)                     # a heartbeat from A keeps the binding
-    assert not p.authorize(LISTEN, B, "SET_MODE", None, 1, 191, None, 15.0).accepted
-    v = p.authorize(LISTEN, B, "SET_MODE", None, 1, 191, None, 15.6)   # A silent for 3.1 s: B takes over
+    p.observe(LISTEN, A, 1, 191, 12.5, 102.5)              # a heartbeat from A keeps the binding
+    assert not p.authorize(LISTEN, B, "SET_MODE", None, 1, 191, None, 15.0, 105.0).accepted
+    # 5 s of wall clock but the vehicle clock stood still (a SITL busy with a backlog): no move
+    assert not p.authorize(LISTEN, B, "SET_MODE", None, 1, 191, None, 17.5, 102.6).accepted
+    # 30 s of vehicle time in 1 s of wall clock (a fast simulation): no move either
+    assert not p.authorize(LISTEN, B, "SET_MODE", None, 1, 191, None, 13.5, 132.5).accepted
+    v = p.authorize(LISTEN, B, "SET_MODE", None, 1, 191, None, 15.6, 105.6)   # A silent 3.1 s in both: B
     assert v.accepted and v.bindings_changed and "moved" in v.report
     assert p.bound_addresses(LISTEN) == {B}
     assert p.counts["rebound"] == 1
+    assert p.summary()["accepted_from"] == [
+        {"link": LISTEN, "address": "127.0.0.1:40001", "sysid": 1, "compid": 191, "messages": 1},
+        {"link": LISTEN, "address": "127.0.0.1:40002", "sysid": 1, "compid": 191, "messages": 1}]
 
 
 def test_one_report_per_source_and_bounded():
