@@ -408,3 +408,50 @@ class ClientTable:
         for a in old:
             del self._last[a]
         self.n_expired += len(old)
+
+
+class IntakeBudget:
+    """Bounds the work that datagrams from unbound addresses may cost (no I/O).
+
+    A ``udpin`` link reads every datagram anyone sends it, and parsing costs
+    the SITL 0.1-0.3 ms per packet: a flood would stall the vehicle's clock
+    and, in lockstep, the flight. Datagrams from a bound controller's address
+    (``ClientTable.pinned``) always pass; from any other address a datagram
+    passes only if it is at most ``max_bytes`` long (a ground station sends
+    one packet, at most 280 bytes, per datagram) and a token is left in a
+    bucket refilled at ``rate_hz`` (``burst`` at most), shared by all of them.
+    What does not pass is dropped unparsed and counted.
+
+    Parameters
+    ----------
+    max_bytes : int
+    rate_hz : float
+        Datagrams per wall-clock second from all unbound addresses together.
+    burst : int
+    """
+
+    def __init__(self, max_bytes: int = 1024, rate_hz: float = 1000.0, burst: int = 250) -> None:
+        if max_bytes < 280 or not rate_hz > 0 or burst < 1:
+            raise ValueError("max_bytes >= 280, rate_hz > 0, burst >= 1")
+        self.max_bytes = int(max_bytes)
+        self.rate_hz = float(rate_hz)
+        self.burst = float(burst)
+        self._tokens = float(burst)
+        self._last_s: float | None = None
+        self.n_oversized = 0
+        self.n_over_rate = 0
+
+    def admit(self, size: int, now_s: float) -> bool:
+        """May a datagram of ``size`` bytes from an unbound address be parsed now?"""
+        if size > self.max_bytes:
+            self.n_oversized += 1
+            return False
+        last = self._last_s
+        self._last_s = now_s
+        if last is not None and now_s > last:
+            self._tokens = min(self.burst, self._tokens + (now_s - last) * self.rate_hz)
+        if self._tokens < 1.0:
+            self.n_over_rate += 1
+            return False
+        self._tokens -= 1.0
+        return True

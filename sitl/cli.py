@@ -248,10 +248,11 @@ def _run(args) -> int:
     try:
         server.run()
     finally:
+        report = server.link_report() if args.stats is not None else None
         server.close()
-        if args.stats is not None:
+        if report is not None:
             tmp = Path(args.stats + ".part")
-            tmp.write_text(json.dumps(server.link_report(), indent=1) + "\n", encoding="utf-8")
+            tmp.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
             os.replace(tmp, args.stats)
         if profiler is not None:
             profiler.disable()

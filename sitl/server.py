@@ -59,7 +59,10 @@ Who may control the vehicle (``sitl.auth``): control messages are accepted
 only from configured controllers (by system/component ids, on a control
 link, from the address they first came from), others are ignored with one
 STATUSTEXT per source; read-only requests are open to anyone. ``--out``
-links are telemetry-only, ``--control-out`` links carry control too.
+links are telemetry-only, ``--control-out`` links carry control too. A
+flood from unbound addresses is shed before parsing (``IntakeBudget``:
+datagrams over 1024 bytes, and beyond 1000 per second together), so it
+cannot stall the vehicle's clock; bound controllers always get through.
 
 Signing (MAVLink 2): with ``signing_key`` every outgoing packet is signed,
 control must carry a valid, fresh signature and SETUP_SIGNING is refused.
@@ -94,7 +97,7 @@ from companion.link.signing import (
 )
 from companion.link.sockets import is_udp_url, open_udp
 
-from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller
+from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .flightstack import (
     IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
     Parameters, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
@@ -577,6 +580,7 @@ class SitlServer:
             DEFAULT_CONTROLLERS if config.controllers is None else config.controllers,
             None if config.signing_key is None else SignatureVerifier(config.signing_key),
             key_locked=config.signing_key is not None)
+        self._intake = IntakeBudget()
 
     # ------------------------------------------------------------------ params
     @staticmethod
@@ -645,6 +649,7 @@ class SitlServer:
         return {
             "control": self.auth.summary(),
             "bad_packets": self.stats["bad_packets"],
+            "dropped_unparsed": {"oversized": self._intake.n_oversized, "over_rate": self._intake.n_over_rate},
             "ignored_types": dict(self.stats["ignored"]),
             "unsupported_commands": {str(k): v for k, v in self.stats["unsupported"].items()},
             "links": [{"url": l.url, "control": l.control, "clients": len(l.clients),
@@ -1023,6 +1028,9 @@ class SitlServer:
         """(lockstep answer or None, messages) of one UDP datagram: the answer
         (one packet per frame) is decoded without pymavlink's parser when it
         is alone in its datagram (and dropped unless its sender may control)."""
+        if link.server and link.last_addr not in link.clients.pinned and \
+                not self._intake.admit(len(data), time.monotonic()):
+            return None, ()      # an unbound source over its budget: dropped unparsed (sitl.auth.IntakeBudget)
         ans = codec.decode_actuator_datagram(data)
         if ans is None:
             return None, link.parse(data)

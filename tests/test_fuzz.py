@@ -4,21 +4,13 @@ signed companion flight with a lockstep racer. All traffic on loopback."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.link.signing import SignatureVerifier
 
-ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("fuzz_link", ROOT / "benchmarks" / "fuzz_link.py")
-fuzz_link = importlib.util.module_from_spec(_spec)
-sys.modules.setdefault("fuzz_link", fuzz_link)
-_spec.loader.exec_module(fuzz_link)
+import fuzz_link   # benchmarks/ (pyproject: pytest pythonpath)
 
 
 def _parse(data: bytes) -> list:

@@ -9,7 +9,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.link.signing import SignatureVerifier
 from sitl.auth import (
-    DEFAULT_CONTROLLERS, READ_ONLY_COMMANDS, ClientTable, ControlPolicy, Controller, is_control,
+    DEFAULT_CONTROLLERS, READ_ONLY_COMMANDS, ClientTable, ControlPolicy, Controller, IntakeBudget, is_control,
     parse_controller,
 )
 from sitl.server import SitlServer
@@ -170,3 +170,15 @@ def test_client_table_bounded_lru_pinned_and_expiring():
     assert set(t) == {("y", 1)}
     with pytest.raises(ValueError):
         ClientTable(0, 1.0)
+
+
+def test_intake_budget_sheds_floods_from_unbound_sources():
+    b = IntakeBudget(max_bytes=1024, rate_hz=100.0, burst=10)
+    assert not b.admit(1025, 0.0) and b.n_oversized == 1          # no ground station sends that
+    assert [b.admit(300, 0.0) for _ in range(12)] == [True] * 10 + [False] * 2   # the burst
+    assert b.admit(300, 0.011) and not b.admit(300, 0.011)        # 11 ms at 100/s: one token back
+    # a steady 1000/s flood for one second: 100 pass (the rate), the rest are dropped unparsed
+    passed = sum(b.admit(100, 1.0 + k * 1e-3) for k in range(1000))
+    assert passed == pytest.approx(100 + 10, abs=2) and b.n_over_rate > 800
+    with pytest.raises(ValueError):
+        IntakeBudget(max_bytes=100)

@@ -5,9 +5,7 @@ UDP. (Ports in use: tests/test_bad_input.py.)"""
 from __future__ import annotations
 
 import os
-import re
 import socket
-import struct
 import time
 from pathlib import Path
 
@@ -15,41 +13,12 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.errors import InputError
+from fuzz_link import inet_sockets   # benchmarks/ (pyproject: pytest pythonpath)
 from companion.link import Connection
 from sitl.api import SitlThread, free_udp_port
 from test_sitl_mavlink import MISSION, Client
 
 pytestmark = pytest.mark.skipif(not Path("/proc/net/udp").exists(), reason="needs Linux /proc")
-
-
-def _addr(hexpair: str) -> tuple[str, int]:
-    ip, port = hexpair.split(":")
-    return socket.inet_ntoa(struct.pack("<I", int(ip, 16))), int(port, 16)
-
-
-def inet_sockets(pid: int) -> list[tuple[str, tuple, tuple]]:
-    """Every IPv4/IPv6 UDP and TCP socket process ``pid`` holds: (proto, local, remote)."""
-    inodes = set()
-    fd_dir = Path(f"/proc/{pid}/fd")
-    for fd in fd_dir.iterdir():
-        try:
-            m = re.fullmatch(r"socket:\[(\d+)\]", os.readlink(fd))
-        except OSError:
-            continue
-        if m:
-            inodes.add(int(m.group(1)))
-    out = []
-    for proto in ("udp", "tcp", "udp6", "tcp6"):
-        lines = Path(f"/proc/{pid}/net/{proto}").read_text().splitlines()[1:]
-        for line in lines:
-            f = line.split()
-            if int(f[9]) not in inodes:
-                continue
-            if proto.endswith("6"):
-                out.append((proto, (f[1],), (f[2],)))     # any IPv6 socket is a finding
-            else:
-                out.append((proto, _addr(f[1]), _addr(f[2])))
-    return out
 
 
 def test_every_sitl_socket_is_loopback_and_udpout_connected():
