@@ -481,6 +481,7 @@ def run_flight_campaign(n_datagrams: int, signing: bool, cut_s: float | None, ra
         figures["sitl_ignored_control"] = ctl["ignored"]
         figures["sitl_rebound"] = ctl["rebound"]
         figures["sitl_bad_packets"] = st["bad_packets"]
+        figures["sitl_dropped_unparsed"] = st["dropped_unparsed"]
         figures["sitl_clients_evicted"] = sum(l["clients_evicted"] for l in st["links"])
     if conn is not None:
         figures["companion_link"] = conn.link_stats().to_dict()
@@ -603,9 +604,10 @@ def main(argv=None) -> int:
 def _merge(a: dict, b: dict) -> dict:
     out = dict(b)
     for k in ("datagrams", "crashes", "accepted_foreign_control", "accepted_control_from_companion",
-              "racer_answers", "sitl_bad_packets"):
+              "racer_answers", "sitl_bad_packets", "sitl_rebound", "sitl_clients_evicted"):
         out[k] = a.get(k, 0) + b.get(k, 0)
-    out["by_kind"] = dict(Counter(a.get("by_kind", {})) + Counter(b.get("by_kind", {})))
+    for k in ("by_kind", "sitl_ignored_control", "sitl_dropped_unparsed"):
+        out[k] = dict(Counter(a.get(k, {})) + Counter(b.get(k, {})))
     out["completed_all"] = bool(a.get("completed_all", a.get("completed"))) and bool(b.get("completed"))
     out["max_error_m"] = max(x for x in (a.get("max_error_m"), b.get("max_error_m")) if x is not None) \
         if a.get("max_error_m") is not None or b.get("max_error_m") is not None else None
