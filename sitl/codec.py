@@ -3,7 +3,7 @@ wire units (1e7 degrees, mm, cm, cdeg, mG) and MAVLink's [w, x, y, z]
 quaternions.
 
 Everything it takes and returns is ENU world / FLU body, SI units
-(DESIGN.md "Frames and units"); every frame change goes through
+(docs/frames.md); every frame change goes through
 ``companion.frames``. Encoders take a pymavlink ``MAVLink`` protocol object
 (``conn.mav``, it only supplies the message classes) and return the message
 object, ready for ``conn.mav.send``; decoders take a pymavlink message and

@@ -133,6 +133,9 @@ class ParamSpec:
 
 _R, _I = PARAM_TYPE_REAL32, PARAM_TYPE_INT32
 
+#: Parameters a PARAM_SET cannot change (they describe how the simulator was started).
+READ_ONLY_PARAMS = frozenset({"SIM_LOCKSTEP"})
+
 #: The parameter set. PX4 names where PX4 has the parameter; SIM_* are the
 #: simulator's own (noise and lockstep), applied by ``sitl.server``.
 PARAM_SPECS: tuple[ParamSpec, ...] = (
@@ -152,6 +155,9 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_TILTMAX_AIR", _R, 35.0, 10.0, 85.0, "onboard controller tilt limit (deg)"),
     ParamSpec("NAV_MC_ALT_RAD", _R, 0.8, 0.05, 10.0, "takeoff altitude acceptance (m)"),
     ParamSpec("RTL_RETURN_ALT", _R, 5.0, 0.0, 150.0, "return altitude above home (m; PX4's default is 60)"),
+    ParamSpec("SIM_LOCKSTEP", _I, 0, 0, 1,
+              "1: lockstep with the actuator peer (the --lockstep option; read-only): the vehicle waits for "
+              "every answer, so link delay costs wall time, not control"),
     ParamSpec("SIM_LS_TMO", _R, 2.0, 0.05, 60.0, "lockstep: wall-clock wait for the answer (s)"),
     ParamSpec("SIM_LS_SPIN", _R, 300.0, 0.0, 5000.0,
               "lockstep: busy-poll for the answer this long before sleeping (us; 0 off)"),

@@ -1,5 +1,5 @@
 """MAVLink transport of the SITL: ``Simulation`` + ``FlightStack`` behind
-pymavlink connections (DESIGN.md "MAVLink contract" and "Time").
+pymavlink connections (docs/mavlink.md).
 
 The vehicle is system 1, component 1, MAVLink 2, common dialect. Connection
 strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
@@ -100,7 +100,7 @@ from companion.link.sockets import is_udp_url, open_udp
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .flightstack import (
     IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
-    Parameters, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
+    Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
     SEVERITY_INFO, SEVERITY_WARNING,
 )
 from .sim import Simulation
@@ -166,7 +166,7 @@ class ServerConfig:
     outs : tuple of str
         Extra links (e.g. ``udpout:127.0.0.1:14550`` for a ground station).
     lockstep : bool
-        Allow lockstep with an actuator peer (DESIGN.md "Time").
+        Allow lockstep with an actuator peer (docs/mavlink.md "Time and lockstep").
     speed : float
         Real-time factor when free-running (0: as fast as possible).
     seed : int or None
@@ -486,6 +486,7 @@ class SitlServer:
             "SIM_VEC_VAR": nz.vector_variance, "SIM_GYRO_VAR": nz.gyro_variance,
             "SIM_POS_STD": nz.position_std_m, "SIM_VEL_STD": nz.velocity_std_m_s,
             "SIM_RNG_STD": getattr(nz, "range_std_m", 0.0),
+            "SIM_LOCKSTEP": int(bool(config.lockstep)),
             **self._controller_param_defaults()})
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
@@ -1303,6 +1304,11 @@ class SitlServer:
         name = msg.param_id
         if name not in self.params:
             self._say(SEVERITY_WARNING, f"Unknown parameter {name[:30]}")
+            return
+        if name in READ_ONLY_PARAMS:
+            self._say(SEVERITY_WARNING, f"Param rejected: {name} is read-only")
+            i = self.params.index(name)
+            link.send(self._param_msg(link.mav, i))
             return
         spec = self.params.spec(name)
         if spec.param_type == PARAM_TYPE_INT32 and int(msg.param_type) == PARAM_TYPE_INT32:

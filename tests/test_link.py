@@ -563,3 +563,21 @@ def test_fast_link_round_trip_over_udp_with_tlog(tmp_path):
         vehicle.close()
     types = [r.msg.get_type() for r in read_tlog(tmp_path / "f.tlog")]
     assert types == ["HEARTBEAT"] * 2 + ["LOCAL_POSITION_NED", "HEARTBEAT", "HIGHRES_IMU", "HIL_ACTUATOR_CONTROLS"] * 3
+
+
+def test_int32_parameters_are_decoded_bytewise_as_they_travel():
+    import struct
+
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from companion.link.codec import decode_param_value
+    from sitl.codec import param_to_wire
+
+    mav = mavlink.MAVLink(None)
+    for v in (0, 1, -7, 123456):
+        wire = param_to_wire(v, mavlink.MAV_PARAM_TYPE_INT32)
+        msg = mav.param_value_encode(b"SIM_LOCKSTEP", wire, mavlink.MAV_PARAM_TYPE_INT32, 1, 0)
+        assert decode_param_value(msg) == v
+        assert struct.pack("<f", wire) == struct.pack("<i", v)     # the bytes are the int's
+    msg = mav.param_value_encode(b"COM_HIL_TMO", 0.2, mavlink.MAV_PARAM_TYPE_REAL32, 1, 0)
+    assert decode_param_value(msg) == 0.2

@@ -13,8 +13,11 @@ onboard link, ``udpout`` on its side) needs ``--connect udpin:0.0.0.0:PORT``.
 Without ``--plan`` the mission is planned here (as ``companion plan``); with
 it, the trajectory is rebuilt from the plan's way-points with the mission's
 trajectory weights (the LQR solution is exact, so it is the same trajectory).
-Exit code 0 when the flight completed (landed and disarmed), 1 when it did
-not (the report says why), 2 on bad input.
+Exit code 0 when the flight completed (every check of
+``companion.flight.monitor`` held: armed, airborne, in our mode, no crash,
+error within ``--max-error``; landed and disarmed), 3 when it did not (the
+report's ``violation`` says why, and what was flown), 2 on bad input
+(checked before anything is flown or written).
 """
 
 from __future__ import annotations
@@ -76,7 +79,30 @@ def add_arguments(parser) -> None:
     parser.add_argument("--signing-key", default=None, metavar="FILE",
                         help="MAVLink 2 signing key file (32 raw bytes, or a passphrase hashed with SHA-256 as "
                              "MAVProxy's signing setup): sign everything, accept only signed vehicle messages")
+    add_safety_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def add_safety_arguments(parser) -> None:
+    """Flags shared by ``fly`` and ``demo``: what counts as a completed flight and what to do otherwise."""
+    parser.add_argument("--max-error", type=float, default=0.5, metavar="M",
+                        help="tracking error bound (m) of a completed flight; beyond it the flight is stopped "
+                             "(default %(default)s)")
+    parser.add_argument("--on-failure", choices=("land", "hold"), default="land",
+                        help="when a flight must stop early (violation, SIGINT/SIGTERM): land, or hold "
+                             "(AUTO.LOITER) and let go (default %(default)s)")
+    parser.add_argument("--attach", choices=("refuse", "resume", "land"), default="refuse",
+                        help="a vehicle already flying at connection: refuse, resume the trajectory from "
+                             "the nearest way-point, or land it (default %(default)s)")
+
+
+def safety_overrides(args) -> dict:
+    """RunnerConfig keys from ``add_safety_arguments``'s flags (InputError on a bad value)."""
+    import math
+
+    if not (math.isfinite(args.max_error) and args.max_error > 0):
+        raise InputError(f"--max-error {args.max_error}", "must be a finite number > 0 (metres)")
+    return {"max_tracking_error_m": float(args.max_error), "on_failure": args.on_failure, "attach": args.attach}
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,18 +113,19 @@ class FlightPlan:
     waypoints_p_enu_m: np.ndarray
     target_enu_m: np.ndarray
     coverage_fraction: float | None
-    plan: object = None          # companion.planner.Plan when planned here
     waypoints_t_s: np.ndarray | None = None
     waypoints_v_enu_m_s: np.ndarray | None = None
     waypoints_a_enu_m_s2: np.ndarray | None = None
+    path_xy_m: np.ndarray | None = None
 
     @classmethod
     def from_plan(cls, plan) -> "FlightPlan":
         """From a ``companion.planner.Plan``."""
         w = plan.waypoints
         return cls(plan.trajectory, np.asarray(w.p_enu_m, dtype=float), np.asarray(plan.target_enu_m, dtype=float),
-                   float(plan.stats.coverage_fraction), plan, np.asarray(w.t_s, dtype=float),
-                   np.asarray(w.v_enu_m_s, dtype=float), np.asarray(w.a_enu_m_s2, dtype=float))
+                   float(plan.stats.coverage_fraction), np.asarray(w.t_s, dtype=float),
+                   np.asarray(w.v_enu_m_s, dtype=float), np.asarray(w.a_enu_m_s2, dtype=float),
+                   np.asarray(plan.coverage.path_xy_m, dtype=float))
 
     def cut(self, cut_s: float, config) -> "FlightPlan":
         """The way-points up to the first one at or after ``cut_s`` seconds
@@ -122,7 +149,9 @@ class FlightPlan:
         v[-1] = 0.0
         a[-1] = 0.0
         traj = generate_trajectory(t, p, v, a, config, target_enu_m=self.target_enu_m)
-        return FlightPlan(traj, p, self.target_enu_m, None, None, t, v, a)
+        # The coverage stays the whole plan's: the report's flown coverage is
+        # then the part of it this shorter flight covered.
+        return FlightPlan(traj, p, self.target_enu_m, self.coverage_fraction, t, v, a, self.path_xy_m)
 
 
 def prepare(mission, plan_path: str | None) -> FlightPlan:
@@ -145,15 +174,15 @@ def prepare(mission, plan_path: str | None) -> FlightPlan:
     check_plan_file(pf, mission)      # on the map, above the terrain, for this field (companion/preflight.py)
     target = pf.target_enu_m
     if target is None:
-        # A plan.json without ``target_enu_m`` (it is not in DESIGN.md's
-        # minimum): S_p is where the pointing rays of eq. (21) meet.
+        # A plan.json without ``target_enu_m`` (the loader does not require
+        # it, docs/plan-json.md): S_p is where the pointing rays of eq. (21) meet.
         target = pointing_target_from_rays(pf.p_enu_m, pf.pointing_enu, str(plan_path))
     traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
                                pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")
     return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
-                      None if cov is None else float(cov), None, pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
-                      pf.waypoint_a_enu_m_s2)
+                      None if cov is None else float(cov), pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
+                      pf.waypoint_a_enu_m_s2, pf.path_xy_m if len(pf.path_xy_m) else None)
 
 
 def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
@@ -195,9 +224,36 @@ def open_link(connect: str, tlog_path: str | None, signing_key: bytes | None = N
     return Connection(connect, tlog=tlog, signing_key=signing_key).open()
 
 
+def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | None, overrides: dict) -> dict:
+    """The flight's setup record (``companion.flight.setup_record``): what ``companion replay``
+    needs to rebuild this flight from its .tlog and the same mission (and plan) files."""
+    import hashlib
+
+    from .. import __version__
+
+    def digest(path) -> str | None:
+        try:
+            return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+        except OSError:
+            return None
+
+    return {
+        "format": "companion-setup/1",
+        "version": __version__,
+        "mission": mission.name,
+        "mission_sha": digest(mission.source),
+        "map_sha": digest(mission.map_path),
+        "dem_sha": digest(mission.dem_path),
+        "plan_sha": digest(plan_path) if plan_path else None,
+        "control": control,
+        "cut_s": cut_s,
+        "runner": {k: (list(v) if isinstance(v, tuple) else v) for k, v in sorted(overrides.items())},
+    }
+
+
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
             progress=None, cut_s: float | None = None, runner_overrides: dict | None = None,
-            signing_key: bytes | None = None, conn=None):
+            plan_path: str | None = None, signing_key: bytes | None = None, conn=None):
     """Open the link (unless ``conn``, from ``open_link``, is given), fly, close.
     Returns ``companion.runner.FlightResult``.
 
@@ -206,7 +262,7 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
     file behind.
     """
     from ..control import GeometricController
-    from ..runner import MissionRunner, RunnerConfig
+    from ..runner import FlightCore, FlightInputs, MissionRunner, RunnerConfig
 
     try:
         if cut_s is not None:
@@ -215,25 +271,30 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
         ctrl = None
         if control == "companion":
             ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
+        inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
+                              (mission.home.lat, mission.home.lon, mission.home.alt_m),
+                              tuple(float(x) for x in flight_plan.target_enu_m),
+                              tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
+                              flight_plan.coverage_fraction, flight_plan.path_xy_m,
+                              flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}))
+        core = FlightCore(inputs, cfg, mission.vehicle, ctrl)
     except BaseException:
         if conn is not None:
             conn.close()
         raise
+    from ..memory import release_freed_memory
+
+    release_freed_memory()   # the planner's peak is not held through the flight
     if conn is None:
         conn = open_link(connect, tlog_path, signing_key)
     tlog = conn.tlog
-    if tlog is not None:
-        try:
-            tlog.open()
-        except OSError as exc:
-            conn.close()
-            raise InputError(str(tlog_path), f"cannot write: {exc.strerror or exc}") from None
     try:
-        home = (mission.home.lat, mission.home.lon, mission.home.alt_m)
-        runner = MissionRunner(conn, flight_plan.trajectory, flight_plan.waypoints_p_enu_m, home,
-                               flight_plan.target_enu_m, mission.vehicle, ctrl, cfg, progress,
-                               mission.name, flight_plan.coverage_fraction)
-        return runner.run()
+        if tlog is not None:
+            try:
+                tlog.open()
+            except OSError as exc:
+                raise InputError(str(tlog_path), f"cannot write: {exc.strerror or exc}") from None
+        return MissionRunner(conn, core, progress).run()
     finally:
         conn.close()
         if tlog is not None:
@@ -254,6 +315,7 @@ def run(args) -> int:
     if args.signing_key is not None:
         from ..link.signing import load_signing_key
         key = load_signing_key(args.signing_key)
+    overrides = safety_overrides(args)
     mission = load_mission(args.mission)
     # The link first: a bad --connect (unknown host, port in use, refused) fails before any planning.
     conn = open_link(args.connect, args.tlog, key)
@@ -263,7 +325,8 @@ def run(args) -> int:
         conn.close()
         raise
     progress = Progress(enabled=not args.quiet)
-    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, conn=conn)
+    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, overrides,
+                     args.plan, conn=conn)
     rep = result.report
     write_report(rep, args.report)
     tr = rep.tracking
@@ -271,6 +334,10 @@ def run(args) -> int:
     print(f"companion fly: {'completed' if rep.completed else 'NOT completed'} ({rep.control} control), "
           f"{rep.sim_time_s:.1f} s flown in {rep.wall_time_s:.1f} s wall, tracking {err} "
           f"({tr.truth_source}); report {args.report}")
-    if rep.error:
-        print(f"companion fly: {rep.error}", file=sys.stderr)
-    return 0 if rep.completed else 1
+    if not rep.completed:
+        print(f"companion fly: NOT completed: {rep.error or rep.phase}", file=sys.stderr)
+    return 0 if rep.completed else EXIT_FAILED
+
+
+#: Exit code of a flight that did not complete (2 is bad input).
+EXIT_FAILED = 3

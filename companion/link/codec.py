@@ -1,10 +1,10 @@
 """MAVLink encode/decode for the companion: the only companion module that
 speaks NED/FRD, wire units and MAVLink's [w, x, y, z] quaternions.
 
-Everything it returns is ENU world / FLU body, SI units (DESIGN.md "Frames
-and units"); every frame change goes through ``companion.frames``. Decoders
-take a pymavlink message object and return a small named result; encoders take
-a pymavlink ``MAVLink`` protocol object (``conn.mav``) and return the message
+Everything it returns is ENU world / FLU body, SI units (docs/frames.md);
+every frame change goes through ``companion.frames``. Decoders take a
+pymavlink message object and return a small named result; encoders take a
+pymavlink ``MAVLink`` protocol object (``conn.mav``) and return the message
 object, ready for ``conn.send``.
 
 The decoders of the per-frame messages (HIGHRES_IMU, LOCAL_POSITION_NED) are
@@ -190,6 +190,14 @@ def decode_attitude_quaternion(msg) -> Attitude:
     """ATTITUDE_QUATERNION ([w, x, y, z], body FRD -> NED) -> ``R_enu_flu``."""
     R_ned_frd = frames.quat_wxyz2rotmat((msg.q1, msg.q2, msg.q3, msg.q4))
     return Attitude(int(msg.time_boot_ms), frames.R_ned_frd2enu_flu(R_ned_frd))
+
+
+def decode_param_value(msg) -> float | int:
+    """PARAM_VALUE's value: INT32 parameters travel byte-wise in the float field
+    (PX4's and this project's SITL's convention, MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
+    if int(msg.param_type) == mavlink.MAV_PARAM_TYPE_INT32:
+        return struct.unpack("<i", struct.pack("<f", float(msg.param_value)))[0]
+    return float(msg.param_value)
 
 
 def decode_heartbeat(msg) -> VehicleState:

@@ -78,7 +78,7 @@ class Connection:
     tlog : TlogWriter or None
         Records every packet sent and received (already opened by the caller).
     target_system, target_component : int
-        The vehicle (DESIGN.md: 1/1).
+        The vehicle (1/1, docs/mavlink.md "Who is who").
     signing_key : bytes or None
         32-byte MAVLink 2 signing key (``companion.link.signing.load_signing_key``).
     max_time_jump_s : float
@@ -126,6 +126,13 @@ class Connection:
         #: usually arrives within tens of microseconds, less than a process
         #: wake-up costs. Only worth it with the vehicle on another core.
         self.spin_s = 0.0
+        #: Time stamp (us) for the .tlog records: the runner maps the vehicle's
+        #: clock onto the wall clock (``MissionRunner._stamp_us``); None: wall clock.
+        self.clock: Callable[[], int] | None = None
+
+    def _stamp(self) -> int:
+        c = self.clock
+        return c() if c is not None else int(time.time() * 1e6)
 
     # --- lifetime ---------------------------------------------------------
 
@@ -218,7 +225,7 @@ class Connection:
         self.n_sent += 1
         if self.tlog is not None:
             self._flush_rx()
-            self.tlog.write(msg.get_msgbuf())
+            self.tlog.write(msg.get_msgbuf(), self._stamp())
 
     def _flush_rx(self) -> None:
         """Record the packets of the last datagram received (deferred until
@@ -227,7 +234,7 @@ class Connection:
         if rx is not None:
             self._rx_log = None
             if self.tlog is not None:
-                self.tlog.write_many(rx[1], rx[0])
+                self.tlog.write_many(rx, self._stamp())
 
     def _write(self, buf: bytes) -> None:
         if self._sock is not None:
@@ -257,7 +264,7 @@ class Connection:
         self.n_sent += 1
         if self.tlog is not None:
             self._flush_rx()
-            self.tlog.write(buf)
+            self.tlog.write(buf, self._stamp())
 
     def send_heartbeat(self) -> None:
         self.send(self._mav.heartbeat_encode(
@@ -373,7 +380,8 @@ class Connection:
             self.n_received += len(out)
             if self.tlog is not None:
                 self._flush_rx()
-                self._rx_log = (int(time.time() * 1e6), [m.get_msgbuf() for m in out])
+                # stamped when written (after the frame was handled: its vehicle time)
+                self._rx_log = [m.get_msgbuf() for m in out]
         return out
 
     def poll(self, timeout_s: float = 0.0) -> list:
@@ -407,7 +415,7 @@ class Connection:
             for m in self.filter.filter(self._parse(data), None):
                 out.append(m)
                 if tlog is not None:
-                    tlog.write(m.get_msgbuf())
+                    tlog.write(m.get_msgbuf(), self._stamp())
         self.n_received += len(out)
         if not out and timeout_s > 0 and self._fd is None:
             time.sleep(min(timeout_s, 0.001))
