@@ -396,8 +396,8 @@ def run_flight_campaign(n_datagrams: int, signing: bool, cut_s: float | None, ra
 
     The SITL is a ``python -m sitl`` subprocess (lockstep, ``--stats``: the
     control it accepted, by source, is read back at its exit). The attackers
-    start once the companion controls the vehicle (its first command was
-    acknowledged): without signing, the ids of a controller belong to whoever
+    start once the companion controls the vehicle (the vehicle acknowledged
+    its first control command): without signing, the ids of a controller belong to whoever
     uses them first (``sitl.auth``), so this is an attack during a flight.
 
     Returns
@@ -434,13 +434,17 @@ def run_flight_campaign(n_datagrams: int, signing: bool, cut_s: float | None, ra
     try:
         conn = open_link(sitl.url, str(workdir / "flight.tlog"), key)
         companion = "%s:%d" % conn._sock.getsockname()
-        command_long = conn.command_long
+        poll = conn.poll
+        from sitl.auth import is_control
 
-        def first_command_starts_the_attack(*a, **k):
-            r = command_long(*a, **k)
-            sender.go.set()
-            return r
-        conn.command_long = first_command_starts_the_attack
+        def first_control_ack_starts_the_attack(*a, **k):
+            msgs = poll(*a, **k)
+            if not sender.go.is_set():
+                for m in msgs:
+                    if m.get_type() == "COMMAND_ACK" and m.result == 0 and is_control("COMMAND_LONG", m.command):
+                        sender.go.set()      # the vehicle obeyed the companion: it is bound
+            return msgs
+        conn.poll = first_control_ack_starts_the_attack
         sender.start()
         if rac is not None:
             rac.start_after = sender.go

@@ -37,6 +37,8 @@ A control message is accepted only if all of these hold:
    companion only speaks when the vehicle does: a SITL busy with a backlog
    of datagrams has not heard it, but its clock has not moved either. With
    signing a valid signature is the proof and the binding follows it at once.
+   A binding is also released at once when the kernel reports the bound
+   address unreachable (ICMP port unreachable: the controller's socket closed).
 
 Ignored control messages are counted, and the first one from each source
 (link, address, system, component) is reported once by STATUSTEXT
@@ -149,6 +151,8 @@ class Verdict:
 
 
 _ACCEPT = Verdict(True)
+#: ``ControlPolicy.counts`` keys that are not reasons for ignoring a message.
+_NOT_IGNORED = ("accepted", "rebound", "released")
 _SIG_REASONS = {"unsigned": "unsigned", "bad_signature": "bad signature", "replay": "replayed signature",
                 "stale": "stale signature", "malformed": "malformed signature"}
 
@@ -224,6 +228,15 @@ class ControlPolicy:
         """(link, address) a controller is bound to, or None."""
         b = self._bindings.get((sysid, compid))
         return None if b is None else (b.link, b.addr)
+
+    def release(self, link: str, addr) -> list[tuple[int, int]]:
+        """Free the bindings at ``addr`` on ``link`` (its socket is known to be
+        closed); returns the (sysid, compid) released."""
+        ids = [k for k, b in self._bindings.items() if b.link == link and b.addr == addr]
+        for k in ids:
+            del self._bindings[k]
+        self.counts["released"] += len(ids)
+        return ids
 
     def observe(self, link: str, addr, sysid: int, compid: int, now_s: float, vehicle_s: float = 0.0) -> None:
         """Any message from ``addr`` on ``link``: keeps a binding there alive."""
@@ -308,8 +321,9 @@ class ControlPolicy:
             "accepted_from": [{"link": k[0], "address": None if k[1] is None else f"{k[1][0]}:{k[1][1]}",
                                "sysid": k[2], "compid": k[3], "messages": n}
                               for k, n in self.accepted_from.items()],
-            "ignored": {k: v for k, v in self.counts.items() if k not in ("accepted", "rebound")},
+            "ignored": {k: v for k, v in self.counts.items() if k not in _NOT_IGNORED},
             "rebound": self.counts["rebound"],
+            "released": self.counts["released"],
             "signing": self.signing,
         }
 
@@ -400,6 +414,11 @@ class ClientTable:
             del last[oldest]
             self.n_evicted += 1
         last[addr] = now_s
+
+    def forget(self, addr) -> None:
+        """Drop ``addr`` now (its socket is closed), pinned or not."""
+        self._last.pop(addr, None)
+        self.pinned.discard(addr)
 
     def sweep(self, now_s: float) -> None:
         """Drop unpinned clients silent for more than ``expiry_s``."""

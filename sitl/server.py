@@ -74,6 +74,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import errno
 import math
 import select
 import socket
@@ -146,6 +147,8 @@ _DEFAULT_RATES_HZ = {
 }
 
 _HEARTBEAT_ID = ID.MAVLINK_MSG_ID_HEARTBEAT
+#: Linux's IP_RECVERR (the socket module does not export it).
+_IP_RECVERR = getattr(socket, "IP_RECVERR", 11)
 
 
 def _default_interval_us(mid: int) -> int:
@@ -275,6 +278,15 @@ class _Link:
             port = getattr(self.conn, "port", None)
             self.fd = port.fileno() if isinstance(port, socket.socket) else self.conn.fd
         self.mav.robust_parsing = True
+        #: Peers the kernel reported unreachable, for the server to forget (``collect_unreachable``).
+        self.gone: list = []
+        self._recverr = False
+        if self.server:
+            try:   # ICMP errors with the address they concern: a closed peer is noticed at once
+                self.sock.setsockopt(socket.IPPROTO_IP, _IP_RECVERR, 1)
+                self._recverr = hasattr(socket, "MSG_ERRQUEUE")
+            except OSError:
+                pass
         self.parser = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         self.parser.robust_parsing = True
         self._rcvtimeo = None
@@ -319,16 +331,38 @@ class _Link:
         self._batch_len += len(buf)
 
     def _transmit_now(self, buf: bytes) -> None:
-        try:
-            if self.server:
-                for addr in self.clients:
+        if self.server:
+            for addr in self.clients:   # one failing client must not cost the others their telemetry
+                try:
                     self.sock.sendto(buf, addr)
-            elif self.sock is not None:
+                except OSError as exc:
+                    self._send_error(exc)
+            return
+        try:
+            if self.sock is not None:
                 self.sock.send(buf)
             else:
                 self.conn.write(buf)
         except OSError:
             pass
+
+    def _send_error(self, exc: OSError) -> None:
+        if exc.errno == errno.ECONNREFUSED:
+            self.collect_unreachable()
+
+    def collect_unreachable(self) -> None:
+        """Move the addresses the kernel reported unreachable (ICMP port
+        unreachable: the peer's socket is closed) from the error queue to
+        ``gone`` (``IP_RECVERR``, Linux; elsewhere nothing is reported)."""
+        if not self._recverr:
+            return
+        for _ in range(64):
+            try:
+                _, _, _, addr = self.sock.recvmsg(1, 512, socket.MSG_ERRQUEUE | socket.MSG_DONTWAIT)
+            except OSError:
+                return
+            if addr and addr not in self.gone:
+                self.gone.append(addr)
 
     def send(self, msg) -> None:
         """Pack (signing if set up) and send a pymavlink message."""
@@ -353,8 +387,8 @@ class _Link:
         self.mav.seq = (self.mav.seq + 1) & 0xFF
         try:
             self.sock.sendto(buf, addr)
-        except OSError:
-            pass
+        except OSError as exc:
+            self._send_error(exc)
 
     def send_fast(self, packer, args: tuple) -> None:
         """Send through a ``codec.FastPacker``."""
@@ -400,7 +434,9 @@ class _Link:
                 data, addr = self.sock.recvfrom(65535)
             else:
                 data, addr = self.sock.recvfrom(65535, socket.MSG_DONTWAIT)
-        except OSError:   # timeout/EAGAIN, ECONNREFUSED after an ICMP error, EINTR, ...
+        except OSError as exc:   # timeout/EAGAIN, ECONNREFUSED after an ICMP error, EINTR, ...
+            if exc.errno == errno.ECONNREFUSED:
+                self.collect_unreachable()
             return None
         if self.server:
             self.clients.admit(addr, time.monotonic())
@@ -994,6 +1030,8 @@ class SitlServer:
                     if link.udp:
                         data = link.recv_datagram()
                         if data is None:
+                            if link.gone:
+                                self._forget_gone(link)
                             break
                         ans, msgs = self._decode_datagram(link, data)
                     else:
@@ -1017,6 +1055,8 @@ class SitlServer:
             try:
                 data = link.recv_datagram(wait if k == 0 else 0.0, spin_s if k == 0 else 0.0)
                 if data is None:
+                    if link.gone:
+                        self._forget_gone(link)
                     return
                 ans, msgs = self._decode_datagram(link, data)
             except Exception:   # garbage must never stop the vehicle
@@ -1076,6 +1116,18 @@ class SitlServer:
         except Exception:   # never let one malformed message stop the vehicle
             self.stats["bad_packets"] += 1
         self._flush_events()
+
+    def _forget_gone(self, link: _Link) -> None:
+        """Peers whose socket closed (ICMP port unreachable): no more telemetry
+        to them, and a controller bound there is free for its next address at
+        once (a restarted companion re-attaches without waiting for the
+        binding's silence timeout)."""
+        gone, link.gone = link.gone, []
+        for addr in gone:
+            link.clients.forget(addr)
+            for sysid, compid in self.auth.release(link.url, addr):
+                self._say(SEVERITY_INFO, f"controller {sysid}/{compid} at {addr[0]}:{addr[1]} gone (port closed)")
+        link.clients.pinned = self.auth.bound_addresses(link.url)
 
     def _verdict(self, v) -> bool:
         """Act on a ``sitl.auth.Verdict`` (pins, STATUSTEXT); returns ``v.accepted``."""

@@ -141,7 +141,7 @@ def test_attack_matrix_nothing_accepted(tmp_path, signing):
             gcs.pump(0.3)
             server = sitl.server
             accepted_before = server.auth.counts["accepted"]
-            ignored_before = sum(v for k, v in server.auth.counts.items() if k not in ("accepted", "rebound"))
+            ignored_before = sum(v for k, v in server.auth.counts.items() if k not in ("accepted", "rebound", "released"))
             texts_before = len(gcs.texts)
 
             # the attackers: (name, socket, destination, packets)
@@ -181,7 +181,7 @@ def test_attack_matrix_nothing_accepted(tmp_path, signing):
             _read_back(gcs, start_z)
             counts = server.auth.counts
             assert counts["accepted"] == accepted_before
-            ignored = sum(v for k, v in counts.items() if k not in ("accepted", "rebound")) - ignored_before
+            ignored = sum(v for k, v in counts.items() if k not in ("accepted", "rebound", "released")) - ignored_before
             assert ignored == n_sent, dict(counts)
             assert counts["rebound"] == 0
             assert server.auth.binding(255, 190)[1] == ("127.0.0.1", gcs.conn.port.getsockname()[1])
@@ -205,3 +205,26 @@ def test_attack_matrix_nothing_accepted(tmp_path, signing):
             tele.close()
             for s in attackers:
                 s.close()
+
+
+def test_a_closed_controller_is_released_at_once():
+    """A ground station that closes its socket (a restarted companion, a GCS
+    relaunched) frees its ids at once: the kernel's port-unreachable report
+    (IP_RECVERR) tells the SITL, so the next address need not wait out the
+    binding's silence timeout. A live one keeps them (the attack matrix)."""
+    home_iv = mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_HOME_POSITION
+    with SitlThread(MISSION, speed=2.0) as sitl:
+        first = Client(sitl.url)
+        first.hello()
+        assert first.command(*home_iv, 500_000) == mavlink.MAV_RESULT_ACCEPTED
+        first.close()
+        second = Client(sitl.url)
+        try:
+            t0 = time.monotonic()
+            second.hello()
+            assert second.command(*home_iv, 600_000) == mavlink.MAV_RESULT_ACCEPTED
+            assert time.monotonic() - t0 < 2.0          # well inside the 3 s silence rule
+            assert sitl.server.auth.counts["released"] == 1 and sitl.server.auth.counts["rebound"] == 0
+            assert sitl.server.auth.binding(255, 190)[1][1] == second.conn.port.getsockname()[1]
+        finally:
+            second.close()

@@ -182,3 +182,16 @@ def test_intake_budget_sheds_floods_from_unbound_sources():
     assert passed == pytest.approx(100 + 10, abs=2) and b.n_over_rate > 800
     with pytest.raises(ValueError):
         IntakeBudget(max_bytes=100)
+
+
+def test_release_frees_a_closed_controller_and_forget_unpins():
+    p = policy()
+    assert p.authorize(LISTEN, A, "SET_MODE", None, 255, 190, None, 0.0, 0.0).accepted
+    assert p.release(LISTEN, B) == [] and p.release(LISTEN, A) == [(255, 190)]
+    assert p.binding(255, 190) is None and p.counts["released"] == 1
+    assert p.authorize(LISTEN, B, "SET_MODE", None, 255, 190, None, 0.1, 0.1).accepted   # at once
+    t = ClientTable(2, 5.0)
+    t.admit(A, 0.0)
+    t.pinned = {A}
+    t.forget(A)
+    assert A not in t and A not in t.pinned
