@@ -333,10 +333,7 @@ class _Link:
     def _transmit_now(self, buf: bytes) -> None:
         if self.server:
             for addr in self.clients:   # one failing client must not cost the others their telemetry
-                try:
-                    self.sock.sendto(buf, addr)
-                except OSError as exc:
-                    self._send_error(exc)
+                self._sendto(buf, addr)
             return
         try:
             if self.sock is not None:
@@ -346,9 +343,19 @@ class _Link:
         except OSError:
             pass
 
-    def _send_error(self, exc: OSError) -> None:
-        if exc.errno == errno.ECONNREFUSED:
-            self.collect_unreachable()
+    def _sendto(self, buf: bytes, addr) -> None:
+        """``sendto`` on the server socket. With IP_RECVERR the kernel reports a
+        pending ICMP error (about any peer) on the next call and drops that
+        datagram: collect the error and send once more."""
+        try:
+            self.sock.sendto(buf, addr)
+        except OSError as exc:
+            if exc.errno == errno.ECONNREFUSED and self._recverr:
+                self.collect_unreachable()
+                try:
+                    self.sock.sendto(buf, addr)
+                except OSError:
+                    pass
 
     def collect_unreachable(self) -> None:
         """Move the addresses the kernel reported unreachable (ICMP port
@@ -385,10 +392,7 @@ class _Link:
         except (struct_error, ValueError, TypeError, OverflowError):
             return
         self.mav.seq = (self.mav.seq + 1) & 0xFF
-        try:
-            self.sock.sendto(buf, addr)
-        except OSError as exc:
-            self._send_error(exc)
+        self._sendto(buf, addr)
 
     def send_fast(self, packer, args: tuple) -> None:
         """Send through a ``codec.FastPacker``."""

@@ -19,6 +19,7 @@ import math
 import socket
 import time
 
+import numpy as np
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
@@ -228,3 +229,40 @@ def test_a_closed_controller_is_released_at_once():
             assert sitl.server.auth.binding(255, 190)[1][1] == second.conn.port.getsockname()[1]
         finally:
             second.close()
+
+
+def test_a_closed_client_costs_the_lockstep_peer_no_frame():
+    """With IP_RECVERR the kernel reports a closed client's ICMP error on the
+    next send, about any peer, and drops that datagram: the SITL collects it
+    and sends again, so the lockstep peer still gets every frame (consecutive
+    frame times, no lockstep time-out) while clients come and go."""
+    from fuzz_link import imu_time_usec
+
+    with SitlThread(MISSION, lockstep=True, speed=1.0) as sitl:
+        host, port = sitl.listen.split(":")[1:]
+        dest = (host, int(port))
+        peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        peer.bind(("127.0.0.1", 0))
+        peer.settimeout(3.0)
+        mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
+        hb = bytes(mav.heartbeat_encode(18, 8, 0, 0, 4).pack(mav))
+        peer.sendto(hb, dest)
+        times, gone = [], 0
+        try:
+            while len(times) < 300:
+                data = peer.recv(65536)
+                t = imu_time_usec(data)
+                if t is None or (times and t == times[-1]):
+                    continue
+                times.append(t)
+                peer.sendto(bytes(mav.hil_actuator_controls_encode(t, [NAN] * 16, 0, 1).pack(mav)), dest)
+                if len(times) % 40 == 0:       # a client that joins and leaves
+                    c = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                    c.sendto(hb, dest)
+                    c.close()
+                    gone += 1
+        finally:
+            peer.close()
+        assert gone == 7
+        assert set(np.diff(times)) == {4000}                  # every frame, none skipped
+        assert sitl.server.lockstep_engaged

@@ -83,3 +83,28 @@ def test_unresolvable_host_is_one_line_error():
     with pytest.raises(InputError) as exc:
         Connection("udpout:no.such.host.invalid:1").open()
     assert "--connect udpout:no.such.host.invalid:1" in str(exc.value) and "resolve" in str(exc.value)
+
+
+def test_a_pending_icmp_error_does_not_drop_the_next_datagram():
+    """IP_RECVERR makes the kernel report a closed peer's ICMP error on the
+    next sendto, about any peer, and drop that datagram: the SITL's link
+    collects the error (the closed address goes to ``gone``) and sends again."""
+    from sitl.server import _Link
+
+    link = _Link(f"udpin:127.0.0.1:{free_udp_port()}")
+    live = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    live.bind(("127.0.0.1", 0))
+    live.settimeout(1.0)
+    closed = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    closed.bind(("127.0.0.1", 0))
+    dead = closed.getsockname()
+    closed.close()
+    try:
+        link._sendto(b"to the closed port", dead)
+        time.sleep(0.05)
+        link._sendto(b"to the live one", live.getsockname())
+        assert live.recv(100) == b"to the live one"
+        assert link.gone == [dead]
+    finally:
+        link.close()
+        live.close()
