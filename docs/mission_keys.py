@@ -93,42 +93,42 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "vehicle.motor_time_constant_s": ("s", ">= 0", "First-order rotor lag (SITL plant)."),
     "sim.obstacles": ("", "", "Obstacles unknown to the planner (SITL only)."),
     "sim.obstacles[].type": ("", "", "`cylinder` or `box`."),
-    "sim.obstacles[].x": ("m", "", "Centre, ENU x on the map frame."),
-    "sim.obstacles[].y": ("m", "", "Centre, ENU y on the map frame."),
-    "sim.obstacles[].height": ("m", "> 0", "Height above the terrain."),
-    "sim.obstacles[].radius": ("m", "> 0 for a cylinder", "Cylinder radius."),
-    "sim.obstacles[].size_x": ("m", "> 0 for a box", "Box size along its x before the yaw."),
-    "sim.obstacles[].size_y": ("m", "> 0 for a box", "Box size along its y before the yaw."),
-    "sim.obstacles[].yaw_deg": ("deg", "", "Box rotation about z (ENU, counter-clockwise from east)."),
-    "sim.noise.vector_variance": ("", ">= 0", "White-noise variance on the unit vector measurements "
+    "sim.obstacles[].x": ("m", "[-1e6, 1e6]", "Centre, ENU x on the map frame."),
+    "sim.obstacles[].y": ("m", "[-1e6, 1e6]", "Centre, ENU y on the map frame."),
+    "sim.obstacles[].height": ("m", "(0, 100]", "Height above the terrain."),
+    "sim.obstacles[].radius": ("m", "> 0 for a cylinder, <= 50", "Cylinder radius."),
+    "sim.obstacles[].size_x": ("m", "> 0 for a box, <= 500", "Box size along its x before the yaw."),
+    "sim.obstacles[].size_y": ("m", "> 0 for a box, <= 500", "Box size along its y before the yaw."),
+    "sim.obstacles[].yaw_deg": ("deg", "[-360, 360]", "Box rotation about z (ENU, counter-clockwise from east)."),
+    "sim.noise.vector_variance": ("", "[0, 1]", "White-noise variance on the unit vector measurements "
                                   "(accelerometer and magnetometer directions), as the paper."),
-    "sim.noise.gyro_variance": ("(rad/s)^2", ">= 0", "White-noise variance on the gyro."),
-    "sim.noise.position_std_m": ("m", ">= 0", "Position measurement noise (LOCAL_POSITION_NED)."),
-    "sim.noise.velocity_std_m_s": ("m/s", ">= 0", "Velocity measurement noise."),
-    "sim.noise.gyro_bias_rad_s": ("rad/s", "", "Constant gyro bias, body FLU."),
-    "sim.noise.accel_bias_m_s2": ("m/s^2", "", "Constant accelerometer bias, body FLU."),
-    "sim.noise.range_std_m": ("m", ">= 0", "Rangefinder white noise."),
-    "sim.seed": ("", "integer >= 0 (not checked by the loader)", "Seed of the SITL's noise and wind "
+    "sim.noise.gyro_variance": ("(rad/s)^2", "[0, 1]", "White-noise variance on the gyro."),
+    "sim.noise.position_std_m": ("m", "[0, 10]", "Position measurement noise (LOCAL_POSITION_NED)."),
+    "sim.noise.velocity_std_m_s": ("m/s", "[0, 10]", "Velocity measurement noise."),
+    "sim.noise.gyro_bias_rad_s": ("rad/s", "each in [-1, 1]", "Constant gyro bias, body FLU."),
+    "sim.noise.accel_bias_m_s2": ("m/s^2", "each in [-5, 5]", "Constant accelerometer bias, body FLU."),
+    "sim.noise.range_std_m": ("m", "[0, 5]", "Rangefinder white noise."),
+    "sim.seed": ("", ">= 0", "Seed of the SITL's noise and wind "
                  "(`--seed` overrides it)."),
     "sim.rangefinders": ("", "", "Body-fixed rangefinders (one DISTANCE_SENSOR id each); null: forward, "
                          "left, right and down; []: none."),
     "sim.rangefinders[].id": ("", "[0, 255]", "DISTANCE_SENSOR id, unique."),
     "sim.rangefinders[].orientation": ("", "0-7, 24 or 25", "MAV_SENSOR_ORIENTATION: 0 forward, 2 right, "
                                        "4 back, 6 left, 24 up, 25 down."),
-    "sim.rangefinders[].min_m": ("m", "[0, max_m)", "Shortest range."),
-    "sim.rangefinders[].max_m": ("m", "> min_m", "Longest range; beyond it: no return."),
+    "sim.rangefinders[].min_m": ("m", "[0, max_m), <= 10", "Shortest range."),
+    "sim.rangefinders[].max_m": ("m", "> min_m, <= 200", "Longest range; beyond it: no return."),
     "sim.rangefinders[].hfov_deg": ("deg", "[0, 180)", "Horizontal field of view (full angle)."),
     "sim.rangefinders[].vfov_deg": ("deg", "[0, 180)", "Vertical field of view (full angle)."),
-    "sim.rangefinders[].rate_hz": ("Hz", "> 0", "Measurement rate (vehicle time)."),
-    "sim.canopy_height_m": ("m", "> 0", "Occupied map cells are extruded to this height for the "
+    "sim.rangefinders[].rate_hz": ("Hz", "(0, 1000]", "Measurement rate (vehicle time)."),
+    "sim.canopy_height_m": ("m", "(0, 20]", "Occupied map cells are extruded to this height for the "
                             "rangefinders."),
-    "sim.wind.mean_enu_m_s": ("m/s", "", "Mean wind, ENU."),
-    "sim.wind.gust_std_m_s": ("m/s", ">= 0", "Stationary standard deviation of the gusts, per axis."),
-    "sim.wind.gust_time_constant_s": ("s", "> 0", "Correlation time of the gusts."),
-    "sim.wind.drag_n_s_m": ("N s/m", ">= 0", "Linear drag F = -drag (v - w); 0: no aerodynamic force "
+    "sim.wind.mean_enu_m_s": ("m/s", "norm in [0, 30]", "Mean wind, ENU."),
+    "sim.wind.gust_std_m_s": ("m/s", "[0, 15]", "Stationary standard deviation of the gusts, per axis."),
+    "sim.wind.gust_time_constant_s": ("s", "(0, 3600]", "Correlation time of the gusts."),
+    "sim.wind.drag_n_s_m": ("N s/m", "[0, 10]", "Linear drag F = -drag (v - w); 0: no aerodynamic force "
                             "(eq. (20)), so wind has no effect."),
-    "sim.magnetic_field_enu_gauss": ("gauss", "", "Earth field the SITL's magnetometer measures, ENU."),
-    "sim.start_enu_m": ("m", "", "Launch point [x, y] on the map (z from the DEM); null: the free cell "
+    "sim.magnetic_field_enu_gauss": ("gauss", "norm in [0.2, 0.7]", "Earth field the SITL's magnetometer measures, ENU."),
+    "sim.start_enu_m": ("m", "each in [-1e6, 1e6]; on the map (checked by the SITL)", "Launch point [x, y] on the map (z from the DEM); null: the free cell "
                         "nearest the free space's centroid."),
 }
 
