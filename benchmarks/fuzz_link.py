@@ -497,6 +497,7 @@ def run_flight_campaign(n_datagrams: int, signing: bool, cut_s: float | None, ra
         figures["rms_error_m"] = rep.tracking.rms_error_m
         figures["n_tracking_samples"] = rep.tracking.n_samples
         figures["sim_time_s"] = rep.sim_time_s
+        figures["report_link"] = rep.link
     return figures
 
 

@@ -81,3 +81,4 @@ def test_fuzz_sitl_during_a_signed_flight(tmp_path):
     assert f["completed"], f.get("error")
     assert f["n_tracking_samples"] > 0 and f["max_error_m"] < 0.05
     assert f["companion_link"]["dropped"] == 0                   # the vehicle's own stream was all good
+    assert f["report_link"]["auth"]["accepted"] == f["companion_link"]["accepted"]   # report.json's link.auth

@@ -196,6 +196,10 @@ class Connection:
         """What was received and dropped so far (``companion.link.auth``; for report.json)."""
         return self.filter.stats(self.n_bad)
 
+    def auth_stats(self) -> dict:
+        """``{"auth": link_stats()}`` as JSON, for report.json's ``link`` (the runner merges it)."""
+        return {"auth": self.link_stats().to_dict()}
+
     def __enter__(self) -> "Connection":
         return self.open()
 
