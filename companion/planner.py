@@ -196,6 +196,11 @@ def check_sizes(mission: Mission, grid: OccupancyGrid) -> None:
     if cov.line_spacing_m is not None and cov.line_spacing_m < grid.resolution_m:
         raise PlanError(f"{mission.source}: key 'coverage.line_spacing_m'",
                         f"{cov.line_spacing_m:g} m is below the map resolution {grid.resolution_m:g} m")
+    extent_m = max(grid.shape) * grid.resolution_m
+    if cov.line_spacing_m is not None and cov.line_spacing_m >= extent_m:
+        raise PlanError(f"{mission.source}: key 'coverage.line_spacing_m'",
+                        f"{cov.line_spacing_m:g} m is not below the map's size {extent_m:g} m: "
+                        f"no two coverage lines fit")
 
 
 def trajectory_stats(trajectory: Trajectory,

@@ -127,36 +127,36 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "vehicle.motor_time_constant_s": ("s", ">= 0", "First-order rotor lag (SITL plant)."),
     "sim.obstacles": ("", "", "Obstacles unknown to the planner (SITL only)."),
     "sim.obstacles[].type": ("", "", "`cylinder` or `box`."),
-    "sim.obstacles[].x": ("m", "", "Centre, ENU x on the map frame."),
-    "sim.obstacles[].y": ("m", "", "Centre, ENU y on the map frame."),
-    "sim.obstacles[].height": ("m", "> 0", "Height above the terrain."),
-    "sim.obstacles[].radius": ("m", "> 0 for a cylinder", "Cylinder radius."),
-    "sim.obstacles[].size_x": ("m", "> 0 for a box", "Box size along its x before the yaw."),
-    "sim.obstacles[].size_y": ("m", "> 0 for a box", "Box size along its y before the yaw."),
-    "sim.obstacles[].yaw_deg": ("deg", "", "Box rotation about z (ENU, counter-clockwise from east)."),
-    "sim.noise.vector_variance": ("", ">= 0", "White-noise variance on the unit vector measurements "
+    "sim.obstacles[].x": ("m", "[-1e6, 1e6]", "Centre, ENU x on the map frame."),
+    "sim.obstacles[].y": ("m", "[-1e6, 1e6]", "Centre, ENU y on the map frame."),
+    "sim.obstacles[].height": ("m", "(0, 100]", "Height above the terrain."),
+    "sim.obstacles[].radius": ("m", "> 0 for a cylinder, <= 50", "Cylinder radius."),
+    "sim.obstacles[].size_x": ("m", "> 0 for a box, <= 500", "Box size along its x before the yaw."),
+    "sim.obstacles[].size_y": ("m", "> 0 for a box, <= 500", "Box size along its y before the yaw."),
+    "sim.obstacles[].yaw_deg": ("deg", "[-360, 360]", "Box rotation about z (ENU, counter-clockwise from east)."),
+    "sim.noise.vector_variance": ("", "[0, 1)", "White-noise variance on the unit vector measurements "
                                   "(accelerometer and magnetometer directions), as the paper."),
-    "sim.noise.gyro_variance": ("(rad/s)^2", ">= 0", "White-noise variance on the gyro."),
-    "sim.noise.position_std_m": ("m", ">= 0", "Position measurement noise (LOCAL_POSITION_NED)."),
-    "sim.noise.velocity_std_m_s": ("m/s", ">= 0", "Velocity measurement noise."),
-    "sim.noise.gyro_bias_rad_s": ("rad/s", "", "Constant gyro bias, body FLU."),
-    "sim.noise.accel_bias_m_s2": ("m/s^2", "", "Constant accelerometer bias, body FLU."),
-    "sim.noise.range_std_m": ("m", ">= 0", "Rangefinder white noise."),
-    "sim.noise.gyro_noise_density_rad_s_rthz": ("rad/s/sqrt(Hz)", ">= 0", "Gyro white-noise density; per-sample "
+    "sim.noise.gyro_variance": ("(rad/s)^2", "[0, 1]", "White-noise variance on the gyro."),
+    "sim.noise.position_std_m": ("m", "[0, 10]", "Position measurement noise (LOCAL_POSITION_NED)."),
+    "sim.noise.velocity_std_m_s": ("m/s", "[0, 10]", "Velocity measurement noise."),
+    "sim.noise.gyro_bias_rad_s": ("rad/s", "each in [-1, 1]", "Constant gyro bias, body FLU."),
+    "sim.noise.accel_bias_m_s2": ("m/s^2", "each in [-5, 5]", "Constant accelerometer bias, body FLU."),
+    "sim.noise.range_std_m": ("m", "[0, 5]", "Rangefinder white noise."),
+    "sim.noise.gyro_noise_density_rad_s_rthz": ("rad/s/sqrt(Hz)", "[0, 0.1]", "Gyro white-noise density; per-sample "
                                                 "std = density * sqrt(sensor rate). Overrides the profile's."),
-    "sim.noise.accel_noise_density_m_s2_rthz": ("m/s^2/sqrt(Hz)", ">= 0", "Accelerometer white-noise density."),
-    "sim.noise.gyro_bias_turn_on_std_rad_s": ("rad/s", ">= 0", "Std of the seeded turn-on gyro bias, per axis."),
-    "sim.noise.accel_bias_turn_on_std_m_s2": ("m/s^2", ">= 0", "Std of the seeded turn-on accelerometer bias "
+    "sim.noise.accel_noise_density_m_s2_rthz": ("m/s^2/sqrt(Hz)", "[0, 1]", "Accelerometer white-noise density."),
+    "sim.noise.gyro_bias_turn_on_std_rad_s": ("rad/s", "[0, 1]", "Std of the seeded turn-on gyro bias, per axis."),
+    "sim.noise.accel_bias_turn_on_std_m_s2": ("m/s^2", "[0, 5]", "Std of the seeded turn-on accelerometer bias "
                                               "(after calibration), per axis."),
-    "sim.noise.gyro_bias_walk_rad_s_rts": ("rad/s/sqrt(s)", ">= 0", "Gyro bias random walk (drift)."),
-    "sim.noise.accel_bias_walk_m_s2_rts": ("m/s^2/sqrt(s)", ">= 0", "Accelerometer bias random walk (drift)."),
-    "sim.noise.mag_noise_std_gauss": ("gauss", ">= 0", "Magnetometer white noise per axis (replaces the paper's "
+    "sim.noise.gyro_bias_walk_rad_s_rts": ("rad/s/sqrt(s)", "[0, 0.1]", "Gyro bias random walk (drift)."),
+    "sim.noise.accel_bias_walk_m_s2_rts": ("m/s^2/sqrt(s)", "[0, 1]", "Accelerometer bias random walk (drift)."),
+    "sim.noise.mag_noise_std_gauss": ("gauss", "[0, 1]", "Magnetometer white noise per axis (replaces the paper's "
                                       "direction noise when given)."),
-    "sim.noise.mag_hard_iron_gauss": ("gauss", "", "Constant magnetic disturbance of the airframe, body FLU."),
-    "sim.noise.mag_thrust_gauss_per_n": ("gauss/N", "", "Magnetic disturbance proportional to the total rotor "
+    "sim.noise.mag_hard_iron_gauss": ("gauss", "each in [-2, 2]", "Constant magnetic disturbance of the airframe, body FLU."),
+    "sim.noise.mag_thrust_gauss_per_n": ("gauss/N", "each in [-0.1, 0.1]", "Magnetic disturbance proportional to the total rotor "
                                          "thrust (motor currents), body FLU."),
-    "sim.noise.position_z_std_m": ("m", ">= 0", "Vertical position noise (default: position_std_m)."),
-    "sim.noise.gnss_rate_hz": ("Hz", "> 0", "Rate of the position/velocity fixes (default: every sensor frame)."),
+    "sim.noise.position_z_std_m": ("m", "[0, 10]", "Vertical position noise (default: position_std_m)."),
+    "sim.noise.gnss_rate_hz": ("Hz", "(0, 1000]", "Rate of the position/velocity fixes (default: every sensor frame)."),
     "sim.noise.gnss_latency_s": ("s", "[0, 1)", "Delay between a fix's measurement and its delivery; "
                                  "LOCAL_POSITION_NED carries the measurement time."),
     "sim.vector_sensors": ("", "physical | paper", "physical: the accelerometer measures the specific force; "
@@ -167,7 +167,7 @@ NOTES: dict[str, tuple[str, str, str]] = {
                            "override its values."),
     "sim.onboard_state": ("", "estimate | truth", "What the SITL's own cascaded controller flies on: its onboard "
                           "estimator's output from the noisy sensors, or the true state (labelled so)."),
-    "sim.seed": ("", "integer >= 0 (not checked by the loader)", "Seed of the SITL's noise and wind "
+    "sim.seed": ("", ">= 0", "Seed of the SITL's noise and wind "
                  "(`--seed` overrides it)."),
     "sim.rangefinders": ("", "", "Body-fixed rangefinders (one DISTANCE_SENSOR id each); null: forward, "
                          "left, right and down; []: none."),
@@ -176,8 +176,8 @@ NOTES: dict[str, tuple[str, str, str]] = {
                                        "4 back, 6 left (rotations about FRD axes, as PX4), odd values the "
                                        "diagonals, 24 up, 25 down; 100 (CUSTOM): the rotation is "
                                        "`rotation_flu_deg` or `quaternion_flu_wxyz`."),
-    "sim.rangefinders[].min_m": ("m", "[0, max_m)", "Shortest range."),
-    "sim.rangefinders[].max_m": ("m", "> min_m, at most 655", "Longest range; beyond it: no return."),
+    "sim.rangefinders[].min_m": ("m", "[0, max_m), <= 10", "Shortest range."),
+    "sim.rangefinders[].max_m": ("m", "> min_m, <= 655", "Longest range; beyond it: no return."),
     "sim.rangefinders[].position_flu_m": ("m", "each in [-10, 10]", "Mounting point from the centre of mass, "
                                           "body FLU (x forward, y left, z up); the rays start there."),
     "sim.rangefinders[].rotation_flu_deg": ("deg", "with orientation 100 only",
@@ -192,27 +192,27 @@ NOTES: dict[str, tuple[str, str, str]] = {
                                                "FRD (docs/mavlink.md)."),
     "sim.rangefinders[].hfov_deg": ("deg", "[0, 180)", "Horizontal field of view (full angle)."),
     "sim.rangefinders[].vfov_deg": ("deg", "[0, 180)", "Vertical field of view (full angle)."),
-    "sim.rangefinders[].rate_hz": ("Hz", "> 0", "Measurement rate (vehicle time)."),
-    "sim.canopy_height_m": ("m", "> 0", "Occupied map cells are extruded to this height above the terrain "
+    "sim.rangefinders[].rate_hz": ("Hz", "(0, 1000]", "Measurement rate (vehicle time)."),
+    "sim.canopy_height_m": ("m", "(0, 20]", "Occupied map cells are extruded to this height above the terrain "
                             "for the rangefinders and the crash check."),
     "sim.collision.enabled": ("", "", "false: nothing is a crash (the SITL before issue 8)."),
     "sim.collision.vehicle_radius_m": ("m", "(0, 10] or null", "Radius of the vehicle sphere about its centre "
                                        "of mass: touching an obstacle or a vine row with it is a crash; null: "
                                        "`vehicle.arm_m` + 0.127 (a 10-inch propeller), 0.442 m by default."),
-    "sim.collision.touchdown_max_down_m_s": ("m/s", ">= 0", "A touchdown (the centre of mass, where the landing "
+    "sim.collision.touchdown_max_down_m_s": ("m/s", "[0, 20]", "A touchdown (the centre of mass, where the landing "
                                              "gear is, reaching the terrain) faster than this downward is a crash."),
-    "sim.collision.touchdown_max_horizontal_m_s": ("m/s", ">= 0", "A touchdown faster than this sideways is "
+    "sim.collision.touchdown_max_horizontal_m_s": ("m/s", "[0, 20]", "A touchdown faster than this sideways is "
                                                    "a crash."),
-    "sim.collision.touchdown_unplanned_max_m_s": ("m/s", ">= 0", "A touchdown while not landing (armed, not "
+    "sim.collision.touchdown_unplanned_max_m_s": ("m/s", "[0, 20]", "A touchdown while not landing (armed, not "
                                                   "AUTO.LAND, the active setpoint more than 0.2 m above the "
                                                   "terrain or climbing) faster than this is a crash."),
-    "sim.wind.mean_enu_m_s": ("m/s", "", "Mean wind, ENU."),
-    "sim.wind.gust_std_m_s": ("m/s", ">= 0", "Stationary standard deviation of the gusts, per axis."),
-    "sim.wind.gust_time_constant_s": ("s", "> 0", "Correlation time of the gusts."),
-    "sim.wind.drag_n_s_m": ("N s/m", ">= 0", "Linear drag F = -drag (v - w); 0: no aerodynamic force "
+    "sim.wind.mean_enu_m_s": ("m/s", "norm in [0, 30]", "Mean wind, ENU."),
+    "sim.wind.gust_std_m_s": ("m/s", "[0, 15]", "Stationary standard deviation of the gusts, per axis."),
+    "sim.wind.gust_time_constant_s": ("s", "(0, 3600]", "Correlation time of the gusts."),
+    "sim.wind.drag_n_s_m": ("N s/m", "[0, 10]", "Linear drag F = -drag (v - w); 0: no aerodynamic force "
                             "(eq. (20)), so wind has no effect."),
-    "sim.magnetic_field_enu_gauss": ("gauss", "", "Earth field the SITL's magnetometer measures, ENU."),
-    "sim.start_enu_m": ("m", "", "Launch point [x, y] on the map (z from the DEM); null: the free cell "
+    "sim.magnetic_field_enu_gauss": ("gauss", "norm in [0.2, 0.7]", "Earth field the SITL's magnetometer measures, ENU."),
+    "sim.start_enu_m": ("m", "each in [-1e6, 1e6]; on the map (checked by the SITL)", "Launch point [x, y] on the map (z from the DEM); null: the free cell "
                         "nearest the free space's centroid."),
 }
 

@@ -593,9 +593,26 @@ def position_target_local_ned(mav, time_boot_ms: int, setpoint):
         float(a[0]), float(a[1]), float(a[2]), yaw, yaw_rate)
 
 
+STATUSTEXT_CHUNK = 50
+#: Longest text sent in chunks (the rest is cut).
+STATUSTEXT_MAX = 250
+
+
 def statustext(mav, severity: int, text: str):
     """STATUSTEXT (text cut to the 50 bytes of one chunk)."""
-    return mav.statustext_encode(severity, text.encode("ascii", "replace")[:50])
+    return mav.statustext_encode(severity, text.encode("ascii", "replace")[:STATUSTEXT_CHUNK])
+
+
+def statustext_chunks(mav, severity: int, text: str, text_id: int) -> list:
+    """A long text as STATUSTEXT chunks (MAVLink 2 ``id`` = ``text_id`` > 0,
+    ``chunk_seq`` 0, 1, ...; the last chunk is shorter than 50 bytes, or an
+    empty one follows, which is how receivers see the end), at most
+    ``STATUSTEXT_MAX`` bytes."""
+    b = text.encode("ascii", "replace")[:STATUSTEXT_MAX]
+    parts = [b[i:i + STATUSTEXT_CHUNK] for i in range(0, len(b), STATUSTEXT_CHUNK)]
+    if len(parts[-1]) == STATUSTEXT_CHUNK:
+        parts.append(b"")
+    return [mav.statustext_encode(severity, p, text_id, k) for k, p in enumerate(parts)]
 
 
 def _clip16(x: float) -> int:

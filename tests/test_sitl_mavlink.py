@@ -28,17 +28,35 @@ POS_ONLY = 0xDF8
 LPOS = mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED
 
 
+def join_statustext(pending: dict, msg) -> str | None:
+    """The whole text once a STATUSTEXT ends (MAVLink 2 chunks share a non-zero
+    ``id``, the last one is shorter than 50 bytes), else None."""
+    text_id = int(getattr(msg, "id", 0) or 0)
+    if text_id == 0:
+        return msg.text
+    parts = pending.setdefault(text_id, [])
+    parts.append(msg.text)
+    if len(msg.text) < 50:
+        return "".join(pending.pop(text_id))
+    return None
+
+
 class Client:
     """A ground station (255/190) on pymavlink's mavutil, MAVLink 2."""
 
-    def __init__(self, url: str, sysid: int = 255, compid: int = 190) -> None:
+    def __init__(self, url: str, sysid: int = 255, compid: int = 190, local_port: int | None = None) -> None:
         self.conn = mavutil.mavlink_connection(url, source_system=sysid, source_component=compid)
+        if local_port is not None:
+            # The SITL binds a controller's ids to the address it first controlled
+            # from: successive clients of one SITL (one ground station) share a port.
+            self.conn.port.bind(("127.0.0.1", local_port))
         self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=sysid, srcComponent=compid)
         self.conn.mav.robust_parsing = True
         self.conn.WIRE_PROTOCOL_VERSION = "2.0"
         self.mav = self.conn.mav
         self.texts: list[str] = []
         self.latest: dict[str, object] = {}
+        self._chunks: dict = {}
 
     def hello(self):
         self.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
@@ -50,7 +68,9 @@ class Client:
         t = msg.get_type()
         self.latest[t] = msg
         if t == "STATUSTEXT":
-            self.texts.append(msg.text)
+            text = join_statustext(self._chunks, msg)
+            if text is not None:
+                self.texts.append(text)
 
     def recv(self, mtype, timeout: float, cond=None):
         """First message of type ``mtype`` (str or tuple) satisfying ``cond``."""
@@ -482,6 +502,10 @@ def signed(m) -> bool:
 
 
 def test_signing(gcs):
+    """SETUP_SIGNING from a controller (as MAVProxy's ``signing setup``): the SITL
+    signs from then on and wants signed control; the key holder turns it off again."""
+    from companion.link.signing import enable_outgoing_signing, signing_timestamp
+
     key = bytes(range(1, 33))
     gcs.mav.setup_signing_send(1, 1, key, 1)
     m = gcs.recv("HIGHRES_IMU", 3.0, signed)
@@ -489,7 +513,13 @@ def test_signing(gcs):
     rx = mavlink.MAVLink(None)
     rx.signing.secret_key = key
     assert rx.parse_buffer(bytes(m.get_msgbuf()))[0].get_signed()    # verifies with the key
-    gcs.mav.setup_signing_send(1, 1, bytes(32), 0)                   # all-zero key: off
+    gcs.mav.setup_signing_send(1, 1, bytes(32), 0)                   # unsigned: ignored now
+    gcs.pump(0.5)
+    assert any("SETUP_SIGNING" in t and t.endswith(": unsigned") for t in gcs.texts), gcs.texts
+    assert gcs.recv("HIGHRES_IMU", 1.0, signed) is not None
+    enable_outgoing_signing(gcs.mav, key, 0, signing_timestamp(time.time()))
+    gcs.mav.signing.allow_unsigned_callback = lambda mav, msg_id: True   # to see the unsigned stream
+    gcs.mav.setup_signing_send(1, 1, bytes(32), 0)                   # signed all-zero key: off
     assert gcs.recv("HIGHRES_IMU", 3.0, lambda m: not signed(m)) is not None
 
 

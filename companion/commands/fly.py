@@ -25,6 +25,8 @@ report's ``violation`` says why, and what was flown), 2 on bad input
 
 from __future__ import annotations
 
+import math
+import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +36,33 @@ import numpy as np
 from ..errors import InputError
 
 DEFAULT_CONNECT = "udpout:127.0.0.1:14540"
+
+
+def check_output_paths(outputs) -> None:
+    """Fail before any work when an output cannot be written where asked.
+
+    Parameters
+    ----------
+    outputs : iterable of (option, path)
+        E.g. ``(("--tlog", "flight.tlog"), ("--report", "report.json"))``.
+
+    Raises
+    ------
+    InputError
+        A path is a directory, its directory does not exist, or two options
+        name the same file (one line naming the option and path).
+    """
+    seen = {}
+    for opt, path in outputs:
+        p = Path(path)
+        if p.is_dir():
+            raise InputError(f"{opt} {path}", "is a directory (give a file name)")
+        if not p.parent.is_dir():
+            raise InputError(f"{opt} {path}", f"directory {p.parent} does not exist")
+        key = os.path.abspath(p)
+        if key in seen:
+            raise InputError(f"{opt} {path}", f"is also given as {seen[key]}")
+        seen[key] = opt
 
 
 def add_arguments(parser) -> None:
@@ -53,6 +82,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--sortie", type=int, default=None, metavar="N",
                         help="fly only sortie N (1-based) of the plan: from the launch point, its corridors, "
                              "back to the launch point")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="MAVLink 2 signing key file (32 raw bytes, or a passphrase hashed with SHA-256 as "
+                             "MAVProxy's signing setup): sign everything, accept only signed vehicle messages")
     add_safety_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -171,6 +203,8 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None) -> Flight
     from ..trajectory import generate_trajectory
 
     pf = load_plan(plan_path)
+    from ..preflight import check_plan_file
+    check_plan_file(pf, mission)      # on the map, above the terrain, for this field (companion/preflight.py)
     target = pf.target_enu_m
     if target is None:
         # A plan.json without ``target_enu_m`` (the loader does not require
@@ -213,6 +247,20 @@ def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
+def open_link(connect: str, tlog_path: str | None, signing_key: bytes | None = None):
+    """The vehicle link, opened (the tlog not yet: ``execute`` creates it).
+
+    Raises
+    ------
+    InputError
+        Unknown host, port in use, connection refused: one line, nothing written.
+    """
+    from ..link import Connection, TlogWriter
+
+    tlog = TlogWriter(tlog_path) if tlog_path else None
+    return Connection(connect, tlog=tlog, signing_key=signing_key).open()
+
+
 def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | None, overrides: dict) -> dict:
     """The flight's setup record (``companion.flight.setup_record``): what ``companion replay``
     needs to rebuild this flight from its .tlog and the same mission (and plan) files."""
@@ -242,36 +290,41 @@ def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | No
 
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
             progress=None, cut_s: float | None = None, runner_overrides: dict | None = None,
-            plan_path: str | None = None):
-    """Open the link, fly, close. Returns ``companion.runner.FlightResult``."""
+            plan_path: str | None = None, signing_key: bytes | None = None, conn=None):
+    """Open the link (unless ``conn``, from ``open_link``, is given), fly, close.
+    Returns ``companion.runner.FlightResult``.
+
+    The link is opened before the tlog is created: a link that cannot be
+    opened (unknown host, port in use, refused) is bad input and leaves no
+    file behind.
+    """
     from ..control import GeometricController
-    from ..link import Connection, TlogWriter
     from ..runner import FlightCore, FlightInputs, MissionRunner, RunnerConfig
 
-    if cut_s is not None:
-        flight_plan = flight_plan.cut(cut_s, mission.trajectory)
-    cfg = RunnerConfig(control=control, **(runner_overrides or {}))
-    ctrl = None
-    if control == "companion":
-        ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
-    inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
-                          (mission.home.lat, mission.home.lon, mission.home.alt_m),
-                          tuple(float(x) for x in flight_plan.target_enu_m),
-                          tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
-                          flight_plan.coverage_fraction, flight_plan.path_xy_m,
-                          flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}))
-    core = FlightCore(inputs, cfg, mission.vehicle, ctrl)
+    try:
+        if cut_s is not None:
+            flight_plan = flight_plan.cut(cut_s, mission.trajectory)
+        cfg = RunnerConfig(control=control, **(runner_overrides or {}))
+        ctrl = None
+        if control == "companion":
+            ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
+        inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
+                              (mission.home.lat, mission.home.lon, mission.home.alt_m),
+                              tuple(float(x) for x in flight_plan.target_enu_m),
+                              tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
+                              flight_plan.coverage_fraction, flight_plan.path_xy_m,
+                              flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}))
+        core = FlightCore(inputs, cfg, mission.vehicle, ctrl)
+    except BaseException:
+        if conn is not None:
+            conn.close()
+        raise
     from ..memory import release_freed_memory
 
     release_freed_memory()   # the planner's peak is not held through the flight
-    from ..errors import LinkError
-
-    tlog = TlogWriter(tlog_path) if tlog_path else None
-    conn = Connection(connect, tlog=tlog)
-    try:
-        conn.open()
-    except LinkError as exc:   # unresolvable host, refused tcp:, port in use: nothing flown, nothing written
-        raise InputError(f"--connect {connect}", str(exc)) from None
+    if conn is None:
+        conn = open_link(connect, tlog_path, signing_key)
+    tlog = conn.tlog
     try:
         if tlog is not None:
             try:
@@ -292,17 +345,27 @@ def run(args) -> int:
     from ..report import write_report
 
     check_connection_string(args.connect)
-    if args.cut is not None and not args.cut > 0:
-        raise InputError("--cut", "must be > 0 seconds")
+    if args.cut is not None and not (math.isfinite(args.cut) and args.cut > 0):
+        raise InputError(f"--cut {args.cut}", "must be a finite number of seconds > 0")
     check_output_paths((("--tlog", args.tlog), ("--report", args.report)))
+    key = None
+    if args.signing_key is not None:
+        from ..link.signing import load_signing_key
+        key = load_signing_key(args.signing_key)
     overrides = safety_overrides(args)
     if args.sortie is not None and args.sortie < 1:
         raise InputError("--sortie", f"sorties are numbered from 1, got {args.sortie}")
     mission = load_mission(args.mission)
-    fp = prepare(mission, args.plan, args.sortie)
+    # The link first: a bad --connect (unknown host, port in use, refused) fails before any planning.
+    conn = open_link(args.connect, args.tlog, key)
+    try:
+        fp = prepare(mission, args.plan, args.sortie)
+    except BaseException:
+        conn.close()
+        raise
     progress = Progress(enabled=not args.quiet)
     result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, overrides,
-                     args.plan)
+                     args.plan, conn=conn)
     rep = result.report
     write_report(rep, args.report)
     tr = rep.tracking
@@ -317,19 +380,3 @@ def run(args) -> int:
 
 #: Exit code of a flight that did not complete (2 is bad input).
 EXIT_FAILED = 3
-
-
-def check_output_paths(pairs) -> None:
-    """Before anything is flown: each (flag, path) must be writable as a file.
-
-    Raises
-    ------
-    InputError
-        The path is an existing directory, or its directory does not exist.
-    """
-    for opt, path in pairs:
-        p = Path(path)
-        if p.is_dir():
-            raise InputError(f"{opt} {path}", "is a directory")
-        if not p.parent.is_dir():
-            raise InputError(f"{opt} {path}", f"directory {p.parent} does not exist")

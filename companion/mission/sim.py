@@ -308,6 +308,8 @@ class SimConfig:
         m = self.magnetic_field_enu_gauss
         if not all(math.isfinite(x) for x in m) or not math.hypot(*m) > 0:
             raise ValueError("sim.magnetic_field_enu_gauss must be finite and non-zero")
+        from .sim_ranges import check_sim_ranges   # physical ranges of every numeric key
+
         if self.canopy_height_m <= 0:
             raise ValueError("sim.canopy_height_m must be > 0")
         if self.start_enu_m is not None and not all(math.isfinite(x) for x in self.start_enu_m):
@@ -316,6 +318,7 @@ class SimConfig:
             ids = [r.id for r in self.rangefinders]
             if len(set(ids)) != len(ids):
                 raise ValueError("sim.rangefinders ids must be unique")
+        check_sim_ranges(self)
 
     @property
     def rangefinders_or_default(self) -> tuple[RangefinderConfig, ...]:
