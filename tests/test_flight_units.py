@@ -199,3 +199,23 @@ def test_link_health_trusts_a_lockstep_vehicle_until_its_frames_skip():
     h = LinkHealth(dt, lockstep=True)
     verdicts = [h.observe(k * dt + 0.03 * rng.random(), k * dt) for k in range(0, 4000, 2)]
     assert any(v is not None for v in verdicts)
+
+
+def test_takeoff_segments_climb_above_the_canopy_before_crossing_the_field():
+    from companion.flight.core import takeoff_segments
+
+    start, first = (10.0, 3.0, 0.2), (22.45, 8.75, 1.5)
+    segs = takeoff_segments(start, first, 4.0, 1.0, 3.0)
+    # up, across at the transit height, down: continuous, rest to rest
+    assert [s[0] for s in segs[1:]] == [s[1] for s in segs[:-1]]
+    assert segs[0][0] == start and segs[-1][1] == first
+    (a0, a1, _), (b0, b1, _), (c0, c1, _) = segs
+    assert a1 == (10.0, 3.0, 4.0) and b1 == (22.45, 8.75, 4.0) and c1 == first
+    # no horizontal motion below the transit height
+    assert a0[:2] == a1[:2] and c0[:2] == c1[:2]
+    # launched under the first point: one climb, whatever the floor
+    assert takeoff_segments((22.45, 8.75, 0.2), first, 4.0, 1.0, 3.0) == \
+        [((22.45, 8.75, 0.2), first, pytest.approx(3.0))]
+    # no floor (a field without rows): level at the first point's height, no descent
+    segs = takeoff_segments(start, first, None, 1.0, 3.0)
+    assert len(segs) == 2 and segs[1][1] == first

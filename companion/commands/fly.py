@@ -288,6 +288,22 @@ def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | No
     }
 
 
+#: Vine canopy height (m) assumed for the take-off transfer until the mission gives one.
+DEFAULT_CANOPY_M = 2.0
+#: Clearance (m) of the take-off transfer above the highest canopy of the field.
+TRANSIT_CLEARANCE_M = 1.0
+
+
+def transit_floor_z_m(mission) -> float:
+    """Lowest height (ENU z, m) at which a level flight across the field cannot touch a
+    vine row: the DEM's highest point, plus the canopy, plus ``TRANSIT_CLEARANCE_M``."""
+    from ..maps.field import load_mission_dem
+
+    dem = load_mission_dem(mission)
+    h = np.asarray(dem.heights_m, dtype=float)
+    return float(np.nanmax(h)) + DEFAULT_CANOPY_M + TRANSIT_CLEARANCE_M
+
+
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
             progress=None, cut_s: float | None = None, runner_overrides: dict | None = None,
             plan_path: str | None = None, signing_key: bytes | None = None, conn=None):
@@ -313,7 +329,8 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
                               tuple(float(x) for x in flight_plan.target_enu_m),
                               tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
                               flight_plan.coverage_fraction, flight_plan.path_xy_m,
-                              flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}))
+                              flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}),
+                              transit_floor_z_m(mission))
         core = FlightCore(inputs, cfg, mission.vehicle, ctrl)
     except BaseException:
         if conn is not None:

@@ -118,6 +118,10 @@ class FlightInputs:
     path_xy_m : (M, 2) array or None
         The plan's 2D coverage path; the report's flown coverage is the
         planned coverage times the fraction of this path actually flown.
+    transit_floor_z_m : float or None
+        Lowest safe height (ENU z, m) of a straight level flight across the
+        field: the take-off's transfer to the first point flies at least this
+        high (``takeoff_segments``).
     setup : dict or None
         How this flight was set up (``companion.flight.setup_record``): sent
         at connection so the .tlog describes its own flight.
@@ -132,6 +136,7 @@ class FlightInputs:
     coverage_fraction: float | None = None
     path_xy_m: object = None
     setup: dict | None = None
+    transit_floor_z_m: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,6 +176,31 @@ def heading_from_imu(accel_flu, mag_flu, mag_field_enu) -> float:
     x = hw[0] * h[0] + kw[0] * k[0]
     y = hw[1] * h[0] + kw[1] * k[0]
     return math.atan2(y, x)
+
+
+def takeoff_segments(start, first, transit_floor_z_m, climb_speed_m_s: float, transfer_speed_m_s: float):
+    """The take-off as rest-to-rest smooth segments ``[(p0, p1, duration_s), ...]`` (ENU).
+
+    Launched within ``LAUNCH_TOLERANCE_M`` of the first point: one vertical
+    climb to it. Otherwise: climb straight up to the transit height, fly
+    level to above the first point, descend to it. The transit height is
+    the highest of the first point, the start and ``transit_floor_z_m``
+    (the highest terrain of the field plus the canopy and a clearance: a
+    level flight there cannot touch a vine row); None: the first point's
+    height (a field without rows).
+    """
+    start = tuple(float(c) for c in start)
+    first = tuple(float(c) for c in first)
+    if math.dist(start[:2], first[:2]) < LAUNCH_TOLERANCE_M:
+        return [(start, first, climb_duration_s(math.dist(start, first), climb_speed_m_s))]
+    z_t = max(first[2], start[2], transit_floor_z_m if transit_floor_z_m is not None else -math.inf)
+    top = (start[0], start[1], z_t)
+    over = (first[0], first[1], z_t)
+    segs = [(start, top, climb_duration_s(z_t - start[2], climb_speed_m_s)),
+            (top, over, climb_duration_s(math.dist(top, over), transfer_speed_m_s, 1.0))]
+    if z_t - first[2] > 1e-6:
+        segs.append((over, first, climb_duration_s(z_t - first[2], climb_speed_m_s)))
+    return segs
 
 
 class FlightCore:
@@ -245,8 +275,8 @@ class FlightCore:
         self._hb_t = None
         # schedule (vehicle seconds), set at arming
         self._t_arm = None
-        self._climb_from = self._climb_top = None
-        self._climb_T = self._transfer_T = 0.0
+        self._segments: list[tuple] = []     # take-off: (p0, p1, T) smooth segments back to back
+        self._takeoff_T = 0.0
         self._psi_arm = self._dpsi = 0.0
         self._t_hold = self._t_traj = self._t_hover = self._t_land = math.inf
         self._window: TrajectoryWindow | None = None
@@ -520,17 +550,10 @@ class FlightCore:
         cfg = self.cfg
         first = self._hold_first
         self._t_arm = t_arm
-        self._climb_from = tuple(self._pos)
-        if math.dist(self._pos[:2], first.p[:2]) < LAUNCH_TOLERANCE_M:
-            # Launched under the first point (``companion demo``): one climb
-            # straight to it, no level transfer.
-            self._climb_top = tuple(first.p)
-            self._transfer_T = 0.0
-        else:
-            self._climb_top = (self._pos[0], self._pos[1], max(first.p[2], self._pos[2]))
-            self._transfer_T = climb_duration_s(math.dist(self._climb_top, first.p), cfg.transfer_speed_m_s, 1.0)
-        self._climb_T = climb_duration_s(math.dist(self._climb_from, self._climb_top), cfg.climb_speed_m_s)
-        self._t_hold = t_arm + self._climb_T + self._transfer_T
+        self._segments = takeoff_segments(tuple(self._pos), first.p, self.inputs.transit_floor_z_m,
+                                          cfg.climb_speed_m_s, cfg.transfer_speed_m_s)
+        self._takeoff_T = sum(seg[2] for seg in self._segments)
+        self._t_hold = t_arm + self._takeoff_T
         # Heading of the body y axis (the pointing axis b2) at arming, measured
         # by the IMU (accelerometer + magnetometer); the takeoff turns it toward s0.
         s0 = first.s
@@ -848,11 +871,14 @@ class FlightCore:
             return self._hold_last
         if ph == "takeoff":
             dt = t - self._t_arm
-            if dt < self._climb_T or self._transfer_T <= 0.0:
-                p, v, a, j, s = smooth_segment(self._climb_from, self._climb_top, self._climb_T, dt)
+            rest = dt
+            for p0, p1, T in self._segments:
+                if rest < T:
+                    break
+                rest -= T
             else:
-                p, v, a, j, s = smooth_segment(self._climb_top, self._hold_first.p, self._transfer_T,
-                                               dt - self._climb_T)
+                rest = T      # past the last segment: its end
+            p, v, a, j, s = smooth_segment(p0, p1, T, rest)
             # Turn the pointing direction smoothly from the heading at arming to
             # the trajectory's first pointing s0 and hand the controller a target
             # "at infinity" in that direction: the straight transfer may pass
@@ -866,7 +892,7 @@ class FlightCore:
 
     def _takeoff_pointing(self, dt: float) -> tuple:
         s0 = self._hold_first.s
-        T = self._climb_T + self._transfer_T
+        T = self._takeoff_T
         sig = smooth_segment((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), T, dt)[0][0]
         psi = self._psi_arm + sig * self._dpsi
         h = math.sqrt(max(0.0, 1.0 - (sig * s0[2]) ** 2))

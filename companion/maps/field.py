@@ -304,11 +304,15 @@ def load_mission_maps(mission) -> tuple[OccupancyGrid, ElevationModel]:
         grid = load_field(mission.field_path, home3, f.resolution_m, f.row_width_m, f.border_m)
     else:
         grid = rotate_grid(load_ogm(mission.map_path), yaw)
+    return grid, load_mission_dem(mission)
+
+
+def load_mission_dem(mission) -> ElevationModel:
+    """The mission's elevation model in ENU about ``home`` (``load_mission_maps``'s second half)."""
+    home = mission.home
     dem_path = mission.dem_path
     if is_georeferenced(dem_path, mission.dem_crs):
         from .gis import load_geo_dem
 
-        dem = load_geo_dem(dem_path, home3, mission.dem_crs)
-    else:
-        dem = rotate_dem(load_dem(dem_path), yaw)
-    return grid, dem
+        return load_geo_dem(dem_path, (home.lat, home.lon, home.alt_m), mission.dem_crs)
+    return rotate_dem(load_dem(dem_path), math.radians(90.0 - home.heading_deg))

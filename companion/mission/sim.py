@@ -127,15 +127,15 @@ class NoiseConfig:
                 continue
             vals = v if f.name in _VECTOR_KEYS else (v,)
             if not all(math.isfinite(x) for x in vals):
-                raise ValueError(f"noise.{f.name} must be finite")
+                raise ValueError(f"sim.noise.{f.name} must be finite")
             if f.name not in _VECTOR_KEYS and v < 0:
-                raise ValueError(f"noise.{f.name} must be >= 0")
+                raise ValueError(f"sim.noise.{f.name} must be >= 0")
         if self.gnss_rate_hz is not None and not self.gnss_rate_hz > 0:
-            raise ValueError("noise.gnss_rate_hz must be > 0")
+            raise ValueError("sim.noise.gnss_rate_hz must be > 0")
         if self.gnss_latency_s is not None and not self.gnss_latency_s < 1.0:
-            raise ValueError("noise.gnss_latency_s must be in [0, 1) s")
+            raise ValueError("sim.noise.gnss_latency_s must be in [0, 1) s")
         if self.vector_variance is not None and self.vector_variance >= 1.0:
-            raise ValueError("noise.vector_variance must be < 1 (a variance on unit vectors)")
+            raise ValueError("sim.noise.vector_variance must be < 1 (a variance on unit vectors)")
 
 
 # MAV_SENSOR_ORIENTATION values a body-fixed rangefinder may use (pymavlink
