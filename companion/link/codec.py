@@ -398,6 +398,37 @@ def px4_custom_mode(main_mode: int, sub_mode: int = 0) -> int:
     return (main_mode << 16) | (sub_mode << 24)
 
 
+@dataclass(frozen=True, slots=True)
+class GlobalPosition:
+    """GLOBAL_POSITION_INT in SI units and ENU.
+
+    Attributes
+    ----------
+    time_boot_ms : int
+    lat_deg, lon_deg : float
+        WGS-84 (1e-7 degree resolution on the wire: about 1.1 cm north, less east).
+    alt_m : float
+        Altitude AMSL (m).
+    relative_alt_m : float
+        Altitude above the vehicle's home (m).
+    vel_enu_m_s : tuple (3,)
+        Ground velocity, ENU, m/s (cm/s resolution on the wire).
+    """
+
+    time_boot_ms: int
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    relative_alt_m: float
+    vel_enu_m_s: tuple
+
+
+def decode_global_position_int(msg) -> GlobalPosition:
+    """GLOBAL_POSITION_INT (1e7 deg, mm, cm/s NED) -> ``GlobalPosition`` (deg, m, m/s ENU)."""
+    return GlobalPosition(int(msg.time_boot_ms), msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3,
+                          msg.relative_alt * 1e-3, (msg.vy * 0.01, msg.vx * 0.01, -msg.vz * 0.01))
+
+
 # --- fast MAVLink 2 framing of the per-frame messages ---------------------------
 #
 # In lockstep every sensor frame is one datagram (LOCAL_POSITION_NED, ODOMETRY,
@@ -564,11 +595,9 @@ _MODE_DISARMED = mavlink.MAV_MODE_FLAG_HIL_ENABLED
 _ZERO12 = (0.0,) * 12
 
 
-def pack_hil_actuator_controls(seq: int, system_id: int, component_id: int, time_usec: int, motor_cmd,
-                               armed: bool) -> bytes:
-    """The packet of ``encode_hil_actuator_controls(...)`` framed as pymavlink
-    would (unsigned MAVLink 2, sequence ``seq``), without a message object:
-    byte-identical to ``msg.pack(mav)`` (tested)."""
+def hil_actuator_controls_payload(time_usec: int, motor_cmd, armed: bool) -> bytes:
+    """The MAVLink 2 payload (zero-truncated, as on the wire) of
+    ``encode_hil_actuator_controls(mav, time_usec, motor_cmd, armed)``."""
     mode = _MODE_ARMED if armed else _MODE_DISARMED
     if motor_cmd is None:
         payload = _HIL_PAYLOAD.pack(time_usec, HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP, *_NAN16, mode)
@@ -576,7 +605,15 @@ def pack_hil_actuator_controls(seq: int, system_id: int, component_id: int, time
         m0, m1, m2, m3 = motor_cmd
         payload = _HIL_PAYLOAD.pack(time_usec, HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP, m0, m1, m2, m3, *_ZERO12,
                                     mode)
-    payload = payload.rstrip(b"\0") or b"\0"   # MAVLink 2 trailing-zero truncation
+    return payload.rstrip(b"\0") or b"\0"   # MAVLink 2 trailing-zero truncation
+
+
+def pack_hil_actuator_controls(seq: int, system_id: int, component_id: int, time_usec: int, motor_cmd,
+                               armed: bool) -> bytes:
+    """The packet of ``encode_hil_actuator_controls(...)`` framed as pymavlink
+    would (unsigned MAVLink 2, sequence ``seq``), without a message object:
+    byte-identical to ``msg.pack(mav)`` (tested)."""
+    payload = hil_actuator_controls_payload(time_usec, motor_cmd, armed)
     head = _V2_HEADER.pack(0xFD, len(payload), 0, 0, seq, system_id, component_id, _HIL_ID & 0xFF,
                            (_HIL_ID >> 8) & 0xFF, _HIL_ID >> 16)
     body = head + payload
