@@ -423,6 +423,29 @@ class GlobalPosition:
     vel_enu_m_s: tuple
 
 
+@dataclass(frozen=True, slots=True)
+class HomePosition:
+    """HOME_POSITION: the vehicle's home, geodetic and in its local frame.
+
+    Attributes
+    ----------
+    lat_deg, lon_deg, alt_m : float
+        WGS-84, altitude AMSL (m).
+    pos_enu_m : tuple (3,)
+        The home in the vehicle's local frame (ENU, m).
+    """
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    pos_enu_m: tuple
+
+
+def decode_home_position(msg) -> HomePosition:
+    """HOME_POSITION (1e7 deg, mm, local NED) -> ``HomePosition`` (deg, m, ENU)."""
+    return HomePosition(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3, (msg.y, msg.x, -msg.z))
+
+
 def decode_global_position_int(msg) -> GlobalPosition:
     """GLOBAL_POSITION_INT (1e7 deg, mm, cm/s NED) -> ``GlobalPosition`` (deg, m, m/s ENU)."""
     return GlobalPosition(int(msg.time_boot_ms), msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3,

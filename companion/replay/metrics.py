@@ -133,8 +133,9 @@ class FlightMetrics:
     Attributes
     ----------
     duration_s : float
-        First to last sensor frame (HIGHRES_IMU), like the report's ``sim_time_s``;
-        first to last timed message when the log has no HIGHRES_IMU.
+        First to last sensor frame (HIGHRES_IMU), like the report's ``sim_time_s``
+        (gaps over ``MAX_CLOCK_STEP_S`` and clock jumps left out); first to last
+        timed message when the log has no HIGHRES_IMU.
     n_frames : int
         HIGHRES_IMU messages.
     flight_time_s : float
@@ -252,7 +253,8 @@ class MetricsAccumulator:
         self.vcomp = int(vehicle_component)
         self.t = None                 # the vehicle clock (s)
         self.clock_jumps = 0
-        self.t_imu_first = self.t_imu_last = None
+        self.t_imu_last = None
+        self.frames_s = 0.0           # sensor-frame time flown (gaps and clock jumps left out)
         self.t_first = None
         self.n_frames = 0
         self.n_vehicle = self.n_companion = 0
@@ -270,7 +272,8 @@ class MetricsAccumulator:
         self._odom = None             # the latest ODOMETRY (decoded for the log rows only)
         self._att = None              # the latest ATTITUDE's R (tuple of 9)
         self._home_geo = None         # geodetic pose of the local origin (from HOME_POSITION)
-        self._gpos_origin = None
+        self._gpos_origin = None      # the first fix (the frame of the distances until HOME_POSITION)
+        self._gpos_geo = None
         self._ref_source = None
         self._handlers = {
             "HIGHRES_IMU": self._imu, "LOCAL_POSITION_NED": self._lpos, "ODOMETRY": self._odometry,
@@ -325,8 +328,9 @@ class MetricsAccumulator:
     def _imu(self, m) -> None:
         t = m.time_usec * 1e-6
         self._clock(t)
-        if self.t_imu_first is None:
-            self.t_imu_first = t
+        last = self.t_imu_last
+        if last is not None and 0.0 < t - last <= MAX_CLOCK_STEP_S:
+            self.frames_s += t - last
         self.t_imu_last = t
         self.n_frames += 1
 
@@ -353,22 +357,27 @@ class MetricsAccumulator:
         g = codec.decode_global_position_int(m)
         t = g.time_boot_ms * 1e-3
         self._clock(t)
-        origin = self._home_geo
-        if origin is None:
-            if self._gpos_origin is None:
-                self._gpos_origin = (g.lat_deg, g.lon_deg, g.alt_m)
-            origin = self._gpos_origin
-        p = frames.geodetic2enu(g.lat_deg, g.lon_deg, g.alt_m, *origin)
-        self.tracks["estimate:GLOBAL_POSITION_INT"].add(t, tuple(float(c) for c in p), g.vel_enu_m_s)
+        geo = (g.lat_deg, g.lon_deg, g.alt_m)
+        if self._gpos_origin is None:
+            self._gpos_origin = geo
+        self._gpos_geo = geo
+        self.tracks["estimate:GLOBAL_POSITION_INT"].add(t, self._gpos_local(geo), g.vel_enu_m_s)
+
+    def _gpos_local(self, geo) -> tuple:
+        """ENU (m) of a geodetic fix: about the local origin once HOME_POSITION gave it, else the first fix."""
+        origin = self._home_geo if self._home_geo is not None else self._gpos_origin
+        return tuple(float(c) for c in frames.geodetic2enu(*geo, *origin))
 
     def _home(self, m) -> None:
-        if self._home_geo is not None or self._gpos_origin is not None:
-            return   # the local frame of the first fix is kept
-        # HOME_POSITION: the home's geodetic pose and its local NED position: the local origin is
-        # the geodetic point the home's local offset away from it.
-        x_e, y_n, z_u = m.y, m.x, -m.z
-        lat, lon, alt = m.latitude * 1e-7, m.longitude * 1e-7, m.altitude * 1e-3
-        self._home_geo = frames.enu2geodetic(-x_e, -y_n, -z_u, lat, lon, alt)
+        if self._home_geo is not None:
+            return
+        # The local origin is the geodetic point the home's local offset away from the home.
+        h = codec.decode_home_position(m)
+        x, y, z = h.pos_enu_m
+        self._home_geo = tuple(float(c) for c in frames.enu2geodetic(-x, -y, -z, h.lat_deg, h.lon_deg, h.alt_m))
+        tr = self.tracks["estimate:GLOBAL_POSITION_INT"]
+        if tr.p is not None:   # the next step is measured in the new frame
+            tr.p = self._gpos_local(self._gpos_geo)
 
     def _attitude(self, m) -> None:
         self._clock(m.time_boot_ms * 1e-3)
@@ -485,8 +494,8 @@ class MetricsAccumulator:
             reference_source=self._ref_source,
             estimated=track_src is not None and track_src != "sim_truth",
         )
-        if self.t_imu_first is not None:
-            duration = self.t_imu_last - self.t_imu_first
+        if self.n_frames:
+            duration = self.frames_s
         else:
             duration = (self.t - self.t_first) if self.t is not None else 0.0
         bt = self.tracks[best] if best is not None else None
