@@ -241,7 +241,12 @@ def run(args) -> int:
     c = result.comparison
     if c is not None and not c.identical:
         print(f"companion replay: DIVERGED at {c.first_divergence.describe()}", file=sys.stderr)
-        if warnings:
-            print(f"companion replay: note: {warnings[0]}", file=sys.stderr)
+        s = result.scan
+        if s.n_skipped_packets or s.n_skipped_bytes:
+            print(f"companion replay: note: the recording is damaged ({s.n_skipped_packets} packets, "
+                  f"{s.n_skipped_bytes} bytes skipped, the first at byte {s.regions[0].offset}): outputs "
+                  "after a lost packet cannot match", file=sys.stderr)
+        for w in warnings:
+            print(f"companion replay: note: {w}", file=sys.stderr)
         return EXIT_DIVERGED
     return 0
