@@ -513,15 +513,25 @@ class FastMessage(tuple):
 
     def to_dict(self) -> dict:
         d = {"mavpackettype": self._msgname}
-        d.update(zip(self._fieldnames, self))
+        d.update((k, getattr(self, k)) for k in self._fieldnames)
         return d
 
     def __repr__(self) -> str:
-        return f"{self._msgname} {{{', '.join(f'{k} : {v}' for k, v in zip(self._fieldnames, self))}}}"
+        return f"{self._msgname} {{{', '.join(f'{k} : {getattr(self, k)}' for k in self._fieldnames)}}}"
+
+
+def _array_field(a: int, b: int, name: str) -> property:
+    """An array field: a fresh list of the flat values a..b (built only when read)."""
+    return property(lambda self: list(self[a:b]), doc=f"field {name}")
 
 
 class FastDecoder:
-    """struct decoder of one message type (``msg_class``: pymavlink's class)."""
+    """struct decoder of one message type (``msg_class``: pymavlink's class).
+
+    The message is the flat unpacked tuple (then system id, component id,
+    packet); an array field (ODOMETRY's ``q`` and covariances) is a list made
+    from its slice of that tuple when it is read, not at every decode.
+    """
 
     def __init__(self, msg_class) -> None:
         self.msgid = int(msg_class.id)
@@ -530,17 +540,19 @@ class FastDecoder:
         self.size = int(msg_class.unpacker.size)
         names = tuple(msg_class.ordered_fieldnames)
         lengths = tuple(int(k) for k in msg_class.array_lengths)
-        # (start, stop) of each array field in the flat unpacked tuple
-        self.groups = None
-        if any(lengths):
-            groups, i = [], 0
-            for k in lengths:
-                groups.append((i, i + max(k, 1), k > 0))
-                i += max(k, 1)
-            self.groups = tuple(groups)
-        attrs = {"__slots__": (), "_msgname": msg_class.msgname, "_msgid": self.msgid, "_fieldnames": names}
-        for i, n in enumerate(names):
-            attrs[n] = property(operator.itemgetter(i), doc=f"field {n}")
+        types = dict(zip(msg_class.fieldnames, msg_class.fieldtypes))
+        attrs = {"__slots__": (), "_msgname": msg_class.msgname, "_msgid": self.msgid,
+                 "_fieldnames": tuple(msg_class.fieldnames)}
+        i = 0
+        for n, k in zip(names, lengths):
+            if k and types[n] == "char":
+                raise ValueError(f"FastDecoder: {msg_class.msgname}.{n} is text (not supported)")
+            if k:
+                attrs[n] = _array_field(i, i + k, n)
+                i += k
+            else:
+                attrs[n] = property(operator.itemgetter(i), doc=f"field {n}")
+                i += 1
         self.cls = type("Fast_" + msg_class.msgname, (FastMessage,), attrs)
 
     def decode(self, packet: bytes, payload: bytes, sysid: int, compid: int) -> FastMessage:
@@ -548,12 +560,7 @@ class FastDecoder:
         n = len(payload)
         if n != self.size:   # MAVLink 2 zero truncation, or a longer (newer) payload
             payload = payload + bytes(self.size - n) if n < self.size else payload[:self.size]
-        flat = self.unpacker.unpack(payload)
-        if self.groups is None:
-            return tuple.__new__(self.cls, flat + (sysid, compid, packet))
-        vals = [list(flat[a:b]) if arr else flat[a] for a, b, arr in self.groups]
-        vals += (sysid, compid, packet)
-        return tuple.__new__(self.cls, vals)
+        return tuple.__new__(self.cls, self.unpacker.unpack(payload) + (sysid, compid, packet))
 
 
 #: The types decoded without pymavlink (the per-frame telemetry of a lockstep run).

@@ -247,6 +247,7 @@ class TlogScanner:
         unpack = _STAMP.unpack_from
         summary = self.summary
         append = out.append
+        new_record = tuple.__new__          # RawRecord without its Python-level __new__ (per record)
         while i + 16 <= n:   # stamp (8) + the shortest packet (v1, empty payload: 8)
             magic = buf[i + 8]
             if magic == _V2:
@@ -313,7 +314,7 @@ class TlogScanner:
                 if len(summary.time_jumps) < MAX_REPORTED:
                     summary.time_jumps.append(TimeJump(base + i, last, stamp))
             self._last_stamp = stamp
-            append(RawRecord(stamp, base + i, msgid, sysid, compid, buf[i + 8:end]))
+            append(new_record(RawRecord, (stamp, base + i, msgid, sysid, compid, buf[i + 8:end])))
             i = end
         summary.n_records += len(out)
         if out:
@@ -410,13 +411,14 @@ def _valid_at(buf: bytes, i: int, final: bool):
     return _crc(buf[i + 9:end - 2] + extra, 0xFFFF) == (buf[end - 2] | buf[end - 1] << 8)
 
 
-def decode_record(rec: RawRecord, mav):
-    """The message of a record: a ``codec.FastMessage`` for the per-frame
-    types (MAVLink 2), else pymavlink's (``mav``: a ``MAVLink`` object used as
-    a decoder); None when pymavlink cannot decode it."""
+def decode_record(rec: RawRecord, mav, decoders=FAST_DECODERS):
+    """The message of a record: a ``codec.FastMessage`` for the types of
+    ``decoders`` (MAVLink 2; default: the per-frame types, decoded as the live
+    link decodes them), else pymavlink's (``mav``: a ``MAVLink`` object used
+    as a decoder); None when pymavlink cannot decode it."""
     p = rec.packet
     if p[0] == _V2:
-        dec = FAST_DECODERS.get(rec.msgid)
+        dec = decoders.get(rec.msgid)
         if dec is not None:
             return dec.decode(p, p[10:10 + p[1]], rec.sysid, rec.compid)
     try:

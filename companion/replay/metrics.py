@@ -275,13 +275,28 @@ class MetricsAccumulator:
         self._gpos_origin = None      # the first fix (the frame of the distances until HOME_POSITION)
         self._gpos_geo = None
         self._ref_source = None
+        M = mavlink
         self._handlers = {
-            "HIGHRES_IMU": self._imu, "LOCAL_POSITION_NED": self._lpos, "ODOMETRY": self._odometry,
-            "GLOBAL_POSITION_INT": self._gpos, "HEARTBEAT": self._heartbeat,
-            "EXTENDED_SYS_STATE": self._ext_state, "DISTANCE_SENSOR": self._distance,
-            "STATUSTEXT": self._vehicle_text, "POSITION_TARGET_LOCAL_NED": self._echo,
-            "HOME_POSITION": self._home, "ATTITUDE": self._attitude, "SYSTEM_TIME": self._system_time,
+            M.MAVLINK_MSG_ID_HIGHRES_IMU: self._imu,
+            M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self._lpos,
+            M.MAVLINK_MSG_ID_ODOMETRY: self._odometry,
+            M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._gpos,
+            M.MAVLINK_MSG_ID_HEARTBEAT: self._heartbeat,
+            M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self._ext_state,
+            M.MAVLINK_MSG_ID_DISTANCE_SENSOR: self._distance,
+            M.MAVLINK_MSG_ID_STATUSTEXT: self._vehicle_text,
+            M.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: self._echo,
+            M.MAVLINK_MSG_ID_HOME_POSITION: self._home,
+            M.MAVLINK_MSG_ID_ATTITUDE: self._attitude,
         }
+
+    #: Vehicle message ids the metrics read (others need not be decoded).
+    MSG_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIGHRES_IMU, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+                         mavlink.MAVLINK_MSG_ID_ODOMETRY, mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+                         mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+                         mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR, mavlink.MAVLINK_MSG_ID_STATUSTEXT,
+                         mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED, mavlink.MAVLINK_MSG_ID_HOME_POSITION,
+                         mavlink.MAVLINK_MSG_ID_ATTITUDE))
 
     # --- the clock ------------------------------------------------------------------
 
@@ -318,12 +333,17 @@ class MetricsAccumulator:
 
     # --- vehicle messages --------------------------------------------------------------
 
-    def vehicle(self, msg) -> None:
-        """One message of the vehicle (any component of its system)."""
+    def vehicle(self, msg, msgid: int | None = None) -> None:
+        """One message of the vehicle (any component of its system); ``msgid``
+        when the caller knows it. Every vehicle message counts; only ``MSG_IDS`` are read."""
         self.n_vehicle += 1
-        h = self._handlers.get(msg.get_type())
+        h = self._handlers.get(msg.get_msgId() if msgid is None else msgid)
         if h is not None:
             h(msg)
+
+    def count_vehicle(self) -> None:
+        """A vehicle message not decoded (not in ``MSG_IDS``)."""
+        self.n_vehicle += 1
 
     def _imu(self, m) -> None:
         t = m.time_usec * 1e-6
@@ -334,13 +354,10 @@ class MetricsAccumulator:
         self.t_imu_last = t
         self.n_frames += 1
 
-    def _system_time(self, m) -> None:
-        if m.time_boot_ms:
-            self._clock(m.time_boot_ms * 1e-3)
-
     def _lpos(self, m) -> None:
         t = m.time_boot_ms * 1e-3
-        self._clock(t)
+        if not self.n_frames:          # the sensor frames (HIGHRES_IMU) carry the clock when there are any
+            self._clock(t)
         # NED -> ENU (codec.decode_local_position_ned, inlined: 250 Hz)
         self.tracks["estimate:LOCAL_POSITION_NED"].add(t, (m.y, m.x, -m.z), (m.vy, m.vx, -m.vz))
 
@@ -348,15 +365,16 @@ class MetricsAccumulator:
         if m.get_srcComponent() != self.vcomp:
             return
         t = m.time_usec * 1e-6
-        self._clock(t)
+        if not self.n_frames:
+            self._clock(t)
         self._odom = m
-        pos, _ = codec.decode_odometry_pose(m)
-        self.tracks["sim_truth"].add(t, pos, None)
+        self.tracks["sim_truth"].add(t, (m.y, m.x, -m.z), None)    # NED -> ENU (codec.decode_odometry_pose)
 
     def _gpos(self, m) -> None:
         g = codec.decode_global_position_int(m)
         t = g.time_boot_ms * 1e-3
-        self._clock(t)
+        if not self.n_frames:
+            self._clock(t)
         geo = (g.lat_deg, g.lon_deg, g.alt_m)
         if self._gpos_origin is None:
             self._gpos_origin = geo
@@ -380,7 +398,8 @@ class MetricsAccumulator:
             tr.p = self._gpos_local(self._gpos_geo)
 
     def _attitude(self, m) -> None:
-        self._clock(m.time_boot_ms * 1e-3)
+        if not self.n_frames:
+            self._clock(m.time_boot_ms * 1e-3)
         self._att = tuple(codec.decode_attitude(m).R_enu_flu.ravel().tolist())
 
     def _heartbeat(self, m) -> None:
@@ -410,8 +429,9 @@ class MetricsAccumulator:
                 tr.errors.start(self.t)
 
     def _distance(self, m) -> None:
-        self._clock(m.time_boot_ms * 1e-3)
-        if m.orientation == _DOWN or not self._settled(self.t):
+        if not self.n_frames:
+            self._clock(m.time_boot_ms * 1e-3)
+        if m.orientation == _DOWN or self.t is None or not self._settled(self.t):
             return
         r = codec.decode_distance_sensor(m).distance_m
         if math.isfinite(r) and (self.min_clearance is None or r < self.min_clearance):

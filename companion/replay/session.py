@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import common as mavlink
 
 from ..flight.core import DEGRADE_PREFIX, INTERRUPT_PREFIX
+from ..link import codec
 from ..link.connection import COMPANION_COMPONENT_ID, COMPANION_SYSTEM_ID
 from ..link.tlog_scan import decode_record, new_decoder
 from .compare import OutputComparer, computed_payload, message_name
@@ -45,6 +46,9 @@ _SETPOINT = mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED
 _IMU = mavlink.MAVLINK_MSG_ID_HIGHRES_IMU
 #: Companion messages the metrics read (the others are only counted).
 _METRIC_IDS = (_SETPOINT, _STATUSTEXT)
+#: Decoders of the companion's messages (never fed to the core): the setpoints without pymavlink.
+_COMPANION_DECODERS = {**codec.FAST_DECODERS,
+                       _SETPOINT: codec.FastDecoder(mavlink.MAVLink_set_position_target_local_ned_message)}
 
 
 @dataclass(frozen=True)
@@ -184,28 +188,47 @@ class ReplaySession:
         self._finished = False
         #: The setup record, collected on the way (``setup_collector.finish()``).
         self.setup_collector = SetupCollector()
+        core_ids = set()
+        if core is not None:
+            for name in core.handled_types:
+                mid = getattr(mavlink, f"MAVLINK_MSG_ID_{name}", None)
+                if mid is not None and mid not in self.withhold:
+                    core_ids.add(int(mid))
+        self._core_ids = frozenset(core_ids)
+        self._need = frozenset(core_ids | set(MetricsAccumulator.MSG_IDS) | {_IMU})
 
     def feed(self, records) -> None:
-        """Process ``records`` (``RawRecord``s, in file order)."""
+        """Process ``records`` (``RawRecord``s, in file order).
+
+        A vehicle message is decoded only when the core acts on its type
+        (``FlightCore.handled_types``: any other leaves the core as it was)
+        or the metrics read it."""
         dec = self._dec
         metrics = self.metrics
         core = self.core
         pending = self.pending
-        withhold = self.withhold
+        core_ids = self._core_ids
+        need = self._need
         vsys = self.vsys
         for rec in records:
-            if rec.compid == COMPANION_COMPONENT_ID and rec.sysid == COMPANION_SYSTEM_ID:
+            mid = rec.msgid
+            sysid = rec.sysid
+            if rec.compid == COMPANION_COMPONENT_ID and sysid == COMPANION_SYSTEM_ID:
                 self._companion(rec)
+                continue
+            if mid not in need:
+                if sysid == vsys:
+                    metrics.count_vehicle()
                 continue
             msg = decode_record(rec, dec)
             if msg is None:
                 self.n_undecodable += 1
                 continue
-            if rec.sysid == vsys:
-                metrics.vehicle(msg)
-            if rec.msgid == _IMU:
+            if sysid == vsys:
+                metrics.vehicle(msg, mid)
+            if mid == _IMU:
                 self.seen_imu = True
-            if core is not None and rec.msgid not in withhold:
+            if mid in core_ids:
                 core.handle(msg)
                 if core.outbox:
                     pending.extend(core.take_outbox())
@@ -213,7 +236,7 @@ class ReplaySession:
     def _companion(self, rec) -> None:
         msg = None
         if rec.msgid in _METRIC_IDS:
-            msg = decode_record(rec, self._dec)
+            msg = decode_record(rec, self._dec, _COMPANION_DECODERS)
             if msg is not None:
                 self.metrics.companion(msg)
                 if rec.msgid == _STATUSTEXT:
