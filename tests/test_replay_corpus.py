@@ -276,3 +276,43 @@ def test_controller_inputs_are_what_the_link_delivered(tlogs, mission, flight_pl
         if r.compid == 191 and r.msgid == mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS:
             n_cmd += not math.isnan(dec.decode(bytearray(r.packet)).controls[0])
     assert len(taps) == n_cmd
+
+
+# --- events from outside the core, re-injected where the recording announces them ------------------
+
+
+def _event_at(t_s: float, event: str):
+    """A hook making the core meet an outside event right after the frame at ``t_s`` (as the runner does)."""
+
+    def hook(core):
+        handle = core.handle
+
+        def handle_then_event(m):
+            handle(m)
+            if m.get_type() == "HIGHRES_IMU" and core.t_s >= t_s and not getattr(core, "_event_done", False):
+                core._event_done = True
+                if event == "interrupt":
+                    core.interrupt("SIGTERM")
+                else:
+                    core.degrade("jitter p95 31 ms > 20 ms")
+
+        core.handle = handle_then_event
+
+    return hook
+
+
+@pytest.mark.parametrize("event", ["interrupt", "degrade"])
+def test_outside_events_are_reinjected(event, tlogs, mission, flight_plan):
+    data = rerecord(tlogs["companion-cut4"], mission, flight_plan, _event_at(8.0, event))
+    res = rerun(data, mission, flight_plan)          # a fresh core: nobody calls interrupt/degrade
+    c = res.comparison
+    assert c.identical, c.first_divergence.describe()
+    prefix = "companion: interrupted by " if event == "interrupt" else "companion: inner loop to vehicle: "
+    assert len(c.injected) == 1 and c.injected[0].startswith(prefix)
+    if event == "interrupt":
+        assert res.flight.interrupted == "SIGTERM" and not res.flight.completed
+    else:
+        # the reason as it went on the wire: STATUSTEXT holds 50 characters, prefix included
+        assert res.flight.degraded["reason"] == ("companion: inner loop to vehicle: jitter p95 31 ms > 20 ms"[:50]
+                                                 [len(prefix):])
+        assert res.flight.degraded["t_s"] == pytest.approx(8.0, abs=0.004)

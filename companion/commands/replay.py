@@ -236,7 +236,7 @@ def run(args) -> int:
         from ..flight_plot import write_flight_figures
 
         Path(args.plot).mkdir(exist_ok=True)
-        figs = write_flight_figures(result.log, fp, args.plot)
+        figs = write_flight_figures(result.log, core.inputs if core is not None else None, args.plot)
         print(f"  figures: {', '.join(Path(f).name for f in figs) or 'none (no flight rows)'} in {args.plot}")
     c = result.comparison
     if c is not None and not c.identical:
