@@ -249,59 +249,32 @@ class TlogScanner:
         append = out.append
         new_record = tuple.__new__          # RawRecord without its Python-level __new__ (per record)
         while i + 16 <= n:   # stamp (8) + the shortest packet (v1, empty payload: 8)
-            magic = buf[i + 8]
-            if magic == _V2:
-                if i + 18 > n:
-                    break
-                plen = buf[i + 9]
-                iflags = buf[i + 10]
-                end = i + 20 + plen + (_SIG_LEN if iflags & _SIGNED else 0)
-                if end > n:
-                    if final:
-                        self._mark_framed(i, "truncated", end)
-                        i += 1
-                        continue
-                    break
-                msgid = buf[i + 15] | buf[i + 16] << 8 | buf[i + 17] << 16
-                crc_end = i + 20 + plen
-                extra = extras.get(msgid)
-                if extra is None or iflags & ~_SIGNED:
-                    ok = self._unknown_boundary(buf, i, end, final)
-                    if ok is None:
-                        break
-                    i = self._skip_unknown(i, end) if ok else self._skip_byte(i)
-                    continue
-                if crc(buf[i + 9:crc_end - 2] + extra, 0xFFFF) != (buf[crc_end - 2] | buf[crc_end - 1] << 8):
-                    self._mark_framed(i, "bad_crc", end)
-                    i += 1
-                    continue
-                sysid, compid = buf[i + 13], buf[i + 14]
-            elif magic == _V1:
-                plen = buf[i + 9]
-                end = i + 16 + plen
-                if end > n:
-                    if final:
-                        self._mark_framed(i, "truncated", end)
-                        i += 1
-                        continue
-                    break
-                msgid = buf[i + 13]
-                extra = extras.get(msgid)
-                if extra is None:
-                    ok = self._unknown_boundary(buf, i, end, final)
-                    if ok is None:
-                        break
-                    i = self._skip_unknown(i, end) if ok else self._skip_byte(i)
-                    continue
-                if crc(buf[i + 9:end - 2] + extra, 0xFFFF) != (buf[end - 2] | buf[end - 1] << 8):
-                    self._mark_framed(i, "bad_crc", end)
-                    i += 1
-                    continue
-                sysid, compid = buf[i + 11], buf[i + 12]
-            else:
+            h = _header(buf, i)
+            if h is None:                      # not a packet start
                 self._mark_framed(i, None, 0)
                 i += 1
                 continue
+            if h is _MORE:
+                break
+            end, crc_end, msgid, ids, odd_flags = h
+            if end > n:
+                if final:
+                    self._mark_framed(i, "truncated", end)
+                    i += 1
+                    continue
+                break
+            extra = extras.get(msgid)
+            if extra is None or odd_flags:
+                ok = self._unknown_boundary(buf, i, end, final)
+                if ok is None:
+                    break
+                i = self._skip_unknown(i, end) if ok else self._skip_byte(i)
+                continue
+            if crc(buf[i + 9:crc_end - 2] + extra, 0xFFFF) != (buf[crc_end - 2] | buf[crc_end - 1] << 8):
+                self._mark_framed(i, "bad_crc", end)
+                i += 1
+                continue
+            sysid, compid = buf[ids], buf[ids + 1]
             # a valid record
             if self._bad_start is not None:
                 self._close_bad(base + i)
@@ -384,31 +357,45 @@ class TlogScanner:
         self._bad_kind = None
 
 
+#: ``_header``'s answer when the buffer ends inside the header.
+_MORE = ()
+
+
+def _header(buf: bytes, i: int):
+    """The framing of a record at ``buf[i]`` (stamp first): (end, CRC end, message id,
+    offset of the system id, flags this reader cannot parse); None when no packet
+    starts there; ``_MORE`` when the header runs past the buffer. Needs i + 16 <= len."""
+    magic = buf[i + 8]
+    if magic == _V2:
+        if i + 18 > len(buf):
+            return _MORE
+        iflags = buf[i + 10]
+        crc_end = i + 20 + buf[i + 9]
+        return (crc_end + (_SIG_LEN if iflags & _SIGNED else 0), crc_end,
+                buf[i + 15] | buf[i + 16] << 8 | buf[i + 17] << 16, i + 13, iflags & ~_SIGNED)
+    if magic == _V1:
+        end = i + 16 + buf[i + 9]
+        return end, end, buf[i + 13], i + 11, 0
+    return None
+
+
 def _valid_at(buf: bytes, i: int, final: bool):
     """Whether a valid (CRC-checked) record starts at ``buf[i]``; None when
     the buffer ends before that can be told (and more data may come)."""
-    n = len(buf)
-    if i + 16 > n:
+    if i + 16 > len(buf):
         return False if final else None
-    magic = buf[i + 8]
-    if magic == _V2:
-        if i + 18 > n:
-            return False if final else None
-        plen = buf[i + 9]
-        end = i + 20 + plen
-        if end > n:
-            return False if final else None
-        extra = _CRC_EXTRA.get(buf[i + 15] | buf[i + 16] << 8 | buf[i + 17] << 16)
-    elif magic == _V1:
-        end = i + 16 + buf[i + 9]
-        if end > n:
-            return False if final else None
-        extra = _CRC_EXTRA.get(buf[i + 13])
-    else:
+    h = _header(buf, i)
+    if h is None:
         return False
-    if extra is None:
+    if h is _MORE:
+        return False if final else None
+    end, crc_end, msgid, _ids, odd = h
+    if end > len(buf):
+        return False if final else None
+    extra = _CRC_EXTRA.get(msgid)
+    if extra is None or odd:
         return False
-    return _crc(buf[i + 9:end - 2] + extra, 0xFFFF) == (buf[end - 2] | buf[end - 1] << 8)
+    return _crc(buf[i + 9:crc_end - 2] + extra, 0xFFFF) == (buf[crc_end - 2] | buf[crc_end - 1] << 8)
 
 
 def decode_record(rec: RawRecord, mav, decoders=FAST_DECODERS):
