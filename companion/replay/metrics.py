@@ -47,6 +47,7 @@ from .. import frames
 from ..flight.core import PHASE_CODE
 from ..flight.log import ErrorStats, FlightLog
 from ..flight.monitor import px4_mode_name
+from ..flight.setup_record import SETUP_TEXT_ID
 from ..link import codec
 
 #: STATUSTEXT prefix of the companion's replanning announcements (issue 8's replanner).
@@ -61,7 +62,6 @@ MAX_EVENTS = 200
 _IN_AIR = (mavlink.MAV_LANDED_STATE_IN_AIR, mavlink.MAV_LANDED_STATE_TAKEOFF, mavlink.MAV_LANDED_STATE_LANDING)
 _ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 _DOWN = mavlink.MAV_SENSOR_ROTATION_PITCH_270
-_SETUP_TEXT_ID = 0x4353
 _NAN3 = (math.nan,) * 3
 _NAN9 = (math.nan,) * 9
 _NAN10 = (math.nan,) * 10
@@ -460,7 +460,7 @@ class MetricsAccumulator:
             self._ref_source = "companion setpoints"
             self._reference(msg)
         elif k == "STATUSTEXT":
-            if getattr(msg, "id", 0) == _SETUP_TEXT_ID:
+            if getattr(msg, "id", 0) == SETUP_TEXT_ID:
                 return
             text = str(msg.text)
             if text.startswith(REPLAN_PREFIX):

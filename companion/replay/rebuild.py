@@ -10,15 +10,12 @@ files); ``setup_mismatches`` says which files differ from the recorded ones.
 
 from __future__ import annotations
 
-from pymavlink.dialects.v20 import common as mavlink
-
 from ..flight.config import RunnerConfig
 from ..flight.core import FlightCore, FlightInputs
 from ..flight.setup_record import PREFIX, SETUP_TEXT_ID, parse_setup
 
 #: The setup record format this replay understands.
 SETUP_FORMAT = "companion-setup/1"
-_STATUSTEXT = mavlink.MAVLINK_MSG_ID_STATUSTEXT
 _FILE_KEYS = (("mission_sha", "mission file"), ("map_sha", "map file"), ("dem_sha", "DEM file"),
               ("plan_sha", "plan file"))
 
