@@ -16,7 +16,9 @@ valid record, and reported as a ``SkippedRegion`` (offset, bytes, kind):
 - ``unknown_id``: one well-framed record of a message id outside the common
   dialect (its CRC cannot be checked; it is accepted as a record boundary
   only when a valid record or the end of the file follows it);
-- ``garbage``: bytes that frame no record.
+- ``garbage``: bytes that frame no record (``bad_crc+garbage``: a record
+  whose CRC fails, then more such bytes; a tail of fewer than 16 bytes is
+  ``truncated``).
 
 A false start inside garbage needs the magic byte, a known message id and a
 matching 16-bit CRC at once (about 1 in 10^7 per byte for MAVLink 2), so the
@@ -99,7 +101,8 @@ class SkippedRegion:
         First byte skipped (file offset).
     n_bytes : int
     kind : str
-        ``bad_crc``, ``truncated``, ``unknown_id`` or ``garbage`` (module docstring).
+        ``bad_crc``, ``truncated``, ``unknown_id``, ``garbage`` or ``bad_crc+garbage``
+        (module docstring).
     n_packets : int
         Well-framed packets lost in the region (1 for bad_crc, truncated and
         unknown_id, 0 for garbage).

@@ -182,7 +182,8 @@ class ReplaySession:
         self.n_differing = 0
         self.n_runner_heartbeats = 0
         self.n_undecodable = 0
-        self.injected: list = []
+        self.injected: list = []      # the first 100 texts (``n_injected`` counts them all)
+        self.n_injected = 0
         self.seen_imu = False
         self._dec = new_decoder()
         self._finished = False
@@ -254,10 +255,10 @@ class ReplaySession:
             text = str(msg.text)
             if text.startswith(INTERRUPT_PREFIX):
                 core.interrupt(text[len(INTERRUPT_PREFIX):])
-                self.injected.append(text)
+                self._injected(text)
             elif text.startswith(DEGRADE_PREFIX):
                 core.degrade(text[len(DEGRADE_PREFIX):])
-                self.injected.append(text)
+                self._injected(text)
             pending.extend(core.take_outbox())
         index = self.comparer.n_compared
         if not pending:
@@ -265,12 +266,19 @@ class ReplaySession:
             return
         out = pending.popleft()
         diff = self.comparer.compare(out, rec)
-        if diff is not None:
-            computed = message_name(rec.msgid) if diff.field is not None else diff.computed_value
-            recorded = message_name(rec.msgid) if diff.field is not None else diff.recorded_value
-            self._diverged(Divergence(core.t_s, rec.offset, index, recorded, computed, diff.field,
-                                      diff.recorded_value if diff.field is not None else None,
-                                      diff.computed_value if diff.field is not None else None))
+        if diff is None:
+            return
+        if diff.field is None:        # another message type: the values are the type names
+            self._diverged(Divergence(core.t_s, rec.offset, index, diff.recorded_value, diff.computed_value))
+        else:
+            name = message_name(rec.msgid)
+            self._diverged(Divergence(core.t_s, rec.offset, index, name, name, diff.field, diff.recorded_value,
+                                      diff.computed_value))
+
+    def _injected(self, text: str) -> None:
+        self.n_injected += 1
+        if len(self.injected) < 100:
+            self.injected.append(text)
 
     def _diverged(self, d: Divergence) -> None:
         self.n_differing += 1
