@@ -1,9 +1,10 @@
-"""Plan files: plan.json (DESIGN.md), QGroundControl ``.plan`` and "QGC WPL 110".
+"""Plan files: plan.json (docs/plan-json.md), QGroundControl ``.plan`` and "QGC WPL 110".
 
 All three are produced as text in memory (the CLI writes them atomically).
 
 plan.json
-    ENU metres in the map frame, SI units. Keys: ``frame`` ("ENU"),
+    ENU metres in the map frame, SI units. Keys: ``format_version``
+    (``PLAN_FORMAT_VERSION``; docs/schemas/plan.schema.json), ``frame`` ("ENU"),
     ``origin`` {lat, lon, alt_m} (the mission home = map frame origin),
     ``path``, ``waypoints`` [{t, p, v, a, corner}], ``trajectory`` {t, p, v,
     a, pointing} sampled at ``sample_hz``, ``stats``, ``timings_s``; plus
@@ -32,6 +33,7 @@ import numpy as np
 
 from .config import to_dict
 from .errors import PlanError
+from .format_version import check_format_version
 from .frames import enu2geodetic
 from .textfile import read_text
 from .mission import Mission
@@ -41,6 +43,11 @@ MAV_FRAME_GLOBAL = 0
 MAV_FRAME_GLOBAL_RELATIVE_ALT = 3
 MAV_AUTOPILOT_PX4 = 12
 MAV_TYPE_QUADROTOR = 2
+
+#: plan.json format written here ("MAJOR.MINOR", docs/README.md "Versions");
+#: ``load_plan`` reads every file of the same major version.
+PLAN_FORMAT_VERSION = "1.0"
+PLAN_FORMAT_MAJOR = int(PLAN_FORMAT_VERSION.split(".")[0])
 
 STATS_KEYS = ("coverage_fraction", "path_length_m", "duration_s", "n_waypoints", "orientation_deg",
               "max_speed_m_s", "max_accel_m_s2", "waypoint_residual_m")
@@ -66,7 +73,7 @@ def sample_times(t0: float, tf: float, sample_hz: float) -> np.ndarray:
 
 
 def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
-    """The plan.json document (DESIGN.md "Files") as plain JSON types.
+    """The plan.json document (docs/plan-json.md) as plain JSON types.
 
     Parameters
     ----------
@@ -88,6 +95,7 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
     s = traj.sample(t)
     home = mission.home
     return {
+        "format_version": PLAN_FORMAT_VERSION,
         "name": mission.name,
         "frame": "ENU",
         "origin": {"lat": home.lat, "lon": home.lon, "alt_m": home.alt_m},
@@ -177,8 +185,9 @@ def load_plan(path: str | Path) -> PlanFile:
     Raises
     ------
     PlanError
-        Missing/unreadable file, not JSON, or a missing/malformed key
-        (the message names the file and the key).
+        Missing/unreadable file, not JSON, a ``format_version`` of another
+        major version, or a missing/malformed key (the message names the
+        file and the key). A file without ``format_version`` is read as 1.0.
     """
     p = Path(path)
     src = str(p)
@@ -189,6 +198,7 @@ def load_plan(path: str | Path) -> PlanFile:
         raise PlanError(f"{src}: line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
     if not isinstance(data, dict):
         raise PlanError(src, "expected a JSON object")
+    check_format_version(data, PLAN_FORMAT_MAJOR, src, PlanError)
     if _get(data, "frame", src) != "ENU":
         raise PlanError(f"{src}: key 'frame'", f"expected 'ENU', got {data['frame']!r}")
     origin = _get(data, "origin", src)

@@ -3,7 +3,7 @@ wire units (1e7 degrees, mm, cm, cdeg, mG) and MAVLink's [w, x, y, z]
 quaternions.
 
 Everything it takes and returns is ENU world / FLU body, SI units
-(DESIGN.md "Frames and units"); every frame change goes through
+(docs/frames.md); every frame change goes through
 ``companion.frames``. Encoders take a pymavlink ``MAVLink`` protocol object
 (``conn.mav``, it only supplies the message classes) and return the message
 object, ready for ``conn.mav.send``; decoders take a pymavlink message and
@@ -317,7 +317,8 @@ def highres_imu_args(time_us: int, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss
 
     Body FLU -> FRD is (x, -y, -z) (``frames.flu2frd``), written out per
     component. ``time_usec`` is vehicle time; accelerometer = specific force
-    (m/s^2), gyro rad/s, magnetometer gauss. Barometer fields follow the ISA
+    (m/s^2; g R^T e3 with ``sim.vector_sensors: paper``, ``sitl.sensors``),
+    gyro rad/s, magnetometer gauss. Barometer fields follow the ISA
     from the altitude AMSL (hPa, m, degC).
     """
     ax, ay, az = accel_flu_m_s2

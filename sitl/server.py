@@ -1,5 +1,5 @@
 """MAVLink transport of the SITL: ``Simulation`` + ``FlightStack`` behind
-pymavlink connections (DESIGN.md "MAVLink contract" and "Time").
+pymavlink connections (docs/mavlink.md).
 
 The vehicle is system 1, component 1, MAVLink 2, common dialect. Connection
 strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
@@ -51,9 +51,21 @@ at each rangefinder's own rate (an interval sets all rangefinder periods,
 -1 stops them being sent). An interval shorter than the sensor period means
 every frame.
 
-The SITL has no state estimator: ATTITUDE, the onboard controller and the
-flight stack use the true attitude; positions are the (noisy) position
-measurements; HIGHRES_IMU carries the noisy IMU.
+What the streams carry (``sitl.sensors``, ``sitl.gnss``, ``sitl.estimator``):
+HIGHRES_IMU the noisy IMU and magnetometer of the frame (``sim.vector_sensors``
+decides what the accelerometer fields mean); LOCAL_POSITION_NED and
+GPS_RAW_INT the latest *delivered* position/velocity sample, LOCAL_POSITION_NED
+stamped with its measurement time (repeated, same time_boot_ms, until the
+next delivery); with ``sim.onboard_state: estimate`` (default) ATTITUDE,
+ATTITUDE_QUATERNION and GLOBAL_POSITION_INT carry the onboard estimator's
+attitude, bias-corrected rates and position, as PX4 reports its EKF's, and
+the onboard controller and flight stack use the estimate; with ``truth``
+they carry and use the true state ("true state" mode, the SITL without an
+estimator). Truth kept in estimate mode, where a real stack has equivalent
+information: the plant's ground contact stands for the land detector
+(landed state, auto-disarm, integrator freeze), and home is the true start
+point (a real stack takes its estimate at arming, within the sensors'
+centimetres here). ODOMETRY is always the ground truth.
 
 Signing: SETUP_SIGNING stores the key on every link and signs all outgoing
 messages with it; unsigned incoming messages are still accepted (a SITL
@@ -150,7 +162,7 @@ class ServerConfig:
     outs : tuple of str
         Extra links (e.g. ``udpout:127.0.0.1:14550`` for a ground station).
     lockstep : bool
-        Allow lockstep with an actuator peer (DESIGN.md "Time").
+        Allow lockstep with an actuator peer (docs/mavlink.md "Time and lockstep").
     speed : float
         Real-time factor when free-running (0: as fast as possible).
     seed : int or None
@@ -405,11 +417,11 @@ class SitlServer:
         self.sim = Simulation(mission, np.random.default_rng(seed), physics_hz=config.physics_hz,
                               sensor_hz=config.sensor_hz, world=world, start_enu_m=start_xy,
                               start_yaw_rad=start_yaw)
-        nz = mission.sim.noise
+        md = self.sim.sensors.model
         self.params = Parameters(initial={
-            "SIM_VEC_VAR": nz.vector_variance, "SIM_GYRO_VAR": nz.gyro_variance,
-            "SIM_POS_STD": nz.position_std_m, "SIM_VEL_STD": nz.velocity_std_m_s,
-            "SIM_RNG_STD": getattr(nz, "range_std_m", 0.0),
+            "SIM_VEC_VAR": md.accel_rel_std ** 2, "SIM_GYRO_VAR": md.gyro_std_rad_s ** 2,
+            "SIM_POS_STD": md.position_std_xy_m, "SIM_POSZ_STD": md.position_std_z_m,
+            "SIM_VEL_STD": md.velocity_std_m_s, "SIM_RNG_STD": md.range_std_m,
             "SIM_LOCKSTEP": int(bool(config.lockstep)),
             **self._controller_param_defaults()})
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
@@ -518,8 +530,9 @@ class SitlServer:
         s.acc_rel_std = math.sqrt(p["SIM_VEC_VAR"])
         s.mag_std = math.sqrt(p["SIM_VEC_VAR"]) * float(np.linalg.norm(s.mag_earth))
         s.gyro_std = math.sqrt(p["SIM_GYRO_VAR"])
-        s.pos_std = p["SIM_POS_STD"]
-        s.vel_std = p["SIM_VEL_STD"]
+        s.gnss.pos_std_xy_m = p["SIM_POS_STD"]
+        s.gnss.pos_std_z_m = p["SIM_POSZ_STD"]
+        s.gnss.vel_std_m_s = p["SIM_VEL_STD"]
         s.range_std = p["SIM_RNG_STD"]
         if p["SIM_RNG_HZ"] > 0:   # 0 leaves the configured (or SET_MESSAGE_INTERVAL) rates alone
             for rf in s.rangefinders:
@@ -605,13 +618,24 @@ class SitlServer:
 
     def _nav_state(self, frame) -> NavState:
         # Floats, not arrays: the truth is read from the plant (it only moves
-        # in ``step_frame``, so between frames it is ``frame.truth``) and the
-        # measurements from the frame's float tuples (``sim.SensorFrame``
-        # builds its arrays lazily; nobody else reads them every frame).
+        # in ``step_frame``, so between frames it is ``frame.truth``).
+        # Ground contact stands for the land detector in both modes.
         pl = self.sim.plant
+        e = frame.estimate
+        if e is not None:
+            return NavState(e.pos_enu_m, e.vel_enu_m_s, e.yaw_enu_rad, e.tilt_rad, bool(pl.landed))
         R = pl.R   # row-major 9-tuple, body FLU -> world ENU
         tilt = math.acos(max(-1.0, min(1.0, R[8])))
-        return NavState(frame._pos, frame._vel, math.atan2(R[3], R[0]), tilt, bool(pl.landed))
+        return NavState(pl.p, pl.v, math.atan2(R[3], R[0]), tilt, bool(pl.landed))
+
+    def _attitude_source(self):
+        """(R row-major 9-tuple, body rates FLU) reported in ATTITUDE*: the
+        estimate, or the truth with ``sim.onboard_state: truth``."""
+        e = self._frame.estimate if self._frame is not None else None
+        if e is not None:
+            return e.R, e.omega_flu_rad_s
+        pl = self.sim.plant
+        return pl.R, pl.w
 
     def _reschedule(self) -> None:
         """Split the enabled streams into those due every frame (interval at
@@ -711,21 +735,20 @@ class SitlServer:
         return self._mav().extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED, self.stack.landed_state)
 
     def _enc_attitude(self):
-        t = self._frame.truth
-        return codec.attitude(self._mav(), self.sim.time_us // 1000, t.R, t.omega_flu_rad_s)
+        return codec.attitude(self._mav(), self.sim.time_us // 1000, *self._attitude_source())
 
     def _enc_attitude_q(self):
-        t = self._frame.truth
-        return codec.attitude_quaternion(self._mav(), self.sim.time_us // 1000, t.R, t.omega_flu_rad_s)
+        return codec.attitude_quaternion(self._mav(), self.sim.time_us // 1000, *self._attitude_source())
 
     def _enc_lpos(self):
         f = self._frame
-        return codec.local_position_ned(self._mav(), f.time_us // 1000, f.pos_enu_m, f.vel_enu_m_s)
+        return codec.local_position_ned(self._mav(), f.pos_time_us // 1000, f.pos_enu_m, f.vel_enu_m_s)
 
     def _enc_gpos(self):
         f = self._frame
+        s = self._nav_state(f)
         return codec.global_position_int(self._mav(), f.time_us // 1000, self.origin, self.home_enu_m,
-                                         f.pos_enu_m, f.vel_enu_m_s, codec.yaw_enu_of(f.truth.R))
+                                         s.pos_enu_m, s.vel_enu_m_s, s.yaw_enu_rad)
 
     def _enc_gps(self):
         f = self._frame
@@ -752,11 +775,10 @@ class SitlServer:
 
     def _lpos_args(self):
         f = self._frame
-        return codec.local_position_ned_args(f.time_us // 1000, f._pos, f._vel)
+        return codec.local_position_ned_args(f.pos_time_us // 1000, f._pos, f._vel)
 
     def _attitude_q_args(self):
-        pl = self.sim.plant
-        return codec.attitude_quaternion_args(self.sim.time_us // 1000, pl.R, pl.w)
+        return codec.attitude_quaternion_args(self.sim.time_us // 1000, *self._attitude_source())
 
     def _odometry_args(self):
         pl = self.sim.plant
@@ -766,8 +788,7 @@ class SitlServer:
         return mavlink.MAVLink_odometry_message(*self._odometry_args())
 
     def _attitude_args(self):
-        pl = self.sim.plant
-        return codec.attitude_args(self.sim.time_us // 1000, pl.R, pl.w)
+        return codec.attitude_args(self.sim.time_us // 1000, *self._attitude_source())
 
     def _enc_truth(self):
         t = self._frame.truth
@@ -1115,8 +1136,8 @@ class SitlServer:
     def _on_position_target(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
-        f = self._frame
-        target = codec.decode_position_target(msg, codec.yaw_enu_of(f.truth.R), f.pos_enu_m)
+        nav = self._state()   # the flight stack's own heading and position (estimate or truth)
+        target = codec.decode_position_target(msg, nav.yaw_enu_rad, nav.pos_enu_m)
         if target is not None:
             self.stack.offboard_setpoint(self.sim.time_us, target)
 

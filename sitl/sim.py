@@ -5,6 +5,13 @@ period (``physics_hz / sensor_hz`` physics steps with the commands held,
 zero-order hold) and returns the sensor frame. The flight-stack shell
 (``sitl.flightstack``) decides where the motor commands come from (the
 companion's HIL_ACTUATOR_CONTROLS or ``Simulation.onboard``).
+
+``sim.onboard_state: estimate`` (default): every frame also runs the
+vehicle's own estimator (``sitl.estimator``) on the frame's measurements,
+and ``step_onboard`` flies the cascaded controller on that estimate;
+``truth``: on the true state (the SITL without an estimator). The ground
+contact flag (``landed``) is the plant's in both modes: it stands for the
+flight stack's land detector.
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ import numpy as np
 
 from companion.mission.schema import Mission
 
+from .estimator import Estimate, EstimatorConfig, OnboardEstimator
 from .onboard import CascadedController, OnboardGains, Setpoint  # noqa: F401  (re-export)
 from .plant import Plant, PlantParams
 from .sensors import RangeReading, SensorSuite  # noqa: F401  (re-export)
@@ -112,23 +120,30 @@ class SensorFrame(_Lazy):
     ----------
     time_us : int
         Vehicle time since boot (us).
-    accel_flu_m_s2 : (3,) ndarray, specific force, body FLU
+    accel_flu_m_s2 : (3,) ndarray, accelerometer fields, body FLU (specific
+        force; g R^T e3 with ``sim.vector_sensors: paper``)
     gyro_flu_rad_s : (3,) ndarray
     mag_flu_gauss : (3,) ndarray
-    pos_enu_m, vel_enu_m_s : (3,) ndarray, position/velocity measurements
+    pos_enu_m, vel_enu_m_s : (3,) ndarray, the latest delivered position/velocity sample
     ranges : tuple of RangeReading (only those due this frame)
     truth : TrueState
+    pos_time_us : int
+        Measurement time of ``pos_enu_m``/``vel_enu_m_s`` (us; older than
+        ``time_us`` by the GNSS latency and the hold since then).
+    estimate : sitl.estimator.Estimate or None
+        The onboard estimator's output (None with ``sim.onboard_state: truth``).
 
     Constructed like the former frozen dataclass (same field order); float
     tuples are accepted and become arrays when first read.
     """
 
-    __slots__ = ("time_us", "_acc", "_gyro", "_mag", "_pos", "_vel", "ranges", "truth")
+    __slots__ = ("time_us", "_acc", "_gyro", "_mag", "_pos", "_vel", "ranges", "truth", "pos_time_us",
+                 "estimate")
     _fields = ("time_us", "accel_flu_m_s2", "gyro_flu_rad_s", "mag_flu_gauss", "pos_enu_m",
-               "vel_enu_m_s", "ranges", "truth")
+               "vel_enu_m_s", "ranges", "truth", "pos_time_us", "estimate")
 
     def __init__(self, time_us, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss, pos_enu_m,
-                 vel_enu_m_s, ranges, truth) -> None:
+                 vel_enu_m_s, ranges, truth, pos_time_us=None, estimate=None) -> None:
         _set(self, "time_us", time_us)
         _set(self, "_acc", accel_flu_m_s2)
         _set(self, "_gyro", gyro_flu_rad_s)
@@ -137,8 +152,10 @@ class SensorFrame(_Lazy):
         _set(self, "_vel", vel_enu_m_s)
         _set(self, "ranges", ranges)
         _set(self, "truth", truth)
+        _set(self, "pos_time_us", time_us if pos_time_us is None else pos_time_us)
+        _set(self, "estimate", estimate)
 
-    accel_flu_m_s2 = _lazy_field("_acc", _vec, "(3,) specific force, body FLU (m/s^2)")
+    accel_flu_m_s2 = _lazy_field("_acc", _vec, "(3,) accelerometer fields, body FLU (m/s^2)")
     gyro_flu_rad_s = _lazy_field("_gyro", _vec, "(3,) body rate measurement, FLU (rad/s)")
     mag_flu_gauss = _lazy_field("_mag", _vec, "(3,) magnetic field, body FLU (gauss)")
     pos_enu_m = _lazy_field("_pos", _vec, "(3,) position measurement, world ENU (m)")
@@ -199,8 +216,18 @@ class Simulation:
         self.params = SimParams(physics_hz, sensor_hz, plant_params, gains)
         self.plant = Plant(plant_params, self.world.ground_height, self.world.terrain.max_height_m)
         self.wind = WindModel(sim.wind, rng)
-        self.sensors = SensorSuite(sim, self.world, rng)
+        self.sensors = SensorSuite(sim, self.world, rng, sensor_hz)
         self.onboard = CascadedController(mission.vehicle, gains, plant_params.gravity_m_s2)
+        md = self.sensors.model
+        #: Configuration of the onboard estimator (None: ``sim.onboard_state: truth``).
+        self.estimator_config = None if sim.onboard_state == "truth" else EstimatorConfig(
+            accel_mode="inclinometer" if sim.vector_sensors == "paper" else "specific_force",
+            mag_enu_gauss=tuple(sim.magnetic_field_enu_gauss), gravity_m_s2=plant_params.gravity_m_s2,
+            pos_std_xy_m=md.position_std_xy_m, pos_std_z_m=md.position_std_z_m,
+            vel_std_m_s=md.velocity_std_m_s,
+            # an inclinometer gives no acceleration: a looser motion model
+            accel_noise_m_s2_rthz=0.5 if sim.vector_sensors == "paper" else EstimatorConfig.accel_noise_m_s2_rthz)
+        self.estimator: OnboardEstimator | None = None
         self.sensor_period_us = 1_000_000 // sensor_hz
         self.substeps = physics_hz // sensor_hz
         self.dt_physics_s = 1.0 / physics_hz
@@ -226,6 +253,11 @@ class Simulation:
             self.plant.set_state(start, R=R, landed=False)
         self.onboard.reset()
         self._truth = None
+        pl = self.plant
+        self.sensors.gnss.reset(pl.p, pl.v)
+        self.estimator = (None if self.estimator_config is None
+                          else OnboardEstimator(self.estimator_config))
+        self.estimate: Estimate | None = None
 
     @property
     def truth(self) -> TrueState:
@@ -258,11 +290,16 @@ class Simulation:
         return self._sample()
 
     def step_onboard(self, sp: Setpoint) -> SensorFrame:
-        """One frame flown by the onboard controller on the true state
-        (the plain-float fast path; equivalent to
-        ``step_frame(onboard.update(truth, sp, dt))``)."""
+        """One frame flown by the onboard controller on the estimate (or, with
+        ``sim.onboard_state: truth``, the true state): the plain-float fast
+        path of ``step_frame(onboard.update(state, sp, dt))``."""
         pl = self.plant
-        cmd = self.onboard.update_floats(pl.p, pl.v, pl.R, pl.w, sp, self.dt_frame_s, pl.landed)
+        e = self.estimate
+        if self.estimator is not None and e is not None:
+            cmd = self.onboard.update_floats(e.pos_enu_m, e.vel_enu_m_s, e.R, e.omega_flu_rad_s, sp,
+                                             self.dt_frame_s, pl.landed)
+        else:
+            cmd = self.onboard.update_floats(pl.p, pl.v, pl.R, pl.w, sp, self.dt_frame_s, pl.landed)
         return self.step_frame(cmd)
 
     def _sample(self) -> SensorFrame:
@@ -270,8 +307,14 @@ class Simulation:
         p, R = pl.p, pl.R
         truth = self._truth = TrueState(p, pl.v, R, pl.w, pl.acc, pl.landed, pl.f)
         sensors = self.sensors
-        # Same draws, same order as ``imu`` then ``position`` then ``ranges``.
-        acc, gyro, mag = sensors.imu_tuples(R, pl.acc, pl.w, self.params.plant.gravity_m_s2)
-        pos, vel = sensors.position_tuples(p, pl.v)
+        f = pl.f
+        # Same draws, same order as ``imu`` then the GNSS then ``ranges``.
+        acc, gyro, mag = sensors.imu_tuples(R, pl.acc, pl.w, self.params.plant.gravity_m_s2,
+                                            f[0] + f[1] + f[2] + f[3])
+        fix = sensors.gnss.step(self.time_us, p, pl.v)
         ranges = sensors.ranges(self.time_us, p, R)
-        return SensorFrame(self.time_us, acc, gyro, mag, pos, vel, ranges, truth)
+        est = None
+        if self.estimator is not None:
+            est = self.estimate = self.estimator.update(self.time_us, self.dt_frame_s, gyro, acc, mag, fix)
+        return SensorFrame(self.time_us, acc, gyro, mag, fix.pos_enu_m, fix.vel_enu_m_s, ranges, truth,
+                           fix.time_us, est)

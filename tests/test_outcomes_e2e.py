@@ -218,3 +218,28 @@ def test_attach_land_brings_a_flying_vehicle_down(tmp_path):
     assert rc == 3 and rep["violation"]["kind"] == "attached" and rep["phase"] == "done"
     hb = [m for m in msgs if m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1]
     assert not hb[-1].base_mode & 128
+
+
+def test_jittery_real_time_link_hands_the_inner_loop_to_the_vehicle(tmp_path):
+    """0-30 ms of jitter on a free-running (real-time) link: the companion's
+    inner loop cannot be closed safely, so it hands control to the vehicle's
+    controller, keeps streaming setpoints, completes, and says so."""
+    from sitl.api import SitlProcess
+    from sitl.relay import UdpRelay
+
+    with SitlProcess(MISSION, lockstep=False, speed=1.0) as sitl:
+        host, port = sitl.url.split(":")[1:]
+        with UdpRelay((host, int(port)), delay_min_s=0.0, delay_max_s=0.03, seed=3) as relay:
+            via = type("Via", (), {"url": f"udpout:127.0.0.1:{relay.port}"})
+            rc, rep, msgs = _fly(tmp_path, via, "--cut", "2")
+    assert rep["degraded"] is not None and "jitter" in rep["degraded"]["reason"]
+    assert not rep["crashed"]
+    assert rc == 0 and rep["completed"], rep["violation"]
+    # on the wire: finite motor commands stop once the hand-over is announced
+    texts = [i for i, m in enumerate(msgs) if m.get_type() == "STATUSTEXT" and m.get_srcComponent() == 191
+             and m.text.startswith("companion: inner loop to vehicle")]
+    assert len(texts) == 1
+    after = [m for m in msgs[texts[0]:] if m.get_type() == "HIL_ACTUATOR_CONTROLS"]
+    assert after and all(m.controls[0] != m.controls[0] for m in after)
+    sp = [m for m in msgs[texts[0]:] if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"]
+    assert len(sp) > 100                   # setpoints go on

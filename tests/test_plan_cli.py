@@ -23,7 +23,7 @@ from companion.plan_io import load_plan
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSIONS = ROOT / "missions"
-DESIGN_KEYS = {"frame", "origin", "path", "waypoints", "trajectory", "stats", "timings_s"}
+LOADER_KEYS = {"frame", "origin", "path", "waypoints", "trajectory", "stats", "timings_s"}
 STATS_KEYS = {"coverage_fraction", "path_length_m", "duration_s", "n_waypoints", "orientation_deg",
               "max_speed_m_s", "max_accel_m_s2", "waypoint_residual_m"}
 
@@ -198,7 +198,7 @@ def planned(request, tmp_path_factory):
 
 def test_plan_json_keys(planned):
     doc = planned["doc"]
-    assert DESIGN_KEYS <= set(doc)
+    assert LOADER_KEYS <= set(doc)
     assert set(doc["stats"]) == STATS_KEYS
     assert set(doc["timings_s"]) == {"load", "coverage", "trajectory", "total"}
     assert set(doc["trajectory"]) == {"t", "p", "v", "a", "pointing"}

@@ -64,8 +64,10 @@ def test_mavsdk_offboard_flight(vehicle):
     assert pos.latitude_deg == pytest.approx(lat, abs=2e-7) and pos.longitude_deg == pytest.approx(lon, abs=2e-7)
     assert pos.absolute_altitude_m == pytest.approx(alt, abs=0.01)
     att = tel.attitude_euler()
-    assert att.yaw_deg == pytest.approx(90.0, abs=0.5)     # the SITL starts facing east (ENU yaw 0)
-    assert abs(att.roll_deg) < 0.5 and abs(att.pitch_deg) < 0.5
+    # the onboard estimate (sim.onboard_state: estimate), aligned from the
+    # paper's noisy vectors: within about 1 deg after the first seconds
+    assert att.yaw_deg == pytest.approx(90.0, abs=2.0)     # the SITL starts facing east (ENU yaw 0)
+    assert abs(att.roll_deg) < 2.0 and abs(att.pitch_deg) < 2.0
     assert tel.flight_mode() == FlightMode.HOLD
 
     action.arm()

@@ -81,7 +81,6 @@ class FlightPlan:
     waypoints_p_enu_m: np.ndarray
     target_enu_m: np.ndarray
     coverage_fraction: float | None
-    plan: object = None          # companion.planner.Plan when planned here
     waypoints_t_s: np.ndarray | None = None
     waypoints_v_enu_m_s: np.ndarray | None = None
     waypoints_a_enu_m_s2: np.ndarray | None = None
@@ -92,7 +91,7 @@ class FlightPlan:
         """From a ``companion.planner.Plan``."""
         w = plan.waypoints
         return cls(plan.trajectory, np.asarray(w.p_enu_m, dtype=float), np.asarray(plan.target_enu_m, dtype=float),
-                   float(plan.stats.coverage_fraction), plan, np.asarray(w.t_s, dtype=float),
+                   float(plan.stats.coverage_fraction), np.asarray(w.t_s, dtype=float),
                    np.asarray(w.v_enu_m_s, dtype=float), np.asarray(w.a_enu_m_s2, dtype=float),
                    np.asarray(plan.coverage.path_xy_m, dtype=float))
 
@@ -120,7 +119,7 @@ class FlightPlan:
         traj = generate_trajectory(t, p, v, a, config, target_enu_m=self.target_enu_m)
         # The coverage stays the whole plan's: the report's flown coverage is
         # then the part of it this shorter flight covered.
-        return FlightPlan(traj, p, self.target_enu_m, self.coverage_fraction, None, t, v, a, self.path_xy_m)
+        return FlightPlan(traj, p, self.target_enu_m, self.coverage_fraction, t, v, a, self.path_xy_m)
 
 
 def prepare(mission, plan_path: str | None) -> FlightPlan:
@@ -141,14 +140,14 @@ def prepare(mission, plan_path: str | None) -> FlightPlan:
     pf = load_plan(plan_path)
     target = pf.target_enu_m
     if target is None:
-        # A plan.json without ``target_enu_m`` (it is not in DESIGN.md's
-        # minimum): S_p is where the pointing rays of eq. (21) meet.
+        # A plan.json without ``target_enu_m`` (the loader does not require
+        # it, docs/plan-json.md): S_p is where the pointing rays of eq. (21) meet.
         target = pointing_target_from_rays(pf.p_enu_m, pf.pointing_enu, str(plan_path))
     traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
                                pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")
     return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
-                      None if cov is None else float(cov), None, pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
+                      None if cov is None else float(cov), pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
                       pf.waypoint_a_enu_m_s2, pf.path_xy_m if len(pf.path_xy_m) else None)
 
 
@@ -225,6 +224,9 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
                           flight_plan.coverage_fraction, flight_plan.path_xy_m,
                           flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}))
     core = FlightCore(inputs, cfg, mission.vehicle, ctrl)
+    from ..memory import release_freed_memory
+
+    release_freed_memory()   # the planner's peak is not held through the flight
     from ..errors import LinkError
 
     tlog = TlogWriter(tlog_path) if tlog_path else None

@@ -12,6 +12,9 @@ import math
 
 import numpy as np
 
+#: Cell keys are ``kx * _KEY_STRIDE + ky`` (fields up to ~1e9 cells a side).
+_KEY_STRIDE = 1 << 31
+
 
 class PathCoverage:
     """Flown fraction of a 2D path.
@@ -37,30 +40,36 @@ class PathCoverage:
             n = max(1, int(math.ceil(L / spacing_m)))
             s = np.arange(1, n + 1) / n
             pts.append(a + s[:, None] * (b - a))
-        self.points = np.concatenate(pts)
+        pts = np.concatenate(pts)
         self.radius_m = float(radius_m)
-        self.flown = np.zeros(len(self.points), dtype=bool)
         self._cell = self.radius_m
-        keys = np.floor(self.points / self._cell).astype(np.int64)
-        self._grid: dict[tuple[int, int], list[int]] = {}
-        for i, (kx, ky) in enumerate(keys.tolist()):
-            self._grid.setdefault((kx, ky), []).append(i)
+        # Points sorted by grid cell; each cell's points are one slice.
+        keys = np.floor(pts / self._cell).astype(np.int64)
+        k1 = keys[:, 0] * _KEY_STRIDE + keys[:, 1]
+        order = np.argsort(k1, kind="stable")
+        self.points = pts[order]
+        self._x = np.ascontiguousarray(self.points[:, 0])
+        self._y = np.ascontiguousarray(self.points[:, 1])
+        k1 = k1[order]
+        starts = np.flatnonzero(np.r_[True, k1[1:] != k1[:-1]])
+        ends = np.r_[starts[1:], len(k1)]
+        self._slices = dict(zip(k1[starts].tolist(), zip(starts.tolist(), ends.tolist())))
+        self.flown = np.zeros(len(self.points), dtype=bool)
         self._r2 = self.radius_m ** 2
-        self._pts = self.points.tolist()
 
     def visit(self, x_m: float, y_m: float) -> None:
         """The vehicle is at (x, y) (ENU m)."""
         cx, cy = math.floor(x_m / self._cell), math.floor(y_m / self._cell)
-        g, pts, flown, r2 = self._grid, self._pts, self.flown, self._r2
+        sl, r2 = self._slices, self._r2
         for dx in (-1, 0, 1):
+            base = (cx + dx) * _KEY_STRIDE + cy
             for dy in (-1, 0, 1):
-                idx = g.get((cx + dx, cy + dy))
-                if idx is None:
+                se = sl.get(base + dy)
+                if se is None:
                     continue
-                for i in idx:
-                    px, py = pts[i]
-                    if (px - x_m) ** 2 + (py - y_m) ** 2 <= r2:
-                        flown[i] = True
+                a, b = se
+                d2 = (self._x[a:b] - x_m) ** 2 + (self._y[a:b] - y_m) ** 2
+                self.flown[a:b] |= d2 <= r2
 
     def fraction(self) -> float:
         return float(np.count_nonzero(self.flown)) / len(self.flown)

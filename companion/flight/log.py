@@ -36,7 +36,7 @@ class FlightLog:
                + [f"est_{c}" for c in "xyz"] + [f"R{i}{j}" for i in range(3) for j in range(3)]
                + [f"{b}_{c}" for b in ("b1d", "b2d", "b3d") for c in "xyz"] + ["f"]
                + [f"s_{c}" for c in "xyz"])
-    max_rows: int = 40000
+    max_rows: int = 20000
     #: The kept rows back to back (C doubles).
     data: array = field(default_factory=lambda: array("d"))
     stride: int = 1

@@ -1,10 +1,10 @@
 """MAVLink encode/decode for the companion: the only companion module that
 speaks NED/FRD, wire units and MAVLink's [w, x, y, z] quaternions.
 
-Everything it returns is ENU world / FLU body, SI units (DESIGN.md "Frames
-and units"); every frame change goes through ``companion.frames``. Decoders
-take a pymavlink message object and return a small named result; encoders take
-a pymavlink ``MAVLink`` protocol object (``conn.mav``) and return the message
+Everything it returns is ENU world / FLU body, SI units (docs/frames.md);
+every frame change goes through ``companion.frames``. Decoders take a
+pymavlink message object and return a small named result; encoders take a
+pymavlink ``MAVLink`` protocol object (``conn.mav``) and return the message
 object, ready for ``conn.send``.
 
 The decoders of the per-frame messages (HIGHRES_IMU, LOCAL_POSITION_NED) are

@@ -66,7 +66,7 @@ class Connection:
     tlog : TlogWriter or None
         Records every packet sent and received (already opened by the caller).
     target_system, target_component : int
-        The vehicle (DESIGN.md: 1/1).
+        The vehicle (1/1, docs/mavlink.md "Who is who").
 
     Notes
     -----

@@ -1,8 +1,10 @@
 """Telemetry logs (.tlog) in pymavlink's format, written and read.
 
 A .tlog is a sequence of records: a big-endian uint64 timestamp (microseconds
-since the Unix epoch, wall clock, as pymavlink/MAVProxy write it) followed by
-one raw MAVLink packet (v1 or v2, signature included). The recorder logs both
+since the Unix epoch, as pymavlink/MAVProxy write it) followed by one raw
+MAVLink packet (v1 or v2, signature included). The time stamp is the caller's
+(the runner maps the vehicle clock onto the wall time of the flight start,
+docs/tlog.md), else the wall clock. The recorder logs both
 directions and flushes by wall clock at least once a second and on close, so
 a crash loses at most the last second. pymavlink's ``mavutil.mavlink_connection``
 reads these files; ``read_tlog`` here is a dependency-light reader for replay.
@@ -28,7 +30,7 @@ class TlogWriter:
     path : str or Path
         Output file (created or truncated by ``open``).
     flush_interval_s : float
-        Longest wall-clock time between flushes (<= 1 s per DESIGN.md).
+        Longest wall-clock time between flushes (<= 1 s, docs/tlog.md).
 
     Notes
     -----

@@ -1,4 +1,4 @@
-"""Mission file schema (DESIGN.md "Mission YAML"): frozen dataclasses.
+"""Mission file schema (docs/mission.md): frozen dataclasses.
 
 Only the keys below are accepted; an unknown key or a wrong type is a
 ``MissionError`` naming the file and the dotted key.

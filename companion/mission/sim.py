@@ -7,7 +7,7 @@ mission file is validated in one place.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
 
@@ -37,22 +37,105 @@ class ObstacleConfig:
             raise ValueError("box size_x and size_y must be > 0")
 
 
+#: Named sensor profiles (``sim.sensor_profile``). Their datasheet values
+#: live with the simulator (``sitl.profiles``); the schema only knows the names.
+SENSOR_PROFILES = ("icm42688p-bmm150-zedf9p",)
+
+#: Keys of ``NoiseConfig`` that are 3-vectors.
+_VECTOR_KEYS = ("gyro_bias_rad_s", "accel_bias_m_s2", "mag_hard_iron_gauss", "mag_thrust_gauss_per_n")
+
+
 @dataclass(frozen=True)
 class NoiseConfig:
-    """White measurement noise (variances per component, as the paper) and biases."""
+    """Sensor errors: ``sim.noise``. Every key is optional.
 
-    vector_variance: float = 5.0e-4       # on the unit vector measurements (accel dir, mag dir)
-    gyro_variance: float = 5.0e-4         # (rad/s)^2 on Omega
-    position_std_m: float = 0.0           # mocap-like by default, as the paper
-    velocity_std_m_s: float = 0.0
-    gyro_bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    accel_bias_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    range_std_m: float = 0.01             # rangefinder white noise (m)
+    A key that is given replaces the value of the sensor profile
+    (``sim.sensor_profile``); a key given nowhere takes the no-profile
+    default, the paper's model (Section 3.4): white noise of variance 5e-4
+    on the unit-vector measurements and on Omega, exact position and
+    velocity in every sensor frame, no bias. Independent error sources add
+    (variances add). Units are in the names; body vectors are FLU.
+
+    Attributes
+    ----------
+    vector_variance : float
+        Per-component variance of white noise on the accelerometer and
+        magnetometer *directions* (-): the raw vectors get a standard
+        deviation ``sqrt(vector_variance) * |vector|``. Default 5e-4 (paper);
+        0 with a profile.
+    gyro_variance : float
+        White gyro noise variance per sample ((rad/s)^2). Default 5e-4; 0
+        with a profile.
+    gyro_noise_density_rad_s_rthz, accel_noise_density_m_s2_rthz : float
+        White-noise densities (rad/s/sqrt(Hz), m/s^2/sqrt(Hz)); per-sample
+        std = density * sqrt(sensor rate). Default 0.
+    gyro_bias_rad_s, accel_bias_m_s2 : (3,)
+        Constant biases (body FLU). Default 0.
+    gyro_bias_turn_on_std_rad_s, accel_bias_turn_on_std_m_s2 : float
+        Std of a turn-on bias drawn once per run and axis (seeded). Default 0.
+    gyro_bias_walk_rad_s_rts, accel_bias_walk_m_s2_rts : float
+        Bias random walk (rad/s/sqrt(s), m/s^2/sqrt(s)): the bias moves by a
+        N(0, walk^2 dt) step every sample of the vehicle clock. Default 0.
+    mag_noise_std_gauss : float
+        Absolute white magnetometer noise per sample and axis (gauss). Default 0.
+    mag_hard_iron_gauss : (3,)
+        Constant field of the airframe added to the magnetometer (body FLU, gauss).
+    mag_thrust_gauss_per_n : (3,)
+        Field of the motor currents per newton of total rotor thrust (body
+        FLU, gauss/N).
+    position_std_m : float
+        White position noise per sample, x and y (and z unless
+        ``position_z_std_m`` is given) (m). Default 0.
+    position_z_std_m : float
+        White vertical position noise (m). Default: ``position_std_m``.
+    velocity_std_m_s : float
+        White velocity noise per sample and axis (m/s). Default 0.
+    gnss_rate_hz : float
+        Rate of the position/velocity (GNSS) samples (Hz, > 0). Default:
+        every sensor frame.
+    gnss_latency_s : float
+        Delay from a GNSS sample's measurement to its delivery (s, in
+        [0, 1)). Default 0.
+    range_std_m : float
+        Rangefinder white noise (m). Default 0.01.
+    """
+
+    vector_variance: float | None = None
+    gyro_variance: float | None = None
+    gyro_noise_density_rad_s_rthz: float | None = None
+    accel_noise_density_m_s2_rthz: float | None = None
+    gyro_bias_rad_s: tuple[float, float, float] | None = None
+    accel_bias_m_s2: tuple[float, float, float] | None = None
+    gyro_bias_turn_on_std_rad_s: float | None = None
+    accel_bias_turn_on_std_m_s2: float | None = None
+    gyro_bias_walk_rad_s_rts: float | None = None
+    accel_bias_walk_m_s2_rts: float | None = None
+    mag_noise_std_gauss: float | None = None
+    mag_hard_iron_gauss: tuple[float, float, float] | None = None
+    mag_thrust_gauss_per_n: tuple[float, float, float] | None = None
+    position_std_m: float | None = None
+    position_z_std_m: float | None = None
+    velocity_std_m_s: float | None = None
+    gnss_rate_hz: float | None = None
+    gnss_latency_s: float | None = None
+    range_std_m: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("vector_variance", "gyro_variance", "position_std_m", "velocity_std_m_s", "range_std_m"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"noise.{name} must be >= 0")
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if v is None:
+                continue
+            vals = v if f.name in _VECTOR_KEYS else (v,)
+            if not all(math.isfinite(x) for x in vals):
+                raise ValueError(f"noise.{f.name} must be finite")
+            if f.name not in _VECTOR_KEYS and v < 0:
+                raise ValueError(f"noise.{f.name} must be >= 0")
+        if self.gnss_rate_hz is not None and not self.gnss_rate_hz > 0:
+            raise ValueError("noise.gnss_rate_hz must be > 0")
+        if self.gnss_latency_s is not None and not self.gnss_latency_s < 1.0:
+            raise ValueError("noise.gnss_latency_s must be in [0, 1) s")
+        if self.vector_variance is not None and self.vector_variance >= 1.0:
+            raise ValueError("noise.vector_variance must be < 1 (a variance on unit vectors)")
 
 
 # MAV_SENSOR_ORIENTATION values a body-fixed rangefinder may use (pymavlink
@@ -144,8 +227,20 @@ class SimConfig:
     wind: WindConfig = field(default_factory=WindConfig)
     magnetic_field_enu_gauss: tuple[float, float, float] = (0.0, 0.21, -0.42)
     start_enu_m: tuple[float, float] | None = None
+    vector_sensors: Literal["physical", "paper"] = "physical"
+    sensor_profile: Literal[SENSOR_PROFILES] | None = None
+    onboard_state: Literal["estimate", "truth"] = "estimate"
 
     def __post_init__(self) -> None:
+        if self.sensor_profile is not None and self.sensor_profile not in SENSOR_PROFILES:
+            raise ValueError(f"sim.sensor_profile must be one of {', '.join(SENSOR_PROFILES)}")
+        if self.vector_sensors not in ("physical", "paper"):
+            raise ValueError("sim.vector_sensors must be physical or paper")
+        if self.onboard_state not in ("estimate", "truth"):
+            raise ValueError("sim.onboard_state must be estimate or truth")
+        m = self.magnetic_field_enu_gauss
+        if not all(math.isfinite(x) for x in m) or not math.hypot(*m) > 0:
+            raise ValueError("sim.magnetic_field_enu_gauss must be finite and non-zero")
         if self.canopy_height_m <= 0:
             raise ValueError("sim.canopy_height_m must be > 0")
         if self.start_enu_m is not None and not all(math.isfinite(x) for x in self.start_enu_m):
