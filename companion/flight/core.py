@@ -323,6 +323,12 @@ class FlightCore:
         if self._proc is not None:
             self._drive()
 
+    @property
+    def handled_types(self) -> frozenset:
+        """Message types ``handle`` acts on; any other message leaves the core as it was
+        (``companion replay`` does not even decode them)."""
+        return frozenset(self._dispatch)
+
     def take_outbox(self) -> list:
         out = self.outbox
         self.outbox = []

@@ -413,6 +413,60 @@ def px4_custom_mode(main_mode: int, sub_mode: int = 0) -> int:
     return (main_mode << 16) | (sub_mode << 24)
 
 
+@dataclass(frozen=True, slots=True)
+class GlobalPosition:
+    """GLOBAL_POSITION_INT in SI units and ENU.
+
+    Attributes
+    ----------
+    time_boot_ms : int
+    lat_deg, lon_deg : float
+        WGS-84 (1e-7 degree resolution on the wire: about 1.1 cm north, less east).
+    alt_m : float
+        Altitude AMSL (m).
+    relative_alt_m : float
+        Altitude above the vehicle's home (m).
+    vel_enu_m_s : tuple (3,)
+        Ground velocity, ENU, m/s (cm/s resolution on the wire).
+    """
+
+    time_boot_ms: int
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    relative_alt_m: float
+    vel_enu_m_s: tuple
+
+
+@dataclass(frozen=True, slots=True)
+class HomePosition:
+    """HOME_POSITION: the vehicle's home, geodetic and in its local frame.
+
+    Attributes
+    ----------
+    lat_deg, lon_deg, alt_m : float
+        WGS-84, altitude AMSL (m).
+    pos_enu_m : tuple (3,)
+        The home in the vehicle's local frame (ENU, m).
+    """
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    pos_enu_m: tuple
+
+
+def decode_home_position(msg) -> HomePosition:
+    """HOME_POSITION (1e7 deg, mm, local NED) -> ``HomePosition`` (deg, m, ENU)."""
+    return HomePosition(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3, (msg.y, msg.x, -msg.z))
+
+
+def decode_global_position_int(msg) -> GlobalPosition:
+    """GLOBAL_POSITION_INT (1e7 deg, mm, cm/s NED) -> ``GlobalPosition`` (deg, m, m/s ENU)."""
+    return GlobalPosition(int(msg.time_boot_ms), msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3,
+                          msg.relative_alt * 1e-3, (msg.vy * 0.01, msg.vx * 0.01, -msg.vz * 0.01))
+
+
 # --- fast MAVLink 2 framing of the per-frame messages ---------------------------
 #
 # In lockstep every sensor frame is one datagram (LOCAL_POSITION_NED, ODOMETRY,
@@ -474,15 +528,25 @@ class FastMessage(tuple):
 
     def to_dict(self) -> dict:
         d = {"mavpackettype": self._msgname}
-        d.update(zip(self._fieldnames, self))
+        d.update((k, getattr(self, k)) for k in self._fieldnames)
         return d
 
     def __repr__(self) -> str:
-        return f"{self._msgname} {{{', '.join(f'{k} : {v}' for k, v in zip(self._fieldnames, self))}}}"
+        return f"{self._msgname} {{{', '.join(f'{k} : {getattr(self, k)}' for k in self._fieldnames)}}}"
+
+
+def _array_field(a: int, b: int, name: str) -> property:
+    """An array field: a fresh list of the flat values a..b (built only when read)."""
+    return property(lambda self: list(self[a:b]), doc=f"field {name}")
 
 
 class FastDecoder:
-    """struct decoder of one message type (``msg_class``: pymavlink's class)."""
+    """struct decoder of one message type (``msg_class``: pymavlink's class).
+
+    The message is the flat unpacked tuple (then system id, component id,
+    packet); an array field (ODOMETRY's ``q`` and covariances) is a list made
+    from its slice of that tuple when it is read, not at every decode.
+    """
 
     def __init__(self, msg_class) -> None:
         self.msgid = int(msg_class.id)
@@ -491,17 +555,19 @@ class FastDecoder:
         self.size = int(msg_class.unpacker.size)
         names = tuple(msg_class.ordered_fieldnames)
         lengths = tuple(int(k) for k in msg_class.array_lengths)
-        # (start, stop) of each array field in the flat unpacked tuple
-        self.groups = None
-        if any(lengths):
-            groups, i = [], 0
-            for k in lengths:
-                groups.append((i, i + max(k, 1), k > 0))
-                i += max(k, 1)
-            self.groups = tuple(groups)
-        attrs = {"__slots__": (), "_msgname": msg_class.msgname, "_msgid": self.msgid, "_fieldnames": names}
-        for i, n in enumerate(names):
-            attrs[n] = property(operator.itemgetter(i), doc=f"field {n}")
+        types = dict(zip(msg_class.fieldnames, msg_class.fieldtypes))
+        attrs = {"__slots__": (), "_msgname": msg_class.msgname, "_msgid": self.msgid,
+                 "_fieldnames": tuple(msg_class.fieldnames)}
+        i = 0
+        for n, k in zip(names, lengths):
+            if k and types[n] == "char":
+                raise ValueError(f"FastDecoder: {msg_class.msgname}.{n} is text (not supported)")
+            if k:
+                attrs[n] = _array_field(i, i + k, n)
+                i += k
+            else:
+                attrs[n] = property(operator.itemgetter(i), doc=f"field {n}")
+                i += 1
         self.cls = type("Fast_" + msg_class.msgname, (FastMessage,), attrs)
 
     def decode(self, packet: bytes, payload: bytes, sysid: int, compid: int) -> FastMessage:
@@ -509,12 +575,7 @@ class FastDecoder:
         n = len(payload)
         if n != self.size:   # MAVLink 2 zero truncation, or a longer (newer) payload
             payload = payload + bytes(self.size - n) if n < self.size else payload[:self.size]
-        flat = self.unpacker.unpack(payload)
-        if self.groups is None:
-            return tuple.__new__(self.cls, flat + (sysid, compid, packet))
-        vals = [list(flat[a:b]) if arr else flat[a] for a, b, arr in self.groups]
-        vals += (sysid, compid, packet)
-        return tuple.__new__(self.cls, vals)
+        return tuple.__new__(self.cls, self.unpacker.unpack(payload) + (sysid, compid, packet))
 
 
 #: The types decoded without pymavlink (the per-frame telemetry of a lockstep run).
@@ -579,11 +640,9 @@ _MODE_DISARMED = mavlink.MAV_MODE_FLAG_HIL_ENABLED
 _ZERO12 = (0.0,) * 12
 
 
-def pack_hil_actuator_controls(seq: int, system_id: int, component_id: int, time_usec: int, motor_cmd,
-                               armed: bool) -> bytes:
-    """The packet of ``encode_hil_actuator_controls(...)`` framed as pymavlink
-    would (unsigned MAVLink 2, sequence ``seq``), without a message object:
-    byte-identical to ``msg.pack(mav)`` (tested)."""
+def hil_actuator_controls_payload(time_usec: int, motor_cmd, armed: bool) -> bytes:
+    """The MAVLink 2 payload (zero-truncated, as on the wire) of
+    ``encode_hil_actuator_controls(mav, time_usec, motor_cmd, armed)``."""
     mode = _MODE_ARMED if armed else _MODE_DISARMED
     if motor_cmd is None:
         payload = _HIL_PAYLOAD.pack(time_usec, HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP, *_NAN16, mode)
@@ -591,7 +650,15 @@ def pack_hil_actuator_controls(seq: int, system_id: int, component_id: int, time
         m0, m1, m2, m3 = motor_cmd
         payload = _HIL_PAYLOAD.pack(time_usec, HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP, m0, m1, m2, m3, *_ZERO12,
                                     mode)
-    payload = payload.rstrip(b"\0") or b"\0"   # MAVLink 2 trailing-zero truncation
+    return payload.rstrip(b"\0") or b"\0"   # MAVLink 2 trailing-zero truncation
+
+
+def pack_hil_actuator_controls(seq: int, system_id: int, component_id: int, time_usec: int, motor_cmd,
+                               armed: bool) -> bytes:
+    """The packet of ``encode_hil_actuator_controls(...)`` framed as pymavlink
+    would (unsigned MAVLink 2, sequence ``seq``), without a message object:
+    byte-identical to ``msg.pack(mav)`` (tested)."""
+    payload = hil_actuator_controls_payload(time_usec, motor_cmd, armed)
     head = _V2_HEADER.pack(0xFD, len(payload), 0, 0, seq, system_id, component_id, _HIL_ID & 0xFF,
                            (_HIL_ID >> 8) & 0xFF, _HIL_ID >> 16)
     body = head + payload

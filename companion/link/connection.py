@@ -114,7 +114,9 @@ class Connection:
         self._sock = None          # UDP socket read/written directly (see ``open``)
         self._dest = None          # udpout: the vehicle's resolved address
         self._rcvtimeo = None      # the socket's current SO_RCVTIMEO (s)
-        self._rx_log = None        # (time_usec, packets) received, not yet in the tlog
+        self._rx_log = None        # packets received, not yet in the tlog (see ``_record_answer``)
+        self._rx_frames = None     # [(index in _rx_log, HIGHRES_IMU time_usec)] of that batch
+        self._tx_log = []          # packets sent while a received batch waits, in order
         #: Lockstep (set by the runner): a datagram that does not end a sensor
         #: frame (an immediate reply such as COMMAND_ACK or MISSION_REQUEST) is
         #: returned together with the vehicle's next frame datagram, so that
@@ -228,17 +230,50 @@ class Connection:
             self._write(buf)
         self.n_sent += 1
         if self.tlog is not None:
-            self._flush_rx()
-            self.tlog.write(msg.get_msgbuf(), self._stamp())
+            self._record_sent(msg.get_msgbuf())
+
+    def _record_sent(self, buf) -> None:
+        if self._rx_log is None:
+            self.tlog.write(buf, self._stamp())
+        else:
+            self._tx_log.append(buf)
 
     def _flush_rx(self) -> None:
-        """Record the packets of the last datagram received (deferred until
-        after the answer went out: in lockstep the vehicle waits for it)."""
+        """Record what waits: the packets of the last batch received, then the
+        packets sent since, with one stamp (the clock now)."""
         rx = self._rx_log
         if rx is not None:
             self._rx_log = None
+            self._rx_frames = None
+            tx, self._tx_log = self._tx_log, []
             if self.tlog is not None:
-                self.tlog.write_many(rx, self._stamp())
+                self.tlog.write_many(rx + tx, self._stamp())
+
+    def _record_answer(self, time_usec: int) -> None:
+        """The answer to sensor frame ``time_usec`` went out (it is the last packet
+        of ``_tx_log``): record the received packets up to and including that
+        frame's HIGHRES_IMU, then what was sent since, stamped now, i.e. with
+        the frame's vehicle time (the runner's clock, which reads the vehicle
+        time of the frame just handled). In lockstep a batch is one frame and
+        the whole batch goes; a batch of several frames (free-running vehicle)
+        is recorded frame by frame, each with its own time. Deferred until
+        after the answer: in lockstep the vehicle waits for it."""
+        rx = self._rx_log
+        if rx is None:
+            return
+        cut = None
+        for k, (i, t) in enumerate(self._rx_frames):
+            if t == time_usec:
+                cut = k
+                break
+        if cut is None or cut == len(self._rx_frames) - 1:
+            self._flush_rx()
+            return
+        i = self._rx_frames[cut][0] + 1
+        tx, self._tx_log = self._tx_log, []
+        self.tlog.write_many(rx[:i] + tx, self._stamp())
+        self._rx_log = rx[i:]
+        self._rx_frames = [(j - i, t) for j, t in self._rx_frames[cut + 1:]]
 
     def _write(self, buf: bytes) -> None:
         if self._sock is not None:
@@ -259,6 +294,8 @@ class Connection:
         mav = self._mav
         if self._sock is None or mav.signing.sign_outgoing:
             self.send(codec.encode_hil_actuator_controls(mav, time_usec, motor_cmd, armed))
+            if self.tlog is not None:
+                self._record_answer(time_usec)
             return
         buf = codec.pack_hil_actuator_controls(mav.seq, mav.srcSystem, mav.srcComponent, time_usec, motor_cmd,
                                                armed)
@@ -267,8 +304,8 @@ class Connection:
         self._write(buf)
         self.n_sent += 1
         if self.tlog is not None:
-            self._flush_rx()
-            self.tlog.write(buf, self._stamp())
+            self._record_sent(buf)
+            self._record_answer(time_usec)
 
     def send_heartbeat(self) -> None:
         self.send(self._mav.heartbeat_encode(
@@ -386,6 +423,7 @@ class Connection:
                 self._flush_rx()
                 # stamped when written (after the frame was handled: its vehicle time)
                 self._rx_log = [m.get_msgbuf() for m in out]
+                self._rx_frames = [(i, m.time_usec) for i, m in enumerate(out) if m.get_type() == "HIGHRES_IMU"]
         return out
 
     def poll(self, timeout_s: float = 0.0) -> list:
@@ -398,6 +436,8 @@ class Connection:
         conn = self._conn
         if conn is None:
             raise LinkError("connection is not open")
+        if self.tlog is not None:
+            self.tlog.tick()   # flushed at least once a flush interval, even while the link is silent
         if self._sock is not None:
             return self._poll_udp(timeout_s)
         if timeout_s > 0 and self._fd is not None:
