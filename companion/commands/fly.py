@@ -304,6 +304,24 @@ def transit_floor_z_m(mission) -> float:
     return float(np.nanmax(h)) + DEFAULT_CANOPY_M + TRANSIT_CLEARANCE_M
 
 
+def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None):
+    """The ``FlightCore`` that flies ``flight_plan`` (already cut) with ``cfg``: the
+    same construction for ``companion fly`` and ``companion replay``."""
+    from ..control import GeometricController
+    from ..runner import FlightCore, FlightInputs
+
+    ctrl = None
+    if cfg.control == "companion":
+        ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
+    inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
+                          (mission.home.lat, mission.home.lon, mission.home.alt_m),
+                          tuple(float(x) for x in flight_plan.target_enu_m),
+                          tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
+                          flight_plan.coverage_fraction, flight_plan.path_xy_m, setup,
+                          transit_floor_z_m(mission))
+    return FlightCore(inputs, cfg, mission.vehicle, ctrl)
+
+
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
             progress=None, cut_s: float | None = None, runner_overrides: dict | None = None,
             plan_path: str | None = None, signing_key: bytes | None = None, conn=None):
@@ -314,24 +332,14 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
     opened (unknown host, port in use, refused) is bad input and leaves no
     file behind.
     """
-    from ..control import GeometricController
-    from ..runner import FlightCore, FlightInputs, MissionRunner, RunnerConfig
+    from ..runner import MissionRunner, RunnerConfig
 
     try:
         if cut_s is not None:
             flight_plan = flight_plan.cut(cut_s, mission.trajectory)
         cfg = RunnerConfig(control=control, **(runner_overrides or {}))
-        ctrl = None
-        if control == "companion":
-            ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
-        inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
-                              (mission.home.lat, mission.home.lon, mission.home.alt_m),
-                              tuple(float(x) for x in flight_plan.target_enu_m),
-                              tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
-                              flight_plan.coverage_fraction, flight_plan.path_xy_m,
-                              flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}),
-                              transit_floor_z_m(mission))
-        core = FlightCore(inputs, cfg, mission.vehicle, ctrl)
+        core = build_flight_core(mission, flight_plan, cfg,
+                                 flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}))
     except BaseException:
         if conn is not None:
             conn.close()

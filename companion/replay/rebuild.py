@@ -11,7 +11,7 @@ files); ``setup_mismatches`` says which files differ from the recorded ones.
 from __future__ import annotations
 
 from ..flight.config import RunnerConfig
-from ..flight.core import FlightCore, FlightInputs
+from ..flight.core import FlightCore
 from ..flight.setup_record import PREFIX, SETUP_TEXT_ID, parse_setup
 
 #: The setup record format this replay understands.
@@ -96,7 +96,7 @@ def build_core(setup: dict, mission, flight_plan) -> FlightCore:
     ValueError
         The setup record is not one this version can replay.
     """
-    from ..control import GeometricController
+    from ..commands.fly import build_flight_core
 
     if setup.get("format") != SETUP_FORMAT:
         raise ValueError(f"setup record format {setup.get('format')!r}, expected {SETUP_FORMAT!r}")
@@ -104,15 +104,7 @@ def build_core(setup: dict, mission, flight_plan) -> FlightCore:
     cut_s = setup.get("cut_s")
     if cut_s is not None:
         flight_plan = flight_plan.cut(float(cut_s), mission.trajectory)
-    ctrl = None
-    if cfg.control == "companion":
-        ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
-    inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
-                          (mission.home.lat, mission.home.lon, mission.home.alt_m),
-                          tuple(float(x) for x in flight_plan.target_enu_m),
-                          tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
-                          flight_plan.coverage_fraction, flight_plan.path_xy_m, setup)
-    return FlightCore(inputs, cfg, mission.vehicle, ctrl)
+    return build_flight_core(mission, flight_plan, cfg, setup)
 
 
 def setup_mismatches(recorded: dict, current: dict) -> list[str]:
