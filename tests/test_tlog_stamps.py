@@ -64,6 +64,9 @@ def test_frames_stamped_with_their_own_time_and_replies_after_what_they_answer(t
     try:
         conn.send_heartbeat()                                  # before the vehicle clock: epoch + 0
         _, addr = veh.recvfrom(65536)
+        # the link believes a vehicle only from the address of its first heartbeat
+        veh.sendto(mav.heartbeat_encode(2, 12, 0, 0, 3).pack(mav), addr)
+        poll_until(conn, 1, runner)
         # frame 1 alone; then an ACK datagram batched (frame_sync) with frame 2
         conn.frame_sync = True
         veh.sendto(frame(mav, 4000), addr)
@@ -83,7 +86,7 @@ def test_frames_stamped_with_their_own_time_and_replies_after_what_they_answer(t
         veh.close()
     recs = [(r.time_usec - EPOCH_US, r.msg.get_type(), r.msg.get_srcComponent()) for r in read_tlog(path)]
     assert recs == [
-        (0, "HEARTBEAT", 191),
+        (0, "HEARTBEAT", 191), (0, "HEARTBEAT", 1),            # both before the vehicle clock runs
         (4000, "LOCAL_POSITION_NED", 1), (4000, "HIGHRES_IMU", 1), (4000, "HIL_ACTUATOR_CONTROLS", 191),
         # the reply to the ACK left before frame 2 was handled, and is recorded after the packets it answers
         (8000, "COMMAND_ACK", 1), (8000, "LOCAL_POSITION_NED", 1), (8000, "HIGHRES_IMU", 1),
