@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass(frozen=True)
@@ -144,6 +145,22 @@ class ControlConfig:
     pointing_limit: bool = True
     pointing_yaw_rate_max_rad_s: float = 1.0
     pointing_yaw_accel_fraction: float = 0.5
+    vectors: Literal["physical", "paper"] = "physical"
+    velocity_aided: bool = True
+    observer: bool = True
+    observer_tilt_gain_max_rad_s: float = 100.0
+    observer_gravity_gain_rad_s: float = 0.5
+    observer_mag_gain_rad_s: float = 1.0
+    observer_bias_gain_1_s: float = 0.1
+    observer_bias_max_rad_s: float = 0.2
+    observer_window_s: float = 0.3
+    observer_history_s: float = 0.6
+    nav_position_std_m: float = 0.0
+    nav_velocity_std_m_s: float = 0.0
+    nav_accel_noise_m_s2_sqrt_hz: float = 0.02
+    nav_accel_bias_walk_m_s3_sqrt_hz: float = 0.01
+    nav_adaptive_noise: bool = True
+    gyro_noise_rad_s_sqrt_hz: float = 1.4e-3
 
     def __post_init__(self) -> None:
         for name in ("kx", "kv", "rho1", "rho2", "alpha"):
@@ -166,3 +183,21 @@ class ControlConfig:
             raise ValueError("control.pointing_yaw_accel_fraction must be in (0, 1]")
         if not math.hypot(*self.mag_field_enu_gauss) > 0:
             raise ValueError("control.mag_field_enu_gauss must not be zero")
+        if self.observer and not math.hypot(*self.mag_field_enu_gauss[:2]) > 0:
+            raise ValueError("control.mag_field_enu_gauss must have a horizontal part (the observer's heading)")
+        if self.vectors not in ("physical", "paper"):
+            raise ValueError("control.vectors must be 'physical' or 'paper'")
+        for name in ("observer_tilt_gain_max_rad_s", "observer_history_s", "nav_accel_noise_m_s2_sqrt_hz",
+                     "gyro_noise_rad_s_sqrt_hz"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"control.{name} must be > 0")
+        for name in ("observer_gravity_gain_rad_s", "observer_mag_gain_rad_s", "observer_bias_gain_1_s",
+                     "observer_bias_max_rad_s", "observer_window_s", "nav_position_std_m",
+                     "nav_velocity_std_m_s", "nav_accel_bias_walk_m_s3_sqrt_hz"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"control.{name} must be >= 0")
+        if not self.observer_window_s < self.observer_history_s:
+            raise ValueError("control.observer_window_s must be < control.observer_history_s")
+        if self.observer and not self.velocity_aided and not self.observer_gravity_gain_rad_s > 0:
+            raise ValueError("control.observer without velocity_aided needs observer_gravity_gain_rad_s > 0 "
+                             "(no tilt information otherwise)")
