@@ -135,6 +135,7 @@ _E3 = (0.0, 0.0, 1.0)
 _POS_STD_FLOOR_M = 1e-6
 _VEL_STD_FLOOR_M_S = 1e-6
 _N_NOISE_MIN = 10        # fixes seen before the velocity-aided tilt starts (noise estimate settled)
+_BIAS_GATE_RAD = 0.1     # the bias integrates only innovations smaller than this (no wind-up on transients)
 
 
 # --- small SO(3) helpers on float tuples ----------------------------------------------
@@ -477,17 +478,18 @@ class VelocityAidedObserver:
         """(position m, velocity m/s) fix noise used by the gains: the assumed values or,
         with ``adaptive``, the online estimates when larger.
 
-        Online estimate, per axis, from consecutive fixes ``k-1, k`` (interval
-        ``T``): the velocity residual ``(v_k - v_k-1) - int a_in`` (the IMU's
-        predicted increment) has variance ``2 sigma_v^2 + accel_noise^2 T``
-        (plus the small integrated attitude error); the position residual ``p_k - p_k-1 - T (v_k +
+        Online estimate, per axis, from equally spaced fixes ``k-2, k-1, k``
+        (interval ``T``): the second difference of ``v - A``, ``A = int a_in``
+        the IMU's predicted velocity (so the vehicle's jerk and a constant
+        attitude error cancel), has variance ``6 sigma_v^2 + 2 accel_noise^2
+        T``; the position residual ``p_k - p_k-1 - T (v_k +
         v_k-1)/2`` has ``2 sigma_p^2 + T^2 sigma_v^2 / 2``. Both squared
         residuals are averaged over ~5 s (a running mean at first).
         """
         sv, sp = self.vel_std, self.pos_std
         if self.adaptive and self._n_noise >= 2:
             T = self._noise_T
-            ev2 = 0.5 * (self._var_v - self.accel_noise * self.accel_noise * T)
+            ev2 = (self._var_v - 2.0 * self.accel_noise * self.accel_noise * T) / 6.0
             if ev2 > sv * sv:
                 sv = math.sqrt(ev2)
             ep = 0.5 * (self._var_p - 0.5 * T * T * sv * sv)
@@ -566,7 +568,8 @@ class VelocityAidedObserver:
                 sx, sy, sz = sx + k * zx, sy + k * zy, sz + k * zz
         if sx != 0.0 or sy != 0.0 or sz != 0.0:
             R = _mul(R, so3_exp(sx * dt, sy * dt, sz * dt))
-            self._bias_step(sx * dt, sy * dt, sz * dt)
+            if sx * sx + sy * sy + sz * sz < (_BIAS_GATE_RAD * (self.k_g + self.k_m)) ** 2:
+                self._bias_step(sx * dt, sy * dt, sz * dt)
         self._n += 1
         if self._n % 64 == 0:
             R = _orthonormalise(R)
@@ -697,13 +700,15 @@ class VelocityAidedObserver:
 
     def _noise_step(self, T: float, py: Vec3, vy: Vec3, At: Vec3) -> None:
         """Update the running mean-squares of the fix residuals (see :meth:`noise_std`)."""
-        if not self.adaptive or not self._fixes:
+        fixes = self._fixes
+        if not self.adaptive or len(fixes) < 2 or not T > 0.0:
             return
-        tau0, p0, v0, A0 = self._fixes[-1]
-        if not T > 0.0:
+        tau1, p1, v1, A1 = fixes[-1]
+        tau2, _, v2, A2 = fixes[-2]
+        if abs((tau1 - tau2) - T) > 0.1 * T:   # unequal intervals: no second difference
             return
-        rv = sum((vy[k] - v0[k] - (At[k] - A0[k])) ** 2 for k in range(3)) / 3.0
-        rp = sum((py[k] - p0[k] - 0.5 * T * (vy[k] + v0[k])) ** 2 for k in range(3)) / 3.0
+        rv = sum((vy[k] - At[k] - 2.0 * (v1[k] - A1[k]) + (v2[k] - A2[k])) ** 2 for k in range(3)) / 3.0
+        rp = sum((py[k] - p1[k] - 0.5 * T * (vy[k] + v1[k])) ** 2 for k in range(3)) / 3.0
         n = self._n_noise + 1
         self._n_noise = n
         beta = max(1.0 - math.exp(-T / 5.0), 1.0 / n)
@@ -742,7 +747,8 @@ class VelocityAidedObserver:
         if not s > 0.0:
             return
         k = tilt_gain(dtau, span, sv, self.gyro_noise, g, self.k_t_max)
-        a = k * dtau * math.atan2(s, d) / s
+        phi = math.atan2(s, d)
+        a = k * dtau * phi / s
         E = so3_exp(a * cr[0], a * cr[1], a * cr[2])
         self.R = _mul(E, self.R)
         self._C = _mul(E, C)
@@ -751,7 +757,8 @@ class VelocityAidedObserver:
         self._S = _apply(E, *self._S)
         self._fw = _apply(E, *self._fw)
         self._uw = _apply(E, *self._uw)
-        self._bias_step(*_apply_t(self.R, a * cr[0], a * cr[1], a * cr[2]))
+        if phi < _BIAS_GATE_RAD:
+            self._bias_step(*_apply_t(self.R, a * cr[0], a * cr[1], a * cr[2]))
         self.n_tilt_updates += 1
 
     def _nav_gains(self, dtau: float, sp: float, sv: float):
