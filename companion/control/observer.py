@@ -478,23 +478,21 @@ class VelocityAidedObserver:
         """(position m, velocity m/s) fix noise used by the gains: the assumed values or,
         with ``adaptive``, the online estimates when larger.
 
-        Online estimate, per axis, from equally spaced fixes ``k-2, k-1, k``
-        (interval ``T``): the second difference of ``v - A``, ``A = int a_in``
-        the IMU's predicted velocity (so the vehicle's jerk and a constant
-        attitude error cancel), has variance ``6 sigma_v^2 + 2 accel_noise^2
-        T``; the position residual ``p_k - p_k-1 - T (v_k +
+        Online estimate, per axis, from fixes ``k-2, k-1, k`` (intervals
+        ``T1``, ``T``): the second divided difference of ``w = v - A``, ``A =
+        int a_in`` the IMU's predicted velocity (so the vehicle's jerk and a
+        constant attitude error cancel), ``d = (w_k - w_k-1)/T - (w_k-1 -
+        w_k-2)/T1``, has variance ``sigma_v^2 (1/T^2 + (1/T + 1/T1)^2 +
+        1/T1^2) + accel_noise^2 (1/T + 1/T1)``; the position residual ``p_k - p_k-1 - T (v_k +
         v_k-1)/2`` has ``2 sigma_p^2 + T^2 sigma_v^2 / 2``. Both squared
         residuals are averaged over ~5 s (a running mean at first).
         """
         sv, sp = self.vel_std, self.pos_std
-        if self.adaptive and self._n_noise >= 2:
-            T = self._noise_T
-            ev2 = (self._var_v - 2.0 * self.accel_noise * self.accel_noise * T) / 6.0
-            if ev2 > sv * sv:
-                sv = math.sqrt(ev2)
-            ep = 0.5 * (self._var_p - 0.5 * T * T * sv * sv)
-            if ep > sp * sp:
-                sp = math.sqrt(ep)
+        if self.adaptive and self._n_noise >= 1:
+            if self._var_v > sv * sv:
+                sv = math.sqrt(self._var_v)
+            if self._var_p > sp * sp:
+                sp = math.sqrt(self._var_p)
         return sp, sv
 
     def window(self, vel_std_m_s: float) -> float:
@@ -699,22 +697,28 @@ class VelocityAidedObserver:
             fixes.popleft()
 
     def _noise_step(self, T: float, py: Vec3, vy: Vec3, At: Vec3) -> None:
-        """Update the running mean-squares of the fix residuals (see :meth:`noise_std`)."""
+        """Update the running means of the fix-noise variance samples (see :meth:`noise_std`)."""
         fixes = self._fixes
         if not self.adaptive or len(fixes) < 2 or not T > 0.0:
             return
         tau1, p1, v1, A1 = fixes[-1]
-        tau2, _, v2, A2 = fixes[-2]
-        if abs((tau1 - tau2) - T) > 0.1 * T:   # unequal intervals: no second difference
+        tau0, _, v0, A0 = fixes[-2]
+        T1 = tau1 - tau0
+        if not T1 > 0.0:
             return
-        rv = sum((vy[k] - At[k] - 2.0 * (v1[k] - A1[k]) + (v2[k] - A2[k])) ** 2 for k in range(3)) / 3.0
+        # second divided difference of w = v - A: d = (w2 - w1)/T - (w1 - w0)/T1
+        c = 1.0 / (T * T) + (1.0 / T + 1.0 / T1) ** 2 + 1.0 / (T1 * T1)
+        qa = self.accel_noise * self.accel_noise * (1.0 / T + 1.0 / T1)
+        d2 = sum(((vy[k] - At[k] - v1[k] + A1[k]) / T - (v1[k] - A1[k] - v0[k] + A0[k]) / T1) ** 2
+                 for k in range(3)) / 3.0
+        sv2 = (d2 - qa) / c
         rp = sum((py[k] - p1[k] - 0.5 * T * (vy[k] + v1[k])) ** 2 for k in range(3)) / 3.0
         n = self._n_noise + 1
         self._n_noise = n
         beta = max(1.0 - math.exp(-T / 5.0), 1.0 / n)
-        self._var_v += beta * (rv - self._var_v)
-        self._var_p += beta * (rp - self._var_p)
-        self._noise_T = T
+        self._var_v += beta * (sv2 - self._var_v)
+        sv2_now = max(self._var_v, self.vel_std * self.vel_std)
+        self._var_p += beta * (0.5 * (rp - 0.5 * T * T * sv2_now) - self._var_p)
 
     def _tilt(self, tau: float, dtau: float, i: int, w: float, vy: Vec3, sv: float) -> None:
         # the most recent fix at least one window before tau
