@@ -110,6 +110,62 @@ class ControlConfig:
         J_zz``, 0.25 rad/s^2 for the paper's vehicle), in (0, 1]; the rest is
         the margin that rejects disturbances and noise.
 
+    vectors : "physical" or "paper"
+        What the vehicle's accelerometer fields carry, as the SITL's
+        ``sim.vector_sensors``: "physical" (default) the specific force
+        ``R^T (a + g e3)`` of a real IMU; "paper" the paper's sensor model
+        (Section 3.4), a unit vector of constant inertial direction ``g R^T
+        e3``, so the controller takes ``r1 = e3`` (and ``r2 = m_hat``).
+    velocity_aided : bool
+        The world direction of the specific force from the velocity fixes
+        (``dv/dt + g e3``): without the observer, ``r1 = unit(a_hat + g e3)``
+        with ``a_hat`` the differentiated velocity and, with the paper's
+        vectors, ``b1 = e3`` (the thrust axis of eq. 20's drag-free plant);
+        with the observer, its velocity-aided tilt innovation. False, without
+        the observer: ``r1 = e3`` against the accelerometer (the paper's law
+        on the paper's vectors; biased under acceleration on a physical IMU).
+    observer : bool
+        The attitude observer of ``companion.control.observer`` (default):
+        the law acts on the virtual pairs ``b_i = R_hat^T r_i`` (``r1 = e3``,
+        ``r2`` the horizontal field), the bias-corrected gyro, and the
+        position/velocity of its translational filter (current time, between
+        and despite late fixes). The vector filters (``*_vector_gain_rad_s``)
+        then act inside it only on the accelerometer direction. False: the
+        (filtered) measured vectors, the raw position/velocity (the paper).
+    observer_tilt_gain_max_rad_s : float
+        Cap of the velocity-aided tilt correction rate (1/s); the rate itself
+        follows the fix noise (``observer.tilt_gain``): 100 with exact fixes
+        every 4 ms, ~1 at 1 cm/s, ~0.4 with 10 Hz RTK fixes.
+    observer_gravity_gain_rad_s : float
+        Rate (1/s) of the accelerometer-against-e3 innovation, used with the
+        paper's vectors or without velocity aiding.
+    observer_mag_gain_rad_s : float
+        Rate (1/s) of the heading innovation (magnetometer, horizontal part).
+    observer_bias_gain_1_s : float
+        Gyro-bias integral gain k_b (1/s): ``b_hat_dot = -k_b sigma``;
+        bias error decays at about k_b (tilt) and 0.11/s (heading, k_m = 1).
+    observer_bias_max_rad_s : float
+        Bound of the estimated gyro bias (rad/s).
+    observer_window_s : float
+        Longest velocity window of the tilt innovation (s), reached at 5
+        mm/s of fix noise (one fix interval with exact fixes).
+    observer_history_s : float
+        History kept for late fixes (s): fix latency + window must fit.
+    nav_position_std_m, nav_velocity_std_m_s : float
+        Position/velocity fix noise the observer assumes (floors of its
+        online estimate with ``nav_adaptive_noise``); 0: exact (mocap).
+    nav_accel_noise_m_s2_sqrt_hz : float
+        White acceleration noise of the translational filter's input
+        (accelerometer noise and model error), m/s^2/sqrt(Hz).
+    nav_accel_bias_walk_m_s3_sqrt_hz : float
+        Random walk of its acceleration bias state, m/s^3/sqrt(Hz).
+    nav_adaptive_noise : bool
+        Estimate the fix noise online from the fixes themselves (default):
+        one default serves exact 250 Hz mocap fixes and noisy 10 Hz RTK.
+    gyro_noise_rad_s_sqrt_hz : float
+        Gyro noise density the tilt gain assumes (rad/s/sqrt(Hz)); default
+        the paper's variance 5e-4 at 250 Hz (1.4e-3).
+
     Mission figures (``python benchmarks/track_inprocess.py``: the planned
     trajectories of the bundled missions on the SITL plant in-process, the
     paper's noise, mission seeds): max error after 5 s 0.41 mm
