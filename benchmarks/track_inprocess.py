@@ -75,7 +75,8 @@ class TrackResult:
 def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = None, *,
         seed: int | None = None, noise: bool = True, cut_s: float | None = None,
         settle_s: float = 5.0, plan=None, mission=None, record: bool = False,
-        sensors: SensorSpec | None = None, noise_overrides: dict | None = None) -> TrackResult:
+        sensors: SensorSpec | None = None, noise_overrides: dict | None = None,
+        abort_m: float | None = None) -> TrackResult:
     """Fly the mission's planned trajectory in-process; see the module docstring.
 
     Parameters
@@ -100,6 +101,9 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
     noise_overrides : dict, optional
         Fields of the mission's ``sim.noise`` to replace (e.g.
         ``velocity_std_m_s``, ``gyro_bias_rad_s``).
+    abort_m : float, optional
+        Stop the flight when the error exceeds this (diverged:
+        ``extra["diverged"]``, the figures cover the frames flown).
     """
     import dataclasses
 
@@ -157,9 +161,14 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
     sp = None
     next_sp = -1
     sp_every = int(round(1.0 / (50.0 * dt)))     # runner: setpoints at 50 Hz of vehicle time
+    diverged = False
     for k in range(n):
         tr = frame.truth
         errs[k] = math.dist(tr.pos_enu_m, P[k])
+        if abort_m is not None and not errs[k] < abort_m:
+            diverged, n = True, k + 1
+            errs = errs[:n]
+            break
         t_s = frame.time_us * 1e-6
         if control == "companion":
             if models is not None:
@@ -192,9 +201,10 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
             cmd = sim.onboard.update(tr, sp, dt)
         frame = sim.step_frame(cmd)
     t = np.arange(n) * dt
-    after = errs[t >= settle_s]
+    after = errs[t >= settle_s] if t[-1] >= settle_s else errs
     extra = {k: np.array(v) for k, v in diag.items()} if record else {}
     extra["t_base_us"] = t_base_us
+    extra["diverged"] = diverged
     return TrackResult(t, errs, float(after.max()), float(math.sqrt(np.mean(after ** 2))), extra)
 
 

@@ -365,3 +365,23 @@ def test_closed_loop_with_noisy_velocity_stays_bounded(vel_std, bound_m):
 
 def test_closed_loop_without_observer_diverges_at_1cm_s():
     assert _fly_circle(ControlConfig(observer=False), 0.01, 8.0) > 0.1
+
+
+def test_observe_before_take_off_estimates_the_bias_at_rest_and_update_uses_a_frame_once():
+    # On the ground, at rest, for 30 s before the controller takes over: the bias estimate
+    # converges (slow roots ~0.1/s: e^-3), and the take-over frame fed to both observe() and
+    # update() is integrated once (same state as feeding it once).
+    b = (0.01, 0.01, 0.01)
+    veh, R = VehicleConfig(), _R_enu(75.0)
+    a, c = GeometricController(veh, ControlConfig(), (5.0, 5.0, 0.0)), GeometricController(
+        veh, ControlConfig(), (5.0, 5.0, 0.0))
+    frames = list(_hover_frames(R, 7501, gyro_bias=b))
+    for t, w, acc, m, p, v in frames[:-1]:
+        a.observe(t, w, acc, m, p, v, t)
+        c.observe(t, w, acc, m, p, v, t)
+    assert np.all(np.abs(np.array(a.observer.b) - b) < 0.1 * np.abs(b))
+    t, w, acc, m, p, v = frames[-1]
+    a.observe(t, w, acc, m, p, v, t)
+    a.update_fast(t, w, acc, m, p, v, t, p, v, (0, 0, 0), (0, 0, 0), (0, 0, 0))
+    c.update_fast(t, w, acc, m, p, v, t, p, v, (0, 0, 0), (0, 0, 0), (0, 0, 0))
+    assert a.observer.R == c.observer.R and a.observer.b == c.observer.b

@@ -77,8 +77,27 @@ law above. Separately, the pointing reference is made flyable
 (``companion.control.pointing``: eq. 21 exactly where the vehicle can
 follow it, yaw-rate/acceleration limited elsewhere).
 
-The two vectors and how their world directions are known
----------------------------------------------------------
+Where the vector pairs come from (``ControlConfig.vectors``, ``velocity_aided``, ``observer``)
+--------------------------------------------------------------------------------------------
+By default (``observer``) from the attitude observer of
+``companion.control.observer``: a velocity-aided complementary filter on
+SO(3) with gyro-bias estimation and a translational filter. The law then
+acts on the virtual pairs ``b_1 = R_hat^T e3``, ``b_2 = R_hat^T h`` (``h``
+the horizontal Earth field) against ``r_1 = e3``, ``r_2 = h``, on the
+bias-corrected gyro, and on the filtered position and velocity at the
+frame's time (e_x, e_v, and a_hat for F_dot: the filter's velocity
+differentiated as below). The observer's inputs are the same raw
+measurements; it never sees the true attitude. Without the observer the
+pairs are the measured vectors (``vectors.controller_vectors``):
+
+- ``vectors = "paper"`` (the paper's sensor model, ``sim.vector_sensors:
+  paper``): the accelerometer fields carry ``g R^T e3``, so ``r_1 = e3``;
+  with ``velocity_aided`` the tilt comes instead from the velocity (``b_1 =
+  e3``, the thrust axis of eq. 20's plant, against ``unit(a_hat + g e3)``);
+- ``vectors = "physical"`` (a real IMU): as described next.
+
+The two measured vectors and how their world directions are known
+-----------------------------------------------------------------
 (details in ``companion.control.vectors``) b_1: the accelerometer's specific
 force, against ``r_1 = unit(a_hat + g e3)`` with ``a_hat`` the vehicle's
 acceleration from the measured velocity differentiated on the vehicle clock
@@ -89,6 +108,10 @@ Optional filters: a slow body-frame low-pass on b_1 (constant for a
 drag-free multirotor) and a gyro-propagated complementary filter on b_2.
 With the filters off and the raw field, this is the paper's law on raw
 vectors.
+
+With noisy velocity fixes (1 cm/s and more) the differentiated velocity
+leaves its noise in ``r_1`` and in ``Omega_d``: the previous default
+diverged at 1 cm/s; the observer keeps millimetres (``tests/test_observer.py``).
 
 Everything here is pure: the controller object holds only filter state and
 takes the vehicle's time as an argument. The pure functions below are the
@@ -644,6 +667,19 @@ class GeometricController:
                 gyro_noise=cfg.gyro_noise_rad_s_sqrt_hz, mass_kg=self._m,
                 motor_time_constant_s=vehicle.motor_time_constant_s,
                 accel_direction_gain_rad_s=cfg.accel_vector_gain_rad_s, adaptive=cfg.nav_adaptive_noise)
+
+    def observe(self, t_s: float, gyro, accel, mag, pos, vel, nav_t) -> None:
+        """Feed the observer one frame without computing a command (arguments as :meth:`update_fast`).
+
+        For the frames before the controller takes over (on the ground
+        before arming, or while the vehicle's own controller flies): the
+        gyro bias and the fix noise are then estimated at rest, and the
+        first :meth:`update_fast` starts from a converged estimate. A frame
+        fed here and again to :meth:`update_fast` (same ``t_s``) is used
+        once. No-op without the observer.
+        """
+        if self.observer is not None:
+            self.observer.update(t_s, gyro, accel, mag, pos, vel, nav_t, self._thrust_prev)
 
     def attitude_estimate(self) -> AttitudeEstimate | None:
         """The attitude the controller acts on, with the position and velocity it used (last frame).
