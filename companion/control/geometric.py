@@ -853,7 +853,7 @@ class GeometricController:
             m2x, m2y, m2z = (R[0] * hx + R[3] * hy + R[6] * hz, R[1] * hx + R[4] * hy + R[7] * hz,
                              R[2] * hx + R[5] * hy + R[8] * hz)
             r2x, r2y, r2z = hx, hy, hz
-        elif self._today:
+        else:
             x, y, z = accel
             n = sqrt(x * x + y * y + z * z)
             if not n > 0.0:
@@ -865,53 +865,43 @@ class GeometricController:
                 raise ValueError("cannot normalise a zero (or non-finite) vector")
             fm = self._f_mag.step(t_s, x / n, y / n, z / n, wx, wy, wz)
             # both filters have stepped before anything below may raise (as in update_reference)
-            x, y, z = fa
-            n = sqrt(x * x + y * y + z * z)
-            if not n > 0.0:
-                raise ValueError("cannot normalise a zero (or non-finite) vector")
-            m1x, m1y, m1z = x / n, y / n, z / n                       # b_1 (body)
-            z = ahz + g
-            n = sqrt(ahx * ahx + ahy * ahy + z * z)
-            if not n > 0.0:
-                raise ValueError("cannot normalise a zero (or non-finite) vector")
-            r1x, r1y, r1z = ahx / n, ahy / n, z / n                   # r_1 (world)
-            x, y, z = fm
-            n = sqrt(x * x + y * y + z * z)
-            if not n > 0.0:
-                raise ValueError("cannot normalise a zero (or non-finite) vector")
-            m2x, m2y, m2z = x / n, y / n, z / n                       # b_2 (body)
-            r2x, r2y, r2z = self._r2u                                  # r_2 (world)
-            if self._perp:
-                c = m2x * m1x + m2y * m1y + m2z * m1z
-                x, y, z = m2x - c * m1x, m2y - c * m1y, m2z - c * m1z
+            if not self._today:
+                # the other sensor models / tilt sources (controller_vectors)
+                pr = controller_vectors(fa, fm, (ahx, ahy, ahz), self._r2, g, self._perp, self._vectors, self._aided)
+                m1x, m1y, m1z = pr.b1
+                r1x, r1y, r1z = pr.r1
+                m2x, m2y, m2z = pr.b2
+                r2x, r2y, r2z = pr.r2
+            else:
+                x, y, z = fa
                 n = sqrt(x * x + y * y + z * z)
                 if not n > 0.0:
                     raise ValueError("cannot normalise a zero (or non-finite) vector")
-                m2x, m2y, m2z = x / n, y / n, z / n
-                c = r2x * r1x + r2y * r1y + r2z * r1z
-                x, y, z = r2x - c * r1x, r2y - c * r1y, r2z - c * r1z
+                m1x, m1y, m1z = x / n, y / n, z / n                       # b_1 (body)
+                z = ahz + g
+                n = sqrt(ahx * ahx + ahy * ahy + z * z)
+                if not n > 0.0:
+                    raise ValueError("cannot normalise a zero (or non-finite) vector")
+                r1x, r1y, r1z = ahx / n, ahy / n, z / n                   # r_1 (world)
+                x, y, z = fm
                 n = sqrt(x * x + y * y + z * z)
                 if not n > 0.0:
                     raise ValueError("cannot normalise a zero (or non-finite) vector")
-                r2x, r2y, r2z = x / n, y / n, z / n
-
-        else:
-            # the other sensor models / tilt sources (controller_vectors)
-            x, y, z = accel
-            n = sqrt(x * x + y * y + z * z)
-            if not n > 0.0:
-                raise ValueError("cannot normalise a zero (or non-finite) vector")
-            fa = self._f_acc.step(t_s, x / n, y / n, z / n, wx, wy, wz)
-            x, y, z = mag
-            n = sqrt(x * x + y * y + z * z)
-            if not n > 0.0:
-                raise ValueError("cannot normalise a zero (or non-finite) vector")
-            fm = self._f_mag.step(t_s, x / n, y / n, z / n, wx, wy, wz)
-            pr = controller_vectors(fa, fm, (ahx, ahy, ahz), self._r2, g, self._perp, self._vectors, self._aided)
-            m1x, m1y, m1z = pr.b1
-            r1x, r1y, r1z = pr.r1
-            m2x, m2y, m2z = pr.b2
-            r2x, r2y, r2z = pr.r2
+                m2x, m2y, m2z = x / n, y / n, z / n                       # b_2 (body)
+                r2x, r2y, r2z = self._r2u                                  # r_2 (world)
+                if self._perp:
+                    c = m2x * m1x + m2y * m1y + m2z * m1z
+                    x, y, z = m2x - c * m1x, m2y - c * m1y, m2z - c * m1z
+                    n = sqrt(x * x + y * y + z * z)
+                    if not n > 0.0:
+                        raise ValueError("cannot normalise a zero (or non-finite) vector")
+                    m2x, m2y, m2z = x / n, y / n, z / n
+                    c = r2x * r1x + r2y * r1y + r2z * r1z
+                    x, y, z = r2x - c * r1x, r2y - c * r1y, r2z - c * r1z
+                    n = sqrt(x * x + y * y + z * z)
+                    if not n > 0.0:
+                        raise ValueError("cannot normalise a zero (or non-finite) vector")
+                    r2x, r2y, r2z = x / n, y / n, z / n
         self._pairs = ((m1x, m1y, m1z), (m2x, m2y, m2z), (r1x, r1y, r1z), (r2x, r2y, r2z))
         self._pv = (tuple(pos), (vx, vy, vz))
         self._t_last = t_s
