@@ -360,11 +360,11 @@ def test_closed_loop_with_noisy_velocity_stays_bounded(vel_std, bound_m):
     # observer estimates the noise and averages the tilt over a window: millimetres. The
     # previous design (tilt from the differentiated velocity, no observer) leaves the
     # velocity noise in r_1 and in Omega_d: at 1 cm/s it loses the vehicle (next test).
-    assert _fly_circle(ControlConfig(), vel_std, 8.0) < bound_m
+    assert _fly_circle(ControlConfig(), vel_std, 6.0) < bound_m
 
 
 def test_closed_loop_without_observer_diverges_at_1cm_s():
-    assert _fly_circle(ControlConfig(observer=False), 0.01, 8.0) > 0.1
+    assert _fly_circle(ControlConfig(observer=False), 0.01, 6.0) > 0.1
 
 
 def test_observe_before_take_off_estimates_the_bias_at_rest_and_update_uses_a_frame_once():
