@@ -59,6 +59,12 @@ Corrections (Mahony's passive filter: ``R_hat_dot = R_hat S(Omega_y - b_hat
    Gain: ``k_t`` (rad/s) from :func:`tilt_gain`, a scalar steady-state
    Kalman gain for a tilt that random-walks with the gyro noise and is
    measured with the window's velocity noise, capped at ``tilt_gain_max``.
+   The fix noise is the assumed one or, by default, estimated online from
+   the fixes (:meth:`VelocityAidedObserver.noise_std`), and the window
+   grows with it (:meth:`VelocityAidedObserver.window`: one fix interval
+   for exact fixes, ``window_s`` from 5 mm/s): the same defaults serve
+   exact 250 Hz mocap fixes (k_t = 100/s) and 10 Hz RTK (k_t ~ 0.4/s). The
+   aiding starts after 10 fixes (the noise estimate has samples).
 2. Gravity (``gravity_gain``; used when velocity aiding is off, or with the
    paper's vectors): the accelerometer direction against ``e3``,
    ``sigma += k_g a_m x R_hat^T e3`` (|a_m| = 1). Right for the paper's
@@ -72,7 +78,10 @@ Corrections (Mahony's passive filter: ``R_hat_dot = R_hat S(Omega_y - b_hat
 
 Bias: ``b_hat <- b_hat - k_b dtheta_b`` for every body-frame correction
 angle ``dtheta_b`` (``= sigma dt``, or ``R_hat^T`` the world correction), so
-``b_hat_dot = -k_b sigma``; ``|b_hat|`` is projected onto ``bias_max``.
+``b_hat_dot = -k_b sigma``; ``|b_hat|`` is projected onto ``bias_max``, and
+only innovations below 0.1 rad are integrated (a 0.01 rad/s bias leaves
+``b/k`` = 25 mrad at the slowest tilt rate, 0.4/s; the large errors of a
+start-up or a wrong initialisation would wind the integral up).
 
 Why it is stable
 ----------------
