@@ -109,6 +109,7 @@ def main(argv=None) -> int:
             print("|---" * (len(cols) + 1) + "|")
             for name in args.controllers:
                 control, cfg = CONTROLLERS[name]
+                label = name + (", true state" if control == "vehicle" and args.mode == "inprocess" else "")
                 cells = []
                 for v in VEL_STD:
                     for b in GYRO_BIAS:
@@ -120,7 +121,7 @@ def main(argv=None) -> int:
                                             Path(tmp), sim_extra={"noise": noise})
                         cells.append(_cell(r))
                         print(f"# {mission} {name} v={v} b={b}: {cells[-1]}", file=sys.stderr, flush=True)
-                print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+                print(f"| {label} | " + " | ".join(cells) + " |", flush=True)
     return 0
 
 

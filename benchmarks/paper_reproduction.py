@@ -194,6 +194,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cut", type=float, default=None, help="fly only the first S seconds of each trajectory")
     ap.add_argument("--seed", type=int, default=None, help="noise seed (default: each mission's sim.seed)")
     ap.add_argument("--tables", nargs="*", default=["paper", "physical"], choices=("paper", "physical"))
+    ap.add_argument("--rows", nargs="*", default=None, metavar="TEXT",
+                    help="fly only the rows whose name contains one of these")
     args = ap.parse_args(argv)
     inproc = args.mode == "inprocess"
     cache: dict = {}
@@ -211,6 +213,8 @@ def main(argv=None) -> int:
                       "| RMS (mm) | paper max (mm) |")
                 print("|---|---|---|---|---|---|---|---|")
                 for row in rows:
+                    if args.rows and not any(x in row.name for x in args.rows):
+                        continue
                     r = (fly_inprocess(mission, row, args.cut, args.seed, cache) if inproc
                          else fly_mavlink(mission, row, args.cut, args.seed, Path(tmp)))
                     note = f" ({r['error']})" if r.get("error") else ""
