@@ -175,8 +175,10 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
                 meas = Measurements(*models.measure(frame))
             else:
                 pos, vel = _f32(frame.pos_enu_m), _f32(frame.vel_enu_m_s)
+                # LOCAL_POSITION_NED's time_boot_ms: the fix's measurement time (where the SITL has one)
+                t_fix_us = getattr(frame, "pos_time_us", frame.time_us)
                 meas = Measurements(_f32(frame.gyro_flu_rad_s), _f32(frame.accel_flu_m_s2),
-                                    _f32(frame.mag_flu_gauss), pos, vel, (frame.time_us // 1000) * 1e-3)
+                                    _f32(frame.mag_flu_gauss), pos, vel, (t_fix_us // 1000) * 1e-3)
             ref = Reference(tuple(P[k]), tuple(V[k]), tuple(A[k]), tuple(Jk[k]), tuple(S[k]))
             out = ctrl.update(t_s, meas, ref)
             cmd = out.motor_cmd
