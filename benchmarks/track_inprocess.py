@@ -153,6 +153,9 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
     hover = veh.mass_kg * g / 4.0
     sim.plant.set_state(P[0], V[0], R=R0, f=(hover,) * 4, landed=False)
     sim.onboard.reset()
+    gnss = getattr(sim.sensors, "gnss", None)     # a SITL with a GNSS receiver: its first fix is here
+    if gnss is not None:
+        gnss.reset(tuple(P[0]), tuple(V[0]))
     frame = sim.step_frame((hover / veh.max_thrust_per_rotor_n,) * 4)
     t_base_us = frame.time_us
 
