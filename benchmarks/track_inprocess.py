@@ -160,7 +160,8 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
     t_base_us = frame.time_us
 
     errs = np.empty(n)
-    diag = {"yaw_err": [], "tilt_err": [], "sat": [], "yaw": [], "att_err": [], "pos_est_err": []} if record else None
+    diag = ({"yaw_err": [], "tilt_err": [], "sat": [], "yaw": [], "att_err": [], "pos_est_err": [], "e_x": []}
+            if record else None)
     sp = None
     next_sp = -1
     sp_every = int(round(1.0 / (50.0 * dt)))     # runner: setpoints at 50 Hz of vehicle time
@@ -198,6 +199,7 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
                 E = R.T @ np.array(est.R_enu_flu).reshape(3, 3)
                 diag["att_err"].append(0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]]))
                 diag["pos_est_err"].append(np.array(est.pos_enu_m) - tr.pos_enu_m)
+                diag["e_x"].append(np.array(out.e_x))
         else:
             if k >= next_sp:
                 next_sp = k + sp_every

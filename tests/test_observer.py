@@ -385,3 +385,24 @@ def test_observe_before_take_off_estimates_the_bias_at_rest_and_update_uses_a_fr
     a.update_fast(t, w, acc, m, p, v, t, p, v, (0, 0, 0), (0, 0, 0), (0, 0, 0))
     c.update_fast(t, w, acc, m, p, v, t, p, v, (0, 0, 0), (0, 0, 0), (0, 0, 0))
     assert a.observer.R == c.observer.R and a.observer.b == c.observer.b
+
+
+def test_fix_noise_is_estimated_online_per_horizontal_and_vertical_axis():
+    # 10 Hz fixes of a hovering vehicle with white noise 1 cm horizontal, 2 cm vertical, 2 cm/s,
+    # exact IMU: the second divided differences of v - int(a_in) and the position residuals give
+    # the noise std back. Running mean over 5 s of 10 Hz fixes, 2 horizontal axes: the variance
+    # estimate has a relative std of about sqrt(2/100) = 14 %, the std half that: 20 % bounds.
+    rng = np.random.default_rng(11)
+    obs = _observer()
+    R = _R_enu(10.0)
+    fix = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    for n, (t, w, a, m, p, v) in enumerate(_hover_frames(R, 7500)):
+        if n % 25 == 0:
+            fix = (t, tuple(np.array(p) + rng.normal(0.0, 1.0, 3) * [0.01, 0.01, 0.02]),
+                   tuple(np.array(v) + rng.normal(0.0, 0.02, 3)))
+        obs.update(t, w, a, m, fix[1], fix[2], fix[0])
+    sp_h, sv_h = obs.noise_std(0)
+    sp_z, sv_z = obs.noise_std(1)
+    assert sp_h == pytest.approx(0.01, rel=0.2) and sv_h == pytest.approx(0.02, rel=0.2)
+    assert sp_z == pytest.approx(0.02, rel=0.2) and sv_z == pytest.approx(0.02, rel=0.2)
+    assert obs.window(sv_h) == pytest.approx(0.3)          # noisy fixes: the longest window

@@ -622,6 +622,7 @@ class GeometricController:
         self._r2 = unit3(cfg.mag_field_enu_gauss)
         self._rho = (float(cfg.rho1), float(cfg.rho2))
         self.accel = AccelerationEstimator(cfg.accel_filter_tau_s)
+        self._tau_a = float(cfg.accel_filter_tau_s)
         # the paper's accelerometer vector is R^T e3, a world-fixed direction: propagate it with the gyro
         self._f_acc = BodyVectorFilter(cfg.accel_vector_gain_rad_s, propagate=cfg.vectors == "paper")
         self._f_mag = BodyVectorFilter(cfg.mag_vector_gain_rad_s, propagate=True)
@@ -814,6 +815,10 @@ class GeometricController:
             bx_, by_, bz_ = obs.b
             gyro = (gyro[0] - bx_, gyro[1] - by_, gyro[2] - bz_)
             pos, vel, nav_t = obs.p, obs.v, t_s
+            # a_hat from the filter's velocity, low-passed over one fix interval: a 10 Hz fix's
+            # correction step in v_hat must not reach F_dot as a one-frame spike
+            fi = obs.fix_interval_s
+            self.accel.tau_s = fi if fi > self._tau_a else self._tau_a
         wx, wy, wz = gyro
 
         # --- AccelerationEstimator.update (state kept in self.accel) -----------------
@@ -1156,6 +1161,8 @@ class GeometricController:
                        self._thrust_prev)
             Omega = (Omega[0] - obs.b[0], Omega[1] - obs.b[1], Omega[2] - obs.b[2])
             p, v, t_nav = obs.p, obs.v, t_s
+            fi = obs.fix_interval_s
+            self.accel.tau_s = fi if fi > self._tau_a else self._tau_a
         a_hat = self.accel.update(t_nav, v, ref.jerk_enu_m_s3)
         if obs is not None:
             pairs = virtual_pairs(obs.R, self._h)

@@ -461,10 +461,11 @@ class VelocityAidedObserver:
         self._hist: deque = deque()
         self._fixes: deque = deque()         # (tau, p, v, A(tau)) of past fixes
         self._tau: float | None = None
+        self.fix_interval_s = 0.0            # time between the last two fixes (s)
         self._f_model: float | None = None
         self._ub_filter = BodyVectorFilter(self.accel_direction_gain, propagate=False)
-        self._var_v = 0.0                    # running mean of the velocity residual^2 (per axis)
-        self._var_p = 0.0
+        self._var_v = [0.0, 0.0]             # running means of the fix-noise variances: horizontal, vertical
+        self._var_p = [0.0, 0.0]
         self._n_noise = 0
         self._n = 0
         self.n_late_fixes = 0
@@ -483,9 +484,10 @@ class VelocityAidedObserver:
             raise ValueError("the observer has no measurement yet")
         return AttitudeEstimate(self.t, self.R, self.b, self.p, self.v)
 
-    def noise_std(self) -> tuple[float, float]:
-        """(position m, velocity m/s) fix noise used by the gains: the assumed values or,
-        with ``adaptive``, the online estimates when larger.
+    def noise_std(self, axis: int = 0) -> tuple[float, float]:
+        """(position m, velocity m/s) fix noise used by the gains, horizontal (``axis`` 0,
+        per axis) or vertical (1): the assumed values or, with ``adaptive``, the online
+        estimates when larger (GNSS is noisier vertically).
 
         Online estimate, per axis, from fixes ``k-2, k-1, k`` (intervals
         ``T1``, ``T``): the second divided difference of ``w = v - A``, ``A =
@@ -498,10 +500,10 @@ class VelocityAidedObserver:
         """
         sv, sp = self.vel_std, self.pos_std
         if self.adaptive and self._n_noise >= 1:
-            if self._var_v > sv * sv:
-                sv = math.sqrt(self._var_v)
-            if self._var_p > sp * sp:
-                sp = math.sqrt(self._var_p)
+            if self._var_v[axis] > sv * sv:
+                sv = math.sqrt(self._var_v[axis])
+            if self._var_p[axis] > sp * sp:
+                sp = math.sqrt(self._var_p[axis])
         return sp, sv
 
     def window(self, vel_std_m_s: float) -> float:
@@ -668,6 +670,7 @@ class VelocityAidedObserver:
     def _fix(self, tau: float, pos, vel) -> None:
         dtau = tau - self._tau
         self._tau = tau
+        self.fix_interval_s = dtau
         py = (float(pos[0]), float(pos[1]), float(pos[2]))
         vy = (float(vel[0]), float(vel[1]), float(vel[2]))
         at = self._at(tau)
@@ -677,16 +680,18 @@ class VelocityAidedObserver:
         i, w = at
         At = self._interp(i, w, 4)
         self._noise_step(dtau, py, vy, At)
-        sp, sv = self.noise_std()
+        sp, sv = self.noise_std(0)
         # --- translational filter: innovation at tau, carried to every later frame -----
-        K = self._nav_gains(dtau, sp, sv)
+        Kh, Kz = self._nav_gains(dtau, sp, sv), self._nav_gains(dtau, *self.noise_std(1))
         pt, vt = self._interp(i, w, 2), self._interp(i, w, 3)
         ep = (py[0] - pt[0], py[1] - pt[1], py[2] - pt[2])
         ev = (vy[0] - vt[0], vy[1] - vt[1], vy[2] - vt[2])
-        (k00, k01), (k10, k11), (k20, k21) = K
-        dp = tuple(k00 * ep[j] + k01 * ev[j] for j in range(3))
-        dv = tuple(k10 * ep[j] + k11 * ev[j] for j in range(3))
-        dc = tuple(k20 * ep[j] + k21 * ev[j] for j in range(3))
+        dp, dv, dc = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        for j, K in ((0, Kh), (1, Kh), (2, Kz)):
+            (k00, k01), (k10, k11), (k20, k21) = K
+            dp[j] = k00 * ep[j] + k01 * ev[j]
+            dv[j] = k10 * ep[j] + k11 * ev[j]
+            dc[j] = k20 * ep[j] + k21 * ev[j]
         hist = self._hist
         for j in range(i + (1 if w > 0.0 else 0), len(hist)):
             tj, Sj, pj, vj, Aj = hist[j]
@@ -718,16 +723,15 @@ class VelocityAidedObserver:
         # second divided difference of w = v - A: d = (w2 - w1)/T - (w1 - w0)/T1
         c = 1.0 / (T * T) + (1.0 / T + 1.0 / T1) ** 2 + 1.0 / (T1 * T1)
         qa = self.accel_noise * self.accel_noise * (1.0 / T + 1.0 / T1)
-        d2 = sum(((vy[k] - At[k] - v1[k] + A1[k]) / T - (v1[k] - A1[k] - v0[k] + A0[k]) / T1) ** 2
-                 for k in range(3)) / 3.0
-        sv2 = (d2 - qa) / c
-        rp = sum((py[k] - p1[k] - 0.5 * T * (vy[k] + v1[k])) ** 2 for k in range(3)) / 3.0
+        d2 = [((vy[k] - At[k] - v1[k] + A1[k]) / T - (v1[k] - A1[k] - v0[k] + A0[k]) / T1) ** 2 for k in range(3)]
+        rp = [(py[k] - p1[k] - 0.5 * T * (vy[k] + v1[k])) ** 2 for k in range(3)]
         n = self._n_noise + 1
         self._n_noise = n
         beta = max(1.0 - math.exp(-T / 5.0), 1.0 / n)
-        self._var_v += beta * (sv2 - self._var_v)
-        sv2_now = max(self._var_v, self.vel_std * self.vel_std)
-        self._var_p += beta * (0.5 * (rp - 0.5 * T * T * sv2_now) - self._var_p)
+        for a, d2a, rpa in ((0, 0.5 * (d2[0] + d2[1]), 0.5 * (rp[0] + rp[1])), (1, d2[2], rp[2])):
+            self._var_v[a] += beta * ((d2a - qa) / c - self._var_v[a])
+            sv2_now = max(self._var_v[a], self.vel_std * self.vel_std)
+            self._var_p[a] += beta * (0.5 * (rpa - 0.5 * T * T * sv2_now) - self._var_p[a])
 
     def _tilt(self, tau: float, dtau: float, i: int, w: float, vy: Vec3, sv: float) -> None:
         # the most recent fix at least one window before tau
