@@ -166,22 +166,27 @@ class ControlConfig:
         Gyro noise density the tilt gain assumes (rad/s/sqrt(Hz)); default
         the paper's variance 5e-4 at 250 Hz (1.4e-3).
 
-    Mission figures (``python benchmarks/track_inprocess.py``: the planned
-    trajectories of the bundled missions on the SITL plant in-process, the
-    paper's noise, mission seeds): max error after 5 s 0.41 mm
-    (flat-rectangle) and 0.52 mm (tilted-hexagon); 0.84 / 0.87 mm with ki =
-    0 and accel_vector_gain_rad_s = 0.2 (the previous defaults). Over MAVLink
-    (``python benchmarks/paper_reproduction.py``) 0.35 / 0.29 mm. With wind
-    (flat-rectangle with ``sim.wind: {mean_enu_m_s: [2, 1, 0], gust_std_m_s:
-    0.5, gust_time_constant_s: 2, drag_n_s_m: 0.3}``, ``companion demo``)
-    5.0 mm max / 2.0 mm RMS against 15.9 / 11.2 mm without the integral and
-    13.2 / 8.5 mm for the SITL's cascaded controller.
+    Mission figures (in-process, ``python benchmarks/paper_reproduction.py``
+    and ``python benchmarks/noise_sweep.py``: the planned trajectories on the
+    SITL's plant, mission seeds, max / RMS error after 5 s): the default on
+    the SITL's default sensors (physical IMU, the paper's noise, exact
+    position) 0.42 / 0.13 mm on flat-rectangle (0.41 / 0.12 without the
+    observer); on the paper's sensors (``vectors: paper``) 0.33 / 0.32 mm
+    max on flat-rectangle / tilted-hexagon, where the paper's law gets 21.0
+    / 19.5 mm (4.95 / 4.39 with the pointing governor). White velocity
+    noise 1 cm/s and 5 cm/s (every frame): 1.43 and 2.32 mm max (the
+    previous default, no observer: 1.8 m, diverged). Windy flat-rectangle
+    ~4 mm. Over MAVLink ``companion demo`` on the default mission 0.38 / 0.13
+    mm.
 
-    Figures (``python benchmarks/bench_control.py``, in-process plant, 250 Hz
-    sample and hold, the paper's noise, 25 s on 1 m/s paths): max position
-    error after 5 s about 0.5 mm with these defaults (0.85 mm with ki = 0),
-    3.4 mm with the vector filters off, 3.5-3.7 mm with Lee et al.'s kx, kv
-    = 16, 5.6 (and ki = 0: 60 is beyond their Routh bound, 20.6).
+    The previous figures (no observer, tilt from the differentiated exact
+    velocity; ``python benchmarks/bench_control.py``, in-process plant,
+    250 Hz sample and hold, the paper's noise, 25 s on 1 m/s paths): max
+    position error after 5 s about 0.5 mm (0.85 mm with ki = 0), 3.4 mm
+    with the vector filters off, 3.5-3.7 mm with Lee et al.'s kx, kv = 16,
+    5.6 (and ki = 0: 60 is beyond their Routh bound, 20.6). With wind
+    (``flat-rectangle-windy``, ``companion demo``) 5.0 mm max / 2.0 mm RMS
+    against 15.9 / 11.2 mm without the integral.
     """
 
     kx: float = 60.0
