@@ -176,8 +176,9 @@ class ControlConfig:
     / 19.5 mm (4.95 / 4.39 with the pointing governor). White velocity
     noise 1 cm/s and 5 cm/s (every frame): 1.43 and 2.32 mm max (the
     previous default, no observer: 1.8 m, diverged). Windy flat-rectangle
-    ~4 mm. Over MAVLink ``companion demo`` on the default mission 0.38 / 0.13
-    mm.
+    4.9 / 2.0 mm. Over MAVLink ``companion demo`` on the default mission 0.38
+    / 0.13 mm; on the paper's sensors 0.33 mm (the paper's law 19.4 mm,
+    3.9 mm with the governor).
 
     The previous figures (no observer, tilt from the differentiated exact
     velocity; ``python benchmarks/bench_control.py``, in-process plant,
