@@ -494,9 +494,10 @@ class VelocityAidedObserver:
         int a_in`` the IMU's predicted velocity (so the vehicle's jerk and a
         constant attitude error cancel), ``d = (w_k - w_k-1)/T - (w_k-1 -
         w_k-2)/T1``, has variance ``sigma_v^2 (1/T^2 + (1/T + 1/T1)^2 +
-        1/T1^2) + accel_noise^2 (1/T + 1/T1)``; the position residual ``p_k - p_k-1 - T (v_k +
-        v_k-1)/2`` has ``2 sigma_p^2 + T^2 sigma_v^2 / 2``. Both squared
-        residuals are averaged over ~5 s (a running mean at first).
+        1/T1^2) + accel_noise^2 (1/T + 1/T1)``; the position residual ``p_k -
+        p_k-1 - T (v_k + v_k-1)/2`` has ``2 sigma_p^2 + T^2 sigma_v^2 / 2``.
+        The variance samples are averaged over ~5 s (a running mean at first),
+        over x and y for the horizontal figure, z for the vertical one.
         """
         sv, sp = self.vel_std, self.pos_std
         if self.adaptive and self._n_noise >= 1:
@@ -648,7 +649,7 @@ class VelocityAidedObserver:
             hist.popleft()
 
     def _at(self, tau: float):
-        """(index i, weight w) with tau between hist[i] and hist[i+1] (w = 0 at hist[i]); None: older than the history."""
+        """(i, w): tau between hist[i] and hist[i+1] at weight w (0: at hist[i]); None: older than the history."""
         hist = self._hist
         i = len(hist) - 1
         if tau >= hist[i][0]:
