@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from .errors import LinkError
 from .flight.config import RunnerConfig  # noqa: F401  (re-export)
 from .flight.core import (LAUNCH_TOLERANCE_M, PHASES, UNUSED_STREAMS, ActuatorOut,  # noqa: F401
-                          FlightCore, FlightInputs, heading_from_imu)
+                          FlightCore, FlightInputs)
 from .flight.health import LinkHealth
 from .flight.log import FlightLog  # noqa: F401  (re-export)
 from .flight.reference import (RefSample, climb_duration_s, pointing_at,  # noqa: F401  (re-export)

@@ -117,6 +117,32 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "control.pointing_yaw_rate_max_rad_s": ("rad/s", "> 0", "Yaw-rate limit of the pointing reference."),
     "control.pointing_yaw_accel_fraction": ("", "(0, 1]", "Yaw-acceleration limit as a fraction of the "
                                             "vehicle's yaw acceleration at hover."),
+    "control.vectors": ("", "physical | paper", "`physical`: the accelerometer reads the specific force (r1 from the "
+                        "velocity); `paper`: it reads g R^T e3, a constant inertial direction (r1 = e3), to match "
+                        "`sim.vector_sensors: paper`."),
+    "control.velocity_aided": ("", "", "Take the tilt from the specific force against the acceleration measured "
+                               "by the velocity fixes (Hua et al.); false: the accelerometer as gravity."),
+    "control.observer": ("", "", "Feed the law virtual vector pairs R_hat^T r_i from the velocity-aided attitude "
+                         "observer on SO(3) (companion/control/observer.py) instead of the raw vectors."),
+    "control.observer_tilt_gain_max_rad_s": ("1/s", "> 0", "Largest tilt-correction gain of the observer."),
+    "control.observer_gravity_gain_rad_s": ("1/s", ">= 0", "Tilt gain toward the accelerometer as gravity "
+                                            "(used without velocity_aided)."),
+    "control.observer_mag_gain_rad_s": ("1/s", ">= 0", "Heading-correction gain from the magnetometer."),
+    "control.observer_bias_gain_1_s": ("1/s", ">= 0", "Gyro-bias estimation gain."),
+    "control.observer_bias_max_rad_s": ("rad/s", ">= 0", "Bound of the estimated gyro bias."),
+    "control.observer_window_s": ("s", ">= 0, < observer_history_s", "Longest velocity-difference window of the "
+                                  "tilt innovation (adapted to the fixes' noise)."),
+    "control.observer_history_s": ("s", "> observer_window_s", "Attitude history kept to compare late fixes at their "
+                                   "measurement time."),
+    "control.nav_position_std_m": ("m", ">= 0", "Position-fix noise assumed by the translational filter "
+                                   "(0: estimated online when nav_adaptive_noise)."),
+    "control.nav_velocity_std_m_s": ("m/s", ">= 0", "Velocity-fix noise assumed by the translational filter."),
+    "control.nav_accel_noise_m_s2_sqrt_hz": ("m/s^2/sqrt(Hz)", "> 0", "Accelerometer noise density of the "
+                                             "translational filter's model."),
+    "control.nav_accel_bias_walk_m_s3_sqrt_hz": ("m/s^3/sqrt(Hz)", ">= 0", "Accelerometer bias random walk of "
+                                                 "the translational filter's model."),
+    "control.nav_adaptive_noise": ("", "", "Estimate the fixes' noise online and adapt the gains and window."),
+    "control.gyro_noise_rad_s_sqrt_hz": ("rad/s/sqrt(Hz)", "> 0", "Gyro noise density assumed by the observer."),
     "vehicle.mass_kg": ("kg", "> 0", "Mass m (four rotors must lift it: see max_thrust_per_rotor_n)."),
     "vehicle.inertia_kg_m2": ("kg m^2", "each > 0, triangle inequality", "Principal inertia J_xx, J_yy, "
                               "J_zz, body FLU."),

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from companion.commands.demo import missions_dir
-from companion.flight.core import heading_from_imu
+from companion.control.observer import heading_from_accel_mag
 from companion.flight.coverage import PathCoverage
 from companion.flight.health import LinkHealth
 from companion.flight.log import ErrorStats, FlightLog
@@ -89,14 +89,14 @@ def _R(yaw, pitch, roll):
 
 @pytest.mark.parametrize("yaw_deg", [0, 30, 90, 179, -120])
 @pytest.mark.parametrize("tilt", [(0, 0), (0.2, -0.1), (-0.35, 0.3)])
-def test_heading_from_imu_is_the_heading_of_body_x(yaw_deg, tilt):
+def test_takeoff_heading_from_accel_and_mag_is_the_heading_of_body_x(yaw_deg, tilt):
     m_w = np.array([0.05, 0.21, -0.42])      # a field with some declination (east component)
     R = _R(math.radians(yaw_deg), *tilt)
     acc = R.T @ np.array([0, 0, 9.81])       # at rest: the specific force is up
     mag = R.T @ m_w
     x_w = R @ np.array([1.0, 0, 0])
     expected = math.atan2(x_w[1], x_w[0])
-    got = heading_from_imu(tuple(acc), tuple(mag), tuple(m_w))
+    got = heading_from_accel_mag(tuple(acc), tuple(mag), tuple(m_w))
     assert math.isclose(math.remainder(got - expected, 2 * math.pi), 0.0, abs_tol=1e-9)
 
 

@@ -233,3 +233,15 @@ def test_read_tlog_recovers_around_damage(good, split, tmp_path):
     assert len(list(read_tlog(path))) == len(split) - 1
     with pytest.raises(ValueError, match="bad_crc"):
         list(read_tlog(path, skip_bad=False))
+
+
+def test_a_stamp_no_log_can_carry_marks_garbage_before_a_valid_packet(good, split):
+    """Garbage that ends exactly at a packet start frames a record with a valid CRC: its
+    stamp (the garbage's last 8 bytes) is what tells it. Stamps past 2200 are refused."""
+    k = 300
+    o, n = split[k]
+    data = bytearray(good)
+    data[o:o + 8] = struct.pack(">Q", 2**62)          # year ~146,000
+    recs, s = scan(bytes(data))
+    assert got(recs) == records(good, split, set(range(len(split))) - {k})
+    assert s.n_skipped_bytes == n and s.regions[0].offset == o

@@ -59,6 +59,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from ..control.observer import heading_from_accel_mag
 from ..errors import CommandRejected, LinkError
 from ..link import codec
 from ..report import FlightReport, ReplanningStats, TrackingStats
@@ -147,35 +148,6 @@ class ActuatorOut:
     time_usec: int
     motor_cmd: tuple | None
     armed: bool
-
-
-def heading_from_imu(accel_flu, mag_flu, mag_field_enu) -> float:
-    """ENU heading (rad from east, CCW) of the body x axis, from the IMU at rest.
-
-    At rest the accelerometer reads the specific force ``R^T g e3``: its
-    direction is the world's up in body axes. The magnetometer's component
-    normal to it is the Earth field's horizontal part in body axes. TRIAD
-    with the up pair exact: ``R = W B^T`` with ``W = [e3, h_w, e3 x h_w]``,
-    ``B = [u_b, h_b, u_b x h_b]``; the heading is that of ``R e1``.
-    Exact for any tilt (not only level), noise aside.
-    """
-    ax, ay, az = accel_flu
-    n = math.sqrt(ax * ax + ay * ay + az * az)
-    u = (ax / n, ay / n, az / n)
-    mx, my, mz = mag_flu
-    c = mx * u[0] + my * u[1] + mz * u[2]
-    h = (mx - c * u[0], my - c * u[1], mz - c * u[2])
-    nh = math.sqrt(h[0] ** 2 + h[1] ** 2 + h[2] ** 2)
-    h = (h[0] / nh, h[1] / nh, h[2] / nh)
-    k = (u[1] * h[2] - u[2] * h[1], u[2] * h[0] - u[0] * h[2], u[0] * h[1] - u[1] * h[0])   # u x h
-    hw = (float(mag_field_enu[0]), float(mag_field_enu[1]))
-    nw = math.hypot(*hw)
-    hw = (hw[0] / nw, hw[1] / nw)
-    kw = (-hw[1], hw[0])                                      # e3 x h_w (horizontal)
-    # R e1 = e3 u_x + h_w h_x + (e3 x h_w) k_x; its horizontal part:
-    x = hw[0] * h[0] + kw[0] * k[0]
-    y = hw[1] * h[0] + kw[1] * k[0]
-    return math.atan2(y, x)
 
 
 def takeoff_segments(start, first, transit_floor_z_m, climb_speed_m_s: float, transfer_speed_m_s: float):
@@ -565,7 +537,7 @@ class FlightCore:
         s0 = first.s
         psi1 = math.atan2(s0[1], s0[0])
         if self._imu is not None:
-            psi0 = heading_from_imu(self._imu[0], self._imu[1], self.inputs.mag_field_enu_gauss) + 0.5 * math.pi
+            psi0 = heading_from_accel_mag(self._imu[0], self._imu[1], self.inputs.mag_field_enu_gauss) + 0.5 * math.pi
         else:
             psi0 = psi1
         self._psi_arm = psi0
@@ -818,6 +790,10 @@ class FlightCore:
                 except (ValueError, ZeroDivisionError, OverflowError):
                     # a non-finite or degenerate measurement: let the vehicle fly this frame
                     self.n_control_faults += 1
+        if cmd is None and self.ctrl is not None and self._pos is not None and self.degraded is None:
+            # Not flying the inner loop (yet): the observer still learns the gyro
+            # bias and the fixes' noise, so control starts from a settled estimate.
+            self.ctrl.observe(t, gyro, acc, mag, self._pos, self._vel, self._nav_t)
         self.outbox.append(ActuatorOut(t_us, cmd, self.armed))
         if ref is not None:
             self._record(t, ref, out)

@@ -53,6 +53,11 @@ _V1, _V2 = 0xFE, 0xFD
 _SIGNED = mavlink.MAVLINK_IFLAG_SIGNED
 _SIG_LEN = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN
 #: CRC_EXTRA byte (as a 1-byte ``bytes``) of every message id of the common dialect.
+#: Plausible .tlog stamps (us since the Unix epoch, or since boot): up to 2200-01-01. A
+#: record stamped later is garbage in front of a packet (random stamps fall below this
+#: bound once in 2500).
+STAMP_MIN_US = 0
+STAMP_MAX_US = 7_258_118_400 * 10**6
 _CRC_EXTRA = {mid: bytes((cls.crc_extra,)) for mid, cls in mavlink.mavlink_map.items()}
 
 #: Stamp steps reported as time jumps (s): backwards by more, or forwards by more.
@@ -277,11 +282,17 @@ class TlogScanner:
                 self._mark_framed(i, "bad_crc", end)
                 i += 1
                 continue
+            (stamp,) = unpack(buf, i)
+            if not STAMP_MIN_US <= stamp <= STAMP_MAX_US:
+                # A 16-bit CRC passes on one random frame in 65536: a packet-looking
+                # run of garbage is also told by a time stamp no log can carry.
+                self._mark_framed(i, None, 0)
+                i += 1
+                continue
             sysid, compid = buf[ids], buf[ids + 1]
             # a valid record
             if self._bad_start is not None:
                 self._close_bad(base + i)
-            (stamp,) = unpack(buf, i)
             last = self._last_stamp
             if last is None:
                 summary.first_stamp_us = stamp
@@ -396,7 +407,7 @@ def _valid_at(buf: bytes, i: int, final: bool):
     if end > len(buf):
         return False if final else None
     extra = _CRC_EXTRA.get(msgid)
-    if extra is None or odd:
+    if extra is None or odd or not STAMP_MIN_US <= _STAMP.unpack_from(buf, i)[0] <= STAMP_MAX_US:
         return False
     return _crc(buf[i + 9:crc_end - 2] + extra, 0xFFFF) == (buf[crc_end - 2] | buf[crc_end - 1] << 8)
 
