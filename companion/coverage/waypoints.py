@@ -106,8 +106,21 @@ def extract_waypoints(plan: CoveragePlan, dem: ElevationModel, flight: FlightCon
     PlanError
         If the path has fewer than two distinct points.
     """
+    return waypoints_along(plan.path_xy_m, dem, flight, a_ref_m_s2)
+
+
+def waypoints_along(path_xy_m: np.ndarray, dem: ElevationModel, flight: FlightConfig,
+                    a_ref_m_s2: float = A_REF_M_S2) -> Waypoints:
+    """Way-points of any polyline (``extract_waypoints`` without the plan; module doc).
+
+    Parameters
+    ----------
+    path_xy_m : (N, 2) array
+        Turning points (ENU, m); each becomes a corner way-point at rest.
+    dem, flight, a_ref_m_s2 : as ``extract_waypoints``.
+    """
     V, dt, agl = flight.speed_m_s, flight.waypoint_interval_s, flight.height_agl_m
-    path = np.asarray(plan.path_xy_m, dtype=float)
+    path = np.asarray(path_xy_m, dtype=float)
     if len(path) < 2:
         raise PlanError("<plan>", "the coverage path has fewer than two points")
     d = V * dt

@@ -13,6 +13,7 @@ from typing import Literal
 from ..control.config import ControlConfig
 from ..vehicle import VehicleConfig
 from ..trajectory.config import TrajectoryConfig
+from .replan import ReplanConfig
 from .sim import SimConfig
 
 #: Upper bounds of the lengths a vineyard mission can sensibly hold (m): flight
@@ -99,6 +100,7 @@ class Mission:
     trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
     control: ControlConfig = field(default_factory=ControlConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    replan: ReplanConfig = field(default_factory=ReplanConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     description: str = ""
     base_dir: str = "."   # set by the loader: directory of the mission file

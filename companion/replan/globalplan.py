@@ -1,0 +1,155 @@
+"""The plan the replanner follows and re-plans: trajectory, way-points, coverage segments.
+
+Times are the plan's clock (the first way-point at the trajectory's t0; the
+replanner maps vehicle time onto it when the trajectory phase starts).
+Every turning point of the coverage path is a corner way-point, so the legs
+of the path are the pieces between consecutive corner way-points; the
+"next turning point" of Fig. 5 is the end corner of the current leg.
+
+``segments`` are the coverage's main segments (the runs that cover the
+corridors) still to fly, in flight order, each with the way-points at its
+two ends; a re-route uses them to know what is left to cover.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..mission.schema import FlightConfig
+from ..trajectory import Trajectory, TrajectoryConfig
+
+#: An end of a main segment matches a corner way-point within this distance (m).
+_MATCH_TOL_M = 0.05
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A main segment still to cover (ENU m), flown from ``start_xy`` to ``end_xy``.
+
+    ``first_wp`` and ``last_wp`` index the way-points at its two ends (the
+    plan's arrays); ``first_wp`` may be 0 for a segment entered before the
+    plan began (a re-solved plan that starts inside it).
+    """
+
+    start_xy: tuple[float, float]
+    end_xy: tuple[float, float]
+    first_wp: int
+    last_wp: int
+
+    @property
+    def length_m(self) -> float:
+        return float(np.hypot(self.end_xy[0] - self.start_xy[0], self.end_xy[1] - self.start_xy[1]))
+
+
+@dataclass(frozen=True, eq=False)
+class GlobalPlan:
+    """The trajectory being followed and what is needed to re-plan it.
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+        LQR trajectory (plan clock, ENU).
+    t_s : (N,) way-point times (s, plan clock).
+    p_enu_m, v_enu_m_s, a_enu_m_s2 : (N, 3) way-point constraints.
+    corner : (N,) bool, turning points.
+    segments : tuple of Segment
+        Main segments not yet finished when the plan was made, in flight order.
+    target_enu_m : (3,) array or None
+        Pointing target S_p.
+    flight : FlightConfig
+        Height above the terrain, speed and way-point interval (re-routes).
+    trajectory_config : TrajectoryConfig
+        LQR weights (re-solves).
+    min_segment_m : float
+        Shortest main segment worth flying (the coverage setting).
+    final_xy : (2,) the end of the whole coverage path (ENU m).
+    """
+
+    trajectory: Trajectory
+    t_s: np.ndarray
+    p_enu_m: np.ndarray
+    v_enu_m_s: np.ndarray
+    a_enu_m_s2: np.ndarray
+    corner: np.ndarray
+    segments: tuple[Segment, ...]
+    target_enu_m: np.ndarray | None
+    flight: FlightConfig
+    trajectory_config: TrajectoryConfig
+    min_segment_m: float
+    final_xy: tuple[float, float]
+
+    @classmethod
+    def from_plan(cls, plan, mission) -> "GlobalPlan":
+        """From ``companion.planner.plan_mission``'s ``Plan`` and its ``Mission``."""
+        wp = plan.waypoints
+        segs = np.asarray([[a, b] for a, b in plan.coverage.main_segments], dtype=float).reshape(-1, 2, 2)
+        path = np.asarray(plan.coverage.path_xy_m, dtype=float)
+        return cls.from_waypoints(plan.trajectory, wp.t_s, wp.p_enu_m, wp.v_enu_m_s, wp.a_enu_m_s2,
+                                  wp.corner, segs, plan.target_enu_m, mission.flight, mission.trajectory,
+                                  mission.coverage.min_segment_m, tuple(path[-1]))
+
+    @classmethod
+    def from_waypoints(cls, trajectory, t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, corner, segments_xy,
+                       target_enu_m, flight, trajectory_config, min_segment_m, final_xy) -> "GlobalPlan":
+        """Assemble a plan; ``segments_xy`` (k, 2, 2) main segments in flight order
+        (each [start, end], ENU m) are matched to the way-points at their ends."""
+        p = np.asarray(p_enu_m, dtype=float)
+        corner = np.asarray(corner, dtype=bool)
+        segs = match_segments(np.asarray(segments_xy, dtype=float).reshape(-1, 2, 2), p[:, :2], corner)
+        return cls(trajectory, np.asarray(t_s, dtype=float), p, np.asarray(v_enu_m_s, dtype=float),
+                   np.asarray(a_enu_m_s2, dtype=float), corner, segs,
+                   None if target_enu_m is None else np.asarray(target_enu_m, dtype=float),
+                   flight, trajectory_config, float(min_segment_m),
+                   (float(final_xy[0]), float(final_xy[1])))
+
+    @property
+    def corner_indices(self) -> np.ndarray:
+        """(K,) way-point indices of the turning points (the first and last way-points included)."""
+        idx = np.flatnonzero(self.corner)
+        if len(idx) == 0 or idx[0] != 0:
+            idx = np.concatenate([[0], idx])
+        if idx[-1] != len(self.t_s) - 1:
+            idx = np.append(idx, len(self.t_s) - 1)
+        return idx
+
+    def waypoint_index_at(self, t_s: float) -> int:
+        """Index of the last way-point whose time is <= ``t_s`` (plan clock; 0 before the start)."""
+        return max(0, int(np.searchsorted(self.t_s, t_s, side="right")) - 1)
+
+    def segment_at(self, wp_index: int) -> tuple[int | None, int]:
+        """(index of the segment being flown after way-point ``wp_index`` or None,
+        index of the first segment not yet started)."""
+        current = None
+        nxt = len(self.segments)
+        for i, s in enumerate(self.segments):
+            if s.first_wp <= wp_index < s.last_wp:
+                current = i
+            if s.first_wp > wp_index:
+                nxt = i
+                break
+        return current, nxt
+
+
+def match_segments(segments_xy: np.ndarray, wp_xy: np.ndarray, corner: np.ndarray) -> tuple[Segment, ...]:
+    """Way-points at the ends of each main segment (flight order, monotone).
+
+    Each end is the first corner way-point (from the previous match on)
+    within ``_MATCH_TOL_M``; failing that (a segment end the path planner
+    merged into a straight continuation), the nearest way-point from the
+    previous match on.
+    """
+    out = []
+    cursor = 0
+    n = len(wp_xy)
+    for a, b in segments_xy:
+        ends = []
+        for q in (a, b):
+            d = np.hypot(*(wp_xy[cursor:] - q).T)
+            hits = np.flatnonzero(corner[cursor:] & (d <= _MATCH_TOL_M))
+            k = cursor + (int(hits[0]) if len(hits) else int(np.argmin(d)))
+            ends.append(k)
+            cursor = min(k, n - 1)
+        out.append(Segment((float(a[0]), float(a[1])), (float(b[0]), float(b[1])), ends[0], ends[1]))
+    return tuple(out)

@@ -1,0 +1,227 @@
+"""Re-route around an obstacle the vehicle cannot pass (issue 8: stop, add the
+obstacle to the map, fly the rest of the blocked corridor from its other
+end, re-plan the remaining coverage from the current state).
+
+Steps of ``reroute`` (pure: maps, plan and state in, a new plan out):
+
+1. The obstacle's points (the face the sensors saw, extended by the assumed
+   depth along the direction of travel) are added to the map; the eroded
+   free space loses every cell within the safety margin of them.
+2. What is left to cover: the rest of the current main segment beyond the
+   obstacle (its free runs past the vehicle, each at least the minimum
+   segment length) flown *from the segment's far end back toward the
+   obstacle*, then the main segments not yet started, in their planned
+   order and direction, each cut into its free runs in the updated map.
+3. The route: from the vehicle straight back along its track to the first
+   point of the eroded free space (the vehicle stopped within the margin of
+   the obstacle), then an auxiliary connection (``coverage.gridpath.aux_path``:
+   straight where clear, else the shortest grid path) to each piece in
+   turn; a piece that cannot be reached is skipped (counted).
+4. Way-points along the route (``coverage.waypoints.waypoints_along``), the
+   first one replaced by the current reference position (the vehicle may
+   have climbed: the first interval is stretched for the descent at the
+   vertical speed), and the LQR from the current state (``initial_state``).
+
+No piece reachable while some are left, or no free space to back off into:
+no route (the caller holds and reports).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..coverage.freespace import grid_to_world, lookup, world_to_grid
+from ..coverage.gridpath import aux_path
+from ..coverage.waypoints import waypoints_along
+from ..errors import InputError
+from ..trajectory import generate_trajectory
+from .globalplan import GlobalPlan
+from .knownmap import KnownMap
+
+#: Farthest (m) the route may back off along the track to reach free space.
+MAX_BACK_OFF_M = 5.0
+#: Route points closer than this (m) are merged.
+_MERGE_M = 0.05
+_QUINTIC_PEAK_V = 1.875
+
+
+@dataclass(frozen=True)
+class RerouteResult:
+    """Outcome of ``reroute``.
+
+    Attributes
+    ----------
+    plan : GlobalPlan or None
+        The re-planned coverage (None: no route).
+    known : KnownMap
+        The map with the obstacle added (also when there is no route).
+    reason : str
+        "" on success, else why there is no route.
+    n_pieces : int
+        Coverage pieces in the new plan.
+    n_skipped : int
+        Pieces left out because they cannot be reached.
+    path_xy_m : (m, 2) array
+        The new route's turning points (ENU m; empty without a route).
+    """
+
+    plan: GlobalPlan | None
+    known: KnownMap
+    reason: str
+    n_pieces: int
+    n_skipped: int
+    path_xy_m: np.ndarray
+
+
+def obstacle_footprint(points_enu_m: np.ndarray, travel_xy: np.ndarray, depth_m: float,
+                       step_m: float) -> np.ndarray:
+    """(m, 2) the points' xy plus copies every ``step_m`` up to ``depth_m`` further
+    along the unit direction of travel ``travel_xy`` (the unseen back of the obstacle)."""
+    xy = np.asarray(points_enu_m, dtype=float).reshape(-1, 3)[:, :2]
+    steps = np.arange(0.0, depth_m + 1e-9, step_m)
+    u = np.asarray(travel_xy, dtype=float)
+    return (xy[:, None, :] + steps[None, :, None] * u[None, None, :]).reshape(-1, 2)
+
+
+def free_runs(known: KnownMap, a_xy, b_xy) -> list[tuple[float, float]]:
+    """Runs [s0, s1] (m from ``a_xy``) of the segment a-b inside the eroded free space.
+
+    The segment is sampled every half cell; a run spans its free samples.
+    """
+    a, b = np.asarray(a_xy, dtype=float), np.asarray(b_xy, dtype=float)
+    L = float(np.hypot(*(b - a)))
+    h = known.free.resolution_m
+    n = max(2, int(np.ceil(L / (0.5 * h))) + 1)
+    s = np.linspace(0.0, L, n)
+    pts = a + (s / max(L, 1e-12))[:, None] * (b - a)
+    g = world_to_grid(known.grid, pts)
+    ok = lookup(known.free.eroded, h, g[:, 0], g[:, 1])
+    runs = []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+    for i0, i1 in zip(edges[0::2], edges[1::2]):
+        runs.append((float(s[i0]), float(s[i1 - 1])))
+    return runs
+
+
+def back_off(known: KnownMap, p_xy, direction_xy, max_m: float = MAX_BACK_OFF_M) -> np.ndarray | None:
+    """First point of the eroded free space from ``p_xy`` along ``-direction_xy`` (ENU m), or None."""
+    p = np.asarray(p_xy, dtype=float)
+    u = np.asarray(direction_xy, dtype=float)
+    h = known.free.resolution_m
+    s = np.arange(0.0, max_m + 1e-9, 0.5 * h)
+    pts = p - s[:, None] * u
+    g = world_to_grid(known.grid, pts)
+    ok = np.flatnonzero(lookup(known.free.eroded, h, g[:, 0], g[:, 1]))
+    if len(ok) == 0:
+        return None
+    # one more half cell inside, so the aux path's straight test starts in free space
+    k = min(int(ok[0]) + 1, len(s) - 1)
+    return pts[k] if lookup(known.free.eroded, h, *world_to_grid(known.grid, pts[k:k + 1]).T)[0] else pts[ok[0]]
+
+
+def _merge(points: list) -> np.ndarray:
+    out = [np.asarray(points[0], dtype=float)]
+    for q in points[1:]:
+        q = np.asarray(q, dtype=float)
+        if np.hypot(*(q - out[-1])) > _MERGE_M:
+            out.append(q)
+    return np.array(out)
+
+
+def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: int,
+            obstacle_enu_m: np.ndarray, travel_xy, depth_m: float, vertical_speed_m_s: float) -> RerouteResult:
+    """Re-plan the remaining coverage around a blocking obstacle (module doc).
+
+    Parameters
+    ----------
+    plan : GlobalPlan
+        The plan being flown when the vehicle left it.
+    known : KnownMap
+    state : object with p, v, a, jerk (ENU 3-sequences)
+        The reference state (at rest after the stop).
+    t_now_s : float
+        Plan-clock time the new plan starts.
+    wp_index : int
+        Last way-point of ``plan`` passed when the vehicle left it.
+    obstacle_enu_m : (k, 3) array
+        Points of the blocking obstacle.
+    travel_xy : (2,) unit direction of travel when it was met (ENU).
+    depth_m : float
+        Assumed depth of the obstacle behind the seen face (m).
+    vertical_speed_m_s : float
+        Speed allotted to a descent on the first interval.
+    """
+    travel = np.asarray(travel_xy, dtype=float)
+    travel = travel / max(float(np.hypot(*travel)), 1e-12)
+    new_known = known.with_obstacle(obstacle_footprint(obstacle_enu_m, travel, depth_m,
+                                                       0.5 * known.free.resolution_m))
+    p = np.asarray(state.p, dtype=float)
+
+    def fail(reason: str) -> RerouteResult:
+        return RerouteResult(None, new_known, reason, 0, 0, np.zeros((0, 2)))
+
+    start = back_off(new_known, p[:2], travel)
+    if start is None:
+        return fail(f"no free space within {MAX_BACK_OFF_M:g} m behind the vehicle")
+
+    # what is left to cover, in flight order: (entry, exit) pairs (ENU xy)
+    pieces: list[tuple[np.ndarray, np.ndarray]] = []
+    min_len = plan.min_segment_m
+    current, nxt = plan.segment_at(wp_index)
+    if current is not None:
+        seg = plan.segments[current]
+        a, b = np.asarray(seg.start_xy), np.asarray(seg.end_xy)
+        L = max(float(np.hypot(*(b - a))), 1e-12)
+        u = (b - a) / L
+        s_v = float((p[:2] - a) @ u)
+        beyond = [(s0, s1) for s0, s1 in free_runs(new_known, a, b) if s0 > s_v and s1 - s0 >= min_len]
+        for s0, s1 in sorted(beyond, reverse=True):       # from the far end back toward the obstacle
+            pieces.append((a + s1 * u, a + s0 * u))
+    for seg in plan.segments[nxt:]:
+        a, b = np.asarray(seg.start_xy), np.asarray(seg.end_xy)
+        L = max(float(np.hypot(*(b - a))), 1e-12)
+        u = (b - a) / L
+        for s0, s1 in free_runs(new_known, a, b):
+            if s1 - s0 >= min_len:
+                pieces.append((a + s0 * u, a + s1 * u))
+
+    grid = new_known.grid
+    route = [p[:2], start]
+    cur = start
+    flown = []
+    skipped = 0
+    for entry, exit_ in pieces:
+        try:
+            conn = aux_path(new_known.free, world_to_grid(grid, cur), world_to_grid(grid, entry))
+        except InputError:
+            skipped += 1
+            continue
+        route.extend(grid_to_world(grid, conn)[1:])
+        route.append(exit_)
+        flown.append((entry, exit_))
+        cur = exit_
+    if pieces and not flown:
+        return fail(f"none of the {len(pieces)} coverage pieces left can be reached")
+    path = _merge(route)
+    if len(path) < 2:
+        path = np.array([p[:2], p[:2] - 0.1 * travel])      # nothing left: settle just behind
+    try:
+        wps = waypoints_along(path, new_known.dem, plan.flight)
+        t = wps.t_s.copy()
+        P = wps.p_enu_m.copy()
+        dz = abs(float(P[0, 2] - p[2]))
+        extra = max(0.0, _QUINTIC_PEAK_V * dz / vertical_speed_m_s - t[1])
+        t[1:] += extra
+        P[0] = p
+        x0 = np.array([state.p, state.v, state.a, state.jerk], dtype=float)
+        traj = generate_trajectory(t + t_now_s, P, wps.v_enu_m_s, wps.a_enu_m_s2, plan.trajectory_config,
+                                   initial_state=x0, target_enu_m=plan.target_enu_m)
+    except InputError as exc:
+        return fail(f"re-planning failed: {exc}")
+    segs = np.array([[e, x] for e, x in flown], dtype=float).reshape(-1, 2, 2)
+    new_plan = GlobalPlan.from_waypoints(traj, t + t_now_s, P, wps.v_enu_m_s, wps.a_enu_m_s2, wps.corner, segs,
+                                         plan.target_enu_m, plan.flight, plan.trajectory_config,
+                                         plan.min_segment_m, tuple(path[-1]))
+    return RerouteResult(new_plan, new_known, "", len(flown), skipped, path)

@@ -1,0 +1,347 @@
+"""Closed-loop kinematic flights of the replanner (pure, in-test).
+
+A point mass follows the reference exactly (position = reference, level
+attitude, body y toward the pointing direction as the controller flies it);
+16 rangefinders in a horizontal ring (MAV_SENSOR_ROTATION_CUSTOM with yaw
+quaternions, 22.5 deg wide: three rays, the axis and the two edges) and one
+looking down (one ray) are ray cast
+against hand-placed geometry with an analytic caster written here (ground
+plane, two vine rows as boxes, cylinders and boxes), independent of the
+replanner's perception code and of the SITL. The field: two rows 12 m long
+(x 3..15 m, y 2.3..2.7 and 4.8..5.2 m) and a path over three lines (the
+corridor y = 3.75 east, the south headland y = 1.25 west, the north
+headland y = 6.25 east), the plan made by the project's own way-point and
+LQR code. The true clearance is the distance from the reference to the
+obstacle's surface, computed analytically here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pytest
+
+from companion.coverage.freespace import erode_free_space
+from companion.coverage.waypoints import waypoints_along
+from companion.link import codec
+from companion.maps.grid import ElevationModel, OccupancyGrid
+from companion.mission.replan import ReplanConfig
+from companion.mission.schema import FlightConfig
+from companion.replan import GlobalPlan, KnownMap, Replanner
+from companion.trajectory import TrajectoryConfig, generate_trajectory
+
+RES = 0.1
+ROWS = ((3.0, 15.0, 2.3, 2.7), (3.0, 15.0, 4.8, 5.2))     # x0, x1, y0, y1 (m)
+CANOPY_M = 2.0
+CORRIDOR_Y = 3.75
+PATH = np.array([[1.0, 3.75], [17.0, 3.75], [17.0, 1.25], [1.0, 1.25], [1.0, 6.25], [17.0, 6.25]])
+SEGMENTS = np.array([PATH[0:2], PATH[2:4], PATH[4:6]])
+TARGET = np.array([9.0, 3.75, 1.5])
+N_RING = 16
+RING_FOV = math.radians(360.0 / N_RING)
+NARROW_FOV = math.radians(5.0)
+MAX_RANGE_M = 10.0
+
+
+# --- the world, cast analytically ---------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    x: float
+    y: float
+    r: float
+    h: float
+
+    def cast(self, o, d, lim):
+        ex, ey = o[0] - self.x, o[1] - self.y
+        a = d[0] * d[0] + d[1] * d[1]
+        best = math.inf
+        if a > 0.0:
+            b = ex * d[0] + ey * d[1]
+            c = ex * ex + ey * ey - self.r * self.r
+            disc = b * b - a * c
+            if disc >= 0.0:
+                t = (-b - math.sqrt(disc)) / a
+                if 0.0 <= t < lim and 0.0 <= o[2] + t * d[2] <= self.h:
+                    best = t
+        if d[2] != 0.0:
+            t = (self.h - o[2]) / d[2]
+            if 0.0 <= t < min(best, lim) and (ex + t * d[0]) ** 2 + (ey + t * d[1]) ** 2 <= self.r ** 2:
+                best = t
+        return best
+
+    def clearance(self, p):
+        dh = math.hypot(p[0] - self.x, p[1] - self.y) - self.r
+        dz = p[2] - self.h
+        if dz <= 0.0:
+            return max(dh, 0.0)
+        return math.hypot(max(dh, 0.0), dz)
+
+
+@dataclass(frozen=True)
+class Box:
+    x0: float
+    x1: float
+    y0: float
+    y1: float
+    h: float
+
+    def cast(self, o, d, lim):
+        t0, t1 = 0.0, lim
+        for q, dq, lo, hi in ((o[0], d[0], self.x0, self.x1), (o[1], d[1], self.y0, self.y1),
+                              (o[2], d[2], 0.0, self.h)):
+            if dq == 0.0:
+                if q < lo or q > hi:
+                    return math.inf
+                continue
+            ta, tb = (lo - q) / dq, (hi - q) / dq
+            if ta > tb:
+                ta, tb = tb, ta
+            t0, t1 = max(t0, ta), min(t1, tb)
+            if t0 > t1:
+                return math.inf
+        return t0
+
+    def clearance(self, p):
+        dx = max(self.x0 - p[0], 0.0, p[0] - self.x1)
+        dy = max(self.y0 - p[1], 0.0, p[1] - self.y1)
+        dz = max(p[2] - self.h, 0.0)
+        return math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+ROW_BOXES = tuple(Box(x0, x1, y0, y1, CANOPY_M) for x0, x1, y0, y1 in ROWS)
+
+
+def cast(o, d, bodies, lim=MAX_RANGE_M):
+    best = -o[2] / d[2] if d[2] < 0.0 else math.inf          # ground z = 0
+    for b in bodies:
+        t = b.cast(o, d, min(best, lim))
+        best = min(best, t)
+    return best if best <= lim else math.inf
+
+
+# --- the plan ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Field:
+    known: KnownMap
+    plan: GlobalPlan
+
+
+def build_field(safety_margin_m: float = 0.5) -> Field:
+    rows, cols = 75, 200
+    occ = np.zeros((rows, cols), dtype=bool)
+    for x0, x1, y0, y1 in ROWS:
+        occ[int(round(y0 / RES)):int(round(y1 / RES)), int(round(x0 / RES)):int(round(x1 / RES))] = True
+    grid = OccupancyGrid(occupied=occ, free=~occ, resolution_m=RES)
+    dem = ElevationModel(np.zeros((6, 12)), x0_m=-1.0, y0_m=-1.0, cellsize_m=2.0)
+    flight = FlightConfig(height_agl_m=1.5, speed_m_s=1.0, waypoint_interval_s=4.0)
+    wps = waypoints_along(PATH, dem, flight)
+    traj = generate_trajectory(wps.t_s, wps.p_enu_m, wps.v_enu_m_s, wps.a_enu_m_s2, TrajectoryConfig(),
+                               target_enu_m=TARGET)
+    plan = GlobalPlan.from_waypoints(traj, wps.t_s, wps.p_enu_m, wps.v_enu_m_s, wps.a_enu_m_s2, wps.corner,
+                                     SEGMENTS, TARGET, flight, TrajectoryConfig(), 1.0, tuple(PATH[-1]))
+    known = KnownMap.build(grid, dem, erode_free_space(grid, safety_margin_m), CANOPY_M, 0.2)
+    return Field(known, plan)
+
+
+@pytest.fixture(scope="module")
+def field() -> Field:
+    return build_field()
+
+
+# --- the flight ------------------------------------------------------------------------------
+
+
+def _yaw_quat(deg):
+    return (math.cos(math.radians(deg) / 2), 0.0, 0.0, math.sin(math.radians(deg) / 2))
+
+
+def _fan_body(R_flu_sensor, hfov, vfov):
+    """Body FLU rays of a sensor: the axis and the edge midpoints of the non-zero fields of view."""
+    S = np.array(R_flu_sensor).reshape(3, 3)
+    rays = [(1.0, 0.0, 0.0)]
+    for k, fov in ((1, hfov), (2, vfov)):
+        if fov > 0:
+            for sgn in (1.0, -1.0):
+                r = [1.0, 0.0, 0.0]
+                r[k] = sgn * math.tan(fov / 2)
+                rays.append(tuple(r))
+    return [tuple(S @ (np.array(r) / np.linalg.norm(r))) for r in rays]
+
+
+SENSORS = tuple((k, codec.MAV_SENSOR_ROTATION_CUSTOM, _yaw_quat(k * 360.0 / N_RING), RING_FOV, 0.0)
+                for k in range(N_RING)) + ((N_RING, 25, None, 0.0, 0.0),)
+SENSOR_GEOMETRY = tuple((sid, o, codec.sensor_rotation_flu(o, q), h, v) for sid, o, q, h, v in SENSORS)
+SENSOR_FANS = tuple(_fan_body(R, h, v) for _, _, R, h, v in SENSOR_GEOMETRY)
+
+
+def level_attitude(s) -> np.ndarray:
+    """R_enu_flu, level, body y toward the horizontal pointing direction (b1 = b2 x e3)."""
+    n = math.hypot(s[0], s[1])
+    bx, by = s[0] / n, s[1] / n
+    return np.array([[by, bx, 0.0], [-bx, by, 0.0], [0.0, 0.0, 1.0]])
+
+
+@dataclass
+class Flight:
+    t: np.ndarray
+    ref: np.ndarray           # (n, 15): p, v, a, jerk, snap
+    modes: list
+    events: list
+    replanner: Replanner
+    steps: list
+
+    def clearance(self, obstacles) -> np.ndarray:
+        return np.array([min((o.clearance(p) for o in obstacles), default=math.inf) for p in self.ref[:, :3]])
+
+
+def fly(field: Field, obstacles=(), cfg: ReplanConfig = ReplanConfig(), t_end_s: float = 200.0,
+        dt_s: float = 0.04, sensor_every: int = 2, stop_after=None) -> Flight:
+    rp = Replanner(cfg, field.known, field.plan)
+    rp.start(0.0)
+    p = tuple(field.plan.trajectory.sample(0.0).p)
+    s = (0.0, 1.0, 0.0)
+    ts, refs, modes, events, steps = [], [], [], [], []
+    k = 0
+    t = 0.0
+    bodies = ROW_BOXES + tuple(obstacles)
+    while t <= t_end_s:
+        R = level_attitude(s)
+        rp.on_pose(t, p, R)
+        if k % sensor_every == 0:
+            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+            for (sid, orient, Rs, h, v), fan in zip(SENSOR_GEOMETRY, SENSOR_FANS):
+                best = min(cast(p, (r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z,
+                                    r20 * x + r21 * y + r22 * z), bodies) for x, y, z in fan)
+                none = not math.isfinite(best)
+                rp.on_range(t, codec.Range(int(round(t * 1000)), sid, math.nan if none else best, 0.1,
+                                           MAX_RANGE_M, orient, h, v, math.nan, none, Rs))
+        st = rp.step(t, p, (0.0, 0.0, 0.0))
+        r = st.ref
+        ts.append(t)
+        refs.append(r.p + r.v + r.a + r.jerk + r.snap)
+        modes.append(st.mode)
+        events.extend(st.events)
+        steps.append(st)
+        p, s = r.p, r.s
+        if st.finished or st.hold or (stop_after is not None and stop_after(st, t)):
+            break
+        t += dt_s
+        k += 1
+    return Flight(np.array(ts), np.array(refs), modes, events, rp, steps)
+
+
+def _actions(f: Flight) -> list:
+    return [e.action for e in f.events]
+
+
+# --- the flights -----------------------------------------------------------------------------
+
+
+def test_no_obstacle_reference_is_the_plan(field):
+    f = fly(field, sensor_every=5)
+    assert f.steps[-1].finished and f.events == []
+    assert set(f.modes) == {"follow", "done"}
+    smp = field.plan.trajectory.sample(f.t)
+    got = f.ref
+    for k, name in enumerate(("p", "v", "a", "jerk", "snap")):
+        np.testing.assert_allclose(got[:, 3 * k:3 * k + 3], getattr(smp, name), atol=1e-9, rtol=0, err_msg=name)
+    assert f.replanner.stats.unknown_hits == 0          # rows and ground are all known
+    assert f.replanner.stats.readings > 1000
+
+
+def _after_rejoin(seconds):
+    state = {"t": None}
+
+    def stop(st, t):
+        if state["t"] is None and any(e.action == "rejoin" for e in st.events):
+            state["t"] = t
+        return state["t"] is not None and t >= state["t"] + seconds
+    return stop
+
+
+def test_low_obstacle_is_climbed_over(field):
+    post = Cylinder(9.0, CORRIDOR_Y, 0.25, 1.6)           # top 1.6 m: 1.6 + 0.5 + margins < 3 m ceiling
+    f = fly(field, [post], stop_after=_after_rejoin(6.0))
+    acts = _actions(f)
+    assert acts[:3] == ["avoid", "climb", "rejoin"], acts
+    assert "stop" not in acts and "reroute" not in acts
+    clear = f.clearance([post])
+    assert clear.min() >= ReplanConfig().clearance_m
+    over = (np.abs(f.ref[:, 0] - post.x) <= post.r) & (np.abs(f.ref[:, 1] - post.y) <= post.r)
+    assert over.any() and f.ref[over, 2].min() >= post.h + ReplanConfig().clearance_m   # went over it
+    # the corridor: within 0.5 m of its centre line all along the rows
+    in_rows = (f.ref[:, 0] > 3.0) & (f.ref[:, 0] < 15.0) & (np.abs(f.ref[:, 1] - CORRIDOR_Y) < 1.25)
+    assert np.abs(f.ref[in_rows, 1] - CORRIDOR_Y).max() <= 0.5
+    assert f.ref[:, 2].max() <= 1.5 + 0.0 + ReplanConfig().ceiling_agl_m        # below the ceiling (flat ground)
+    st = f.replanner.stats
+    assert st.max_lateral_deviation_m <= 0.5
+    assert post.h - 1.5 < st.max_climb_m <= ReplanConfig().ceiling_agl_m - 1.5
+    # back on the plan's line and height after the rejoin
+    assert abs(f.ref[-1, 1] - CORRIDOR_Y) < 0.02 and abs(f.ref[-1, 2] - 1.5) < 0.02
+    # no jump anywhere, the switches included: each frame's change of p, v, a is
+    # bounded by the speed, acceleration and jerk limits (per axis) times the frame
+    cfg = ReplanConfig()
+    dt = np.diff(f.t)[:, None]
+    assert np.all(np.abs(np.diff(f.ref[:, 0:3], axis=0)) <= 1.05 * 1.0 * dt + 1e-9)
+    assert np.all(np.abs(np.diff(f.ref[:, 3:6], axis=0)) <= 1.05 * cfg.accel_m_s2 * dt + 1e-9)
+    assert np.all(np.abs(np.diff(f.ref[:, 6:9], axis=0)) <= 1.05 * cfg.jerk_m_s3 * dt + 1e-9)
+    assert np.abs(f.ref[:, 9:12]).max() <= cfg.jerk_m_s3 + 1e-9
+
+
+def test_tall_obstacle_stop_then_reroute_and_finish(field):
+    post = Cylinder(9.0, CORRIDOR_Y, 0.25, 4.0)           # above the ceiling: cannot climb over
+    f = fly(field, [post])
+    acts = _actions(f)
+    assert "stop" in acts and "reroute" in acts and "hold" not in acts, acts
+    assert acts.index("stop") < acts.index("reroute")
+    assert f.steps[-1].finished                             # completed the re-planned coverage
+    clear = f.clearance([post])
+    assert clear.min() >= ReplanConfig().clearance_m
+    # where it stopped, in front of the post
+    i_stop = next(i for i, st in enumerate(f.steps) if any(e.action == "reroute" for e in st.events))
+    assert f.ref[i_stop, 0] < post.x - post.r - ReplanConfig().clearance_m
+    assert np.linalg.norm(f.ref[i_stop, 3:6]) < 0.05        # at rest when re-routing
+    # the rest of the blocked corridor was flown from its other end: the reference
+    # comes back along y = 3.75 from x = 17 to just beyond the post, heading west
+    after = np.arange(len(f.t)) > i_stop
+    west = after & (np.abs(f.ref[:, 1] - CORRIDOR_Y) < 0.1) & (f.ref[:, 3] < -0.5)
+    assert west.any()
+    assert f.ref[west, 0].max() > 14.0 and f.ref[west, 0].min() < post.x + 2.0
+    # and the south headland line (the coverage after the corridor) is flown
+    south = after & (np.abs(f.ref[:, 1] - 1.25) < 0.1)
+    assert np.ptp(f.ref[south, 0]) > 14.0
+
+
+def test_obstacle_beside_the_line_is_passed_within_the_corridor(field):
+    # a post near the south row: a gap of more than the clearance remains to its north
+    post = Cylinder(9.0, CORRIDOR_Y - 0.8, 0.2, 4.0)
+    f = fly(field, [post], stop_after=_after_rejoin(4.0))
+    acts = _actions(f)
+    assert "avoid" in acts and "stop" not in acts and "hold" not in acts, acts
+    assert f.clearance([post]).min() >= ReplanConfig().clearance_m
+    in_rows = (f.ref[:, 0] > 3.0) & (f.ref[:, 0] < 15.0) & (np.abs(f.ref[:, 1] - CORRIDOR_Y) < 1.25)
+    assert np.abs(f.ref[in_rows, 1] - CORRIDOR_Y).max() <= 0.5
+    assert f.replanner.stats.max_lateral_deviation_m <= 0.5
+
+
+def test_ablation_clearance_governor(field):
+    """Our addition, the clearance governor, against the APF alone (the same
+    flight, sensors and obstacle): a post 0.65 m beside the line, at the
+    turning point that is the APF's goal. The improved repulsion is scaled
+    by the goal distance squared and vanishes at the goal, so the APF alone
+    comes within the clearance; with the governor the reference keeps it."""
+    post = Cylinder(17.0, CORRIDOR_Y + 0.65, 0.2, 4.0)
+
+    def rerouted(st, t):
+        return st.mode == "reroute"
+    with_gov = fly(field, [post], stop_after=rerouted)
+    without = fly(field, [post], cfg=replace(ReplanConfig(), clearance_governor=False), stop_after=rerouted)
+    c_with = with_gov.clearance([post]).min()
+    c_without = without.clearance([post]).min()
+    assert c_with >= ReplanConfig().clearance_m > c_without
