@@ -345,3 +345,49 @@ def test_ablation_clearance_governor(field):
     c_with = with_gov.clearance([post]).min()
     c_without = without.clearance([post]).min()
     assert c_with >= ReplanConfig().clearance_m > c_without
+
+
+# --- re-route, as a pure function -------------------------------------------------------------
+
+
+def test_reroute_flies_the_rest_of_the_corridor_from_its_other_end(field):
+    from companion.replan import ShapedState, reroute
+    post_xy = np.array([[8.75, CORRIDOR_Y + d] for d in (-0.2, -0.1, 0.0, 0.1, 0.2)])   # the face seen
+    pts = np.column_stack([post_xy, np.full(len(post_xy), 1.5)])
+    st = ShapedState((8.2, CORRIDOR_Y, 1.5), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    plan = field.plan
+    wp = plan.waypoint_index_at(8.0)                    # in the corridor, the first segment
+    assert plan.segment_at(wp)[0] == 0
+    res = reroute(plan, field.known, st, 20.0, wp, pts, (1.0, 0.0), 0.5, 0.5)
+    assert res.reason == "" and res.n_skipped == 0 and res.n_pieces == 3
+    new = res.plan
+    # starts in the current state, backs off westward first
+    s0 = new.trajectory.sample(20.0)
+    np.testing.assert_allclose(s0.p, st.p, atol=1e-9)
+    assert res.path_xy_m[1, 0] < 8.2 and res.path_xy_m[1, 1] == pytest.approx(CORRIDOR_Y)
+    # the first piece is the corridor beyond the post, entered from x = 17 and flown west
+    a, b = new.segments[0].start_xy, new.segments[0].end_xy
+    assert a[0] == pytest.approx(17.0) and a[1] == pytest.approx(CORRIDOR_Y)
+    assert b[1] == pytest.approx(CORRIDOR_Y) and 9.25 < b[0] < 9.25 + 0.5 + 1.0
+    # then the two lines not yet flown, in their planned order and direction
+    np.testing.assert_allclose([new.segments[1].start_xy, new.segments[1].end_xy], SEGMENTS[1], atol=1e-6)
+    np.testing.assert_allclose([new.segments[2].start_xy, new.segments[2].end_xy], SEGMENTS[2], atol=1e-6)
+    # the new trajectory keeps the post (and its assumed depth) out of reach
+    smp = new.trajectory.sample(np.arange(new.trajectory.t0, new.trajectory.tf, 0.05)).p
+    post = Box(8.75, 9.25, CORRIDOR_Y - 0.25, CORRIDOR_Y + 0.25, 4.0)
+    assert min(post.clearance(p) for p in smp) >= 0.5
+    # and the map now knows the obstacle
+    assert res.known.classify(8.8, CORRIDOR_Y, 3.0) != "unknown"
+
+
+def test_reroute_without_a_route_reports(field):
+    from companion.replan import ShapedState, reroute
+    # a wall across the whole field east of the post: what is left of the corridor
+    # (between the post and the wall, and beyond the wall) cannot be reached
+    wall = field.known.with_obstacle(np.array([[15.0 + 0.05 * k, y] for k in range(3)
+                                               for y in np.arange(0.0, 7.5, 0.05)]))
+    pts = np.array([[8.75, CORRIDOR_Y + d, 1.5] for d in (-0.2, 0.0, 0.2)])
+    st = ShapedState((8.2, CORRIDOR_Y, 1.5), (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3)
+    plan = replace(field.plan, segments=field.plan.segments[:1])       # only this corridor left
+    res = reroute(plan, wall, st, 20.0, plan.waypoint_index_at(8.0), pts, (1.0, 0.0), 0.5, 0.5)
+    assert res.plan is None and "none of the 2 coverage pieces left can be reached" in res.reason
