@@ -201,7 +201,7 @@ class Flight:
 
 
 def fly(field: Field, obstacles=(), cfg: ReplanConfig = ReplanConfig(), t_end_s: float = 200.0,
-        dt_s: float = 0.04, sensor_every: int = 2, stop_after=None) -> Flight:
+        dt_s: float = 0.05, sensor_every: int = 2, stop_after=None) -> Flight:
     rp = Replanner(cfg, field.known, field.plan)
     rp.start(0.0)
     p = tuple(field.plan.trajectory.sample(0.0).p)
@@ -244,7 +244,7 @@ def _actions(f: Flight) -> list:
 
 
 def test_no_obstacle_reference_is_the_plan(field):
-    f = fly(field, sensor_every=5)
+    f = fly(field, sensor_every=4)
     assert f.steps[-1].finished and f.events == []
     assert set(f.modes) == {"follow", "done"}
     smp = field.plan.trajectory.sample(f.t)
@@ -255,21 +255,24 @@ def test_no_obstacle_reference_is_the_plan(field):
     assert f.replanner.stats.readings > 1000
 
 
-def _after_rejoin(seconds):
+def _after_rejoin(seconds=None):
+    """Stop ``seconds`` after the first rejoin, or (None) when following the plan again after it."""
     state = {"t": None}
 
     def stop(st, t):
         if state["t"] is None and any(e.action == "rejoin" for e in st.events):
             state["t"] = t
-        return state["t"] is not None and t >= state["t"] + seconds
+        if state["t"] is None:
+            return False
+        return st.mode == "follow" if seconds is None else t >= state["t"] + seconds
     return stop
 
 
 def test_low_obstacle_is_climbed_over(field):
     post = Cylinder(9.0, CORRIDOR_Y, 0.25, 1.6)           # top 1.6 m: 1.6 + 0.5 + margins < 3 m ceiling
-    f = fly(field, [post], stop_after=_after_rejoin(6.0))
+    f = fly(field, [post], stop_after=_after_rejoin())
     acts = _actions(f)
-    assert acts[:3] == ["avoid", "climb", "rejoin"], acts
+    assert acts == ["avoid", "climb", "rejoin"], acts
     assert "stop" not in acts and "reroute" not in acts
     clear = f.clearance([post])
     assert clear.min() >= ReplanConfig().clearance_m
@@ -282,8 +285,9 @@ def test_low_obstacle_is_climbed_over(field):
     st = f.replanner.stats
     assert st.max_lateral_deviation_m <= 0.5
     assert post.h - 1.5 < st.max_climb_m <= ReplanConfig().ceiling_agl_m - 1.5
-    # back on the plan's line and height after the rejoin
-    assert abs(f.ref[-1, 1] - CORRIDOR_Y) < 0.02 and abs(f.ref[-1, 2] - 1.5) < 0.02
+    # back on the plan's line and height when the rejoin ends (at a way-point)
+    assert f.modes[-1] == "follow" and f.t[-1] < 30.0
+    assert abs(f.ref[-1, 1] - CORRIDOR_Y) < 0.05 and abs(f.ref[-1, 2] - 1.5) < 0.05
     # no jump anywhere, the switches included: each frame's change of p, v, a is
     # bounded by the speed, acceleration and jerk limits (per axis) times the frame
     cfg = ReplanConfig()
@@ -321,7 +325,7 @@ def test_tall_obstacle_stop_then_reroute_and_finish(field):
 def test_obstacle_beside_the_line_is_passed_within_the_corridor(field):
     # a post near the south row: a gap of more than the clearance remains to its north
     post = Cylinder(9.0, CORRIDOR_Y - 0.8, 0.2, 4.0)
-    f = fly(field, [post], stop_after=_after_rejoin(4.0))
+    f = fly(field, [post], stop_after=_after_rejoin())
     acts = _actions(f)
     assert "avoid" in acts and "stop" not in acts and "hold" not in acts, acts
     assert f.clearance([post]).min() >= ReplanConfig().clearance_m
@@ -330,21 +334,35 @@ def test_obstacle_beside_the_line_is_passed_within_the_corridor(field):
     assert f.replanner.stats.max_lateral_deviation_m <= 0.5
 
 
-def test_ablation_clearance_governor(field):
-    """Our addition, the clearance governor, against the APF alone (the same
-    flight, sensors and obstacle): a post 0.65 m beside the line, at the
-    turning point that is the APF's goal. The improved repulsion is scaled
-    by the goal distance squared and vanishes at the goal, so the APF alone
-    comes within the clearance; with the governor the reference keeps it."""
-    post = Cylinder(17.0, CORRIDOR_Y + 0.65, 0.2, 4.0)
-
-    def rerouted(st, t):
-        return st.mode == "reroute"
-    with_gov = fly(field, [post], stop_after=rerouted)
-    without = fly(field, [post], cfg=replace(ReplanConfig(), clearance_governor=False), stop_after=rerouted)
-    c_with = with_gov.clearance([post]).min()
-    c_without = without.clearance([post]).min()
-    assert c_with >= ReplanConfig().clearance_m > c_without
+def test_ablation_clearance_governor():
+    """Our addition, the clearance governor, against the APF alone (same plan,
+    same obstacle, nothing else changed): a thin post 0.4 m from the turning
+    point that is the APF's goal, beside the line so that the corridor leaves
+    a gap. The improved repulsion is scaled by the goal distance squared and
+    vanishes at the goal, so the APF alone settles at the goal, within the
+    clearance; with the governor the reference keeps the clearance. The post
+    is given to the memory directly (a column of points), no sensors."""
+    from companion.mission.schema import FlightConfig
+    t = np.array([0.0, 12.0, 16.0])
+    P = np.array([[0.0, 0.0, 1.5], [10.0, 0.0, 1.5], [10.0, -3.0, 1.5]])
+    traj = generate_trajectory(t, P, target_enu_m=np.array([5.0, 5.0, 1.5]))
+    plan = GlobalPlan.from_waypoints(traj, t, P, np.zeros((3, 3)), np.zeros((3, 3)), np.ones(3, bool),
+                                     np.zeros((0, 2, 2)), np.array([5.0, 5.0, 1.5]), FlightConfig(),
+                                     TrajectoryConfig(), 1.0, (10.0, -3.0))
+    post = np.array([[10.2, 0.35, z] for z in np.arange(0.0, 4.0, 0.1)])
+    out = {}
+    for governor in (True, False):
+        rp = Replanner(replace(ReplanConfig(), clearance_governor=governor, memory_s=1e3), build_field().known, plan)
+        for q in post:
+            rp.memory.add(0.0, q)
+        d = []
+        for k in range(1000):
+            st = rp.step(0.02 * k, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+            d.append(np.min(np.linalg.norm(post - st.ref.p, axis=1)))
+            if st.mode in ("reroute", "hold", "done"):
+                break
+        out[governor] = min(d)
+    assert out[True] >= ReplanConfig().clearance_m > out[False]
 
 
 # --- re-route, as a pure function -------------------------------------------------------------

@@ -161,7 +161,8 @@ def test_fan_points_follow_the_sensor_roll():
     zs = sorted(h[2] - 1.5 for h in ev.fan_hits)
     np.testing.assert_allclose(zs, [-3 * math.sin(hfov / 2), 3 * math.sin(hfov / 2)], atol=1e-6)
     np.testing.assert_allclose([h[1] for h in ev.fan_hits], 0.0, atol=1e-6)
-    assert ev.half_angle_rad == 0.0 and ev.half_angle_max_rad == pytest.approx(hfov / 2)
+    assert ev.half_v_rad == 0.0 and ev.half_h_rad == ev.half_max_rad == pytest.approx(hfov / 2)
+    np.testing.assert_allclose(np.abs(ev.h_axis), (0, 0, 1), atol=1e-6)   # the FOV opens vertically
 
 
 def test_no_return_clears_to_max_and_invalid_reading_gives_nothing():
@@ -264,26 +265,42 @@ def test_memory_decays_unless_seen_again():
     m = _memory()
     m.add(0.0, (5.0, 0.0, 1.5))
     m.add(0.0, (6.0, 0.0, 1.5))
-    m.add(4.0, (6.02, 0.01, 1.51))               # same voxel: refreshed, not added
+    m.add(4.0, (6.02, 0.01, 1.51))               # same voxel: refreshed, not added, not moved
     assert len(m) == 2
     m.expire(5.5, (0.0, 0.0, 1.5))
-    assert len(m) == 1 and m.points()[0] == pytest.approx((6.02, 0.01, 1.51))
+    assert len(m) == 1 and m.points()[0] == pytest.approx((6.0, 0.0, 1.5))
     m.expire(9.5, (0.0, 0.0, 1.5))
     assert len(m) == 0
+
+
+def _beam(origin, axis, h_axis, free_m, half_h=math.radians(2.5), half_v=math.radians(2.5)):
+    from companion.replan import BeamEvidence
+    v_axis = tuple(np.cross(axis, h_axis))
+    return BeamEvidence(origin, axis, h_axis, v_axis, half_h, half_v, free_m, None, math.nan)
 
 
 def test_memory_cleared_by_a_beam_through_the_point_not_beside_it():
     m = _memory()
     m.add(0.0, (3.0, 0.0, 1.5))
     # a beam beside the point (the side sensor after passing it) does not clear it
-    m.clear_beam((4.0, 0.0, 1.5), (0.0, 1.0, 0.0), math.radians(2.5), 10.0)
+    m.clear_beam(_beam((4.0, 0.0, 1.5), (0.0, 1.0, 0.0), (-1.0, 0.0, 0.0), 10.0))
     assert len(m) == 1
     # a beam whose return is at the point keeps it (within the margin)
-    m.clear_beam((0.0, 0.0, 1.5), (1.0, 0.0, 0.0), math.radians(2.5), 3.05)
+    m.clear_beam(_beam((0.0, 0.0, 1.5), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), 3.05))
     assert len(m) == 1
     # a beam that now reaches farther through the point clears it
-    m.clear_beam((0.0, 0.0, 1.5), (1.0, 0.0, 0.0), math.radians(2.5), 8.0)
+    m.clear_beam(_beam((0.0, 0.0, 1.5), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), 8.0))
     assert len(m) == 0
+
+
+def test_memory_clearing_follows_the_field_of_view():
+    # a fan 40 deg wide, flat (no vertical field of view), looking east from the origin
+    fan = _beam((0.0, 0.0, 1.5), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), 8.0, math.radians(20), 0.0)
+    m = _memory()
+    m.add(0.0, (3.0, 1.0, 1.5))          # 18 deg off the axis, in the fan: cleared
+    m.add(0.0, (3.0, 1.2, 1.5))          # 22 deg off: outside
+    m.add(0.0, (3.0, 0.0, 1.8))          # above the flat fan
+    assert m.clear_beam(fan) == 1 and len(m) == 2
 
 
 def test_memory_bounded_and_local():

@@ -1,14 +1,18 @@
 """Short-lived local memory of unknown obstacle points (ENU, m).
 
 One point per voxel (``voxel_m``): a new return in an occupied voxel
-replaces its point and refreshes its time, so an obstacle seen again and
-again does not grow the memory. Points are forgotten when
+refreshes its time and keeps the point first seen there, so an obstacle
+seen again and again does not grow the memory, and the point does not
+creep with the sensor (a horizontal beam climbing a face would otherwise
+drag the voxel's point up to the top, where the first beam over the top
+clears it). Points are forgotten when
 
 - not seen again for ``lifetime_s`` (decay, vehicle time);
 - farther than ``radius_m`` from the vehicle;
-- inside a beam that is now free (clearing): a later reading's cone passes
-  through the point short of its own return (by ``clear_margin_m``), so the
-  obstacle moved or was a false return;
+- inside a beam that is now free (clearing): a later reading's field of
+  view holds the point short of its own return (by ``clear_margin_m``), so
+  the obstacle moved, was a false return, or was one of the candidate
+  positions of a wide beam's return that another beam shows to be free;
 - the capacity is reached (the oldest point goes first).
 
 So a side sensor that stops seeing an obstacle beside the vehicle (its beam
@@ -72,9 +76,9 @@ class ObstacleMemory:
             i = self._free.pop()
             self._slots[key] = i
             self._key[i] = key
-        self._pts[i] = (x, y, z)
+            self._pts[i] = (x, y, z)
+            self._cache = None
         self._t[i] = t_s
-        self._cache = None
 
     def _drop(self, i: int) -> None:
         key = self._key[i]
@@ -98,20 +102,22 @@ class ObstacleMemory:
         """(k,) last-seen times of ``points()``, same order."""
         return self._t[self._active()] if self._slots else np.zeros(0)
 
-    def clear_beam(self, origin, axis, half_angle_rad: float, free_m: float) -> int:
-        """Forget the points inside the cone (origin, unit axis, half-angle) short of
-        ``free_m - clear_margin_m``; returns how many were forgotten."""
+    def clear_beam(self, ev) -> int:
+        """Forget the points inside a free beam (``perception.BeamEvidence``): in its
+        pyramid (half the fields of view about the axis, plus half a voxel) and
+        short of ``free_m - clear_margin_m``; returns how many were forgotten."""
         if not self._slots:
             return 0
-        reach = free_m - self.clear_margin_m
+        reach = ev.free_m - self.clear_margin_m
         if reach <= 0.0:
             return 0
         idx = self._active()
-        rel = self._pts[idx] - np.asarray(origin, dtype=float)
-        along = rel @ np.asarray(axis, dtype=float)
-        perp2 = np.einsum("ki,ki->k", rel, rel) - along * along
-        lim = along * math.tan(half_angle_rad) + 0.5 * self.voxel_m
-        inside = (along > 0.0) & (along < reach) & (perp2 <= lim * lim)
+        rel = self._pts[idx] - np.asarray(ev.origin, dtype=float)
+        along = rel @ np.asarray(ev.axis, dtype=float)
+        r = 0.5 * self.voxel_m
+        inside = (along > 0.0) & (along < reach)
+        inside &= np.abs(rel @ np.asarray(ev.h_axis, dtype=float)) <= along * math.tan(ev.half_h_rad) + r
+        inside &= np.abs(rel @ np.asarray(ev.v_axis, dtype=float)) <= along * math.tan(ev.half_v_rad) + r
         gone = idx[inside]
         for i in gone.tolist():
             self._drop(i)

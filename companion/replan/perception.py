@@ -9,14 +9,15 @@ Geometry (all ENU world / FLU body, m)::
 
 ``R_flu_sensor`` comes decoded with the reading (``companion.link.codec``:
 orientations 0..7, 24, 25 and MAV_SENSOR_ROTATION_CUSTOM's quaternion).
-The return is placed on the beam axis: a rangefinder reports the nearest
-surface anywhere in its field of view, so the true point may be off the
-axis by up to ``distance * tan(fov / 2)`` (9 cm at 2 m for 5 deg); the
-clearance margin absorbs it. The beam is free of obstacles up to the
-distance (a cone of half-angle ``min(hfov, vfov) / 2``: the smaller, so
-clearing never reaches where the sensor did not look), or up to ``max_m``
-for a reading with no return. A reading below ``min_m`` (NaN without
-``no_return``) is no evidence.
+The return is placed on the beam axis, and a rangefinder reports the
+nearest surface anywhere in its field of view, so the true point may be off
+the axis by up to ``distance * tan(fov / 2)``: ``fan_hits`` are the four
+edge midpoints of the field of view at the measured distance (the replanner
+classifies all five and, for a wide beam, remembers them all). The beam's
+pyramid (its horizontal and vertical fields of view about its axis) is free
+of obstacles up to the distance, or up to ``max_m`` for a reading with no
+return. A reading below ``min_m`` (NaN without ``no_return``) is no
+evidence.
 
 The pose at the reading's time comes from ``PoseHistory``: position
 interpolated linearly between the two poses around that time (or
@@ -52,10 +53,18 @@ class PoseHistory:
     def __init__(self, history_s: float = HISTORY_S) -> None:
         self.history_s = float(history_s)
         self._poses: deque[Pose] = deque()
+        self._last: Pose | None = None          # the last answer (one frame's readings share a time)
 
     def add(self, t_s: float, pos_enu_m, R_enu_flu) -> None:
-        """Append a pose (times non-decreasing; an older one restarts the history)."""
-        R = tuple(float(x) for x in (R_enu_flu.ravel() if hasattr(R_enu_flu, "ravel") else R_enu_flu))
+        """Append a pose (times non-decreasing; an older one restarts the history).
+
+        ``R_enu_flu``: a (3, 3) array, three rows, or a row-major 9-sequence.
+        """
+        if hasattr(R_enu_flu, "ravel"):
+            R_enu_flu = R_enu_flu.ravel().tolist()
+        elif len(R_enu_flu) == 3:
+            R_enu_flu = [*R_enu_flu[0], *R_enu_flu[1], *R_enu_flu[2]]
+        R = tuple(float(x) for x in R_enu_flu)
         if len(R) != 9:
             raise ValueError("R_enu_flu must have 9 elements")
         pose = Pose(float(t_s), (float(pos_enu_m[0]), float(pos_enu_m[1]), float(pos_enu_m[2])), R)
@@ -63,6 +72,7 @@ class PoseHistory:
         if q and pose.t_s < q[-1].t_s:
             q.clear()
         q.append(pose)
+        self._last = None
         while q[0].t_s < pose.t_s - self.history_s:
             q.popleft()
 
@@ -73,6 +83,9 @@ class PoseHistory:
         """Pose at ``t_s`` (module doc); None when ``t_s`` is outside the history
         (older than its first pose, or newer than the last by more than
         ``MAX_EXTRAPOLATION_S``)."""
+        last = self._last
+        if last is not None and last.t_s == t_s:
+            return last
         q = self._poses
         if not q or t_s < q[0].t_s - 1e-9 or t_s > q[-1].t_s + MAX_EXTRAPOLATION_S:
             return None
@@ -85,8 +98,10 @@ class PoseHistory:
         a, b = q[i - 1], q[i]
         span = b.t_s - a.t_s
         f = 1.0 if span <= 0.0 else (t_s - a.t_s) / span
-        p = tuple(a.p[k] + f * (b.p[k] - a.p[k]) for k in range(3))
-        return Pose(float(t_s), p, a.R if f < 0.5 else b.R)
+        ap, bp = a.p, b.p
+        p = (ap[0] + f * (bp[0] - ap[0]), ap[1] + f * (bp[1] - ap[1]), ap[2] + f * (bp[2] - ap[2]))
+        self._last = Pose(float(t_s), p, a.R if f < 0.5 else b.R)
+        return self._last
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,12 +112,15 @@ class BeamEvidence:
     ----------
     origin : 3-tuple
         Sensor position.
-    axis : 3-tuple
-        Unit beam direction.
-    half_angle_rad : float
-        Half-angle of the cone known to be free (min of the two fields of view).
+    axis, h_axis, v_axis : 3-tuples
+        The sensor frame in ENU: unit beam direction, and the directions in
+        which the horizontal and the vertical fields of view open (sensor y
+        and z).
+    half_h_rad, half_v_rad : float
+        Half the horizontal and vertical fields of view (0 when unset).
     free_m : float
-        The cone is free of obstacles from the origin up to this range.
+        The beam (the pyramid of its fields of view) is free of obstacles
+        from the origin up to this range.
     hit : 3-tuple or None
         The return on the axis at the measured distance; None without a return.
     distance_m : float
@@ -112,18 +130,27 @@ class BeamEvidence:
         along the four edge midpoints of the field of view (empty without a
         return or without a field of view). A return is explained by the
         known map if any of ``hit`` and these is on a known feature.
-    half_angle_max_rad : float
-        Half the larger field of view.
     """
 
     origin: tuple
     axis: tuple
-    half_angle_rad: float
+    h_axis: tuple
+    v_axis: tuple
+    half_h_rad: float
+    half_v_rad: float
     free_m: float
     hit: tuple | None
     distance_m: float
     fan_hits: tuple = ()
-    half_angle_max_rad: float = 0.0
+
+    @property
+    def half_max_rad(self) -> float:
+        """Half the larger field of view."""
+        return max(self.half_h_rad, self.half_v_rad)
+
+
+def _half(fov: float) -> float:
+    return 0.5 * fov if math.isfinite(fov) and 0.0 <= fov < math.pi else 0.0
 
 
 def beam_evidence(reading, pose: Pose, offset_flu_m=(0.0, 0.0, 0.0)) -> BeamEvidence | None:
@@ -161,22 +188,22 @@ def beam_evidence(reading, pose: Pose, offset_flu_m=(0.0, 0.0, 0.0)) -> BeamEvid
     origin = (px + r00 * ox + r01 * oy + r02 * oz,
               py + r10 * ox + r11 * oy + r12 * oz,
               pz + r20 * ox + r21 * oy + r22 * oz)
-    bx, by, bz = S[0], S[3], S[6]                         # first column: beam in body FLU
-    axis = (r00 * bx + r01 * by + r02 * bz, r10 * bx + r11 * by + r12 * bz, r20 * bx + r21 * by + r22 * bz)
+    cols = []
+    for c in range(3):                                    # the sensor's axes, body FLU -> ENU
+        bx, by, bz = S[c], S[3 + c], S[6 + c]
+        cols.append((r00 * bx + r01 * by + r02 * bz, r10 * bx + r11 * by + r12 * bz,
+                     r20 * bx + r21 * by + r22 * bz))
+    axis = cols[0]
     n = math.sqrt(axis[0] ** 2 + axis[1] ** 2 + axis[2] ** 2)
-    if not (n > 0.0 and math.isfinite(n)) or not all(math.isfinite(c) for c in origin):
+    if not (abs(n - 1.0) < 1e-6) or not math.isfinite(origin[0] + origin[1] + origin[2]):
         return None
-    axis = (axis[0] / n, axis[1] / n, axis[2] / n)
-    fovs = [f for f in (reading.hfov_rad, reading.vfov_rad) if math.isfinite(f) and f >= 0.0]
-    half = 0.5 * min(fovs) if fovs else 0.0
     hit = None
     fan = ()
     if math.isfinite(d):
         hit = (origin[0] + d * axis[0], origin[1] + d * axis[1], origin[2] + d * axis[2])
         fan = tuple(_fan_points(pose.R, S, origin, d, reading.hfov_rad, reading.vfov_rad))
-    half_max = 0.5 * max(fovs) if fovs else 0.0
-    return BeamEvidence(origin, axis, min(half, 0.5 * math.pi - 1e-3), float(free), hit, d, fan,
-                        min(half_max, 0.5 * math.pi - 1e-3))
+    return BeamEvidence(origin, axis, cols[1], cols[2], _half(reading.hfov_rad), _half(reading.vfov_rad),
+                        float(free), hit, d, fan)
 
 
 def _fan_points(R, S, origin, d: float, hfov: float, vfov: float):

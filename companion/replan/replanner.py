@@ -19,10 +19,11 @@ Modes (``ReplanStep.mode``)
             - corridor: the lateral offset from the leg's line stays within
               ``lateral_limit_m`` (soft walls, the rows are walls);
             - height: between ``floor_agl_m`` and ``ceiling_agl_m`` above the terrain;
-            - clearance governor (our addition, see below): the speed toward
-              any remembered point is at most sqrt(2 a_b (d - clearance -
-              ``GOVERNOR_MARGIN_M``)), a_b = ``accel_m_s2`` / 2, so the
-              reference can always brake before the clearance.
+            - clearance governor (our addition, see below): the speed v
+              toward any remembered point d away satisfies v^2 / (2 a_b) +
+              v ``GOVERNOR_LAG_S`` <= d - clearance - ``GOVERNOR_MARGIN_M``,
+              a_b = ``accel_m_s2`` / 2, so the shaped reference can always
+              brake before the clearance.
 ``climb``   the vertical escape (Fig. 19: "the obstacle avoidance was
             performed vertically"), the same APF with virtual goals. When no
             lateral gap of the corridor lets the vehicle pass an obstacle
@@ -89,6 +90,10 @@ _FOLLOWING = ("follow", "rejoin", "reroute")
 
 #: The governor keeps the reference this much (m) beyond the clearance while braking.
 GOVERNOR_MARGIN_M = 0.1
+#: The governor's braking law allows for this lag (s) of the shaped reference: with the
+#: default limits (1 m/s^2, 2 m/s^3) the shaper stops from 1 m/s in 0.97 m, from
+#: 0.5 m/s in 0.37 m; v^2 / (2 a_b) + v t_lag gives 1.6 m and 0.55 m.
+GOVERNOR_LAG_S = 0.6
 #: Extra height (m) above the top of an obstacle plus the clearance and the governor margin.
 PASS_MARGIN_M = 0.1
 #: Obstacle points closer than this (m) to a nearer one belong to the same obstacle.
@@ -102,6 +107,8 @@ CALM_FRACTION = 0.5
 #: Time constant of the gradient flow (s): the velocity command is F / (k_att T), so
 #: the attraction alone closes on the goal at 1/T of the distance per second.
 FLOW_TIME_S = 1.0
+#: The rejoin waits until no point is within the trigger range plus this (m).
+REJOIN_HYSTERESIS_M = 0.3
 #: A rejoin that fails its checks is tried again after this long (s).
 REJOIN_RETRY_S = 0.25
 #: Soft-wall gain (1/s): the speed toward a wall is at most this times the distance left.
@@ -346,14 +353,14 @@ class Replanner:
             return
         mem = self.memory
         if len(mem):
-            mem.clear_beam(ev.origin, ev.axis, ev.half_angle_rad, ev.free_m)
+            mem.clear_beam(ev)
         if ev.hit is not None:
             classify = self.known.classify
             if classify(*ev.hit) == UNKNOWN and all(classify(*q) == UNKNOWN for q in ev.fan_hits):
                 # the return may come from anywhere in the field of view: keep the
                 # edge points too where they are a voxel apart (later beams clear them)
                 mem.add(t_s, ev.hit)
-                if ev.distance_m * math.tan(ev.half_angle_max_rad) > self.cfg.voxel_m:
+                if ev.distance_m * math.tan(ev.half_max_rad) > self.cfg.voxel_m:
                     for q in ev.fan_hits:
                         mem.add(t_s, q)
                 self.n_unknown += 1
@@ -420,32 +427,33 @@ class Replanner:
         if self._dev_leg is not None:
             self._deviation(s.p)
         if len(self.memory):
-            rng = self._threat(tau, s)
+            rng = self._threat(s.p, s.v, self._leg_frame(self._leg_at(tau))[2])
             if rng is not None:
                 self._enter_avoid(tau, s, rng, events)
         return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
 
     def _trigger_m(self, speed: float) -> float:
-        return max(self.cfg.influence_range_m,
-                   speed * speed / (2.0 * self._brake) + self.cfg.clearance_m + GOVERNOR_MARGIN_M + 0.5)
+        """Range (m) at which an obstacle point starts an avoidance: d_o, or farther when
+        the governor's braking distance from ``speed`` (plus 0.5 m) needs it."""
+        return max(self.cfg.influence_range_m, speed * speed / (2.0 * self._brake) + speed * GOVERNOR_LAG_S
+                   + self.cfg.clearance_m + GOVERNOR_MARGIN_M + 0.5)
 
-    def _threat(self, tau: float, s) -> float | None:
-        """Distance to the nearest remembered point within the trigger range, not behind; None if none."""
+    def _threat(self, p, v, leg_u, extra_m: float = 0.0) -> float | None:
+        """Distance to the nearest remembered point within the trigger range (plus
+        ``extra_m``) that is not behind (along the horizontal velocity, or ``leg_u``
+        when hovering, at least -clearance); None if none. The same test starts
+        an avoidance and (with ``REJOIN_HYSTERESIS_M``) allows the rejoin."""
         pts = self.memory.points()
-        P = np.asarray(s.p)
-        rel = pts - P
-        dist = np.sqrt(np.einsum("ki,ki->k", rel, rel))
-        vh = math.hypot(s.v[0], s.v[1])
-        if vh > 0.05:
-            u = np.array([s.v[0] / vh, s.v[1] / vh])
-        else:
-            u = self._leg_frame(self._leg_at(tau))[2]
-        along = rel[:, :2] @ u
-        rel_ok = (dist <= self._trigger_m(math.sqrt(s.v[0] ** 2 + s.v[1] ** 2 + s.v[2] ** 2))) & \
-            (along >= -self.cfg.clearance_m)
-        if not rel_ok.any():
+        if not len(pts):
             return None
-        return float(dist[rel_ok].min())
+        rel = pts - np.asarray(p)
+        dist = np.sqrt(np.einsum("ki,ki->k", rel, rel))
+        vh = math.hypot(v[0], v[1])
+        u = np.array([v[0] / vh, v[1] / vh]) if vh > 0.05 else leg_u
+        along = rel[:, :2] @ u
+        speed = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+        ok = (dist <= self._trigger_m(speed) + extra_m) & (along >= -self.cfg.clearance_m)
+        return float(dist[ok].min()) if ok.any() else None
 
     def _enter_avoid(self, tau: float, s, rng: float, events: list) -> None:
         self.shaper.reset(s.p, s.v, s.a, s.jerk)
@@ -479,8 +487,8 @@ class Replanner:
         along = rel[:, :2] @ u
         c = cfg.clearance_m
         near = dist <= cfg.influence_range_m
-        relevant = near & (along >= -c)
-        if not relevant.any() and tau >= self._next_rejoin and self._calm():
+        if tau >= self._next_rejoin and self._calm() and \
+                self._threat(P, self.shaper.v, u, REJOIN_HYSTERESIS_M) is None:
             ref = self._try_rejoin(tau, events)
             if ref is not None:
                 return ref
@@ -564,18 +572,26 @@ class Replanner:
             vt, vn = vt * self.speed_m_s / h, vn * self.speed_m_s / h
         return np.array([vt * u[0] + vn * n[0], vt * u[1] + vn * n[1], vz])
 
+    def _allowed_speed(self, room_m):
+        """Largest speed (m/s) that stops within ``room_m`` (scalar or array): braking at
+        a_b after a lag, v^2 / (2 a_b) + v t_lag = room."""
+        bt = self._brake * GOVERNOR_LAG_S
+        return np.sqrt(bt * bt + 2.0 * self._brake * room_m) - bt
+
     def _wall_speed(self, d: float) -> float:
         """Largest speed (m/s) toward a wall ``d`` m away (negative: pushed back from beyond it):
         the soft-wall gain and the braking law, whichever is lower."""
         if d <= 0.0:
             return WALL_GAIN_1_S * d
-        return min(WALL_GAIN_1_S * d, math.sqrt(2.0 * self._brake * d))
+        return min(WALL_GAIN_1_S * d, float(self._allowed_speed(d)))
 
     def _govern(self, P, v, obs, obs_dist, scale_only: bool = False) -> np.ndarray:
-        """Clearance governor: approach speed to each point <= sqrt(2 a_b (d - c - margin))."""
+        """Clearance governor: the approach speed to each point is at most the v with
+        v^2 / (2 a_b) + v t_lag = d - clearance - margin (braking at a_b after the
+        shaper's lag t_lag = ``GOVERNOR_LAG_S``)."""
         d = np.maximum(obs_dist, 1e-9)
         nrm = (P - obs) / d[:, None]                        # from each point to the vehicle
-        allow = np.sqrt(2.0 * self._brake * np.maximum(0.0, d - self.cfg.clearance_m - GOVERNOR_MARGIN_M))
+        allow = self._allowed_speed(np.maximum(0.0, d - self.cfg.clearance_m - GOVERNOR_MARGIN_M))
         if scale_only:
             approach = -(nrm @ v)
             bad = approach > allow + 1e-12
@@ -649,10 +665,12 @@ class Replanner:
         A, B, u, n = self._leg_frame(k)
         ci = self._ci
         i0, i1 = int(ci[min(k, len(ci) - 2)]), int(ci[min(k + 1, len(ci) - 1)])
-        lead = max(1.0, self.speed_m_s)
         first = None
         for i in range(i0 + 1, i1 + 1):
             a_i = float((plan.p_enu_m[i, :2] - P[:2]) @ u)
+            # far enough ahead to come down to it at cruise speed (no turning back)
+            t_down = 1.875 * abs(float(plan.p_enu_m[i, 2] - P[2])) / self.cfg.vertical_speed_m_s
+            lead = max(1.0, self.speed_m_s, self.speed_m_s * t_down)
             if (i == i1 and a_i > -0.1) or a_i > lead:
                 first = i
                 break
