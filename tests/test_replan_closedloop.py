@@ -409,3 +409,60 @@ def test_reroute_without_a_route_reports(field):
     plan = replace(field.plan, segments=field.plan.segments[:1])       # only this corridor left
     res = reroute(plan, wall, st, 20.0, plan.waypoint_index_at(8.0), pts, (1.0, 0.0), 0.5, 0.5)
     assert res.plan is None and "none of the 2 coverage pieces left can be reached" in res.reason
+
+
+# --- time-bounded escape, garbage, the report --------------------------------------------------
+
+
+def test_escape_is_time_bounded_then_holds(field):
+    """A climb that cannot get through in ``escape_timeout_s`` stops and holds
+    (here a 1 s bound against the 1.6 m post the default climbs in about 6 s)."""
+    post = Cylinder(9.0, CORRIDOR_Y, 0.25, 1.6)
+    f = fly(field, [post], cfg=replace(ReplanConfig(), escape_timeout_s=1.0), t_end_s=40.0)
+    acts = _actions(f)
+    assert acts == ["avoid", "climb", "stop", "hold"], acts
+    assert f.steps[-1].hold and not f.steps[-1].finished and f.modes[-1] == "hold"
+    assert "escape" in f.events[2].detail
+    assert np.linalg.norm(f.ref[-1, 3:6]) == 0.0                 # holding still
+    assert f.clearance([post]).min() >= ReplanConfig().clearance_m
+
+
+def test_garbage_readings_are_ignored(field):
+    import json
+    rp = Replanner(ReplanConfig(), field.known, field.plan)
+    rp.start(0.0)
+    eye = tuple(np.eye(3).ravel())
+    rp.on_range(0.0, codec.Range(0, 1, 2.0, 0.1, 10.0, 0, 0.1, 0.1, math.nan, False, eye))   # before any pose
+    rp.on_pose(0.0, (1.0, CORRIDOR_Y, 1.5), eye)
+    bad = [codec.Range(0, 1, 2.0, 0.1, 10.0, 8, 0.1, 0.1, math.nan, False, None),          # unsupported
+           codec.Range(0, 1, math.nan, 0.1, 10.0, 0, 0.1, 0.1, math.nan, False, eye),      # below min
+           codec.Range(0, 1, math.inf, 0.1, math.inf, 0, math.nan, -1.0, math.nan, True, eye),
+           codec.Range(0, 1, 2.0, 0.1, 10.0, 0, math.nan, math.inf, math.nan, False, (math.nan,) * 9)]
+    for r in bad:
+        rp.on_range(0.0, r)
+    st = rp.step(0.0, (1.0, CORRIDOR_Y, 1.5), (0.0, 0.0, 0.0))
+    assert st.mode == "follow" and len(rp.memory) == 0
+    assert rp.stats.ignored_readings == len(bad) + 1 and rp.stats.readings == len(bad) + 1
+    assert json.loads(json.dumps(rp.stats.to_dict()))["readings"] == len(bad) + 1
+    # a reading stamped on another clock is placed with the pose at its arrival
+    rp.on_range(0.0, codec.Range(10 ** 9, 1, 2.0, 0.1, 10.0, 0, 0.1, 0.1, math.nan, False, eye))
+    assert rp.memory.points()[0] == pytest.approx((3.0, CORRIDOR_Y, 1.5))
+
+
+def test_stats_for_the_report(field):
+    post = Cylinder(9.0, CORRIDOR_Y, 0.25, 1.6)
+    f = fly(field, [post], stop_after=_after_rejoin())
+    d = f.replanner.stats.to_dict()
+    assert d["events"] == 3 and [e["action"] for e in d["event_list"]] == ["avoid", "climb", "rejoin"]
+    e0 = d["event_list"][0]
+    assert e0["obstacle_range_m"] <= f.replanner._trigger_m(1.0) and len(e0["pos_enu_m"]) == 3
+    # the reference's climb above the flight height, from the log
+    assert d["max_climb_m"] == pytest.approx(f.ref[:, 2].max() - 1.5, abs=1e-9)
+    lateral = np.abs(f.ref[:, 1] - CORRIDOR_Y).max()
+    assert d["max_lateral_deviation_m"] == pytest.approx(lateral, abs=1e-9)
+    # extra path: flown length minus the plan's, both from the log and the plan
+    flown = np.sum(np.linalg.norm(np.diff(f.ref[:, :3], axis=0), axis=1))
+    tr = field.plan.trajectory
+    planned = np.sum(np.linalg.norm(np.diff(tr.sample(np.append(np.arange(tr.t0, tr.tf, 0.05), tr.tf)).p,
+                                            axis=0), axis=1))
+    assert d["extra_path_m"] == pytest.approx(flown - planned, abs=1e-6)

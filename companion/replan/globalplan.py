@@ -92,11 +92,20 @@ class GlobalPlan:
 
     @classmethod
     def from_waypoints(cls, trajectory, t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, corner, segments_xy,
-                       target_enu_m, flight, trajectory_config, min_segment_m, final_xy) -> "GlobalPlan":
+                       target_enu_m, flight, trajectory_config, min_segment_m, final_xy=None) -> "GlobalPlan":
         """Assemble a plan; ``segments_xy`` (k, 2, 2) main segments in flight order
-        (each [start, end], ENU m) are matched to the way-points at their ends."""
+        (each [start, end], ENU m) are matched to the way-points at their ends.
+
+        ``segments_xy`` None (a plan read from plan.json, which has no main
+        segments): every leg between turning points at least ``min_segment_m``
+        long counts as coverage. ``final_xy`` None: the last way-point.
+        """
         p = np.asarray(p_enu_m, dtype=float)
         corner = np.asarray(corner, dtype=bool)
+        if segments_xy is None:
+            segments_xy = legs_as_segments(p[:, :2], corner, float(min_segment_m))
+        if final_xy is None:
+            final_xy = p[-1, :2]
         segs = match_segments(np.asarray(segments_xy, dtype=float).reshape(-1, 2, 2), p[:, :2], corner)
         return cls(trajectory, np.asarray(t_s, dtype=float), p, np.asarray(v_enu_m_s, dtype=float),
                    np.asarray(a_enu_m_s2, dtype=float), corner, segs,
@@ -153,3 +162,11 @@ def match_segments(segments_xy: np.ndarray, wp_xy: np.ndarray, corner: np.ndarra
             cursor = min(k, n - 1)
         out.append(Segment((float(a[0]), float(a[1])), (float(b[0]), float(b[1])), ends[0], ends[1]))
     return tuple(out)
+
+
+def legs_as_segments(wp_xy: np.ndarray, corner: np.ndarray, min_length_m: float) -> np.ndarray:
+    """(k, 2, 2) the legs between consecutive turning points at least ``min_length_m`` long."""
+    idx = np.flatnonzero(corner)
+    out = [(wp_xy[a], wp_xy[b]) for a, b in zip(idx[:-1], idx[1:])
+           if np.hypot(*(wp_xy[b] - wp_xy[a])) >= min_length_m]
+    return np.array(out, dtype=float).reshape(-1, 2, 2)

@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..coverage.freespace import FreeSpace, dilate_runs, disk_half_widths
+from ..coverage.freespace import FreeSpace, dilate_runs, disk_half_widths, erode_free_space
 from ..maps.grid import ElevationModel, OccupancyGrid
 from ..maps.heightfield import HeightField
 
@@ -87,6 +87,20 @@ class KnownMap:
         empty = np.zeros(grid.shape, dtype=bool)
         return cls(grid, dem, free, float(canopy_height_m), float(tolerance_m), known_rows,
                    empty, empty, HeightField(dem))
+
+    @classmethod
+    def from_mission(cls, mission, grid: OccupancyGrid, dem: ElevationModel,
+                     free_eroded: np.ndarray | None = None) -> "KnownMap":
+        """The map of a mission: its ``replan`` canopy height and tolerance, the free
+        space eroded by its coverage safety margin (``free_eroded``: the plan's
+        ``coverage.free_eroded`` when at hand, else computed here)."""
+        margin = mission.coverage.safety_margin_m
+        if free_eroded is None:
+            free = erode_free_space(grid, margin)
+        else:
+            free = FreeSpace(np.asarray(free_eroded, dtype=bool), grid.free & ~grid.occupied, grid.resolution_m,
+                             margin + grid.resolution_m)
+        return cls.build(grid, dem, free, mission.replan.canopy_height_m, mission.replan.known_tolerance_m)
 
     # --- scalar queries (per reading) --------------------------------------------------
 

@@ -211,6 +211,24 @@ class ReplanStats:
     unknown_hits: int
     ignored_readings: int
 
+    def to_dict(self) -> dict:
+        """Plain JSON types (report.json ``replanning``; events as {t_s, pos_enu_m, obstacle_range_m, action, detail})."""
+        def num(x):
+            return None if x is None else float(x)
+        return {
+            "events": int(self.events),
+            "event_list": [{"t_s": float(e.t_s), "pos_enu_m": [float(c) for c in e.pos_enu_m],
+                            "obstacle_range_m": num(e.obstacle_range_m), "action": e.action, "detail": e.detail}
+                           for e in self.event_list],
+            "max_lateral_deviation_m": float(self.max_lateral_deviation_m),
+            "extra_path_m": float(self.extra_path_m),
+            "max_climb_m": float(self.max_climb_m),
+            "min_obstacle_range_m": num(self.min_obstacle_range_m),
+            "readings": int(self.readings),
+            "unknown_hits": int(self.unknown_hits),
+            "ignored_readings": int(self.ignored_readings),
+        }
+
 
 def _pointing(p, target) -> tuple:
     if target is None:
@@ -299,6 +317,12 @@ class Replanner:
         self._stop_then = ""
         self._next_rejoin = -math.inf
         self._dev_leg: tuple | None = None
+
+    @classmethod
+    def from_plan(cls, plan, mission) -> "Replanner":
+        """For a ``companion.planner.Plan`` of ``mission`` (its maps, coverage and trajectory)."""
+        known = KnownMap.from_mission(mission, plan.grid, plan.dem, plan.coverage.free_eroded)
+        return cls(mission.replan, known, GlobalPlan.from_plan(plan, mission))
 
     # --- plan bookkeeping -------------------------------------------------------------
 
