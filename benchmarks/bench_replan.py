@@ -96,10 +96,13 @@ def attitude(s):
     return ((by, bx, 0.0), (-bx, by, 0.0), (0.0, 0.0, 1.0))
 
 
-def readings(world, t, p, R):
+def readings(world, t, p, R, due=None):
+    """The readings of the sensors ``due`` (indices; all when None) at pose (p, R)."""
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R
     out = []
-    for (sid, orient, Rs, h), fan in zip(SENSORS, FANS):
+    for k, ((sid, orient, Rs, h), fan) in enumerate(zip(SENSORS, FANS)):
+        if due is not None and k not in due:
+            continue
         best = math.inf
         for x, y, z in fan:
             best = min(best, world.raycast(p[0], p[1], p[2], r00 * x + r01 * y + r02 * z,
@@ -121,7 +124,9 @@ def fly(m, plan, known, gplan, obstacles, dt_s, sensor_every, t_max_s, timed=Fal
     k, t = 0, 0.0
     while t <= t_max_s:
         R = attitude(s)
-        rs = readings(world, t, p, R) if k % sensor_every == 0 else ()
+        # each sensor at 1 / sensor_every of the frames, staggered over the period as the SITL does
+        due = {i for i in range(len(SENSORS)) if (k + i) % sensor_every == 0}
+        rs = readings(world, t, p, R, due) if due else ()
         c0 = time.perf_counter()
         rp.on_pose(t, p, R)
         for r in rs:

@@ -22,6 +22,8 @@ from ..trajectory import Trajectory, TrajectoryConfig
 
 #: An end of a main segment matches a corner way-point within this distance (m).
 _MATCH_TOL_M = 0.05
+#: Legs this close (m) to the nearest are tied (at a turn, the direction decides).
+_LEG_TIE_M = 0.3
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,11 @@ class GlobalPlan:
     min_segment_m : float
         Shortest main segment worth flying (the coverage setting).
     final_xy : (2,) the end of the whole coverage path (ENU m).
+    turns_enu_m : (K, 3) array
+        The turning points of the path being flown (ENU m): the legs between
+        them are the corridors' lines the avoidance keeps to. A rejoined plan
+        keeps its parent's (its first way-point, the state it starts from,
+        is not a turning point of the path).
     """
 
     trajectory: Trajectory
@@ -79,6 +86,7 @@ class GlobalPlan:
     trajectory_config: TrajectoryConfig
     min_segment_m: float
     final_xy: tuple[float, float]
+    turns_enu_m: np.ndarray
 
     @classmethod
     def from_plan(cls, plan, mission) -> "GlobalPlan":
@@ -107,21 +115,40 @@ class GlobalPlan:
         if final_xy is None:
             final_xy = p[-1, :2]
         segs = match_segments(np.asarray(segments_xy, dtype=float).reshape(-1, 2, 2), p[:, :2], corner)
+        turns = p[np.union1d(np.flatnonzero(corner), [0, len(p) - 1])]
         return cls(trajectory, np.asarray(t_s, dtype=float), p, np.asarray(v_enu_m_s, dtype=float),
                    np.asarray(a_enu_m_s2, dtype=float), corner, segs,
                    None if target_enu_m is None else np.asarray(target_enu_m, dtype=float),
                    flight, trajectory_config, float(min_segment_m),
-                   (float(final_xy[0]), float(final_xy[1])))
+                   (float(final_xy[0]), float(final_xy[1])), turns)
 
-    @property
-    def corner_indices(self) -> np.ndarray:
-        """(K,) way-point indices of the turning points (the first and last way-points included)."""
-        idx = np.flatnonzero(self.corner)
-        if len(idx) == 0 or idx[0] != 0:
-            idx = np.concatenate([[0], idx])
-        if idx[-1] != len(self.t_s) - 1:
-            idx = np.append(idx, len(self.t_s) - 1)
-        return idx
+    def leg_frame(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Leg k (clamped): start and end turning points (3,), the horizontal unit
+        vector along it and the one to its left (2,), ENU."""
+        k = min(max(int(k), 0), len(self.turns_enu_m) - 2)
+        A, B = self.turns_enu_m[k], self.turns_enu_m[k + 1]
+        d = B[:2] - A[:2]
+        n = float(np.hypot(*d))
+        u = d / n if n > 1e-9 else np.array([1.0, 0.0])
+        return A, B, u, np.array([-u[1], u[0]])
+
+    def leg_near(self, p_enu_m, direction_xy=None) -> int:
+        """Index of the leg nearest (horizontally) to ``p_enu_m``; among legs within
+        ``_LEG_TIE_M`` of the nearest, the one most along ``direction_xy`` (at a turn)."""
+        T = self.turns_enu_m[:, :2]
+        if len(T) < 2:
+            return 0
+        a, b = T[:-1], T[1:]
+        ab = b - a
+        L2 = np.maximum(np.einsum("ki,ki->k", ab, ab), 1e-18)
+        q = np.asarray(p_enu_m, dtype=float)[:2]
+        s = np.clip(((q - a) * ab).sum(axis=1) / L2, 0.0, 1.0)
+        d = np.hypot(*(a + s[:, None] * ab - q).T)
+        near = np.flatnonzero(d <= d.min() + _LEG_TIE_M)
+        if direction_xy is None or len(near) == 1:
+            return int(near[0])
+        u = ab[near] / np.sqrt(L2[near])[:, None]
+        return int(near[np.argmax(u @ np.asarray(direction_xy, dtype=float))])
 
     def waypoint_index_at(self, t_s: float) -> int:
         """Index of the last way-point whose time is <= ``t_s`` (plan clock; 0 before the start)."""

@@ -271,6 +271,32 @@ def cluster_nearest(points: np.ndarray, dist: np.ndarray, merge_m: float, k_max:
     return np.array(out).reshape(-1, 3)
 
 
+def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m_s: float,
+                         vertical_speed_m_s: float) -> int:
+    """The first way-point to rejoin after an avoidance along the leg direction ``u_xy``.
+
+    From the way-point after ``wp_leave`` (the last passed when the avoidance
+    began) on: the first turning point not behind the reference (a turn is
+    never cut), or the first other way-point ahead of it by more than the
+    lead: 1 m, 1 s at the plan speed, and the distance flown at that speed
+    while coming down (or up) to it at the vertical speed (no turning back to
+    reach it). Past a turning point that is behind, the next way-point.
+    """
+    P = np.asarray(p_enu_m, dtype=float)
+    n = len(plan.t_s)
+    for i in range(wp_leave + 1, n):
+        q = plan.p_enu_m[i]
+        a_i = float((q[:2] - P[:2]) @ u_xy)
+        if plan.corner[i]:
+            if a_i > -0.1:
+                return i
+            return min(i + 1, n - 1)
+        t_down = 1.875 * abs(float(q[2] - P[2])) / vertical_speed_m_s
+        if a_i > max(1.0, speed_m_s, speed_m_s * t_down):
+            return i
+    return n - 1
+
+
 class Replanner:
     """Obstacle-avoiding reference generator (module doc).
 
@@ -329,30 +355,11 @@ class Replanner:
     def _set_plan(self, plan: GlobalPlan) -> None:
         self.plan = plan
         self._cursor = TrajectoryCursor(plan.trajectory)
-        self._ci = plan.corner_indices
-        self._ct = plan.t_s[self._ci].tolist()
-        self._leg = 0
-
-    def _leg_at(self, tau: float) -> int:
-        ct = self._ct
-        k = self._leg
-        if tau < ct[k]:
-            k = 0
-        while k < len(ct) - 2 and tau >= ct[k + 1]:
-            k += 1
-        self._leg = k
-        return k
+        self._n_legs = max(1, len(plan.turns_enu_m) - 1)
 
     def _leg_frame(self, k: int):
-        """(A (3,), B (3,), u_t (2,), u_n (2,)) of leg k: start and end corners, along and left unit vectors."""
-        ci = self._ci
-        k = min(max(k, 0), len(ci) - 2)
-        A = self.plan.p_enu_m[ci[k]]
-        B = self.plan.p_enu_m[ci[k + 1]]
-        d = B[:2] - A[:2]
-        n = float(np.hypot(*d))
-        u = d / n if n > 1e-9 else np.array([1.0, 0.0])
-        return A, B, u, np.array([-u[1], u[0]])
+        """(A (3,), B (3,), u_t (2,), u_n (2,)) of leg k of the plan (``GlobalPlan.leg_frame``)."""
+        return self.plan.leg_frame(k)
 
     # --- the contract ----------------------------------------------------------------------
 
@@ -451,7 +458,7 @@ class Replanner:
         if self._dev_leg is not None:
             self._deviation(s.p)
         if len(self.memory):
-            rng = self._threat(s.p, s.v, self._leg_frame(self._leg_at(tau))[2])
+            rng = self._threat(s.p, s.v, self._leg_frame(self.plan.leg_near(s.p, s.v[:2]))[2])
             if rng is not None:
                 self._enter_avoid(tau, s, rng, events)
         return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
@@ -481,7 +488,7 @@ class Replanner:
 
     def _enter_avoid(self, tau: float, s, rng: float, events: list) -> None:
         self.shaper.reset(s.p, s.v, s.a, s.jerk)
-        k = self._leg_at(tau)
+        k = self.plan.leg_near(s.p, s.v[:2])
         self._avoid_leg = k
         self._wp_leave = self.plan.waypoint_index_at(tau)
         A, B, u, n = self._leg_frame(k)
@@ -499,7 +506,7 @@ class Replanner:
         P = np.array(self.shaper.p)
         k = self._avoid_leg
         A, B, u, n = self._leg_frame(k)
-        if math.hypot(*(B[:2] - P[:2])) < GOAL_REACHED_M and k < len(self._ci) - 2:
+        if math.hypot(*(B[:2] - P[:2])) < GOAL_REACHED_M and k < self._n_legs - 1:
             k = self._avoid_leg = k + 1
             A, B, u, n = self._leg_frame(k)
             self._dev_leg = (A.copy(), n.copy())
@@ -685,21 +692,8 @@ class Replanner:
         st = self.shaper.state()
         plan = self.plan
         P = np.asarray(st.p)
-        k = self._avoid_leg
-        A, B, u, n = self._leg_frame(k)
-        ci = self._ci
-        i0, i1 = int(ci[min(k, len(ci) - 2)]), int(ci[min(k + 1, len(ci) - 1)])
-        first = None
-        for i in range(i0 + 1, i1 + 1):
-            a_i = float((plan.p_enu_m[i, :2] - P[:2]) @ u)
-            # far enough ahead to come down to it at cruise speed (no turning back)
-            t_down = 1.875 * abs(float(plan.p_enu_m[i, 2] - P[2])) / self.cfg.vertical_speed_m_s
-            lead = max(1.0, self.speed_m_s, self.speed_m_s * t_down)
-            if (i == i1 and a_i > -0.1) or a_i > lead:
-                first = i
-                break
-        if first is None:
-            first = min(i1 + 1, len(plan.t_s) - 1)
+        A, B, u, n = self._leg_frame(self._avoid_leg)
+        first = first_waypoint_ahead(plan, self._wp_leave, P, u, self.speed_m_s, self.cfg.vertical_speed_m_s)
         res = rejoin(plan, st, tau, first, self.memory.points(), self.cfg.clearance_m,
                      self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z)
         if res.plan is None:
