@@ -154,6 +154,8 @@ def field() -> Field:
     return build_field()
 
 
+
+
 # --- the flight ------------------------------------------------------------------------------
 
 
@@ -242,6 +244,20 @@ def _actions(f: Flight) -> list:
 
 # --- the flights -----------------------------------------------------------------------------
 
+LOW_POST = Cylinder(9.0, CORRIDOR_Y, 0.25, 1.6)         # top 1.6 m: 1.6 + 0.5 + margins < 3 m ceiling
+BESIDE_POST = Cylinder(9.0, CORRIDOR_Y - 0.8, 0.2, 4.0)  # near the south row: a gap remains to its north
+
+
+@pytest.fixture(scope="module")
+def low_flight(field):
+    """The low post across the corridor, flown until the plan is followed again after the rejoin."""
+    return fly(field, [LOW_POST], stop_after=_after_rejoin())
+
+
+@pytest.fixture(scope="module")
+def beside_flight(field):
+    return fly(field, [BESIDE_POST], stop_after=_after_rejoin())
+
 
 def test_no_obstacle_reference_is_the_plan(field):
     f = fly(field, sensor_every=4)
@@ -268,9 +284,8 @@ def _after_rejoin(seconds=None):
     return stop
 
 
-def test_low_obstacle_is_climbed_over(field):
-    post = Cylinder(9.0, CORRIDOR_Y, 0.25, 1.6)           # top 1.6 m: 1.6 + 0.5 + margins < 3 m ceiling
-    f = fly(field, [post], stop_after=_after_rejoin())
+def test_low_obstacle_is_climbed_over(low_flight):
+    post, f = LOW_POST, low_flight
     acts = _actions(f)
     assert acts == ["avoid", "climb", "rejoin"], acts
     assert "stop" not in acts and "reroute" not in acts
@@ -322,10 +337,8 @@ def test_tall_obstacle_stop_then_reroute_and_finish(field):
     assert np.ptp(f.ref[south, 0]) > 14.0
 
 
-def test_obstacle_beside_the_line_is_passed_within_the_corridor(field):
-    # a post near the south row: a gap of more than the clearance remains to its north
-    post = Cylinder(9.0, CORRIDOR_Y - 0.8, 0.2, 4.0)
-    f = fly(field, [post], stop_after=_after_rejoin())
+def test_obstacle_beside_the_line_is_passed_within_the_corridor(beside_flight):
+    post, f = BESIDE_POST, beside_flight
     acts = _actions(f)
     assert "avoid" in acts and "stop" not in acts and "hold" not in acts, acts
     assert f.clearance([post]).min() >= ReplanConfig().clearance_m
@@ -363,6 +376,44 @@ def test_ablation_clearance_governor():
                 break
         out[governor] = min(d)
     assert out[True] >= ReplanConfig().clearance_m > out[False]
+
+
+def test_ablation_corridor_walls(field, beside_flight):
+    """The corridor walls against the APF alone (lateral limit 5 m): the post
+    beside the line pushes the free APF 0.95 m sideways, to 0.1 m from the
+    row's face; with the 0.5 m walls the reference keeps 0.6 m from it."""
+    gaps = {}
+    for limit in (0.5, 5.0):
+        f = beside_flight if limit == 0.5 else fly(field, [BESIDE_POST], cfg=replace(
+            ReplanConfig(), lateral_limit_m=limit), stop_after=_after_rejoin())
+        in_rows = (f.ref[:, 0] > 3.0) & (f.ref[:, 0] < 15.0)
+        gaps[limit] = (np.abs(f.ref[in_rows, 1] - CORRIDOR_Y).max(), (4.8 - f.ref[in_rows, 1]).min())
+    assert gaps[0.5][0] <= 0.5 < gaps[5.0][0]
+    assert gaps[5.0][1] < 0.5 <= gaps[0.5][1]               # the safety margin to the row
+
+
+def test_ablation_vertical_escape(field, low_flight):
+    """The vertical escape against the APF alone: across the corridor, a
+    1.6 m post is a local minimum of the APF; without the escape the
+    vehicle stops in front of it and holds, with it it goes over."""
+    post, with_escape = LOW_POST, low_flight
+    without = fly(field, [post], cfg=replace(ReplanConfig(), vertical_escape=False, escape_timeout_s=10.0),
+                  t_end_s=60.0)
+    assert _actions(with_escape) == ["avoid", "climb", "rejoin"] and with_escape.ref[-1, 0] > post.x
+    assert _actions(without) == ["avoid", "stop", "hold"] and without.ref[-1, 0] < post.x - post.r
+    assert min(with_escape.clearance([post]).min(), without.clearance([post]).min()) >= 0.5
+
+
+def test_ablation_reference_shaping(field, low_flight):
+    """The shaper's limits against (nearly) none: the same avoidance asks for
+    about twice the acceleration and five times the jerk of the limits."""
+    shaped = low_flight
+    loose = fly(field, [LOW_POST], cfg=replace(ReplanConfig(), accel_m_s2=1e3, jerk_m_s3=1e4), stop_after=_after_rejoin())
+    cfg = ReplanConfig()
+    assert np.abs(shaped.ref[:, 6:9]).max() <= cfg.accel_m_s2 + 1e-6
+    assert np.abs(shaped.ref[:, 9:12]).max() <= cfg.jerk_m_s3 + 1e-6
+    assert np.abs(loose.ref[:, 6:9]).max() > 1.5 * cfg.accel_m_s2
+    assert np.abs(loose.ref[:, 9:12]).max() > 4.0 * cfg.jerk_m_s3
 
 
 # --- re-route, as a pure function -------------------------------------------------------------
@@ -417,7 +468,7 @@ def test_reroute_without_a_route_reports(field):
 def test_escape_is_time_bounded_then_holds(field):
     """A climb that cannot get through in ``escape_timeout_s`` stops and holds
     (here a 1 s bound against the 1.6 m post the default climbs in about 6 s)."""
-    post = Cylinder(9.0, CORRIDOR_Y, 0.25, 1.6)
+    post = LOW_POST
     f = fly(field, [post], cfg=replace(ReplanConfig(), escape_timeout_s=1.0), t_end_s=40.0)
     acts = _actions(f)
     assert acts == ["avoid", "climb", "stop", "hold"], acts
@@ -449,9 +500,8 @@ def test_garbage_readings_are_ignored(field):
     assert rp.memory.points()[0] == pytest.approx((3.0, CORRIDOR_Y, 1.5))
 
 
-def test_stats_for_the_report(field):
-    post = Cylinder(9.0, CORRIDOR_Y, 0.25, 1.6)
-    f = fly(field, [post], stop_after=_after_rejoin())
+def test_stats_for_the_report(field, low_flight):
+    f = low_flight
     d = f.replanner.stats.to_dict()
     assert d["events"] == 3 and [e["action"] for e in d["event_list"]] == ["avoid", "climb", "rejoin"]
     e0 = d["event_list"][0]

@@ -89,6 +89,10 @@ class ReplanConfig:
         Limit the approach speed to every obstacle point so the reference
         can always brake before ``clearance_m`` (our addition to the paper's
         APF; False only for the ablation).
+    vertical_escape : bool
+        Climb over an obstacle the corridor does not let the vehicle pass
+        (our escape from the APF's local minimum); False only for the
+        ablation (the vehicle then holds after ``escape_timeout_s``).
     sensors : tuple of SensorMount
         Mounting offsets by DISTANCE_SENSOR id; ids not listed sit at the
         centre of mass.
@@ -116,6 +120,7 @@ class ReplanConfig:
     escape_timeout_s: float = 20.0
     obstacle_depth_m: float = 0.5
     clearance_governor: bool = True
+    vertical_escape: bool = True
     sensors: tuple[SensorMount, ...] = ()
 
     def __post_init__(self) -> None:

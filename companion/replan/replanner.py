@@ -12,9 +12,12 @@ Modes (``ReplanStep.mode``)
             obstacle was detected, goal = the end of the current leg (the
             next turning point, Fig. 5), obstacles = the remembered points
             within d_o (one per cluster, ``CLUSTER_M``). Its force sets a
-            velocity command (the plan speed along F / max(|F|, k_att x 1 m),
-            so it slows where the forces balance), which is constrained and
+            velocity command, the gradient flow F / (k_att ``FLOW_TIME_S``)
+            (it slows where the forces balance), which is constrained and
             shaped (``shaper``) into p, v, a, jerk, snap:
+
+            - speed: the plan's (or ``speed_m_s``) horizontally,
+              ``vertical_speed_m_s`` vertically;
 
             - corridor: the lateral offset from the leg's line stays within
               ``lateral_limit_m`` (soft walls, the rows are walls);
@@ -40,8 +43,9 @@ Modes (``ReplanStep.mode``)
             pushing the vehicle far above the obstacle).
 ``stop``    when the obstacle's top (plus margins) is above the ceiling, or
             the escape did not pass the obstacle within
-            ``escape_timeout_s``: the velocity command is zero (and the
-            governor keeps the clearance) until the reference is at rest.
+            ``escape_timeout_s``: the velocity command is zero until the
+            reference is at rest (the governor's braking law left the room
+            for it).
 ``reroute`` after a stop for a tall obstacle, ``reroute.reroute`` re-plans
             the remaining coverage from the current state; this mode lasts
             until the new plan's second way-point, then ``follow``.
@@ -58,12 +62,17 @@ Never pressing on: in every mode but ``follow``/``rejoin``/``reroute``
 the governor limits the approach speed to every remembered point, and
 ``follow`` hands over to ``avoid`` with room to brake.
 
-Departures from the paper (each has an ablation in the tests): the
-clearance governor (the improved APF alone lets a vehicle whose goal is near
-an obstacle come arbitrarily close, since U_rep -> 0 at the goal); the
-corridor walls and the vertical escape (the paper's Fig. 19 goes over the
-obstacles but does not say how); the velocity-command shaping (the paper
-moves a particle along the force).
+Departures from the paper, each with an ablation in
+``tests/test_replan_closedloop.py`` (same flight, one switch): the
+clearance governor (``clearance_governor``; the improved APF alone lets a
+vehicle whose goal is near an obstacle come within the clearance, since
+U_rep -> 0 at the goal); the corridor walls (``lateral_limit_m``; the APF
+alone pushes the vehicle toward the rows); the vertical escape
+(``vertical_escape``; without it the APF stays in the local minimum in front
+of a post across the corridor, Fig. 19 goes over such obstacles without
+saying how); the velocity-command shaping (``accel_m_s2``/``jerk_m_s3``;
+the paper moves a particle along the force, whose setpoint steps no vehicle
+can follow).
 """
 
 from __future__ import annotations
@@ -496,6 +505,7 @@ class Replanner:
         along = float((np.asarray(s.p[:2]) - A[:2]) @ u)
         self._progress = along
         self._t_progress = tau
+        self._t_avoid = tau
         self._t_climb = None
         self._travel = u.copy()
         self.mode = "avoid"
@@ -532,7 +542,10 @@ class Replanner:
         stalled = tau - self._t_progress > cfg.stall_s
         ground = self.known.ground_z(float(P[0]), float(P[1]))
         z_ceiling = ground + cfg.ceiling_agl_m
-        if self.mode == "avoid" and (not passable or stalled):
+        if tau - self._t_avoid > cfg.escape_timeout_s and self.mode == "avoid" and not cfg.vertical_escape:
+            return self._enter_stop(tau, events, "hold", f"no way past in {cfg.escape_timeout_s:g} s "
+                                    "(vertical escape off)")
+        if self.mode == "avoid" and (not passable or stalled) and cfg.vertical_escape:
             self.mode = "climb"
             self._t_climb = tau
             self._climb_phase = "rise"

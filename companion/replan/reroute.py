@@ -113,12 +113,13 @@ def back_off(known: KnownMap, p_xy, direction_xy, max_m: float = MAX_BACK_OFF_M)
     s = np.arange(0.0, max_m + 1e-9, 0.5 * h)
     pts = p - s[:, None] * u
     g = world_to_grid(known.grid, pts)
-    ok = np.flatnonzero(lookup(known.free.eroded, h, g[:, 0], g[:, 1]))
+    free = lookup(known.free.eroded, h, g[:, 0], g[:, 1])
+    ok = np.flatnonzero(free)
     if len(ok) == 0:
         return None
-    # one more half cell inside, so the aux path's straight test starts in free space
-    k = min(int(ok[0]) + 1, len(s) - 1)
-    return pts[k] if lookup(known.free.eroded, h, *world_to_grid(known.grid, pts[k:k + 1]).T)[0] else pts[ok[0]]
+    # one more half cell inside when it is free too, so the connection starts well in free space
+    k = int(ok[0])
+    return pts[k + 1] if k + 1 < len(s) and free[k + 1] else pts[k]
 
 
 def _merge(points: list) -> np.ndarray:
