@@ -25,8 +25,9 @@ flown exactly, level attitude, body y toward the pointing direction) at
 50 Hz with sensors at 12.5 Hz, each with 0-3 random obstacles (cylinders
 r 0.15-0.4 m and boxes 0.3-1.0 m, heights 0.8-4 m, in the corridors and
 the headlands, at least 1 m from the flight's start). Per flight: the
-outcome (finished / hold / timeout), the events, the true clearance (the
-reference's distance to the obstacles' surfaces) and the statistics.
+outcome (finished / hold / timeout), the events, the true clearance of the
+body (the reference's distance to the obstacles' surfaces minus the body
+radius, from ``mission.vehicle``: arm + 10-inch propeller) and the statistics.
 Accuracy figures only: these are deterministic for a seed.
 """
 
@@ -40,12 +41,12 @@ from pathlib import Path
 import numpy as np
 
 from companion import frames
-from companion.coverage.freespace import FreeSpace
 from companion.link import codec
 from companion.mission import load_mission
 from companion.mission.sim import ObstacleConfig
 from companion.planner import plan_mission
 from companion.replan import GlobalPlan, KnownMap, Replanner
+from companion.replan.replanner import mission_replan_config
 from companion.trajectory.cursor import TrajectoryCursor
 from sitl.world import World
 
@@ -83,10 +84,7 @@ SENSORS, FANS = _sensors()
 def setup(mission_name: str):
     m = load_mission(ROOT / "missions" / mission_name / "mission.yaml")
     plan = plan_mission(m)
-    g = plan.grid
-    free = FreeSpace(plan.coverage.free_eroded, g.free & ~g.occupied, g.resolution_m,
-                     m.coverage.safety_margin_m + g.resolution_m)
-    known = KnownMap.build(g, plan.dem, free, m.replan.canopy_height_m, m.replan.known_tolerance_m)
+    known = KnownMap.from_mission(m, plan.grid, plan.dem, plan.coverage.free_eroded)
     return m, plan, known, GlobalPlan.from_plan(plan, m)
 
 
@@ -116,7 +114,7 @@ def readings(world, t, p, R, due=None):
 def fly(m, plan, known, gplan, obstacles, dt_s, sensor_every, t_max_s, timed=False):
     """One kinematic flight; returns (replanner, refs (n, 3), modes, per-frame seconds, per-frame modes)."""
     world = World.build(plan.grid, plan.dem, tuple(obstacles), m.replan.canopy_height_m)
-    rp = Replanner(m.replan, known, gplan)
+    rp = Replanner(mission_replan_config(m), known, gplan)
     rp.start(0.0)
     p = tuple(gplan.trajectory.sample(0.0).p)
     s = (0.0, 1.0, 0.0)
@@ -221,6 +219,7 @@ def true_clearance(refs: np.ndarray, obstacles, ground) -> float:
 
 def placements(mission_name: str, n: int, seed: int) -> None:
     m, plan, known, gplan = setup(mission_name)
+    body = mission_replan_config(m).body_radius_m
     rng = np.random.default_rng(seed)
     t_max = 3.0 * gplan.trajectory.duration_s + 60.0
     rows = []
@@ -232,14 +231,18 @@ def placements(mission_name: str, n: int, seed: int) -> None:
         clear = true_clearance(refs, obs, known.ground_z) if obs else math.inf
         acts = [e.action for e in st.event_list]
         rows.append((outcome, clear, st.max_lateral_deviation_m, st.max_climb_m, st.extra_path_m, acts, obs))
-        print(f"{i:3d} {len(obs)} obstacles  {outcome:8s} clearance {clear:6.2f} m  lateral {st.max_lateral_deviation_m:.2f} m"
+        print(f"{i:3d} {len(obs)} obstacles  {outcome:8s} body clearance {clear - body:6.2f} m  "
+              f"lateral {st.max_lateral_deviation_m:.2f} m"
               f"  climb {st.max_climb_m:.2f} m  extra {st.extra_path_m:6.1f} m  events {' '.join(acts)}", flush=True)
     outcomes = [r[0] for r in rows]
     clears = np.array([r[1] for r in rows if math.isfinite(r[1])])
-    print(f"\n{n} flights ({mission_name}, seed {seed}): finished {outcomes.count('finished')}, "
-          f"hold {outcomes.count('hold')}, timeout {outcomes.count('timeout')}; "
-          f"min true clearance {clears.min() if len(clears) else float('nan'):.2f} m; "
-          f"below 0.5 m: {int(np.sum(clears < 0.5))}; max lateral {max(r[2] for r in rows):.2f} m")
+    body_clear = clears - body
+    print(f"\n{n} flights ({mission_name}, seed {seed}, body radius {body:.3f} m): "
+          f"finished {outcomes.count('finished')}, hold {outcomes.count('hold')}, "
+          f"timeout {outcomes.count('timeout')}; min body clearance "
+          f"{body_clear.min() if len(body_clear) else float('nan'):.2f} m (centre {clears.min() if len(clears) else float('nan'):.2f} m); "
+          f"below 0.5 m: {int(np.sum(body_clear < 0.5))}; max lateral {max(r[2] for r in rows):.2f} m; "
+          f"max climb {max(r[3] for r in rows):.2f} m")
 
 
 def main() -> None:

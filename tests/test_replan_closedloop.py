@@ -314,17 +314,21 @@ def test_low_obstacle_is_climbed_over(low_flight):
 
 
 def test_tall_obstacle_stop_then_reroute_and_finish(field):
+    """With the paper's vehicle's size: its body (a sphere of 0.442 m, arms and
+    propellers) keeps the 0.5 m clearance, so its centre keeps 0.942 m."""
     post = Cylinder(9.0, CORRIDOR_Y, 0.25, 4.0)           # above the ceiling: cannot climb over
-    f = fly(field, [post])
+    cfg = replace(ReplanConfig(), body_radius_m=0.442)
+    keep = cfg.clearance_m + cfg.body_radius_m
+    f = fly(field, [post], cfg=cfg)
     acts = _actions(f)
     assert "stop" in acts and "reroute" in acts and "hold" not in acts, acts
     assert acts.index("stop") < acts.index("reroute")
     assert f.steps[-1].finished                             # completed the re-planned coverage
     clear = f.clearance([post])
-    assert clear.min() >= ReplanConfig().clearance_m
+    assert clear.min() >= keep
     # where it stopped, in front of the post
     i_stop = next(i for i, st in enumerate(f.steps) if any(e.action == "reroute" for e in st.events))
-    assert f.ref[i_stop, 0] < post.x - post.r - ReplanConfig().clearance_m
+    assert f.ref[i_stop, 0] < post.x - post.r - keep
     assert np.linalg.norm(f.ref[i_stop, 3:6]) < 0.05        # at rest when re-routing
     # the rest of the blocked corridor was flown from its other end: the reference
     # comes back along y = 3.75 from x = 17 to just beyond the post, heading west
@@ -476,6 +480,16 @@ def test_escape_is_time_bounded_then_holds(field):
     assert "escape" in f.events[2].detail
     assert np.linalg.norm(f.ref[-1, 3:6]) == 0.0                 # holding still
     assert f.clearance([post]).min() >= ReplanConfig().clearance_m
+
+
+def test_body_radius_from_the_vehicle():
+    from companion.mission import load_mission
+    from companion.replan.replanner import PROP_RADIUS_M, mission_replan_config
+    from pathlib import Path
+    m = load_mission(Path(__file__).resolve().parents[1] / "missions" / "flat-rectangle" / "mission.yaml")
+    assert mission_replan_config(m).body_radius_m == pytest.approx(m.vehicle.arm_m + PROP_RADIUS_M)
+    m2 = replace(m, replan=replace(m.replan, body_radius_m=0.3))
+    assert mission_replan_config(m2).body_radius_m == 0.3
 
 
 def test_garbage_readings_are_ignored(field):

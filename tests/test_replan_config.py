@@ -39,7 +39,9 @@ def test_section_values_and_sensor_offsets(tmp_path):
 @pytest.mark.parametrize("yaml, key, what", [
     ("replan: {clearence_m: 0.5}\n", "replan.clearence_m", "unknown key"),
     ("replan: {sensors: [{id: 1, offset: [0, 0, 0]}]}\n", "replan.sensors[0].offset", "unknown key"),
-    ("replan: {clearance_m: 3.0}\n", "replan", "clearance_m must be below"),
+    ("replan: {clearance_m: 3.0}\n", "replan", "clearance_m + body_radius_m must be below"),
+    ("replan: {clearance_m: 1.0, body_radius_m: 1.2}\n", "replan", "clearance_m + body_radius_m must be below"),
+    ("replan: {body_radius_m: -0.1}\n", "replan", "body_radius_m must be in"),
     ("replan: {floor_agl_m: 4.0}\n", "replan", "floor_agl_m must be below"),
     ("replan: {k_att: 0}\n", "replan", "k_att must be"),
     ("replan: {sensors: [{id: 1}, {id: 1}]}\n", "replan", "ids must be unique"),

@@ -48,8 +48,14 @@ class ReplanConfig:
         the equilibrium in front of an obstacle on the line to a goal 10 m
         away at about 1 m (``companion.replan.apf``).
     clearance_m : float
-        Closest the reference may come to an unknown obstacle point (m);
-        the vehicle stops this far in front of an obstacle it cannot pass.
+        Closest the vehicle's body may come to an unknown obstacle (m): the
+        reference's centre keeps ``clearance_m + body_radius_m`` from every
+        obstacle point; the vehicle stops that far in front of an obstacle it
+        cannot pass.
+    body_radius_m : float or None
+        Radius of the sphere holding the vehicle (arms and propellers, m);
+        None: ``Replanner.from_plan`` takes the vehicle's arm plus a 10-inch
+        propeller (0.442 m for the paper's vehicle), the constructor 0.
     lateral_limit_m : float
         Largest horizontal deviation from the planned path while avoiding
         (m): the rows are walls.
@@ -104,6 +110,7 @@ class ReplanConfig:
     influence_range_m: float = 2.1
     n: float = 2.0
     clearance_m: float = 0.5
+    body_radius_m: float | None = None
     lateral_limit_m: float = 0.5
     ceiling_agl_m: float = 3.0
     floor_agl_m: float = 0.5
@@ -135,12 +142,14 @@ class ReplanConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"replan.{name} must be a finite number >= 0, got {v}")
+        if self.body_radius_m is not None and not (math.isfinite(self.body_radius_m) and 0 <= self.body_radius_m <= 10):
+            raise ValueError(f"replan.body_radius_m must be in [0, 10] m, got {self.body_radius_m}")
         if self.speed_m_s is not None and not (math.isfinite(self.speed_m_s) and self.speed_m_s > 0):
             raise ValueError(f"replan.speed_m_s must be > 0, got {self.speed_m_s}")
         if self.floor_agl_m >= self.ceiling_agl_m:
             raise ValueError("replan.floor_agl_m must be below replan.ceiling_agl_m")
-        if self.clearance_m >= self.influence_range_m:
-            raise ValueError("replan.clearance_m must be below replan.influence_range_m")
+        if self.clearance_m + (self.body_radius_m or 0.0) >= self.influence_range_m:
+            raise ValueError("replan.clearance_m + body_radius_m must be below replan.influence_range_m")
         if self.voxel_m > self.clearance_m:
             raise ValueError("replan.voxel_m must not exceed replan.clearance_m")
         ids = [s.id for s in self.sensors]

@@ -139,13 +139,14 @@ class KnownMap:
 
     # --- obstacles added in flight -------------------------------------------------------
 
-    def with_obstacle(self, points_xy_m: np.ndarray) -> "KnownMap":
+    def with_obstacle(self, points_xy_m: np.ndarray, keep_m: float | None = None) -> "KnownMap":
         """A copy with the cells under ``points_xy_m`` ((k, 2), ENU m) occupied.
 
-        The eroded free space loses every cell within the erosion threshold
-        of a new cell (the same disk as ``erode_free_space``, computed in a
-        window around the points), the classification masks gain the cells
-        dilated by the tolerance. Points off the grid are ignored.
+        The eroded free space loses every cell within ``keep_m`` (at least,
+        and by default, the erosion threshold) of a new cell (the disk of
+        ``erode_free_space``, computed in a window around the points), the
+        classification masks gain the cells dilated by the tolerance. Points
+        off the grid are ignored.
         """
         pts = np.asarray(points_xy_m, dtype=float).reshape(-1, 2)
         cells = [c for c in (self.cell_of(float(x), float(y)) for x, y in pts) if c is not None]
@@ -153,9 +154,10 @@ class KnownMap:
             return self
         rc = np.array(cells)
         h = self.grid.resolution_m
-        erode_w = disk_half_widths(self.free.threshold_m / h)
+        keep = max(self.free.threshold_m, keep_m if keep_m is not None else 0.0)
+        erode_w = disk_half_widths(keep / h)
         known_w = disk_half_widths(self.tolerance_m / h + 1.0)
-        k = int(math.ceil(self.free.threshold_m / h)) + int(math.ceil(self.tolerance_m / h)) + 2
+        k = int(math.ceil(keep / h)) + int(math.ceil(self.tolerance_m / h)) + 2
         rows, cols = self.grid.shape
         r0, r1 = max(0, rc[:, 0].min() - k), min(rows, rc[:, 0].max() + k + 1)
         c0, c1 = max(0, rc[:, 1].min() - k), min(cols, rc[:, 1].max() + k + 1)

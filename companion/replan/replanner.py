@@ -77,6 +77,7 @@ can follow).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -132,6 +133,8 @@ CLEAR_MARGIN_M = 0.15
 GOAL_REACHED_M = 0.3
 #: The reference is at rest below these speed (m/s) and acceleration (m/s^2).
 REST_V_M_S, REST_A_M_S2 = 0.02, 0.05
+#: Propeller radius (m) added to the arm length for the body radius when the mission gives none.
+PROP_RADIUS_M = 0.127
 #: Events kept in the statistics (the count goes on).
 MAX_EVENTS_KEPT = 1000
 
@@ -306,6 +309,15 @@ def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m
     return n - 1
 
 
+def mission_replan_config(mission) -> ReplanConfig:
+    """The mission's ``replan`` settings with ``body_radius_m`` filled in from the
+    vehicle when unset: the arm length plus ``PROP_RADIUS_M`` (a 10-inch propeller)."""
+    cfg = mission.replan
+    if cfg.body_radius_m is None:
+        cfg = dataclasses.replace(cfg, body_radius_m=float(mission.vehicle.arm_m) + PROP_RADIUS_M)
+    return cfg
+
+
 class Replanner:
     """Obstacle-avoiding reference generator (module doc).
 
@@ -325,6 +337,8 @@ class Replanner:
         self.known = known
         self.apf = ApfParams(cfg.k_att, cfg.k_rep, cfg.influence_range_m, cfg.n)
         self.speed_m_s = float(cfg.speed_m_s if cfg.speed_m_s is not None else plan.flight.speed_m_s)
+        #: distance kept from every obstacle point by the vehicle's centre: the clearance plus the body
+        self._keep_m = cfg.clearance_m + (cfg.body_radius_m or 0.0)
         self.memory = ObstacleMemory(cfg.voxel_m, cfg.memory_s, cfg.memory_radius_m, CLEAR_MARGIN_M)
         self.poses = PoseHistory()
         self.shaper = ReferenceShaper(cfg.accel_m_s2, cfg.jerk_m_s3)
@@ -355,9 +369,10 @@ class Replanner:
 
     @classmethod
     def from_plan(cls, plan, mission) -> "Replanner":
-        """For a ``companion.planner.Plan`` of ``mission`` (its maps, coverage and trajectory)."""
+        """For a ``companion.planner.Plan`` of ``mission`` (its maps, coverage and trajectory);
+        ``replan.body_radius_m`` unset is taken from the vehicle (``mission_body_radius_m``)."""
         known = KnownMap.from_mission(mission, plan.grid, plan.dem, plan.coverage.free_eroded)
-        return cls(mission.replan, known, GlobalPlan.from_plan(plan, mission))
+        return cls(mission_replan_config(mission), known, GlobalPlan.from_plan(plan, mission))
 
     # --- plan bookkeeping -------------------------------------------------------------
 
@@ -476,7 +491,7 @@ class Replanner:
         """Range (m) at which an obstacle point starts an avoidance: d_o, or farther when
         the governor's braking distance from ``speed`` (plus 0.5 m) needs it."""
         return max(self.cfg.influence_range_m, speed * speed / (2.0 * self._brake) + speed * GOVERNOR_LAG_S
-                   + self.cfg.clearance_m + GOVERNOR_MARGIN_M + 0.5)
+                   + self._keep_m + GOVERNOR_MARGIN_M + 0.5)
 
     def _threat(self, p, v, leg_u, extra_m: float = 0.0) -> float | None:
         """Distance to the nearest remembered point within the trigger range (plus
@@ -492,7 +507,7 @@ class Replanner:
         u = np.array([v[0] / vh, v[1] / vh]) if vh > 0.05 else leg_u
         along = rel[:, :2] @ u
         speed = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
-        ok = (dist <= self._trigger_m(speed) + extra_m) & (along >= -self.cfg.clearance_m)
+        ok = (dist <= self._trigger_m(speed) + extra_m) & (along >= -self._keep_m)
         return float(dist[ok].min()) if ok.any() else None
 
     def _enter_avoid(self, tau: float, s, rng: float, events: list) -> None:
@@ -526,7 +541,7 @@ class Replanner:
         rel = pts - P
         dist = np.sqrt(np.einsum("ki,ki->k", rel, rel))
         along = rel[:, :2] @ u
-        c = cfg.clearance_m
+        c = self._keep_m
         near = dist <= cfg.influence_range_m
         if tau >= self._next_rejoin and self._calm() and \
                 self._threat(P, self.shaper.v, u, REJOIN_HYSTERESIS_M) is None:
@@ -635,7 +650,7 @@ class Replanner:
         shaper's lag t_lag = ``GOVERNOR_LAG_S``)."""
         d = np.maximum(obs_dist, 1e-9)
         nrm = (P - obs) / d[:, None]                        # from each point to the vehicle
-        allow = self._allowed_speed(np.maximum(0.0, d - self.cfg.clearance_m - GOVERNOR_MARGIN_M))
+        allow = self._allowed_speed(np.maximum(0.0, d - self._keep_m - GOVERNOR_MARGIN_M))
         if scale_only:
             approach = -(nrm @ v)
             bad = approach > allow + 1e-12
@@ -672,7 +687,7 @@ class Replanner:
         if self._stop_then == "reroute":
             blocking = pts[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else pts
             res = reroute(self.plan, self.known, st, tau, self._wp_leave, blocking, self._travel,
-                          self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s)
+                          self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s, self._keep_m)
             self.known = res.known
             self.memory.forget(lambda q: np.array([self.known.classify(*map(float, x)) != UNKNOWN for x in q]))
             if res.plan is not None:
@@ -707,7 +722,7 @@ class Replanner:
         P = np.asarray(st.p)
         A, B, u, n = self._leg_frame(self._avoid_leg)
         first = first_waypoint_ahead(plan, self._wp_leave, P, u, self.speed_m_s, self.cfg.vertical_speed_m_s)
-        res = rejoin(plan, st, tau, first, self.memory.points(), self.cfg.clearance_m,
+        res = rejoin(plan, st, tau, first, self.memory.points(), self._keep_m,
                      self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z)
         if res.plan is None:
             self._next_rejoin = tau + REJOIN_RETRY_S

@@ -6,7 +6,8 @@ Steps of ``reroute`` (pure: maps, plan and state in, a new plan out):
 
 1. The obstacle's points (the face the sensors saw, extended by the assumed
    depth along the direction of travel) are added to the map; the eroded
-   free space loses every cell within the safety margin of them.
+   free space loses every cell within ``keep_m`` (the clearance plus the
+   vehicle's body radius, at least the map's own erosion threshold) of them.
 2. What is left to cover: the rest of the current main segment beyond the
    obstacle (its free runs past the vehicle, each at least the minimum
    segment length) flown *from the segment's far end back toward the
@@ -132,7 +133,8 @@ def _merge(points: list) -> np.ndarray:
 
 
 def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: int,
-            obstacle_enu_m: np.ndarray, travel_xy, depth_m: float, vertical_speed_m_s: float) -> RerouteResult:
+            obstacle_enu_m: np.ndarray, travel_xy, depth_m: float, vertical_speed_m_s: float,
+            keep_m: float | None = None) -> RerouteResult:
     """Re-plan the remaining coverage around a blocking obstacle (module doc).
 
     Parameters
@@ -153,11 +155,14 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
         Assumed depth of the obstacle behind the seen face (m).
     vertical_speed_m_s : float
         Speed allotted to a descent on the first interval.
+    keep_m : float, optional
+        Distance the route keeps from the obstacle (m; the replanner's
+        clearance plus the body radius); default the map's erosion threshold.
     """
     travel = np.asarray(travel_xy, dtype=float)
     travel = travel / max(float(np.hypot(*travel)), 1e-12)
     new_known = known.with_obstacle(obstacle_footprint(obstacle_enu_m, travel, depth_m,
-                                                       0.5 * known.free.resolution_m))
+                                                       0.5 * known.free.resolution_m), keep_m)
     p = np.asarray(state.p, dtype=float)
 
     def fail(reason: str) -> RerouteResult:
