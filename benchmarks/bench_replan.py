@@ -9,7 +9,8 @@ over a whole flight of the mission at 250 Hz, ray cast by the SITL's
 ``World`` against the mission's rows and terrain (the casting itself is not
 timed), with a ring of 16 horizontal rangefinders (22.5 deg wide,
 MAV_SENSOR_ROTATION_CUSTOM), a ring of 8 pitched 20 deg down (45 deg wide)
-and one looking down, each at 25 Hz:
+and one looking down, each at 25 Hz (a reading: the nearest of five rays
+across the field of view):
 
 - ``clear way``: no obstacle (the replanner follows the plan);
 - ``bare cursor``: the same frames evaluating only the trajectory with
@@ -73,7 +74,8 @@ def _sensors():
     fans = []
     for _, _, R, h in out:
         S = np.array(R).reshape(3, 3)
-        rays = [(1.0, 0.0, 0.0)] + ([(1.0, t, 0.0) for t in (math.tan(h / 2), -math.tan(h / 2))] if h else [])
+        # five rays across the horizontal field of view (a real sensor sees all of it)
+        rays = [(1.0, math.tan(f * h / 2), 0.0) for f in (0.0, 0.5, -0.5, 1.0, -1.0)] if h else [(1.0, 0.0, 0.0)]
         fans.append([tuple(S @ (np.array(r) / np.linalg.norm(r))) for r in rays])
     return out, fans
 

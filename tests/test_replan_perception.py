@@ -157,9 +157,10 @@ def test_fan_points_follow_the_sensor_roll():
     hfov = math.radians(20)
     ev = beam_evidence(_reading(codec.MAV_SENSOR_ROTATION_CUSTOM, 300, q, hfov=hfov, vfov=0.0),
                        Pose(0.0, (0.0, 0.0, 1.5), tuple(np.eye(3).ravel())))
-    assert len(ev.fan_hits) == 2
+    assert len(ev.fan_hits) == 4                     # wider than 10 deg: the edges and half-way
     zs = sorted(h[2] - 1.5 for h in ev.fan_hits)
-    np.testing.assert_allclose(zs, [-3 * math.sin(hfov / 2), 3 * math.sin(hfov / 2)], atol=1e-6)
+    s1, s2 = 3 * math.sin(hfov / 2), 3 * math.sin(hfov / 4)
+    np.testing.assert_allclose(zs, [-s1, -s2, s2, s1], atol=1e-6)
     np.testing.assert_allclose([h[1] for h in ev.fan_hits], 0.0, atol=1e-6)
     assert ev.half_v_rad == 0.0 and ev.half_h_rad == ev.half_max_rad == pytest.approx(hfov / 2)
     np.testing.assert_allclose(np.abs(ev.h_axis), (0, 0, 1), atol=1e-6)   # the FOV opens vertically
@@ -215,6 +216,53 @@ def test_classification_row_ground_post_canopy_top():
     added = km.with_obstacle(np.array([[3.0, 1.0]]))
     assert added.classify(3.0, 1.05, 3.5) == KNOWN_ADDED      # any height over an added obstacle
     assert km.classify(3.0, 1.05, 3.5) == UNKNOWN             # the original map is unchanged
+
+
+def test_explains_a_return_only_where_the_ray_enters_a_known_surface():
+    km = _known()                                   # the row: x 1..5 m, y 1.8..2.2 m, canopy 2 m
+    o = (3.0, 0.8, 1.5)
+    north = (0.0, 1.0, 0.0)
+    assert km.explains(o, north, 1.0)              # head-on into the south face
+    assert not km.explains(o, north, 0.6)          # short of it: something else
+    assert not km.explains(o, north, 1.9)          # beyond the row: the face would have answered first
+    # grazing along the face at 3 deg: enters it at the measured range
+    a = math.radians(3.0)
+    g = (math.cos(a), math.sin(a), 0.0)
+    o2 = (1.5, 1.8 - 0.05, 1.5)
+    d = 0.05 / math.sin(a)
+    assert km.explains(o2, g, d)
+    # the row's corner, touched
+    c = (1.0, 1.8)
+    o3 = (0.5, 1.3, 1.5)
+    u = np.array([c[0] - 0.5, c[1] - 1.3, 0.0])
+    assert km.explains(o3, tuple(u / np.linalg.norm(u)), float(np.linalg.norm(u)))
+    # above the canopy (ground 0.3 m there): not the row; on the ground: yes
+    assert not km.explains((3.0, 0.8, 3.0), north, 1.0)
+    down = (0.0, 0.0, -1.0)
+    assert km.explains((3.0, 1.0, 1.5), down, 1.5 - 0.3)
+
+
+def test_wide_beam_in_a_corridor_sees_the_post_not_the_row():
+    """A 40 deg beam in front of a post: its edge reaches the row only beyond
+    the post's range, so the row does not explain the return."""
+    from companion.replan import GlobalPlan, Replanner
+    from companion.trajectory import TrajectoryConfig, generate_trajectory
+    from companion.mission.schema import FlightConfig
+    km = _known()
+    t = np.array([0.0, 10.0])
+    p = np.array([[0.5, 1.0, 1.8], [5.5, 1.0, 1.8]])
+    plan = GlobalPlan.from_waypoints(generate_trajectory(t, p), t, p, np.zeros((2, 3)), np.zeros((2, 3)),
+                                     np.array([True, True]), None, None, FlightConfig(), TrajectoryConfig(), 1.0)
+    rp = Replanner(ReplanConfig(), km, plan)
+    rp.on_pose(1.234, (1.5, 1.0, 1.5), tuple(np.eye(3).ravel()))       # looking east along y = 1
+    # post 1.5 m ahead on the axis; the beam's left edge (20 deg) meets the row face (y = 1.8) at 2.34 m
+    rp.on_range(1.234, _reading(0, 150, hfov=math.radians(40), vfov=0.0))
+    assert len(rp.memory) >= 1 and rp.memory.points()[0] == pytest.approx((3.0, 1.0, 1.5))
+    # the same beam whose return is the row face along its left edge: explained, nothing kept
+    rp2 = Replanner(ReplanConfig(), km, plan)
+    rp2.on_pose(1.234, (1.5, 1.0, 1.5), tuple(np.eye(3).ravel()))
+    rp2.on_range(1.234, _reading(0, round(100 * 0.8 / math.sin(math.radians(20))), hfov=math.radians(40), vfov=0.0))
+    assert len(rp2.memory) == 0
 
 
 def test_with_obstacle_erodes_the_free_space_locally():

@@ -8,7 +8,7 @@ from .knownmap import KnownMap
 from .memory import ObstacleMemory
 from .perception import BeamEvidence, Pose, PoseHistory, beam_evidence
 from .rejoin import RejoinResult, rejoin
-from .replanner import MODES, ReplanEvent, Replanner, ReplanStats, ReplanStep
+from .replanner import MODES, ReplanEvent, Replanner, ReplanStats, ReplanStep, mission_replan_config
 from .reroute import RerouteResult, reroute
 from .shaper import ReferenceShaper, ShapedState
 
@@ -16,6 +16,6 @@ __all__ = [
     "ReplanConfig", "SensorMount", "ApfForce", "ApfParams", "apf_force", "attractive_potential",
     "repulsive_potential", "total_potential", "GlobalPlan", "Segment", "KnownMap", "ObstacleMemory",
     "BeamEvidence", "Pose", "PoseHistory", "beam_evidence", "RejoinResult", "rejoin", "MODES",
-    "ReplanEvent", "Replanner", "ReplanStats", "ReplanStep", "RerouteResult", "reroute",
+    "ReplanEvent", "Replanner", "ReplanStats", "ReplanStep", "mission_replan_config", "RerouteResult", "reroute",
     "ReferenceShaper", "ShapedState",
 ]

@@ -32,6 +32,10 @@ from ..maps.grid import ElevationModel, OccupancyGrid
 from ..maps.heightfield import HeightField
 
 KNOWN_GROUND, KNOWN_ROW, KNOWN_ADDED, UNKNOWN = "ground", "row", "added", "unknown"
+#: ``explains``: a ray enters a row within this distance (m) beyond the return ...
+SURFACE_AHEAD_M = 0.1
+#: ... and is outside it this far (m) before the return.
+SURFACE_BEHIND_M = 0.4
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,6 +140,43 @@ class KnownMap:
     def is_known(self, x: float, y: float, z: float) -> bool:
         """True when the hit lies on a known feature (``classify`` is not ``"unknown"``)."""
         return self.classify(x, y, z) != UNKNOWN
+
+    def _in_row(self, x: float, y: float, z: float) -> bool:
+        cell = self.cell_of(x, y)
+        return cell is not None and bool(self.grid.occupied[cell]) and z <= self.height(x, y) + self.canopy_height_m
+
+    def explains(self, origin, direction, distance_m: float) -> bool:
+        """Is a return at ``distance_m`` along the unit ``direction`` from ``origin``
+        (ENU m) the surface of a known feature?
+
+        - the terrain: the hit is within the tolerance of the ground;
+        - an added obstacle: the hit is within the tolerance of its cells;
+        - a row: the ray *enters* it there: within ``SURFACE_AHEAD_M`` beyond
+          the hit (probed at 0.2, 0.5 and 1 times it) it is inside an
+          occupied cell below the canopy (or the hit is within half a cell
+          of one: a ray that touches a row's corner), ``SURFACE_BEHIND_M``
+          before the hit it is not. A return from an unknown obstacle whose
+          beam would reach a row farther on is not explained (a wide beam
+          always has a row somewhere in its field of view in a corridor), a
+          beam grazing a row's face is.
+        """
+        ox, oy, oz = origin
+        dx, dy, dz = direction
+        d = float(distance_m)
+        hx, hy, hz = ox + d * dx, oy + d * dy, oz + d * dz
+        c = self.classify(hx, hy, hz)
+        if c in (KNOWN_GROUND, KNOWN_ADDED):
+            return True
+        # inside a row just beyond the return (probed at a few depths: a ray that
+        # clips a row's corner is inside for a few centimetres only) ...
+        if not any(self._in_row(ox + a * dx, oy + a * dy, oz + a * dz)
+                   for a in (d + 0.2 * SURFACE_AHEAD_M, d + 0.5 * SURFACE_AHEAD_M, d + SURFACE_AHEAD_M)):
+            # ... or the hit touches a row's corner (within half a cell)
+            e = 0.5 * self.grid.resolution_m
+            if not any(self._in_row(hx + ex, hy + ey, hz) for ex, ey in ((e, e), (e, -e), (-e, e), (-e, -e))):
+                return False
+        b = max(d - SURFACE_BEHIND_M, 0.0)
+        return not self._in_row(ox + b * dx, oy + b * dy, oz + b * dz)
 
     # --- obstacles added in flight -------------------------------------------------------
 

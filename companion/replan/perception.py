@@ -12,8 +12,9 @@ orientations 0..7, 24, 25 and MAV_SENSOR_ROTATION_CUSTOM's quaternion).
 The return is placed on the beam axis, and a rangefinder reports the
 nearest surface anywhere in its field of view, so the true point may be off
 the axis by up to ``distance * tan(fov / 2)``: ``fan_hits`` are the four
-edge midpoints of the field of view at the measured distance (the replanner
-classifies all five and, for a wide beam, remembers them all). The beam's
+edge midpoints of the field of view at the measured distance, and half-way
+to them for a wide field (the replanner asks the known map about all of them
+and, for a wide beam, remembers them all). The beam's
 pyramid (its horizontal and vertical fields of view about its axis) is free
 of obstacles up to the distance, or up to ``max_m`` for a reading with no
 return. A reading below ``min_m`` (NaN without ``no_return``) is no
@@ -127,9 +128,10 @@ class BeamEvidence:
         The measured distance (NaN without a return).
     fan_hits : tuple of 3-tuples
         Where the return may also lie: the points at the measured distance
-        along the four edge midpoints of the field of view (empty without a
-        return or without a field of view). A return is explained by the
-        known map if any of ``hit`` and these is on a known feature.
+        along the four edge midpoints of the field of view, and half-way to
+        them for a field wider than ``WIDE_FOV_RAD`` (empty without a return
+        or without a field of view). The replanner asks the known map about
+        ``hit`` and these (``KnownMap.explains``).
     """
 
     origin: tuple
@@ -177,6 +179,8 @@ def beam_evidence(reading, pose: Pose, offset_flu_m=(0.0, 0.0, 0.0)) -> BeamEvid
         return None
     d = reading.distance_m
     if math.isfinite(d):
+        if not d > 0.0 or d < reading.min_m:
+            return None                  # below the sensor's range: no evidence
         free = d
     elif reading.no_return and math.isfinite(reading.max_m):
         free = reading.max_m
@@ -206,18 +210,25 @@ def beam_evidence(reading, pose: Pose, offset_flu_m=(0.0, 0.0, 0.0)) -> BeamEvid
                         float(free), hit, d, fan)
 
 
+#: A field of view wider than this (rad) is also sampled half-way to its edges.
+WIDE_FOV_RAD = math.radians(10.0)
+
+
 def _fan_points(R, S, origin, d: float, hfov: float, vfov: float):
-    """Points at range ``d`` along the edge midpoints of the field of view (ENU)."""
+    """Points at range ``d`` across the field of view (ENU): the edge midpoints,
+    and half-way to them for a field wider than ``WIDE_FOV_RAD``."""
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
     for col, fov in ((1, hfov), (2, vfov)):
         if not (math.isfinite(fov) and 0.0 < fov < math.pi):
             continue
-        t = math.tan(0.5 * fov)
-        for sgn in (1.0, -1.0):
-            # sensor-frame ray (1, +-t, 0) or (1, 0, +-t), to body FLU, then ENU
-            bx = S[0] + sgn * t * S[col]
-            by = S[3] + sgn * t * S[3 + col]
-            bz = S[6] + sgn * t * S[6 + col]
+        half = 0.5 * fov
+        angles = (half, -half, 0.5 * half, -0.5 * half) if fov > WIDE_FOV_RAD else (half, -half)
+        for a in angles:
+            # sensor-frame ray (1, tan a, 0) or (1, 0, tan a), to body FLU, then ENU
+            t = math.tan(a)
+            bx = S[0] + t * S[col]
+            by = S[3] + t * S[3 + col]
+            bz = S[6] + t * S[6 + col]
             ex = r00 * bx + r01 * by + r02 * bz
             ey = r10 * bx + r11 * by + r12 * bz
             ez = r20 * bx + r21 * by + r22 * bz

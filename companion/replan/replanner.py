@@ -409,16 +409,26 @@ class Replanner:
         mem = self.memory
         if len(mem):
             mem.clear_beam(ev)
-        if ev.hit is not None:
-            classify = self.known.classify
-            if classify(*ev.hit) == UNKNOWN and all(classify(*q) == UNKNOWN for q in ev.fan_hits):
-                # the return may come from anywhere in the field of view: keep the
-                # edge points too where they are a voxel apart (later beams clear them)
-                mem.add(t_s, ev.hit)
-                if ev.distance_m * math.tan(ev.half_max_rad) > self.cfg.voxel_m:
-                    for q in ev.fan_hits:
+        if ev.hit is not None and not self._explained(ev):
+            # the return may come from anywhere in the field of view: keep the edge
+            # points too where they are a voxel apart and not on a known feature
+            # (later beams clear the wrong ones)
+            mem.add(t_s, ev.hit)
+            if ev.distance_m * math.tan(ev.half_max_rad) > self.cfg.voxel_m:
+                for q in ev.fan_hits:
+                    if self.known.classify(*q) == UNKNOWN:
                         mem.add(t_s, q)
-                self.n_unknown += 1
+            self.n_unknown += 1
+
+    def _explained(self, ev) -> bool:
+        """The known map accounts for the return along the axis or a field-of-view edge."""
+        known, o, d = self.known, ev.origin, ev.distance_m
+        if known.explains(o, ev.axis, d):
+            return True
+        for q in ev.fan_hits:
+            if known.explains(o, ((q[0] - o[0]) / d, (q[1] - o[1]) / d, (q[2] - o[2]) / d), d):
+                return True
+        return False
 
     def step(self, t_s: float, pos_enu_m, vel_enu_m_s) -> ReplanStep:
         """The reference for this frame (vehicle time ``t_s``; the estimated state)."""
