@@ -8,7 +8,7 @@ Per-step cost (wall time of one frame: ``on_pose``, the frame's
 over a whole flight of the mission at 250 Hz, ray cast by the SITL's
 ``World`` against the mission's rows and terrain (the casting itself is not
 timed), with a ring of 16 horizontal rangefinders (22.5 deg wide,
-MAV_SENSOR_ROTATION_CUSTOM), a ring of 8 pitched 20 deg down (45 deg wide)
+MAV_SENSOR_ROTATION_CUSTOM), a ring of 16 pitched 20 deg down (22.5 deg wide)
 and one looking down, each at 25 Hz (a reading: the nearest of five rays
 across the field of view):
 
@@ -55,7 +55,7 @@ ROOT = Path(__file__).resolve().parents[1]
 N_RING = 16
 RING_FOV = math.radians(360.0 / N_RING)
 #: a second ring looking 20 deg down sees obstacles whose top is just below the flight height
-N_LOW = 8
+N_LOW = 16
 LOW_FOV = math.radians(360.0 / N_LOW)
 LOW_PITCH_DEG = -20.0
 

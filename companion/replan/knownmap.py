@@ -35,7 +35,7 @@ KNOWN_GROUND, KNOWN_ROW, KNOWN_ADDED, UNKNOWN = "ground", "row", "added", "unkno
 #: ``explains``: a ray enters a row within this distance (m) beyond the return ...
 SURFACE_AHEAD_M = 0.1
 #: ... and is outside it this far (m) before the return.
-SURFACE_BEHIND_M = 0.4
+SURFACE_BEHIND_M = 0.1
 
 
 @dataclass(frozen=True, eq=False)

@@ -104,6 +104,9 @@ GOVERNOR_MARGIN_M = 0.1
 #: default limits (1 m/s^2, 2 m/s^3) the shaper stops from 1 m/s in 0.97 m, from
 #: 0.5 m/s in 0.37 m; v^2 / (2 a_b) + v t_lag gives 1.6 m and 0.55 m.
 GOVERNOR_LAG_S = 0.6
+#: A re-route keeps this much (m) beyond the clearance and body from the obstacle's
+#: footprint: the sensors saw one face of it, its sides may reach a little farther.
+ROUTE_MARGIN_M = 0.3
 #: Extra height (m) above the top of an obstacle plus the clearance and the governor margin.
 PASS_MARGIN_M = 0.1
 #: Obstacle points closer than this (m) to a nearer one belong to the same obstacle.
@@ -292,7 +295,9 @@ def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m
     never cut), or the first other way-point ahead of it by more than the
     lead: 1 m, 1 s at the plan speed, and the distance flown at that speed
     while coming down (or up) to it at the vertical speed (no turning back to
-    reach it). Past a turning point that is behind, the next way-point.
+    reach it). ``u_xy`` is the direction of the leg the avoidance is on
+    (it moves to the next leg when the avoidance reaches a turn), so way-points
+    behind a turn already passed are measured along the new leg.
     """
     P = np.asarray(p_enu_m, dtype=float)
     n = len(plan.t_s)
@@ -302,7 +307,7 @@ def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m
         if plan.corner[i]:
             if a_i > -0.1:
                 return i
-            return min(i + 1, n - 1)
+            continue                      # a turn already passed (the avoidance went round it)
         t_down = 1.875 * abs(float(q[2] - P[2])) / vertical_speed_m_s
         if a_i > max(1.0, speed_m_s, speed_m_s * t_down):
             return i
@@ -576,6 +581,7 @@ class Replanner:
             self._climb_phase = "rise"
             self._rise_xy = P[:2].copy()
             self._z_pass = P[2]
+            self._far_along = float(P[:2] @ u)
             self._event(events, "climb", self._nearest(dist), "no lateral gap" if not passable else "no progress")
         goal = B.copy()
         if self.mode == "climb":
@@ -697,7 +703,7 @@ class Replanner:
         if self._stop_then == "reroute":
             blocking = pts[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else pts
             res = reroute(self.plan, self.known, st, tau, self._wp_leave, blocking, self._travel,
-                          self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s, self._keep_m)
+                          self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s, self._keep_m + ROUTE_MARGIN_M)
             self.known = res.known
             self.memory.forget(lambda q: np.array([self.known.classify(*map(float, x)) != UNKNOWN for x in q]))
             if res.plan is not None:
