@@ -112,3 +112,17 @@ def test_rejoin_respects_the_ceiling():
     assert res.plan is None and res.reason == "ceiling"
     ok = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5, ceiling_z=lambda x, y: z.max() + 0.01)
     assert ok.plan is not None
+
+
+def test_rejoin_way_point_ahead_not_back_round_a_turn():
+    from companion.replan.replanner import first_waypoint_ahead
+    plan = _plan()          # east along y = 0 to the turn at (18, 0), then north to (18, 2.5), west to (15, 2.5)
+    # on the first leg at x = 8.5 heading east: 11 is 2.5 m ahead (more than the 1 m lead)
+    assert first_waypoint_ahead(plan, 2, (8.5, 0.0, 1.5), np.array([1.0, 0.0]), 1.0, 0.5) == 3
+    # 1.2 m above the line: coming down at 0.5 m/s takes 4.5 s, so 4.5 m of lead: 15 (6.5 m ahead)
+    assert first_waypoint_ahead(plan, 2, (8.5, 0.0, 2.7), np.array([1.0, 0.0]), 1.0, 0.5) == 4
+    # near the turn: the turn itself, never cut
+    assert first_waypoint_ahead(plan, 4, (17.5, 0.0, 1.5), np.array([1.0, 0.0]), 1.0, 0.5) == 5
+    # the avoidance went round the turns at (18, 0) and (18, 2.5) and is heading west at x = 16.8:
+    # the way-points behind it are skipped, the next ahead is the end (15, 2.5)
+    assert first_waypoint_ahead(plan, 4, (16.8, 2.5, 1.5), np.array([-1.0, 0.0]), 1.0, 0.5) == 7
