@@ -442,7 +442,7 @@ def test_reroute_flies_the_rest_of_the_corridor_from_its_other_end(field):
     a, b = new.segments[0].start_xy, new.segments[0].end_xy
     assert a[0] == pytest.approx(17.0) and a[1] == pytest.approx(CORRIDOR_Y)
     assert b[1] == pytest.approx(CORRIDOR_Y) and 9.25 < b[0] < 9.25 + 0.5 + 1.0
-    # then the two lines not yet flown, in their planned order and direction
+    # then the two lines not yet flown, in their planned order (each entered by its nearer end: as planned here)
     np.testing.assert_allclose([new.segments[1].start_xy, new.segments[1].end_xy], SEGMENTS[1], atol=1e-6)
     np.testing.assert_allclose([new.segments[2].start_xy, new.segments[2].end_xy], SEGMENTS[2], atol=1e-6)
     # the new trajectory keeps the post (and its assumed depth) out of reach

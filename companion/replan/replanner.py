@@ -35,8 +35,8 @@ Modes (``ReplanStep.mode``)
             oscillation), the pass height is the top of the obstacle points
             ahead plus the clearance and margins (``PASS_MARGIN_M``), at most
             the ceiling; it grows with the points seen while rising. *Rise*:
-            the goal is the pass height above the point where the escape
-            began. *Over*: once the way ahead is clear at that height, the
+            the goal is the pass height above the point of the leg's line
+            where the escape began. *Over*: once the way ahead is clear at that height, the
             goal is on the leg's line at the pass height, d_o beyond the
             farthest obstacle point seen (a goal this near keeps the
             improved repulsion, scaled by the goal distance squared, from
@@ -203,8 +203,9 @@ class ReplanStats:
     event_list : tuple of ReplanEvent
         The first ``MAX_EVENTS_KEPT`` events.
     max_lateral_deviation_m : float
-        Largest horizontal distance from the reference to the line of the
-        leg being avoided, while avoiding and rejoining (m).
+        Largest horizontal distance from the reference to the leg being
+        avoided (or the one before it, after a turn), while avoiding and
+        rejoining (m).
     extra_path_m : float
         Length of the flown reference minus the planned trajectory's length (m).
     max_climb_m : float
@@ -253,6 +254,15 @@ def _pointing(p, target) -> tuple:
     return (0.0, 1.0, 0.0) if n < 1e-9 else (u[0] / n, u[1] / n, u[2] / n)
 
 
+def _segment_distance(p, a, b) -> float:
+    """Horizontal distance (m) from the point p to the segment a-b (ENU xy)."""
+    ax, ay = float(a[0]), float(a[1])
+    dx, dy = float(b[0]) - ax, float(b[1]) - ay
+    L2 = dx * dx + dy * dy
+    t = 0.0 if L2 <= 0.0 else min(max(((p[0] - ax) * dx + (p[1] - ay) * dy) / L2, 0.0), 1.0)
+    return math.hypot(p[0] - ax - t * dx, p[1] - ay - t * dy)
+
+
 def lateral_gap(lat_m: np.ndarray, half_width_m: float, clearance_m: float, min_gap_m: float = 0.02) -> bool:
     """True if some lateral position in [-half_width, half_width] keeps ``clearance_m``
     from every obstacle offset in ``lat_m`` (a gap of at least ``min_gap_m``)."""
@@ -291,8 +301,9 @@ def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m
     """The first way-point to rejoin after an avoidance along the leg direction ``u_xy``.
 
     From the way-point after ``wp_leave`` (the last passed when the avoidance
-    began) on: the first turning point not behind the reference (a turn is
-    never cut), or the first other way-point ahead of it by more than the
+    began) on: the first turning point still ahead of the reference by more
+    than ``GOAL_REACHED_M`` (a turn is never cut; one the avoidance reached,
+    its goal, counts as passed), or the first other way-point ahead of it by more than the
     lead: 1 m, 1 s at the plan speed, and the distance flown at that speed
     while coming down (or up) to it at the vertical speed (no turning back to
     reach it). ``u_xy`` is the direction of the leg the avoidance is on
@@ -305,9 +316,9 @@ def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m
         q = plan.p_enu_m[i]
         a_i = float((q[:2] - P[:2]) @ u_xy)
         if plan.corner[i]:
-            if a_i > -0.1:
+            if a_i > GOAL_REACHED_M:
                 return i
-            continue                      # a turn already passed (the avoidance went round it)
+            continue                      # a turn reached or passed (the avoidance went round it)
         t_down = 1.875 * abs(float(q[2] - P[2])) / vertical_speed_m_s
         if a_i > max(1.0, speed_m_s, speed_m_s * t_down):
             return i
@@ -511,8 +522,10 @@ class Replanner:
     def _threat(self, p, v, leg_u, extra_m: float = 0.0) -> float | None:
         """Distance to the nearest remembered point within the trigger range (plus
         ``extra_m``) that is not behind (along the horizontal velocity, or ``leg_u``
-        when hovering, at least -clearance); None if none. The same test starts
-        an avoidance and (with ``REJOIN_HYSTERESIS_M``) allows the rejoin."""
+        when hovering, at least -(clearance + body + ``extra_m``)); None if none.
+        The same test starts an avoidance and (with ``REJOIN_HYSTERESIS_M``, and
+        the leg ``follow`` will use) allows the rejoin, so the two cannot
+        alternate."""
         pts = self.memory.points()
         if not len(pts):
             return None
@@ -522,7 +535,7 @@ class Replanner:
         u = np.array([v[0] / vh, v[1] / vh]) if vh > 0.05 else leg_u
         along = rel[:, :2] @ u
         speed = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
-        ok = (dist <= self._trigger_m(speed) + extra_m) & (along >= -self._keep_m)
+        ok = (dist <= self._trigger_m(speed) + extra_m) & (along >= -self._keep_m - extra_m)
         return float(dist[ok].min()) if ok.any() else None
 
     def _enter_avoid(self, tau: float, s, rng: float, events: list) -> None:
@@ -531,7 +544,7 @@ class Replanner:
         self._avoid_leg = k
         self._wp_leave = self.plan.waypoint_index_at(tau)
         A, B, u, n = self._leg_frame(k)
-        self._dev_leg = (A.copy(), n.copy())
+        self._dev_leg = ((A[:2].copy(), B[:2].copy()),)
         along = float((np.asarray(s.p[:2]) - A[:2]) @ u)
         self._progress = along
         self._t_progress = tau
@@ -549,7 +562,7 @@ class Replanner:
         if math.hypot(*(B[:2] - P[:2])) < GOAL_REACHED_M and k < self._n_legs - 1:
             k = self._avoid_leg = k + 1
             A, B, u, n = self._leg_frame(k)
-            self._dev_leg = (A.copy(), n.copy())
+            self._dev_leg = (self._dev_leg[-1], (A[:2].copy(), B[:2].copy()))   # this leg and the one before
             self._progress = float((P[:2] - A[:2]) @ u)
             self._t_progress = tau
         pts = self.memory.points()
@@ -558,8 +571,9 @@ class Replanner:
         along = rel[:, :2] @ u
         c = self._keep_m
         near = dist <= cfg.influence_range_m
-        if tau >= self._next_rejoin and self._calm() and \
-                self._threat(P, self.shaper.v, u, REJOIN_HYSTERESIS_M) is None:
+        v = self.shaper.v
+        if tau >= self._next_rejoin and self._calm() and self._threat(
+                P, v, self._leg_frame(self.plan.leg_near(P, v[:2]))[2], REJOIN_HYSTERESIS_M) is None:
             ref = self._try_rejoin(tau, events)
             if ref is not None:
                 return ref
@@ -579,7 +593,7 @@ class Replanner:
             self.mode = "climb"
             self._t_climb = tau
             self._climb_phase = "rise"
-            self._rise_xy = P[:2].copy()
+            self._rise_xy = A[:2] + float((P[:2] - A[:2]) @ u) * u      # on the leg's line
             self._z_pass = P[2]
             self._far_along = float(P[:2] @ u)
             self._event(events, "climb", self._nearest(dist), "no lateral gap" if not passable else "no progress")
@@ -737,7 +751,12 @@ class Replanner:
         plan = self.plan
         P = np.asarray(st.p)
         A, B, u, n = self._leg_frame(self._avoid_leg)
-        first = first_waypoint_ahead(plan, self._wp_leave, P, u, self.speed_m_s, self.cfg.vertical_speed_m_s)
+        # way-points of earlier legs are behind, whatever their projection on this one
+        start = self._wp_leave
+        at_A = np.flatnonzero(plan.corner[start:] & (np.hypot(*(plan.p_enu_m[start:, :2] - A[:2]).T) < 0.05))
+        if len(at_A):
+            start += int(at_A[0])
+        first = first_waypoint_ahead(plan, start, P, u, self.speed_m_s, self.cfg.vertical_speed_m_s)
         res = rejoin(plan, st, tau, first, self.memory.points(), self._keep_m,
                      self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z)
         if res.plan is None:
@@ -755,8 +774,7 @@ class Replanner:
     def _deviation(self, p) -> None:
         if self._dev_leg is None:
             return
-        A, n = self._dev_leg
-        lat = abs((p[0] - A[0]) * n[0] + (p[1] - A[1]) * n[1])
+        lat = min(_segment_distance(p, a, b) for a, b in self._dev_leg)
         if lat > self._max_lat:
             self._max_lat = lat
         climb = p[2] - (self.known.ground_z(p[0], p[1]) + self.plan.flight.height_agl_m)

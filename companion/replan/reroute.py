@@ -12,7 +12,11 @@ Steps of ``reroute`` (pure: maps, plan and state in, a new plan out):
    obstacle (its free runs past the vehicle, each at least the minimum
    segment length) flown *from the segment's far end back toward the
    obstacle*, then the main segments not yet started, in their planned
-   order and direction, each cut into its free runs in the updated map.
+   order, each cut into its free runs in the updated map and entered by
+   its end nearer to where the previous one ended (straight line): the
+   planned directions were chosen for the planned order, which the
+   re-route has broken, and the connection would otherwise often fly the
+   whole piece once to reach its far end.
 3. The route: from the vehicle straight back along its track to the first
    point of the eroded free space (the vehicle stopped within the margin of
    the obstacle), then an auxiliary connection (``coverage.gridpath.aux_path``:
@@ -174,6 +178,7 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
 
     # what is left to cover, in flight order: (entry, exit) pairs (ENU xy)
     pieces: list[tuple[np.ndarray, np.ndarray]] = []
+    n_forced = 0
     min_len = plan.min_segment_m
     current, nxt = plan.segment_at(wp_index)
     if current is not None:
@@ -185,6 +190,7 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
         beyond = [(s0, s1) for s0, s1 in free_runs(new_known, a, b) if s0 > s_v and s1 - s0 >= min_len]
         for s0, s1 in sorted(beyond, reverse=True):       # from the far end back toward the obstacle
             pieces.append((a + s1 * u, a + s0 * u))
+    n_forced = len(pieces)
     for seg in plan.segments[nxt:]:
         a, b = np.asarray(seg.start_xy), np.asarray(seg.end_xy)
         L = max(float(np.hypot(*(b - a))), 1e-12)
@@ -198,7 +204,9 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
     cur = start
     flown = []
     skipped = 0
-    for entry, exit_ in pieces:
+    for k, (entry, exit_) in enumerate(pieces):
+        if k >= n_forced and np.hypot(*(exit_ - cur)) < np.hypot(*(entry - cur)):
+            entry, exit_ = exit_, entry           # enter a free piece by its nearer end
         try:
             conn = aux_path(new_known.free, world_to_grid(grid, cur), world_to_grid(grid, entry))
         except InputError:
