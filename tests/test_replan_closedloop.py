@@ -530,3 +530,15 @@ def test_stats_for_the_report(field, low_flight):
     planned = np.sum(np.linalg.norm(np.diff(tr.sample(np.append(np.arange(tr.t0, tr.tf, 0.05), tr.tf)).p,
                                             axis=0), axis=1))
     assert d["extra_path_m"] == pytest.approx(flown - planned, abs=1e-6)
+
+
+def test_back_off_to_the_nearest_free_cell_not_through_the_obstacle(field):
+    from companion.replan.reroute import nearest_free
+    pts = np.array([[9.0, CORRIDOR_Y + d] for d in (-0.2, 0.0, 0.2)])
+    known = field.known.with_obstacle(pts, 1.3)
+    p = np.array([9.6, CORRIDOR_Y])                     # stopped east of the post, inside its margin
+    q = nearest_free(known, p, pts, 0.5)
+    g = known.cell_of(*q)
+    assert known.free.eroded[g]
+    assert q[0] > 9.6                                     # east, away from the post, not across it
+    assert np.hypot(*(q - p)) < 1.0                     # the margin (1.3 m) minus where it stopped

@@ -550,7 +550,6 @@ class Replanner:
         self._t_progress = tau
         self._t_avoid = tau
         self._t_climb = None
-        self._travel = u.copy()
         self.mode = "avoid"
         self._event(events, "avoid", rng, f"unknown obstacle within {self._trigger_m(self.speed_m_s):.2f} m")
 
@@ -716,7 +715,8 @@ class Replanner:
         dist = np.linalg.norm(pts - P, axis=1) if len(pts) else np.zeros(0)
         if self._stop_then == "reroute":
             blocking = pts[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else pts
-            res = reroute(self.plan, self.known, st, tau, self._wp_leave, blocking, self._travel,
+            travel = self._leg_frame(self._avoid_leg)[2]       # the leg the avoidance was on
+            res = reroute(self.plan, self.known, st, tau, self._wp_leave, blocking, travel,
                           self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s, self._keep_m + ROUTE_MARGIN_M)
             self.known = res.known
             self.memory.forget(lambda q: np.array([self.known.classify(*map(float, x)) != UNKNOWN for x in q]))

@@ -17,9 +17,12 @@ Steps of ``reroute`` (pure: maps, plan and state in, a new plan out):
    planned directions were chosen for the planned order, which the
    re-route has broken, and the connection would otherwise often fly the
    whole piece once to reach its far end.
-3. The route: from the vehicle straight back along its track to the first
-   point of the eroded free space (the vehicle stopped within the margin of
-   the obstacle), then an auxiliary connection (``coverage.gridpath.aux_path``:
+3. The route: from the vehicle straight back along its track (or, when
+   that finds no free space, or the leg would pass closer to the obstacle
+   than the vehicle is, straight away from the obstacle, or else to the
+   nearest free cell such a leg reaches) to the first point of the eroded
+   free space (the vehicle stopped within the margin of the obstacle), then
+   an auxiliary connection (``coverage.gridpath.aux_path``:
    straight where clear, else the shortest grid path) to each piece in
    turn; a piece that cannot be reached is skipped (counted).
 4. Way-points along the route (``coverage.waypoints.waypoints_along``), the
@@ -127,6 +130,52 @@ def back_off(known: KnownMap, p_xy, direction_xy, max_m: float = MAX_BACK_OFF_M)
     return pts[k + 1] if k + 1 < len(s) and free[k + 1] else pts[k]
 
 
+def nearest_free(known: KnownMap, p_xy, points_xy: np.ndarray, keep_m: float,
+                 max_m: float = MAX_BACK_OFF_M, tries: int = 400) -> np.ndarray | None:
+    """The nearest centre of an eroded free cell within ``max_m`` of ``p_xy`` (ENU m)
+    reached by a straight leg clear of the obstacle points (``_segment_clear_of``);
+    None if none of the ``tries`` nearest is."""
+    grid = known.grid
+    h = known.free.resolution_m
+    rc = known.cell_of(float(p_xy[0]), float(p_xy[1]))
+    if rc is None:
+        return None
+    k = int(np.ceil(max_m / h))
+    r0, c0 = max(0, rc[0] - k), max(0, rc[1] - k)
+    win = known.free.eroded[r0:rc[0] + k + 1, c0:rc[1] + k + 1]
+    rows, cols = np.nonzero(win)
+    if len(rows) == 0:
+        return None
+    x, y = grid.cell_to_world(rows + r0, cols + c0)
+    cand = np.column_stack([x, y])
+    d = np.hypot(*(cand - np.asarray(p_xy, dtype=float)).T)
+    for i in np.argsort(d)[:tries]:
+        if d[i] > max_m:
+            break
+        if _segment_clear_of(p_xy, cand[i], points_xy, keep_m):
+            return cand[i]
+    return None
+
+
+def _min_keep(keep_m: float | None, known: KnownMap) -> float:
+    """What the back-off leg must keep from the obstacle: half the route's margin
+    (the vehicle stopped within it; it must not go closer)."""
+    return 0.5 * (keep_m if keep_m is not None else known.free.threshold_m)
+
+
+def _segment_clear_of(a, b, points_xy: np.ndarray, keep_m: float) -> bool:
+    """True when the straight segment a-b (ENU xy) keeps ``keep_m`` from every point,
+    or gets no closer to them than ``a`` is."""
+    if len(points_xy) == 0:
+        return True
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    ab = b - a
+    L2 = max(float(ab @ ab), 1e-18)
+    t = np.clip(((points_xy - a) @ ab) / L2, 0.0, 1.0)
+    d = np.hypot(*(a + t[:, None] * ab - points_xy).T)
+    return bool(d.min() >= min(keep_m, float(np.hypot(*(points_xy - a).T).min()) - 1e-9))
+
+
 def _merge(points: list) -> np.ndarray:
     out = [np.asarray(points[0], dtype=float)]
     for q in points[1:]:
@@ -154,7 +203,10 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
         Last way-point of ``plan`` passed when the vehicle left it.
     obstacle_enu_m : (k, 3) array
         Points of the blocking obstacle.
-    travel_xy : (2,) unit direction of travel when it was met (ENU).
+    travel_xy : (2,) unit direction of travel when the obstacle stopped the vehicle
+        (ENU): the route backs off the other way (the track it came along) or,
+        when that finds no free space clear of the obstacle, away from the
+        obstacle; the assumed depth extends from the vehicle through the obstacle.
     depth_m : float
         Assumed depth of the obstacle behind the seen face (m).
     vertical_speed_m_s : float
@@ -165,16 +217,29 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
     """
     travel = np.asarray(travel_xy, dtype=float)
     travel = travel / max(float(np.hypot(*travel)), 1e-12)
-    new_known = known.with_obstacle(obstacle_footprint(obstacle_enu_m, travel, depth_m,
-                                                       0.5 * known.free.resolution_m), keep_m)
     p = np.asarray(state.p, dtype=float)
+    obs = np.asarray(obstacle_enu_m, dtype=float).reshape(-1, 3)
+    toward = travel
+    if len(obs):
+        d = obs[np.argmin(np.hypot(*(obs[:, :2] - p[:2]).T)), :2] - p[:2]
+        if np.hypot(*d) > 1e-6:
+            toward = d / np.hypot(*d)
+    new_known = known.with_obstacle(obstacle_footprint(obs, toward, depth_m, 0.5 * known.free.resolution_m), keep_m)
 
     def fail(reason: str) -> RerouteResult:
         return RerouteResult(None, new_known, reason, 0, 0, np.zeros((0, 2)))
 
-    start = back_off(new_known, p[:2], travel)
+    start = None
+    keep_back = _min_keep(keep_m, new_known)
+    for direction in (travel, toward):
+        cand = back_off(new_known, p[:2], direction)
+        if cand is not None and _segment_clear_of(p[:2], cand, obs[:, :2], keep_back):
+            start = cand
+            break
     if start is None:
-        return fail(f"no free space within {MAX_BACK_OFF_M:g} m behind the vehicle")
+        start = nearest_free(new_known, p[:2], obs[:, :2], keep_back)
+    if start is None:
+        return fail(f"no free space within {MAX_BACK_OFF_M:g} m behind the vehicle or away from the obstacle")
 
     # what is left to cover, in flight order: (entry, exit) pairs (ENU xy)
     pieces: list[tuple[np.ndarray, np.ndarray]] = []
