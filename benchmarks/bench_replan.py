@@ -25,7 +25,7 @@ Issue 8's target: one replanning step <= 1 ms median.
 flown exactly, level attitude, body y toward the pointing direction) at
 50 Hz with sensors at 12.5 Hz, each with 0-3 random obstacles (cylinders
 r 0.15-0.4 m and boxes 0.3-1.0 m, heights 0.8-4 m, in the corridors and
-the headlands, at least 1 m from the flight's start). Per flight: the
+the headlands, centres at least 2.5 m from the flight's start). Per flight: the
 outcome (finished / hold / timeout), the events, the true clearance of the
 body (the reference's distance to the obstacles' surfaces minus the body
 radius, from ``mission.vehicle``: arm + 10-inch propeller) and the statistics.
@@ -177,7 +177,8 @@ def per_step(mission_name: str) -> None:
 
 
 def random_obstacles(rng, gplan, known, n):
-    """n obstacles in the corridors and headlands, not within 1 m of the start."""
+    """n obstacles in the corridors and headlands, their centre at least 2.5 m from the
+    start (the vehicle takes off there: nothing may stand within its clearance)."""
     free = known.free
     start = gplan.trajectory.sample(0.0).p[:2]
     out = []
@@ -186,7 +187,7 @@ def random_obstacles(rng, gplan, known, n):
         # near the planned path (corridors and headlands), up to 0.8 m off it
         i = rng.integers(0, len(path) - 1)
         q = path[i] + rng.uniform() * (path[i + 1] - path[i]) + rng.uniform(-0.8, 0.8, 2)
-        if np.hypot(*(q - start)) < 1.0 or known.cell_of(float(q[0]), float(q[1])) is None:
+        if np.hypot(*(q - start)) < 2.5 or known.cell_of(float(q[0]), float(q[1])) is None:
             continue
         if known.grid.occupied[known.cell_of(float(q[0]), float(q[1]))]:
             continue

@@ -24,6 +24,8 @@ from ..trajectory import Trajectory, TrajectoryConfig
 _MATCH_TOL_M = 0.05
 #: Legs this close (m) to the nearest are tied (at a turn, the direction decides).
 _LEG_TIE_M = 0.3
+#: Turning points closer than this (m) to the previous one do not start a leg.
+_MIN_LEG_M = 0.5
 
 
 @dataclass(frozen=True)
@@ -115,7 +117,7 @@ class GlobalPlan:
         if final_xy is None:
             final_xy = p[-1, :2]
         segs = match_segments(np.asarray(segments_xy, dtype=float).reshape(-1, 2, 2), p[:, :2], corner)
-        turns = p[np.union1d(np.flatnonzero(corner), [0, len(p) - 1])]
+        turns = merge_turns(p[np.union1d(np.flatnonzero(corner), [0, len(p) - 1])])
         return cls(trajectory, np.asarray(t_s, dtype=float), p, np.asarray(v_enu_m_s, dtype=float),
                    np.asarray(a_enu_m_s2, dtype=float), corner, segs,
                    None if target_enu_m is None else np.asarray(target_enu_m, dtype=float),
@@ -189,6 +191,23 @@ def match_segments(segments_xy: np.ndarray, wp_xy: np.ndarray, corner: np.ndarra
             cursor = min(k, n - 1)
         out.append(Segment((float(a[0]), float(a[1])), (float(b[0]), float(b[1])), ends[0], ends[1]))
     return tuple(out)
+
+
+def merge_turns(turns: np.ndarray, min_leg_m: float = _MIN_LEG_M) -> np.ndarray:
+    """The turning points without those closer than ``min_leg_m`` (horizontally) to
+    the previous one kept (the last is always kept, replacing a too-near one):
+    a leg a few centimetres long (a re-route's back-off, a grid path's step)
+    has no direction to keep to."""
+    out = [turns[0]]
+    for q in turns[1:]:
+        if np.hypot(*(q[:2] - out[-1][:2])) >= min_leg_m:
+            out.append(q)
+    if len(turns) > 1 and not np.array_equal(out[-1], turns[-1]):
+        if len(out) > 1 and np.hypot(*(turns[-1][:2] - out[-1][:2])) < min_leg_m:
+            out[-1] = turns[-1]
+        else:
+            out.append(turns[-1])
+    return np.array(out).reshape(-1, 3)
 
 
 def legs_as_segments(wp_xy: np.ndarray, corner: np.ndarray, min_length_m: float) -> np.ndarray:

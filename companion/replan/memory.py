@@ -7,7 +7,9 @@ creep with the sensor (a horizontal beam climbing a face would otherwise
 drag the voxel's point up to the top, where the first beam over the top
 clears it). Points are forgotten when
 
-- not seen again for ``lifetime_s`` (decay, vehicle time);
+- not seen again for ``lifetime_s`` (decay, vehicle time; a shorter
+  lifetime may be given per point: the replanner gives the candidate
+  positions of a wide beam's return 1 s);
 - farther than ``radius_m`` from the vehicle;
 - inside a beam that is now free (clearing): a later reading's field of
   view holds the point short of its own return (by ``clear_margin_m``), so
@@ -56,6 +58,7 @@ class ObstacleMemory:
         self.capacity = int(capacity)
         self._pts = np.zeros((self.capacity, 3))
         self._t = np.full(self.capacity, -math.inf)
+        self._life = np.full(self.capacity, self.lifetime_s)
         self._key = [None] * self.capacity
         self._slots: dict[tuple, int] = {}
         self._free = list(range(self.capacity - 1, -1, -1))
@@ -64,8 +67,11 @@ class ObstacleMemory:
     def __len__(self) -> int:
         return len(self._slots)
 
-    def add(self, t_s: float, point) -> None:
-        """Remember a return at ``point`` (ENU m) seen at ``t_s``."""
+    def add(self, t_s: float, point, lifetime_s: float | None = None) -> None:
+        """Remember a return at ``point`` (ENU m) seen at ``t_s``, for ``lifetime_s``
+        (default the memory's) unless seen again; a voxel keeps the longest
+        lifetime it was given."""
+        life = self.lifetime_s if lifetime_s is None else float(lifetime_s)
         x, y, z = float(point[0]), float(point[1]), float(point[2])
         v = self.voxel_m
         key = (math.floor(x / v), math.floor(y / v), math.floor(z / v))
@@ -77,7 +83,10 @@ class ObstacleMemory:
             self._slots[key] = i
             self._key[i] = key
             self._pts[i] = (x, y, z)
+            self._life[i] = life
             self._cache = None
+        else:
+            self._life[i] = max(self._life[i], life)
         self._t[i] = t_s
 
     def _drop(self, i: int) -> None:
@@ -129,7 +138,7 @@ class ObstacleMemory:
             return 0
         idx = self._active()
         rel = self._pts[idx] - np.asarray(center_enu_m, dtype=float)
-        old = (self._t[idx] < t_s - self.lifetime_s) | (np.einsum("ki,ki->k", rel, rel) > self.radius_m ** 2)
+        old = (self._t[idx] < t_s - self._life[idx]) | (np.einsum("ki,ki->k", rel, rel) > self.radius_m ** 2)
         gone = idx[old]
         for i in gone.tolist():
             self._drop(i)

@@ -138,6 +138,9 @@ GOAL_REACHED_M = 0.3
 REST_V_M_S, REST_A_M_S2 = 0.02, 0.05
 #: Propeller radius (m) added to the arm length for the body radius when the mission gives none.
 PROP_RADIUS_M = 0.127
+#: Lifetime (s) of the field-of-view edge candidates of a wide beam's return (the
+#: axis point lives ``memory_s``).
+CANDIDATE_LIFETIME_S = 1.0
 #: Events kept in the statistics (the count goes on).
 MAX_EVENTS_KEPT = 1000
 
@@ -427,13 +430,15 @@ class Replanner:
             mem.clear_beam(ev)
         if ev.hit is not None and not self._explained(ev):
             # the return may come from anywhere in the field of view: keep the edge
-            # points too where they are a voxel apart and not on a known feature
-            # (later beams clear the wrong ones)
+            # points too where they are a voxel apart and not on a known feature,
+            # briefly (CANDIDATE_LIFETIME_S) unless seen again: later beams clear the
+            # wrong ones, and those no beam passes through again (a wide beam's
+            # candidates over a row seen from above the canopy) must not linger
             mem.add(t_s, ev.hit)
             if ev.distance_m * math.tan(ev.half_max_rad) > self.cfg.voxel_m:
                 for q in ev.fan_hits:
                     if self.known.classify(*q) == UNKNOWN:
-                        mem.add(t_s, q)
+                        mem.add(t_s, q, CANDIDATE_LIFETIME_S)
             self.n_unknown += 1
 
     def _explained(self, ev) -> bool:
