@@ -40,13 +40,15 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+for _p in (str(ROOT), str(Path(__file__).resolve().parent)):
+    if _p not in sys.path:
+        sys.path.insert(0, _p)
 
 from companion.control import ControlConfig, GeometricController, Measurements, Reference  # noqa: E402
 from companion.mission import load_mission  # noqa: E402
 from companion.planner import plan_mission  # noqa: E402
 from companion.runner import setpoint_yaw_enu  # noqa: E402
+from sensor_models import SensorModels, SensorSpec  # noqa: E402
 from sitl.sim import Setpoint, Simulation  # noqa: E402
 from sitl.world import load_world  # noqa: E402
 
@@ -72,7 +74,9 @@ class TrackResult:
 
 def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = None, *,
         seed: int | None = None, noise: bool = True, cut_s: float | None = None,
-        settle_s: float = 5.0, plan=None, mission=None, record: bool = False) -> TrackResult:
+        settle_s: float = 5.0, plan=None, mission=None, record: bool = False,
+        sensors: SensorSpec | None = None, noise_overrides: dict | None = None,
+        abort_m: float | None = None) -> TrackResult:
     """Fly the mission's planned trajectory in-process; see the module docstring.
 
     Parameters
@@ -90,6 +94,16 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
         Fly only the first ``cut_s`` seconds of the trajectory.
     record : bool
         Keep per-frame attitude / yaw diagnostics in ``extra``.
+    sensors : SensorSpec, optional
+        What the companion is given instead of the SITL's own sensors
+        (``sensor_models``: the paper's vectors, an IMU, a disturbed
+        magnetometer, late GNSS fixes); seeded from the same seed.
+    noise_overrides : dict, optional
+        Fields of the mission's ``sim.noise`` to replace (e.g.
+        ``velocity_std_m_s``, ``gyro_bias_rad_s``).
+    abort_m : float, optional
+        Stop the flight when the error exceeds this (diverged:
+        ``extra["diverged"]``, the figures cover the frames flown).
     """
     import dataclasses
 
@@ -98,13 +112,22 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
         sim_cfg = mission.sim
         nz = dataclasses.replace(sim_cfg.noise, vector_variance=0.0, gyro_variance=0.0)
         mission = dataclasses.replace(mission, sim=dataclasses.replace(sim_cfg, noise=nz))
+    if noise_overrides:
+        sim_cfg = mission.sim
+        nz = dataclasses.replace(sim_cfg.noise, **noise_overrides)
+        mission = dataclasses.replace(mission, sim=dataclasses.replace(sim_cfg, noise=nz))
     plan = plan or plan_mission(mission)
     traj = plan.trajectory
     target = tuple(float(x) for x in plan.target_enu_m)
     cfg = cfg or mission.control
-    rng = np.random.default_rng(mission.sim.seed if seed is None else seed)
+    seed_ = mission.sim.seed if seed is None else seed
+    rng = np.random.default_rng(seed_)
     sim = Simulation(mission, rng, world=load_world(mission))
     dt = sim.dt_frame_s
+    models = None
+    if sensors is not None:
+        models = SensorModels(sensors, np.random.default_rng([seed_, 7]), sim.params.plant.gravity_m_s2,
+                              mission.sim.magnetic_field_enu_gauss, dt)
     t0, tf = float(traj.t0), float(traj.tf)
     if cut_s is not None:
         tf = min(tf, t0 + cut_s)
@@ -130,22 +153,36 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
     hover = veh.mass_kg * g / 4.0
     sim.plant.set_state(P[0], V[0], R=R0, f=(hover,) * 4, landed=False)
     sim.onboard.reset()
+    gnss = getattr(sim.sensors, "gnss", None)     # a SITL with a GNSS receiver: its first fix is here
+    if gnss is not None:
+        gnss.reset(tuple(P[0]), tuple(V[0]))
     frame = sim.step_frame((hover / veh.max_thrust_per_rotor_n,) * 4)
     t_base_us = frame.time_us
 
     errs = np.empty(n)
-    diag = {"yaw_err": [], "tilt_err": [], "sat": [], "yaw": []} if record else None
+    diag = ({"yaw_err": [], "tilt_err": [], "sat": [], "yaw": [], "att_err": [], "pos_est_err": [], "e_x": []}
+            if record else None)
     sp = None
     next_sp = -1
     sp_every = int(round(1.0 / (50.0 * dt)))     # runner: setpoints at 50 Hz of vehicle time
+    diverged = False
     for k in range(n):
         tr = frame.truth
         errs[k] = math.dist(tr.pos_enu_m, P[k])
+        if abort_m is not None and not errs[k] < abort_m:
+            diverged, n = True, k + 1
+            errs = errs[:n]
+            break
         t_s = frame.time_us * 1e-6
         if control == "companion":
-            pos, vel = _f32(frame.pos_enu_m), _f32(frame.vel_enu_m_s)
-            meas = Measurements(_f32(frame.gyro_flu_rad_s), _f32(frame.accel_flu_m_s2), _f32(frame.mag_flu_gauss),
-                                pos, vel, (frame.time_us // 1000) * 1e-3)
+            if models is not None:
+                meas = Measurements(*models.measure(frame))
+            else:
+                pos, vel = _f32(frame.pos_enu_m), _f32(frame.vel_enu_m_s)
+                # LOCAL_POSITION_NED's time_boot_ms: the fix's measurement time (where the SITL has one)
+                t_fix_us = getattr(frame, "pos_time_us", frame.time_us)
+                meas = Measurements(_f32(frame.gyro_flu_rad_s), _f32(frame.accel_flu_m_s2),
+                                    _f32(frame.mag_flu_gauss), pos, vel, (t_fix_us // 1000) * 1e-3)
             ref = Reference(tuple(P[k]), tuple(V[k]), tuple(A[k]), tuple(Jk[k]), tuple(S[k]))
             out = ctrl.update(t_s, meas, ref)
             cmd = out.motor_cmd
@@ -158,6 +195,11 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
                 diag["yaw_err"].append(math.degrees((y - yd + math.pi) % (2 * math.pi) - math.pi))
                 diag["yaw"].append(math.degrees(yd))
                 diag["sat"].append(out.saturated)
+                est = ctrl.attitude_estimate()
+                E = R.T @ np.array(est.R_enu_flu).reshape(3, 3)
+                diag["att_err"].append(0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]]))
+                diag["pos_est_err"].append(np.array(est.pos_enu_m) - tr.pos_enu_m)
+                diag["e_x"].append(np.array(out.e_x))
         else:
             if k >= next_sp:
                 next_sp = k + sp_every
@@ -166,9 +208,10 @@ def fly(mission_path, control: str = "companion", cfg: ControlConfig | None = No
             cmd = sim.onboard.update(tr, sp, dt)
         frame = sim.step_frame(cmd)
     t = np.arange(n) * dt
-    after = errs[t >= settle_s]
+    after = errs[t >= settle_s] if t[-1] >= settle_s else errs
     extra = {k: np.array(v) for k, v in diag.items()} if record else {}
     extra["t_base_us"] = t_base_us
+    extra["diverged"] = diverged
     return TrackResult(t, errs, float(after.max()), float(math.sqrt(np.mean(after ** 2))), extra)
 
 

@@ -1,4 +1,4 @@
-"""``companion`` command line: ``plan``, ``fly``, ``demo``.
+"""``companion`` command line: ``plan``, ``fly``, ``demo``, ``replay``.
 
 Each subcommand lives in ``companion.commands.<name>`` with
 ``add_arguments(parser)`` and ``run(args) -> int``. Bad input of any kind
@@ -17,6 +17,7 @@ COMMANDS = {
     "plan": "plan a coverage mission: maps -> ISOA -> way-points -> LQR trajectory -> plan.json",
     "fly": "fly a planned mission over MAVLink against a vehicle (the bundled SITL or a flight stack)",
     "demo": "start the bundled SITL, plan and fly a bundled mission, write out/",
+    "replay": "replay a recorded flight (.tlog): its metrics; with --mission, re-run the companion and compare",
 }
 
 

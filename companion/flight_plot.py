@@ -30,8 +30,21 @@ def _euler_deg(R: np.ndarray) -> np.ndarray:
     return np.degrees(np.unwrap(out, axis=0)) if ok.any() else out
 
 
+def _plan_points(plan):
+    """(way-points (N, 3), pointing target (3,)) of a ``Plan``, a ``FlightPlan``
+    (``companion.commands.fly``) or None (a replay without a mission: neither)."""
+    if plan is None:
+        return None, None
+    w = getattr(plan, "waypoints", None)
+    wps = w.p_enu_m if w is not None else getattr(plan, "waypoints_p_enu_m", None)
+    return wps, getattr(plan, "target_enu_m", None)
+
+
 def write_flight_figures(log, plan, out_dir) -> list[str]:
     """Write the five figures into ``out_dir``; returns their paths.
+
+    ``plan`` (a ``Plan``, a ``FlightPlan`` or None) only adds the way-points
+    and the pointing target to the 3D path.
 
     Raises
     ------
@@ -74,8 +87,11 @@ def write_flight_figures(log, plan, out_dir) -> list[str]:
         ax = fig.add_subplot(projection="3d")
         ax.plot(*ref[k].T, "k--", lw=1, label="reference")
         ax.plot(*tru[k].T, "C0", lw=1, label="flown")
-        ax.scatter(*np.asarray(plan.waypoints.p_enu_m).T, s=8, c="C3", label="way-points")
-        ax.scatter(*plan.target_enu_m, marker="*", s=60, c="C2", label="pointing target")
+        wps, target = _plan_points(plan)
+        if wps is not None and len(wps):
+            ax.scatter(*np.asarray(wps, dtype=float).T, s=8, c="C3", label="way-points")
+        if target is not None:
+            ax.scatter(*np.asarray(target, dtype=float), marker="*", s=60, c="C2", label="pointing target")
         ax.set_xlabel("x east [m]")
         ax.set_ylabel("y north [m]")
         ax.set_zlabel("z up [m]")

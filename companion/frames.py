@@ -1,7 +1,7 @@
 """Frame and unit conversions: the only place where NED/FRD math is written.
 
 Inside the project everything is ENU world / FLU body, z up, SI units
-(DESIGN.md). MAVLink speaks NED world / FRD body, [w, x, y, z] quaternions,
+(docs/frames.md). MAVLink speaks NED world / FRD body, [w, x, y, z] quaternions,
 1e7 degrees, mm and cm. The MAVLink encode/decode module of each side
 (``companion.link.codec``, ``sitl.codec``) calls these functions and nothing
 else does.

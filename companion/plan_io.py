@@ -1,9 +1,10 @@
-"""Plan files: plan.json (DESIGN.md), QGroundControl ``.plan`` and "QGC WPL 110".
+"""Plan files: plan.json (docs/plan-json.md), QGroundControl ``.plan`` and "QGC WPL 110".
 
 All three are produced as text in memory (the CLI writes them atomically).
 
 plan.json
-    ENU metres in the map frame, SI units. Keys: ``frame`` ("ENU"),
+    ENU metres in the map frame, SI units. Keys: ``format_version``
+    (``PLAN_FORMAT_VERSION``; docs/schemas/plan.schema.json), ``frame`` ("ENU"),
     ``origin`` {lat, lon, alt_m} (the mission home = map frame origin),
     ``path``, ``waypoints`` [{t, p, v, a, corner}], ``trajectory`` {t, p, v,
     a, pointing} sampled at ``sample_hz``, ``stats``, ``timings_s``; plus
@@ -11,18 +12,18 @@ plan.json
     ``trajectory_weights`` (the LQR weights used).
 
 QGroundControl exports
-    The way-points as MAV_CMD_NAV_WAYPOINT (16) items in
-    MAV_FRAME_GLOBAL_RELATIVE_ALT (3): latitude/longitude from the ENU
-    position through ``companion.frames.enu2geodetic`` about the mission
-    home, and **altitude relative to home**, i.e. the way-point's map-frame
-    z (the map's z = 0 is the home altitude ``home.alt_m`` AMSL; a DEM in
-    the same frame makes z = terrain + flight height). The home position
-    itself is written with its AMSL altitude (``plannedHomePosition``; item 0
-    of the WPL file, frame 0 = MAV_FRAME_GLOBAL).
+    The flight-ready mission of ``companion.mission_items`` (take-off, speed,
+    ROI at S_p, the way-points with yaw toward S_p, RTL; AMSL altitudes in
+    MAV_FRAME_GLOBAL, which do not depend on where the vehicle arms; the
+    inclusion fence in the .plan), latitude/longitude through
+    ``companion.frames.enu2geodetic`` about the mission home. The home
+    position is written with its AMSL altitude (``plannedHomePosition``;
+    item 0 of the WPL file, frame 0 = MAV_FRAME_GLOBAL).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass
@@ -32,15 +33,22 @@ import numpy as np
 
 from .config import to_dict
 from .errors import PlanError
-from .frames import enu2geodetic
+from .format_version import check_format_version
 from .textfile import read_text
 from .mission import Mission
 
 MAV_CMD_NAV_WAYPOINT = 16
 MAV_FRAME_GLOBAL = 0
 MAV_FRAME_GLOBAL_RELATIVE_ALT = 3
+#: QGroundControl's AltitudeMode for MAV_FRAME_GLOBAL (QGroundControlQmlGlobal::AltitudeModeAbsolute)
+QGC_ALTITUDE_MODE_ABSOLUTE = 2
 MAV_AUTOPILOT_PX4 = 12
 MAV_TYPE_QUADROTOR = 2
+
+#: plan.json format written here ("MAJOR.MINOR", docs/README.md "Versions");
+#: ``load_plan`` reads every file of the same major version.
+PLAN_FORMAT_VERSION = "1.0"
+PLAN_FORMAT_MAJOR = int(PLAN_FORMAT_VERSION.split(".")[0])
 
 STATS_KEYS = ("coverage_fraction", "path_length_m", "duration_s", "n_waypoints", "orientation_deg",
               "max_speed_m_s", "max_accel_m_s2", "waypoint_residual_m")
@@ -66,7 +74,7 @@ def sample_times(t0: float, tf: float, sample_hz: float) -> np.ndarray:
 
 
 def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
-    """The plan.json document (DESIGN.md "Files") as plain JSON types.
+    """The plan.json document (docs/plan-json.md) as plain JSON types.
 
     Parameters
     ----------
@@ -88,14 +96,12 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
     s = traj.sample(t)
     home = mission.home
     return {
+        "format_version": PLAN_FORMAT_VERSION,
         "name": mission.name,
         "frame": "ENU",
         "origin": {"lat": home.lat, "lon": home.lon, "alt_m": home.alt_m},
         "path": _rows(plan.coverage.path_xy_m),
-        "waypoints": [
-            {"t": float(ti), "p": _rows(p), "v": _rows(v), "a": _rows(a), "corner": bool(c)}
-            for ti, p, v, a, c in zip(wp.t_s, wp.p_enu_m, wp.v_enu_m_s, wp.a_enu_m_s2, wp.corner)
-        ],
+        "waypoints": _waypoints_json(wp),
         "sample_hz": float(sample_hz),
         "trajectory": {"t": _rows(t), "p": _rows(s.p), "v": _rows(s.v), "a": _rows(s.a),
                        "pointing": _rows(s.pointing)},
@@ -103,6 +109,37 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
         "trajectory_weights": to_dict(mission.trajectory),
         "stats": {k: getattr(plan.stats, k) for k in STATS_KEYS},
         "timings_s": {k: getattr(plan.timings_s, k) for k in TIMING_KEYS},
+        "warnings": list(plan.warnings),
+        **sorties_json(plan, mission),
+    }
+
+
+def _waypoints_json(w) -> list:
+    return [{"t": float(ti), "p": _rows(p), "v": _rows(v), "a": _rows(a), "corner": bool(c)}
+            for ti, p, v, a, c in zip(w.t_s, w.p_enu_m, w.v_enu_m_s, w.a_enu_m_s2, w.corner)]
+
+
+def sorties_json(plan, mission: Mission) -> dict:
+    """plan.json's ``energy`` summary and ``sorties`` (``companion.sorties``)."""
+    from .energy import cruise_power_w, hover_power_w
+
+    sp = plan.sorties
+    if sp is None:
+        return {}
+    cfg = mission.energy
+    return {
+        "energy": {"hover_power_w": hover_power_w(mission.vehicle, cfg),
+                   "cruise_power_w": float(cruise_power_w(mission.flight.speed_m_s, mission.vehicle, cfg)),
+                   "transit_power_w": float(cruise_power_w(mission.flight.transit_speed_m_s, mission.vehicle, cfg)),
+                   "battery_wh": cfg.battery_wh, "usable_wh": cfg.usable_wh,
+                   "total_energy_wh": sp.total_energy_wh, "total_duration_s": sp.total_duration_s,
+                   "max_mission_items": cfg.max_mission_items},
+        "launch_enu_m": _rows(sp.launch_xy_m),
+        "sorties": [{"index": s.index, "segments": list(s.segments), "energy_wh": s.energy.energy_wh,
+                     "duration_s": s.energy.duration_s, "n_items": s.n_items,
+                     "speed_changes": [[int(i), float(v)] for i, v in s.speed_changes],
+                     "path": _rows(s.path_xy_m), "waypoints": _waypoints_json(s.waypoints)}
+                    for s in sp.sorties],
     }
 
 
@@ -129,6 +166,9 @@ class PlanFile:
     data : dict
         The whole document.
     source : str
+    sorties : list of dict
+        Per sortie: ``waypoint_t_s``, ``waypoint_p_enu_m``, ``waypoint_v_enu_m_s``,
+        ``waypoint_a_enu_m_s2`` arrays (empty list for a plan.json without sorties).
     """
 
     origin: tuple[float, float, float]
@@ -148,6 +188,7 @@ class PlanFile:
     timings_s: dict
     data: dict
     source: str
+    sorties: list = dataclasses.field(default_factory=list)
 
 
 def _num_array(value, shape_tail: tuple[int, ...], src: str, key: str) -> np.ndarray:
@@ -177,8 +218,9 @@ def load_plan(path: str | Path) -> PlanFile:
     Raises
     ------
     PlanError
-        Missing/unreadable file, not JSON, or a missing/malformed key
-        (the message names the file and the key).
+        Missing/unreadable file, not JSON, a ``format_version`` of another
+        major version, or a missing/malformed key (the message names the
+        file and the key). A file without ``format_version`` is read as 1.0.
     """
     p = Path(path)
     src = str(p)
@@ -189,6 +231,7 @@ def load_plan(path: str | Path) -> PlanFile:
         raise PlanError(f"{src}: line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
     if not isinstance(data, dict):
         raise PlanError(src, "expected a JSON object")
+    check_format_version(data, PLAN_FORMAT_MAJOR, src, PlanError)
     if _get(data, "frame", src) != "ENU":
         raise PlanError(f"{src}: key 'frame'", f"expected 'ENU', got {data['frame']!r}")
     origin = _get(data, "origin", src)
@@ -225,74 +268,128 @@ def load_plan(path: str | Path) -> PlanFile:
     target = None
     if "target_enu_m" in data:
         target = _num_array([data["target_enu_m"]], (3,), src, "target_enu_m")[0]
+    sorties = []
+    raw_sorties = data.get("sorties", [])
+    if not isinstance(raw_sorties, list):
+        raise PlanError(f"{src}: key 'sorties'", "expected a list")
+    for j, so in enumerate(raw_sorties):
+        ws = _get(so, "waypoints", src, f"sorties[{j}]")
+        if not isinstance(ws, list) or len(ws) < 2:
+            raise PlanError(f"{src}: key 'sorties[{j}].waypoints'", "expected a list of at least 2 way-points")
+        cols_s = {}
+        for k_, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
+            cols_s[k_] = _num_array([_get(w, k_, src, f"sorties[{j}].waypoints[{i}]") for i, w in enumerate(ws)],
+                                    tail, src, f"sorties[{j}].waypoints[].{k_}")
+        if np.any(np.diff(cols_s["t"]) <= 0):
+            raise PlanError(f"{src}: key 'sorties[{j}].waypoints[].t'", "times must be strictly increasing")
+        sorties.append({"waypoint_t_s": cols_s["t"], "waypoint_p_enu_m": cols_s["p"],
+                        "waypoint_v_enu_m_s": cols_s["v"], "waypoint_a_enu_m_s2": cols_s["a"]})
     return PlanFile(origin=o, path_xy_m=path_xy, waypoint_t_s=cols["t"], waypoint_p_enu_m=cols["p"],
                     waypoint_v_enu_m_s=cols["v"], waypoint_a_enu_m_s2=cols["a"],
                     waypoint_corner=np.array(corner, dtype=bool), t_s=t, p_enu_m=arrays["p"],
                     v_enu_m_s=arrays["v"], a_enu_m_s2=arrays["a"], pointing_enu=arrays["pointing"],
-                    target_enu_m=target, stats=dict(stats), timings_s=dict(timings), data=data, source=src)
+                    target_enu_m=target, stats=dict(stats), timings_s=dict(timings), data=data, source=src,
+                    sorties=sorties)
 
 
 # --- QGroundControl exports ------------------------------------------------------
 
-def _geodetic(p_enu_m: np.ndarray, mission: Mission) -> list[tuple[float, float, float]]:
-    """Per way-point (lat_deg, lon_deg, alt_rel_home_m)."""
+def flight_items(plan, mission: Mission, sortie=None, fence_enu_m: np.ndarray | None = None):
+    """The flight-ready items (``companion.mission_items``) of one sortie of a plan
+    (``plan.sorties.sorties[i]``; default: the whole route, launched under its first
+    way-point), with the inclusion fence around the field (simplified to half the
+    safety margin, so the path keeps at least half the margin from the fence)."""
+    from .mission_items import build_flight_items
+
     h = mission.home
+    fence = field_fence(plan, mission) if fence_enu_m is None else fence_enu_m
+    if sortie is None:
+        return build_flight_items(plan.waypoints.p_enu_m, plan.target_enu_m, (h.lat, h.lon, h.alt_m),
+                                  mission.flight.speed_m_s, fence_enu_m=fence)
+    return build_flight_items(sortie.waypoints.p_enu_m, plan.target_enu_m, (h.lat, h.lon, h.alt_m),
+                              mission.flight.speed_m_s, launch_enu_m=plan.sorties.launch_xy_m,
+                              fence_enu_m=fence, speed_changes=sortie.speed_changes)
+
+
+def field_fence(plan, mission: Mission) -> np.ndarray:
+    """(K, 2) ENU inclusion fence around the field (``coverage.boundary``)."""
+    from .coverage.boundary import field_boundary
+
+    return field_boundary(plan.grid, max(0.5 * mission.coverage.safety_margin_m, plan.grid.resolution_m))
+
+
+def sortie_file(path: str, index: int, count: int) -> str:
+    """The export file of sortie ``index`` (1-based): ``path`` itself for a single
+    sortie, else ``<stem>-sortie<index><suffix>`` beside it."""
+    if count == 1:
+        return path
+    p = Path(path)
+    return str(p.with_name(f"{p.stem}-sortie{index}{p.suffix}"))
+
+
+def _json_num(v: float):
+    return None if isinstance(v, float) and math.isnan(v) else v
+
+
+def qgc_plan_dict(items, speed_m_s: float) -> dict:
+    """QGroundControl ``.plan`` (JSON, fileType "Plan", version 1): one SimpleItem per
+    mission item (AMSL altitudes, QGC AltitudeMode 2), the inclusion fence in
+    ``geoFence.polygons`` (module doc of ``companion.mission_items``)."""
     out = []
-    for x, y, z in np.asarray(p_enu_m, dtype=float):
-        lat, lon, _ = enu2geodetic(x, y, z, h.lat, h.lon, h.alt_m)
-        out.append((lat, lon, float(z)))
-    return out
-
-
-def qgc_plan_dict(waypoints_p_enu_m: np.ndarray, mission: Mission) -> dict:
-    """QGroundControl ``.plan`` (JSON, fileType "Plan", version 1) with one
-    SimpleItem NAV_WAYPOINT per way-point, altitudes relative to home."""
-    items = []
-    for i, (lat, lon, alt) in enumerate(_geodetic(waypoints_p_enu_m, mission)):
-        items.append({
+    for i, it in enumerate(items.mission):
+        positional = it.frame == MAV_FRAME_GLOBAL
+        out.append({
             "type": "SimpleItem",
-            "autoContinue": True,
-            "command": MAV_CMD_NAV_WAYPOINT,
+            "autoContinue": bool(it.autocontinue),
+            "command": it.command,
             "doJumpId": i + 1,
-            "frame": MAV_FRAME_GLOBAL_RELATIVE_ALT,
-            # hold (s), acceptance radius (m), pass radius (m), yaw (NaN = unchanged -> null), lat, lon, alt
-            "params": [0, 0, 0, None, lat, lon, alt],
-            "Altitude": alt,
-            "AltitudeMode": 1,           # QGC: relative to launch (home)
+            "frame": it.frame,
+            "params": [_json_num(float(v)) for v in it.params] + [it.lat_deg, it.lon_deg, it.alt_m],
+            "Altitude": it.alt_m if positional else 0,
+            "AltitudeMode": QGC_ALTITUDE_MODE_ABSOLUTE,
             "AMSLAltAboveTerrain": None,
         })
-    h = mission.home
+    fence = []
+    if len(items.fence_latlon_deg):
+        fence = [{"inclusion": True, "polygon": [[float(a), float(b)] for a, b in items.fence_latlon_deg],
+                  "version": 1}]
+    lat, lon, alt = items.home
     return {
         "fileType": "Plan",
         "version": 1,
         "groundStation": "QGroundControl",
-        "geoFence": {"circles": [], "polygons": [], "version": 2},
+        "geoFence": {"circles": [], "polygons": fence, "version": 2},
         "rallyPoints": {"points": [], "version": 2},
         "mission": {
             "version": 2,
             "firmwareType": MAV_AUTOPILOT_PX4,
             "vehicleType": MAV_TYPE_QUADROTOR,
-            "cruiseSpeed": mission.flight.speed_m_s,
-            "hoverSpeed": mission.flight.speed_m_s,
-            "globalPlanAltitudeMode": 1,
-            "plannedHomePosition": [h.lat, h.lon, h.alt_m],
-            "items": items,
+            "cruiseSpeed": speed_m_s,
+            "hoverSpeed": speed_m_s,
+            "globalPlanAltitudeMode": QGC_ALTITUDE_MODE_ABSOLUTE,
+            "plannedHomePosition": [lat, lon, alt],
+            "items": out,
         },
     }
 
 
-def qgc_plan_text(waypoints_p_enu_m: np.ndarray, mission: Mission) -> str:
-    return json.dumps(qgc_plan_dict(waypoints_p_enu_m, mission), indent=2, allow_nan=False) + "\n"
+def qgc_plan_text(items, speed_m_s: float) -> str:
+    return json.dumps(qgc_plan_dict(items, speed_m_s), indent=2, allow_nan=False) + "\n"
 
 
-def qgc_wpl_text(waypoints_p_enu_m: np.ndarray, mission: Mission) -> str:
+def _wpl_num(v: float) -> str:
+    return "nan" if math.isnan(v) else f"{v:.8g}"
+
+
+def qgc_wpl_text(items) -> str:
     """"QGC WPL 110" text: tab-separated ``index current frame command p1 p2 p3 p4
-    lat lon alt autocontinue``; line 0 is home (frame 0, AMSL), then the
-    way-points (frame 3, altitude relative to home)."""
-    h = mission.home
+    lat lon alt autocontinue``; line 0 is the planned home (frame 0, AMSL), then
+    the mission items (AMSL altitudes). The format has no fence."""
+    lat0, lon0, alt0 = items.home
     lines = ["QGC WPL 110",
-             f"0\t1\t{MAV_FRAME_GLOBAL}\t{MAV_CMD_NAV_WAYPOINT}\t0\t0\t0\t0\t{h.lat:.10f}\t{h.lon:.10f}\t{h.alt_m:.4f}\t1"]
-    for i, (lat, lon, alt) in enumerate(_geodetic(waypoints_p_enu_m, mission), start=1):
-        lines.append(f"{i}\t0\t{MAV_FRAME_GLOBAL_RELATIVE_ALT}\t{MAV_CMD_NAV_WAYPOINT}\t0\t0\t0\t0\t"
-                     f"{lat:.10f}\t{lon:.10f}\t{alt:.4f}\t1")
+             f"0\t1\t{MAV_FRAME_GLOBAL}\t{MAV_CMD_NAV_WAYPOINT}\t0\t0\t0\t0\t{lat0:.10f}\t{lon0:.10f}\t{alt0:.4f}\t1"]
+    for i, it in enumerate(items.mission, start=1):
+        p = "\t".join(_wpl_num(float(v)) for v in it.params)
+        lines.append(f"{i}\t0\t{it.frame}\t{it.command}\t{p}\t{it.lat_deg:.10f}\t{it.lon_deg:.10f}\t"
+                     f"{it.alt_m:.4f}\t{1 if it.autocontinue else 0}")
     return "\n".join(lines) + "\n"

@@ -16,8 +16,10 @@ import numpy as np
 
 from .coverage import extract_waypoints, plan_coverage
 from .errors import PlanError
-from .maps import ElevationModel, OccupancyGrid, load_dem, load_ogm
+from .maps import ElevationModel, OccupancyGrid
+from .maps.field import load_mission_maps
 from .mission import Mission
+from .sorties import plan_sorties
 from .trajectory import Trajectory, generate_trajectory
 
 #: Samples per knot interval for the speed/acceleration statistics (the pieces are
@@ -65,7 +67,7 @@ class PlanTimings:
     """Wall-clock time (s, ``time.perf_counter``) of each phase of ``plan_mission``.
 
     ``coverage`` includes the way-point extraction; ``trajectory`` includes
-    the statistics sampling.
+    the statistics sampling and the sortie split.
     """
 
     load: float
@@ -92,6 +94,11 @@ class Plan:
         Pointing target S_p of eq. (21) (ENU, m).
     stats : PlanStats
     timings_s : PlanTimings
+    warnings : tuple of str
+        Things the user should know that did not stop the plan (main segments
+        that cannot be reached and are not flown, ...), one line each.
+    sorties : SortiePlan or None
+        The plan split into battery-sized sorties (``companion.sorties``).
     """
 
     grid: OccupancyGrid
@@ -102,6 +109,8 @@ class Plan:
     target_enu_m: np.ndarray
     stats: PlanStats
     timings_s: PlanTimings
+    warnings: tuple[str, ...] = ()
+    sorties: object = None
 
 
 def free_centroid_xy(grid: OccupancyGrid) -> np.ndarray:
@@ -160,6 +169,19 @@ def check_dem_covers(dem: ElevationModel, path_xy_m: np.ndarray) -> None:
                         f"y {y_min:.2f}..{y_max:.2f} m, NODATA cells excluded)")
 
 
+def check_dem_overlaps(dem: ElevationModel, grid: OccupancyGrid) -> None:
+    """PlanError naming the DEM when it does not overlap the map at all: a
+    georeferenced DEM (UTM, Lambert-93, ...) read as local coordinates, said
+    before planning instead of as "does not cover the path" afterwards."""
+    rows, cols = grid.shape
+    cx, cy = grid.cell_to_world(np.array([0, 0, rows - 1, rows - 1]), np.array([0, cols - 1, 0, cols - 1]))
+    x_min, x_max, y_min, y_max = dem.extent_m
+    if cx.max() < x_min or cx.min() > x_max or cy.max() < y_min or cy.min() > y_max:
+        raise PlanError(dem.source, f"the DEM (x {x_min:.0f}..{x_max:.0f}, y {y_min:.0f}..{y_max:.0f} m) does not "
+                        f"overlap the map (x {cx.min():.0f}..{cx.max():.0f}, y {cy.min():.0f}..{cy.max():.0f} m); "
+                        "if it is georeferenced (UTM, ...), give the mission key dem_crs or a .prj file")
+
+
 def check_sizes(mission: Mission, grid: OccupancyGrid) -> None:
     """PlanError unless the coverage settings fit the map's cell size.
 
@@ -174,6 +196,11 @@ def check_sizes(mission: Mission, grid: OccupancyGrid) -> None:
     if cov.line_spacing_m is not None and cov.line_spacing_m < grid.resolution_m:
         raise PlanError(f"{mission.source}: key 'coverage.line_spacing_m'",
                         f"{cov.line_spacing_m:g} m is below the map resolution {grid.resolution_m:g} m")
+    extent_m = max(grid.shape) * grid.resolution_m
+    if cov.line_spacing_m is not None and cov.line_spacing_m >= extent_m:
+        raise PlanError(f"{mission.source}: key 'coverage.line_spacing_m'",
+                        f"{cov.line_spacing_m:g} m is not below the map's size {extent_m:g} m: "
+                        f"no two coverage lines fit")
 
 
 def trajectory_stats(trajectory: Trajectory,
@@ -209,15 +236,15 @@ def plan_mission(mission: Mission) -> Plan:
         coverage/flight settings do not fit the map (``check_sizes``, ``MAX_WAYPOINTS``).
     """
     t_start = time.perf_counter()
-    grid = load_ogm(mission.map_path)
-    dem = load_dem(mission.dem_path)
+    grid, dem = load_mission_maps(mission)
     t_loaded = time.perf_counter()
 
     check_sizes(mission, grid)
+    check_dem_overlaps(dem, grid)
     coverage = plan_coverage(grid, mission.coverage)
     path = np.asarray(coverage.path_xy_m, dtype=float)
     if path.ndim != 2 or path.shape[0] < 2:
-        raise PlanError(str(mission.map_path), "the coverage planner found no path in the free space")
+        raise PlanError(grid.source, "the coverage planner found no path in the free space")
     check_dem_covers(dem, path)
     spacing_m = mission.flight.speed_m_s * mission.flight.waypoint_interval_s
     if float(coverage.path_length_m) / spacing_m > MAX_WAYPOINTS:
@@ -231,6 +258,7 @@ def plan_mission(mission: Mission) -> Plan:
     trajectory = generate_trajectory(waypoints.t_s, waypoints.p_enu_m, waypoints.v_enu_m_s,
                                      waypoints.a_enu_m_s2, mission.trajectory, target_enu_m=target)
     max_v, max_a, residual = trajectory_stats(trajectory)
+    sorties = plan_sorties(coverage, waypoints, dem, mission.flight, mission.vehicle, mission.energy, grid, mission.source)
     t_done = time.perf_counter()
 
     stats = PlanStats(
@@ -246,4 +274,5 @@ def plan_mission(mission: Mission) -> Plan:
     timings = PlanTimings(load=t_loaded - t_start, coverage=t_covered - t_loaded,
                           trajectory=t_done - t_covered, total=t_done - t_start)
     return Plan(grid=grid, dem=dem, coverage=coverage, waypoints=waypoints, trajectory=trajectory,
-                target_enu_m=target, stats=stats, timings_s=timings)
+                target_enu_m=target, stats=stats, timings_s=timings,
+                warnings=tuple(grid.warnings) + tuple(coverage.warnings), sorties=sorties)

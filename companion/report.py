@@ -1,8 +1,9 @@
-"""Flight report (report.json, DESIGN.md "Files") and its tracking statistics.
+"""Flight report (report.json, docs/report-json.md) and its tracking statistics.
 
 ``tracking_stats`` is pure: arrays in, a named result out. ``write_report``
 writes the JSON atomically (temporary file + rename), so an interrupted run
-leaves no partial report.
+leaves no partial report. The document starts with ``format_version``
+(``REPORT_FORMAT_VERSION``); its schema is docs/schemas/report.schema.json.
 """
 
 from __future__ import annotations
@@ -14,6 +15,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+#: report.json format written here ("MAJOR.MINOR", docs/README.md "Versions").
+REPORT_FORMAT_VERSION = "1.0"
 
 
 @dataclass(frozen=True)
@@ -31,16 +35,16 @@ class TrackingStats:
     n_samples : int
         Number of samples used.
     truth_source : str
-        Where the vehicle position came from: "sim_state" (the simulator's
-        ground truth) or "estimate" (LOCAL_POSITION_NED, when the vehicle
-        sends no ground truth, e.g. a real flight stack).
+        Where the vehicle position came from: "sim_truth" (the simulator's
+        ground truth, ODOMETRY) or "estimate" (LOCAL_POSITION_NED, when the
+        vehicle sends no ground truth, e.g. a real flight stack).
     """
 
     max_error_m: float | None
     rms_error_m: float | None
     settle_s: float
     n_samples: int = 0
-    truth_source: str = "sim_state"
+    truth_source: str = "sim_truth"
 
 
 @dataclass(frozen=True)
@@ -64,12 +68,15 @@ class ReplanningStats:
 
 @dataclass(frozen=True)
 class FlightReport:
-    """Everything report.json holds (DESIGN.md keys first).
+    """Everything report.json holds (docs/report-json.md), after ``format_version``.
 
     Attributes
     ----------
     completed : bool
-        The trajectory was flown to its end and the vehicle landed and disarmed.
+        The trajectory was flown to its end and the vehicle landed and
+        disarmed, with no violation (``companion.flight.monitor``): it stayed
+        armed, airborne, in the mode we asked for, did not crash, and the
+        tracking error stayed within the bound.
     control : str
         "companion" (geometric controller, HIL_ACTUATOR_CONTROLS) or "vehicle".
     sim_time_s : float
@@ -81,6 +88,25 @@ class FlightReport:
         From the plan's statistics.
     tlog : str or None
         Path of the recorded .tlog.
+    crashed : bool
+        The vehicle reported a crash (STATUSTEXT CRITICAL "CRASH...").
+    crash : dict or None
+        ``{t_s, text}`` of the crash report.
+    violation : dict or None
+        The first violation (``Violation.to_dict``): why the flight is not completed.
+    planned_coverage_fraction : float or None
+        The plan's coverage; ``coverage_fraction`` is what was flown of it
+        (planned coverage times ``path_flown_fraction``).
+    path_flown_fraction : float or None
+        Fraction of the planned coverage path the vehicle passed within 0.5 m of.
+    degraded : dict or None
+        When the inner loop was handed back to the vehicle's controller: time and reason.
+    interrupted : str or None
+        The signal that stopped the flight.
+    link : dict or None
+        Link statistics (messages received, rejected, bad bytes).
+    resumed_from_s : float or None
+        ``--attach resume``: trajectory time (s from its start) the flight resumed at.
     """
 
     completed: bool
@@ -97,9 +123,19 @@ class FlightReport:
     real_time_factor: float | None = None
     n_frames: int = 0
     trajectory_duration_s: float = 0.0
+    crashed: bool = False
+    crash: dict | None = None
+    violation: dict | None = None
+    planned_coverage_fraction: float | None = None
+    path_flown_fraction: float | None = None
+    degraded: dict | None = None
+    interrupted: str | None = None
+    link: dict | None = None
+    resumed_from_s: float | None = None
 
     def to_dict(self) -> dict:
-        return _finite(asdict(self))
+        """The report.json document: ``format_version`` first, then the fields."""
+        return {"format_version": REPORT_FORMAT_VERSION, **_finite(asdict(self))}
 
 
 def _finite(obj):
@@ -114,7 +150,7 @@ def _finite(obj):
 
 
 def tracking_stats(t_s, err_m, t_start_s: float, settle_s: float = 5.0,
-                   truth_source: str = "sim_state") -> TrackingStats:
+                   truth_source: str = "sim_truth") -> TrackingStats:
     """Max and RMS of a position error series after ``t_start_s + settle_s``.
 
     Parameters

@@ -1,4 +1,4 @@
-"""Reading input files with one-line errors (DESIGN.md "Errors").
+"""Reading input files with one-line errors (docs/README.md "Bad input").
 
 The loaders of missions, maps, DEMs and plans all read a text file and, for
 YAML, parse it; a failure becomes the loader's ``InputError`` subclass naming

@@ -44,10 +44,12 @@ import numpy as np
 
 try:
     from companion.maps.dem import write_dem
+    from companion.maps.field import points_in_polygon  # noqa: F401  (re-exported for the corpus)
     from companion.maps.ogm import write_pgm
 except ModuleNotFoundError:  # running from a checkout without the package installed
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from companion.maps.dem import write_dem
+    from companion.maps.field import points_in_polygon  # noqa: F401
     from companion.maps.ogm import write_pgm
 
 PIX_OCCUPIED = 0
@@ -90,21 +92,6 @@ class FieldSpec:
 
 
 # --- geometry (pure) -------------------------------------------------------
-
-def points_in_polygon(x: np.ndarray, y: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Even-odd rule; x, y broadcast; poly (K, 2). Returns bool array."""
-    inside = np.zeros(np.broadcast(x, y).shape, dtype=bool)
-    k = len(poly)
-    for i in range(k):
-        x1, y1 = poly[i]
-        x2, y2 = poly[(i + 1) % k]
-        if y1 == y2:
-            continue
-        crosses = (y1 > y) != (y2 > y)
-        x_cross = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-        inside ^= crosses & (x < x_cross)
-    return inside
-
 
 def chord(poly: np.ndarray, v: float, angle_deg: float, inset_m: float) -> tuple[float, float]:
     """Interval (u_lo, u_hi) of the line {u d + v n} inside the convex CCW polygon

@@ -65,10 +65,17 @@ class _SitlOptions:
 
     def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
                  speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
-                 sensor_hz: int = 250) -> None:
+                 sensor_hz: int = 250, control_outs=(), signing_key_file=None, max_clients: int = 8,
+                 client_timeout_s: float = 10.0, stats_file=None, controllers=None) -> None:
         self.mission_path = Path(mission_path)
         self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
         self.outs = tuple(outs)
+        self.control_outs = tuple(control_outs)
+        self.signing_key_file = None if signing_key_file is None else str(signing_key_file)
+        self.max_clients = int(max_clients)
+        self.client_timeout_s = float(client_timeout_s)
+        self.stats_file = None if stats_file is None else str(stats_file)
+        self.controllers = None if controllers is None else tuple(str(c) for c in controllers)
         self.lockstep = lockstep
         self.speed = speed
         self.seed = seed
@@ -90,6 +97,17 @@ class SitlThread(_SitlOptions):
     listen : str
         Main link (default: a free loopback UDP port).
     outs : sequence of str
+        Telemetry-only links.
+    control_outs : sequence of str
+        Extra links that carry control too (``sitl --control-out``).
+    signing_key_file : str or Path, optional
+        MAVLink 2 signing key file (``sitl --signing-key``).
+    max_clients, client_timeout_s
+        ``sitl --max-clients``, ``--client-timeout``.
+    stats_file : str or Path, optional
+        ``sitl --stats`` (``SitlProcess`` only; a ``SitlThread``'s server is at hand).
+    controllers : sequence of str, optional
+        ``sitl --controller`` values (``SYSID/COMPID[@LINK]``); None: the defaults.
     lockstep : bool
     speed : float
         Real-time factor when free-running (0: as fast as possible).
@@ -113,9 +131,19 @@ class SitlThread(_SitlOptions):
         from .server import ServerConfig, SitlServer
 
         mission = load_mission(self.mission_path)
+        key = None
+        if self.signing_key_file is not None:
+            from companion.link.signing import load_signing_key
+            key = load_signing_key(self.signing_key_file)
+        controllers = None
+        if self.controllers is not None:
+            from .auth import parse_controller
+            controllers = tuple(parse_controller(c) for c in self.controllers)
         cfg = ServerConfig(listen=self.listen, outs=self.outs, lockstep=self.lockstep, speed=self.speed,
                            seed=self.seed, physics_hz=self.physics_hz, sensor_hz=self.sensor_hz,
-                           start=self.start_pose, spin=False)
+                           start=self.start_pose, spin=False, control_outs=self.control_outs, signing_key=key,
+                           max_clients=self.max_clients, client_timeout_s=self.client_timeout_s,
+                           controllers=controllers)
         self.server = SitlServer(mission, cfg)
         self.server.open()   # readiness: the sockets exist when start() returns
 
@@ -175,6 +203,15 @@ class SitlProcess(_SitlOptions):
                "--sensor-hz", str(self.sensor_hz)]
         for o in self.outs:
             cmd += ["--out", o]
+        for o in self.control_outs:
+            cmd += ["--control-out", o]
+        if self.signing_key_file is not None:
+            cmd += ["--signing-key", self.signing_key_file]
+        cmd += ["--max-clients", str(self.max_clients), "--client-timeout", repr(self.client_timeout_s)]
+        if self.stats_file is not None:
+            cmd += ["--stats", self.stats_file]
+        for c in self.controllers or ():
+            cmd += ["--controller", c]
         if self.lockstep:
             cmd.append("--lockstep")
         if self.seed is not None:

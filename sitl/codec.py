@@ -3,7 +3,7 @@ wire units (1e7 degrees, mm, cm, cdeg, mG) and MAVLink's [w, x, y, z]
 quaternions.
 
 Everything it takes and returns is ENU world / FLU body, SI units
-(DESIGN.md "Frames and units"); every frame change goes through
+(docs/frames.md); every frame change goes through
 ``companion.frames``. Encoders take a pymavlink ``MAVLink`` protocol object
 (``conn.mav``, it only supplies the message classes) and return the message
 object, ready for ``conn.mav.send``; decoders take a pymavlink message and
@@ -22,11 +22,19 @@ Wire conventions chosen here (documented once)
   ``base_mode`` always has ``MAV_MODE_FLAG_CUSTOM_MODE_ENABLED``.
 - DISTANCE_SENSOR: centimetres; a reading with no return (nothing within
   ``max_m``) is sent as ``current_distance = max_distance + 1`` cm with
-  ``signal_quality = 1`` (MAVLink: 1 = invalid signal). This is what PX4's
-  rangefinder drivers publish for "out of range": a value outside
-  ``[min_distance, max_distance]``, which every PX4 consumer (EKF2, obstacle
-  avoidance) treats as "no valid reading". Valid readings have
-  ``signal_quality = 100``.
+  ``signal_quality = 1`` (MAVLink: 1 = invalid signal). DISTANCE_SENSOR's own
+  definition does not say how to send "no return"; ``max_distance + 1`` is
+  OBSTACLE_DISTANCE's definition of "no obstacle", and a value outside
+  ``[min_distance, max_distance]`` is what every PX4 consumer (EKF2,
+  collision prevention) treats as "no valid reading". Valid readings have
+  ``signal_quality = 100``. ``covariance`` is the range noise variance in
+  cm^2 (rounded, at most 254; 255 would mean unknown). ``quaternion`` is
+  the sensor's mounting rotation, sensor frame -> body FRD, [w, x, y, z]
+  with w >= 0 (MAVLink: "zero-rotation is along the vehicle body x-axis";
+  required for MAV_SENSOR_ROTATION_CUSTOM). It is sent for every sensor, the
+  enum's own rotation for the others (MAVLink asks for it only with CUSTOM
+  and says "0 if invalid"; PX4 sends zeros there): a reader can always use
+  it, or use ``orientation`` unless it is 100.
 - NAV_TAKEOFF ``param7`` is an altitude AMSL (m), as PX4; NaN means "the
   default takeoff height" (MIS_TAKEOFF_ALT above home).
 - SET_POSITION_TARGET_LOCAL_NED: ``type_mask`` bits as MAVLink's
@@ -317,7 +325,8 @@ def highres_imu_args(time_us: int, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss
 
     Body FLU -> FRD is (x, -y, -z) (``frames.flu2frd``), written out per
     component. ``time_usec`` is vehicle time; accelerometer = specific force
-    (m/s^2), gyro rad/s, magnetometer gauss. Barometer fields follow the ISA
+    (m/s^2; g R^T e3 with ``sim.vector_sensors: paper``, ``sitl.sensors``),
+    gyro rad/s, magnetometer gauss. Barometer fields follow the ISA
     from the altitude AMSL (hPa, m, degC).
     """
     ax, ay, az = accel_flu_m_s2
@@ -512,13 +521,38 @@ def distance_sensor_args(time_boot_ms: int, reading) -> tuple:
         dist_cm, quality = max_cm + 1, 1
     else:
         dist_cm, quality = int(round(d * 100.0)), 100
+    # (getattr: readings of other makers, e.g. tests, may lack the mounting fields)
+    std_cm = 100.0 * float(getattr(reading, "noise_std_m", 0.0))
+    cov = min(int(round(std_cm * std_cm)), 254)
     return (int(time_boot_ms), min_cm, max_cm, min(max(dist_cm, 0), 65535),
             mavlink.MAV_DISTANCE_SENSOR_LASER, int(reading.sensor_id) & 0xFF,
-            int(reading.orientation), 255, float(reading.hfov_rad), float(reading.vfov_rad),
-            _Q_ZERO, quality)
+            int(reading.orientation), cov, float(reading.hfov_rad), float(reading.vfov_rad),
+            mount_quaternion_frd(getattr(reading, "mount_rotation_flu", _I9)), quality)
 
 
-_Q_ZERO = (0.0, 0.0, 0.0, 0.0)
+_I9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+_MOUNT_Q: dict[tuple, tuple] = {}
+
+
+def mount_quaternion_frd(mount_rotation_flu) -> tuple:
+    """Quaternion [w, x, y, z] (w >= 0) of a mounting rotation sensor -> body,
+    given sensor -> body FLU (row-major 9-tuple), in FRD on both sides
+    (``R_frd = T R_flu T``, T = diag(1, -1, -1)). Cached: a vehicle has a few
+    sensors and this runs for every reading."""
+    key = tuple(mount_rotation_flu)
+    q = _MOUNT_Q.get(key)
+    if q is None:
+        T = frames.T_FLU_FRD
+        R_frd = T @ np.array(key, dtype=float).reshape(3, 3) @ T
+        q = _MOUNT_Q[key] = tuple(float(c) for c in frames.rotmat2quat_wxyz(R_frd))
+    return q
+
+
+def mount_rotation_flu_of(quaternion_frd) -> np.ndarray:
+    """Inverse of ``mount_quaternion_frd``: [w, x, y, z] sensor -> body FRD ->
+    (3, 3) rotation sensor -> body FLU."""
+    T = frames.T_FLU_FRD
+    return T @ frames.quat_wxyz2rotmat(quaternion_frd) @ T
 
 
 def distance_sensor(mav, time_boot_ms: int, reading):
@@ -559,9 +593,26 @@ def position_target_local_ned(mav, time_boot_ms: int, setpoint):
         float(a[0]), float(a[1]), float(a[2]), yaw, yaw_rate)
 
 
+STATUSTEXT_CHUNK = 50
+#: Longest text sent in chunks (the rest is cut).
+STATUSTEXT_MAX = 250
+
+
 def statustext(mav, severity: int, text: str):
     """STATUSTEXT (text cut to the 50 bytes of one chunk)."""
-    return mav.statustext_encode(severity, text.encode("ascii", "replace")[:50])
+    return mav.statustext_encode(severity, text.encode("ascii", "replace")[:STATUSTEXT_CHUNK])
+
+
+def statustext_chunks(mav, severity: int, text: str, text_id: int) -> list:
+    """A long text as STATUSTEXT chunks (MAVLink 2 ``id`` = ``text_id`` > 0,
+    ``chunk_seq`` 0, 1, ...; the last chunk is shorter than 50 bytes, or an
+    empty one follows, which is how receivers see the end), at most
+    ``STATUSTEXT_MAX`` bytes."""
+    b = text.encode("ascii", "replace")[:STATUSTEXT_MAX]
+    parts = [b[i:i + STATUSTEXT_CHUNK] for i in range(0, len(b), STATUSTEXT_CHUNK)]
+    if len(parts[-1]) == STATUSTEXT_CHUNK:
+        parts.append(b"")
+    return [mav.statustext_encode(severity, p, text_id, k) for k, p in enumerate(parts)]
 
 
 def _clip16(x: float) -> int:
@@ -749,3 +800,23 @@ def odometry_truth(mav, time_us: int, pos_enu_m, vel_enu_m_s, R_enu_flu, omega_f
         float(p[0]), float(p[1]), float(p[2]), [float(c) for c in q],
         float(v_frd[0]), float(v_frd[1]), float(v_frd[2]), float(w[0]), float(w[1]), float(w[2]),
         cov, cov, 0, mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN, 100)
+
+
+def sys_status(mav, sensors_present: int, sensors_enabled: int, sensors_health: int, voltage_v: float,
+               current_a: float, remaining: float):
+    """SYS_STATUS with the battery: volts -> mV, amperes -> cA, 0..1 -> %."""
+    return mav.sys_status_encode(sensors_present, sensors_enabled, sensors_health, 250,
+                                 int(round(voltage_v * 1000.0)), int(round(current_a * 100.0)),
+                                 int(round(100.0 * min(max(remaining, 0.0), 1.0))), 0, 0, 0, 0, 0, 0)
+
+
+def battery_status(mav, cells: int, voltage_v: float, current_a: float, consumed_ah: float,
+                   consumed_wh: float, remaining: float):
+    """BATTERY_STATUS (id 0, all functions, LiPo): per-cell mV (UINT16_MAX for cells
+    the pack does not have), cA, mAh, hJ, %."""
+    cell_mv = int(round(voltage_v / cells * 1000.0))
+    volts = [cell_mv if i < cells else 65535 for i in range(10)]
+    return mav.battery_status_encode(0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO,
+                                     32767, volts, int(round(current_a * 100.0)),
+                                     int(round(consumed_ah * 1000.0)), int(round(consumed_wh * 36.0)),
+                                     int(round(100.0 * min(max(remaining, 0.0), 1.0))))

@@ -40,6 +40,16 @@ Failsafes (announced by STATUSTEXT)
   holding, 2 return). A mode change by the user ends the failsafe.
 - Landing: landed for COM_DISARM_LAND after having flown -> disarm; armed on
   the ground without taking off for COM_DISARM_PRFLT -> disarm (PX4).
+
+Crash (issue 8; the simulation detects it, ``sitl.collision``)
+-------------------------------------------------------------
+``crash(now_us, event)``: STATUSTEXT CRITICAL ``event.text`` ("CRASH:
+cylinder #1 at E10.00 N3.75 U1.20, 1.02 m/s"), the motors are cut (the
+output is "disarmed" from then on), HEARTBEAT ``system_status`` is
+MAV_STATE_EMERGENCY until the stack is rebuilt, the vehicle is disarmed
+("Disarmed (crashed)") once it has come to rest, and arming, take-off,
+landing, return and mode changes are refused (DENIED, "... denied:
+crashed"). A disarm request is accepted at any time.
 """
 
 from __future__ import annotations
@@ -51,6 +61,7 @@ from enum import Enum
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from .collision import CrashEvent, landing_intended
 from .onboard import Setpoint
 
 # MAVLink enum values used by the stack (named once, from the common dialect).
@@ -133,6 +144,9 @@ class ParamSpec:
 
 _R, _I = PARAM_TYPE_REAL32, PARAM_TYPE_INT32
 
+#: Parameters a PARAM_SET cannot change (they describe how the simulator was started).
+READ_ONLY_PARAMS = frozenset({"SIM_LOCKSTEP"})
+
 #: The parameter set. PX4 names where PX4 has the parameter; SIM_* are the
 #: simulator's own (noise and lockstep), applied by ``sitl.server``.
 PARAM_SPECS: tuple[ParamSpec, ...] = (
@@ -152,12 +166,16 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_TILTMAX_AIR", _R, 35.0, 10.0, 85.0, "onboard controller tilt limit (deg)"),
     ParamSpec("NAV_MC_ALT_RAD", _R, 0.8, 0.05, 10.0, "takeoff altitude acceptance (m)"),
     ParamSpec("RTL_RETURN_ALT", _R, 5.0, 0.0, 150.0, "return altitude above home (m; PX4's default is 60)"),
+    ParamSpec("SIM_LOCKSTEP", _I, 0, 0, 1,
+              "1: lockstep with the actuator peer (the --lockstep option; read-only): the vehicle waits for "
+              "every answer, so link delay costs wall time, not control"),
     ParamSpec("SIM_LS_TMO", _R, 2.0, 0.05, 60.0, "lockstep: wall-clock wait for the answer (s)"),
     ParamSpec("SIM_LS_SPIN", _R, 300.0, 0.0, 5000.0,
               "lockstep: busy-poll for the answer this long before sleeping (us; 0 off)"),
     ParamSpec("SIM_VEC_VAR", _R, 5.0e-4, 0.0, 1.0, "accel/mag direction noise variance (-)"),
     ParamSpec("SIM_GYRO_VAR", _R, 5.0e-4, 0.0, 1.0, "gyro noise variance ((rad/s)^2)"),
-    ParamSpec("SIM_POS_STD", _R, 0.0, 0.0, 100.0, "position measurement noise std (m)"),
+    ParamSpec("SIM_POS_STD", _R, 0.0, 0.0, 100.0, "horizontal position measurement noise std (m)"),
+    ParamSpec("SIM_POSZ_STD", _R, 0.0, 0.0, 100.0, "vertical position measurement noise std (m)"),
     ParamSpec("SIM_VEL_STD", _R, 0.0, 0.0, 100.0, "velocity measurement noise std (m/s)"),
     ParamSpec("SIM_RNG_STD", _R, 0.0, 0.0, 100.0, "rangefinder noise std (m)"),
     ParamSpec("SIM_RNG_HZ", _R, 0.0, 0.0, 1000.0,
@@ -315,7 +333,8 @@ class MissionProtocol:
     RETRY_S = 0.5
     MAX_RETRIES = 5
 
-    def __init__(self) -> None:
+    def __init__(self, max_items: int = MAX_MISSION_ITEMS) -> None:
+        self.max_items = int(max_items)
         self.items: tuple[MissionItem, ...] = ()
         self.current_seq = 0
         self._upload: list[MissionItem] | None = None
@@ -336,7 +355,7 @@ class MissionProtocol:
             if count == 0:
                 return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mission_type)]
             return [SendAck(mavlink.MAV_MISSION_UNSUPPORTED, mission_type)]
-        if count < 0 or count > MAX_MISSION_ITEMS:
+        if count < 0 or count > self.max_items:
             self._upload = None
             return [SendAck(mavlink.MAV_MISSION_NO_SPACE, mission_type)]
         if count == 0:
@@ -553,6 +572,7 @@ class FlightStack:
         self._params_version = -1        # freshness limits (us), cached per parameter version
         self._hil_tmo_us = self._of_loss_us = 0.0
         self._out: StackOutput | None = None   # last output, reused while unchanged
+        self.crash_event: CrashEvent | None = None
 
     # ------------------------------------------------------------------ info
     @property
@@ -560,7 +580,13 @@ class FlightStack:
         return self.mode.main << 16 | self.mode.sub << 24
 
     @property
+    def crashed(self) -> bool:
+        return self.crash_event is not None
+
+    @property
     def system_status(self) -> int:
+        if self.crash_event is not None:
+            return mavlink.MAV_STATE_EMERGENCY
         if self._failsafe is not None:
             return mavlink.MAV_STATE_CRITICAL
         return mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
@@ -570,6 +596,8 @@ class FlightStack:
         s = self._state
         if s is None or s.landed or not self.armed:
             return mavlink.MAV_LANDED_STATE_ON_GROUND
+        if self.crash_event is not None:
+            return mavlink.MAV_LANDED_STATE_IN_AIR   # falling
         if self.mode is FlightMode.TAKEOFF:
             return mavlink.MAV_LANDED_STATE_TAKEOFF
         if self.mode is FlightMode.LAND:
@@ -610,6 +638,27 @@ class FlightStack:
     def _say(self, severity: int, text: str) -> None:
         self.events.append(StatusEvent(severity, text))
 
+    def crash(self, now_us: int, event: CrashEvent) -> None:
+        """The vehicle crashed (see the module notes)."""
+        if self.crash_event is not None:
+            return
+        self.crash_event = event
+        self._failsafe = None
+        self._override_active = False
+        self._say(SEVERITY_CRITICAL, event.text)
+
+    def _denied_crashed(self, what: str) -> CommandResult:
+        self._say(SEVERITY_CRITICAL, f"{what} denied: crashed")
+        return CommandResult(RESULT_DENIED, "crashed")
+
+    def landing_intended(self, ground_z_m: float) -> bool:
+        """Whether a touchdown now would be a landing asked for: disarmed,
+        AUTO.LAND, idling, or an active setpoint at the ground
+        (``sitl.collision.landing_intended``)."""
+        o = self._out
+        landing_mode = not self.armed or self.mode is FlightMode.LAND or o is None or o.idle
+        return landing_intended(landing_mode, None if o is None else o.setpoint, ground_z_m)
+
     # ------------------------------------------------------------------ inputs
     def offboard_setpoint(self, now_us: int, target) -> None:
         """Record a decoded SET_POSITION_TARGET_LOCAL_NED (``codec.PositionTarget``)."""
@@ -625,6 +674,8 @@ class FlightStack:
     # ------------------------------------------------------------------ commands
     def arm(self, now_us: int, state: NavState, force: bool = False) -> CommandResult:
         """MAV_CMD_COMPONENT_ARM_DISARM(1). ``force``: param2 == 21196."""
+        if self.crash_event is not None:
+            return self._denied_crashed("Arming")
         if self.armed:
             return CommandResult(RESULT_ACCEPTED)
         if not force:
@@ -657,7 +708,7 @@ class FlightStack:
         """MAV_CMD_COMPONENT_ARM_DISARM(0): refused in the air unless forced."""
         if not self.armed:
             return CommandResult(RESULT_ACCEPTED)
-        if not state.landed and not force:
+        if not state.landed and not force and self.crash_event is None:
             self._say(SEVERITY_CRITICAL, "Disarming denied: not landed")
             return CommandResult(RESULT_DENIED, "not landed")
         self.armed = False
@@ -670,6 +721,8 @@ class FlightStack:
         """DO_SET_MODE / SET_MODE with a PX4 custom mode (None: unknown)."""
         if mode is None:
             return CommandResult(RESULT_DENIED, "unknown or unsupported mode")
+        if self.crash_event is not None:
+            return self._denied_crashed("Mode change")
         if mode is FlightMode.MISSION:
             self._say(SEVERITY_WARNING, "Mission mode not available: mission stored only")
             return CommandResult(RESULT_DENIED, "missions are stored, not flown")
@@ -692,6 +745,8 @@ class FlightStack:
 
         Disarmed: switches to AUTO.TAKEOFF; arming then takes off (PX4).
         """
+        if self.crash_event is not None:
+            return self._denied_crashed("Takeoff")
         home_z = float(self.home_enu_m[2])
         z_min = home_z + self.params["MIS_TAKEOFF_ALT"]
         z = z_min if target_z_enu_m is None else float(target_z_enu_m)
@@ -710,6 +765,8 @@ class FlightStack:
 
     def land(self, now_us: int, state: NavState) -> CommandResult:
         """MAV_CMD_NAV_LAND: AUTO.LAND where the vehicle is."""
+        if self.crash_event is not None:
+            return self._denied_crashed("Land")
         self._failsafe = None
         self._enter(FlightMode.LAND, state)
         return CommandResult(RESULT_ACCEPTED)
@@ -754,6 +811,11 @@ class FlightStack:
 
         if not self.armed:
             self._override_active = False
+            return _DISARMED_OUTPUT
+        if self.crash_event is not None:
+            # motors cut; disarmed once at rest
+            if state.landed:
+                self.disarm(now_us, state, force=True, why="crashed")
             return _DISARMED_OUTPUT
 
         # --- landed bookkeeping and auto-disarm

@@ -27,7 +27,14 @@ Integrator (one physics step of length h, commands held constant):
 Ground contact: the body origin may not go below the terrain. Touching down
 sets ``landed``: the vehicle rests level (yaw kept) with zero velocity and
 rate, motors keep spinning; it lifts off as soon as the vertical thrust
-exceeds the weight (no sinking, no sliding).
+exceeds the weight (no sinking, no sliding). Every touchdown increments
+``touchdowns`` and records the velocity just before it (``impact_vel_enu_m_s``).
+
+Crash (``crash``, decided by ``sitl.collision``): the rotors stop at once and
+stay stopped whatever the commands, velocity and body rate drop to zero (a
+fully inelastic hit), and the body falls from where it hit straight down to
+the support height given (the terrain, or the top of what is under it),
+where it rests (``landed``) until ``set_state`` resets it.
 
 The hot path is plain Python float arithmetic on purpose: numpy calls on
 3-vectors cost about 1 us each, the whole step here costs about as much as
@@ -110,6 +117,10 @@ class Plant:
         self._lag_b = 0.0
         self._count = 0
         self.impact_speed_m_s = 0.0
+        self.impact_vel_enu_m_s = (0.0, 0.0, 0.0)
+        self.touchdowns = 0
+        self._terrain = self.ground_height
+        self._terrain_max_m = self.max_ground_m
         self.set_state((0.0, 0.0, 0.0))
 
     # ------------------------------------------------------------------ state
@@ -117,8 +128,11 @@ class Plant:
                   landed: bool = False) -> None:
         """Set the full state (arrays or sequences; R 3x3 body FLU -> world ENU).
 
-        ``f`` None: rotors at zero thrust.
+        ``f`` None: rotors at zero thrust. Clears a crash.
         """
+        self.crashed = False
+        self.ground_height = self._terrain
+        self.max_ground_m = self._terrain_max_m
         self.p = tuple(float(x) for x in p)
         self.v = tuple(float(x) for x in v)
         if R is None:
@@ -129,6 +143,23 @@ class Plant:
         self.f = (0.0, 0.0, 0.0, 0.0) if f is None else tuple(float(x) for x in f)
         self.landed = bool(landed)
         self.acc = (0.0, 0.0, 0.0)
+
+    def crash(self, p, rest_z_m: float) -> None:
+        """Crash at ``p`` (ENU, m): rotors stopped for good, velocity and body
+        rate zero; the body then falls straight down to ``rest_z_m`` (the
+        support height under ``p``) and rests there."""
+        self.p = tuple(float(x) for x in p)
+        self.v = (0.0, 0.0, 0.0)
+        self.w = (0.0, 0.0, 0.0)
+        self.f = (0.0, 0.0, 0.0, 0.0)
+        self.acc = (0.0, 0.0, 0.0)
+        self.crashed = True
+        rest = float(rest_z_m)
+        self.ground_height = lambda x, y: rest
+        self.max_ground_m = rest
+        if self.p[2] <= rest:
+            self.p = (self.p[0], self.p[1], rest)
+            self.landed = True
 
     def state_arrays(self):
         """(p, v, R 3x3, w, acc, f) as numpy arrays (copies)."""
@@ -167,7 +198,7 @@ class Plant:
             else:
                 self._lag_a = self._lag_b = 0.0
         la, lb = self._lag_a, self._lag_b
-        c0, c1, c2, c3 = cmd
+        c0, c1, c2, c3 = cmd if not self.crashed else (0.0, 0.0, 0.0, 0.0)
         c0 = fmax * (0.0 if c0 < 0.0 else 1.0 if c0 > 1.0 else c0)
         c1 = fmax * (0.0 if c1 < 0.0 else 1.0 if c1 > 1.0 else c1)
         c2 = fmax * (0.0 if c2 < 0.0 else 1.0 if c2 > 1.0 else c2)
@@ -316,8 +347,10 @@ class Plant:
             if npz <= max_ground and nvz <= 0.0:
                 zg = self.ground_height(npx, npy)
                 if npz <= zg:
-                    # Touch-down: at rest, level, yaw kept (see ``_touch_down``).
+                    # Touch-down: at rest, level, yaw kept.
                     self.impact_speed_m_s = math.sqrt(nvx * nvx + nvy * nvy + nvz * nvz)
+                    self.impact_vel_enu_m_s = (nvx, nvy, nvz)
+                    self.touchdowns += 1
                     px, py, pz = npx, npy, zg
                     ux = uy = uz = wx = wy = wz = 0.0
                     acc = (0.0, 0.0, 0.0)
@@ -337,18 +370,6 @@ class Plant:
         self.acc = acc
         self.landed = landed
         self._count = count
-
-    def _touch_down(self, x, y, zg, vx, vy, vz) -> None:
-        self.impact_speed_m_s = math.sqrt(vx * vx + vy * vy + vz * vz)
-        self.p = (x, y, zg)
-        self.v = (0.0, 0.0, 0.0)
-        self.w = (0.0, 0.0, 0.0)
-        self.acc = (0.0, 0.0, 0.0)
-        r00, r10 = self.R[0], self.R[3]
-        yaw = math.atan2(r10, r00) if abs(r00) + abs(r10) > 1e-9 else 0.0
-        c, s = math.cos(yaw), math.sin(yaw)
-        self.R = (c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
-        self.landed = True
 
 
 def rotate_right(R, thx: float, thy: float, thz: float):

@@ -1,5 +1,5 @@
 """MAVLink transport of the SITL: ``Simulation`` + ``FlightStack`` behind
-pymavlink connections (DESIGN.md "MAVLink contract" and "Time").
+pymavlink connections (docs/mavlink.md).
 
 The vehicle is system 1, component 1, MAVLink 2, common dialect. Connection
 strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
@@ -40,7 +40,7 @@ While the vehicle clock is stalled (lockstep wait) a HEARTBEAT still goes
 out once per wall-clock second so that ground stations keep the link.
 
 Message rates (defaults, changeable by MAV_CMD_SET_MESSAGE_INTERVAL):
-HEARTBEAT 1 Hz, SYS_STATUS 1 Hz, SYSTEM_TIME 1 Hz, EXTENDED_SYS_STATE 5 Hz,
+HEARTBEAT 1 Hz, SYS_STATUS and BATTERY_STATUS 1 Hz (sitl/battery.py), SYSTEM_TIME 1 Hz, EXTENDED_SYS_STATE 5 Hz,
 ATTITUDE / ATTITUDE_QUATERNION / LOCAL_POSITION_NED 50 Hz,
 GLOBAL_POSITION_INT 10 Hz, GPS_RAW_INT 5 Hz, POSITION_TARGET_LOCAL_NED
 10 Hz, HOME_POSITION 0.5 Hz, ODOMETRY off (when requested: the true state,
@@ -51,19 +51,42 @@ at each rangefinder's own rate (an interval sets all rangefinder periods,
 -1 stops them being sent). An interval shorter than the sensor period means
 every frame.
 
-The SITL has no state estimator: ATTITUDE, the onboard controller and the
-flight stack use the true attitude; positions are the (noisy) position
-measurements; HIGHRES_IMU carries the noisy IMU.
+What the streams carry (``sitl.sensors``, ``sitl.gnss``, ``sitl.estimator``):
+HIGHRES_IMU the noisy IMU and magnetometer of the frame (``sim.vector_sensors``
+decides what the accelerometer fields mean); LOCAL_POSITION_NED and
+GPS_RAW_INT the latest *delivered* position/velocity sample, LOCAL_POSITION_NED
+stamped with its measurement time (repeated, same time_boot_ms, until the
+next delivery); with ``sim.onboard_state: estimate`` (default) ATTITUDE,
+ATTITUDE_QUATERNION and GLOBAL_POSITION_INT carry the onboard estimator's
+attitude, bias-corrected rates and position, as PX4 reports its EKF's, and
+the onboard controller and flight stack use the estimate; with ``truth``
+they carry and use the true state ("true state" mode, the SITL without an
+estimator). Truth kept in estimate mode, where a real stack has equivalent
+information: the plant's ground contact stands for the land detector
+(landed state, auto-disarm, integrator freeze), and home is the true start
+point (a real stack takes its estimate at arming, within the sensors'
+centimetres here). ODOMETRY is always the ground truth.
 
-Signing: SETUP_SIGNING stores the key on every link and signs all outgoing
-messages with it; unsigned incoming messages are still accepted (a SITL
-convenience, documented), an all-zero key disables signing.
+Who may control the vehicle (``sitl.auth``): control messages are accepted
+only from configured controllers (by system/component ids, on a control
+link, from the address they first came from), others are ignored with one
+STATUSTEXT per source; read-only requests are open to anyone. ``--out``
+links are telemetry-only, ``--control-out`` links carry control too. A
+flood from unbound addresses is shed before parsing (``IntakeBudget``:
+datagrams over 1024 bytes, and beyond 1000 per second together), so it
+cannot stall the vehicle's clock; bound controllers always get through.
+
+Signing (MAVLink 2): with ``signing_key`` every outgoing packet is signed,
+control must carry a valid, fresh signature and SETUP_SIGNING is refused.
+Without it, SETUP_SIGNING from a controller stores a key the same way (an
+all-zero key, sent signed, turns signing off again).
 """
 
 from __future__ import annotations
 
 import collections
 import dataclasses
+import errno
 import math
 import select
 import socket
@@ -82,9 +105,16 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.mission.schema import Mission
 
 from . import codec
+from companion.link.signing import (
+    SignatureVerifier, disable_outgoing_signing, enable_outgoing_signing, signing_timestamp,
+)
+from companion.link.sockets import is_udp_url, open_udp
+
+from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
+from .battery import Battery
 from .flightstack import (
     IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
-    Parameters, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
+    Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
     SEVERITY_INFO, SEVERITY_WARNING,
 )
 from .sim import Simulation
@@ -117,6 +147,7 @@ ID = mavlink
 _DEFAULT_RATES_HZ = {
     ID.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
     ID.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    ID.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
     ID.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
     ID.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
     ID.MAVLINK_MSG_ID_ATTITUDE: 50.0,
@@ -130,6 +161,8 @@ _DEFAULT_RATES_HZ = {
 }
 
 _HEARTBEAT_ID = ID.MAVLINK_MSG_ID_HEARTBEAT
+#: Linux's IP_RECVERR (the socket module does not export it).
+_IP_RECVERR = getattr(socket, "IP_RECVERR", 11)
 
 
 def _default_interval_us(mid: int) -> int:
@@ -150,7 +183,7 @@ class ServerConfig:
     outs : tuple of str
         Extra links (e.g. ``udpout:127.0.0.1:14550`` for a ground station).
     lockstep : bool
-        Allow lockstep with an actuator peer (DESIGN.md "Time").
+        Allow lockstep with an actuator peer (docs/mavlink.md "Time and lockstep").
     speed : float
         Real-time factor when free-running (0: as fast as possible).
     seed : int or None
@@ -164,6 +197,18 @@ class ServerConfig:
         Busy-poll for lockstep answers (SIM_LS_SPIN). False when the peer
         shares this process (``SitlThread``): a spinning thread would only
         compete with it for the interpreter lock.
+    control_outs : tuple of str
+        Extra links that may carry control (``outs`` are telemetry-only);
+        see ``sitl.auth``.
+    controllers : tuple of sitl.auth.Controller or None
+        Who may control the vehicle (None: ``sitl.auth.DEFAULT_CONTROLLERS``).
+    signing_key : bytes or None
+        32-byte MAVLink 2 signing key: every outgoing packet is signed,
+        control must be signed, SETUP_SIGNING is refused.
+    max_clients : int
+        Peers a ``udpin`` link serves at most (``sitl.auth.ClientTable``).
+    client_timeout_s : float
+        Wall-clock seconds of silence after which a ``udpin`` peer is dropped.
     """
 
     listen: str = "udpin:127.0.0.1:14540"
@@ -175,8 +220,19 @@ class ServerConfig:
     sensor_hz: int = 250
     start: tuple[float, float, float] | None = None
     spin: bool = True
+    control_outs: tuple[str, ...] = ()
+    controllers: tuple[Controller, ...] | None = None
+    signing_key: bytes | None = None
+    max_clients: int = 8
+    client_timeout_s: float = 10.0
 
     def __post_init__(self) -> None:
+        if self.signing_key is not None and len(self.signing_key) != 32:
+            raise ValueError("signing_key must be 32 bytes")
+        if not (isinstance(self.max_clients, int) and 1 <= self.max_clients <= 1024):
+            raise ValueError("max_clients must be an integer in [1, 1024]")
+        if not (math.isfinite(self.client_timeout_s) and 0.1 <= self.client_timeout_s <= 3600):
+            raise ValueError("client_timeout_s must be in [0.1, 3600] s")
         if not (self.speed >= 0 and math.isfinite(self.speed)):
             raise ValueError("speed must be >= 0 (0: as fast as possible)")
         if self.start is not None:
@@ -189,43 +245,73 @@ class ServerConfig:
 
 
 class _Link:
-    """One pymavlink connection with our own common-dialect MAVLink 2 encoder.
+    """One MAVLink link with our own common-dialect MAVLink 2 encoder.
 
-    UDP links are read and written on the socket directly (one ``recvfrom``
-    per datagram; one ``sendto`` per client for a frame's telemetry, see
-    ``BATCH_BYTES``, and per reply): mavutil's per-message bookkeeping costs
-    more than the rest of a frame's telemetry. A ``udpin`` link serves every
-    address that has sent it something; replies go to the requester only.
-    Other link types (TCP, serial) go through mavutil.
+    UDP links are our own sockets (``companion.link.sockets.open_udp``: a
+    ``udpin`` port in use is an error, ``udpout`` is connected to its peer so
+    nobody else can write to it), read and written directly (one
+    ``recvfrom`` per datagram; one ``sendto`` per client for a frame's
+    telemetry, see ``BATCH_BYTES``, and per reply): mavutil's per-message
+    bookkeeping costs more than the rest of a frame's telemetry. A ``udpin``
+    link serves the addresses that sent it something, at most
+    ``max_clients`` of them, expiring after ``client_timeout_s`` of silence
+    (``sitl.auth.ClientTable``); replies go to the requester only. Other
+    link types (TCP, serial) go through mavutil.
+
+    Incoming packets are parsed by a ``MAVLink`` object without a key
+    (``parser``): signatures are checked by ``sitl.auth`` with our rules;
+    ``mav`` packs (and signs, when signing is on).
     """
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, control: bool = True, max_clients: int = 8,
+                 client_timeout_s: float = 10.0, option: str = "--listen") -> None:
         self.url = url
-        self.conn = mavutil.mavlink_connection(url, source_system=SYSTEM_ID,
-                                               source_component=COMPONENT_ID)
-        # Replace the module-global-dialect encoder by our own (common, v2):
-        # independent of MAVLINK20/MAVLINK_DIALECT and of other users of mavutil.
-        self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
-        self.conn.mav.robust_parsing = True
-        self.conn.WIRE_PROTOCOL_VERSION = "2.0"
-        self.conn.first_byte = False
-        self.mav = self.conn.mav
-        self.udp = isinstance(self.conn, mavutil.mavudp)
-        self.server = self.udp and bool(self.conn.udp_server)
-        self.sock = self.conn.port if self.udp else None
+        self.control = control
+        self.udp = is_udp_url(url)
+        self.conn = None
+        self.clients = ClientTable(max_clients, client_timeout_s)
+        if self.udp:
+            us = open_udp(url, option)
+            self.sock = us.sock
+            self.server = us.server
+            self.peer = us.peer
+            self.fd = self.sock.fileno()
+            self.mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        else:
+            self.conn = mavutil.mavlink_connection(url, source_system=SYSTEM_ID,
+                                                   source_component=COMPONENT_ID, retries=0)
+            # Replace the module-global-dialect encoder by our own (common, v2):
+            # independent of MAVLINK20/MAVLINK_DIALECT and of other users of mavutil.
+            self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+            self.conn.WIRE_PROTOCOL_VERSION = "2.0"
+            self.conn.first_byte = False
+            self.mav = self.conn.mav
+            self.sock = None
+            self.server = False
+            self.peer = None
+            port = getattr(self.conn, "port", None)
+            self.fd = port.fileno() if isinstance(port, socket.socket) else self.conn.fd
+        self.mav.robust_parsing = True
+        #: Peers the kernel reported unreachable, for the server to forget (``collect_unreachable``).
+        self.gone: list = []
+        self._recverr = False
+        if self.server:
+            try:   # ICMP errors with the address they concern: a closed peer is noticed at once
+                self.sock.setsockopt(socket.IPPROTO_IP, _IP_RECVERR, 1)
+                self._recverr = hasattr(socket, "MSG_ERRQUEUE")
+            except OSError:
+                pass
+        self.parser = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self.parser.robust_parsing = True
         self._rcvtimeo = None
         if self.udp:
             # Blocking socket with a kernel receive timeout: waiting for the
             # lockstep answer is one recvfrom() (``recv_datagram(wait=True)``)
             # instead of select() + recvfrom(); MSG_DONTWAIT reads without waiting.
-            self.sock.setblocking(True)
             self._set_rcvtimeo(0.05)
-        self.clients = self.conn.clients if self.udp else set()
         self.last_addr = None
         self._batch: list | None = None
         self._batch_len = 0
-        port = getattr(self.conn, "port", None)
-        self.fd = port.fileno() if isinstance(port, socket.socket) else self.conn.fd
 
     @property
     def has_peer(self) -> bool:
@@ -259,14 +345,45 @@ class _Link:
         self._batch_len += len(buf)
 
     def _transmit_now(self, buf: bytes) -> None:
+        if self.server:
+            for addr in self.clients:   # one failing client must not cost the others their telemetry
+                self._sendto(buf, addr)
+            return
         try:
-            if self.server:
-                for addr in self.clients:
-                    self.sock.sendto(buf, addr)
+            if self.sock is not None:
+                self.sock.send(buf)
             else:
                 self.conn.write(buf)
         except OSError:
             pass
+
+    def _sendto(self, buf: bytes, addr) -> None:
+        """``sendto`` on the server socket. With IP_RECVERR the kernel reports a
+        pending ICMP error (about any peer) on the next call and drops that
+        datagram: collect the error and send once more."""
+        try:
+            self.sock.sendto(buf, addr)
+        except OSError as exc:
+            if exc.errno == errno.ECONNREFUSED and self._recverr:
+                self.collect_unreachable()
+                try:
+                    self.sock.sendto(buf, addr)
+                except OSError:
+                    pass
+
+    def collect_unreachable(self) -> None:
+        """Move the addresses the kernel reported unreachable (ICMP port
+        unreachable: the peer's socket is closed) from the error queue to
+        ``gone`` (``IP_RECVERR``, Linux; elsewhere nothing is reported)."""
+        if not self._recverr:
+            return
+        for _ in range(64):
+            try:
+                _, _, _, addr = self.sock.recvmsg(1, 512, socket.MSG_ERRQUEUE | socket.MSG_DONTWAIT)
+            except OSError:
+                return
+            if addr and addr not in self.gone:
+                self.gone.append(addr)
 
     def send(self, msg) -> None:
         """Pack (signing if set up) and send a pymavlink message."""
@@ -289,10 +406,7 @@ class _Link:
         except (struct_error, ValueError, TypeError, OverflowError):
             return
         self.mav.seq = (self.mav.seq + 1) & 0xFF
-        try:
-            self.sock.sendto(buf, addr)
-        except OSError:
-            pass
+        self._sendto(buf, addr)
 
     def send_fast(self, packer, args: tuple) -> None:
         """Send through a ``codec.FastPacker``."""
@@ -328,8 +442,8 @@ class _Link:
                             continue
                     else:
                         if self.server:
-                            self.clients.add(addr)
-                            self.last_addr = addr
+                            self.clients.admit(addr, time.monotonic())
+                        self.last_addr = addr
                         return data
                     break
             if wait_s > 0:
@@ -338,11 +452,13 @@ class _Link:
                 data, addr = self.sock.recvfrom(65535)
             else:
                 data, addr = self.sock.recvfrom(65535, socket.MSG_DONTWAIT)
-        except OSError:   # timeout/EAGAIN, ECONNREFUSED after an ICMP error, EINTR, ...
+        except OSError as exc:   # timeout/EAGAIN, ECONNREFUSED after an ICMP error, EINTR, ...
+            if exc.errno == errno.ECONNREFUSED:
+                self.collect_unreachable()
             return None
         if self.server:
-            self.clients.add(addr)
-            self.last_addr = addr
+            self.clients.admit(addr, time.monotonic())
+        self.last_addr = addr
         return data
 
     def parse(self, data: bytes) -> list:
@@ -351,14 +467,14 @@ class _Link:
         A datagram holds whole packets: the parser starts afresh on each, so a
         truncated packet can never swallow the next datagram.
         """
-        mav = self.mav
+        mav = self.parser
         mav.buf = bytearray()
         mav.buf_index = 0
         try:
             return mav.parse_buffer(data) or []
         except Exception:   # pymavlink raised on garbage: drop the buffer
-            self.mav.buf = bytearray()
-            self.mav.buf_index = 0
+            mav.buf = bytearray()
+            mav.buf_index = 0
             return []
 
     def receive(self):
@@ -367,12 +483,26 @@ class _Link:
         if self.udp:
             data = self.recv_datagram()
             return None if data is None else self.parse(data)
-        msg = self.conn.recv_msg()
-        return None if msg is None else [msg]
+        # A stream (TCP, serial): packets may span reads, so the parser keeps its buffer.
+        try:
+            data = self.conn.recv(4096)
+        except OSError:
+            return None
+        if not data:
+            return None
+        try:
+            return self.parser.parse_buffer(data) or []
+        except Exception:   # pymavlink raised on garbage: drop the buffer
+            self.parser.buf = bytearray()
+            self.parser.buf_index = 0
+            return []
 
     def close(self) -> None:
         try:
-            self.conn.close()
+            if self.sock is not None:
+                self.sock.close()
+            else:
+                self.conn.close()
         except OSError:
             pass
 
@@ -405,16 +535,19 @@ class SitlServer:
         self.sim = Simulation(mission, np.random.default_rng(seed), physics_hz=config.physics_hz,
                               sensor_hz=config.sensor_hz, world=world, start_enu_m=start_xy,
                               start_yaw_rad=start_yaw)
-        nz = mission.sim.noise
+        md = self.sim.sensors.model
         self.params = Parameters(initial={
-            "SIM_VEC_VAR": nz.vector_variance, "SIM_GYRO_VAR": nz.gyro_variance,
-            "SIM_POS_STD": nz.position_std_m, "SIM_VEL_STD": nz.velocity_std_m_s,
-            "SIM_RNG_STD": getattr(nz, "range_std_m", 0.0),
+            "SIM_VEC_VAR": md.accel_rel_std ** 2, "SIM_GYRO_VAR": md.gyro_std_rad_s ** 2,
+            "SIM_POS_STD": md.position_std_xy_m, "SIM_POSZ_STD": md.position_std_z_m,
+            "SIM_VEL_STD": md.velocity_std_m_s, "SIM_RNG_STD": md.range_std_m,
+            "SIM_LOCKSTEP": int(bool(config.lockstep)),
             **self._controller_param_defaults()})
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
         self.stack = FlightStack(self.params, self.home_enu_m)
-        self.missions = MissionProtocol()
+        self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
+        self.missions = MissionProtocol(mission.energy.max_mission_items)
+        self.battery = Battery(mission.energy)
         self._mission_peer = None
         self._apply_params()
         self._frame = None
@@ -425,6 +558,7 @@ class SitlServer:
         self._wall_epoch_us = int(time.time() * 1e6)
         self._last_hb_wall = 0.0
         self._rng_interval_disabled = False
+        self._text_id = 0                 # STATUSTEXT id of the last text sent in chunks
         self._last_ranges: dict = {}
         period = self.sim.sensor_period_us
         self._intervals = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
@@ -438,6 +572,7 @@ class SitlServer:
         self._encoders = {
             ID.MAVLINK_MSG_ID_HEARTBEAT: self._enc_heartbeat,
             ID.MAVLINK_MSG_ID_SYS_STATUS: self._enc_sys_status,
+            ID.MAVLINK_MSG_ID_BATTERY_STATUS: self._enc_battery,
             ID.MAVLINK_MSG_ID_SYSTEM_TIME: self._enc_system_time,
             ID.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self._enc_ext_state,
             ID.MAVLINK_MSG_ID_ATTITUDE: self._enc_attitude,
@@ -496,6 +631,14 @@ class SitlServer:
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
         self.stats = {"bad_packets": 0, "ignored": collections.Counter(), "unsupported": collections.Counter()}
+        #: Who may control the vehicle (``sitl.auth``); its ``counts`` are the
+        #: accepted and ignored control messages.
+        self.auth = ControlPolicy(
+            (config.listen, *config.control_outs),
+            DEFAULT_CONTROLLERS if config.controllers is None else config.controllers,
+            None if config.signing_key is None else SignatureVerifier(config.signing_key),
+            key_locked=config.signing_key is not None)
+        self._intake = IntakeBudget()
 
     # ------------------------------------------------------------------ params
     @staticmethod
@@ -517,8 +660,9 @@ class SitlServer:
         s.acc_rel_std = math.sqrt(p["SIM_VEC_VAR"])
         s.mag_std = math.sqrt(p["SIM_VEC_VAR"]) * float(np.linalg.norm(s.mag_earth))
         s.gyro_std = math.sqrt(p["SIM_GYRO_VAR"])
-        s.pos_std = p["SIM_POS_STD"]
-        s.vel_std = p["SIM_VEL_STD"]
+        s.gnss.pos_std_xy_m = p["SIM_POS_STD"]
+        s.gnss.pos_std_z_m = p["SIM_POSZ_STD"]
+        s.gnss.vel_std_m_s = p["SIM_VEL_STD"]
         s.range_std = p["SIM_RNG_STD"]
         if p["SIM_RNG_HZ"] > 0:   # 0 leaves the configured (or SET_MESSAGE_INTERVAL) rates alone
             for rf in s.rangefinders:
@@ -530,12 +674,20 @@ class SitlServer:
     # ------------------------------------------------------------------ lifecycle
     def open(self) -> None:
         """Open every link (binds sockets). Raises OSError/ValueError on a bad address."""
+        cfg = self.config
+        specs = ([(cfg.listen, True, "--listen")] + [(u, False, "--out") for u in cfg.outs]
+                 + [(u, True, "--control-out") for u in cfg.control_outs])
         try:
-            for url in (self.config.listen, *self.config.outs):
-                self.links.append(_Link(url))
+            for url, control, option in specs:
+                self.links.append(_Link(url, control, cfg.max_clients, cfg.client_timeout_s, option))
         except BaseException:
             self.close()
             raise
+        if cfg.signing_key is not None:
+            ts = signing_timestamp(time.time())
+            self.auth.verifier.timestamp = ts
+            for i, link in enumerate(self.links):
+                enable_outgoing_signing(link.mav, cfg.signing_key, i, ts)
 
     def close(self) -> None:
         for link in self.links:
@@ -549,6 +701,20 @@ class SitlServer:
     @property
     def time_us(self) -> int:
         return self.sim.time_us
+
+    def link_report(self) -> dict:
+        """JSON-ready link statistics: who controlled the vehicle and what was
+        ignored (``sitl.auth``), garbage, message types not handled, clients."""
+        return {
+            "control": self.auth.summary(),
+            "bad_packets": self.stats["bad_packets"],
+            "dropped_unparsed": {"oversized": self._intake.n_oversized, "over_rate": self._intake.n_over_rate},
+            "ignored_types": dict(self.stats["ignored"]),
+            "unsupported_commands": {str(k): v for k, v in self.stats["unsupported"].items()},
+            "links": [{"url": l.url, "control": l.control, "clients": len(l.clients),
+                       "clients_evicted": l.clients.n_evicted, "clients_expired": l.clients.n_expired}
+                      for l in self.links],
+        }
 
     def run(self, max_frames: int | None = None) -> None:
         """The main loop (see the module docstring). Returns on ``stop()``."""
@@ -595,22 +761,47 @@ class SitlServer:
             self._onboard_flying = True
             frame = sim.step_onboard(out.setpoint)
         self._frame = frame
+        self.battery.drain(sim.plant.f, sim.dt_frame_s)
         self.frames += 1
+        if sim.crash is not None and not self.stack.crashed:
+            self._on_crash(sim.crash)
         if frame.ranges:
             for r in frame.ranges:
                 self._last_ranges[r.sensor_id] = r
         self._flush_events()
         self._send_telemetry(frame)
 
+    def _on_crash(self, event) -> None:
+        """Tell the flight stack (STATUSTEXT, EMERGENCY) and announce the new
+        system status in this frame's HEARTBEAT."""
+        self.stack.crash(self.sim.time_us, event)
+        self._next_due[_HEARTBEAT_ID] = self.sim.time_us
+        self._due_min = self.sim.time_us
+
+    def _landing_intended(self) -> bool:
+        p = self.sim.plant.p
+        return self.stack.landing_intended(self.sim.world.ground_height(p[0], p[1]))
+
     def _nav_state(self, frame) -> NavState:
         # Floats, not arrays: the truth is read from the plant (it only moves
-        # in ``step_frame``, so between frames it is ``frame.truth``) and the
-        # measurements from the frame's float tuples (``sim.SensorFrame``
-        # builds its arrays lazily; nobody else reads them every frame).
+        # in ``step_frame``, so between frames it is ``frame.truth``).
+        # Ground contact stands for the land detector in both modes.
         pl = self.sim.plant
+        e = frame.estimate
+        if e is not None:
+            return NavState(e.pos_enu_m, e.vel_enu_m_s, e.yaw_enu_rad, e.tilt_rad, bool(pl.landed))
         R = pl.R   # row-major 9-tuple, body FLU -> world ENU
         tilt = math.acos(max(-1.0, min(1.0, R[8])))
-        return NavState(frame._pos, frame._vel, math.atan2(R[3], R[0]), tilt, bool(pl.landed))
+        return NavState(pl.p, pl.v, math.atan2(R[3], R[0]), tilt, bool(pl.landed))
+
+    def _attitude_source(self):
+        """(R row-major 9-tuple, body rates FLU) reported in ATTITUDE*: the
+        estimate, or the truth with ``sim.onboard_state: truth``."""
+        e = self._frame.estimate if self._frame is not None else None
+        if e is not None:
+            return e.R, e.omega_flu_rad_s
+        pl = self.sim.plant
+        return pl.R, pl.w
 
     def _reschedule(self) -> None:
         """Split the enabled streams into those due every frame (interval at
@@ -699,8 +890,14 @@ class SitlServer:
         s = self._nav_state(self._frame)
         if s.landed and s.tilt_rad < math.radians(30.0):
             health |= _PREARM
-        return self._mav().sys_status_encode(_SENSORS | _PREARM, _SENSORS | _PREARM, health, 250,
-                                             16800, -1, 100, 0, 0, 0, 0, 0, 0)
+        b = self.battery
+        return codec.sys_status(self._mav(), _SENSORS | _PREARM, _SENSORS | _PREARM, health, b.voltage_v,
+                                b.current_a, b.remaining)
+
+    def _enc_battery(self):
+        b = self.battery
+        return codec.battery_status(self._mav(), b.cells, b.voltage_v, b.current_a, b.consumed_ah,
+                                    b.consumed_wh, b.remaining)
 
     def _enc_system_time(self):
         t = self.sim.time_us
@@ -710,21 +907,20 @@ class SitlServer:
         return self._mav().extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED, self.stack.landed_state)
 
     def _enc_attitude(self):
-        t = self._frame.truth
-        return codec.attitude(self._mav(), self.sim.time_us // 1000, t.R, t.omega_flu_rad_s)
+        return codec.attitude(self._mav(), self.sim.time_us // 1000, *self._attitude_source())
 
     def _enc_attitude_q(self):
-        t = self._frame.truth
-        return codec.attitude_quaternion(self._mav(), self.sim.time_us // 1000, t.R, t.omega_flu_rad_s)
+        return codec.attitude_quaternion(self._mav(), self.sim.time_us // 1000, *self._attitude_source())
 
     def _enc_lpos(self):
         f = self._frame
-        return codec.local_position_ned(self._mav(), f.time_us // 1000, f.pos_enu_m, f.vel_enu_m_s)
+        return codec.local_position_ned(self._mav(), f.pos_time_us // 1000, f.pos_enu_m, f.vel_enu_m_s)
 
     def _enc_gpos(self):
         f = self._frame
+        s = self._nav_state(f)
         return codec.global_position_int(self._mav(), f.time_us // 1000, self.origin, self.home_enu_m,
-                                         f.pos_enu_m, f.vel_enu_m_s, codec.yaw_enu_of(f.truth.R))
+                                         s.pos_enu_m, s.vel_enu_m_s, s.yaw_enu_rad)
 
     def _enc_gps(self):
         f = self._frame
@@ -751,11 +947,10 @@ class SitlServer:
 
     def _lpos_args(self):
         f = self._frame
-        return codec.local_position_ned_args(f.time_us // 1000, f._pos, f._vel)
+        return codec.local_position_ned_args(f.pos_time_us // 1000, f._pos, f._vel)
 
     def _attitude_q_args(self):
-        pl = self.sim.plant
-        return codec.attitude_quaternion_args(self.sim.time_us // 1000, pl.R, pl.w)
+        return codec.attitude_quaternion_args(self.sim.time_us // 1000, *self._attitude_source())
 
     def _odometry_args(self):
         pl = self.sim.plant
@@ -765,8 +960,7 @@ class SitlServer:
         return mavlink.MAVLink_odometry_message(*self._odometry_args())
 
     def _attitude_args(self):
-        pl = self.sim.plant
-        return codec.attitude_args(self.sim.time_us // 1000, pl.R, pl.w)
+        return codec.attitude_args(self.sim.time_us // 1000, *self._attitude_source())
 
     def _enc_truth(self):
         t = self._frame.truth
@@ -886,6 +1080,8 @@ class SitlServer:
                     if link.udp:
                         data = link.recv_datagram()
                         if data is None:
+                            if link.gone:
+                                self._forget_gone(link)
                             break
                         ans, msgs = self._decode_datagram(link, data)
                     else:
@@ -909,6 +1105,8 @@ class SitlServer:
             try:
                 data = link.recv_datagram(wait if k == 0 else 0.0, spin_s if k == 0 else 0.0)
                 if data is None:
+                    if link.gone:
+                        self._forget_gone(link)
                     return
                 ans, msgs = self._decode_datagram(link, data)
             except Exception:   # garbage must never stop the vehicle
@@ -917,13 +1115,21 @@ class SitlServer:
             if self._dispatch(link, ans, msgs, until_released):
                 return
 
-    @staticmethod
-    def _decode_datagram(link: _Link, data: bytes):
+    def _decode_datagram(self, link: _Link, data: bytes):
         """(lockstep answer or None, messages) of one UDP datagram: the answer
         (one packet per frame) is decoded without pymavlink's parser when it
-        is alone in its datagram."""
+        is alone in its datagram (and dropped unless its sender may control)."""
+        if link.server and link.last_addr not in link.clients.pinned and \
+                not self._intake.admit(len(data), time.monotonic()):
+            return None, ()      # an unbound source over its budget: dropped unparsed (sitl.auth.IntakeBudget)
         ans = codec.decode_actuator_datagram(data)
-        return ans, (() if ans is not None else link.parse(data))
+        if ans is None:
+            return None, link.parse(data)
+        v = self.auth.authorize(link.url, link.last_addr, "HIL_ACTUATOR_CONTROLS", None, data[5], data[6],
+                                data, time.monotonic(), self.sim.time_us * 1e-6)
+        if (v.bindings_changed or v.report or not v.accepted) and not self._verdict(v):
+            return None, ()
+        return ans, ()
 
     def _dispatch(self, link: _Link, ans, msgs, until_released: bool) -> bool:
         """Act on a decoded datagram; True when the caller should stop reading
@@ -937,20 +1143,51 @@ class SitlServer:
     # ------------------------------------------------------------------ dispatch
     def _handle(self, link: _Link, msg) -> None:
         mtype = msg.get_type()
+        if mtype == "BAD_DATA":
+            self.stats["bad_packets"] += 1
+            return
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        now, vehicle_s = time.monotonic(), self.sim.time_us * 1e-6
+        self.auth.observe(link.url, link.last_addr, sysid, compid, now, vehicle_s)
         handler = self._handlers.get(mtype)
         if handler is None:
-            if mtype == "BAD_DATA":
-                self.stats["bad_packets"] += 1
-            else:
-                self.stats["ignored"][mtype] += 1
+            self.stats["ignored"][mtype] += 1
             return
-        if msg.get_srcSystem() == SYSTEM_ID and msg.get_srcComponent() == COMPONENT_ID:
+        if sysid == SYSTEM_ID and compid == COMPONENT_ID:
             return   # our own echo
+        command = msg.command if mtype in ("COMMAND_LONG", "COMMAND_INT") else None
+        v = self.auth.authorize(link.url, link.last_addr, mtype, command, sysid, compid, msg.get_msgbuf(), now,
+                                vehicle_s)
+        if v.bindings_changed or v.report or not v.accepted:
+            if not self._verdict(v):
+                return
         try:
             handler(link, msg)
         except Exception:   # never let one malformed message stop the vehicle
             self.stats["bad_packets"] += 1
         self._flush_events()
+
+    def _forget_gone(self, link: _Link) -> None:
+        """Peers whose socket closed (ICMP port unreachable): no more telemetry
+        to them, and a controller bound there is free for its next address at
+        once (a restarted companion re-attaches without waiting for the
+        binding's silence timeout)."""
+        gone, link.gone = link.gone, []
+        for addr in gone:
+            link.clients.forget(addr)
+            for sysid, compid in self.auth.release(link.url, addr):
+                self._say(SEVERITY_INFO, f"controller {sysid}/{compid} at {addr[0]}:{addr[1]} gone (port closed)")
+        link.clients.pinned = self.auth.bound_addresses(link.url)
+
+    def _verdict(self, v) -> bool:
+        """Act on a ``sitl.auth.Verdict`` (pins, STATUSTEXT); returns ``v.accepted``."""
+        if v.bindings_changed:
+            for link in self.links:
+                if link.server:
+                    link.clients.pinned = self.auth.bound_addresses(link.url)
+        if v.report:
+            self._say(SEVERITY_WARNING if not v.accepted else SEVERITY_INFO, v.report)
+        return v.accepted
 
     def _reply(self, link: _Link, msg) -> None:
         link.reply(msg)
@@ -967,7 +1204,12 @@ class SitlServer:
     def _flush_events(self) -> None:
         if self.stack.events:
             for ev in self.stack.pop_events():
-                self._broadcast(codec.statustext(self._mav(), ev.severity, ev.text))
+                if len(ev.text) <= codec.STATUSTEXT_CHUNK:
+                    self._broadcast(codec.statustext(self._mav(), ev.severity, ev.text))
+                else:
+                    self._text_id = self._text_id % 65535 + 1
+                    for m in codec.statustext_chunks(self._mav(), ev.severity, ev.text, self._text_id):
+                        self._broadcast(m)
 
     def _state(self) -> NavState:
         return self._nav_state(self._frame)
@@ -1114,8 +1356,8 @@ class SitlServer:
     def _on_position_target(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
-        f = self._frame
-        target = codec.decode_position_target(msg, codec.yaw_enu_of(f.truth.R), f.pos_enu_m)
+        nav = self._state()   # the flight stack's own heading and position (estimate or truth)
+        target = codec.decode_position_target(msg, nav.yaw_enu_rad, nav.pos_enu_m)
         if target is not None:
             self.stack.offboard_setpoint(self.sim.time_us, target)
 
@@ -1164,6 +1406,11 @@ class SitlServer:
         name = msg.param_id
         if name not in self.params:
             self._say(SEVERITY_WARNING, f"Unknown parameter {name[:30]}")
+            return
+        if name in READ_ONLY_PARAMS:
+            self._say(SEVERITY_WARNING, f"Param rejected: {name} is read-only")
+            i = self.params.index(name)
+            link.send(self._param_msg(link.mav, i))
             return
         spec = self.params.spec(name)
         if spec.param_type == PARAM_TYPE_INT32 and int(msg.param_type) == PARAM_TYPE_INT32:
@@ -1262,16 +1509,20 @@ class SitlServer:
 
     # ------------------------------------------------------------------ misc
     def _on_setup_signing(self, link, msg) -> None:
-        if msg.target_system != SYSTEM_ID:
+        # Reaches here only from a controller, and never with a key from the
+        # command line (``sitl.auth``). From now on control must be signed.
+        if msg.target_system != SYSTEM_ID or self.auth.key_locked:
             return
         key = bytes(msg.secret_key)
-        for l in self.links:
-            if not any(key):
-                l.conn.disable_signing()
-            else:
-                l.conn.setup_signing(key, sign_outgoing=True,
-                                     allow_unsigned_callback=lambda mav, msg_id: True,
-                                     initial_timestamp=int(msg.initial_timestamp) or None)
+        if not any(key):
+            self.auth.set_signing(None)
+            for l in self.links:
+                disable_outgoing_signing(l.mav)
+        else:
+            ts = int(msg.initial_timestamp) or signing_timestamp(time.time())
+            self.auth.set_signing(SignatureVerifier(key, ts))
+            for i, l in enumerate(self.links):
+                enable_outgoing_signing(l.mav, key, i, ts)
         self._say(SEVERITY_INFO, "Signing " + ("disabled" if not any(key) else "key stored"))
 
     def _on_timesync(self, link, msg) -> None:

@@ -5,6 +5,13 @@ period (``physics_hz / sensor_hz`` physics steps with the commands held,
 zero-order hold) and returns the sensor frame. The flight-stack shell
 (``sitl.flightstack``) decides where the motor commands come from (the
 companion's HIL_ACTUATOR_CONTROLS or ``Simulation.onboard``).
+
+``sim.onboard_state: estimate`` (default): every frame also runs the
+vehicle's own estimator (``sitl.estimator``) on the frame's measurements,
+and ``step_onboard`` flies the cascaded controller on that estimate;
+``truth``: on the true state (the SITL without an estimator). The ground
+contact flag (``landed``) is the plant's in both modes: it stands for the
+flight stack's land detector.
 """
 
 from __future__ import annotations
@@ -16,6 +23,10 @@ import numpy as np
 
 from companion.mission.schema import Mission
 
+from .estimator import Estimate, EstimatorConfig, OnboardEstimator
+from companion.mission.sim import vehicle_radius_m
+
+from .collision import CollisionMonitor, CrashEvent
 from .onboard import CascadedController, OnboardGains, Setpoint  # noqa: F401  (re-export)
 from .plant import Plant, PlantParams
 from .sensors import RangeReading, SensorSuite  # noqa: F401  (re-export)
@@ -112,23 +123,30 @@ class SensorFrame(_Lazy):
     ----------
     time_us : int
         Vehicle time since boot (us).
-    accel_flu_m_s2 : (3,) ndarray, specific force, body FLU
+    accel_flu_m_s2 : (3,) ndarray, accelerometer fields, body FLU (specific
+        force; g R^T e3 with ``sim.vector_sensors: paper``)
     gyro_flu_rad_s : (3,) ndarray
     mag_flu_gauss : (3,) ndarray
-    pos_enu_m, vel_enu_m_s : (3,) ndarray, position/velocity measurements
+    pos_enu_m, vel_enu_m_s : (3,) ndarray, the latest delivered position/velocity sample
     ranges : tuple of RangeReading (only those due this frame)
     truth : TrueState
+    pos_time_us : int
+        Measurement time of ``pos_enu_m``/``vel_enu_m_s`` (us; older than
+        ``time_us`` by the GNSS latency and the hold since then).
+    estimate : sitl.estimator.Estimate or None
+        The onboard estimator's output (None with ``sim.onboard_state: truth``).
 
     Constructed like the former frozen dataclass (same field order); float
     tuples are accepted and become arrays when first read.
     """
 
-    __slots__ = ("time_us", "_acc", "_gyro", "_mag", "_pos", "_vel", "ranges", "truth")
+    __slots__ = ("time_us", "_acc", "_gyro", "_mag", "_pos", "_vel", "ranges", "truth", "pos_time_us",
+                 "estimate")
     _fields = ("time_us", "accel_flu_m_s2", "gyro_flu_rad_s", "mag_flu_gauss", "pos_enu_m",
-               "vel_enu_m_s", "ranges", "truth")
+               "vel_enu_m_s", "ranges", "truth", "pos_time_us", "estimate")
 
     def __init__(self, time_us, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss, pos_enu_m,
-                 vel_enu_m_s, ranges, truth) -> None:
+                 vel_enu_m_s, ranges, truth, pos_time_us=None, estimate=None) -> None:
         _set(self, "time_us", time_us)
         _set(self, "_acc", accel_flu_m_s2)
         _set(self, "_gyro", gyro_flu_rad_s)
@@ -137,8 +155,10 @@ class SensorFrame(_Lazy):
         _set(self, "_vel", vel_enu_m_s)
         _set(self, "ranges", ranges)
         _set(self, "truth", truth)
+        _set(self, "pos_time_us", time_us if pos_time_us is None else pos_time_us)
+        _set(self, "estimate", estimate)
 
-    accel_flu_m_s2 = _lazy_field("_acc", _vec, "(3,) specific force, body FLU (m/s^2)")
+    accel_flu_m_s2 = _lazy_field("_acc", _vec, "(3,) accelerometer fields, body FLU (m/s^2)")
     gyro_flu_rad_s = _lazy_field("_gyro", _vec, "(3,) body rate measurement, FLU (rad/s)")
     mag_flu_gauss = _lazy_field("_mag", _vec, "(3,) magnetic field, body FLU (gauss)")
     pos_enu_m = _lazy_field("_pos", _vec, "(3,) position measurement, world ENU (m)")
@@ -181,6 +201,15 @@ class Simulation:
         Gains of ``onboard``.
 
     The vehicle starts landed with the motors stopped.
+
+    Crashes (issue 8, ``sitl.collision``; off with ``sim.collision.enabled:
+    false``): after every frame the vehicle sphere's path over the frame is
+    checked against the obstacles and rows, and a touchdown against the
+    touchdown limits (``landing_intent``, a callable set by the flight-stack
+    shell, says whether the vehicle was landing; without one every touchdown
+    counts as a landing and only the speed limits apply). A crash stops the
+    rotors for good (``Plant.crash``) and is kept in ``crash`` (a
+    ``CrashEvent``) until ``reset``.
     """
 
     def __init__(self, mission: Mission, rng: np.random.Generator, *, physics_hz: int = 1000,
@@ -199,13 +228,29 @@ class Simulation:
         self.params = SimParams(physics_hz, sensor_hz, plant_params, gains)
         self.plant = Plant(plant_params, self.world.ground_height, self.world.terrain.max_height_m)
         self.wind = WindModel(sim.wind, rng)
-        self.sensors = SensorSuite(sim, self.world, rng)
+        self.sensors = SensorSuite(sim, self.world, rng, sensor_hz)
         self.onboard = CascadedController(mission.vehicle, gains, plant_params.gravity_m_s2)
+        md = self.sensors.model
+        #: Configuration of the onboard estimator (None: ``sim.onboard_state: truth``).
+        self.estimator_config = None if sim.onboard_state == "truth" else EstimatorConfig(
+            accel_mode="inclinometer" if sim.vector_sensors == "paper" else "specific_force",
+            mag_enu_gauss=tuple(sim.magnetic_field_enu_gauss), gravity_m_s2=plant_params.gravity_m_s2,
+            pos_std_xy_m=md.position_std_xy_m, pos_std_z_m=md.position_std_z_m,
+            vel_std_m_s=md.velocity_std_m_s,
+            # an inclinometer gives no acceleration: a looser motion model
+            accel_noise_m_s2_rthz=0.5 if sim.vector_sensors == "paper" else EstimatorConfig.accel_noise_m_s2_rthz)
+        self.estimator: OnboardEstimator | None = None
         self.sensor_period_us = 1_000_000 // sensor_hz
         self.substeps = physics_hz // sensor_hz
         self.dt_physics_s = 1.0 / physics_hz
         self.dt_frame_s = self.sensor_period_us * 1e-6
         self.time_us = 0
+        col = sim.collision
+        self.vehicle_radius_m = vehicle_radius_m(sim, mission.vehicle.arm_m)
+        self.collisions = (CollisionMonitor(self.world.geometry, self.vehicle_radius_m, col)
+                           if col.enabled and self.world.geometry is not None else None)
+        self.landing_intent = None
+        self.crash: CrashEvent | None = None
         self.reset(start_enu_m, start_yaw_rad)
 
     # ----------------------------------------------------------------------
@@ -225,7 +270,13 @@ class Simulation:
         else:
             self.plant.set_state(start, R=R, landed=False)
         self.onboard.reset()
+        self.crash = None
         self._truth = None
+        pl = self.plant
+        self.sensors.gnss.reset(pl.p, pl.v)
+        self.estimator = (None if self.estimator_config is None
+                          else OnboardEstimator(self.estimator_config))
+        self.estimate: Estimate | None = None
 
     @property
     def truth(self) -> TrueState:
@@ -252,17 +303,47 @@ class Simulation:
         cmd = (float(motor_cmd_norm[0]), float(motor_cmd_norm[1]),
                float(motor_cmd_norm[2]), float(motor_cmd_norm[3]))
         wind = self.wind.step(self.dt_frame_s)
-        self.plant.advance(cmd, self.dt_physics_s, self.substeps, wind)
+        pl = self.plant
+        p0, landed0, touchdowns0 = pl.p, pl.landed, pl.touchdowns
+        pl.advance(cmd, self.dt_physics_s, self.substeps, wind)
+        if self.collisions is not None and not pl.crashed:
+            self._check_contacts(p0, landed0, touchdowns0)
         self.time_us += self.sensor_period_us
         self._truth = None
         return self._sample()
 
-    def step_onboard(self, sp: Setpoint) -> SensorFrame:
-        """One frame flown by the onboard controller on the true state
-        (the plain-float fast path; equivalent to
-        ``step_frame(onboard.update(truth, sp, dt))``)."""
+    def _check_contacts(self, p0, landed0: bool, touchdowns0: int) -> None:
+        """Crash the vehicle if this frame's motion hit something (module notes)."""
         pl = self.plant
-        cmd = self.onboard.update_floats(pl.p, pl.v, pl.R, pl.w, sp, self.dt_frame_s, pl.landed)
+        mon = self.collisions
+        if not (landed0 and pl.landed):
+            c = mon.sweep(p0, pl.p)
+            if c is not None:
+                f = c.fraction
+                pos = tuple(a + f * (b - a) for a, b in zip(p0, pl.p))
+                self._crashed(c.kind, c.obstacle_index, pos, pl.v, f)
+                return
+        if pl.touchdowns != touchdowns0:
+            landing = True if self.landing_intent is None else bool(self.landing_intent())
+            if mon.touchdown_is_crash(pl.impact_vel_enu_m_s, landing):
+                self._crashed("terrain", None, pl.p, pl.impact_vel_enu_m_s, 1.0)
+
+    def _crashed(self, kind: str, index, pos, vel, fraction: float) -> None:
+        t_us = self.time_us + int(round(fraction * self.sensor_period_us))
+        self.crash = CrashEvent(t_us, kind, index, tuple(float(x) for x in pos), tuple(float(v) for v in vel))
+        self.plant.crash(pos, self.collisions.rest_height_m(*pos))
+
+    def step_onboard(self, sp: Setpoint) -> SensorFrame:
+        """One frame flown by the onboard controller on the estimate (or, with
+        ``sim.onboard_state: truth``, the true state): the plain-float fast
+        path of ``step_frame(onboard.update(state, sp, dt))``."""
+        pl = self.plant
+        e = self.estimate
+        if self.estimator is not None and e is not None:
+            cmd = self.onboard.update_floats(e.pos_enu_m, e.vel_enu_m_s, e.R, e.omega_flu_rad_s, sp,
+                                             self.dt_frame_s, pl.landed)
+        else:
+            cmd = self.onboard.update_floats(pl.p, pl.v, pl.R, pl.w, sp, self.dt_frame_s, pl.landed)
         return self.step_frame(cmd)
 
     def _sample(self) -> SensorFrame:
@@ -270,8 +351,14 @@ class Simulation:
         p, R = pl.p, pl.R
         truth = self._truth = TrueState(p, pl.v, R, pl.w, pl.acc, pl.landed, pl.f)
         sensors = self.sensors
-        # Same draws, same order as ``imu`` then ``position`` then ``ranges``.
-        acc, gyro, mag = sensors.imu_tuples(R, pl.acc, pl.w, self.params.plant.gravity_m_s2)
-        pos, vel = sensors.position_tuples(p, pl.v)
+        f = pl.f
+        # Same draws, same order as ``imu`` then the GNSS then ``ranges``.
+        acc, gyro, mag = sensors.imu_tuples(R, pl.acc, pl.w, self.params.plant.gravity_m_s2,
+                                            f[0] + f[1] + f[2] + f[3])
+        fix = sensors.gnss.step(self.time_us, p, pl.v)
         ranges = sensors.ranges(self.time_us, p, R)
-        return SensorFrame(self.time_us, acc, gyro, mag, pos, vel, ranges, truth)
+        est = None
+        if self.estimator is not None:
+            est = self.estimate = self.estimator.update(self.time_us, self.dt_frame_s, gyro, acc, mag, fix)
+        return SensorFrame(self.time_us, acc, gyro, mag, fix.pos_enu_m, fix.vel_enu_m_s, ranges, truth,
+                           fix.time_us, est)

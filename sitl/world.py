@@ -18,6 +18,10 @@ first surface, ``math.inf`` if none within ``max_m``:
   box from the DEM (at the cell centre) up to ``canopy_height_m``;
 - obstacles: analytic ray/cylinder (with caps) and ray/box (slab) tests,
   standing on the terrain under their centre.
+
+``World.geometry`` is the same scene for distance queries
+(``companion.geometry.SceneGeometry``): the collision check of
+``sitl.collision`` and the companion's clearance report measure on it.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import ndimage
 
+from companion.geometry import ExtrudedCells, SceneGeometry, obstacle_solids
 from companion.maps.grid import ElevationModel, OccupancyGrid
 from companion.mission.sim import ObstacleConfig
 
@@ -108,7 +113,9 @@ class Terrain:
         """Distance along the unit ray to the ground (inf if none within max_m)."""
         hz = oz - self.height(ox, oy)
         if hz <= 0.0:
-            return 0.0
+            if hz < 0.0 or dz <= 0.0:
+                return 0.0               # under the ground, or on it looking into it
+            hz = _HIT_EPS_M * 2.0        # on the ground looking up: trace from just above it
         denom = self.max_slope * math.hypot(dx, dy) - dz
         if denom <= 0.0:
             return _INF
@@ -207,6 +214,12 @@ class RowField:
             vv = v + dv * t
             cc = int(uu) if uu < nc else nc - 1
             r = int(vv) if vv < nr else nr - 1
+            # On a cell boundary moving toward lower indices the ray is in the
+            # lower cell (else the exit distance is 0 and t only creeps by _EPS_T).
+            if du < 0.0 and cc == uu:
+                cc -= 1
+            if dv < 0.0 and r == vv:
+                r -= 1
             if cc < 0:
                 cc = 0
             if r < 0:
@@ -318,13 +331,15 @@ class World:
     """Terrain, rows and obstacles: everything a rangefinder can see.
 
     Build with ``World.build``; ``ground_height(x, y)`` and
-    ``raycast(origin, direction, max_m)`` are the queries.
+    ``raycast(origin, direction, max_m)`` are the queries; ``geometry`` the
+    same solids for distances (``companion.geometry.SceneGeometry``).
     """
 
     terrain: Terrain
     rows: RowField | None
     obstacles: tuple[Obstacle, ...]
     grid: OccupancyGrid | None = None
+    geometry: SceneGeometry | None = None
 
     @classmethod
     def build(cls, grid: OccupancyGrid | None = None, dem: ElevationModel | None = None,
@@ -332,7 +347,9 @@ class World:
         """Assemble a world from in-memory maps (None: flat ground at z = 0, no rows)."""
         terrain = Terrain(dem)
         rows = RowField(grid, terrain, canopy_height_m) if grid is not None else None
-        return cls(terrain, rows, tuple(Obstacle(o, terrain) for o in obstacles), grid)
+        cells = ExtrudedCells(grid, np.array(rows.base), canopy_height_m) if rows is not None else None
+        geometry = SceneGeometry(obstacle_solids(tuple(obstacles), terrain.height), cells, terrain.height)
+        return cls(terrain, rows, tuple(Obstacle(o, terrain) for o in obstacles), grid, geometry)
 
     def ground_height(self, x: float, y: float) -> float:
         """Terrain height (m, ENU z) under (x, y)."""
@@ -406,8 +423,8 @@ def load_world(mission: "Mission") -> World:
     MapError
         A map file cannot be loaded (from the companion's loaders).
     """
-    from companion.maps import load_dem, load_ogm  # noqa: PLC0415  (I/O only here)
+    from companion.maps.field import load_mission_maps  # noqa: PLC0415  (I/O only here)
 
-    grid = load_ogm(mission.map_path)
-    dem = load_dem(mission.dem_path)
+    # the planner's loader: Nav2 maps or vector fields, local or georeferenced DEMs, home heading
+    grid, dem = load_mission_maps(mission)
     return World.build(grid, dem, mission.sim.obstacles, mission.sim.canopy_height_m)

@@ -20,13 +20,21 @@ from companion.control import ControlConfig, GeometricController, Measurements, 
 from companion.vehicle import GRAVITY_M_S2, VehicleConfig
 
 CONFIGS = {
-    "default": ControlConfig(),
+    "default": ControlConfig(),                                  # the observer
     "paper": ControlConfig(attitude_law="paper", mag_perpendicular=False, accel_vector_gain_rad_s=0.0,
-                           mag_vector_gain_rad_s=0.0, pointing_limit=False),
-    "lowpass": ControlConfig(accel_filter_tau_s=0.02, kx=16, kv=5.6, ki=10),   # int gains, a filtered a_hat
+                           mag_vector_gain_rad_s=0.0, pointing_limit=False, ki=0.0, vectors="paper",
+                           velocity_aided=False, observer=False),
+    "paper-vectors-aided": ControlConfig(vectors="paper", observer=False),
+    "accel-as-gravity": ControlConfig(velocity_aided=False, observer=False),
+    "no-observer": ControlConfig(observer=False),                # tilt from the differentiated velocity
+    "observer-paper-law": ControlConfig(attitude_law="paper"),
+    "observer-paper-vectors": ControlConfig(vectors="paper"),
+    "observer-gravity-only": ControlConfig(vectors="paper", velocity_aided=False, nav_adaptive_noise=False),
+    "lowpass": ControlConfig(accel_filter_tau_s=0.02, kx=16, kv=5.6, ki=10, observer=False),   # int gains
     "no-integral": ControlConfig(ki=0.0),
     # integral on and off its bound and in and out of its zone (position noise 10 mm)
-    "integral-clamped": ControlConfig(ki=300.0, integral_limit_fraction=0.002, integral_zone_m=0.015),
+    "integral-clamped": ControlConfig(ki=300.0, integral_limit_fraction=0.002, integral_zone_m=0.015,
+                                      observer=False),
 }
 
 
@@ -88,6 +96,10 @@ def test_update_equals_reference_bit_for_bit(name, target):
         # the fast path's log row is R_d's columns and f
         assert fast.last_desired == tuple(b.R_d[i][j] for j in range(3) for i in range(3)) + (b.f_n,)
     assert n_sat > 0                                      # the saturated mixer paths were visited
+    if fast.observer is not None:                         # the observer ran the same in both
+        assert fast.observer.R == ref.observer.R and fast.observer.p == ref.observer.p
+        assert fast.observer.n_tilt_updates == ref.observer.n_tilt_updates
+        assert fast.attitude_estimate() == ref.attitude_estimate()
 
 
 def test_update_fast_raises_like_reference_on_a_zero_vector():

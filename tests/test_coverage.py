@@ -391,3 +391,75 @@ def test_lcas_mission_flies_each_detected_corridor_once_inside_free_space():
     near = (np.abs(nx) < 15) & (np.abs(ny) < 15)
     d, _ = cKDTree(np.column_stack([nx[near], ny[near]])).query(pts)
     assert d.min() >= margin - grid.resolution_m / 2
+
+
+# --- the coverage statistic against hand-derived fractions (issue 7: tolerance mutations) -----
+
+def _corridor_setup():
+    """The 5-row vineyard (4 equal corridors, 20 m long), its corridors, eroded space and
+    main segments (G frame) of the flown plan."""
+    from companion.coverage.corridors import find_corridors
+    from companion.coverage.freespace import erode_free_space, world_to_grid
+    from companion.coverage.rows import detect_rows
+
+    grid, info = vineyard()
+    plan = plan_coverage(grid, CoverageConfig(safety_margin_m=0.5))
+    corr = find_corridors(detect_rows(grid))
+    free = erode_free_space(grid, 0.5)
+    main_g = world_to_grid(grid, np.array(plan.main_segments))
+    return grid, info, corr, free, main_g
+
+
+def test_coverage_fraction_counts_a_missing_corridor():
+    """Four corridors of equal length (the rows are drawn 20 m long): flying all but one
+    covers 3/4 of their centre lines. A widened distance tolerance (a segment "covers" a
+    corridor one spacing away) or a widened direction tolerance would report more."""
+    from companion.coverage.corridors import coverage_fraction
+    from companion.coverage.freespace import world_to_grid
+
+    grid, info, corr, free, main_g = _corridor_setup()
+    assert len(corr.offset_m) == 4
+    assert np.ptp(corr.t1_m - corr.t0_m) <= 2 * RES           # equal lengths, as drawn
+    assert coverage_fraction(corr, free, main_g, 3.0) == pytest.approx(1.0)
+    # the corridor at d = +1.5 m (between the rows at 0 and +3 m) loses its segment
+    mid_d = to_row_frame(grid_to_world_pts(grid, main_g.mean(axis=1)), info)[1]
+    keep = np.abs(mid_d - 1.5) > 0.5
+    assert np.count_nonzero(~keep) == 1
+    assert coverage_fraction(corr, free, main_g[keep], 3.0) == pytest.approx(0.75, abs=0.01)
+    # a segment across that corridor at 40 deg to the rows is not flown along it: still 3/4
+    c = info["centre"]
+    a = info["a"] + np.deg2rad(40.0)
+    cross = np.array([c + 2.0 * np.array([np.cos(a), np.sin(a)]) + (1.5 * np.array([-np.sin(info["a"]), np.cos(info["a"])])),
+                      c - 2.0 * np.array([np.cos(a), np.sin(a)]) + (1.5 * np.array([-np.sin(info["a"]), np.cos(info["a"])]))])
+    with_cross = np.concatenate([main_g[keep], world_to_grid(grid, cross)[None]])
+    assert coverage_fraction(corr, free, with_cross, 3.0) == pytest.approx(0.75, abs=0.01)
+    # the missing corridor flown from its middle (t = 0) to its end (t = 10 m): its samples
+    # within half a spacing (1.5 m) of that segment count, i.e. t in [-1.5, 10]:
+    # (3 x 20 + 11.5) / 80
+    t_half = np.array([[0.0, 1.5], [10.0, 1.5]])
+    half_seg = np.array([c + t * np.array([np.cos(info["a"]), np.sin(info["a"])])
+                         + dd * np.array([-np.sin(info["a"]), np.cos(info["a"])]) for t, dd in t_half])
+    with_half = np.concatenate([main_g[keep], world_to_grid(grid, half_seg)[None]])
+    assert coverage_fraction(corr, free, with_half, 3.0) == pytest.approx(71.5 / 80, abs=0.01)
+
+
+def grid_to_world_pts(grid, gxy):
+    from companion.coverage.freespace import grid_to_world
+    return grid_to_world(grid, gxy)
+
+
+def test_coverage_fraction_without_rows_is_the_swept_share_of_the_eroded_space():
+    """No rows: the share of eroded cells within half a spacing (plus one cell) of a main
+    segment. A 30 m x 10 m open field eroded by 0.6 m is 28.8 m x 8.8 m; one line along
+    its middle sweeps a band 2 x (0.5 x 2 m + 0.1 m) = 2.2 m wide: 2.2 / 8.8 = 1/4."""
+    from companion.coverage.corridors import coverage_fraction
+    from companion.coverage.freespace import erode_free_space
+
+    free = np.zeros((120, 320), dtype=bool)
+    free[10:110, 10:310] = True
+    grid = OccupancyGrid(occupied=~free, free=free, resolution_m=RES)
+    fs = erode_free_space(grid, 0.5)
+    y_mid = 6.0                                         # rows 10..110 -> 1.0 .. 11.0 m
+    line = np.array([[[1.6, y_mid], [30.4, y_mid]]])
+    frac = coverage_fraction(None, fs, line, 2.0)
+    assert frac == pytest.approx(2.2 / 8.8, abs=0.02)

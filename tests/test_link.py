@@ -281,6 +281,8 @@ def test_garbage_never_crashes_and_good_packets_survive():
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     mav = _vehicle_mav()
     try:
+        # the vehicle's heartbeat binds its address (companion.link.auth)
+        tx.sendto(mav.heartbeat_encode(2, 12, 0, 0, 3).pack(mav), ("127.0.0.1", port))
         sent = 0
         for i in range(60):
             kind = i % 4
@@ -404,6 +406,7 @@ def test_mission_rejected_and_link_timeout():
         # the vehicle NACKs the count
         mav = _vehicle_mav()
         _, peer = rx.recvfrom(4096)
+        rx.sendto(mav.heartbeat_encode(2, 12, 0, 0, 3).pack(mav), peer)   # binds the vehicle's address
         rx.sendto(mav.mission_ack_encode(191, 1, mavlink.MAV_MISSION_NO_SPACE, 0).pack(mav), peer)
         with pytest.raises(MissionRejected) as exc:
             upload_mission(conn, [codec.encode_mission_item_int(conn.mav, 0, (0, 0, 1), 0.0, 0.0, 0.0)],
@@ -500,11 +503,13 @@ def test_frame_sync_returns_a_reply_with_the_next_frame(sync):
     vehicle.settimeout(2.0)
     port = vehicle.getsockname()[1]
     conn = Connection(f"udpout:127.0.0.1:{port}").open()
-    conn.frame_sync = sync
     mav = _vehicle_mav()
     try:
         conn.send_heartbeat()
         _, peer = vehicle.recvfrom(4096)
+        vehicle.sendto(mav.heartbeat_encode(2, 12, 0, 0, 3).pack(mav), peer)   # binds the vehicle
+        assert [m.get_type() for m in conn.poll(1.0)] == ["HEARTBEAT"]
+        conn.frame_sync = sync
         ack = mav.command_ack_encode(176, 0, 0, 0, 1, 191).pack(mav)
         frame = mav.highres_imu_encode(4000, *([0.25] * 13), 0, 0).pack(mav)
         vehicle.sendto(ack, peer)
@@ -535,6 +540,8 @@ def test_fast_link_round_trip_over_udp_with_tlog(tmp_path):
     try:
         conn.send_heartbeat()
         _, peer = vehicle.recvfrom(4096)
+        vehicle.sendto(mav.heartbeat_encode(2, 12, 0, 0, 3).pack(mav), peer)   # binds the vehicle
+        assert [m.get_type() for m in conn.poll(1.0)] == ["HEARTBEAT"]
         for k in range(3):
             frame = (mav.local_position_ned_encode(k, 1.0, 2.0, -3.0, 0, 0, 0).pack(mav)
                      + mav.heartbeat_encode(2, 12, 0, 0, 3).pack(mav)
@@ -555,4 +562,22 @@ def test_fast_link_round_trip_over_udp_with_tlog(tmp_path):
         tlog.close()
         vehicle.close()
     types = [r.msg.get_type() for r in read_tlog(tmp_path / "f.tlog")]
-    assert types == ["HEARTBEAT"] + ["LOCAL_POSITION_NED", "HEARTBEAT", "HIGHRES_IMU", "HIL_ACTUATOR_CONTROLS"] * 3
+    assert types == ["HEARTBEAT"] * 2 + ["LOCAL_POSITION_NED", "HEARTBEAT", "HIGHRES_IMU", "HIL_ACTUATOR_CONTROLS"] * 3
+
+
+def test_int32_parameters_are_decoded_bytewise_as_they_travel():
+    import struct
+
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from companion.link.codec import decode_param_value
+    from sitl.codec import param_to_wire
+
+    mav = mavlink.MAVLink(None)
+    for v in (0, 1, -7, 123456):
+        wire = param_to_wire(v, mavlink.MAV_PARAM_TYPE_INT32)
+        msg = mav.param_value_encode(b"SIM_LOCKSTEP", wire, mavlink.MAV_PARAM_TYPE_INT32, 1, 0)
+        assert decode_param_value(msg) == v
+        assert struct.pack("<f", wire) == struct.pack("<i", v)     # the bytes are the int's
+    msg = mav.param_value_encode(b"COM_HIL_TMO", 0.2, mavlink.MAV_PARAM_TYPE_REAL32, 1, 0)
+    assert decode_param_value(msg) == 0.2

@@ -55,7 +55,8 @@ def test_defaults_and_centroid(tmp_path):
     (GOOD.replace("speed_m_s: 1.5", "speed_m_s: 1.5, sped: 2"), "key 'flight.sped'", "unknown key"),
     (GOOD.replace("height_agl_m: 2.0", "height_agl_m: high"), "key 'flight.height_agl_m'", "expected a number"),
     (GOOD.replace("lat: 44.8", "lat: true"), "key 'home.lat'", "expected a number"),
-    (GOOD.replace("map: maps/map.yaml\n", ""), "key 'map'", "missing"),
+    (GOOD.replace("map: maps/map.yaml\n", ""), "mission.yaml", "exactly one of 'map'"),
+    (GOOD + "field: {file: f.geojson}\n", "mission.yaml", "exactly one of 'map'"),
     (GOOD.replace("alt_m: 30.0", "alt: 30.0"), "key 'home.alt", ""),
     (GOOD.replace("target: [1.0, 2.0, 3.0]", "target: middle"), "key 'pointing.target'", ""),
     (GOOD.replace("speed_m_s: 1.5", "speed_m_s: -1"), "key 'flight'", "speed_m_s must be > 0"),
@@ -121,3 +122,43 @@ def test_exponent_numbers_without_a_dot_are_numbers(tmp_path):
     assert m.sim.noise.gyro_variance == 0.002
     with pytest.raises(MissionError, match=r"sim\.noise\.vector_variance.*string \('5e-4x'\)"):
         load_mission(write(tmp_path, GOOD + "sim: {noise: {vector_variance: 5e-4x}}\n"))
+
+
+# --- sim: sensor model keys (issue 7) ------------------------------------------
+
+
+def test_sensor_keys_load_and_default_to_the_paper_model(tmp_path):
+    m = load_mission(write(tmp_path, GOOD))
+    assert m.sim.vector_sensors == "physical" and m.sim.sensor_profile is None
+    assert m.sim.onboard_state == "estimate"
+    assert m.sim.noise.gnss_rate_hz is None          # not given: the profile's or the paper's value
+    text = GOOD + ("sim:\n  vector_sensors: paper\n  sensor_profile: icm42688p-bmm150-zedf9p\n"
+                   "  onboard_state: truth\n"
+                   "  noise: {velocity_std_m_s: 0.05, gnss_rate_hz: 20, gnss_latency_s: 0.1,\n"
+                   "          gyro_bias_rad_s: [0.01, 0, 0], mag_hard_iron_gauss: [0.01, -0.02, 0.0]}\n")
+    m = load_mission(write(tmp_path, text))
+    assert (m.sim.vector_sensors, m.sim.sensor_profile, m.sim.onboard_state) == (
+        "paper", "icm42688p-bmm150-zedf9p", "truth")
+    assert m.sim.noise.velocity_std_m_s == 0.05 and m.sim.noise.gnss_rate_hz == 20.0
+    assert m.sim.noise.gyro_bias_rad_s == (0.01, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("sim, match", [
+    ("{sensor_profile: bmi088}", r"sim\.sensor_profile.*expected one of 'icm42688p-bmm150-zedf9p'"),
+    ("{vector_sensors: exact}", r"sim\.vector_sensors.*expected one of 'physical', 'paper'"),
+    ("{onboard_state: ekf}", r"sim\.onboard_state.*expected one of 'estimate', 'truth'"),
+    ("{noise: {gyro_noise_density: 0.1}}", r"sim\.noise\.gyro_noise_density.*unknown key"),
+    ("{noise: {velocity_std_m_s: -0.01}}", r"sim\.noise.*velocity_std_m_s must be >= 0"),
+    ("{noise: {accel_noise_density_m_s2_rthz: -1e-3}}", r"accel_noise_density_m_s2_rthz must be >= 0"),
+    ("{noise: {gyro_bias_walk_rad_s_rts: .nan}}", r"sim\.noise\.gyro_bias_walk_rad_s_rts.*finite"),
+    ("{noise: {gyro_bias_rad_s: [0, .inf, 0]}}", r"gyro_bias_rad_s\[1\].*finite"),
+    ("{noise: {gnss_rate_hz: 0}}", r"gnss_rate_hz must be > 0"),
+    ("{noise: {gnss_latency_s: 1.0}}", r"gnss_latency_s must be in \[0, 1\) s"),
+    ("{noise: {gnss_latency_s: -0.05}}", r"gnss_latency_s must be >= 0"),
+    ("{noise: {vector_variance: 1.5}}", r"vector_variance must be < 1"),
+    ("{noise: {mag_thrust_gauss_per_n: [0, 0]}}", r"mag_thrust_gauss_per_n.*list of 3 items"),
+    ("{magnetic_field_enu_gauss: [0, 0, 0]}", r"magnetic_field_enu_gauss must be finite and non-zero"),
+])
+def test_bad_sensor_keys_name_the_key(tmp_path, sim, match):
+    with pytest.raises(MissionError, match=match):
+        load_mission(write(tmp_path, GOOD + f"sim: {sim}\n"))

@@ -18,8 +18,10 @@ MG = VEH.mass_kg * GRAVITY_M_S2
 
 
 def _sim(start=(0.0, 0.0, 0.0), hover=False):
+    # The controller itself: flown on the true state (the estimator's own
+    # tests are in test_estimator.py).
     m = Mission(name="t", map="m.yaml", dem="d.asc", home=HomeConfig(44.8, -0.6, 30.0),
-                sim=SimConfig(rangefinders=()))
+                sim=SimConfig(rangefinders=(), onboard_state="truth"))
     sim = Simulation(m, np.random.default_rng(0), start_enu_m=start)
     if hover:
         sim.plant.set_state(start, f=(MG / 4,) * 4)

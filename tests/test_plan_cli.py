@@ -16,14 +16,13 @@ import pytest
 
 from companion.cli import main
 from companion.errors import PlanError
-from companion.frames import enu2geodetic, geodetic2enu
 from companion.maps import load_dem, load_ogm
 from companion.mission import load_mission
 from companion.plan_io import load_plan
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSIONS = ROOT / "missions"
-DESIGN_KEYS = {"frame", "origin", "path", "waypoints", "trajectory", "stats", "timings_s"}
+LOADER_KEYS = {"frame", "origin", "path", "waypoints", "trajectory", "stats", "timings_s"}
 STATS_KEYS = {"coverage_fraction", "path_length_m", "duration_s", "n_waypoints", "orientation_deg",
               "max_speed_m_s", "max_accel_m_s2", "waypoint_residual_m"}
 
@@ -198,7 +197,7 @@ def planned(request, tmp_path_factory):
 
 def test_plan_json_keys(planned):
     doc = planned["doc"]
-    assert DESIGN_KEYS <= set(doc)
+    assert LOADER_KEYS <= set(doc)
     assert set(doc["stats"]) == STATS_KEYS
     assert set(doc["timings_s"]) == {"load", "coverage", "trajectory", "total"}
     assert set(doc["trajectory"]) == {"t", "p", "v", "a", "pointing"}
@@ -256,36 +255,6 @@ def test_altitude_follows_terrain(planned):
     assert np.abs(agl - h).max() < 0.15
 
 
-def test_qgc_exports_round_trip(planned):
-    doc, mission, out = planned["doc"], planned["mission"], planned["out"]
-    home = mission.home
-    wp = np.array([w["p"] for w in doc["waypoints"]])
-    qgc = json.loads((out / "p.plan").read_text())
-    assert qgc["fileType"] == "Plan" and qgc["version"] == 1
-    assert qgc["mission"]["plannedHomePosition"] == [home.lat, home.lon, home.alt_m]
-    items = qgc["mission"]["items"]
-    assert len(items) == len(wp)
-    back = []
-    for it in items:
-        assert it["type"] == "SimpleItem" and it["command"] == 16 and it["frame"] == 3
-        lat, lon, alt = it["params"][4:7]
-        # Relative altitude: the AMSL altitude is home + alt.
-        back.append(geodetic2enu(lat, lon, home.alt_m + alt, home.lat, home.lon, home.alt_m))
-    assert np.abs(np.array(back) - wp).max() < 0.01
-    lines = (out / "p.waypoints").read_text().splitlines()
-    assert lines[0] == "QGC WPL 110" and len(lines) == len(wp) + 2
-    f0 = lines[1].split("\t")
-    assert [int(f0[0]), int(f0[2]), int(f0[3])] == [0, 0, 16]
-    assert (float(f0[8]), float(f0[9]), float(f0[10])) == pytest.approx((home.lat, home.lon, home.alt_m))
-    back = []
-    for i, line in enumerate(lines[2:], start=1):
-        f = line.split("\t")
-        assert len(f) == 12 and int(f[0]) == i and int(f[2]) == 3 and int(f[3]) == 16 and f[11] == "1"
-        back.append(geodetic2enu(float(f[8]), float(f[9]), home.alt_m + float(f[10]),
-                                 home.lat, home.lon, home.alt_m))
-    assert np.abs(np.array(back) - wp).max() < 0.01
-
-
 def test_plan_json_types_and_finite(planned):
     doc = planned["doc"]
     json.dumps(doc, allow_nan=False)                     # no NaN / inf anywhere
@@ -310,53 +279,6 @@ def test_summary_line(planned):
     assert f"coverage {100 * st['coverage_fraction']:.1f} %" in first
     assert f"orientation {st['orientation_deg']:.1f} deg" in first
     assert "timings:" in out and f"total {tm['total']:.3f} s" in out
-
-
-def test_qgc_plan_matches_the_loader_schema(planned):
-    """The keys and JSON types QGroundControl's loader checks (PlanMasterController /
-    MissionController::_loadJsonMissionFileV2 / MissionItem::load / SimpleMissionItem::load:
-    a number-typed key may be null, meaning NaN)."""
-    qgc = json.loads((planned["out"] / "p.plan").read_text())
-    num = (int, float)
-    assert qgc["fileType"] == "Plan" and qgc["version"] == 1 and isinstance(qgc["groundStation"], str)
-    assert qgc["geoFence"] == {"circles": [], "polygons": [], "version": 2}
-    assert qgc["rallyPoints"] == {"points": [], "version": 2}
-    mis = qgc["mission"]
-    assert mis["version"] == 2
-    for k in ("firmwareType", "vehicleType", "cruiseSpeed", "hoverSpeed", "globalPlanAltitudeMode"):
-        assert isinstance(mis[k], num) and not isinstance(mis[k], bool)
-    assert len(mis["plannedHomePosition"]) == 3 and all(isinstance(v, num) for v in mis["plannedHomePosition"])
-    assert len(mis["items"]) >= 1
-    home = planned["mission"].home
-    wp = np.array([w["p"] for w in planned["doc"]["waypoints"]])
-    for i, (it, p) in enumerate(zip(mis["items"], wp)):
-        assert it["type"] == "SimpleItem" and it["autoContinue"] is True and it["doJumpId"] == i + 1
-        assert it["command"] == 16 and it["frame"] == 3                    # NAV_WAYPOINT, relative altitude
-        assert len(it["params"]) == 7 and all(v is None or isinstance(v, num) for v in it["params"])
-        assert it["AltitudeMode"] == 1                                     # QGC AltitudeModeRelative
-        assert isinstance(it["Altitude"], num) and it["AMSLAltAboveTerrain"] is None
-        lat, lon, _ = enu2geodetic(p[0], p[1], p[2], home.lat, home.lon, home.alt_m)
-        assert it["params"][4:7] == pytest.approx([lat, lon, p[2]], abs=1e-9)
-        assert it["Altitude"] == pytest.approx(p[2])
-
-
-def test_wpl_loads_in_pymavlink(planned):
-    """MAVProxy's ``wp load`` reader: item 0 is home (current, frame GLOBAL, AMSL altitude),
-    then one NAV_WAYPOINT per way-point at the position enu2geodetic gives, relative altitude."""
-    mavwp = pytest.importorskip("pymavlink.mavwp")
-    loader = mavwp.MAVWPLoader()
-    wp = np.array([w["p"] for w in planned["doc"]["waypoints"]])
-    assert loader.load(str(planned["out"] / "p.waypoints")) == len(wp) + 1
-    home = planned["mission"].home
-    h = loader.wp(0)
-    assert (h.seq, h.current, h.frame, h.command) == (0, 1, 0, 16)
-    assert (h.x, h.y, h.z) == pytest.approx((home.lat, home.lon, home.alt_m))
-    for i, p in enumerate(wp, start=1):
-        it = loader.wp(i)
-        assert (it.seq, it.current, it.frame, it.command, it.autocontinue) == (i, 0, 3, 16, 1)
-        lat, lon, _ = enu2geodetic(p[0], p[1], p[2], home.lat, home.lon, home.alt_m)
-        assert it.x == pytest.approx(lat, abs=1e-9) and it.y == pytest.approx(lon, abs=1e-9)   # ~0.1 mm
-        assert it.z == pytest.approx(p[2], abs=1e-4)
 
 
 def test_plot_written(planned):

@@ -440,11 +440,11 @@ def test_reroute_flies_the_rest_of_the_corridor_from_its_other_end(field):
     assert res.path_xy_m[1, 0] < 8.2 and res.path_xy_m[1, 1] == pytest.approx(CORRIDOR_Y)
     # the first piece is the corridor beyond the post, entered from x = 17 and flown west
     a, b = new.segments[0].start_xy, new.segments[0].end_xy
-    assert a[0] == pytest.approx(17.0) and a[1] == pytest.approx(CORRIDOR_Y)
-    assert b[1] == pytest.approx(CORRIDOR_Y) and 9.25 < b[0] < 9.25 + 0.5 + 1.0
+    assert a[0] == pytest.approx(17.0, abs=0.1) and a[1] == pytest.approx(CORRIDOR_Y, abs=0.1)   # a cell
+    assert b[1] == pytest.approx(CORRIDOR_Y, abs=0.1) and 9.25 < b[0] < 9.25 + 0.5 + 1.5
     # then the two lines not yet flown, in their planned order (each entered by its nearer end: as planned here)
-    np.testing.assert_allclose([new.segments[1].start_xy, new.segments[1].end_xy], SEGMENTS[1], atol=1e-6)
-    np.testing.assert_allclose([new.segments[2].start_xy, new.segments[2].end_xy], SEGMENTS[2], atol=1e-6)
+    np.testing.assert_allclose([new.segments[1].start_xy, new.segments[1].end_xy], SEGMENTS[1], atol=0.1)
+    np.testing.assert_allclose([new.segments[2].start_xy, new.segments[2].end_xy], SEGMENTS[2], atol=0.1)
     # the new trajectory keeps the post (and its assumed depth) out of reach
     smp = new.trajectory.sample(np.arange(new.trajectory.t0, new.trajectory.tf, 0.05)).p
     post = Box(8.75, 9.25, CORRIDOR_Y - 0.25, CORRIDOR_Y + 0.25, 4.0)

@@ -151,3 +151,142 @@ def test_frame_carries_truth_and_positions():
     assert fr.truth.landed
     assert np.array_equal(fr.pos_enu_m, [1.0, 2.0, 0.0])
     assert np.array_equal(fr.accel_flu_m_s2, [0.0, 0.0, G])
+
+
+# --- sensor models of issue 7: paper vectors, profile, biases, disturbance ------------------
+
+from scipy.stats import chi2  # noqa: E402
+
+from sitl.profiles import PAPER_DEFAULTS, PROFILES, resolve_sensor_model  # noqa: E402
+
+PROFILE = "icm42688p-bmm150-zedf9p"
+
+
+def _var_bounds(n: int, p: float = 1e-6):
+    """Two-sided bounds on sample variance / true variance for n normal samples:
+    (n - 1) s^2 / sigma^2 ~ chi2(n - 1)."""
+    return chi2.ppf(p / 2, n - 1) / (n - 1), chi2.ppf(1 - p / 2, n - 1) / (n - 1)
+
+
+def _R(roll, pitch, yaw):
+    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
+                              math.cos(yaw), math.sin(yaw))
+    Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    return Rz @ Ry @ Rx
+
+
+def test_paper_vectors_are_constant_inertial_directions_whatever_the_acceleration():
+    """vector_sensors: paper: accel fields = g (R^T e3 + n), mag = |m| (R^T m_hat + n),
+    n ~ N(0, 5e-4 I), even while accelerating hard (a physical accelerometer
+    would read R^T (a + g e3))."""
+    s = SensorSuite(SimConfig(vector_sensors="paper"), World.build(), np.random.default_rng(7))
+    R = _R(0.4, -0.3, 2.0)                      # hand-placed tilted attitude
+    acc = np.array([3.0, -2.0, 4.0])            # and a large acceleration (world)
+    m_e = np.array([0.0, 0.21, -0.42])
+    n = 8000
+    R9, acc3 = tuple(R.ravel()), tuple(acc)
+    samples = [s.imu_tuples(R9, acc3, (0.0, 0.0, 0.0), G) for _ in range(n)]
+    da = np.array([x[0] for x in samples]) / G - R.T @ [0.0, 0.0, 1.0]
+    dm = (np.array([x[2] for x in samples]) - R.T @ m_e) / np.linalg.norm(m_e)
+    lo, hi = _var_bounds(n)
+    for d in (da, dm):
+        assert np.all(np.abs(d.mean(axis=0)) < 5 * math.sqrt(5e-4 / n))       # centred on R^T r_i
+        assert np.all((lo * 5e-4 < d.var(axis=0, ddof=1)) & (d.var(axis=0, ddof=1) < hi * 5e-4))
+    # the physical model differs by the acceleration: R^T (a + g e3)/g is far from R^T e3
+    phys = SensorSuite(SimConfig(noise=QUIET), World.build(), np.random.default_rng(7)).imu(R, acc, np.zeros(3), G)
+    assert np.allclose(phys.accel_flu_m_s2, R.T @ (acc + [0, 0, G]), atol=1e-12)
+    assert np.linalg.norm(phys.accel_flu_m_s2 / G - R.T @ [0, 0, 1]) > 0.3
+
+
+def test_profile_values_follow_the_datasheets():
+    """Per-sample std = density * sqrt(rate), from the datasheet figures in
+    sitl/profiles.py (computed here independently of the module)."""
+    md = resolve_sensor_model(SimConfig(sensor_profile=PROFILE), sensor_hz=250)
+    g0 = 9.80665
+    assert md.gyro_std_rad_s == pytest.approx(2.8e-3 * math.pi / 180 * math.sqrt(250), rel=1e-12)
+    assert md.accel_std_m_s2 == pytest.approx(70e-6 * g0 * math.sqrt(250), rel=1e-12)
+    assert md.gyro_bias_turn_on_std_rad_s == pytest.approx(math.radians(0.5), rel=1e-12)
+    assert md.accel_rel_std == 0.0 and md.mag_std_gauss == 0.006
+    assert (md.position_std_xy_m, md.position_std_z_m, md.velocity_std_m_s) == (0.01, 0.02, 0.02)
+    assert (md.gnss_period_us, md.gnss_latency_us) == (100_000, 80_000)
+    # at another sensor rate the per-sample std scales with sqrt(rate)
+    md1k = resolve_sensor_model(SimConfig(sensor_profile=PROFILE), sensor_hz=1000)
+    assert md1k.gyro_std_rad_s / md.gyro_std_rad_s == pytest.approx(2.0, rel=1e-12)
+    # sim.noise keys override the profile; absent ones keep it
+    over = resolve_sensor_model(SimConfig(sensor_profile=PROFILE, noise=NoiseConfig(
+        velocity_std_m_s=0.05, gyro_variance=1e-4)), sensor_hz=250)
+    assert over.velocity_std_m_s == 0.05 and over.position_std_xy_m == 0.01
+    assert over.gyro_std_rad_s == pytest.approx(math.sqrt(1e-4 + (2.8e-3 * math.pi / 180) ** 2 * 250), rel=1e-12)
+    # no profile: the paper's model, exact position every frame
+    paper = resolve_sensor_model(SimConfig(), sensor_hz=250)
+    assert paper.accel_rel_std == math.sqrt(5e-4) and paper.gyro_std_rad_s == math.sqrt(5e-4)
+    assert (paper.gnss_period_us, paper.gnss_latency_us, paper.position_std_xy_m) == (4000, 0, 0.0)
+    assert set(PROFILES[PROFILE]) == set(PAPER_DEFAULTS) == {f.name for f in dataclasses.fields(NoiseConfig)}
+
+
+def test_profile_gyro_and_accel_noise_on_the_samples():
+    s = SensorSuite(SimConfig(sensor_profile=PROFILE, noise=NoiseConfig(
+        gyro_bias_walk_rad_s_rts=0.0, accel_bias_walk_m_s2_rts=0.0)), World.build(), np.random.default_rng(3))
+    md = s.model
+    n = 20000
+    gy = np.empty((n, 3))
+    ac = np.empty((n, 3))
+    for k in range(n):
+        a, w, _ = s.imu_tuples((1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), G)
+        gy[k], ac[k] = w, a
+    lo, hi = _var_bounds(n)
+    for x, std in ((gy, md.gyro_std_rad_s), (ac, md.accel_std_m_s2)):
+        v = x.var(axis=0, ddof=1) / std ** 2
+        assert np.all((lo < v) & (v < hi))
+    assert np.allclose(gy.mean(axis=0), s._gyro_bias, atol=5 * md.gyro_std_rad_s / math.sqrt(n))
+
+
+def test_turn_on_bias_is_a_seeded_draw_of_the_configured_std():
+    cfg = SimConfig(noise=NoiseConfig(gyro_bias_turn_on_std_rad_s=0.01, gyro_bias_rad_s=(0.1, 0.0, 0.0)))
+    b = np.array([SensorSuite(cfg, World.build(), np.random.default_rng(k))._gyro_bias for k in range(400)])
+    lo, hi = _var_bounds(400)
+    v = b.var(axis=0, ddof=1) / 0.01 ** 2
+    assert np.all((lo < v) & (v < hi))
+    assert b[:, 0].mean() == pytest.approx(0.1, abs=5 * 0.01 / 20)       # constant + turn-on
+    again = SensorSuite(cfg, World.build(), np.random.default_rng(5))._gyro_bias
+    assert np.array_equal(again, b[5])                                     # seeded
+
+
+def test_bias_random_walk_variance_grows_linearly_in_time():
+    """b(t) = b(0) + sum of N(0, q^2 dt) steps: Var b(t) = q^2 t, across independent runs."""
+    q = 0.02          # rad/s/sqrt(s), large so the test is short
+    cfg = SimConfig(noise=NoiseConfig(gyro_variance=0.0, gyro_bias_walk_rad_s_rts=q))
+    runs, steps = 200, 125                         # 0.5 s at 250 Hz
+    b_half = np.empty((runs, 3))
+    b_end = np.empty((runs, 3))
+    R9 = (1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0)
+    for r in range(runs):
+        s = SensorSuite(cfg, World.build(), np.random.default_rng(100 + r))
+        for k in range(steps):
+            s.imu_tuples(R9, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), G)
+            if k == steps // 2 - 1:
+                b_half[r] = s._gyro_bias
+        b_end[r] = s._gyro_bias
+    lo, hi = _var_bounds(3 * runs)
+    for b, t in ((b_half, 0.25), (b_end, 0.5)):
+        v = np.mean(b ** 2) / (q * q * t)          # mean-zero: E b^2 = q^2 t
+        assert lo < v < hi
+    # and the gyro reading carries it: with no white noise the sample is W + b
+    s = SensorSuite(cfg, World.build(), np.random.default_rng(1))
+    b0 = s._gyro_bias
+    _, w, _ = s.imu_tuples(R9, (0.0, 0.0, 0.0), (0.1, 0.0, 0.0), G)
+    assert w == pytest.approx((0.1 + b0[0], b0[1], b0[2]), abs=1e-15)
+
+
+def test_magnetometer_disturbance_hard_iron_plus_motor_current():
+    hi_ = (0.01, -0.02, 0.005)
+    kT = (1e-4, 2e-4, -3e-4)
+    s = SensorSuite(SimConfig(noise=NoiseConfig(vector_variance=0.0, gyro_variance=0.0, mag_hard_iron_gauss=hi_,
+                                                mag_thrust_gauss_per_n=kT)), World.build(), np.random.default_rng(0))
+    R = _R(0.1, 0.2, 1.0)
+    m_e = np.array([0.0, 0.21, -0.42])
+    for T in (0.0, 42.6, 100.0):
+        m = s.imu(R, np.zeros(3), np.zeros(3), G, thrust_n=T).mag_flu_gauss
+        assert np.allclose(m, R.T @ m_e + np.array(hi_) + T * np.array(kT), atol=1e-15)

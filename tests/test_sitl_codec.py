@@ -40,7 +40,7 @@ def roundtrip(mav, msg):
 
 def test_local_position_known_point(mav):
     m = roundtrip(mav, codec.local_position_ned(mav, 1234, (1.0, 2.0, 3.0), (4.0, 5.0, 6.0)))
-    assert (m.x, m.y, m.z) == (2.0, 1.0, -3.0)       # DESIGN.md: ENU (1, 2, 3) is NED (2, 1, -3)
+    assert (m.x, m.y, m.z) == (2.0, 1.0, -3.0)       # docs/frames.md: ENU (1, 2, 3) is NED (2, 1, -3)
     assert (m.vx, m.vy, m.vz) == (5.0, 4.0, -6.0)
     assert m.time_boot_ms == 1234
 

@@ -28,17 +28,35 @@ POS_ONLY = 0xDF8
 LPOS = mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED
 
 
+def join_statustext(pending: dict, msg) -> str | None:
+    """The whole text once a STATUSTEXT ends (MAVLink 2 chunks share a non-zero
+    ``id``, the last one is shorter than 50 bytes), else None."""
+    text_id = int(getattr(msg, "id", 0) or 0)
+    if text_id == 0:
+        return msg.text
+    parts = pending.setdefault(text_id, [])
+    parts.append(msg.text)
+    if len(msg.text) < 50:
+        return "".join(pending.pop(text_id))
+    return None
+
+
 class Client:
     """A ground station (255/190) on pymavlink's mavutil, MAVLink 2."""
 
-    def __init__(self, url: str, sysid: int = 255, compid: int = 190) -> None:
+    def __init__(self, url: str, sysid: int = 255, compid: int = 190, local_port: int | None = None) -> None:
         self.conn = mavutil.mavlink_connection(url, source_system=sysid, source_component=compid)
+        if local_port is not None:
+            # The SITL binds a controller's ids to the address it first controlled
+            # from: successive clients of one SITL (one ground station) share a port.
+            self.conn.port.bind(("127.0.0.1", local_port))
         self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=sysid, srcComponent=compid)
         self.conn.mav.robust_parsing = True
         self.conn.WIRE_PROTOCOL_VERSION = "2.0"
         self.mav = self.conn.mav
         self.texts: list[str] = []
         self.latest: dict[str, object] = {}
+        self._chunks: dict = {}
 
     def hello(self):
         self.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
@@ -50,7 +68,9 @@ class Client:
         t = msg.get_type()
         self.latest[t] = msg
         if t == "STATUSTEXT":
-            self.texts.append(msg.text)
+            text = join_statustext(self._chunks, msg)
+            if text is not None:
+                self.texts.append(text)
 
     def recv(self, mtype, timeout: float, cond=None):
         """First message of type ``mtype`` (str or tuple) satisfying ``cond``."""
@@ -134,8 +154,12 @@ def test_heartbeat_and_telemetry(gcs):
     assert np.all(np.diff(t) == 4000)              # every 250 Hz frame, vehicle time
     zacc = np.mean([m.zacc for m in imus])
     assert zacc == pytest.approx(-9.81, abs=0.05)   # at rest: specific force -g along FRD z
-    att = gcs.recv("ATTITUDE", 3.0)
-    assert abs(att.roll) < 1e-6 and abs(att.pitch) < 1e-6
+    # ATTITUDE is the onboard estimate (sim.onboard_state: estimate): level
+    # within what one second of alignment on the paper's noise leaves
+    # (a few mrad), not the exact true attitude
+    att = gcs.recv("ATTITUDE", 3.0, lambda m: m.time_boot_ms > 2500)
+    assert abs(att.roll) < 0.02 and abs(att.pitch) < 0.02
+    assert (att.roll, att.pitch) != (0.0, 0.0)
 
 
 def test_every_command_is_acked(gcs):
@@ -287,13 +311,22 @@ def test_failsafes_actuator_stream_then_offboard_loss(gcs):
     def sp_and_motors():
         sp()
         gcs.mav.hil_actuator_controls_send(0, [0.4] * 4 + [0.0] * 12, 0, 0)
-    gcs.pump(0.25, sp_and_motors, period=0.01)
-    sunk = -gcs.recv("LOCAL_POSITION_NED", 3.0).z
+    # (pumped until it has sunk: a loaded machine slows the free-running SITL's wall pacing)
+    end = time.monotonic() + 5.0
+    sunk = z0
+    while sunk >= z0 - 0.1 and time.monotonic() < end:
+        gcs.pump(0.05, sp_and_motors, period=0.01)
+        sunk = -gcs.recv("LOCAL_POSITION_NED", 3.0).z
     assert sunk < z0 - 0.1 and "Actuator override active" in gcs.texts
     # Stream stops: the onboard controller takes over and holds the (still fresh) setpoint.
-    gcs.pump(1.0, sp)
+    gcs.pump(0.3, sp)
     assert "Actuator stream lost: onboard controller holds" in gcs.texts
-    assert -gcs.recv("LOCAL_POSITION_NED", 3.0).z == pytest.approx(-p0.z + 2.0, abs=0.1)
+    back = None
+    end = time.monotonic() + 5.0
+    while back is None and time.monotonic() < end:
+        gcs.pump(0.05, sp)
+        back = gcs.recv("LOCAL_POSITION_NED", 0.5, lambda m: abs(-m.z - (-p0.z + 2.0)) < 0.1)
+    assert back is not None
     # Setpoints stop: hold (AUTO.LOITER) for COM_FAIL_ACT_T, then land and disarm.
     hold = gcs.recv("HEARTBEAT", 3.0, lambda m: mavutil.mode_string_v10(m) == "LOITER")
     assert hold is not None and hold.system_status == mavlink.MAV_STATE_CRITICAL
@@ -442,11 +475,37 @@ def test_lockstep_time_stalls_without_answers():
         c.close()
 
 
+def test_actuator_controls_without_the_lockstep_flag_do_not_engage_lockstep():
+    """HIL_ACTUATOR_CONTROLS with flags & 1 == 0 answer nothing: the vehicle
+    clock stays on the first frame and lockstep stays off; the same answer
+    with the flag engages it (PX4's HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP)."""
+    with SitlThread(MISSION, lockstep=True, speed=0.0) as s:
+        c = Client(s.url, sysid=1, compid=191)
+        c.mav.heartbeat_send(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        first = c.recv("HIGHRES_IMU", 5.0)
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:       # answer every (re-sent) frame, flag clear
+            m = c.recv("HIGHRES_IMU", 0.3)
+            t = first.time_usec if m is None else m.time_usec
+            c.mav.hil_actuator_controls_send(t, [NAN] * 16, 0, 0)
+        assert not s.server.lockstep_engaged
+        assert s.server.time_us == first.time_usec          # vehicle time did not move
+        assert "Lockstep engaged" not in c.texts
+        c.mav.hil_actuator_controls_send(first.time_usec, [NAN] * 16, 0, 1)
+        nxt = c.recv("HIGHRES_IMU", 3.0, lambda m: m.time_usec > first.time_usec)
+        assert nxt is not None and s.server.lockstep_engaged
+        c.close()
+
+
 def signed(m) -> bool:
     return bool(m.get_msgbuf()[2] & mavlink.MAVLINK_IFLAG_SIGNED)
 
 
 def test_signing(gcs):
+    """SETUP_SIGNING from a controller (as MAVProxy's ``signing setup``): the SITL
+    signs from then on and wants signed control; the key holder turns it off again."""
+    from companion.link.signing import enable_outgoing_signing, signing_timestamp
+
     key = bytes(range(1, 33))
     gcs.mav.setup_signing_send(1, 1, key, 1)
     m = gcs.recv("HIGHRES_IMU", 3.0, signed)
@@ -454,7 +513,13 @@ def test_signing(gcs):
     rx = mavlink.MAVLink(None)
     rx.signing.secret_key = key
     assert rx.parse_buffer(bytes(m.get_msgbuf()))[0].get_signed()    # verifies with the key
-    gcs.mav.setup_signing_send(1, 1, bytes(32), 0)                   # all-zero key: off
+    gcs.mav.setup_signing_send(1, 1, bytes(32), 0)                   # unsigned: ignored now
+    gcs.pump(0.5)
+    assert any("SETUP_SIGNING" in t and t.endswith(": unsigned") for t in gcs.texts), gcs.texts
+    assert gcs.recv("HIGHRES_IMU", 1.0, signed) is not None
+    enable_outgoing_signing(gcs.mav, key, 0, signing_timestamp(time.time()))
+    gcs.mav.signing.allow_unsigned_callback = lambda mav, msg_id: True   # to see the unsigned stream
+    gcs.mav.setup_signing_send(1, 1, bytes(32), 0)                   # signed all-zero key: off
     assert gcs.recv("HIGHRES_IMU", 3.0, lambda m: not signed(m)) is not None
 
 

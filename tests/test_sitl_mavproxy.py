@@ -31,8 +31,9 @@ WAYPOINTS = [(448000000 + 1000 * i, -6000000 - 500 * i, 2.5 + i) for i in range(
 
 
 def upload_with_pymavlink(url: str) -> None:
-    c = mavutil.mavlink_connection(url, source_system=254, source_component=190)
-    c.mav = mavlink.MAVLink(c, srcSystem=254, srcComponent=190)
+    # 255/190: a ground station the SITL accepts control from by default (sitl.auth)
+    c = mavutil.mavlink_connection(url, source_system=255, source_component=190)
+    c.mav = mavlink.MAVLink(c, srcSystem=255, srcComponent=190)
     try:
         c.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         assert c.recv_match(type="HEARTBEAT", blocking=True, timeout=5) is not None

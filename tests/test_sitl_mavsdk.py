@@ -64,8 +64,10 @@ def test_mavsdk_offboard_flight(vehicle):
     assert pos.latitude_deg == pytest.approx(lat, abs=2e-7) and pos.longitude_deg == pytest.approx(lon, abs=2e-7)
     assert pos.absolute_altitude_m == pytest.approx(alt, abs=0.01)
     att = tel.attitude_euler()
-    assert att.yaw_deg == pytest.approx(90.0, abs=0.5)     # the SITL starts facing east (ENU yaw 0)
-    assert abs(att.roll_deg) < 0.5 and abs(att.pitch_deg) < 0.5
+    # the onboard estimate (sim.onboard_state: estimate), aligned from the
+    # paper's noisy vectors: within about 1 deg after the first seconds
+    assert att.yaw_deg == pytest.approx(90.0, abs=2.0)     # the SITL starts facing east (ENU yaw 0)
+    assert abs(att.roll_deg) < 2.0 and abs(att.pitch_deg) < 2.0
     assert tel.flight_mode() == FlightMode.HOLD
 
     action.arm()
@@ -76,8 +78,9 @@ def test_mavsdk_offboard_flight(vehicle):
     offboard.start()
     assert wait_until(lambda: tel.flight_mode() == FlightMode.OFFBOARD, 3.0)
 
-    # climb 2 m, then fly 2 m north and 1 m east at that height
-    target = (p0.north_m + 2.0, p0.east_m + 1.0, p0.down_m - 2.0)
+    # climb 2 m, then fly 0.5 m north and 2 m east at that height (along the
+    # corridor: its rows stand 1.05 m either side, the vehicle's radius is 0.442 m)
+    target = (p0.north_m + 0.5, p0.east_m + 2.0, p0.down_m - 2.0)
     offboard.set_position_ned(PositionNedYaw(*target, 90.0))
 
     def there():

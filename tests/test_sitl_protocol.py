@@ -17,7 +17,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.api import SitlThread
+from sitl.api import SitlThread, free_udp_port
 from sitl.flightstack import PARAM_SPECS, FlightMode
 
 from test_sitl_mavlink import MISSION, Client
@@ -30,13 +30,15 @@ CUSTOM = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 @pytest.fixture(scope="module")
 def sitl():
     with SitlThread(MISSION, speed=4.0) as s:
+        s.gcs_port = free_udp_port()
         yield s
 
 
 @pytest.fixture()
 def gcs(sitl):
-    # A ground station with an unusual id, so that reply addressing is checked.
-    c = Client(sitl.url, sysid=245, compid=190)
+    # A ground station with an unusual id, so that reply addressing is checked;
+    # one source port for the module (the SITL binds a controller to its address).
+    c = Client(sitl.url, sysid=245, compid=190, local_port=sitl.gcs_port)
     c.hello()
     yield c
     c.close()

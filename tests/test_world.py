@@ -151,3 +151,22 @@ def test_first_free_cell():
     free[1, 2] = True
     w = World.build(OccupancyGrid(occ, free, 0.5, (10.0, 20.0)))
     assert w.first_free_cell_enu() == pytest.approx((11.25, 20.75))
+
+
+def test_ray_from_the_ground_looking_up_or_along_does_not_hit_it():
+    w = World.build(dem=_plane_dem())
+    z0 = 0.1 * 0.5 - 0.2 * 0.5 + 1.0
+    assert w.raycast(0.5, 0.5, z0, 0.0, 0.0, 1.0, 10.0) == math.inf
+    assert w.raycast(0.5, 0.5, z0, 0.0, 0.0, -1.0, 10.0) == 0.0
+    assert w.raycast(0.5, 0.5, z0 - 0.01, 0.0, 0.0, 1.0, 10.0) == 0.0    # from under the ground
+
+
+def test_ray_starting_on_a_cell_boundary_moving_down_index_terminates():
+    """A ray starting exactly on a cell edge with a -4e-21 x component (from a
+    rotation matrix's rounding) used to creep by 1e-9 m per step."""
+    occ = np.zeros((40, 40), dtype=bool)
+    occ[30, :] = True                                     # a row at y in [3.0, 3.1]
+    w = World.build(grid=_grid(occ))
+    assert w.raycast(2.0, 1.0, 0.5, -3.9e-21, 1.0, 0.0, 10.0) == pytest.approx(2.0)
+    assert w.raycast(2.0, 1.0, 0.5, 1e-300, 1.0, 0.0, 10.0) == pytest.approx(2.0)
+    assert w.raycast(2.0, 3.5, 0.5, -3.9e-21, -1.0, 0.0, 10.0) == pytest.approx(0.4)

@@ -51,7 +51,13 @@ def add_arguments(parser) -> None:
                         help="fly only the first S seconds of the trajectory")
     parser.add_argument("--seed", type=int, default=None, metavar="N",
                         help="seed of the SITL's noise and wind (default: the mission's sim.seed)")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="MAVLink 2 signing key file for both the SITL and the companion "
+                             "(32 raw bytes, or a passphrase as MAVProxy's signing setup)")
     parser.add_argument("--no-plots", action="store_true", help="skip the figures")
+    from .fly import add_safety_arguments
+
+    add_safety_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
 
@@ -94,31 +100,43 @@ def run(args) -> int:
 
     t_start = time.monotonic()
     mission_path = resolve_mission(args.mission)
-    if args.cut is not None and not args.cut > 0:
-        raise InputError("--cut", "must be > 0 seconds")
+    if args.cut is not None and not (math.isfinite(args.cut) and args.cut > 0):
+        raise InputError(f"--cut {args.cut}", "must be a finite number of seconds > 0")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out}", "exists and is not a directory")
+    if not out.exists() and not out.parent.is_dir():
+        raise InputError(f"--out {out}", f"directory {out.parent} does not exist")
+    if out.is_dir():
+        from .fly import check_output_paths
+        check_output_paths([("--out", out / n) for n in ("plan.json", "flight.tlog", "report.json")])
+    key = None
+    if args.signing_key is not None:
+        from ..link.signing import load_signing_key
+        key = load_signing_key(args.signing_key)
+    from ..mission import load_mission
+    from .fly import safety_overrides
+
+    overrides = safety_overrides(args)
+    mission = load_mission(mission_path)     # bad input fails here, before the SITL starts
     # The SITL process starts now (it imports and loads its world while we
     # plan) and gets its launch pose once the plan exists.
-    sitl = SitlProcess(mission_path, lockstep=True, speed=1.0, seed=args.seed, start="later").launch()
+    sitl = SitlProcess(mission_path, lockstep=True, speed=1.0, seed=args.seed, start="later",
+                       signing_key_file=args.signing_key).launch()
     try:
-        return _plan_and_fly(args, mission_path, out, sitl, t_start)
+        return _plan_and_fly(args, mission, out, sitl, t_start, key, overrides)
     finally:
         sitl.stop()
 
 
-def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
-    from ..mission import load_mission
+def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides=None) -> int:
     from ..plan_io import plan_json_text, plan_to_json_dict
     from ..progress import Progress
     from ..report import write_report
     from ..runner import UNUSED_STREAMS
-    from .fly import FlightPlan, execute
+    from .fly import EXIT_FAILED, FlightPlan, execute
 
     ATTITUDE = 30   # MAVLINK_MSG_ID_ATTITUDE: the SITL's ground-truth ODOMETRY carries the attitude
-
-    mission = load_mission(mission_path)
 
     from ..planner import plan_mission
 
@@ -138,7 +156,8 @@ def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
     sitl.wait_ready()
     try:
         result = execute(mission, fp, sitl.url, args.control, str(out / "flight.tlog"), progress, args.cut,
-                         {"mute_streams": UNUSED_STREAMS + (ATTITUDE,)})
+                         {"mute_streams": UNUSED_STREAMS + (ATTITUDE,), **(overrides or {})},
+                         signing_key=signing_key)
     finally:
         sitl.stop()
     rep = result.report
@@ -176,6 +195,6 @@ def _plan_and_fly(args, mission_path, out, sitl, t_start) -> int:
     files = ["plan.json", "flight.tlog", "report.json"] + [Path(f).name for f in (figures or [])]
     print(f"wrote {out}/: {', '.join(files)}" + ("" if figures is not None else
                                                  " (figures skipped: install the plot extra)"))
-    if rep.error:
-        print(f"companion demo: {rep.error}", file=sys.stderr)
-    return 0 if rep.completed else 1
+    if not rep.completed:
+        print(f"companion demo: NOT completed: {rep.error or rep.phase}", file=sys.stderr)
+    return 0 if rep.completed else EXIT_FAILED

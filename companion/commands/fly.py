@@ -13,12 +13,20 @@ onboard link, ``udpout`` on its side) needs ``--connect udpin:0.0.0.0:PORT``.
 Without ``--plan`` the mission is planned here (as ``companion plan``); with
 it, the trajectory is rebuilt from the plan's way-points with the mission's
 trajectory weights (the LQR solution is exact, so it is the same trajectory).
-Exit code 0 when the flight completed (landed and disarmed), 1 when it did
-not (the report says why), 2 on bad input.
+``--sortie N`` flies sortie N of the plan (``companion.sorties``: from the
+launch point through its transit, its corridors, and back) instead of the
+whole route; the runner flies it like any trajectory.
+Exit code 0 when the flight completed (every check of
+``companion.flight.monitor`` held: armed, airborne, in our mode, no crash,
+error within ``--max-error``; landed and disarmed), 3 when it did not (the
+report's ``violation`` says why, and what was flown), 2 on bad input
+(checked before anything is flown or written).
 """
 
 from __future__ import annotations
 
+import math
+import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +36,33 @@ import numpy as np
 from ..errors import InputError
 
 DEFAULT_CONNECT = "udpout:127.0.0.1:14540"
+
+
+def check_output_paths(outputs) -> None:
+    """Fail before any work when an output cannot be written where asked.
+
+    Parameters
+    ----------
+    outputs : iterable of (option, path)
+        E.g. ``(("--tlog", "flight.tlog"), ("--report", "report.json"))``.
+
+    Raises
+    ------
+    InputError
+        A path is a directory, its directory does not exist, or two options
+        name the same file (one line naming the option and path).
+    """
+    seen = {}
+    for opt, path in outputs:
+        p = Path(path)
+        if p.is_dir():
+            raise InputError(f"{opt} {path}", "is a directory (give a file name)")
+        if not p.parent.is_dir():
+            raise InputError(f"{opt} {path}", f"directory {p.parent} does not exist")
+        key = os.path.abspath(p)
+        if key in seen:
+            raise InputError(f"{opt} {path}", f"is also given as {seen[key]}")
+        seen[key] = opt
 
 
 def add_arguments(parser) -> None:
@@ -44,7 +79,36 @@ def add_arguments(parser) -> None:
     parser.add_argument("--cut", type=float, default=None, metavar="S",
                         help="fly only the way-points up to S seconds into the trajectory, the last one made a stop "
                              "(the trajectory is re-solved so it ends at rest)")
+    parser.add_argument("--sortie", type=int, default=None, metavar="N",
+                        help="fly only sortie N (1-based) of the plan: from the launch point, its corridors, "
+                             "back to the launch point")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="MAVLink 2 signing key file (32 raw bytes, or a passphrase hashed with SHA-256 as "
+                             "MAVProxy's signing setup): sign everything, accept only signed vehicle messages")
+    add_safety_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def add_safety_arguments(parser) -> None:
+    """Flags shared by ``fly`` and ``demo``: what counts as a completed flight and what to do otherwise."""
+    parser.add_argument("--max-error", type=float, default=0.5, metavar="M",
+                        help="tracking error bound (m) of a completed flight; beyond it the flight is stopped "
+                             "(default %(default)s)")
+    parser.add_argument("--on-failure", choices=("land", "hold"), default="land",
+                        help="when a flight must stop early (violation, SIGINT/SIGTERM): land, or hold "
+                             "(AUTO.LOITER) and let go (default %(default)s)")
+    parser.add_argument("--attach", choices=("refuse", "resume", "land"), default="refuse",
+                        help="a vehicle already flying at connection: refuse, resume the trajectory from "
+                             "the nearest way-point, or land it (default %(default)s)")
+
+
+def safety_overrides(args) -> dict:
+    """RunnerConfig keys from ``add_safety_arguments``'s flags (InputError on a bad value)."""
+    import math
+
+    if not (math.isfinite(args.max_error) and args.max_error > 0):
+        raise InputError(f"--max-error {args.max_error}", "must be a finite number > 0 (metres)")
+    return {"max_tracking_error_m": float(args.max_error), "on_failure": args.on_failure, "attach": args.attach}
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,18 +119,19 @@ class FlightPlan:
     waypoints_p_enu_m: np.ndarray
     target_enu_m: np.ndarray
     coverage_fraction: float | None
-    plan: object = None          # companion.planner.Plan when planned here
     waypoints_t_s: np.ndarray | None = None
     waypoints_v_enu_m_s: np.ndarray | None = None
     waypoints_a_enu_m_s2: np.ndarray | None = None
+    path_xy_m: np.ndarray | None = None
 
     @classmethod
     def from_plan(cls, plan) -> "FlightPlan":
         """From a ``companion.planner.Plan``."""
         w = plan.waypoints
         return cls(plan.trajectory, np.asarray(w.p_enu_m, dtype=float), np.asarray(plan.target_enu_m, dtype=float),
-                   float(plan.stats.coverage_fraction), plan, np.asarray(w.t_s, dtype=float),
-                   np.asarray(w.v_enu_m_s, dtype=float), np.asarray(w.a_enu_m_s2, dtype=float))
+                   float(plan.stats.coverage_fraction), np.asarray(w.t_s, dtype=float),
+                   np.asarray(w.v_enu_m_s, dtype=float), np.asarray(w.a_enu_m_s2, dtype=float),
+                   np.asarray(plan.coverage.path_xy_m, dtype=float))
 
     def cut(self, cut_s: float, config) -> "FlightPlan":
         """The way-points up to the first one at or after ``cut_s`` seconds
@@ -90,36 +155,71 @@ class FlightPlan:
         v[-1] = 0.0
         a[-1] = 0.0
         traj = generate_trajectory(t, p, v, a, config, target_enu_m=self.target_enu_m)
-        return FlightPlan(traj, p, self.target_enu_m, None, None, t, v, a)
+        # The coverage stays the whole plan's: the report's flown coverage is
+        # then the part of it this shorter flight covered.
+        return FlightPlan(traj, p, self.target_enu_m, self.coverage_fraction, t, v, a, self.path_xy_m)
 
 
-def prepare(mission, plan_path: str | None) -> FlightPlan:
-    """Plan ``mission`` or rebuild the trajectory of ``plan_path``.
+def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config,
+                       path_xy_m=None) -> FlightPlan:
+    """The FlightPlan of one sortie's way-points (ENU map frame): the LQR trajectory
+    through them with the mission's weights; the runner flies it like a whole plan."""
+    from ..trajectory import generate_trajectory
+
+    t, p, v, a = (np.asarray(x, dtype=float) for x in (t_s, p_enu_m, v_enu_m_s, a_enu_m_s2))
+    traj = generate_trajectory(t, p, v, a, config, target_enu_m=target_enu_m)
+    return FlightPlan(traj, p, np.asarray(target_enu_m, dtype=float), None, t, v, a,
+                      None if path_xy_m is None else np.asarray(path_xy_m, dtype=float))
+
+
+def _pick_sortie(count: int, sortie: int, source: str) -> int:
+    if not 1 <= sortie <= count:
+        raise InputError("--sortie", f"{sortie} is not a sortie of {source} (it has {count})")
+    return sortie - 1
+
+
+def prepare(mission, plan_path: str | None, sortie: int | None = None) -> FlightPlan:
+    """Plan ``mission`` or rebuild the trajectory of ``plan_path``; ``sortie`` (1-based)
+    picks one sortie of the plan instead of the whole route.
 
     Raises
     ------
     PlanError, MapError
         Bad plan file or maps (one-line InputError).
+    InputError
+        ``--sortie`` is not a sortie of the plan.
     """
     if plan_path is None:
         from ..planner import plan_mission
 
-        return FlightPlan.from_plan(plan_mission(mission))
+        plan = plan_mission(mission)
+        if sortie is None:
+            return FlightPlan.from_plan(plan)
+        so = plan.sorties.sorties[_pick_sortie(len(plan.sorties.sorties), sortie, mission.name)]
+        w = so.waypoints
+        return sortie_flight_plan(w.t_s, w.p_enu_m, w.v_enu_m_s, w.a_enu_m_s2, plan.target_enu_m,
+                                  mission.trajectory, so.path_xy_m)
     from ..plan_io import load_plan
     from ..trajectory import generate_trajectory
 
     pf = load_plan(plan_path)
+    from ..preflight import check_plan_file
+    check_plan_file(pf, mission)      # on the map, above the terrain, for this field (companion/preflight.py)
     target = pf.target_enu_m
     if target is None:
-        # A plan.json without ``target_enu_m`` (it is not in DESIGN.md's
-        # minimum): S_p is where the pointing rays of eq. (21) meet.
+        # A plan.json without ``target_enu_m`` (the loader does not require
+        # it, docs/plan-json.md): S_p is where the pointing rays of eq. (21) meet.
         target = pointing_target_from_rays(pf.p_enu_m, pf.pointing_enu, str(plan_path))
+    if sortie is not None:
+        so = pf.sorties[_pick_sortie(len(pf.sorties), sortie, str(plan_path))]
+        return sortie_flight_plan(so["waypoint_t_s"], so["waypoint_p_enu_m"], so["waypoint_v_enu_m_s"],
+                                  so["waypoint_a_enu_m_s2"], target, mission.trajectory)
     traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
                                pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")
     return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
-                      None if cov is None else float(cov), None, pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
-                      pf.waypoint_a_enu_m_s2)
+                      None if cov is None else float(cov), pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
+                      pf.waypoint_a_enu_m_s2, pf.path_xy_m if len(pf.path_xy_m) else None)
 
 
 def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
@@ -147,33 +247,116 @@ def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
-def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
-            progress=None, cut_s: float | None = None, runner_overrides: dict | None = None):
-    """Open the link, fly, close. Returns ``companion.runner.FlightResult``."""
-    from ..control import GeometricController
+def open_link(connect: str, tlog_path: str | None, signing_key: bytes | None = None):
+    """The vehicle link, opened (the tlog not yet: ``execute`` creates it).
+
+    Raises
+    ------
+    InputError
+        Unknown host, port in use, connection refused: one line, nothing written.
+    """
     from ..link import Connection, TlogWriter
+
+    tlog = TlogWriter(tlog_path) if tlog_path else None
+    return Connection(connect, tlog=tlog, signing_key=signing_key).open()
+
+
+def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | None, overrides: dict) -> dict:
+    """The flight's setup record (``companion.flight.setup_record``): what ``companion replay``
+    needs to rebuild this flight from its .tlog and the same mission (and plan) files."""
+    import hashlib
+
+    from .. import __version__
+
+    def digest(path) -> str | None:
+        try:
+            return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+        except OSError:
+            return None
+
+    return {
+        "format": "companion-setup/1",
+        "version": __version__,
+        "mission": mission.name,
+        "mission_sha": digest(mission.source),
+        "map_sha": digest(mission.map_path if mission.map is not None else mission.field_path),
+        "dem_sha": digest(mission.dem_path),
+        "plan_sha": digest(plan_path) if plan_path else None,
+        "control": control,
+        "cut_s": cut_s,
+        "runner": {k: (list(v) if isinstance(v, tuple) else v) for k, v in sorted(overrides.items())},
+    }
+
+
+#: Vine canopy height (m) assumed for the take-off transfer until the mission gives one.
+DEFAULT_CANOPY_M = 2.0
+#: Clearance (m) of the take-off transfer above the highest canopy of the field.
+TRANSIT_CLEARANCE_M = 1.0
+
+
+def transit_floor_z_m(mission) -> float:
+    """Lowest height (ENU z, m) at which a level flight across the field cannot touch a
+    vine row: the DEM's highest point, plus the canopy, plus ``TRANSIT_CLEARANCE_M``."""
+    from ..maps.field import load_mission_dem
+
+    dem = load_mission_dem(mission)
+    h = np.asarray(dem.heights_m, dtype=float)
+    return float(np.nanmax(h)) + DEFAULT_CANOPY_M + TRANSIT_CLEARANCE_M
+
+
+def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None):
+    """The ``FlightCore`` that flies ``flight_plan`` (already cut) with ``cfg``: the
+    same construction for ``companion fly`` and ``companion replay``."""
+    from ..control import GeometricController
+    from ..runner import FlightCore, FlightInputs
+
+    ctrl = None
+    if cfg.control == "companion":
+        ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
+    inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
+                          (mission.home.lat, mission.home.lon, mission.home.alt_m),
+                          tuple(float(x) for x in flight_plan.target_enu_m),
+                          tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
+                          flight_plan.coverage_fraction, flight_plan.path_xy_m, setup,
+                          transit_floor_z_m(mission))
+    return FlightCore(inputs, cfg, mission.vehicle, ctrl)
+
+
+def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
+            progress=None, cut_s: float | None = None, runner_overrides: dict | None = None,
+            plan_path: str | None = None, signing_key: bytes | None = None, conn=None):
+    """Open the link (unless ``conn``, from ``open_link``, is given), fly, close.
+    Returns ``companion.runner.FlightResult``.
+
+    The link is opened before the tlog is created: a link that cannot be
+    opened (unknown host, port in use, refused) is bad input and leaves no
+    file behind.
+    """
     from ..runner import MissionRunner, RunnerConfig
 
-    if cut_s is not None:
-        flight_plan = flight_plan.cut(cut_s, mission.trajectory)
-    cfg = RunnerConfig(control=control, **(runner_overrides or {}))
-    ctrl = None
-    if control == "companion":
-        ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
-    tlog = TlogWriter(tlog_path) if tlog_path else None
-    conn = Connection(connect, tlog=tlog)
-    if tlog is not None:
-        try:
-            tlog.open()
-        except OSError as exc:
-            raise InputError(str(tlog_path), f"cannot write: {exc.strerror or exc}") from None
     try:
-        conn.open()
-        home = (mission.home.lat, mission.home.lon, mission.home.alt_m)
-        runner = MissionRunner(conn, flight_plan.trajectory, flight_plan.waypoints_p_enu_m, home,
-                               flight_plan.target_enu_m, mission.vehicle, ctrl, cfg, progress,
-                               mission.name, flight_plan.coverage_fraction)
-        return runner.run()
+        if cut_s is not None:
+            flight_plan = flight_plan.cut(cut_s, mission.trajectory)
+        cfg = RunnerConfig(control=control, **(runner_overrides or {}))
+        core = build_flight_core(mission, flight_plan, cfg,
+                                 flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}))
+    except BaseException:
+        if conn is not None:
+            conn.close()
+        raise
+    from ..memory import release_freed_memory
+
+    release_freed_memory()   # the planner's peak is not held through the flight
+    if conn is None:
+        conn = open_link(connect, tlog_path, signing_key)
+    tlog = conn.tlog
+    try:
+        if tlog is not None:
+            try:
+                tlog.open()
+            except OSError as exc:
+                raise InputError(str(tlog_path), f"cannot write: {exc.strerror or exc}") from None
+        return MissionRunner(conn, core, progress).run()
     finally:
         conn.close()
         if tlog is not None:
@@ -187,16 +370,27 @@ def run(args) -> int:
     from ..report import write_report
 
     check_connection_string(args.connect)
-    if args.cut is not None and not args.cut > 0:
-        raise InputError("--cut", "must be > 0 seconds")
-    for opt, path in (("--tlog", args.tlog), ("--report", args.report)):
-        parent = Path(path).parent
-        if not parent.is_dir():
-            raise InputError(f"{opt} {path}", f"directory {parent} does not exist")
+    if args.cut is not None and not (math.isfinite(args.cut) and args.cut > 0):
+        raise InputError(f"--cut {args.cut}", "must be a finite number of seconds > 0")
+    check_output_paths((("--tlog", args.tlog), ("--report", args.report)))
+    key = None
+    if args.signing_key is not None:
+        from ..link.signing import load_signing_key
+        key = load_signing_key(args.signing_key)
+    overrides = safety_overrides(args)
+    if args.sortie is not None and args.sortie < 1:
+        raise InputError("--sortie", f"sorties are numbered from 1, got {args.sortie}")
     mission = load_mission(args.mission)
-    fp = prepare(mission, args.plan)
+    # The link first: a bad --connect (unknown host, port in use, refused) fails before any planning.
+    conn = open_link(args.connect, args.tlog, key)
+    try:
+        fp = prepare(mission, args.plan, args.sortie)
+    except BaseException:
+        conn.close()
+        raise
     progress = Progress(enabled=not args.quiet)
-    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut)
+    result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, overrides,
+                     args.plan, conn=conn)
     rep = result.report
     write_report(rep, args.report)
     tr = rep.tracking
@@ -204,6 +398,10 @@ def run(args) -> int:
     print(f"companion fly: {'completed' if rep.completed else 'NOT completed'} ({rep.control} control), "
           f"{rep.sim_time_s:.1f} s flown in {rep.wall_time_s:.1f} s wall, tracking {err} "
           f"({tr.truth_source}); report {args.report}")
-    if rep.error:
-        print(f"companion fly: {rep.error}", file=sys.stderr)
-    return 0 if rep.completed else 1
+    if not rep.completed:
+        print(f"companion fly: NOT completed: {rep.error or rep.phase}", file=sys.stderr)
+    return 0 if rep.completed else EXIT_FAILED
+
+
+#: Exit code of a flight that did not complete (2 is bad input).
+EXIT_FAILED = 3

@@ -12,6 +12,7 @@ from __future__ import annotations
 import errno
 import math
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -88,28 +89,44 @@ def run(args) -> int:
             raise InputError(p, "cannot write: is a directory")
 
     from ..mission import load_mission
-    from ..plan_io import plan_json_text, plan_to_json_dict, qgc_plan_text, qgc_wpl_text
+    from ..plan_io import (field_fence, flight_items, plan_json_text, plan_to_json_dict, qgc_plan_text,
+                           qgc_wpl_text, sortie_file)
     from ..planner import plan_mission
 
     mission = load_mission(args.mission)
     plan = plan_mission(mission)
     doc = plan_to_json_dict(plan, mission, args.sample_hz)
     files = {args.output: plan_json_text(doc).encode("utf-8")}
-    if args.qgc:
-        files[args.qgc] = qgc_plan_text(plan.waypoints.p_enu_m, mission).encode("utf-8")
-    if args.waypoints:
-        files[args.waypoints] = qgc_wpl_text(plan.waypoints.p_enu_m, mission).encode("utf-8")
+    if args.qgc or args.waypoints:
+        # one flight-ready mission per sortie (``<stem>-sortie<k>`` when there are several)
+        fence = field_fence(plan, mission)
+        sorties = plan.sorties.sorties
+        for s in sorties:
+            items = flight_items(plan, mission, s, fence)
+            if args.qgc:
+                files[sortie_file(args.qgc, s.index, len(sorties))] = \
+                    qgc_plan_text(items, mission.flight.speed_m_s).encode("utf-8")
+            if args.waypoints:
+                files[sortie_file(args.waypoints, s.index, len(sorties))] = qgc_wpl_text(items).encode("utf-8")
     if args.plot:
         from ..plot import render_plan
         files[args.plot] = render_plan(plan, fmt=plot_fmt, title=f"{mission.name}")
     write_atomically(files)
 
+    for w in plan.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     st, tm = plan.stats, plan.timings_s
     print(f"{mission.name}: {st.n_waypoints} way-points, path {st.path_length_m:.1f} m, "
           f"duration {st.duration_s:.1f} s, coverage {100 * st.coverage_fraction:.1f} %, "
           f"orientation {st.orientation_deg:.1f} deg")
     print(f"  max speed {st.max_speed_m_s:.2f} m/s, max accel {st.max_accel_m_s2:.2f} m/s^2, "
           f"way-point residual {100 * st.waypoint_residual_m:.1f} cm")
+    sp = plan.sorties
+    worst = max(sp.sorties, key=lambda x: x.energy.energy_wh)
+    print(f"  {len(sp.sorties)} sortie(s) from ({sp.launch_xy_m[0]:.1f}, {sp.launch_xy_m[1]:.1f}) m: "
+          f"{sp.total_energy_wh:.0f} Wh, {sp.total_duration_s / 60:.1f} min in all; the largest "
+          f"{worst.energy.energy_wh:.1f} Wh of {mission.energy.usable_wh:.1f} Wh usable, "
+          f"{max(x.n_items for x in sp.sorties)} mission items (vehicle holds {mission.energy.max_mission_items})")
     print(f"  timings: load {tm.load:.3f} s, coverage {tm.coverage:.3f} s, "
           f"trajectory {tm.trajectory:.3f} s, total {tm.total:.3f} s")
     print(f"  wrote {', '.join(files)}")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass(frozen=True)
@@ -109,22 +110,84 @@ class ControlConfig:
         J_zz``, 0.25 rad/s^2 for the paper's vehicle), in (0, 1]; the rest is
         the margin that rejects disturbances and noise.
 
-    Mission figures (``python benchmarks/track_inprocess.py``: the planned
-    trajectories of the bundled missions on the SITL plant in-process, the
-    paper's noise, mission seeds): max error after 5 s 0.41 mm
-    (flat-rectangle) and 0.52 mm (tilted-hexagon); 0.84 / 0.87 mm with ki =
-    0 and accel_vector_gain_rad_s = 0.2 (the previous defaults). Over MAVLink
-    (``python benchmarks/paper_reproduction.py``) 0.35 / 0.29 mm. With wind
-    (flat-rectangle with ``sim.wind: {mean_enu_m_s: [2, 1, 0], gust_std_m_s:
-    0.5, gust_time_constant_s: 2, drag_n_s_m: 0.3}``, ``companion demo``)
-    5.0 mm max / 2.0 mm RMS against 15.9 / 11.2 mm without the integral and
-    13.2 / 8.5 mm for the SITL's cascaded controller.
+    vectors : "physical" or "paper"
+        What the vehicle's accelerometer fields carry, as the SITL's
+        ``sim.vector_sensors``: "physical" (default) the specific force
+        ``R^T (a + g e3)`` of a real IMU; "paper" the paper's sensor model
+        (Section 3.4), a unit vector of constant inertial direction ``g R^T
+        e3``, so the controller takes ``r1 = e3`` (and ``r2 = m_hat``).
+    velocity_aided : bool
+        The world direction of the specific force from the velocity fixes
+        (``dv/dt + g e3``): without the observer, ``r1 = unit(a_hat + g e3)``
+        with ``a_hat`` the differentiated velocity and, with the paper's
+        vectors, ``b1 = e3`` (the thrust axis of eq. 20's drag-free plant);
+        with the observer, its velocity-aided tilt innovation. False, without
+        the observer: ``r1 = e3`` against the accelerometer (the paper's law
+        on the paper's vectors; biased under acceleration on a physical IMU).
+    observer : bool
+        The attitude observer of ``companion.control.observer`` (default):
+        the law acts on the virtual pairs ``b_i = R_hat^T r_i`` (``r1 = e3``,
+        ``r2`` the horizontal field), the bias-corrected gyro, and the
+        position/velocity of its translational filter (current time, between
+        and despite late fixes). The vector filters (``*_vector_gain_rad_s``)
+        then act inside it only on the accelerometer direction. False: the
+        (filtered) measured vectors, the raw position/velocity (the paper).
+    observer_tilt_gain_max_rad_s : float
+        Cap of the velocity-aided tilt correction rate (1/s); the rate itself
+        follows the fix noise (``observer.tilt_gain``): 100 with exact fixes
+        every 4 ms, ~1 at 1 cm/s, ~0.4 with 10 Hz RTK fixes.
+    observer_gravity_gain_rad_s : float
+        Rate (1/s) of the accelerometer-against-e3 innovation, used with the
+        paper's vectors or without velocity aiding.
+    observer_mag_gain_rad_s : float
+        Rate (1/s) of the heading innovation (magnetometer, horizontal part).
+    observer_bias_gain_1_s : float
+        Gyro-bias integral gain k_b (1/s): ``b_hat_dot = -k_b sigma``;
+        bias error decays at about k_b (tilt) and 0.11/s (heading, k_m = 1).
+    observer_bias_max_rad_s : float
+        Bound of the estimated gyro bias (rad/s).
+    observer_window_s : float
+        Longest velocity window of the tilt innovation (s), reached at 5
+        mm/s of fix noise (one fix interval with exact fixes).
+    observer_history_s : float
+        History kept for late fixes (s): fix latency + window must fit.
+    nav_position_std_m, nav_velocity_std_m_s : float
+        Position/velocity fix noise the observer assumes (floors of its
+        online estimate with ``nav_adaptive_noise``); 0: exact (mocap).
+    nav_accel_noise_m_s2_sqrt_hz : float
+        White acceleration noise of the translational filter's input
+        (accelerometer noise and model error), m/s^2/sqrt(Hz).
+    nav_accel_bias_walk_m_s3_sqrt_hz : float
+        Random walk of its acceleration bias state, m/s^3/sqrt(Hz).
+    nav_adaptive_noise : bool
+        Estimate the fix noise online from the fixes themselves (default):
+        one default serves exact 250 Hz mocap fixes and noisy 10 Hz RTK.
+    gyro_noise_rad_s_sqrt_hz : float
+        Gyro noise density the tilt gain assumes (rad/s/sqrt(Hz)); default
+        the paper's variance 5e-4 at 250 Hz (1.4e-3).
 
-    Figures (``python benchmarks/bench_control.py``, in-process plant, 250 Hz
-    sample and hold, the paper's noise, 25 s on 1 m/s paths): max position
-    error after 5 s about 0.5 mm with these defaults (0.85 mm with ki = 0),
-    3.4 mm with the vector filters off, 3.5-3.7 mm with Lee et al.'s kx, kv
-    = 16, 5.6 (and ki = 0: 60 is beyond their Routh bound, 20.6).
+    Mission figures (in-process, ``python benchmarks/paper_reproduction.py``
+    and ``python benchmarks/noise_sweep.py``: the planned trajectories on the
+    SITL's plant, mission seeds, max / RMS error after 5 s): the default on
+    the SITL's default sensors (physical IMU, the paper's noise, exact
+    position) 0.42 / 0.13 mm on flat-rectangle (0.41 / 0.12 without the
+    observer); on the paper's sensors (``vectors: paper``) 0.33 / 0.32 mm
+    max on flat-rectangle / tilted-hexagon, where the paper's law gets 21.0
+    / 19.5 mm (4.95 / 4.39 with the pointing governor). White velocity
+    noise 1 cm/s and 5 cm/s (every frame): 1.43 and 2.32 mm max (the
+    previous default, no observer: 1.8 m, diverged). Windy flat-rectangle
+    4.9 / 2.0 mm. Over MAVLink ``companion demo`` on the default mission 0.38
+    / 0.13 mm; on the paper's sensors 0.33 mm (the paper's law 19.4 mm,
+    3.9 mm with the governor).
+
+    The previous figures (no observer, tilt from the differentiated exact
+    velocity; ``python benchmarks/bench_control.py``, in-process plant,
+    250 Hz sample and hold, the paper's noise, 25 s on 1 m/s paths): max
+    position error after 5 s about 0.5 mm (0.85 mm with ki = 0), 3.4 mm
+    with the vector filters off, 3.5-3.7 mm with Lee et al.'s kx, kv = 16,
+    5.6 (and ki = 0: 60 is beyond their Routh bound, 20.6). With wind
+    (``flat-rectangle-windy``, ``companion demo``) 5.0 mm max / 2.0 mm RMS
+    against 15.9 / 11.2 mm without the integral.
     """
 
     kx: float = 60.0
@@ -144,6 +207,22 @@ class ControlConfig:
     pointing_limit: bool = True
     pointing_yaw_rate_max_rad_s: float = 1.0
     pointing_yaw_accel_fraction: float = 0.5
+    vectors: Literal["physical", "paper"] = "physical"
+    velocity_aided: bool = True
+    observer: bool = True
+    observer_tilt_gain_max_rad_s: float = 100.0
+    observer_gravity_gain_rad_s: float = 0.5
+    observer_mag_gain_rad_s: float = 1.0
+    observer_bias_gain_1_s: float = 0.1
+    observer_bias_max_rad_s: float = 0.2
+    observer_window_s: float = 0.3
+    observer_history_s: float = 0.6
+    nav_position_std_m: float = 0.0
+    nav_velocity_std_m_s: float = 0.0
+    nav_accel_noise_m_s2_sqrt_hz: float = 0.02
+    nav_accel_bias_walk_m_s3_sqrt_hz: float = 0.01
+    nav_adaptive_noise: bool = True
+    gyro_noise_rad_s_sqrt_hz: float = 1.4e-3
 
     def __post_init__(self) -> None:
         for name in ("kx", "kv", "rho1", "rho2", "alpha"):
@@ -166,3 +245,21 @@ class ControlConfig:
             raise ValueError("control.pointing_yaw_accel_fraction must be in (0, 1]")
         if not math.hypot(*self.mag_field_enu_gauss) > 0:
             raise ValueError("control.mag_field_enu_gauss must not be zero")
+        if self.observer and not math.hypot(*self.mag_field_enu_gauss[:2]) > 0:
+            raise ValueError("control.mag_field_enu_gauss must have a horizontal part (the observer's heading)")
+        if self.vectors not in ("physical", "paper"):
+            raise ValueError("control.vectors must be 'physical' or 'paper'")
+        for name in ("observer_tilt_gain_max_rad_s", "observer_history_s", "nav_accel_noise_m_s2_sqrt_hz",
+                     "gyro_noise_rad_s_sqrt_hz"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"control.{name} must be > 0")
+        for name in ("observer_gravity_gain_rad_s", "observer_mag_gain_rad_s", "observer_bias_gain_1_s",
+                     "observer_bias_max_rad_s", "observer_window_s", "nav_position_std_m",
+                     "nav_velocity_std_m_s", "nav_accel_bias_walk_m_s3_sqrt_hz"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"control.{name} must be >= 0")
+        if not self.observer_window_s < self.observer_history_s:
+            raise ValueError("control.observer_window_s must be < control.observer_history_s")
+        if self.observer and not self.velocity_aided and not self.observer_gravity_gain_rad_s > 0:
+            raise ValueError("control.observer without velocity_aided needs observer_gravity_gain_rad_s > 0 "
+                             "(no tilt information otherwise)")

@@ -77,8 +77,27 @@ law above. Separately, the pointing reference is made flyable
 (``companion.control.pointing``: eq. 21 exactly where the vehicle can
 follow it, yaw-rate/acceleration limited elsewhere).
 
-The two vectors and how their world directions are known
----------------------------------------------------------
+Where the vector pairs come from (``ControlConfig.vectors``, ``velocity_aided``, ``observer``)
+--------------------------------------------------------------------------------------------
+By default (``observer``) from the attitude observer of
+``companion.control.observer``: a velocity-aided complementary filter on
+SO(3) with gyro-bias estimation and a translational filter. The law then
+acts on the virtual pairs ``b_1 = R_hat^T e3``, ``b_2 = R_hat^T h`` (``h``
+the horizontal Earth field) against ``r_1 = e3``, ``r_2 = h``, on the
+bias-corrected gyro, and on the filtered position and velocity at the
+frame's time (e_x, e_v, and a_hat for F_dot: the filter's velocity
+differentiated as below). The observer's inputs are the same raw
+measurements; it never sees the true attitude. Without the observer the
+pairs are the measured vectors (``vectors.controller_vectors``):
+
+- ``vectors = "paper"`` (the paper's sensor model, ``sim.vector_sensors:
+  paper``): the accelerometer fields carry ``g R^T e3``, so ``r_1 = e3``;
+  with ``velocity_aided`` the tilt comes instead from the velocity (``b_1 =
+  e3``, the thrust axis of eq. 20's plant, against ``unit(a_hat + g e3)``);
+- ``vectors = "physical"`` (a real IMU): as described next.
+
+The two measured vectors and how their world directions are known
+-----------------------------------------------------------------
 (details in ``companion.control.vectors``) b_1: the accelerometer's specific
 force, against ``r_1 = unit(a_hat + g e3)`` with ``a_hat`` the vehicle's
 acceleration from the measured velocity differentiated on the vehicle clock
@@ -89,6 +108,10 @@ Optional filters: a slow body-frame low-pass on b_1 (constant for a
 drag-free multirotor) and a gyro-propagated complementary filter on b_2.
 With the filters off and the raw field, this is the paper's law on raw
 vectors.
+
+With noisy velocity fixes (1 cm/s and more) the differentiated velocity
+leaves its noise in ``r_1`` and in ``Omega_d``: the previous default
+diverged at 1 cm/s; the observer keeps millimetres (``tests/test_observer.py``).
 
 Everything here is pure: the controller object holds only filter state and
 takes the vehicle's time as an argument. The pure functions below are the
@@ -108,7 +131,8 @@ from ..vehicle import GRAVITY_M_S2, VehicleConfig
 from .config import ControlConfig
 from .mixer import Mixer
 from .pointing import PointingGovernor
-from .vectors import AccelerationEstimator, BodyVectorFilter, Vec3, measurement_vectors, unit3
+from .observer import AttitudeEstimate, VelocityAidedObserver, horizontal_field, triad_rotation, virtual_pairs
+from .vectors import AccelerationEstimator, BodyVectorFilter, Vec3, controller_vectors, unit3
 
 # --- small float-tuple vector algebra (the hot path avoids numpy) ---------
 
@@ -598,7 +622,9 @@ class GeometricController:
         self._r2 = unit3(cfg.mag_field_enu_gauss)
         self._rho = (float(cfg.rho1), float(cfg.rho2))
         self.accel = AccelerationEstimator(cfg.accel_filter_tau_s)
-        self._f_acc = BodyVectorFilter(cfg.accel_vector_gain_rad_s, propagate=False)
+        self._tau_a = float(cfg.accel_filter_tau_s)
+        # the paper's accelerometer vector is R^T e3, a world-fixed direction: propagate it with the gyro
+        self._f_acc = BodyVectorFilter(cfg.accel_vector_gain_rad_s, propagate=cfg.vectors == "paper")
         self._f_mag = BodyVectorFilter(cfg.mag_vector_gain_rad_s, propagate=True)
         self._b2_prev: Vec3 = (0.0, 1.0, 0.0)
         self._decoupled = cfg.attitude_law == "decoupled"
@@ -620,6 +646,58 @@ class GeometricController:
         self._t_i: float | None = None
         self.last_desired = None
         self._last_detail = None
+        self._vectors = cfg.vectors
+        self._aided = bool(cfg.velocity_aided)
+        self._today = cfg.vectors == "physical" and self._aided     # the unrolled pair branch
+        self._fmax = float(vehicle.max_thrust_per_rotor_n)
+        self._thrust_prev: float | None = None
+        self._pairs = None
+        self._pv = None
+        self._t_last: float | None = None
+        self.observer = None
+        if cfg.observer:
+            self._h = horizontal_field(cfg.mag_field_enu_gauss)
+            self.observer = VelocityAidedObserver(
+                cfg.mag_field_enu_gauss, self._g, paper_vectors=cfg.vectors == "paper",
+                velocity_aided=cfg.velocity_aided, tilt_gain_max_rad_s=cfg.observer_tilt_gain_max_rad_s,
+                gravity_gain_rad_s=cfg.observer_gravity_gain_rad_s, mag_gain_rad_s=cfg.observer_mag_gain_rad_s,
+                bias_gain_1_s=cfg.observer_bias_gain_1_s, bias_max_rad_s=cfg.observer_bias_max_rad_s,
+                window_s=cfg.observer_window_s, history_s=cfg.observer_history_s,
+                pos_std_m=cfg.nav_position_std_m, vel_std_m_s=cfg.nav_velocity_std_m_s,
+                accel_noise=cfg.nav_accel_noise_m_s2_sqrt_hz, accel_bias_walk=cfg.nav_accel_bias_walk_m_s3_sqrt_hz,
+                gyro_noise=cfg.gyro_noise_rad_s_sqrt_hz, mass_kg=self._m,
+                motor_time_constant_s=vehicle.motor_time_constant_s,
+                accel_direction_gain_rad_s=cfg.accel_vector_gain_rad_s, adaptive=cfg.nav_adaptive_noise)
+
+    def observe(self, t_s: float, gyro, accel, mag, pos, vel, nav_t) -> None:
+        """Feed the observer one frame without computing a command (arguments as :meth:`update_fast`).
+
+        For the frames before the controller takes over (on the ground
+        before arming, or while the vehicle's own controller flies): the
+        gyro bias and the fix noise are then estimated at rest, and the
+        first :meth:`update_fast` starts from a converged estimate. A frame
+        fed here and again to :meth:`update_fast` (same ``t_s``) is used
+        once. No-op without the observer.
+        """
+        if self.observer is not None:
+            self.observer.update(t_s, gyro, accel, mag, pos, vel, nav_t, self._thrust_prev)
+
+    def attitude_estimate(self) -> AttitudeEstimate | None:
+        """The attitude the controller acts on, with the position and velocity it used (last frame).
+
+        With the observer: its estimate (``R_hat``, gyro bias, filtered
+        position/velocity at the frame's time). Without: the rotation the
+        two vector pairs define (TRIAD, pair 1 exact; :func:`body_coordinates`
+        uses the same), zero bias, the measured position/velocity. None
+        before the first update. For the pose of rangefinder readings.
+        """
+        if self.observer is not None and self.observer.initialised:
+            return self.observer.estimate()
+        if self._pairs is None:
+            return None
+        b1, b2, r1, r2 = self._pairs
+        p, v = self._pv
+        return AttitudeEstimate(self._t_last, triad_rotation(b1, b2, r1, r2), (0.0, 0.0, 0.0), p, v)
 
     @property
     def integral_m_s(self) -> Vec3:
@@ -730,6 +808,17 @@ class GeometricController:
         """
         sqrt = math.sqrt
         m, g, kx, kv = self._m, self._g, self._kx, self._kv
+        obs = self.observer
+        if obs is not None:
+            # the observer (companion.control.observer): bias-corrected rate, filtered p, v at t_s
+            obs.update(t_s, gyro, accel, mag, pos, vel, nav_t, self._thrust_prev)
+            bx_, by_, bz_ = obs.b
+            gyro = (gyro[0] - bx_, gyro[1] - by_, gyro[2] - bz_)
+            pos, vel, nav_t = obs.p, obs.v, t_s
+            # a_hat from the filter's velocity, low-passed over one fix interval: a 10 Hz fix's
+            # correction step in v_hat must not reach F_dot as a one-frame spike
+            fi = obs.fix_interval_s
+            self.accel.tau_s = fi if fi > self._tau_a else self._tau_a
         wx, wy, wz = gyro
 
         # --- AccelerationEstimator.update (state kept in self.accel) -----------------
@@ -760,46 +849,67 @@ class GeometricController:
                 ahx, ahy, ahz = ax + lag * jd[0], ay + lag * jd[1], az + lag * jd[2]
 
         # --- measurement_vectors(filtered accel, filtered mag, a_hat, ...) ------------
-        x, y, z = accel
-        n = sqrt(x * x + y * y + z * z)
-        if not n > 0.0:
-            raise ValueError("cannot normalise a zero (or non-finite) vector")
-        fa = self._f_acc.step(t_s, x / n, y / n, z / n, wx, wy, wz)
-        x, y, z = mag
-        n = sqrt(x * x + y * y + z * z)
-        if not n > 0.0:
-            raise ValueError("cannot normalise a zero (or non-finite) vector")
-        fm = self._f_mag.step(t_s, x / n, y / n, z / n, wx, wy, wz)
-        # both filters have stepped before anything below may raise (as in update_reference)
-        x, y, z = fa
-        n = sqrt(x * x + y * y + z * z)
-        if not n > 0.0:
-            raise ValueError("cannot normalise a zero (or non-finite) vector")
-        m1x, m1y, m1z = x / n, y / n, z / n                       # b_1 (body)
-        z = ahz + g
-        n = sqrt(ahx * ahx + ahy * ahy + z * z)
-        if not n > 0.0:
-            raise ValueError("cannot normalise a zero (or non-finite) vector")
-        r1x, r1y, r1z = ahx / n, ahy / n, z / n                   # r_1 (world)
-        x, y, z = fm
-        n = sqrt(x * x + y * y + z * z)
-        if not n > 0.0:
-            raise ValueError("cannot normalise a zero (or non-finite) vector")
-        m2x, m2y, m2z = x / n, y / n, z / n                       # b_2 (body)
-        r2x, r2y, r2z = self._r2u                                  # r_2 (world)
-        if self._perp:
-            c = m2x * m1x + m2y * m1y + m2z * m1z
-            x, y, z = m2x - c * m1x, m2y - c * m1y, m2z - c * m1z
+        if obs is not None:
+            # virtual_pairs(R_hat, h): b_i = R_hat^T r_i, r_1 = e3, r_2 = h (horizontal field)
+            R = obs.R
+            hx, hy, hz = self._h
+            m1x, m1y, m1z = R[6], R[7], R[8]
+            r1x, r1y, r1z = 0.0, 0.0, 1.0
+            m2x, m2y, m2z = (R[0] * hx + R[3] * hy + R[6] * hz, R[1] * hx + R[4] * hy + R[7] * hz,
+                             R[2] * hx + R[5] * hy + R[8] * hz)
+            r2x, r2y, r2z = hx, hy, hz
+        else:
+            x, y, z = accel
             n = sqrt(x * x + y * y + z * z)
             if not n > 0.0:
                 raise ValueError("cannot normalise a zero (or non-finite) vector")
-            m2x, m2y, m2z = x / n, y / n, z / n
-            c = r2x * r1x + r2y * r1y + r2z * r1z
-            x, y, z = r2x - c * r1x, r2y - c * r1y, r2z - c * r1z
+            fa = self._f_acc.step(t_s, x / n, y / n, z / n, wx, wy, wz)
+            x, y, z = mag
             n = sqrt(x * x + y * y + z * z)
             if not n > 0.0:
                 raise ValueError("cannot normalise a zero (or non-finite) vector")
-            r2x, r2y, r2z = x / n, y / n, z / n
+            fm = self._f_mag.step(t_s, x / n, y / n, z / n, wx, wy, wz)
+            # both filters have stepped before anything below may raise (as in update_reference)
+            if not self._today:
+                # the other sensor models / tilt sources (controller_vectors)
+                pr = controller_vectors(fa, fm, (ahx, ahy, ahz), self._r2, g, self._perp, self._vectors, self._aided)
+                m1x, m1y, m1z = pr.b1
+                r1x, r1y, r1z = pr.r1
+                m2x, m2y, m2z = pr.b2
+                r2x, r2y, r2z = pr.r2
+            else:
+                x, y, z = fa
+                n = sqrt(x * x + y * y + z * z)
+                if not n > 0.0:
+                    raise ValueError("cannot normalise a zero (or non-finite) vector")
+                m1x, m1y, m1z = x / n, y / n, z / n                       # b_1 (body)
+                z = ahz + g
+                n = sqrt(ahx * ahx + ahy * ahy + z * z)
+                if not n > 0.0:
+                    raise ValueError("cannot normalise a zero (or non-finite) vector")
+                r1x, r1y, r1z = ahx / n, ahy / n, z / n                   # r_1 (world)
+                x, y, z = fm
+                n = sqrt(x * x + y * y + z * z)
+                if not n > 0.0:
+                    raise ValueError("cannot normalise a zero (or non-finite) vector")
+                m2x, m2y, m2z = x / n, y / n, z / n                       # b_2 (body)
+                r2x, r2y, r2z = self._r2u                                  # r_2 (world)
+                if self._perp:
+                    c = m2x * m1x + m2y * m1y + m2z * m1z
+                    x, y, z = m2x - c * m1x, m2y - c * m1y, m2z - c * m1z
+                    n = sqrt(x * x + y * y + z * z)
+                    if not n > 0.0:
+                        raise ValueError("cannot normalise a zero (or non-finite) vector")
+                    m2x, m2y, m2z = x / n, y / n, z / n
+                    c = r2x * r1x + r2y * r1y + r2z * r1z
+                    x, y, z = r2x - c * r1x, r2y - c * r1y, r2z - c * r1z
+                    n = sqrt(x * x + y * y + z * z)
+                    if not n > 0.0:
+                        raise ValueError("cannot normalise a zero (or non-finite) vector")
+                    r2x, r2y, r2z = x / n, y / n, z / n
+        self._pairs = ((m1x, m1y, m1z), (m2x, m2y, m2z), (r1x, r1y, r1z), (r2x, r2y, r2z))
+        self._pv = (tuple(pos), (vx, vy, vz))
+        self._t_last = t_s
 
         # --- errors and F_d with its derivatives (eq. 23) ------------------------------
         xd0, xd1, xd2 = xd
@@ -1019,6 +1129,7 @@ class GeometricController:
         f = (F0 * (r1x * m1z + mrx * mbz + nrx * nbz) + F1 * (r1y * m1z + mry * mbz + nry * nbz)
              + F2 * (r1z * m1z + mrz * mbz + nrz * nbz))
         cmd, saturated = self.mixer.mix_fast(f, tx, ty, tz)
+        self._thrust_prev = (cmd[0] + cmd[1] + cmd[2] + cmd[3]) * self._fmax
         self.last_desired = (b1x, b1y, b1z, b2x, b2y, b2z, b3x, b3y, b3z, f)
         self._last_detail = ((tx, ty, tz), saturated, (Od0, Od1, Od2), (ex0, ex1, ex2), (ev0, ev1, ev2), zV, V)
         return cmd
@@ -1042,14 +1153,28 @@ class GeometricController:
         kx, kv = self.cfg.kx, self.cfg.kv
         gyro = meas.gyro_flu_rad_s
         Omega = (float(gyro[0]), float(gyro[1]), float(gyro[2]))
-        t_nav = t_s if meas.nav_time_s is None else meas.nav_time_s
-        a_hat = self.accel.update(t_nav, meas.vel_enu_m_s, ref.jerk_enu_m_s3)
-        pairs = measurement_vectors(self._f_acc.update(t_s, unit3(meas.accel_flu_m_s2), Omega),
-                                    self._f_mag.update(t_s, unit3(meas.mag_flu_gauss), Omega),
-                                    a_hat, self._r2, g, self.cfg.mag_perpendicular)
-        b1, b2, r1, r2 = pairs.b1, pairs.b2, pairs.r1, pairs.r2
-
         p, v = meas.pos_enu_m, meas.vel_enu_m_s
+        t_nav = t_s if meas.nav_time_s is None else meas.nav_time_s
+        obs = self.observer
+        if obs is not None:
+            obs.update(t_s, Omega, meas.accel_flu_m_s2, meas.mag_flu_gauss, p, v, meas.nav_time_s,
+                       self._thrust_prev)
+            Omega = (Omega[0] - obs.b[0], Omega[1] - obs.b[1], Omega[2] - obs.b[2])
+            p, v, t_nav = obs.p, obs.v, t_s
+            fi = obs.fix_interval_s
+            self.accel.tau_s = fi if fi > self._tau_a else self._tau_a
+        a_hat = self.accel.update(t_nav, v, ref.jerk_enu_m_s3)
+        if obs is not None:
+            pairs = virtual_pairs(obs.R, self._h)
+        else:
+            pairs = controller_vectors(self._f_acc.update(t_s, unit3(meas.accel_flu_m_s2), Omega),
+                                       self._f_mag.update(t_s, unit3(meas.mag_flu_gauss), Omega),
+                                       a_hat, self._r2, g, self.cfg.mag_perpendicular, self._vectors, self._aided)
+        b1, b2, r1, r2 = pairs.b1, pairs.b2, pairs.r1, pairs.r2
+        self._pairs = (b1, b2, r1, r2)
+        self._pv = (tuple(p), tuple(v))
+        self._t_last = t_s
+
         xd, vd, ad, jd, sd = ref.pos_enu_m, ref.vel_enu_m_s, ref.acc_enu_m_s2, ref.jerk_enu_m_s3, ref.snap_enu_m_s4
         e_x = (p[0] - xd[0], p[1] - xd[1], p[2] - xd[2])
         e_v = (v[0] - vd[0], v[1] - vd[1], v[2] - vd[2])
@@ -1092,5 +1217,6 @@ class GeometricController:
                                         des.b1d, des.b2d, des.b3d, self._rho, self.cfg.alpha)
         f = _dot(F, thrust_axis_estimate(b1, b2, r1, r2))
         mc = self.mixer.mix(f, tau)
+        self._thrust_prev = (mc.cmd[0] + mc.cmd[1] + mc.cmd[2] + mc.cmd[3]) * self._fmax
         return ControlOutput(f, tau, mc.cmd, mc.saturated, des.b3d, des.b2d, des.R_d, des.Omega_d,
                              e_x, e_v, z, V)

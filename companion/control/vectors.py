@@ -119,8 +119,41 @@ def measurement_vectors(accel_flu_m_s2, mag_flu_gauss, accel_est_enu_m_s2,
     -------
     VectorPairs
     """
-    b1 = unit3(accel_flu_m_s2)
-    r1 = specific_force_direction_enu(accel_est_enu_m_s2, gravity_m_s2)
+    return controller_vectors(accel_flu_m_s2, mag_flu_gauss, accel_est_enu_m_s2, mag_field_enu_gauss,
+                              gravity_m_s2, mag_perpendicular, "physical", True)
+
+
+_E3 = (0.0, 0.0, 1.0)
+
+
+def controller_vectors(accel_flu_m_s2, mag_flu_gauss, accel_est_enu_m_s2, mag_field_enu_gauss,
+                       gravity_m_s2: float, mag_perpendicular: bool, vectors: str,
+                       velocity_aided: bool) -> VectorPairs:
+    """The two vector pairs of eq. (28) for each sensor model and tilt source (no observer).
+
+    =========================  ====================================  =====================================
+    ``vectors``, aided         b_1 (body FLU)                        r_1 (world ENU)
+    =========================  ====================================  =====================================
+    physical, True (default)   accelerometer (specific force)        unit(a_hat + g e3), a_hat from v
+    physical, False            accelerometer                         e3: "accelerometer as gravity", wrong
+                                                                     under acceleration (r_1 turns with a)
+    paper, True                e3, the thrust axis of the drag-free   unit(a_hat + g e3), a_hat from v
+                               plant (eq. 20; the paper's IMU
+                               vectors carry no specific force)
+    paper, False (the paper)   accelerometer fields = g R^T e3        e3
+    =========================  ====================================  =====================================
+
+    Pair 2 is the magnetometer against ``mag_field_enu_gauss``, both taken
+    normal to pair 1 with ``mag_perpendicular``. Parameters as
+    :func:`measurement_vectors`, plus ``vectors`` ("physical" | "paper":
+    what the accelerometer fields carry, as the SITL's
+    ``sim.vector_sensors``) and ``velocity_aided``.
+    """
+    if vectors == "paper" and velocity_aided:
+        b1 = _E3
+    else:
+        b1 = unit3(accel_flu_m_s2)
+    r1 = specific_force_direction_enu(accel_est_enu_m_s2, gravity_m_s2) if velocity_aided else _E3
     b2, r2 = unit3(mag_flu_gauss), unit3(mag_field_enu_gauss)
     if mag_perpendicular:
         b2, r2 = _reject(b2, b1), _reject(r2, r1)

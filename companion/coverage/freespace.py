@@ -72,6 +72,13 @@ class FreeSpace:
             cache[f] = Raster(pool(self.eroded[r0:r1, c0:c1], f), f * h, c0 * h, r0 * h)
         return cache[f]
 
+    def block_graph(self):
+        """The exact coarse connectivity of the eroded cells (:class:`blockgraph.BlockGraph`), built once."""
+        if "_block_graph" not in self.__dict__:
+            from .blockgraph import build_block_graph
+            self.__dict__["_block_graph"] = build_block_graph(self.eroded, self.bbox_cells)
+        return self.__dict__["_block_graph"]
+
     @cached_property
     def bbox_cells(self) -> tuple[int, int, int, int]:
         """``(r0, r1, c0, c1)``: half-open cell bounding box of the eroded cells (empty: zeros)."""
@@ -101,6 +108,16 @@ class Raster:
         self.rows, self.cols = mask.shape
         self.flat = np.pad(mask, 1).ravel()
         self.cell_m, self.x0_m, self.y0_m = float(cell_m), float(x0_m), float(y0_m)
+
+    def sample_points(self, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+        """(n,) bool: the mask at G points (m), nearest cell; False off the mask."""
+        inv = 1.0 / self.cell_m
+        x = (np.asarray(gx, float) - self.x0_m) * inv + 1.0
+        y = (np.asarray(gy, float) - self.y0_m) * inv + 1.0
+        # floor, then clip into the padding ring (x < 0 would truncate toward 0)
+        xi = np.clip(np.floor(x), 0, self.cols + 1).astype(np.int64)
+        yi = np.clip(np.floor(y), 0, self.rows + 1).astype(np.int64)
+        return self.flat.take(yi * (self.cols + 2) + xi)
 
     def sample_lines(self, alpha: float, offsets: np.ndarray, t: np.ndarray,
                      dtype=np.float32) -> np.ndarray:

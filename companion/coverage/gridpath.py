@@ -1,47 +1,65 @@
-"""Auxiliary connections: straight where clear, else a shortest grid path.
+"""Auxiliary connections: straight where clear, else a shortest path in the eroded free space.
 
-All points are in the grid frame G (m, see :mod:`freespace`). A connection is
-"clear" when every sample every half cell along it falls in an eroded free
-cell. Otherwise the shortest 8-connected path between the two cells is found
-with Dijkstra (``scipy.sparse.csgraph``) on the eroded cells of a window
-around the two points; the window is the points' bounding box grown by
-``P``, starting at ``P = max(1 m, 0.75 D)`` (``D`` their distance), so the
-search stays local. A path that leaves the window goes at least ``P``
-beyond the bounding box and so is at least ``2 P`` long: a window path no
-longer than ``2 P`` is the shortest one. Otherwise (or if there is none)
-``P`` doubles, until the window covers the map. Windows over ~1e6 cells are searched on
-a min-pooled mask (a pooled cell is free only if all its cells are), which
-keeps the path admissible. The cell path is then simplified to a few
-turning points by line-of-sight shortcutting (string pulling: from each
-kept point, advance along the path while the straight shortcut is clear).
+All points are in the grid frame G (m, see :mod:`freespace`). A connection
+is "clear" when every sample every half cell along it falls in an eroded
+cell. Otherwise:
+
+1. The block graph of the eroded space (:mod:`blockgraph`, built once per
+   plan) tells whether the two end cells are connected at all; if not, the
+   connection does not exist (``PlanError``; :mod:`plan` drops unreachable
+   segments before it gets here).
+2. A shortest path in the block graph gives a corridor of blocks (the path's
+   blocks and their neighbours) that is known to hold a fine path, however
+   far round it goes: narrow passages, rounded corners at the safety margin
+   and pockets reachable only the long way round are all found, at full
+   resolution, with no pooling that could close a passage.
+3. The cheapest 8-connected cell path over the corridor's cells is found
+   with ``scipy.sparse.csgraph.dijkstra`` on a CSR graph of those cells only
+   (neighbours by ``searchsorted`` on their linear indices); cells near the
+   corridor's edge cost more, so the path keeps off the staircase edge of
+   the eroded space where there is room (:func:`cell_path`).
+4. The cell path is simplified by line-of-sight shortcutting (string
+   pulling): from each kept point, a far visible point is found by testing
+   many candidates per vectorised call (the next points, then points
+   64, 128, 256, ... ahead, then evenly spaced probes in the last gap), a
+   few calls per kept point (:func:`simplify`). Consecutive cell centres see
+   each other (a diagonal step's samples at 1/3 and 2/3 lie in its two
+   cells), so every kept point sees the next one.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from ..errors import PlanError
-from .freespace import FreeSpace, lookup
+from .freespace import FreeSpace
 
-_MAX_WINDOW_CELLS = 1_000_000
+_SQRT2 = float(np.sqrt(2.0))
+#: points tested at once by the string pulling before it looks further ahead
+_WINDOW = 64
+#: points tested at once when the string pulling narrows a gap
+_PROBES = 32
+#: cells this close to the edge of the eroded space cost _EDGE_COST times more to cross
+_EDGE_CELLS = 2
+_EDGE_COST = 4.0
+#: 8-neighbourhood offsets (dr, dc) and step lengths (cells).
+_NEIGHBOURS = ((0, 1, 1.0), (0, -1, 1.0), (1, 0, 1.0), (-1, 0, 1.0),
+               (1, 1, _SQRT2), (1, -1, _SQRT2), (-1, 1, _SQRT2), (-1, -1, _SQRT2))
+NEIGHBOURS_4 = _NEIGHBOURS[:4]
 
 
 def is_clear(free: FreeSpace, a: np.ndarray, b: np.ndarray) -> bool:
     """True if the straight segment a-b (G, m) stays in eroded free space."""
-    h = free.resolution_m
-    n = int(np.ceil(np.hypot(*(np.asarray(b) - np.asarray(a))) / (h / 2))) + 1
-    s = np.linspace(0.0, 1.0, n)[:, None]
-    p = (1 - s) * np.asarray(a) + s * np.asarray(b)
-    return bool(lookup(free.eroded, h, p[:, 0], p[:, 1]).all())
+    return bool(visible_from(free, a, np.asarray(b, float)[None])[0])
 
 
 def visible_from(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """(k,) bool: which straight segments a-targets[j] (G, m) stay in eroded free space.
 
-    Same test as :func:`is_clear` (samples every half cell or closer, ends
-    included) for all targets in one vectorised lookup.
+    Samples every half cell or closer, both ends included, for all targets
+    in one vectorised lookup.
     """
     h = free.resolution_m
     a = np.asarray(a, float)
@@ -51,73 +69,115 @@ def visible_from(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> np.ndar
     first = np.concatenate([[0], np.cumsum(n)[:-1]])
     s = (np.arange(len(seg)) - first[seg]) / np.maximum(n[seg] - 1, 1)
     p = a + s[:, None] * (targets[seg] - a)
-    ok = lookup(free.eroded, h, p[:, 0], p[:, 1])
+    ok = free.raster().sample_points(p[:, 0], p[:, 1])
     return np.logical_and.reduceat(ok, first) if len(seg) else np.zeros(0, dtype=bool)
 
 
-def _dijkstra_cells(mask: np.ndarray, src: tuple[int, int],
-                    dst: tuple[int, int]) -> tuple[np.ndarray, float] | None:
-    """Shortest 8-connected cell path in ``mask`` from src to dst or None.
+def cell_graph(rr: np.ndarray, cc: np.ndarray, neighbours=None,
+               edge_cells: int | None = None) -> tuple[csr_matrix, np.ndarray]:
+    """Directed CSR graph of 8-connected grid cells given by their rows and columns.
 
-    Returns the (k, 2) rows/cols of the path and its length (cells).
+    The cells are sorted by linear index and each one's eight neighbours are
+    found by ``searchsorted``, so only the listed cells are touched (a long
+    diagonal corridor costs its own cells, not its bounding box). Edge
+    weight: the step (1 or sqrt 2 cells) times the cost of the cell stepped
+    into: ``_EDGE_COST`` within ``edge_cells`` (default ``_EDGE_CELLS``) of a
+    cell that is not listed, 1 elsewhere (cell_path's doc). ``neighbours``:
+    (dr, dc, step) offsets, default the 8-neighbourhood. Returns the graph
+    and the order that sorts the input cells into node order.
     """
-    rows, cols = mask.shape
-    idx = np.full(mask.shape, -1, dtype=np.int64)
-    free_r, free_c = np.nonzero(mask)
-    idx[free_r, free_c] = np.arange(len(free_r))
-    if idx[src] < 0 or idx[dst] < 0:
+    neighbours = _NEIGHBOURS if neighbours is None else neighbours
+    edge_cells = _EDGE_CELLS if edge_cells is None else edge_cells
+    width = int(cc.max()) + 3
+    lin = (rr.astype(np.int64) + 1) * width + (cc.astype(np.int64) + 1)
+    order = np.argsort(lin, kind="stable")
+    lin = lin[order]
+    n = len(lin)
+    nb = np.empty((n, len(neighbours)), dtype=np.int64)
+    for k, (dr, dc, _) in enumerate(neighbours):
+        t = lin + dr * width + dc
+        pos = np.minimum(np.searchsorted(lin, t), n - 1)
+        nb[:, k] = np.where(lin[pos] == t, pos, -1)
+    ok = nb >= 0
+    if edge_cells > 0:
+        inner = ok.all(axis=1)
+        for _ in range(edge_cells - 1):
+            inner = inner & np.where(ok, inner[np.where(ok, nb, 0)], False).all(axis=1)
+        cost = np.where(inner, 1.0, _EDGE_COST)
+    else:
+        cost = np.ones(n)
+    step = np.array([s for _, _, s in neighbours])
+    w = step[None, :] * cost[np.where(ok, nb, 0)]
+    indptr = np.concatenate([[0], np.cumsum(ok.sum(axis=1))])
+    return csr_matrix((w[ok], nb[ok], indptr), shape=(n, n)), order
+
+
+def cell_path(rr: np.ndarray, cc: np.ndarray, src: tuple[int, int], dst: tuple[int, int]) -> np.ndarray | None:
+    """(k, 2) rows/cols of a cheapest 8-connected path over the listed cells from src to dst, or None.
+
+    Cells within ``_EDGE_CELLS`` of the edge of the listed set cost
+    ``_EDGE_COST`` times more: the path keeps off the staircase edge of the
+    eroded space where it can (where straight shortcuts are visible, so
+    string pulling leaves few corners, each of which is a stop for the
+    way-points), and still takes a passage narrower than that when it must.
+    """
+    rr = np.asarray(rr, dtype=np.int64)
+    cc = np.asarray(cc, dtype=np.int64)
+    hit_s = np.flatnonzero((rr == src[0]) & (cc == src[1]))
+    hit_d = np.flatnonzero((rr == dst[0]) & (cc == dst[1]))
+    if len(hit_s) == 0 or len(hit_d) == 0:
         return None
-    heads, tails, weights = [], [], []
-    for dr, dc, w in ((0, 1, 1.0), (1, 0, 1.0), (1, 1, np.sqrt(2)), (1, -1, np.sqrt(2))):
-        # pairs (r, c) -- (r + dr, c + dc) over the whole window at once
-        a = idx[max(0, -dr): rows - max(0, dr), max(0, -dc): cols - max(0, dc)]
-        b = idx[max(0, dr): rows - max(0, -dr), max(0, dc): cols - max(0, -dc)]
-        ok = (a >= 0) & (b >= 0)
-        heads.append(a[ok])
-        tails.append(b[ok])
-        weights.append(np.full(int(ok.sum()), w))
-    n = len(free_r)
-    graph = coo_matrix((np.concatenate(weights), (np.concatenate(heads), np.concatenate(tails))),
-                       shape=(n, n)).tocsr()
-    dist, pred = dijkstra(graph, directed=False, indices=int(idx[src]), return_predecessors=True)
-    target = int(idx[dst])
-    if not np.isfinite(dist[target]):
+    graph, order = cell_graph(rr, cc)
+    rank = np.empty(len(order), dtype=np.int64)
+    rank[order] = np.arange(len(order))
+    i_src, i_dst = int(rank[hit_s[0]]), int(rank[hit_d[0]])
+    dist, pred = dijkstra(graph, directed=True, indices=i_src, return_predecessors=True)
+    if not np.isfinite(dist[i_dst]):
         return None
-    path = [target]
-    while path[-1] != idx[src]:
+    path = [i_dst]
+    while path[-1] != i_src:
         path.append(int(pred[path[-1]]))
-    path = np.array(path[::-1])
-    return np.column_stack([free_r[path], free_c[path]]), float(dist[target])
+    nodes = order[np.array(path[::-1])]
+    return np.column_stack([rr[nodes], cc[nodes]])
 
 
-def _min_pool(mask: np.ndarray, f: int) -> np.ndarray:
-    m = np.zeros((-(-mask.shape[0] // f) * f, -(-mask.shape[1] // f) * f), dtype=bool)
-    m[: mask.shape[0], : mask.shape[1]] = mask
-    return m.reshape(m.shape[0] // f, f, m.shape[1] // f, f).all(axis=(1, 3))
+def simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
+    """String pulling of a polyline whose consecutive points see each other (module doc, step 4).
 
-
-def _nearest_true(mask: np.ndarray, rc: tuple[int, int]) -> tuple[int, int] | None:
-    r, c = np.nonzero(mask)
-    if len(r) == 0:
-        return None
-    k = int(np.argmin((r - rc[0]) ** 2 + (c - rc[1]) ** 2))
-    return int(r[k]), int(c[k])
-
-
-def _simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
-    """Line-of-sight shortcutting (string pulling) of a polyline whose consecutive
-    points see each other: from each kept point, advance while the next point
-    is still visible (one vectorised visibility test per kept point)."""
-    out = [pts[0]]
-    i, n = 0, len(pts)
+    From each kept point, one vectorised visibility test of the next
+    ``_WINDOW`` points and of points ``_WINDOW 2^k`` ahead picks the farthest
+    visible candidate; the gap up to the next candidate is then narrowed by
+    testing ``_PROBES`` evenly spaced points at once (a few rounds). A few
+    calls per kept point, each testing many segments.
+    """
+    pts = np.asarray(pts, float)
+    n = len(pts)
+    out = [0]
+    i = 0
     while i < n - 1:
-        vis = visible_from(free, pts[i], pts[i + 2:])
-        blocked = np.flatnonzero(~vis)
-        # pts[i + 1] is visible by assumption; stop before the first hidden one
-        j = i + 1 + (int(blocked[0]) if len(blocked) else len(vis))
-        out.append(pts[j])
-        i = j
-    return np.array(out)
+        near = np.arange(i + 1, min(n, i + 1 + _WINDOW))
+        far = i + _WINDOW * 2 ** np.arange(1, 40)
+        cand = np.unique(np.concatenate([near, far[far < n], [n - 1]]))
+        vis = visible_from(free, pts[i], pts[cand])
+        vis[0] = True                               # pts[i + 1] is visible by assumption
+        k = int(np.flatnonzero(vis)[-1])
+        lo = int(cand[k])
+        hi = int(cand[k + 1]) if k + 1 < len(cand) else n
+        while hi - lo > 1:
+            probe = np.unique(np.linspace(lo, hi, _PROBES + 2)[1:-1].astype(np.int64))
+            probe = probe[(probe > lo) & (probe < hi)]
+            if len(probe) == 0:
+                break
+            v = visible_from(free, pts[i], pts[probe])
+            if v.any():
+                j = int(np.flatnonzero(v)[-1])
+                lo = int(probe[j])
+                hi = int(probe[j + 1]) if j + 1 < len(probe) else hi
+            else:
+                hi = int(probe[0])
+        out.append(lo)
+        i = lo
+    return pts[out]
 
 
 def aux_path(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>") -> np.ndarray:
@@ -126,42 +186,23 @@ def aux_path(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>
     Raises
     ------
     PlanError
-        If b cannot be reached from a in the eroded free space.
+        If a or b is not in the eroded free space or they are not connected in it.
     """
     a, b = np.asarray(a, float), np.asarray(b, float)
     if is_clear(free, a, b):
         return np.array([a, b])
     h = free.resolution_m
-    rows, cols = free.eroded.shape
     ra, ca = int(a[1] // h), int(a[0] // h)
     rb, cb = int(b[1] // h), int(b[0] // h)
-    pad = max(1.0, 0.75 * float(np.hypot(*(b - a))))
-    while True:
-        p = int(np.ceil(pad / h))
-        r0, r1 = max(0, min(ra, rb) - p), min(rows, max(ra, rb) + p + 1)
-        c0, c1 = max(0, min(ca, cb) - p), min(cols, max(ca, cb) + p + 1)
-        win = free.eroded[r0:r1, c0:c1]
-        f = max(1, int(np.ceil(np.sqrt(win.size / _MAX_WINDOW_CELLS))))
-        pooled = _min_pool(win, f)
-        src = _nearest_true(pooled, ((ra - r0) // f, (ca - c0) // f))
-        dst = _nearest_true(pooled, ((rb - r0) // f, (cb - c0) // f))
-        cells = None
-        whole = r0 == 0 and c0 == 0 and r1 == rows and c1 == cols
-        if src is not None and dst is not None:
-            found = _dijkstra_cells(pooled, src, dst)
-            # accept only a path that no path leaving the window can beat
-            if found is not None and (whole or found[1] * f * h <= 2 * (p - 1) * h):
-                cells = found[0]
-        if cells is not None:
-            centres = np.column_stack([c0 * h + (cells[:, 1] + 0.5) * f * h,
-                                       r0 * h + (cells[:, 0] + 0.5) * f * h])
-            pts = np.vstack([a, centres, b])
-            # a and b may sit off the pooled cell centres: keep only what is clear
-            if not is_clear(free, a, pts[1]) or not is_clear(free, pts[-2], b):
-                cells = None
-            else:
-                return _simplify(free, pts)
-        if whole:
-            raise PlanError(source, f"no collision-free connection from ({a[0]:.2f}, {a[1]:.2f}) to "
-                                    f"({b[0]:.2f}, {b[1]:.2f}) m (grid frame) in the eroded free space")
-        pad *= 2
+    bg = free.block_graph()
+    corridor = bg.corridor(bg.sub_at(ra, ca), bg.sub_at(rb, cb))
+    if corridor is None:
+        raise PlanError(source, f"no collision-free connection from ({a[0]:.2f}, {a[1]:.2f}) to "
+                                f"({b[0]:.2f}, {b[1]:.2f}) m (grid frame) in the eroded free space")
+    rr, cc = bg.cells_of(corridor)
+    cells = cell_path(rr, cc, (ra, ca), (rb, cb))
+    if cells is None:   # cannot happen: the corridor holds a fine path (module doc)
+        raise PlanError(source, f"internal: no path in the corridor from ({a[0]:.2f}, {a[1]:.2f}) "
+                                f"to ({b[0]:.2f}, {b[1]:.2f}) m")
+    centres = np.column_stack([(cells[:, 1] + 0.5) * h, (cells[:, 0] + 0.5) * h])
+    return simplify(free, np.vstack([a, centres, b]))

@@ -14,6 +14,15 @@ Polytechnica Hungarica 15(2), 2018):
    (:mod:`boustrophedon`, :mod:`gridpath`);
 6. measure the corridor coverage (:mod:`corridors`).
 
+Unreachable segments
+    Main segments lie in the connected components of the eroded free space
+    (:mod:`blockgraph`). The route can only join segments of one component:
+    the one holding the most main-segment length is flown, and the segments
+    of every other component (a pocket closed off by the safety margin, an
+    island of free space) are dropped with a warning naming where they are
+    (``CoveragePlan.warnings``, ``dropped_segments``). The plan goes on; its
+    coverage fraction shows what is missing.
+
 Orientation rule
     * ``coverage.orientation_deg`` set: that direction, no sweep
       (``orientation_source = "config"``).
@@ -53,6 +62,8 @@ from .rows import WRAP_TOL_DEG, detect_rows
 SPACING_MATCH_REL = 0.05
 #: the rows' direction is kept (spacing mismatch) when it scores within this share of the best
 _ROW_SCORE_REL = 0.99
+#: places named in the unreachable-segments warning
+_MAX_PLACES = 5
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,6 +104,13 @@ class CoveragePlan:
         ISOA score of the flown direction; None if forced.
     row_orientation_deg : float or None
         Detected row direction (ENU deg, [0, 180)), None without rows.
+    dropped_segments : list of ((x0, y0), (x1, y1))
+        Main segments (ENU, m) left out because no path reaches them (module doc).
+    warnings : tuple of str
+        One line per group of dropped segments, naming where they are.
+    free_space : FreeSpace or None
+        The eroded free space itself (with its cached rasters and block graph),
+        for later connections (sortie transits).
     """
 
     path_xy_m: np.ndarray
@@ -110,6 +128,9 @@ class CoveragePlan:
     isoa_score_m: float | None = None
     orientation_score_m: float | None = None
     row_orientation_deg: float | None = None
+    dropped_segments: list = field(default_factory=list)
+    warnings: tuple[str, ...] = ()
+    free_space: object = None
 
 
 def _enu_deg(alpha_g_rad: float, yaw_rad: float) -> float:
@@ -171,7 +192,11 @@ def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig) -> CoveragePlan:
         raise PlanError(grid.source, f"no main segment of at least {cfg.min_segment_m} m fits "
                                      "in the eroded free space")
     starts, ends = seg.endpoints_g(alpha)
-    route = join_segments(free, starts, ends, seg.line, grid.source)
+    keep, warnings = reachable_segments(grid, free, starts, ends, cfg.safety_margin_m)
+    dropped = [(tuple(map(float, p)), tuple(map(float, q)))
+               for p, q in zip(grid_to_world(grid, starts[~keep]), grid_to_world(grid, ends[~keep]))]
+    starts, ends = starts[keep], ends[keep]
+    route = join_segments(free, starts, ends, seg.line[keep], grid.source)
     frac = coverage_fraction(corr, free, route.main_g, spacing)
     path = grid_to_world(grid, route.vertices_g)
     main_w = grid_to_world(grid, route.main_g)
@@ -191,4 +216,46 @@ def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig) -> CoveragePlan:
         isoa_score_m=None if sweep is None else sweep.score_m,
         orientation_score_m=score_flown,
         row_orientation_deg=rows.orientation_deg if has_rows else None,
+        dropped_segments=dropped,
+        warnings=warnings,
+        free_space=free,
     )
+
+
+def reachable_segments(grid: OccupancyGrid, free, starts_g: np.ndarray, ends_g: np.ndarray,
+                       margin_m: float) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Which main segments (G, m) the route can join, and a warning per dropped group.
+
+    Keeps the segments of the eroded-space component holding the most
+    main-segment length (module doc, "Unreachable segments").
+
+    Returns
+    -------
+    keep : (k,) bool
+    warnings : tuple of str
+        Empty, or one line: how many segments were dropped, their length and
+        where (ENU centroid of each unreachable component's segment mid-points, m).
+    """
+    h = free.resolution_m
+    bg = free.block_graph()
+    mid = 0.5 * (starts_g + ends_g)
+    comp = bg.components_of(np.floor(starts_g[:, 1] / h).astype(np.int64),
+                            np.floor(starts_g[:, 0] / h).astype(np.int64))
+    length = np.hypot(*(ends_g - starts_g).T)
+    ids, inv = np.unique(comp, return_inverse=True)
+    total = np.bincount(inv, length)
+    best = int(np.argmax(total))
+    keep = inv == best
+    others = [j for j in np.argsort(-total) if j != best]
+    if not others:
+        return keep, ()
+    where = []
+    for j in others[:_MAX_PLACES]:
+        cx, cy = grid_to_world(grid, mid[inv == j].mean(axis=0))
+        where.append(f"({cx:.1f}, {cy:.1f})")
+    more = f" and {len(others) - _MAX_PLACES} more places" if len(others) > _MAX_PLACES else ""
+    n_seg = int(np.count_nonzero(~keep))
+    warnings = [f"{grid.source}: {n_seg} main segment(s), {float(length[~keep].sum()):.1f} m, around "
+                f"{', '.join(where)} m{more} cannot be reached from the rest of the field in the free "
+                f"space eroded by the safety margin {margin_m:g} m: not flown"]
+    return keep, tuple(warnings)

@@ -51,6 +51,9 @@ _MAX_SWEEP_POINTS = 30_000
 #: 1e-4 deg is 2 mm over 1 km), so east-west rows do not print as "180.000"
 WRAP_TOL_DEG = 1e-4
 _MAX_SLOPE_POINTS = 300_000
+#: points of the final pass (offsets and spans of the rows): thousands per row on a
+#: 10 ha field even so; more only costs time
+_MAX_ROW_POINTS = 600_000
 
 
 class RowSpacing(NamedTuple):
@@ -279,14 +282,14 @@ def detect_rows(grid: OccupancyGrid, min_spacing_m: float = 1.0) -> RowStructure
     sweep = _subsample(pts, _MAX_SWEEP_POINTS)
     alpha = _best_angle(sweep, bin_m)
     # the first pass only yields the in-row slope: a statistic, so a stride
-    # subsample of the points is enough (the final pass uses them all)
+    # subsample of the points is enough (the final pass uses up to _MAX_ROW_POINTS)
     found = _rows_at(_subsample(pts, _MAX_SLOPE_POINTS), alpha, h, min_spacing_m)
     if found is None:
         return None
     # refine the direction by the pooled least-squares slope of the rows'
     # points (d against t within each row), then find the rows again
     alpha = (alpha + np.arctan(found[3])) % np.pi
-    found = _rows_at(pts, alpha, h, min_spacing_m)
+    found = _rows_at(_subsample(pts, _MAX_ROW_POINTS), alpha, h, min_spacing_m)
     if found is None:
         return None
     period, offsets, spans, _ = found

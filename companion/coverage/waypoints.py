@@ -84,6 +84,33 @@ def _run(a: np.ndarray, b: np.ndarray, dem: ElevationModel, agl: float):
     return p, arc
 
 
+def run_duration_s(length_m, flight: FlightConfig, a_ref_m_s2: float = A_REF_M_S2, speed_m_s: float | None = None):
+    """Duration (s) of a rest-to-rest straight run of ``length_m`` (scalar or array) as
+    :func:`extract_waypoints` times it (module doc): ``L / V + t_acc`` when the run holds
+    intermediate way-points, the quintic rest-to-rest time otherwise. ``speed_m_s``:
+    the run's cruise speed (default the flight speed)."""
+    L = np.asarray(length_m, dtype=float)
+    V = flight.speed_m_s if speed_m_s is None else speed_m_s
+    dt = flight.waypoint_interval_s
+    t_acc = _QUINTIC_PEAK_V * V / a_ref_m_s2
+    g_min = max(V * dt / 2, V * t_acc / 2)
+    short = np.maximum(_QUINTIC_PEAK_V * L / V, np.sqrt(_QUINTIC_PEAK_A * L / a_ref_m_s2))
+    return np.where(L >= 2 * g_min, L / V + t_acc, short)
+
+
+def run_waypoints(length_m, flight: FlightConfig, a_ref_m_s2: float = A_REF_M_S2, speed_m_s: float | None = None):
+    """Way-points a straight run of ``length_m`` (scalar or array) adds: its
+    intermediate ones plus the corner at its end (module doc)."""
+    L = np.asarray(length_m, dtype=float)
+    V = flight.speed_m_s if speed_m_s is None else speed_m_s
+    dt = flight.waypoint_interval_s
+    d = V * dt
+    t_acc = _QUINTIC_PEAK_V * V / a_ref_m_s2
+    g_min = max(d / 2, V * t_acc / 2)
+    n_mid = np.where(L >= 2 * g_min, np.floor((L - 2 * g_min) / d) + 1, 0)
+    return (n_mid + 1).astype(np.int64)
+
+
 def extract_waypoints(plan: CoveragePlan, dem: ElevationModel, flight: FlightConfig,
                       a_ref_m_s2: float = A_REF_M_S2) -> Waypoints:
     """Way-points of a coverage plan (placement and time allocation: module doc).
@@ -106,30 +133,31 @@ def extract_waypoints(plan: CoveragePlan, dem: ElevationModel, flight: FlightCon
     PlanError
         If the path has fewer than two distinct points.
     """
-    return waypoints_along(plan.path_xy_m, dem, flight, a_ref_m_s2)
+    return waypoints_along(np.asarray(plan.path_xy_m, dtype=float), dem, flight, a_ref_m_s2)
 
 
 def waypoints_along(path_xy_m: np.ndarray, dem: ElevationModel, flight: FlightConfig,
-                    a_ref_m_s2: float = A_REF_M_S2) -> Waypoints:
-    """Way-points of any polyline (``extract_waypoints`` without the plan; module doc).
+                    a_ref_m_s2: float = A_REF_M_S2, speeds_m_s: np.ndarray | None = None) -> Waypoints:
+    """Way-points along a polyline (ENU, m; consecutive vertices distinct): :func:`extract_waypoints`
+    for any path (a sortie with its transits).
 
-    Parameters
-    ----------
-    path_xy_m : (N, 2) array
-        Turning points (ENU, m); each becomes a corner way-point at rest.
-    dem, flight, a_ref_m_s2 : as ``extract_waypoints``.
+    ``speeds_m_s`` (K - 1,): cruise speed of each straight run (default: the
+    flight speed everywhere); the way-point spacing of a run is its speed
+    times the way-point interval.
     """
-    V, dt, agl = flight.speed_m_s, flight.waypoint_interval_s, flight.height_agl_m
+    dt, agl = flight.waypoint_interval_s, flight.height_agl_m
     path = np.asarray(path_xy_m, dtype=float)
     if len(path) < 2:
         raise PlanError("<plan>", "the coverage path has fewer than two points")
-    d = V * dt
-    t_acc = _QUINTIC_PEAK_V * V / a_ref_m_s2
-    g_min = max(d / 2, V * t_acc / 2)
+    if speeds_m_s is None:
+        speeds_m_s = np.full(len(path) - 1, flight.speed_m_s)
     p0 = np.append(path[0], dem.height_at(path[0, 0], path[0, 1]) + agl)
     ts, ps, vs, cs = [0.0], [p0], [np.zeros(3)], [True]
     t = 0.0
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b, V in zip(path[:-1], path[1:], speeds_m_s):
+        d = V * dt
+        t_acc = _QUINTIC_PEAK_V * V / a_ref_m_s2
+        g_min = max(d / 2, V * t_acc / 2)
         dense, arc = _run(a, b, dem, agl)
         S = float(arc[-1])
         n_mid = int(np.floor((S - 2 * g_min) / d)) + 1 if S >= 2 * g_min else 0

@@ -1,10 +1,10 @@
 """MAVLink encode/decode for the companion: the only companion module that
 speaks NED/FRD, wire units and MAVLink's [w, x, y, z] quaternions.
 
-Everything it returns is ENU world / FLU body, SI units (DESIGN.md "Frames
-and units"); every frame change goes through ``companion.frames``. Decoders
-take a pymavlink message object and return a small named result; encoders take
-a pymavlink ``MAVLink`` protocol object (``conn.mav``) and return the message
+Everything it returns is ENU world / FLU body, SI units (docs/frames.md);
+every frame change goes through ``companion.frames``. Decoders take a
+pymavlink message object and return a small named result; encoders take a
+pymavlink ``MAVLink`` protocol object (``conn.mav``) and return the message
 object, ready for ``conn.send``.
 
 The decoders of the per-frame messages (HIGHRES_IMU, LOCAL_POSITION_NED) are
@@ -208,6 +208,14 @@ def decode_attitude_quaternion(msg) -> Attitude:
     """ATTITUDE_QUATERNION ([w, x, y, z], body FRD -> NED) -> ``R_enu_flu``."""
     R_ned_frd = frames.quat_wxyz2rotmat((msg.q1, msg.q2, msg.q3, msg.q4))
     return Attitude(int(msg.time_boot_ms), frames.R_ned_frd2enu_flu(R_ned_frd))
+
+
+def decode_param_value(msg) -> float | int:
+    """PARAM_VALUE's value: INT32 parameters travel byte-wise in the float field
+    (PX4's and this project's SITL's convention, MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
+    if int(msg.param_type) == mavlink.MAV_PARAM_TYPE_INT32:
+        return struct.unpack("<i", struct.pack("<f", float(msg.param_value)))[0]
+    return float(msg.param_value)
 
 
 def decode_heartbeat(msg) -> VehicleState:
@@ -426,6 +434,21 @@ def encode_mission_item_int(mav, seq: int, pos_enu_m, home_lat_deg: float, home_
     )
 
 
+def encode_mission_item(mav, seq: int, item, target_system: int = 1, target_component: int = 1,
+                        mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION, current: bool = False):
+    """MISSION_ITEM_INT from a ``companion.mission_items.MissionItem`` (degrees, m AMSL).
+
+    Latitude/longitude become 1e7 degrees here (the only place they may).
+    ``mission_type``: MAV_MISSION_TYPE_MISSION or MAV_MISSION_TYPE_FENCE.
+    """
+    p1, p2, p3, p4 = (float(v) for v in item.params)
+    return mav.mission_item_int_encode(
+        target_system, target_component, seq, int(item.frame), int(item.command), 1 if current else 0,
+        1 if item.autocontinue else 0, p1, p2, p3, p4,
+        int(round(item.lat_deg * 1e7)), int(round(item.lon_deg * 1e7)), float(item.alt_m), mission_type,
+    )
+
+
 def decode_mission_item_int(msg, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> np.ndarray:
     """MISSION_ITEM_INT in ``MAV_FRAME_GLOBAL_INT`` -> ENU way-point (3,) m about home."""
     x, y, z = frames.geodetic2enu(msg.x * 1e-7, msg.y * 1e-7, float(msg.z), home_lat_deg, home_lon_deg, home_alt_m)
@@ -458,6 +481,60 @@ def encode_hil_actuator_controls(mav, time_usec: int, motor_cmd, armed: bool):
 def px4_custom_mode(main_mode: int, sub_mode: int = 0) -> int:
     """PX4 custom_mode value of a main/sub mode pair."""
     return (main_mode << 16) | (sub_mode << 24)
+
+
+@dataclass(frozen=True, slots=True)
+class GlobalPosition:
+    """GLOBAL_POSITION_INT in SI units and ENU.
+
+    Attributes
+    ----------
+    time_boot_ms : int
+    lat_deg, lon_deg : float
+        WGS-84 (1e-7 degree resolution on the wire: about 1.1 cm north, less east).
+    alt_m : float
+        Altitude AMSL (m).
+    relative_alt_m : float
+        Altitude above the vehicle's home (m).
+    vel_enu_m_s : tuple (3,)
+        Ground velocity, ENU, m/s (cm/s resolution on the wire).
+    """
+
+    time_boot_ms: int
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    relative_alt_m: float
+    vel_enu_m_s: tuple
+
+
+@dataclass(frozen=True, slots=True)
+class HomePosition:
+    """HOME_POSITION: the vehicle's home, geodetic and in its local frame.
+
+    Attributes
+    ----------
+    lat_deg, lon_deg, alt_m : float
+        WGS-84, altitude AMSL (m).
+    pos_enu_m : tuple (3,)
+        The home in the vehicle's local frame (ENU, m).
+    """
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    pos_enu_m: tuple
+
+
+def decode_home_position(msg) -> HomePosition:
+    """HOME_POSITION (1e7 deg, mm, local NED) -> ``HomePosition`` (deg, m, ENU)."""
+    return HomePosition(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3, (msg.y, msg.x, -msg.z))
+
+
+def decode_global_position_int(msg) -> GlobalPosition:
+    """GLOBAL_POSITION_INT (1e7 deg, mm, cm/s NED) -> ``GlobalPosition`` (deg, m, m/s ENU)."""
+    return GlobalPosition(int(msg.time_boot_ms), msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3,
+                          msg.relative_alt * 1e-3, (msg.vy * 0.01, msg.vx * 0.01, -msg.vz * 0.01))
 
 
 # --- fast MAVLink 2 framing of the per-frame messages ---------------------------
@@ -521,15 +598,25 @@ class FastMessage(tuple):
 
     def to_dict(self) -> dict:
         d = {"mavpackettype": self._msgname}
-        d.update(zip(self._fieldnames, self))
+        d.update((k, getattr(self, k)) for k in self._fieldnames)
         return d
 
     def __repr__(self) -> str:
-        return f"{self._msgname} {{{', '.join(f'{k} : {v}' for k, v in zip(self._fieldnames, self))}}}"
+        return f"{self._msgname} {{{', '.join(f'{k} : {getattr(self, k)}' for k in self._fieldnames)}}}"
+
+
+def _array_field(a: int, b: int, name: str) -> property:
+    """An array field: a fresh list of the flat values a..b (built only when read)."""
+    return property(lambda self: list(self[a:b]), doc=f"field {name}")
 
 
 class FastDecoder:
-    """struct decoder of one message type (``msg_class``: pymavlink's class)."""
+    """struct decoder of one message type (``msg_class``: pymavlink's class).
+
+    The message is the flat unpacked tuple (then system id, component id,
+    packet); an array field (ODOMETRY's ``q`` and covariances) is a list made
+    from its slice of that tuple when it is read, not at every decode.
+    """
 
     def __init__(self, msg_class) -> None:
         self.msgid = int(msg_class.id)
@@ -538,17 +625,19 @@ class FastDecoder:
         self.size = int(msg_class.unpacker.size)
         names = tuple(msg_class.ordered_fieldnames)
         lengths = tuple(int(k) for k in msg_class.array_lengths)
-        # (start, stop) of each array field in the flat unpacked tuple
-        self.groups = None
-        if any(lengths):
-            groups, i = [], 0
-            for k in lengths:
-                groups.append((i, i + max(k, 1), k > 0))
-                i += max(k, 1)
-            self.groups = tuple(groups)
-        attrs = {"__slots__": (), "_msgname": msg_class.msgname, "_msgid": self.msgid, "_fieldnames": names}
-        for i, n in enumerate(names):
-            attrs[n] = property(operator.itemgetter(i), doc=f"field {n}")
+        types = dict(zip(msg_class.fieldnames, msg_class.fieldtypes))
+        attrs = {"__slots__": (), "_msgname": msg_class.msgname, "_msgid": self.msgid,
+                 "_fieldnames": tuple(msg_class.fieldnames)}
+        i = 0
+        for n, k in zip(names, lengths):
+            if k and types[n] == "char":
+                raise ValueError(f"FastDecoder: {msg_class.msgname}.{n} is text (not supported)")
+            if k:
+                attrs[n] = _array_field(i, i + k, n)
+                i += k
+            else:
+                attrs[n] = property(operator.itemgetter(i), doc=f"field {n}")
+                i += 1
         self.cls = type("Fast_" + msg_class.msgname, (FastMessage,), attrs)
 
     def decode(self, packet: bytes, payload: bytes, sysid: int, compid: int) -> FastMessage:
@@ -556,12 +645,7 @@ class FastDecoder:
         n = len(payload)
         if n != self.size:   # MAVLink 2 zero truncation, or a longer (newer) payload
             payload = payload + bytes(self.size - n) if n < self.size else payload[:self.size]
-        flat = self.unpacker.unpack(payload)
-        if self.groups is None:
-            return tuple.__new__(self.cls, flat + (sysid, compid, packet))
-        vals = [list(flat[a:b]) if arr else flat[a] for a, b, arr in self.groups]
-        vals += (sysid, compid, packet)
-        return tuple.__new__(self.cls, vals)
+        return tuple.__new__(self.cls, self.unpacker.unpack(payload) + (sysid, compid, packet))
 
 
 #: The types decoded without pymavlink (the per-frame telemetry of a lockstep run).
@@ -626,11 +710,9 @@ _MODE_DISARMED = mavlink.MAV_MODE_FLAG_HIL_ENABLED
 _ZERO12 = (0.0,) * 12
 
 
-def pack_hil_actuator_controls(seq: int, system_id: int, component_id: int, time_usec: int, motor_cmd,
-                               armed: bool) -> bytes:
-    """The packet of ``encode_hil_actuator_controls(...)`` framed as pymavlink
-    would (unsigned MAVLink 2, sequence ``seq``), without a message object:
-    byte-identical to ``msg.pack(mav)`` (tested)."""
+def hil_actuator_controls_payload(time_usec: int, motor_cmd, armed: bool) -> bytes:
+    """The MAVLink 2 payload (zero-truncated, as on the wire) of
+    ``encode_hil_actuator_controls(mav, time_usec, motor_cmd, armed)``."""
     mode = _MODE_ARMED if armed else _MODE_DISARMED
     if motor_cmd is None:
         payload = _HIL_PAYLOAD.pack(time_usec, HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP, *_NAN16, mode)
@@ -638,7 +720,15 @@ def pack_hil_actuator_controls(seq: int, system_id: int, component_id: int, time
         m0, m1, m2, m3 = motor_cmd
         payload = _HIL_PAYLOAD.pack(time_usec, HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP, m0, m1, m2, m3, *_ZERO12,
                                     mode)
-    payload = payload.rstrip(b"\0") or b"\0"   # MAVLink 2 trailing-zero truncation
+    return payload.rstrip(b"\0") or b"\0"   # MAVLink 2 trailing-zero truncation
+
+
+def pack_hil_actuator_controls(seq: int, system_id: int, component_id: int, time_usec: int, motor_cmd,
+                               armed: bool) -> bytes:
+    """The packet of ``encode_hil_actuator_controls(...)`` framed as pymavlink
+    would (unsigned MAVLink 2, sequence ``seq``), without a message object:
+    byte-identical to ``msg.pack(mav)`` (tested)."""
+    payload = hil_actuator_controls_payload(time_usec, motor_cmd, armed)
     head = _V2_HEADER.pack(0xFD, len(payload), 0, 0, seq, system_id, component_id, _HIL_ID & 0xFF,
                            (_HIL_ID >> 8) & 0xFF, _HIL_ID >> 16)
     body = head + payload

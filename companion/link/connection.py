@@ -13,6 +13,15 @@ second of vehicle time (``heartbeat_due``). Receiving never raises on bad
 bytes: undecodable data is counted in ``n_bad`` and dropped. Timeouts that
 guard the link's liveness (no answer at all) are wall-clock; everything the
 flight does is timed by the vehicle's clock in the runner.
+
+UDP sockets are opened by ``companion.link.sockets.open_udp``: ``udpout``
+is connected to the vehicle (the kernel drops datagrams from anyone else),
+``udpin`` binds exactly the address given, and a port in use is an error.
+Every received message passes ``companion.link.auth.VehicleFilter`` (the
+vehicle's ids, its address, signatures, plausible vehicle time); what it
+drops is counted in ``link_stats()``. With ``signing_key`` every message
+sent is signed (MAVLink 2) and only correctly signed vehicle messages are
+accepted.
 """
 
 from __future__ import annotations
@@ -28,6 +37,9 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from ..errors import CommandRejected, InputError, LinkError
 from . import codec
+from .auth import LinkStats, VehicleFilter
+from .signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
+from .sockets import is_udp_url, open_udp
 from .tlog import TlogWriter
 
 COMPANION_SYSTEM_ID = 1
@@ -66,7 +78,11 @@ class Connection:
     tlog : TlogWriter or None
         Records every packet sent and received (already opened by the caller).
     target_system, target_component : int
-        The vehicle (DESIGN.md: 1/1).
+        The vehicle (1/1, docs/mavlink.md "Who is who").
+    signing_key : bytes or None
+        32-byte MAVLink 2 signing key (``companion.link.signing.load_signing_key``).
+    max_time_jump_s : float
+        Vehicle-time tolerance of ``VehicleFilter`` (s).
 
     Notes
     -----
@@ -74,12 +90,18 @@ class Connection:
     """
 
     def __init__(self, url: str, tlog: TlogWriter | None = None, target_system: int = 1,
-                 target_component: int = 1) -> None:
+                 target_component: int = 1, signing_key: bytes | None = None,
+                 max_time_jump_s: float = 1.0) -> None:
         check_connection_string(url)
         self.url = url
         self.tlog = tlog
         self.target_system = target_system
         self.target_component = target_component
+        self.signing_key = None if signing_key is None else bytes(signing_key)
+        self.filter = VehicleFilter(target_system, target_component,
+                                    None if signing_key is None else SignatureVerifier(signing_key),
+                                    max_time_jump_s)
+        self._parser = None        # MAVLink object without a key: signatures are VehicleFilter's
         self.n_bad = 0
         self.n_received = 0
         self.n_sent = 0
@@ -92,7 +114,9 @@ class Connection:
         self._sock = None          # UDP socket read/written directly (see ``open``)
         self._dest = None          # udpout: the vehicle's resolved address
         self._rcvtimeo = None      # the socket's current SO_RCVTIMEO (s)
-        self._rx_log = None        # (time_usec, packets) received, not yet in the tlog
+        self._rx_log = None        # packets received, not yet in the tlog (see ``_record_answer``)
+        self._rx_frames = None     # [(index in _rx_log, HIGHRES_IMU time_usec)] of that batch
+        self._tx_log = []          # packets sent while a received batch waits, in order
         #: Lockstep (set by the runner): a datagram that does not end a sensor
         #: frame (an immediate reply such as COMMAND_ACK or MISSION_REQUEST) is
         #: returned together with the vehicle's next frame datagram, so that
@@ -104,49 +128,79 @@ class Connection:
         #: usually arrives within tens of microseconds, less than a process
         #: wake-up costs. Only worth it with the vehicle on another core.
         self.spin_s = 0.0
+        #: Time stamp (us) for the .tlog records: the runner maps the vehicle's
+        #: clock onto the wall clock (``MissionRunner._stamp_us``); None: wall clock.
+        self.clock: Callable[[], int] | None = None
+
+    def _stamp(self) -> int:
+        c = self.clock
+        return c() if c is not None else int(time.time() * 1e6)
 
     # --- lifetime ---------------------------------------------------------
 
     def open(self) -> "Connection":
-        from pymavlink import mavutil  # deferred: importing mavutil is slow and sets a global dialect
+        """Create the socket (or serial/TCP connection).
 
-        os.environ["MAVLINK20"] = "1"  # mavutil picks its dialect module from this variable
-        try:
-            self._conn = mavutil.mavlink_connection(
-                self.url, source_system=COMPANION_SYSTEM_ID, source_component=COMPANION_COMPONENT_ID,
-                dialect="common", autoreconnect=True)
-        except OSError as exc:
-            raise LinkError(f"cannot open {self.url}: {exc}") from None
-        self._mav = self._conn.mav
-        self._mav.robust_parsing = True
-        try:
-            self._fd = self._conn.fd if self._conn.fd is not None else self._conn.port.fileno()
-        except AttributeError:
-            self._fd = None
-        if isinstance(self._conn, mavutil.mavudp) and not self._conn.broadcast:
+        Raises
+        ------
+        InputError
+            Unknown host, port in use, connection refused: one line naming ``--connect``.
+        """
+        if is_udp_url(self.url):
             # Read and write the UDP socket directly: a blocking socket with a
             # kernel receive timeout (SO_RCVTIMEO) waits for the next frame in
             # one recvfrom() instead of select() + recvfrom() + a failing
             # recvfrom(); MSG_DONTWAIT polls without waiting.
-            self._sock = self._conn.port
-            self._sock.setblocking(True)
-            if not self._conn.udp_server:
-                host, port = self._conn.destination_addr
-                try:
-                    self._dest = (socket.gethostbyname(host), port)
-                except OSError as exc:
-                    raise LinkError(f"cannot resolve {self.url}: {exc}") from None
+            us = open_udp(self.url, "--connect")
+            self._sock = us.sock
+            self._dest = us.peer
+            self._fd = self._sock.fileno()
+            self._mav = mavlink.MAVLink(None, srcSystem=COMPANION_SYSTEM_ID, srcComponent=COMPANION_COMPONENT_ID)
+            self._conn = us
+        else:
+            from pymavlink import mavutil  # deferred: importing mavutil is slow and sets a global dialect
+
+            os.environ["MAVLINK20"] = "1"  # mavutil picks its dialect module from this variable
+            try:
+                self._conn = mavutil.mavlink_connection(
+                    self.url, source_system=COMPANION_SYSTEM_ID, source_component=COMPANION_COMPONENT_ID,
+                    dialect="common", autoreconnect=True, retries=0)   # one attempt: no "sleeping" retries on stdout
+            except OSError as exc:
+                raise InputError(f"--connect {self.url}", f"cannot connect: {exc.strerror or exc}") from None
+            self._mav = self._conn.mav
+            try:
+                self._fd = self._conn.fd if self._conn.fd is not None else self._conn.port.fileno()
+            except AttributeError:
+                self._fd = None
+        self._mav.robust_parsing = True
+        self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
+        if self.signing_key is not None:
+            ts = signing_timestamp(time.time())
+            self.filter.verifier.timestamp = ts
+            enable_outgoing_signing(self._mav, self.signing_key, 0, ts)
         return self
 
     def close(self) -> None:
         self._flush_rx()
-        self._sock = None
+        sock, self._sock = self._sock, None
         if self._conn is not None:
             try:
-                self._conn.close()
+                if sock is not None:
+                    sock.close()
+                else:
+                    self._conn.close()
             except OSError:
                 pass
             self._conn = None
+
+    def link_stats(self) -> LinkStats:
+        """What was received and dropped so far (``companion.link.auth``; for report.json)."""
+        return self.filter.stats(self.n_bad)
+
+    def auth_stats(self) -> dict:
+        """``{"auth": link_stats()}`` as JSON, for report.json's ``link`` (the runner merges it)."""
+        return {"auth": self.link_stats().to_dict()}
 
     def __enter__(self) -> "Connection":
         return self.open()
@@ -176,22 +230,58 @@ class Connection:
             self._write(buf)
         self.n_sent += 1
         if self.tlog is not None:
-            self._flush_rx()
-            self.tlog.write(msg.get_msgbuf())
+            self._record_sent(msg.get_msgbuf())
+
+    def _record_sent(self, buf) -> None:
+        if self._rx_log is None:
+            self.tlog.write(buf, self._stamp())
+        else:
+            self._tx_log.append(buf)
 
     def _flush_rx(self) -> None:
-        """Record the packets of the last datagram received (deferred until
-        after the answer went out: in lockstep the vehicle waits for it)."""
+        """Record what waits: the packets of the last batch received, then the
+        packets sent since, with one stamp (the clock now)."""
         rx = self._rx_log
         if rx is not None:
             self._rx_log = None
+            self._rx_frames = None
+            tx, self._tx_log = self._tx_log, []
             if self.tlog is not None:
-                self.tlog.write_many(rx[1], rx[0])
+                self.tlog.write_many(rx + tx, self._stamp())
+
+    def _record_answer(self, time_usec: int) -> None:
+        """The answer to sensor frame ``time_usec`` went out (it is the last packet
+        of ``_tx_log``): record the received packets up to and including that
+        frame's HIGHRES_IMU, then what was sent since, stamped now, i.e. with
+        the frame's vehicle time (the runner's clock, which reads the vehicle
+        time of the frame just handled). In lockstep a batch is one frame and
+        the whole batch goes; a batch of several frames (free-running vehicle)
+        is recorded frame by frame, each with its own time. Deferred until
+        after the answer: in lockstep the vehicle waits for it."""
+        rx = self._rx_log
+        if rx is None:
+            return
+        cut = None
+        for k, (i, t) in enumerate(self._rx_frames):
+            if t == time_usec:
+                cut = k
+                break
+        if cut is None or cut == len(self._rx_frames) - 1:
+            self._flush_rx()
+            return
+        i = self._rx_frames[cut][0] + 1
+        tx, self._tx_log = self._tx_log, []
+        self.tlog.write_many(rx[:i] + tx, self._stamp())
+        self._rx_log = rx[i:]
+        self._rx_frames = [(j - i, t) for j, t in self._rx_frames[cut + 1:]]
 
     def _write(self, buf: bytes) -> None:
-        if self._dest is not None:
+        if self._sock is not None:
             try:
-                self._sock.sendto(buf, self._dest)
+                if self._dest is not None:
+                    self._sock.send(buf)                       # connected to the vehicle
+                elif self.filter.vehicle_addr is not None:    # udpin: the vehicle's bound address
+                    self._sock.sendto(buf, self.filter.vehicle_addr)
             except OSError:   # e.g. ECONNREFUSED left by an ICMP error: UDP is lossy anyway
                 pass
         else:
@@ -204,6 +294,8 @@ class Connection:
         mav = self._mav
         if self._sock is None or mav.signing.sign_outgoing:
             self.send(codec.encode_hil_actuator_controls(mav, time_usec, motor_cmd, armed))
+            if self.tlog is not None:
+                self._record_answer(time_usec)
             return
         buf = codec.pack_hil_actuator_controls(mav.seq, mav.srcSystem, mav.srcComponent, time_usec, motor_cmd,
                                                armed)
@@ -212,8 +304,8 @@ class Connection:
         self._write(buf)
         self.n_sent += 1
         if self.tlog is not None:
-            self._flush_rx()
-            self.tlog.write(buf)
+            self._record_sent(buf)
+            self._record_answer(time_usec)
 
     def send_heartbeat(self) -> None:
         self.send(self._mav.heartbeat_encode(
@@ -230,12 +322,12 @@ class Connection:
 
     def _parse(self, data: bytes) -> list:
         try:
-            msgs = self._mav.parse_buffer(data)
+            msgs = self._parser.parse_buffer(data)
         except Exception:  # noqa: BLE001 - pymavlink raises on some garbage; never crash the link
             msgs = None
             self.n_bad += 1
             self._reset_parser()
-        if self._is_udp and self._mav.buf_len() > 0:
+        if self._is_udp and self._parser.buf_len() > 0:
             # A UDP datagram carries whole packets: leftover bytes are garbage
             # (or a bad header claiming a long length) and must not swallow
             # the next datagram, which in lockstep would stall the vehicle.
@@ -251,18 +343,22 @@ class Connection:
         return good
 
     def _reset_parser(self) -> None:
-        self._mav.buf = bytearray()
-        self._mav.buf_index = 0
-        self._mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+        self._parser.buf = bytearray()
+        self._parser.buf_index = 0
+        self._parser.expected_length = mavlink.HEADER_LEN_V1 + 2
 
     def feed(self, data: bytes) -> list:
-        """Parse raw bytes as if received (used by tests and replay); returns good messages."""
+        """Parse raw bytes as if received (used by tests and replay); returns good
+        messages (not filtered: ``VehicleFilter`` judges what came from a socket)."""
+        if self._parser is None:
+            self._parser = mavlink.MAVLink(None)
+            self._parser.robust_parsing = True
         return self._parse(data)
 
     def _parse_datagram(self, data: bytes) -> list:
         """Messages of one UDP datagram: the per-frame types decoded by
         ``codec.split_datagram``, everything else by pymavlink (``_parse``)."""
-        if self._mav.signing.secret_key is not None:
+        if self.signing_key is not None:
             return self._parse(data)
         out = []
         for part in codec.split_datagram(data):
@@ -296,8 +392,7 @@ class Connection:
         waiting up to ``timeout_s``)."""
         self._flush_rx()
         sock = self._sock
-        conn = self._conn
-        server = conn.udp_server
+        vfilter = self.filter
         out: list = []
         wait = timeout_s > 0
         if wait and timeout_s != self._rcvtimeo:
@@ -315,11 +410,8 @@ class Connection:
                     data, addr = sock.recvfrom(65536, socket.MSG_DONTWAIT)
             except OSError:   # timeout / nothing queued (EAGAIN), ECONNREFUSED, EINTR
                 break
-            if server:
-                conn.clients.add(addr)
-                conn.clients_last_alive[addr] = time.time()
             if data:
-                out += self._parse_datagram(data)
+                out += vfilter.filter(self._parse_datagram(data), addr)
             # In lockstep the vehicle sends one datagram per frame, ending with
             # HIGHRES_IMU, and waits for the answer: return it at once instead
             # of paying for a drain read that finds nothing.
@@ -329,7 +421,9 @@ class Connection:
             self.n_received += len(out)
             if self.tlog is not None:
                 self._flush_rx()
-                self._rx_log = (int(time.time() * 1e6), [m.get_msgbuf() for m in out])
+                # stamped when written (after the frame was handled: its vehicle time)
+                self._rx_log = [m.get_msgbuf() for m in out]
+                self._rx_frames = [(i, m.time_usec) for i, m in enumerate(out) if m.get_type() == "HIGHRES_IMU"]
         return out
 
     def poll(self, timeout_s: float = 0.0) -> list:
@@ -342,6 +436,8 @@ class Connection:
         conn = self._conn
         if conn is None:
             raise LinkError("connection is not open")
+        if self.tlog is not None:
+            self.tlog.tick()   # flushed at least once a flush interval, even while the link is silent
         if self._sock is not None:
             return self._poll_udp(timeout_s)
         if timeout_s > 0 and self._fd is not None:
@@ -360,10 +456,10 @@ class Connection:
                 break
             if not data:
                 break
-            for m in self._parse(data):
+            for m in self.filter.filter(self._parse(data), None):
                 out.append(m)
                 if tlog is not None:
-                    tlog.write(m.get_msgbuf())
+                    tlog.write(m.get_msgbuf(), self._stamp())
         self.n_received += len(out)
         if not out and timeout_s > 0 and self._fd is None:
             time.sleep(min(timeout_s, 0.001))

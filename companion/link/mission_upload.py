@@ -22,15 +22,38 @@ from pymavlink.dialects.v20 import common as mavlink
 from ..errors import CommandRejected, LinkError
 
 
-class MissionRejected(CommandRejected):
-    """The vehicle answered the upload with a MISSION_ACK other than ACCEPTED."""
+def mission_result_text(result: int, n_items: int | None = None, capacity: int | None = None) -> str:
+    """A MAV_MISSION_RESULT in words: its name and what it means for this upload.
 
-    def __init__(self, result: int) -> None:
+    ``MAV_MISSION_NO_SPACE`` reads "no space: N items, vehicle holds M" (M from
+    ``capacity`` when the caller knows it, e.g. ``energy.max_mission_items``).
+    """
+    entry = mavlink.enums["MAV_MISSION_RESULT"].get(int(result))
+    name = entry.name if entry is not None else f"MAV_MISSION_RESULT {int(result)}"
+    if result == mavlink.MAV_MISSION_NO_SPACE:
+        holds = f"vehicle holds {capacity}" if capacity is not None else "more than the vehicle holds"
+        items = f"{n_items} items" if n_items is not None else "the mission"
+        return f"no space: {items}, {holds} ({name})"
+    short = name.removeprefix("MAV_MISSION_").lower().replace("_", " ")
+    desc = (entry.description or "").strip().rstrip(".") if entry is not None else ""
+    return f"{short}: {desc} ({name})" if desc else f"{short} ({name})"
+
+
+class MissionRejected(CommandRejected):
+    """The vehicle answered the upload with a MISSION_ACK other than ACCEPTED.
+
+    The message is the MAV_MISSION_RESULT in words (:func:`mission_result_text`),
+    not a MAV_RESULT: ``str(exc)`` reads e.g. "mission upload rejected: no space:
+    2500 items, vehicle holds 2000 (MAV_MISSION_NO_SPACE)".
+    """
+
+    def __init__(self, result: int, n_items: int | None = None, capacity: int | None = None) -> None:
         super().__init__(mavlink.MAVLINK_MSG_ID_MISSION_COUNT, result, "mission upload")
+        self.args = (f"mission upload rejected: {mission_result_text(result, n_items, capacity)}",)
 
 
 def upload_mission(conn, items: list, timeout_s: float = 1.0, retries: int = 5,
-                   mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION) -> int:
+                   mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION, capacity: int | None = None) -> int:
     """Upload ``items`` (MISSION_ITEM_INT messages with seq 0..n-1) to the vehicle.
 
     Parameters
@@ -43,6 +66,10 @@ def upload_mission(conn, items: list, timeout_s: float = 1.0, retries: int = 5,
         Wall-clock wait for each vehicle message before a retry.
     retries : int
         Retries per step before giving up.
+    mission_type : int
+        MAV_MISSION_TYPE_MISSION, or MAV_MISSION_TYPE_FENCE for a geofence.
+    capacity : int, optional
+        Items the vehicle holds, if known (named in a NO_SPACE rejection).
 
     Returns
     -------
@@ -88,10 +115,10 @@ def upload_mission(conn, items: list, timeout_s: float = 1.0, retries: int = 5,
             if m.type == mavlink.MAV_MISSION_ACCEPTED and (n == 0 or last_sent == n - 1):
                 return n
             if m.type != mavlink.MAV_MISSION_ACCEPTED:
-                raise MissionRejected(int(m.type))
+                raise MissionRejected(int(m.type), n, capacity)
             continue  # a stale ACK from an earlier transaction
         seq = int(m.seq)
         if not 0 <= seq < n:
-            raise MissionRejected(mavlink.MAV_MISSION_INVALID_SEQUENCE)
+            raise MissionRejected(mavlink.MAV_MISSION_INVALID_SEQUENCE, n, capacity)
         conn.send(items[seq])
         last_sent = seq

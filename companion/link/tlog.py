@@ -1,8 +1,10 @@
 """Telemetry logs (.tlog) in pymavlink's format, written and read.
 
 A .tlog is a sequence of records: a big-endian uint64 timestamp (microseconds
-since the Unix epoch, wall clock, as pymavlink/MAVProxy write it) followed by
-one raw MAVLink packet (v1 or v2, signature included). The recorder logs both
+since the Unix epoch, as pymavlink/MAVProxy write it) followed by one raw
+MAVLink packet (v1 or v2, signature included). The time stamp is the caller's
+(the runner maps the vehicle clock onto the wall time of the flight start,
+docs/tlog.md), else the wall clock. The recorder logs both
 directions and flushes by wall clock at least once a second and on close, so
 a crash loses at most the last second. pymavlink's ``mavutil.mavlink_connection``
 reads these files; ``read_tlog`` here is a dependency-light reader for replay.
@@ -16,11 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
-from pymavlink.dialects.v20 import common as mavlink
 
 _TS = struct.Struct(">Q")
-_MAGIC_V1 = 0xFE
-_MAGIC_V2 = 0xFD
 
 
 class TlogWriter:
@@ -31,7 +30,7 @@ class TlogWriter:
     path : str or Path
         Output file (created or truncated by ``open``).
     flush_interval_s : float
-        Longest wall-clock time between flushes (<= 1 s per DESIGN.md).
+        Longest wall-clock time between flushes (<= 1 s, docs/tlog.md).
 
     Notes
     -----
@@ -83,6 +82,17 @@ class TlogWriter:
         if self._file is not None:
             self._file.flush()
 
+    def tick(self) -> None:
+        """Flush if the interval has passed since the last flush. ``write`` flushes
+        only when it is called; a caller that may go quiet (no packet for a
+        while: a silent link) calls this regularly so that nothing written
+        waits in the buffer longer than ``flush_interval_s``."""
+        if self._file is not None:
+            now = time.monotonic()
+            if now >= self._next_flush:
+                self._file.flush()
+                self._next_flush = now + self.flush_interval_s
+
     def close(self) -> None:
         if self._file is not None:
             self._file.flush()
@@ -104,53 +114,48 @@ class TlogRecord:
     msg: object
 
 
-def _packet_length(buf: bytes, i: int) -> int:
-    """Length of the MAVLink packet starting at ``buf[i]`` (0 if not a packet start)."""
-    magic = buf[i]
-    if magic == _MAGIC_V2:
-        if i + 3 > len(buf):
-            return 0
-        signed = buf[i + 2] & mavlink.MAVLINK_IFLAG_SIGNED
-        return buf[i + 1] + 12 + (mavlink.MAVLINK_SIGNATURE_BLOCK_LEN if signed else 0)
-    if magic == _MAGIC_V1:
-        if i + 2 > len(buf):
-            return 0
-        return buf[i + 1] + 8
-    return 0
-
-
 def read_tlog(path: str | Path, skip_bad: bool = True) -> Iterator[TlogRecord]:
-    """Iterate over the records of a .tlog file.
+    """Iterate over the records of a .tlog file (read in chunks: memory does not
+    grow with the file).
+
+    Framing, CRC checks and resynchronisation are ``companion.link.tlog_scan``'s:
+    a damaged region is skipped and every valid record before and after it is
+    returned.
 
     Parameters
     ----------
     path : str or Path
     skip_bad : bool
-        Skip a record whose packet does not decode (bad CRC, unknown id)
-        instead of raising; a truncated tail ends the iteration quietly.
+        Skip damaged regions (bad CRC, garbage, a truncated tail) quietly;
+        False: raise ValueError at the first one.
 
     Yields
     ------
     TlogRecord
+        The per-frame telemetry types as ``codec.FastMessage`` (fields by
+        name, like pymavlink's), the others as pymavlink messages.
     """
-    data = Path(path).read_bytes()
-    parser = mavlink.MAVLink(None)
-    parser.robust_parsing = True
-    i, n = 0, len(data)
-    while i + 8 < n:
-        (t_us,) = _TS.unpack_from(data, i)
-        length = _packet_length(data, i + 8)
-        if length == 0 or i + 8 + length > n:
-            if length == 0 and skip_bad:
-                i += 1  # resynchronise byte by byte on a corrupted record
+    from .tlog_scan import TlogScanner, decode_record, new_decoder
+
+    scanner = TlogScanner()
+    dec = new_decoder()
+
+    def out(records):
+        if not skip_bad and scanner.summary.n_regions:
+            r = scanner.summary.regions[0]
+            raise ValueError(f"{path}: {r.kind} at byte {r.offset} ({r.n_bytes} bytes)")
+        for rec in records:
+            msg = decode_record(rec, dec)
+            if msg is None:
+                if not skip_bad:
+                    raise ValueError(f"{path}: undecodable packet at byte {rec.offset}")
                 continue
-            return
-        packet = bytearray(data[i + 8:i + 8 + length])
-        i += 8 + length
-        try:
-            msg = parser.decode(packet)
-        except Exception:  # noqa: BLE001 - any undecodable packet is "bad"
-            if skip_bad:
-                continue
-            raise
-        yield TlogRecord(t_us, msg)
+            yield TlogRecord(rec.stamp_us, msg)
+
+    with open(path, "rb") as f:
+        while True:
+            chunk = f.read(1 << 20)
+            if not chunk:
+                break
+            yield from out(scanner.feed(chunk))
+    yield from out(scanner.close())

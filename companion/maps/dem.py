@@ -1,8 +1,12 @@
-"""Elevation model loader: ESRI ASCII grid (``.asc``).
+"""Elevation model loader: ESRI ASCII grid (``.asc``) in the map's local frame.
 
 Header keys (case-insensitive, one ``key value`` pair per line, any order):
 ``ncols``, ``nrows``, ``xllcorner`` or ``xllcenter``, ``yllcorner`` or
-``yllcenter``, ``cellsize``, optional ``NODATA_value``. ``*llcorner`` is the
+``yllcenter``, ``cellsize`` (or GDAL's ``dx`` and ``dy`` for rectangular
+cells), optional ``NODATA_value``. A grid with ``dx != dy`` is resampled
+bilinearly onto square cells of ``min(dx, dy)`` (:func:`resample_square`), so
+every ``ElevationModel`` has square cells. Georeferenced DEMs (GeoTIFF, an
+``.asc`` with a ``.prj``, any CRS) go through :mod:`companion.maps.gis`. ``*llcorner`` is the
 outer lower-left corner of the grid, ``*llcenter`` the centre of the
 lower-left cell (half a cell further in). Then ``nrows`` rows of ``ncols``
 numbers, the first row being the northernmost; the model is flipped so that
@@ -26,7 +30,8 @@ from .grid import ElevationModel
 MAX_COORD_M = 1.0e7
 MAX_HEIGHT_M = 1.0e5
 
-_KEYS = ("ncols", "nrows", "xllcorner", "xllcenter", "yllcorner", "yllcenter", "cellsize", "nodata_value")
+_KEYS = ("ncols", "nrows", "xllcorner", "xllcenter", "yllcorner", "yllcenter", "cellsize", "dx", "dy",
+         "nodata_value")
 
 
 def load_dem(path: str | Path) -> ElevationModel:
@@ -65,7 +70,8 @@ def load_dem(path: str | Path) -> ElevationModel:
             break  # first data row
         if key not in _KEYS:
             raise MapError(f"{src}: line {i + 1}", f"unknown header key {parts[0]!r} "
-                           "(expected ncols, nrows, xllcorner|xllcenter, yllcorner|yllcenter, cellsize, NODATA_value)")
+                           "(expected ncols, nrows, xllcorner|xllcenter, yllcorner|yllcenter, cellsize or dx and dy, "
+                           "NODATA_value)")
         if len(parts) != 2:
             raise MapError(f"{src}: line {i + 1}", f"expected '{parts[0]} <number>'")
         if key in header:
@@ -78,9 +84,14 @@ def load_dem(path: str | Path) -> ElevationModel:
             raise MapError(f"{src}: line {i + 1}", f"{parts[0]} value must be finite")
         i += 1
 
-    for key in ("ncols", "nrows", "cellsize"):
+    for key in ("ncols", "nrows"):
         if key not in header:
             raise MapError(src, f"header key {key!r} missing")
+    if "cellsize" in header and ("dx" in header or "dy" in header):
+        raise MapError(src, "header has both cellsize and dx/dy")
+    if "cellsize" not in header:
+        if "dx" not in header or "dy" not in header:
+            raise MapError(src, "header key 'cellsize' missing (or GDAL's 'dx' and 'dy')")
     for axis in ("x", "y"):
         have = [k for k in (f"{axis}llcorner", f"{axis}llcenter") if k in header]
         if len(have) != 1:
@@ -90,12 +101,14 @@ def load_dem(path: str | Path) -> ElevationModel:
         if v != int(v) or v < 1:
             raise MapError(src, f"header {key} must be a positive integer, got {v:g}")
     ncols, nrows = int(ncols), int(nrows)
-    cell = header["cellsize"]
-    if cell <= 0:
-        raise MapError(src, f"header cellsize must be > 0, got {cell:g}")
-    half = 0.5 * cell
-    x0 = header["xllcenter"] if "xllcenter" in header else header["xllcorner"] + half
-    y0 = header["yllcenter"] if "yllcenter" in header else header["yllcorner"] + half
+    cell_x = header.get("cellsize", header.get("dx"))
+    cell_y = header.get("cellsize", header.get("dy"))
+    for key, v in (("cellsize" if "cellsize" in header else "dx", cell_x), ("cellsize" if "cellsize" in header else "dy", cell_y)):
+        if v <= 0:
+            raise MapError(src, f"header {key} must be > 0, got {v:g}")
+    cell = min(cell_x, cell_y)
+    x0 = header["xllcenter"] if "xllcenter" in header else header["xllcorner"] + 0.5 * cell_x
+    y0 = header["yllcenter"] if "yllcenter" in header else header["yllcorner"] + 0.5 * cell_y
 
     reach = max(abs(x0), abs(y0)) + math.hypot(nrows, ncols) * cell
     if reach > MAX_COORD_M:
@@ -118,8 +131,39 @@ def load_dem(path: str | Path) -> ElevationModel:
     known = z[~np.isnan(z)]
     if known.size and np.abs(known).max() > MAX_HEIGHT_M:
         raise MapError(src, f"height value {known[np.argmax(np.abs(known))]:g} m beyond +-{MAX_HEIGHT_M:g} m")
-    return ElevationModel(heights_m=np.ascontiguousarray(z[::-1]), x0_m=float(x0), y0_m=float(y0),
-                          cellsize_m=float(cell), source=src)
+    z = np.ascontiguousarray(z[::-1])
+    if cell_x != cell_y:
+        z, x0, y0 = resample_square(z, float(x0), float(y0), float(cell_x), float(cell_y))
+    return ElevationModel(heights_m=z, x0_m=float(x0), y0_m=float(y0), cellsize_m=float(cell), source=src)
+
+
+def bilinear(z: np.ndarray, fr: np.ndarray, fc: np.ndarray) -> np.ndarray:
+    """Bilinear interpolation of ``z`` (rows, cols) at fractional indices (row, col);
+    NaN outside the centres' hull or where a NaN cell has weight. Pure."""
+    rows, cols = z.shape
+    out = np.full(np.shape(fr), np.nan)
+    ok = (fr >= -1e-9) & (fr <= rows - 1 + 1e-9) & (fc >= -1e-9) & (fc <= cols - 1 + 1e-9)
+    r, c = np.clip(fr[ok], 0, rows - 1), np.clip(fc[ok], 0, cols - 1)
+    r0 = np.minimum(np.floor(r).astype(np.intp), max(rows - 2, 0))
+    c0 = np.minimum(np.floor(c).astype(np.intp), max(cols - 2, 0))
+    r1, c1 = np.minimum(r0 + 1, rows - 1), np.minimum(c0 + 1, cols - 1)
+    tr, tc = r - r0, c - c0
+    out[ok] = ((1 - tr) * ((1 - tc) * z[r0, c0] + tc * z[r0, c1]) + tr * ((1 - tc) * z[r1, c0] + tc * z[r1, c1]))
+    return out
+
+
+def resample_square(z: np.ndarray, x0_m: float, y0_m: float, dx_m: float, dy_m: float):
+    """A grid of ``dx x dy`` cells (row 0 south, centre of [0, 0] at (x0, y0)) resampled
+    bilinearly onto square cells of ``min(dx, dy)`` over the same centres' extent.
+    Returns (heights, x0, y0)."""
+    cell = min(dx_m, dy_m)
+    rows, cols = z.shape
+    nx = int(np.floor((cols - 1) * dx_m / cell + 1e-9)) + 1
+    ny = int(np.floor((rows - 1) * dy_m / cell + 1e-9)) + 1
+    fc = np.arange(nx) * cell / dx_m
+    fr = np.arange(ny) * cell / dy_m
+    FR, FC = np.meshgrid(fr, fc, indexing="ij")
+    return bilinear(z, FR, FC), x0_m, y0_m
 
 
 def _is_float(token: str) -> bool:

@@ -31,6 +31,8 @@ class OccupancyGrid:
         Rotation of the grid about z (map_server ``origin[2]``).
     source : str
         File the grid came from (for messages).
+    warnings : tuple of str
+        What the loader ignored (unknown map YAML keys, ...), one line each.
     """
 
     occupied: np.ndarray
@@ -39,6 +41,7 @@ class OccupancyGrid:
     origin_xy_m: tuple[float, float] = (0.0, 0.0)
     origin_yaw_rad: float = 0.0
     source: str = "<memory>"
+    warnings: tuple[str, ...] = ()
 
     @property
     def shape(self) -> tuple[int, int]:

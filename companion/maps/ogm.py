@@ -1,27 +1,40 @@
-"""Occupancy grid loader: ROS map_server YAML + PGM (P2 or P5).
+"""Occupancy grid loader: a map YAML + image, read the way Nav2's map_server reads it.
 
-Semantics follow ROS ``map_server`` (``image_loader.cpp``):
+Semantics follow Nav2's ``map_io.cpp`` (``loadMapYaml``/``loadMapFromFile``;
+ROS 1 ``map_server`` is the same for PGM):
 
-- For a pixel value ``v`` of a PGM with maximum ``maxval``, the occupancy
-  probability is ``p = (maxval - v) / maxval`` (dark is occupied), or
-  ``p = v / maxval`` with ``negate: 1``. (For 8-bit images this is map_server's
-  ``(255 - v) / 255``; 16-bit images are scaled by their own ``maxval``.)
-- ``mode: trinary`` (default): ``p > occupied_thresh`` is occupied,
-  ``p < free_thresh`` is free, anything else is unknown.
-- ``mode: scale``: map_server keeps a graded cost for cells between the
-  thresholds. The planner only knows occupied / free / unknown, so those cells
-  are **unknown** (never free); classification is therefore identical to
-  trinary.
-- ``mode: raw``: the pixel value (after ``negate``) *is* the map_server
-  occupancy value: 0..100 are probabilities in percent, classified with the
-  same thresholds on ``v / 100``; any value above 100 (e.g. 255, map_server's
-  "-1") is unknown.
+- **Image formats**: PGM (P2 or P5, 8 or 16 bit) is read here; every other
+  format Nav2's image library reads (PNG, BMP, TIFF, JPEG, PPM, ...) through
+  Pillow. Each pixel's **shade** in [0, 1] is the mean of its red, green and
+  blue channels (a grey image: its grey value) over the channel maximum; in
+  ``trinary`` mode an image with an alpha channel averages the alpha
+  (opacity, 1 = opaque) in as a fourth channel, as Nav2 does "to preserve
+  existing behaviour".
+- ``occ = 1 - shade`` (dark is occupied), or ``occ = shade`` with ``negate``.
+- ``mode: trinary`` (default): ``occ > occupied_thresh`` is occupied,
+  ``occ < free_thresh`` is free, anything else is unknown.
+- ``mode: scale``: a pixel that is not fully opaque is unknown; otherwise
+  as trinary, except that Nav2 keeps a graded cost for cells between the
+  thresholds. The planner only knows occupied / free / unknown, so those
+  cells are **unknown** (never free).
+- ``mode: raw``: the cell value is ``round(255 shade)`` (``negate`` does
+  not apply, as in Nav2): 0..100 are occupancy percentages, classified with
+  the same thresholds on ``value / 100``; anything above 100 is unknown.
+- Keys: ``image``, ``resolution``, ``origin``, ``negate`` (0/1 or a
+  boolean), ``occupied_thresh``, ``free_thresh`` are required, ``mode`` is
+  optional; any other key (``map_type``, ...) is ignored as Nav2 ignores
+  it, with a warning in ``OccupancyGrid.warnings`` (a misspelt optional key
+  should not pass unnoticed).
 
 Image row 0 is the north (top) row; the grid is flipped so that row 0 is the
 south row (``grid.py`` convention). ``origin: [x, y, yaw]`` is the world pose
 of the lower-left corner of the lower-left pixel; ``yaw`` (rad) rotates the
 grid about that corner (kept in ``OccupancyGrid.origin_yaw_rad``).
 A relative ``image`` path is relative to the YAML file.
+
+Every classification goes through a lookup table over the possible channel
+sums (at most 4 x 65535 + 1 entries), so the thresholds are applied in
+double precision and a 10 ha map costs one table lookup per pixel.
 """
 
 from __future__ import annotations
@@ -58,6 +71,29 @@ class ImageData:
 
     values: np.ndarray
     maxval: int
+
+
+@dataclass(frozen=True, eq=False)
+class Shades:
+    """An image reduced to what map_server reads from it (module doc).
+
+    Attributes
+    ----------
+    channel_sum : (h, w) int array
+        Sum of the colour channels of each pixel (R + G + B, or the grey value
+        counted once for a grey image), image order (row 0 = top).
+    n_channels : int
+        How many channels ``channel_sum`` adds (1 for grey, 3 for colour).
+    maxval : int
+        Largest value of one channel (255, 65535 or a PGM's maxval).
+    alpha : (h, w) int array or None
+        Opacity (``maxval`` = opaque) where the image has an alpha channel.
+    """
+
+    channel_sum: np.ndarray
+    n_channels: int
+    maxval: int
+    alpha: np.ndarray | None = None
 
 
 def read_pgm(path: str | Path) -> ImageData:
@@ -141,42 +177,116 @@ def read_pgm(path: str | Path) -> ImageData:
     return ImageData(values.reshape(height, width), maxval)
 
 
-def classify(values: np.ndarray, maxval: int, negate: bool, occupied_thresh: float,
-             free_thresh: float, mode: str) -> tuple[np.ndarray, np.ndarray]:
-    """map_server pixel classification (pure): pixels -> (occupied, free) bool masks.
+def classify(img: Shades, negate: bool, occupied_thresh: float, free_thresh: float,
+             mode: str) -> tuple[np.ndarray, np.ndarray]:
+    """Nav2 pixel classification (pure, module doc): image -> (occupied, free) bool masks.
 
     Parameters
     ----------
-    values : (h, w) unsigned int array
-        Pixel values in 0..maxval.
-    maxval : int
+    img : Shades
     negate : bool
     occupied_thresh, free_thresh : float
         Probability thresholds in [0, 1].
     mode : {'trinary', 'scale', 'raw'}
-        See the module docstring.
 
     Returns
     -------
-    occupied, free : (h, w) bool arrays, same orientation as ``values``.
+    occupied, free : (h, w) bool arrays, same orientation as the image.
     """
-    # Classify each of the maxval + 1 possible values once, then look the pixels up.
-    v = np.arange(maxval + 1, dtype=float)
-    if negate:
-        v = maxval - v
+    m = img.maxval
+    key = img.channel_sum
+    n = img.n_channels
+    with_alpha = img.alpha is not None and mode == "trinary"
+    if with_alpha:
+        # trinary averages the opacity in as one more channel
+        key = key.astype(np.int64) + img.alpha
+        n += 1
+    # one entry per possible channel sum: thresholds in double precision
+    shade = np.arange(n * m + 1, dtype=float) / (n * m)
     if mode == "raw":
+        v = np.rint(shade * 255.0)
         known = v <= 100
-        p = v / 100.0
-        occ_lut, free_lut = known & (p > occupied_thresh), known & (p < free_thresh)
+        occ_lut, free_lut = known & (v / 100.0 > occupied_thresh), known & (v / 100.0 < free_thresh)
     else:
-        p = (maxval - v) / maxval
-        occ_lut = p > occupied_thresh
-        free_lut = (p < free_thresh) & ~occ_lut
-    return occ_lut[values], free_lut[values]
+        occ = shade if negate else 1.0 - shade
+        occ_lut = occ > occupied_thresh
+        free_lut = (occ < free_thresh) & ~occ_lut
+    occupied, free = occ_lut[key], free_lut[key]
+    if mode == "scale" and img.alpha is not None:
+        opaque = img.alpha == m
+        occupied &= opaque
+        free &= opaque
+    return occupied, free
+
+
+def read_image(path: str | Path) -> Shades:
+    """Read a map image: PGM here, anything else through Pillow (module doc).
+
+    Raises
+    ------
+    MapError
+        Missing, unreadable, corrupt or truncated file, or a format Pillow does not know.
+    """
+    p = Path(path)
+    src = str(p)
+    try:
+        with open(p, "rb") as fh:
+            magic = fh.read(2)
+    except FileNotFoundError:
+        raise MapError(src, "no such file (image of the occupancy grid)") from None
+    except OSError as exc:
+        raise MapError(src, f"cannot read: {exc.strerror or exc}") from None
+    if magic in (b"P2", b"P5"):
+        pgm = read_pgm(p)
+        return Shades(pgm.values, 1, pgm.maxval)
+    return _read_with_pillow(p)
+
+
+def _read_with_pillow(p: Path) -> Shades:
+    src = str(p)
+    try:
+        from PIL import Image, UnidentifiedImageError
+    except ImportError:   # pragma: no cover - Pillow is a dependency
+        raise MapError(src, "not a PGM image, and Pillow (needed for other formats) is not installed") from None
+    try:
+        with Image.open(p) as im:
+            im.load()
+            mode = im.mode
+            if mode == "P":
+                im = im.convert("RGBA" if "transparency" in im.info else "RGB")
+            elif mode == "1":
+                im = im.convert("L")
+            elif mode == "PA":
+                im = im.convert("RGBA")
+            elif mode not in ("L", "LA", "RGB", "RGBA", "I", "I;16", "I;16B", "I;16L"):
+                im = im.convert("RGB")
+            mode = im.mode
+            arr = np.asarray(im)
+    except UnidentifiedImageError:
+        raise MapError(src, "not an image Pillow can read (expected PGM, PNG, BMP, TIFF, ...)") from None
+    except Image.DecompressionBombError as exc:
+        raise MapError(src, f"image too large: {exc}") from None
+    except (OSError, ValueError, SyntaxError) as exc:
+        raise MapError(src, f"corrupt or truncated image: {exc}") from None
+    if arr.ndim == 2:
+        if mode.startswith("I"):
+            vmax = int(arr.max()) if arr.size else 0
+            if arr.size and int(arr.min()) < 0:
+                raise MapError(src, "negative pixel values in a 32-bit image")
+            maxval = 65535 if vmax <= 65535 else None
+            if maxval is None:
+                raise MapError(src, f"pixel value {vmax} above 65535 (32-bit images are not maps)")
+            return Shades(arr.astype(np.int64), 1, maxval)
+        return Shades(arr, 1, 255)
+    if arr.shape[2] == 2:                   # LA
+        return Shades(arr[..., 0], 1, 255, arr[..., 1].astype(np.int64))
+    rgb = arr[..., :3].astype(np.int64).sum(axis=2)
+    alpha = arr[..., 3].astype(np.int64) if arr.shape[2] == 4 else None
+    return Shades(rgb, 3, 255, alpha)
 
 
 def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
-    """Load a ROS map_server occupancy grid (YAML + PGM).
+    """Load a Nav2 / ROS map_server occupancy grid (YAML + image).
 
     Parameters
     ----------
@@ -187,7 +297,7 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
     Returns
     -------
     OccupancyGrid
-        Row 0 south, ``source`` = the YAML path.
+        Row 0 south, ``source`` = the YAML path, ``warnings`` naming ignored keys.
 
     Raises
     ------
@@ -199,10 +309,9 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
     data = parse_yaml(read_text(ypath, MapError, "occupancy grid YAML"), src, MapError)
     if not isinstance(data, dict):
         raise MapError(src, "expected a mapping of map_server keys")
-    for key in data:
-        if key not in _REQUIRED + _OPTIONAL:
-            raise MapError(f"{src}: key '{key}'",
-                           f"unknown key (known: {', '.join(sorted(_REQUIRED + _OPTIONAL))})")
+    warnings = tuple(f"{src}: key '{key}' ignored (Nav2's map_server reads only "
+                     f"{', '.join(_REQUIRED + _OPTIONAL)})"
+                     for key in data if key not in _REQUIRED + _OPTIONAL)
     for key in _REQUIRED:
         if key not in data:
             raise MapError(f"{src}: key '{key}'", "missing")
@@ -236,14 +345,14 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
     img_path = Path(image)
     if not img_path.is_absolute():
         img_path = ypath.parent / img_path
-    img = read_pgm(img_path)
-    h, w = img.values.shape
+    img = read_image(img_path)
+    h, w = img.channel_sum.shape
     reach = max(abs(float(origin[0])), abs(float(origin[1]))) + math.hypot(h, w) * resolution
     if reach > MAX_COORD_M:
         raise MapError(f"{src}: keys 'origin', 'resolution'",
                        f"the {w} x {h} grid reaches {reach:.3g} m from the frame origin "
                        f"(more than {MAX_COORD_M:g} m)")
-    occupied, free = classify(img.values, img.maxval, bool(negate), occ_t, free_t, mode)
+    occupied, free = classify(img, bool(negate), occ_t, free_t, mode)
     # Image row 0 is north; grid row 0 is south.
     return OccupancyGrid(
         occupied=np.ascontiguousarray(occupied[::-1]),
@@ -252,6 +361,7 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
         origin_xy_m=(float(origin[0]), float(origin[1])),
         origin_yaw_rad=float(origin[2]),
         source=src,
+        warnings=warnings,
     )
 
 

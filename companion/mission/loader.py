@@ -10,6 +10,9 @@ from ..errors import MissionError
 from ..textfile import parse_yaml, read_text
 from .schema import Mission
 
+#: Fields of ``Mission`` that the loader sets; a mission file may not hold them.
+SET_BY_LOADER = ("base_dir", "source")
+
 
 def load_mission(path: str | Path) -> Mission:
     """Read and validate a mission file.
@@ -24,7 +27,7 @@ def load_mission(path: str | Path) -> Mission:
     data = parse_yaml(read_text(p, MissionError), str(p), MissionError)
     if not isinstance(data, dict):
         raise MissionError(str(p), "expected a mapping of mission keys at the top level")
-    for key in ("base_dir", "source"):
+    for key in SET_BY_LOADER:
         if key in data:
             raise MissionError(f"{p}: key '{key}'", "unknown key (set by the loader)")
     mission = from_dict(Mission, data, str(p))

@@ -1,4 +1,8 @@
-"""Mission file schema (DESIGN.md "Mission YAML"): frozen dataclasses.
+"""Mission file schema (docs/mission.md): frozen dataclasses.
+
+The field comes from ``map`` (a Nav2 map YAML) or ``field`` (GeoJSON/KML);
+``dem`` is a local ASCII grid or a georeferenced raster (``dem_crs`` when the
+file has no CRS); see ``companion.maps.field``.
 
 Only the keys below are accepted; an unknown key or a wrong type is a
 ``MissionError`` naming the file and the dotted key.
@@ -7,10 +11,12 @@ Only the keys below are accepted; an unknown key or a wrong type is a
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from dataclasses import field as _field   # the Mission class has a key named "field"
 from pathlib import Path
 from typing import Literal
 
 from ..control.config import ControlConfig
+from ..energy import EnergyConfig
 from ..vehicle import VehicleConfig
 from ..trajectory.config import TrajectoryConfig
 from .replan import ReplanConfig
@@ -26,11 +32,17 @@ MAX_ALTITUDE_M = 1.0e5
 
 @dataclass(frozen=True)
 class HomeConfig:
-    """Geodetic pose of the map origin (WGS-84 degrees, metres AMSL)."""
+    """Geodetic pose of the map origin (WGS-84 degrees, metres AMSL).
+
+    ``heading_deg``: compass bearing (deg, clockwise from north) of the local
+    map files' x axis; 90 (default) is east. The loaders rotate local maps
+    into ENU (``companion.maps.field``); everything else in the mission is ENU.
+    """
 
     lat: float
     lon: float
     alt_m: float
+    heading_deg: float = 90.0
 
     def __post_init__(self) -> None:
         if not -90.0 <= self.lat <= 90.0:
@@ -39,15 +51,22 @@ class HomeConfig:
             raise ValueError(f"home.lon {self.lon} is outside [-180, 180]")
         if not -MAX_ALTITUDE_M <= self.alt_m <= MAX_ALTITUDE_M:
             raise ValueError(f"home.alt_m {self.alt_m} is outside [-{MAX_ALTITUDE_M:g}, {MAX_ALTITUDE_M:g}] m")
+        if not -360.0 <= self.heading_deg <= 360.0:
+            raise ValueError(f"home.heading_deg {self.heading_deg} is outside [-360, 360]")
 
 
 @dataclass(frozen=True)
 class FlightConfig:
-    """Flight height above the terrain, cruise speed and way-point spacing in time."""
+    """Flight height above the terrain, cruise speed and way-point spacing in time.
+
+    ``transit_speed_m_s``: speed of the transits between the launch point and
+    the corridors of a sortie (nothing is covered there), default 3 m/s.
+    """
 
     height_agl_m: float = 1.5
     speed_m_s: float = 1.0
     waypoint_interval_s: float = 4.0
+    transit_speed_m_s: float = 3.0
 
     def __post_init__(self) -> None:
         if not 0 < self.height_agl_m <= MAX_LENGTH_M:
@@ -56,6 +75,8 @@ class FlightConfig:
             raise ValueError("flight.speed_m_s must be > 0")
         if self.waypoint_interval_s <= 0:
             raise ValueError("flight.waypoint_interval_s must be > 0")
+        if not 0 < self.transit_speed_m_s <= 30.0:
+            raise ValueError("flight.transit_speed_m_s must be in (0, 30] m/s")
 
 
 @dataclass(frozen=True)
@@ -80,6 +101,25 @@ class CoverageConfig:
 
 
 @dataclass(frozen=True)
+class FieldConfig:
+    """A field given as vectors (GeoJSON or KML, WGS-84): rasterised at ``resolution_m``;
+    line strings are vine rows ``row_width_m`` wide (``companion.maps.field``)."""
+
+    file: str
+    resolution_m: float = 0.1
+    row_width_m: float = 0.4
+    border_m: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not 0.01 <= self.resolution_m <= 10.0:
+            raise ValueError("field.resolution_m must be in [0.01, 10] m")
+        if not 0 < self.row_width_m <= 10.0:
+            raise ValueError("field.row_width_m must be in (0, 10] m")
+        if not 0 <= self.border_m <= 100.0:
+            raise ValueError("field.border_m must be in [0, 100] m")
+
+
+@dataclass(frozen=True)
 class PointingConfig:
     """Pointing target S_p of eq. (21): the field's centroid or an ENU point (m)."""
 
@@ -91,24 +131,35 @@ class Mission:
     """A whole mission, paths resolved relative to the mission file."""
 
     name: str
-    map: str
     dem: str
     home: HomeConfig
-    flight: FlightConfig = field(default_factory=FlightConfig)
-    coverage: CoverageConfig = field(default_factory=CoverageConfig)
-    pointing: PointingConfig = field(default_factory=PointingConfig)
-    trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
-    control: ControlConfig = field(default_factory=ControlConfig)
-    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
-    replan: ReplanConfig = field(default_factory=ReplanConfig)
-    sim: SimConfig = field(default_factory=SimConfig)
+    map: str | None = None
+    field: FieldConfig | None = None
+    dem_crs: str | None = None
+    flight: FlightConfig = _field(default_factory=FlightConfig)
+    coverage: CoverageConfig = _field(default_factory=CoverageConfig)
+    pointing: PointingConfig = _field(default_factory=PointingConfig)
+    trajectory: TrajectoryConfig = _field(default_factory=TrajectoryConfig)
+    control: ControlConfig = _field(default_factory=ControlConfig)
+    vehicle: VehicleConfig = _field(default_factory=VehicleConfig)
+    energy: EnergyConfig = _field(default_factory=EnergyConfig)
+    replan: ReplanConfig = _field(default_factory=ReplanConfig)
+    sim: SimConfig = _field(default_factory=SimConfig)
     description: str = ""
     base_dir: str = "."   # set by the loader: directory of the mission file
     source: str = "<mission>"   # set by the loader: the mission file (for error messages)
 
+    def __post_init__(self) -> None:
+        if (self.map is None) == (self.field is None):
+            raise ValueError("give exactly one of 'map' (a map YAML) and 'field' (a GeoJSON or KML field)")
+
     @property
     def map_path(self) -> Path:
         return Path(self.base_dir) / self.map
+
+    @property
+    def field_path(self) -> Path:
+        return Path(self.base_dir) / self.field.file
 
     @property
     def dem_path(self) -> Path:

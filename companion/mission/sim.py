@@ -7,7 +7,7 @@ mission file is validated in one place.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
 
@@ -37,28 +37,112 @@ class ObstacleConfig:
             raise ValueError("box size_x and size_y must be > 0")
 
 
+#: Named sensor profiles (``sim.sensor_profile``). Their datasheet values
+#: live with the simulator (``sitl.profiles``); the schema only knows the names.
+SENSOR_PROFILES = ("icm42688p-bmm150-zedf9p",)
+
+#: Keys of ``NoiseConfig`` that are 3-vectors.
+_VECTOR_KEYS = ("gyro_bias_rad_s", "accel_bias_m_s2", "mag_hard_iron_gauss", "mag_thrust_gauss_per_n")
+
+
 @dataclass(frozen=True)
 class NoiseConfig:
-    """White measurement noise (variances per component, as the paper) and biases."""
+    """Sensor errors: ``sim.noise``. Every key is optional.
 
-    vector_variance: float = 5.0e-4       # on the unit vector measurements (accel dir, mag dir)
-    gyro_variance: float = 5.0e-4         # (rad/s)^2 on Omega
-    position_std_m: float = 0.0           # mocap-like by default, as the paper
-    velocity_std_m_s: float = 0.0
-    gyro_bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    accel_bias_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    range_std_m: float = 0.01             # rangefinder white noise (m)
+    A key that is given replaces the value of the sensor profile
+    (``sim.sensor_profile``); a key given nowhere takes the no-profile
+    default, the paper's model (Section 3.4): white noise of variance 5e-4
+    on the unit-vector measurements and on Omega, exact position and
+    velocity in every sensor frame, no bias. Independent error sources add
+    (variances add). Units are in the names; body vectors are FLU.
+
+    Attributes
+    ----------
+    vector_variance : float
+        Per-component variance of white noise on the accelerometer and
+        magnetometer *directions* (-): the raw vectors get a standard
+        deviation ``sqrt(vector_variance) * |vector|``. Default 5e-4 (paper);
+        0 with a profile.
+    gyro_variance : float
+        White gyro noise variance per sample ((rad/s)^2). Default 5e-4; 0
+        with a profile.
+    gyro_noise_density_rad_s_rthz, accel_noise_density_m_s2_rthz : float
+        White-noise densities (rad/s/sqrt(Hz), m/s^2/sqrt(Hz)); per-sample
+        std = density * sqrt(sensor rate). Default 0.
+    gyro_bias_rad_s, accel_bias_m_s2 : (3,)
+        Constant biases (body FLU). Default 0.
+    gyro_bias_turn_on_std_rad_s, accel_bias_turn_on_std_m_s2 : float
+        Std of a turn-on bias drawn once per run and axis (seeded). Default 0.
+    gyro_bias_walk_rad_s_rts, accel_bias_walk_m_s2_rts : float
+        Bias random walk (rad/s/sqrt(s), m/s^2/sqrt(s)): the bias moves by a
+        N(0, walk^2 dt) step every sample of the vehicle clock. Default 0.
+    mag_noise_std_gauss : float
+        Absolute white magnetometer noise per sample and axis (gauss). Default 0.
+    mag_hard_iron_gauss : (3,)
+        Constant field of the airframe added to the magnetometer (body FLU, gauss).
+    mag_thrust_gauss_per_n : (3,)
+        Field of the motor currents per newton of total rotor thrust (body
+        FLU, gauss/N).
+    position_std_m : float
+        White position noise per sample, x and y (and z unless
+        ``position_z_std_m`` is given) (m). Default 0.
+    position_z_std_m : float
+        White vertical position noise (m). Default: ``position_std_m``.
+    velocity_std_m_s : float
+        White velocity noise per sample and axis (m/s). Default 0.
+    gnss_rate_hz : float
+        Rate of the position/velocity (GNSS) samples (Hz, > 0). Default:
+        every sensor frame.
+    gnss_latency_s : float
+        Delay from a GNSS sample's measurement to its delivery (s, in
+        [0, 1)). Default 0.
+    range_std_m : float
+        Rangefinder white noise (m). Default 0.01.
+    """
+
+    vector_variance: float | None = None
+    gyro_variance: float | None = None
+    gyro_noise_density_rad_s_rthz: float | None = None
+    accel_noise_density_m_s2_rthz: float | None = None
+    gyro_bias_rad_s: tuple[float, float, float] | None = None
+    accel_bias_m_s2: tuple[float, float, float] | None = None
+    gyro_bias_turn_on_std_rad_s: float | None = None
+    accel_bias_turn_on_std_m_s2: float | None = None
+    gyro_bias_walk_rad_s_rts: float | None = None
+    accel_bias_walk_m_s2_rts: float | None = None
+    mag_noise_std_gauss: float | None = None
+    mag_hard_iron_gauss: tuple[float, float, float] | None = None
+    mag_thrust_gauss_per_n: tuple[float, float, float] | None = None
+    position_std_m: float | None = None
+    position_z_std_m: float | None = None
+    velocity_std_m_s: float | None = None
+    gnss_rate_hz: float | None = None
+    gnss_latency_s: float | None = None
+    range_std_m: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("vector_variance", "gyro_variance", "position_std_m", "velocity_std_m_s", "range_std_m"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"noise.{name} must be >= 0")
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if v is None:
+                continue
+            vals = v if f.name in _VECTOR_KEYS else (v,)
+            if not all(math.isfinite(x) for x in vals):
+                raise ValueError(f"sim.noise.{f.name} must be finite")
+            if f.name not in _VECTOR_KEYS and v < 0:
+                raise ValueError(f"sim.noise.{f.name} must be >= 0")
+        if self.gnss_rate_hz is not None and not self.gnss_rate_hz > 0:
+            raise ValueError("sim.noise.gnss_rate_hz must be > 0")
+        if self.gnss_latency_s is not None and not self.gnss_latency_s < 1.0:
+            raise ValueError("sim.noise.gnss_latency_s must be in [0, 1) s")
+        if self.vector_variance is not None and self.vector_variance >= 1.0:
+            raise ValueError("sim.noise.vector_variance must be < 1 (a variance on unit vectors)")
 
 
 # MAV_SENSOR_ORIENTATION values a body-fixed rangefinder may use (pymavlink
 # common dialect): NONE (forward) 0, YAW_45..YAW_315 1..7, PITCH_90 (up) 24,
-# PITCH_270 (down) 25.
-RANGEFINDER_ORIENTATIONS = (0, 1, 2, 3, 4, 5, 6, 7, 24, 25)
+# PITCH_270 (down) 25, CUSTOM 100 (the mounting rotation is given).
+SENSOR_ROTATION_CUSTOM = 100
+RANGEFINDER_ORIENTATIONS = (0, 1, 2, 3, 4, 5, 6, 7, 24, 25, SENSOR_ROTATION_CUSTOM)
 
 
 @dataclass(frozen=True)
@@ -66,8 +150,22 @@ class RangefinderConfig:
     """A body-fixed rangefinder (one DISTANCE_SENSOR id).
 
     ``orientation`` is a MAV_SENSOR_ORIENTATION: 0 forward, 2 right (yaw 90,
-    FRD convention), 4 back, 6 left, 25 down (pitch 270), 24 up (pitch 90),
-    odd values the diagonals. Fields of view are full angles (deg).
+    FRD convention, as PX4), 4 back, 6 left, 25 down (pitch 270), 24 up
+    (pitch 90), odd values the diagonals; 100 (MAV_SENSOR_ROTATION_CUSTOM):
+    the mounting rotation is given by exactly one of
+
+    - ``rotation_flu_deg``: [roll, pitch, yaw] (deg), Z-Y-X Euler angles about
+      the body **FLU** axes (x forward, y left, z up; right-handed), taking
+      the sensor frame (beam along its x, horizontal field of view across its
+      y, vertical across its z) to the body: yaw +90 looks left, pitch -30
+      looks forward and 30 deg up, pitch +30 forward and 30 deg down;
+    - ``quaternion_flu_wxyz``: the same rotation as a quaternion [w, x, y, z]
+      (sensor frame -> body FLU; normalised when used).
+
+    (On the wire MAVLink gives the CUSTOM quaternion in body FRD; the SITL's
+    codec converts.) ``position_flu_m``: where the sensor sits, body FLU (m)
+    from the centre of mass; rays start there. Fields of view are full
+    angles (deg).
     """
 
     id: int
@@ -77,6 +175,9 @@ class RangefinderConfig:
     hfov_deg: float = 5.0
     vfov_deg: float = 5.0
     rate_hz: float = 25.0
+    position_flu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation_flu_deg: tuple[float, float, float] | None = None
+    quaternion_flu_wxyz: tuple[float, float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if not 0 <= self.id <= 255:
@@ -85,10 +186,22 @@ class RangefinderConfig:
             raise ValueError(f"rangefinder orientation must be one of {RANGEFINDER_ORIENTATIONS}")
         if not 0 <= self.min_m < self.max_m:
             raise ValueError("rangefinder needs 0 <= min_m < max_m")
+        if self.max_m > 655.0:
+            raise ValueError("rangefinder max_m must be <= 655 m (DISTANCE_SENSOR carries uint16 cm)")
         if not (0 <= self.hfov_deg < 180 and 0 <= self.vfov_deg < 180):
             raise ValueError("rangefinder fields of view must be in [0, 180) deg")
         if self.rate_hz <= 0:
             raise ValueError("rangefinder rate_hz must be > 0")
+        if not all(math.isfinite(x) and abs(x) <= 10.0 for x in self.position_flu_m):
+            raise ValueError("rangefinder position_flu_m must be finite, within 10 m of the centre")
+        given = (self.rotation_flu_deg is not None) + (self.quaternion_flu_wxyz is not None)
+        if self.orientation == SENSOR_ROTATION_CUSTOM and given != 1:
+            raise ValueError("rangefinder orientation 100 (custom) needs exactly one of "
+                             "rotation_flu_deg or quaternion_flu_wxyz")
+        if self.orientation != SENSOR_ROTATION_CUSTOM and given:
+            raise ValueError("rangefinder rotation_flu_deg/quaternion_flu_wxyz need orientation 100 (custom)")
+        if self.quaternion_flu_wxyz is not None and not math.hypot(*self.quaternion_flu_wxyz) > 1e-6:
+            raise ValueError("rangefinder quaternion_flu_wxyz must not be zero")
 
 
 def default_rangefinders() -> tuple[RangefinderConfig, ...]:
@@ -123,6 +236,41 @@ class WindConfig:
             raise ValueError("wind.gust_time_constant_s must be > 0")
 
 
+#: Propeller radius (m) assumed for the vehicle sphere when
+#: ``sim.collision.vehicle_radius_m`` is not given: a 10-inch propeller.
+DEFAULT_PROP_RADIUS_M = 0.127
+
+
+@dataclass(frozen=True)
+class CollisionConfig:
+    """What counts as a crash in the SITL (issue 8).
+
+    The vehicle is a sphere of ``vehicle_radius_m`` about its centre of mass
+    (None: ``vehicle.arm_m`` + a 10-inch propeller, 0.315 + 0.127 = 0.442 m
+    for the paper's vehicle). Touching an obstacle or a vine row (the OGM's
+    occupied cells extruded to ``sim.canopy_height_m``) is a crash. A
+    touchdown (the centre of mass reaching the terrain, where the landing gear
+    is) is a crash when faster than ``touchdown_max_down_m_s`` downward or
+    ``touchdown_max_horizontal_m_s`` sideways, or, when the vehicle was not
+    landing (see ``sitl.collision``), faster than ``touchdown_unplanned_max_m_s``.
+    ``enabled: false`` turns all of it off (the SITL then lets the vehicle
+    pass through obstacles, as before issue 8).
+    """
+
+    enabled: bool = True
+    vehicle_radius_m: float | None = None
+    touchdown_max_down_m_s: float = 1.0
+    touchdown_max_horizontal_m_s: float = 0.5
+    touchdown_unplanned_max_m_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        if self.vehicle_radius_m is not None and not 0 < self.vehicle_radius_m <= 10.0:
+            raise ValueError("sim.collision.vehicle_radius_m must be in (0, 10] m")
+        for name in ("touchdown_max_down_m_s", "touchdown_max_horizontal_m_s", "touchdown_unplanned_max_m_s"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"sim.collision.{name} must be >= 0")
+
+
 @dataclass(frozen=True)
 class SimConfig:
     """Simulation-only settings of a mission.
@@ -134,6 +282,7 @@ class SimConfig:
     ``start_enu_m``: where the vehicle starts, landed, (x, y) on the map
     frame (m); z is the terrain there. None: the SITL picks the free OGM
     cell nearest to the centroid of the free space (it never plans).
+    ``collision``: the crash rules (``CollisionConfig``).
     """
 
     obstacles: tuple[ObstacleConfig, ...] = ()
@@ -144,8 +293,23 @@ class SimConfig:
     wind: WindConfig = field(default_factory=WindConfig)
     magnetic_field_enu_gauss: tuple[float, float, float] = (0.0, 0.21, -0.42)
     start_enu_m: tuple[float, float] | None = None
+    vector_sensors: Literal["physical", "paper"] = "physical"
+    sensor_profile: Literal[SENSOR_PROFILES] | None = None
+    onboard_state: Literal["estimate", "truth"] = "estimate"
+    collision: CollisionConfig = field(default_factory=CollisionConfig)
 
     def __post_init__(self) -> None:
+        if self.sensor_profile is not None and self.sensor_profile not in SENSOR_PROFILES:
+            raise ValueError(f"sim.sensor_profile must be one of {', '.join(SENSOR_PROFILES)}")
+        if self.vector_sensors not in ("physical", "paper"):
+            raise ValueError("sim.vector_sensors must be physical or paper")
+        if self.onboard_state not in ("estimate", "truth"):
+            raise ValueError("sim.onboard_state must be estimate or truth")
+        m = self.magnetic_field_enu_gauss
+        if not all(math.isfinite(x) for x in m) or not math.hypot(*m) > 0:
+            raise ValueError("sim.magnetic_field_enu_gauss must be finite and non-zero")
+        from .sim_ranges import check_sim_ranges   # physical ranges of every numeric key
+
         if self.canopy_height_m <= 0:
             raise ValueError("sim.canopy_height_m must be > 0")
         if self.start_enu_m is not None and not all(math.isfinite(x) for x in self.start_enu_m):
@@ -154,7 +318,15 @@ class SimConfig:
             ids = [r.id for r in self.rangefinders]
             if len(set(ids)) != len(ids):
                 raise ValueError("sim.rangefinders ids must be unique")
+        check_sim_ranges(self)
 
     @property
     def rangefinders_or_default(self) -> tuple[RangefinderConfig, ...]:
         return default_rangefinders() if self.rangefinders is None else self.rangefinders
+
+
+def vehicle_radius_m(sim: SimConfig, arm_m: float) -> float:
+    """Radius (m) of the vehicle sphere: ``sim.collision.vehicle_radius_m``,
+    else the arm length ``arm_m`` (``vehicle.arm_m``) plus ``DEFAULT_PROP_RADIUS_M``."""
+    r = sim.collision.vehicle_radius_m
+    return float(r) if r is not None else float(arm_m) + DEFAULT_PROP_RADIUS_M

@@ -157,6 +157,18 @@ def nearest_free(known: KnownMap, p_xy, points_xy: np.ndarray, keep_m: float,
     return None
 
 
+def _snap(known: KnownMap, xy) -> np.ndarray:
+    """The centre of the eroded cell holding ``xy`` (ENU m), or ``xy`` if that cell is
+    not eroded: a point sampled on a run's boundary may fall on either side
+    of a cell edge by rounding, and the connection search wants eroded ends."""
+    xy = np.asarray(xy, dtype=float)
+    cell = known.cell_of(float(xy[0]), float(xy[1]))
+    if cell is None or not known.free.eroded[cell]:
+        return xy
+    x, y = known.grid.cell_to_world(cell[0], cell[1])
+    return np.array([float(x), float(y)])
+
+
 def _min_keep(keep_m: float | None, known: KnownMap) -> float:
     """What the back-off leg must keep from the obstacle: half the route's margin
     (the vehicle stopped within it; it must not go closer)."""
@@ -269,9 +281,11 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
     cur = start
     flown = []
     skipped = 0
+    cur = _snap(new_known, cur)
     for k, (entry, exit_) in enumerate(pieces):
         if k >= n_forced and np.hypot(*(exit_ - cur)) < np.hypot(*(entry - cur)):
             entry, exit_ = exit_, entry           # enter a free piece by its nearer end
+        entry, exit_ = _snap(new_known, entry), _snap(new_known, exit_)
         try:
             conn = aux_path(new_known.free, world_to_grid(grid, cur), world_to_grid(grid, entry))
         except InputError:

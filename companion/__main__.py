@@ -1,0 +1,7 @@
+"""``python -m companion``: the ``companion`` command line."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

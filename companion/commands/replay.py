@@ -1,0 +1,252 @@
+"""``companion replay FLIGHT.tlog [--mission MISSION.yaml] [--plan plan.json]
+[--report replay.json] [--plot DIR] [--tolerance ABS] [--withhold TYPE,...]``.
+
+Without ``--mission``: the flight's metrics from the recording alone (any
+MAVLink .tlog, a foreign one included; see ``companion.replay.metrics``).
+With it: the recorded flight's ``FlightCore`` is rebuilt from the setup
+record in the .tlog, the mission (and ``--plan`` when the flight flew one),
+fed the recorded vehicle messages in order, and every output it queues is
+compared with the recorded one (``companion.replay.session``).
+
+Exit codes: 0 metrics only, or every output identical within the tolerance
+(float32 fields bit for bit by default); 4 the outputs diverged (the first
+divergence is named: vehicle time, message, field, recorded and computed
+values); 2 bad input (one line, nothing written). A damaged .tlog is replayed
+as far as it is valid: what was skipped, and where, is printed and reported.
+A .tlog compressed with xz or gzip is read as is.
+"""
+
+from __future__ import annotations
+
+import gzip
+import lzma
+import math
+import sys
+from pathlib import Path
+
+from ..errors import InputError
+
+#: Exit code of a replay whose outputs differ from the recording.
+EXIT_DIVERGED = 4
+CHUNK_BYTES = 1 << 20
+REPORT_FORMAT = "companion-replay"
+REPORT_FORMAT_VERSION = "1.0"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("tlog", metavar="FLIGHT.tlog", help="recorded flight (.tlog, optionally .xz/.gz)")
+    parser.add_argument("--mission", metavar="MISSION.yaml",
+                        help="the flight's mission: re-run the companion and compare every output")
+    parser.add_argument("--plan", metavar="PLAN.json", help="the plan.json the flight flew (with --mission)")
+    parser.add_argument("--report", metavar="FILE", help="write the replay report (JSON)")
+    parser.add_argument("--plot", metavar="DIR", help="write the flight figures into DIR (needs the plot extra)")
+    parser.add_argument("--tolerance", type=float, default=0.0, metavar="ABS",
+                        help="absolute tolerance on float fields (default 0: float32 fields bit for bit)")
+    parser.add_argument("--withhold", default="", metavar="TYPE,...",
+                        help="vehicle message types not fed to the re-run (e.g. ODOMETRY: outputs must not change)")
+    parser.add_argument("--settle", type=float, default=5.0, metavar="S",
+                        help="metrics: tracking error counted from S seconds after lift-off (default %(default)s)")
+
+
+def open_tlog(path: str):
+    """The .tlog's bytes as a binary stream (xz and gzip decompressed on the fly)."""
+    p = Path(path)
+    try:
+        f = open(p, "rb")
+    except IsADirectoryError:
+        raise InputError(path, "is a directory, not a .tlog") from None
+    except OSError as exc:
+        raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
+    head = f.read(6)
+    f.seek(0)
+    if head.startswith(b"\xfd7zXZ\x00"):
+        return lzma.open(f, "rb")
+    if head.startswith(b"\x1f\x8b"):
+        return gzip.open(f, "rb")
+    return f
+
+
+def read_chunks(path: str):
+    """Generator of the file's bytes in chunks; InputError when it cannot be read or decompressed."""
+    f = open_tlog(path)
+    try:
+        while True:
+            try:
+                chunk = f.read(CHUNK_BYTES)
+            except (OSError, EOFError, lzma.LZMAError) as exc:
+                raise InputError(path, f"cannot read: {exc}") from None
+            if not chunk:
+                return
+            yield chunk
+    finally:
+        f.close()
+
+
+def _withheld_ids(spec: str) -> tuple:
+    from pymavlink.dialects.v20 import common as mavlink
+
+    ids = []
+    for name in filter(None, (s.strip().upper() for s in spec.split(","))):
+        mid = getattr(mavlink, f"MAVLINK_MSG_ID_{name}", None)
+        if mid is None:
+            raise InputError(f"--withhold {spec}", f"unknown MAVLink message {name!r}")
+        ids.append(int(mid))
+    return tuple(ids)
+
+
+def _check_args(args) -> tuple:
+    if not (math.isfinite(args.tolerance) and args.tolerance >= 0):
+        raise InputError(f"--tolerance {args.tolerance}", "must be a finite number >= 0")
+    if not (math.isfinite(args.settle) and args.settle >= 0):
+        raise InputError(f"--settle {args.settle}", "must be a finite number >= 0")
+    if args.plan and not args.mission:
+        raise InputError("--plan", "needs --mission (the plan is only used to re-run the flight)")
+    withhold = _withheld_ids(args.withhold)
+    if withhold and not args.mission:
+        raise InputError("--withhold", "needs --mission (it changes what the re-run is fed)")
+    p = Path(args.tlog)
+    if not p.exists():
+        raise InputError(args.tlog, "no such file")
+    if p.is_dir():
+        raise InputError(args.tlog, "is a directory, not a .tlog")
+    if args.report:
+        from .fly import check_output_paths
+
+        check_output_paths((("--report", args.report),))
+    if args.plot:
+        from ..plot import require_matplotlib
+
+        require_matplotlib("--plot")
+        d = Path(args.plot)
+        if d.exists() and not d.is_dir():
+            raise InputError(f"--plot {args.plot}", "exists and is not a directory")
+        if not d.exists() and not d.parent.is_dir():
+            raise InputError(f"--plot {args.plot}", f"directory {d.parent} does not exist")
+    return withhold
+
+
+def _rebuild(args):
+    """(core, flight plan, warnings) of the recorded flight, from its setup and the given files."""
+    from ..mission import load_mission
+    from ..replay import build_core, find_setup, setup_mismatches
+    from .fly import flight_setup, prepare
+
+    try:
+        setup = find_setup(read_chunks(args.tlog))
+    except ValueError as exc:
+        raise InputError(args.tlog, f"setup record unreadable: {exc}") from None
+    if setup is None:
+        raise InputError(args.tlog, "no companion setup record (not written by companion fly/demo): "
+                                    "replay it without --mission for its metrics")
+    mission = load_mission(args.mission)
+    if setup.get("plan_sha") and not args.plan:
+        raise InputError("--plan", f"the flight flew a plan file (sha {setup['plan_sha']}): give it with --plan")
+    current = flight_setup(mission, args.plan, setup.get("control", "companion"), setup.get("cut_s"),
+                           setup.get("runner") or {})
+    warnings = setup_mismatches(setup, current)
+    fp = prepare(mission, args.plan)
+    try:
+        core = build_core(setup, mission, fp)
+    except ValueError as exc:
+        raise InputError(args.tlog, f"setup record: {exc}") from None
+    return core, fp, warnings, setup
+
+
+def _report_doc(args, result, setup, warnings) -> dict:
+    from ..report import _finite
+
+    doc = {
+        "format": REPORT_FORMAT,
+        "format_version": REPORT_FORMAT_VERSION,
+        "tlog": str(args.tlog),
+        "mission": args.mission,
+        "plan": args.plan,
+        "setup": setup,
+        "warnings": list(warnings),
+        "scan": result.scan.to_dict(),
+        "metrics": result.metrics.to_dict(),
+        "comparison": None if result.comparison is None else result.comparison.to_dict(),
+        "flight": None if result.flight is None else result.flight.to_dict(),
+    }
+    return _finite(doc)
+
+
+def _mm(x) -> str:
+    return "n/a" if x is None else f"{x * 1000:.2f} mm"
+
+
+def _print_summary(args, result, warnings) -> None:
+    s, m = result.scan, result.metrics
+    name = f"companion replay: {args.tlog}"
+    print(f"{name}: {s.n_records} records, {s.n_bytes / 1e6:.2f} MB, {m.duration_s:.3f} s of vehicle time "
+          f"({m.n_frames} frames; {m.n_vehicle_messages} vehicle and {m.n_companion_messages} companion messages)")
+    modes = ", ".join(f"{k} {v:.1f} s" for k, v in m.time_in_mode_s.items()) or "none recorded"
+    dist = "n/a" if m.distance_m is None else f"{m.distance_m:.2f} m ({m.horizontal_distance_m:.2f} m horizontal)"
+    print(f"  flight time {m.flight_time_s:.2f} s ({m.flight_time_source or 'unknown'}), distance {dist} "
+          f"from {m.position_source or 'no position'}; modes: {modes}")
+    tr = m.tracking
+    if tr.reference_source is None:
+        print("  tracking: no reference recorded (no setpoints)")
+    else:
+        print(f"  tracking vs {tr.reference_source}: max {_mm(tr.max_error_m)}, rms {_mm(tr.rms_error_m)} "
+              f"({tr.n_samples} samples from {tr.settle_s:g} s after lift-off; position "
+              f"{tr.position_source or 'n/a'}{', ESTIMATED' if tr.estimated else ''})")
+    clr = "n/a" if m.min_clearance_m is None else f"{m.min_clearance_m:.2f} m"
+    print(f"  min clearance {clr}, replanning events {m.replanning_events}")
+    if s.n_regions or s.n_time_jumps:
+        where = ", ".join(f"{r.kind} {r.n_bytes} B at byte {r.offset}" for r in s.regions[:5])
+        more = "" if s.n_regions <= 5 else f", ... ({s.n_regions} regions)"
+        print(f"  skipped: {s.n_skipped_bytes} bytes, {s.n_skipped_packets} packets"
+              f"{' (' + where + more + ')' if where else ''}; time stamp jumps: {s.n_time_jumps}")
+    for w in warnings:
+        print(f"  warning: {w}")
+    c = result.comparison
+    if c is not None:
+        tol = "float32 fields bit for bit" if c.tolerance == 0 else f"tolerance {c.tolerance:g}"
+        if c.identical:
+            extra = f", {c.n_within_tolerance} within tolerance" if c.n_within_tolerance else ""
+            inj = f"; re-injected: {', '.join(c.injected)}" if c.injected else ""
+            print(f"  replay: {c.n_compared} outputs identical ({tol}{extra}){inj}")
+        else:
+            print(f"  replay: DIVERGED ({tol}): {c.n_differing} of {c.n_compared} outputs differ")
+
+
+def run(args) -> int:
+    withhold = _check_args(args)
+    core, fp, warnings, setup = (None, None, [], None)
+    if args.mission:
+        core, fp, warnings, setup = _rebuild(args)
+    from ..replay import replay_chunks
+
+    result = replay_chunks(read_chunks(args.tlog), core, args.tolerance, withhold, args.settle,
+                           with_log=bool(args.plot))
+    if result.scan.n_records == 0:
+        raise InputError(args.tlog, "no MAVLink records (not a .tlog?)")
+    if setup is None:
+        setup = result.setup
+    _print_summary(args, result, warnings)
+    if args.report:
+        import json
+
+        from .plan import write_atomically
+
+        doc = _report_doc(args, result, setup, warnings)
+        write_atomically({args.report: (json.dumps(doc, indent=2) + "\n").encode("utf-8")})
+    if args.plot and result.log is not None:
+        from ..flight_plot import write_flight_figures
+
+        Path(args.plot).mkdir(exist_ok=True)
+        figs = write_flight_figures(result.log, core.inputs if core is not None else None, args.plot)
+        print(f"  figures: {', '.join(Path(f).name for f in figs) or 'none (no flight rows)'} in {args.plot}")
+    c = result.comparison
+    if c is not None and not c.identical:
+        print(f"companion replay: DIVERGED at {c.first_divergence.describe()}", file=sys.stderr)
+        s = result.scan
+        if s.n_skipped_packets or s.n_skipped_bytes:
+            print(f"companion replay: note: the recording is damaged ({s.n_skipped_packets} packets, "
+                  f"{s.n_skipped_bytes} bytes skipped, the first at byte {s.regions[0].offset}): outputs "
+                  "after a lost packet cannot match", file=sys.stderr)
+        for w in warnings:
+            print(f"companion replay: note: {w}", file=sys.stderr)
+        return EXIT_DIVERGED
+    return 0

@@ -1,0 +1,198 @@
+"""Exact coarse connectivity of the eroded free space (a block graph).
+
+The eroded mask (grid frame G, cells of ``h``; see :mod:`freespace`) is cut
+into square blocks of ``f x f`` cells. Inside each block the eroded cells
+fall into one or more 8-connected pieces, the *sub-components*; they are the
+nodes of a sparse graph whose edges join two sub-components of neighbouring
+blocks that hold 8-adjacent cells. Two eroded cells are then 8-connected in
+the fine mask exactly when their sub-components are connected in the graph
+(every sub-component is connected inside itself, and a fine path that
+crosses a block boundary crosses an edge), so:
+
+- the connected components of the graph are the components of the free
+  space (which main segments can be reached from which);
+- a shortest path in the graph gives a corridor of blocks that is known to
+  hold a fine path, so the fine search runs on that corridor only, however
+  far round the connection has to go.
+
+Everything is vectorised: one ``scipy.ndimage.label`` over the blocks seen
+as a stack of ``f x f`` images (a 3-D structure that links cells inside a
+slice only), four shifted comparisons for the edges, and
+``scipy.sparse.csgraph`` for components and shortest paths. Work and memory
+are confined to the bounding box of the eroded cells.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import connected_components, dijkstra
+
+#: Aim for at most about this many blocks (the coarse graph stays small).
+_TARGET_BLOCKS = 40_000
+#: Smallest block edge (cells).
+_MIN_BLOCK = 8
+#: The four "forward" neighbour offsets (dr, dc) of 8-connectivity.
+_FORWARD = ((0, 1), (1, 0), (1, 1), (1, -1))
+
+
+@dataclass(frozen=True, eq=False)
+class BlockGraph:
+    """Block graph of an eroded mask (module doc).
+
+    Attributes
+    ----------
+    block : int
+        Block edge ``f`` (cells).
+    r0, c0 : int
+        Grid cell of the lower-left corner of the covered window (the eroded
+        bounding box); block ``(i, j)`` covers rows ``r0 + i f ..`` and
+        columns ``c0 + j f ..``.
+    shape : (rows, cols)
+        Size of the covered window (cells).
+    labels : (nbr, nbc, f, f) int32
+        Sub-component id (1..K) of each eroded cell, block by block; 0 elsewhere.
+    graph : (K + 1, K + 1) csr_matrix
+        Symmetric adjacency between sub-components, weights the distance
+        (cells) between their blocks' centres; node 0 is unused.
+    component : (K + 1,) int
+        Connected component of each sub-component (-1 for node 0).
+    block_of : (K + 1, 2) int
+        Block (i, j) of each sub-component.
+    """
+
+    block: int
+    r0: int
+    c0: int
+    shape: tuple[int, int]
+    labels: np.ndarray
+    graph: csr_matrix
+    component: np.ndarray
+    block_of: np.ndarray
+
+    def sub_at(self, r: int, c: int) -> int:
+        """Sub-component id of grid cell (r, c); 0 if not eroded or outside the window."""
+        rr, cc = r - self.r0, c - self.c0
+        if 0 <= rr < self.shape[0] and 0 <= cc < self.shape[1]:
+            f = self.block
+            return int(self.labels[rr // f, cc // f, rr % f, cc % f])
+        return 0
+
+    def components_of(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Component id of each grid cell (arrays), -1 where not eroded."""
+        f = self.block
+        rr = np.asarray(rows, dtype=np.int64) - self.r0
+        cc = np.asarray(cols, dtype=np.int64) - self.c0
+        ok = (rr >= 0) & (rr < self.shape[0]) & (cc >= 0) & (cc < self.shape[1])
+        out = np.full(rr.shape, -1, dtype=np.int64)
+        r, c = rr[ok], cc[ok]
+        s = self.labels[r // f, c // f, r % f, c % f]
+        out[ok] = np.where(s > 0, self.component[s], -1)
+        return out
+
+    def cells_of(self, subs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Grid rows and columns (int64 arrays) of the cells of the sub-components ``subs``."""
+        f = self.block
+        nbc = self.labels.shape[1]
+        bi, bj = self.block_of[subs].T
+        ub = np.unique(bi * nbc + bj)
+        sel = np.isin(self.labels[ub // nbc, ub % nbc], subs)
+        m, lr, lc = np.nonzero(sel)
+        return self.r0 + (ub[m] // nbc) * f + lr, self.c0 + (ub[m] % nbc) * f + lc
+
+    def corridor(self, s_from: int, s_to: int) -> np.ndarray | None:
+        """Sub-component ids of a shortest graph path from ``s_from`` to ``s_to``
+        plus their graph neighbours (room to smooth the fine path); None if
+        the two are not connected."""
+        if s_from <= 0 or s_to <= 0 or self.component[s_from] != self.component[s_to]:
+            return None
+        if s_from == s_to:
+            nodes = np.array([s_from])
+        else:
+            # Dijkstra bounded by a distance limit (cells) that doubles until
+            # the target is settled: the search stays local for the usual
+            # short connection and still reaches any connected target.
+            straight = float(np.hypot(*(self.block_of[s_to] - self.block_of[s_from]))) * self.block
+            limit = 2.0 * straight + 4.0 * self.block
+            while True:
+                dist, pred = dijkstra(self.graph, directed=True, indices=s_from, return_predecessors=True,
+                                      limit=limit)
+                if np.isfinite(dist[s_to]):
+                    break
+                if limit > float(self.graph.data.sum()):    # longer than any simple path
+                    return None
+                limit *= 2.0
+            path = [s_to]
+            while path[-1] != s_from:
+                path.append(int(pred[path[-1]]))
+            nodes = np.array(path)
+        neigh = self.graph[nodes].indices
+        return np.unique(np.concatenate([nodes, neigh]))
+
+
+def block_size(n_cells: int) -> int:
+    """Block edge (cells) for a window of ``n_cells``: about ``_TARGET_BLOCKS`` blocks."""
+    return max(_MIN_BLOCK, int(np.ceil(np.sqrt(n_cells / _TARGET_BLOCKS))))
+
+
+def _pairs(a: np.ndarray, b: np.ndarray, k: int) -> np.ndarray | None:
+    """Unique undirected keys ``min * (k + 1) + max`` of the labelled pairs (a, b), a != b."""
+    m = (a > 0) & (b > 0) & (a != b)
+    if not m.any():
+        return None
+    lo = np.minimum(a[m], b[m]).astype(np.int64)
+    return np.unique(lo * (k + 1) + np.maximum(a[m], b[m]))
+
+
+def build_block_graph(eroded: np.ndarray, bbox: tuple[int, int, int, int]) -> BlockGraph:
+    """Block graph (module doc) of ``eroded`` inside the half-open box ``(r0, r1, c0, c1)``."""
+    r0, r1, c0, c1 = bbox
+    win = eroded[r0:r1, c0:c1]
+    f = block_size(win.size)
+    nbr, nbc = -(-win.shape[0] // f), -(-win.shape[1] // f)
+    # the blocks as a stack of f x f images; a structure that only links
+    # cells within one image labels every block's pieces separately
+    padded = np.zeros((nbr * f, nbc * f), dtype=bool)
+    padded[: win.shape[0], : win.shape[1]] = win
+    stack = np.ascontiguousarray(padded.reshape(nbr, f, nbc, f).transpose(0, 2, 1, 3))
+    del padded
+    structure = np.zeros((3, 3, 3), dtype=bool)
+    structure[1] = True
+    lab, k = ndimage.label(stack.reshape(nbr * nbc, f, f), structure=structure, output=np.int32)
+    del stack
+    B = lab.reshape(nbr, nbc, f, f)
+    # edges between sub-components of neighbouring blocks: only the blocks' border
+    # cells can touch across a boundary (8-connectivity: side neighbours and corners)
+    keys = []
+    right, left = B[:, :-1, :, f - 1], B[:, 1:, :, 0]               # (nbr, nbc - 1, f)
+    top, bottom = B[:-1, :, f - 1, :], B[1:, :, 0, :]               # (nbr - 1, nbc, f)
+    for d in (-1, 0, 1):
+        lo, hi = max(0, -d), f - max(0, d)
+        keys.append(_pairs(right[..., lo:hi], left[..., lo + d: hi + d], k))
+        keys.append(_pairs(top[..., lo:hi], bottom[..., lo + d: hi + d], k))
+    keys.append(_pairs(B[:-1, :-1, f - 1, f - 1], B[1:, 1:, 0, 0], k))      # up-right corner
+    keys.append(_pairs(B[:-1, 1:, f - 1, 0], B[1:, :-1, 0, f - 1], k))       # up-left corner
+    keys = [x for x in keys if x is not None]
+    # block of each sub-component: labels are numbered in scan order and no label
+    # spans two blocks, so the ids of block b are (max id before b, max id of b]
+    block_of = np.zeros((k + 1, 2), dtype=np.int64)
+    if k:
+        top_id = np.maximum.accumulate(lab.reshape(nbr * nbc, f * f).max(axis=1))
+        owner = np.searchsorted(top_id, np.arange(1, k + 1), side="left")
+        block_of[1:] = np.column_stack([owner // nbc, owner % nbc])
+    if keys:
+        key = np.unique(np.concatenate(keys))
+        u, v = key // (k + 1), key % (k + 1)
+        w = np.maximum(np.hypot(*(block_of[u] - block_of[v]).T) * f, 1e-6)
+        graph = coo_matrix((np.concatenate([w, w]), (np.concatenate([u, v]), np.concatenate([v, u]))),
+                           shape=(k + 1, k + 1)).tocsr()
+    else:
+        graph = csr_matrix((k + 1, k + 1))
+    _, comp = connected_components(graph, directed=False)
+    comp = comp.astype(np.int64)
+    comp[0] = -1
+    return BlockGraph(block=f, r0=r0, c0=c0, shape=win.shape, labels=B, graph=graph, component=comp,
+                      block_of=block_of)

@@ -1,0 +1,150 @@
+"""Transits from one point (the launch point) to anywhere in the eroded free space.
+
+Every sortie leaves the launch point and comes back to it, so all transits
+share one end. One shortest-path tree from that point serves them all:
+
+- The eroded mask (G frame, :mod:`freespace`) is min-pooled into cells of
+  ``p x p`` fine cells (a pooled cell is free only if all its cells are), so
+  any straight step between the centres of two side-by-side pooled cells
+  stays in eroded space; the pooled cells are joined 4-connected.
+- ``scipy.sparse.csgraph.dijkstra`` from the launch point's pooled cell gives
+  distances and predecessors for every pooled cell at once (one search per
+  plan instead of two per sortie).
+- A transit to a point ``q`` walks the predecessors back from the nearest
+  reachable pooled cell whose centre ``q`` sees, then is simplified by string
+  pulling (``gridpath.simplify``): on the pooled mask first (clear there is
+  clear in the fine mask), then on the fine mask over the few points left. When no such cell is near ``q`` (a passage
+  narrower than a pooled cell), ``gridpath.aux_path`` finds the exact
+  connection instead.
+
+Pooled distances are also the sorties' transit estimates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse.csgraph import dijkstra
+
+from .freespace import FreeSpace
+from .gridpath import NEIGHBOURS_4, aux_path, cell_graph, simplify, visible_from
+
+#: pooled cell edge (m) aimed at; at least one fine cell
+POOL_M = 0.2
+#: how far (pooled cells) a point looks for a pooled cell it sees
+_SEARCH = 4
+
+
+@dataclass(frozen=True, eq=False)
+class TransitTree:
+    """Shortest-path tree of the pooled eroded space from ``root_g`` (module doc)."""
+
+    free: FreeSpace
+    root_g: np.ndarray
+    pool: int
+    r0: int
+    c0: int
+    lin: np.ndarray        # sorted linear indices (row * width + col) of the pooled nodes
+    width: int
+    rows: np.ndarray
+    cols: np.ndarray
+    dist: np.ndarray       # (n,) pooled steps from the root (inf: unreachable)
+    pred: np.ndarray       # (n,) predecessor node, -9999 at the root / unreachable
+    source: str
+    pooled: FreeSpace | None = None   # the pooled mask as a FreeSpace in the pooled frame
+
+    def _centre_g(self, r, c) -> np.ndarray:
+        cell = self.pool * self.free.resolution_m
+        return np.column_stack([(self.c0 * self.free.resolution_m + (np.asarray(c) + 0.5) * cell),
+                                (self.r0 * self.free.resolution_m + (np.asarray(r) + 0.5) * cell)])
+
+    def _attach(self, q_g: np.ndarray) -> int | None:
+        """Node of the nearest reachable pooled cell whose centre ``q_g`` sees, or None."""
+        cell = self.pool * self.free.resolution_m
+        pr = int((q_g[1] - self.r0 * self.free.resolution_m) // cell)
+        pc = int((q_g[0] - self.c0 * self.free.resolution_m) // cell)
+        dr, dc = np.meshgrid(np.arange(-_SEARCH, _SEARCH + 1), np.arange(-_SEARCH, _SEARCH + 1), indexing="ij")
+        order = np.argsort((dr * dr + dc * dc).ravel(), kind="stable")
+        r = pr + dr.ravel()[order]
+        c = pc + dc.ravel()[order]
+        t = r * self.width + c
+        pos = np.minimum(np.searchsorted(self.lin, t), len(self.lin) - 1)
+        hit = (self.lin[pos] == t) & (r >= 0) & (c >= 0)
+        nodes = pos[hit]
+        nodes = nodes[np.isfinite(self.dist[nodes])]
+        if len(nodes) == 0:
+            return None
+        vis = visible_from(self.free, q_g, self._centre_g(self.rows[nodes], self.cols[nodes]))
+        good = nodes[vis]
+        return int(good[0]) if len(good) else None
+
+    def distance_m(self, q_g: np.ndarray) -> float:
+        """Length (m) of the pooled transit from the root to ``q_g``; inf if it cannot attach."""
+        node = self._attach(np.asarray(q_g, float))
+        if node is None:
+            return np.inf
+        centre = self._centre_g(self.rows[node], self.cols[node])[0]
+        return float(self.dist[node]) * self.pool * self.free.resolution_m + float(np.hypot(*(centre - q_g)))
+
+    def path_to(self, q_g: np.ndarray) -> np.ndarray:
+        """(k, 2) G polyline from the root to ``q_g`` in eroded free space (module doc)."""
+        q_g = np.asarray(q_g, float)
+        node = self._attach(q_g)
+        if node is None:
+            return aux_path(self.free, self.root_g, q_g, self.source)
+        chain = [node]
+        while self.pred[chain[-1]] >= 0:
+            chain.append(int(self.pred[chain[-1]]))
+        chain = np.array(chain[::-1])
+        centres = self._centre_g(self.rows[chain], self.cols[chain])
+        # string pulling on the pooled mask first (pooled cells are wholly eroded, so a
+        # segment clear there is clear in the fine mask; half the samples), then on the
+        # fine mask over the few points left, with the two end hops
+        off = np.array([self.c0, self.r0]) * self.free.resolution_m
+        coarse = simplify(self.pooled, centres - off) + off
+        return simplify(self.free, np.vstack([self.root_g, coarse, q_g]))
+
+
+def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>") -> TransitTree:
+    """The tree from ``root_g`` (G, m; in eroded space) over the pooled eroded space (module doc)."""
+    h = free.resolution_m
+    p = max(1, int(round(POOL_M / h)))
+    r0, r1, c0, c1 = free.bbox_cells
+    win = free.eroded[r0:r1, c0:c1]
+    R, C = -(-win.shape[0] // p), -(-win.shape[1] // p)
+    padded = np.zeros((R * p, C * p), dtype=bool)
+    padded[: win.shape[0], : win.shape[1]] = win
+    pooled = padded.reshape(R, p, C, p).all(axis=(1, 3))
+    rows, cols = np.nonzero(pooled)
+    width = C + 2
+    if len(rows) == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return TransitTree(free, np.asarray(root_g, float), p, r0, c0, empty, width, empty, empty,
+                           np.zeros(0), empty, source)
+    graph, order = cell_graph(rows, cols, neighbours=NEIGHBOURS_4, edge_cells=0)
+    rows, cols = rows[order], cols[order]
+    lin = rows * width + cols
+    tree = TransitTree(free, np.asarray(root_g, float), p, r0, c0, lin, width, rows, cols,
+                       np.full(len(rows), np.inf), np.full(len(rows), -9999), source)
+    start = None
+    # the root attaches to the nearest pooled cell it sees (distances not known yet)
+    cell = p * h
+    pr = int((root_g[1] - r0 * h) // cell)
+    pc = int((root_g[0] - c0 * h) // cell)
+    dr, dc = np.meshgrid(np.arange(-_SEARCH, _SEARCH + 1), np.arange(-_SEARCH, _SEARCH + 1), indexing="ij")
+    order2 = np.argsort((dr * dr + dc * dc).ravel(), kind="stable")
+    r = pr + dr.ravel()[order2]
+    c = pc + dc.ravel()[order2]
+    t = r * width + c
+    pos = np.minimum(np.searchsorted(lin, t), len(lin) - 1)
+    nodes = pos[(lin[pos] == t) & (r >= 0) & (c >= 0)]
+    if len(nodes):
+        vis = visible_from(free, np.asarray(root_g, float), tree._centre_g(rows[nodes], cols[nodes]))
+        start = int(nodes[vis][0]) if vis.any() else None
+    if start is None:
+        return tree
+    dist, pred = dijkstra(graph, directed=True, indices=start, return_predecessors=True)
+    pooled_fs = FreeSpace(eroded=pooled, free=pooled, resolution_m=p * h, threshold_m=free.threshold_m)
+    return TransitTree(free, np.asarray(root_g, float), p, r0, c0, lin, width, rows, cols, dist, pred, source,
+                       pooled_fs)

@@ -1,0 +1,960 @@
+"""The whole flight as a pure, event-driven state machine: MAVLink messages in,
+MAVLink messages out.
+
+``FlightCore`` holds no socket, file or clock. The runner (``companion.runner``)
+hands it every message the vehicle sent, in order (``handle``), and sends what
+it queued (``take_outbox``); ``companion replay`` feeds it a recorded .tlog
+the same way and compares what it queues with what was recorded. So a flight
+is a deterministic function of the vehicle's messages, and everything is timed
+by the vehicle's clock (HIGHRES_IMU ``time_usec``).
+
+Sequence::
+
+    connect    the vehicle's HEARTBEAT (1/1)
+    setup      learn the sensor period from two HIGHRES_IMU frames; request
+               LOCAL_POSITION_NED (and the SITL's ground-truth ODOMETRY) at
+               every frame, position streams at a low rate, mute the rest
+               (MAV_CMD_SET_MESSAGE_INTERVAL)
+    upload     the way-points as a MAVLink mission (MISSION_INT protocol)
+    preflight  stream setpoints (hold where the vehicle is) for
+               ``preflight_s`` (PX4 only enters OFFBOARD with a setpoint
+               stream present); DO_SET_MODE OFFBOARD, ARM
+    takeoff    smooth segments (7th-order, C3 smoothstep): a vertical climb
+               from the ground position to the height of the trajectory's
+               first point, then a level transfer to that point (launched
+               within ``LAUNCH_TOLERANCE_M`` of the first point: just the climb)
+    hold       hover there ``hold_s`` (the takeoff transient dies out)
+    trajectory the planned trajectory (or the replanner's, see below)
+    hover      ``hover_s`` at its last point
+    landing    NAV_LAND: the vehicle's own controller descends; it disarms
+               itself once landed (or we send ARM_DISARM(0))
+
+The procedure is written as a generator (``_procedure``) that yields the
+condition it waits for; ``handle`` resumes it after every message once its
+condition holds. Commands wait for their COMMAND_ACK for
+``command_timeout_s`` of vehicle time and are re-sent (TEMPORARILY_REJECTED:
+retried after 0.5 s). Per sensor frame (``_on_imu``), in both control modes,
+setpoints (SET_POSITION_TARGET_LOCAL_NED) are queued at ``setpoint_hz``; with
+``control="companion"`` the geometric controller's motor commands answer every
+frame (HIL_ACTUATOR_CONTROLS, lockstep flag, ``time_usec`` echoed), else a
+tick with four NaN (the vehicle's own controller flies).
+
+Outcome: a ``FlightMonitor`` (``companion.flight.monitor``) watches from our
+arming to our landing command; its first violation stops the flight with the
+reaction it names (``end``, ``release``, ``land``/hold) and the flight is not
+``completed``. ``interrupt`` (SIGINT/SIGTERM) and ``link_lost`` do the same
+from outside. ``degrade`` hands the inner loop back to the vehicle's
+controller (setpoints only) when the link can no longer carry it.
+
+Truth: ODOMETRY (the SITL's ground truth) is decoded only after the frame's
+answer is queued and only feeds the report's error statistics (and the
+monitor's error bound); nothing the controller or the replanner sees comes
+from it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from ..errors import CommandRejected, LinkError
+from ..link import codec
+from ..report import FlightReport, ReplanningStats, TrackingStats
+from ..vehicle import VehicleConfig
+from .config import RunnerConfig
+from .coverage import PathCoverage
+from .log import ErrorStats, FlightLog
+from .monitor import FlightMonitor, MonitorConfig, Violation
+from .setup_record import MAV_SEVERITY_DEBUG, SETUP_TEXT_ID, setup_chunks
+from .reference import (RefSample, TrajectoryWindow, at_rest, climb_duration_s, pointing_at,
+                        setpoint_yaw_enu, smooth_segment)
+
+PHASES = ("connect", "setup", "upload", "preflight", "takeoff", "hold", "trajectory", "hover", "landing", "done",
+          "holding", "released", "ended")
+PHASE_CODE = {p: i for i, p in enumerate(PHASES)}
+#: Phases in which the vehicle is meant to be flying under our reference.
+FLYING = ("takeoff", "hold", "trajectory", "hover")
+
+#: A vehicle armed within this horizontal distance (m) of the trajectory's
+#: first point climbs straight to it (no separate level transfer).
+LAUNCH_TOLERANCE_M = 0.05
+
+#: Streams the runner never reads (muted by ``companion demo``).
+UNUSED_STREAMS = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED)
+
+_SENSOR_DOWN = mavlink.MAV_SENSOR_ROTATION_PITCH_270
+_OFFBOARD = codec.px4_custom_mode(codec.PX4_MAIN_MODE_OFFBOARD)
+_LOITER = codec.px4_custom_mode(codec.PX4_MAIN_MODE_AUTO, 3)
+_NAN3 = (math.nan, math.nan, math.nan)
+_NAN9 = (math.nan,) * 9
+_NAN_CTRL = (math.nan,) * 10
+_Z3 = (0.0, 0.0, 0.0)
+#: STATUSTEXT prefixes of the events that come from outside the core (replay re-injects them).
+INTERRUPT_PREFIX = "companion: interrupted by "
+DEGRADE_PREFIX = "companion: inner loop to vehicle: "
+
+
+@dataclass(frozen=True)
+class FlightInputs:
+    """What the core flies (ENU, map frame = the vehicle's local frame).
+
+    Attributes
+    ----------
+    trajectory : companion.trajectory.Trajectory
+        The reference.
+    waypoints_p_enu_m : (N, 3) array
+        Way-points uploaded as the MAVLink mission.
+    home : (lat_deg, lon_deg, alt_m)
+        Geodetic pose of the map origin (for MISSION_ITEM_INT).
+    target_enu_m : (3,) sequence
+        Pointing target S_p.
+    mag_field_enu_gauss : (3,) sequence
+        The local Earth field (the take-off heading is measured against it).
+    mission_name : str
+    coverage_fraction : float or None
+        The plan's coverage of the field.
+    path_xy_m : (M, 2) array or None
+        The plan's 2D coverage path; the report's flown coverage is the
+        planned coverage times the fraction of this path actually flown.
+    transit_floor_z_m : float or None
+        Lowest safe height (ENU z, m) of a straight level flight across the
+        field: the take-off's transfer to the first point flies at least this
+        high (``takeoff_segments``).
+    setup : dict or None
+        How this flight was set up (``companion.flight.setup_record``): sent
+        at connection so the .tlog describes its own flight.
+    """
+
+    trajectory: object
+    waypoints_p_enu_m: object
+    home: tuple
+    target_enu_m: tuple
+    mag_field_enu_gauss: tuple = (0.0, 0.21, -0.42)
+    mission_name: str = ""
+    coverage_fraction: float | None = None
+    path_xy_m: object = None
+    setup: dict | None = None
+    transit_floor_z_m: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ActuatorOut:
+    """One lockstep answer: HIL_ACTUATOR_CONTROLS for frame ``time_usec``
+    (``motor_cmd`` None: four NaN, the vehicle's controller flies)."""
+
+    time_usec: int
+    motor_cmd: tuple | None
+    armed: bool
+
+
+def heading_from_imu(accel_flu, mag_flu, mag_field_enu) -> float:
+    """ENU heading (rad from east, CCW) of the body x axis, from the IMU at rest.
+
+    At rest the accelerometer reads the specific force ``R^T g e3``: its
+    direction is the world's up in body axes. The magnetometer's component
+    normal to it is the Earth field's horizontal part in body axes. TRIAD
+    with the up pair exact: ``R = W B^T`` with ``W = [e3, h_w, e3 x h_w]``,
+    ``B = [u_b, h_b, u_b x h_b]``; the heading is that of ``R e1``.
+    Exact for any tilt (not only level), noise aside.
+    """
+    ax, ay, az = accel_flu
+    n = math.sqrt(ax * ax + ay * ay + az * az)
+    u = (ax / n, ay / n, az / n)
+    mx, my, mz = mag_flu
+    c = mx * u[0] + my * u[1] + mz * u[2]
+    h = (mx - c * u[0], my - c * u[1], mz - c * u[2])
+    nh = math.sqrt(h[0] ** 2 + h[1] ** 2 + h[2] ** 2)
+    h = (h[0] / nh, h[1] / nh, h[2] / nh)
+    k = (u[1] * h[2] - u[2] * h[1], u[2] * h[0] - u[0] * h[2], u[0] * h[1] - u[1] * h[0])   # u x h
+    hw = (float(mag_field_enu[0]), float(mag_field_enu[1]))
+    nw = math.hypot(*hw)
+    hw = (hw[0] / nw, hw[1] / nw)
+    kw = (-hw[1], hw[0])                                      # e3 x h_w (horizontal)
+    # R e1 = e3 u_x + h_w h_x + (e3 x h_w) k_x; its horizontal part:
+    x = hw[0] * h[0] + kw[0] * k[0]
+    y = hw[1] * h[0] + kw[1] * k[0]
+    return math.atan2(y, x)
+
+
+def takeoff_segments(start, first, transit_floor_z_m, climb_speed_m_s: float, transfer_speed_m_s: float):
+    """The take-off as rest-to-rest smooth segments ``[(p0, p1, duration_s), ...]`` (ENU).
+
+    Launched within ``LAUNCH_TOLERANCE_M`` of the first point: one vertical
+    climb to it. Otherwise: climb straight up to the transit height, fly
+    level to above the first point, descend to it. The transit height is
+    the highest of the first point, the start and ``transit_floor_z_m``
+    (the highest terrain of the field plus the canopy and a clearance: a
+    level flight there cannot touch a vine row); None: the first point's
+    height (a field without rows).
+    """
+    start = tuple(float(c) for c in start)
+    first = tuple(float(c) for c in first)
+    if math.dist(start[:2], first[:2]) < LAUNCH_TOLERANCE_M:
+        return [(start, first, climb_duration_s(math.dist(start, first), climb_speed_m_s))]
+    z_t = max(first[2], start[2], transit_floor_z_m if transit_floor_z_m is not None else -math.inf)
+    top = (start[0], start[1], z_t)
+    over = (first[0], first[1], z_t)
+    segs = [(start, top, climb_duration_s(z_t - start[2], climb_speed_m_s)),
+            (top, over, climb_duration_s(math.dist(top, over), transfer_speed_m_s, 1.0))]
+    if z_t - first[2] > 1e-6:
+        segs.append((over, first, climb_duration_s(z_t - first[2], climb_speed_m_s)))
+    return segs
+
+
+class FlightCore:
+    """Fly ``inputs`` (see the module docstring).
+
+    Parameters
+    ----------
+    inputs : FlightInputs
+    cfg : RunnerConfig
+    vehicle : VehicleConfig
+    controller : GeometricController or None
+        Required for ``cfg.control == "companion"``.
+    target_system, target_component : int
+        The vehicle (1/1).
+    """
+
+    def __init__(self, inputs: FlightInputs, cfg: RunnerConfig, vehicle: VehicleConfig, controller=None,
+                 target_system: int = 1, target_component: int = 1) -> None:
+        if cfg.control == "companion" and controller is None:
+            raise ValueError("control='companion' needs a controller")
+        import numpy as np
+
+        self.inputs = inputs
+        self.cfg = cfg
+        self.vehicle = vehicle
+        self.ctrl = controller
+        self.ts, self.tc = int(target_system), int(target_component)
+        self.waypoints = np.asarray(inputs.waypoints_p_enu_m, dtype=float)
+        self.target = tuple(float(x) for x in inputs.target_enu_m)
+        self.home = tuple(float(h) for h in inputs.home)
+        # Messages are built with a private encoder (no file): the runner packs
+        # them with its own link (sequence numbers, signing).
+        self.enc = mavlink.MAVLink(None, srcSystem=1, srcComponent=mavlink.MAV_COMP_ID_ONBOARD_COMPUTER)
+        self.outbox: list = []
+        self.monitor = FlightMonitor(MonitorConfig(cfg.max_tracking_error_m, cfg.settle_s,
+                                                   max_nav_age_s=cfg.max_nav_age_s))
+        self.log = FlightLog()
+        self.errors = ErrorStats(cfg.settle_s)
+        self.coverage = None if inputs.path_xy_m is None else PathCoverage(inputs.path_xy_m)
+        self.phase = "connect"
+        self.error: str | None = None
+        self.finished = False
+        # vehicle state (from its messages)
+        self.t_us: int | None = None
+        self.t_s: float | None = None
+        self.t_first_s: float | None = None
+        self._imu_times: list[int] = []
+        self.period_us: int | None = None
+        self.n_frames = 0
+        self.armed = False
+        self.vstate = None
+        self.custom_mode: int | None = None
+        self.landed_state = mavlink.MAV_LANDED_STATE_UNDEFINED
+        self._pos = None
+        self._vel = None
+        self._nav_t = None
+        self._imu = None                # (accel, mag) FLU of the last frame
+        self._truth = None
+        self._R = None                  # attitude for the log: truth (ODOMETRY) or the vehicle's ATTITUDE
+        self._odom = None
+        self.truth_source = "estimate"
+        self.min_clearance_m = None
+        self.statustext: list[str] = []
+        self.n_control_faults = 0
+        self.n_stale_frames = 0
+        self._last_err = None
+        self._controlling = False
+        self.degraded: dict | None = None
+        self.interrupted: str | None = None
+        self._next_sp_t = -math.inf
+        self._sp_dt = 1.0 / cfg.setpoint_hz
+        self._hb_t = None
+        # schedule (vehicle seconds), set at arming
+        self._t_arm = None
+        self._segments: list[tuple] = []     # take-off: (p0, p1, T) smooth segments back to back
+        self._takeoff_T = 0.0
+        self._psi_arm = self._dpsi = 0.0
+        self._t_hold = self._t_traj = self._t_hover = self._t_land = math.inf
+        self._window: TrajectoryWindow | None = None
+        self._hold_first = self._hold_last = self._preflight_ref = None
+        self.resumed_from_s: float | None = None
+        # command / mission protocol plumbing of the procedure
+        self._ack = None
+        self._ack_for = None
+        self._mission_msg = None
+        self._param = None
+        self._param_for = None
+        #: The vehicle waits for every answer (the bundled SITL's SIM_LOCKSTEP = 1):
+        #: link delay then costs wall time, not control (``companion.flight.health``).
+        self.vehicle_lockstep = False
+        self._proc = self._procedure()
+        self._waiting = None
+        self._dispatch = {
+            "HIGHRES_IMU": self._on_imu,
+            "LOCAL_POSITION_NED": self._on_local_position,
+            "ODOMETRY": self._on_odometry,
+            "ATTITUDE": self._on_attitude,
+            "HEARTBEAT": self._on_heartbeat,
+            "EXTENDED_SYS_STATE": self._on_ext_state,
+            "DISTANCE_SENSOR": self._on_distance,
+            "STATUSTEXT": self._on_statustext,
+            "COMMAND_ACK": self._on_command_ack,
+            "MISSION_REQUEST_INT": self._on_mission_msg,
+            "MISSION_REQUEST": self._on_mission_msg,
+            "MISSION_ACK": self._on_mission_msg,
+            "PARAM_VALUE": self._on_param_value,
+        }
+        #: Optional tap on the controller's inputs (tests check them against the link).
+        self.input_tap = None
+
+    # --- the runner's face ----------------------------------------------------------
+
+    def handle(self, m) -> None:
+        """Process one message from the vehicle (in arrival order)."""
+        if m.get_srcSystem() != self.ts:
+            return
+        h = self._dispatch.get(m.get_type())
+        if h is not None:
+            h(m)
+        if self._proc is not None:
+            self._drive()
+
+    @property
+    def handled_types(self) -> frozenset:
+        """Message types ``handle`` acts on; any other message leaves the core as it was
+        (``companion replay`` does not even decode them)."""
+        return frozenset(self._dispatch)
+
+    def take_outbox(self) -> list:
+        out = self.outbox
+        self.outbox = []
+        return out
+
+    def interrupt(self, reason: str) -> None:
+        """Stop the flight from outside (SIGINT/SIGTERM): land or hold, report not completed."""
+        if self.finished:
+            return
+        self.interrupted = reason
+        # Said on the wire (and so in the .tlog, where replay finds it).
+        self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_WARNING,
+                                              f"{INTERRUPT_PREFIX}{reason}"[:50].encode()))
+        self.monitor.fail(self.t_s, "interrupted", f"interrupted by {reason}", self.cfg.on_failure)
+        self._stop(self.cfg.on_failure)
+
+    def link_lost(self, detail: str) -> None:
+        """The runner saw no message (or no vehicle clock) for too long: the flight ends."""
+        if self.error is None:
+            self.error = detail
+        self.monitor.fail(self.t_s, "link", detail, "end")
+        self._finish()
+
+    def degrade(self, reason: str, **values) -> None:
+        """Hand the inner loop back to the vehicle's controller (setpoints only)."""
+        if self.degraded is not None or self.cfg.control != "companion":
+            return
+        self.degraded = {"t_s": self.t_s, "reason": reason, **values}
+        self._controlling = False
+        self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_WARNING,
+                                              f"{DEGRADE_PREFIX}{reason}"[:50].encode()))
+
+    @property
+    def heartbeat_wanted(self) -> bool:
+        """Before the vehicle clock runs, the runner sends our HEARTBEAT by wall clock."""
+        return self.t_s is None
+
+    def heartbeat(self):
+        return self.enc.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID,
+                                         0, 0, mavlink.MAV_STATE_ACTIVE)
+
+    # --- procedure plumbing -------------------------------------------------------------
+
+    def _emit(self, msg) -> None:
+        self.outbox.append(msg)
+
+    def _drive(self) -> None:
+        while self._proc is not None:
+            w = self._waiting
+            if w is not None and not w():
+                return
+            try:
+                self._waiting = next(self._proc)
+            except StopIteration:
+                self._proc = None
+                self._waiting = None
+            except CommandRejected as exc:
+                self._procedure_failed("command_rejected", str(exc), result=exc.result)
+            except LinkError as exc:
+                self._procedure_failed("link", str(exc))
+
+    def _procedure_failed(self, kind: str, detail: str, **values) -> None:
+        self._proc = None
+        self._waiting = None
+        if self.error is None:
+            self.error = detail
+        # A failure while landing (or on the ground) ends the flight: landing
+        # again would not help; in the air we land (or hold).
+        action = "land" if self.armed and self.phase in FLYING else "end"
+        self.monitor.fail(self.t_s, kind, detail, action, **values)
+        self._stop(self.cfg.on_failure if action == "land" else action)
+
+    def _elapsed(self, t0: float) -> float:
+        return (self.t_s - t0) if (self.t_s is not None and t0 is not None) else 0.0
+
+    def _command(self, command: int, params=(), what: str = "", retries: int = 3, temp_retries: int = 0,
+                 optional: bool = False):
+        """Send COMMAND_LONG, wait for its COMMAND_ACK (generator; returns the ACK or None).
+
+        Raises CommandRejected on a final refusal, LinkError when unanswered
+        after ``retries`` sends (unless ``optional``: then returns None).
+        """
+        p = [float(x) for x in params]
+        p += [0.0] * (7 - len(p))
+        sends = temps = 0
+        timeout = self.cfg.command_timeout_s
+        while True:
+            self._ack = None
+            self._ack_for = command
+            self._emit(self.enc.command_long_encode(self.ts, self.tc, command, min(sends, 255), *p[:7]))
+            sends += 1
+            t0 = self.t_s
+            while True:
+                yield lambda: self._ack is not None or self._elapsed(t0) > timeout
+                ack = self._ack
+                if ack is not None and ack.result == mavlink.MAV_RESULT_IN_PROGRESS:
+                    self._ack = None
+                    t0 = self.t_s
+                    continue
+                break
+            self._ack_for = None
+            if ack is None:
+                if sends >= retries:
+                    if optional:
+                        return None
+                    raise LinkError(f"no COMMAND_ACK for command {command}{' (' + what + ')' if what else ''} "
+                                    f"after {sends} tries")
+                continue
+            if ack.result == mavlink.MAV_RESULT_ACCEPTED:
+                return ack
+            if ack.result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED and temps < temp_retries:
+                temps += 1
+                t1 = self.t_s
+                yield lambda: self._elapsed(t1) >= 0.5
+                continue
+            if optional:
+                return None
+            raise CommandRejected(command, int(ack.result), what)
+
+    def _upload(self, items: list, mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION, retries: int = 5):
+        """The MISSION_INT upload protocol (generator; https://mavlink.io/en/services/mission.html)."""
+        from ..link.mission_upload import MissionRejected
+
+        n = len(items)
+        count = self.enc.mission_count_encode(self.ts, self.tc, n, mission_type)
+        self._mission_msg = None
+        self._emit(count)
+        last_sent = None
+        misses = 0
+        timeout = self.cfg.command_timeout_s
+        while True:
+            t0 = self.t_s
+            yield lambda: self._mission_msg is not None or self._elapsed(t0) > timeout
+            m = self._mission_msg
+            self._mission_msg = None
+            if m is None:
+                misses += 1
+                if misses > retries:
+                    raise LinkError("mission upload stalled "
+                                    f"({'no request' if last_sent is None else f'after item {last_sent}'})")
+                self._emit(count if last_sent is None else items[last_sent])
+                continue
+            if getattr(m, "mission_type", mission_type) != mission_type:
+                continue
+            misses = 0
+            if m.get_type() == "MISSION_ACK":
+                if m.type == mavlink.MAV_MISSION_ACCEPTED and (n == 0 or last_sent == n - 1):
+                    return n
+                if m.type != mavlink.MAV_MISSION_ACCEPTED:
+                    raise MissionRejected(int(m.type))
+                continue   # a stale ACK of an earlier transaction
+            seq = int(m.seq)
+            if not 0 <= seq < n:
+                raise MissionRejected(mavlink.MAV_MISSION_INVALID_SEQUENCE)
+            self._emit(items[seq])
+            last_sent = seq
+
+    def _param_read(self, name: str, tries: int = 2):
+        """PARAM_REQUEST_READ (generator): the PARAM_VALUE, or None when the vehicle has no such parameter."""
+        self._param_for = name
+        for _ in range(tries):
+            self._param = None
+            self._emit(self.enc.param_request_read_encode(self.ts, self.tc, name.encode(), -1))
+            t0 = self.t_s
+            yield lambda: self._param is not None or self._elapsed(t0) > self.cfg.command_timeout_s
+            if self._param is not None:
+                break
+        self._param_for = None
+        return self._param
+
+    def _set_interval(self, msg_id: int, interval_us: float, optional: bool = False):
+        return (yield from self._command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, interval_us),
+                                         "set message interval", retries=1 if optional else 3, optional=optional))
+
+    # --- the procedure ------------------------------------------------------------------
+
+    def _procedure(self):
+        cfg = self.cfg
+        yield lambda: self.vstate is not None
+        self.phase = "setup"
+        if self.inputs.setup is not None:
+            for text, seq in setup_chunks(self.inputs.setup):
+                self._emit(self.enc.statustext_encode(MAV_SEVERITY_DEBUG, text, SETUP_TEXT_ID, seq))
+        yield lambda: self.period_us is not None
+        yield from self._set_interval(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, self.period_us)
+        if cfg.request_truth:
+            yield from self._set_interval(mavlink.MAVLINK_MSG_ID_ODOMETRY, self.period_us, optional=True)
+        for mid in cfg.mute_streams:
+            yield from self._set_interval(mid, -1, optional=True)
+        for mid, hz in cfg.low_rate_streams:
+            yield from self._set_interval(mid, 1e6 / hz, optional=True)
+        pv = yield from self._param_read("SIM_LOCKSTEP")
+        self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv) == 1
+        yield lambda: self._pos is not None
+        if self.armed:
+            yield from self._attach()
+            return
+
+        self.phase = "upload"
+        items = [codec.encode_mission_item_int(self.enc, i, p, *self.home, self.ts, self.tc, current=(i == 0))
+                 for i, p in enumerate(self.waypoints)]
+        yield from self._upload(items)
+
+        # Setpoints must be streaming before OFFBOARD (PX4 rule): hold the ground position.
+        self._window = TrajectoryWindow(self.inputs.trajectory, self.period_us * 1e-6, self.target)
+        self._hold_first = at_rest(self._window.first())
+        self._hold_last = at_rest(self._window.last())
+        self._preflight_ref = self._static_ref(self._pos)
+        self.phase = "preflight"
+        t_ready = self.t_s + cfg.preflight_s
+        yield lambda: self.t_s >= t_ready
+        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
+                                 (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, codec.PX4_MAIN_MODE_OFFBOARD, 0),
+                                 "set OFFBOARD", temp_retries=10)
+        yield from self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1,), "arm", temp_retries=10)
+        self.armed = True
+        self._schedule(self.t_s)
+        self.monitor.armed(self.t_s, _OFFBOARD)
+        self.phase = "takeoff"
+        yield lambda: self.phase == "landing"
+        yield from self._land()
+
+    def _schedule(self, t_arm: float) -> None:
+        """The take-off/hold/trajectory/hover times, from arming at ``t_arm``."""
+        cfg = self.cfg
+        first = self._hold_first
+        self._t_arm = t_arm
+        self._segments = takeoff_segments(tuple(self._pos), first.p, self.inputs.transit_floor_z_m,
+                                          cfg.climb_speed_m_s, cfg.transfer_speed_m_s)
+        self._takeoff_T = sum(seg[2] for seg in self._segments)
+        self._t_hold = t_arm + self._takeoff_T
+        # Heading of the body y axis (the pointing axis b2) at arming, measured
+        # by the IMU (accelerometer + magnetometer); the takeoff turns it toward s0.
+        s0 = first.s
+        psi1 = math.atan2(s0[1], s0[0])
+        if self._imu is not None:
+            psi0 = heading_from_imu(self._imu[0], self._imu[1], self.inputs.mag_field_enu_gauss) + 0.5 * math.pi
+        else:
+            psi0 = psi1
+        self._psi_arm = psi0
+        self._dpsi = (psi1 - psi0 + math.pi) % (2.0 * math.pi) - math.pi
+        self._t_traj = self._t_hold + cfg.hold_s
+        self._t_hover = self._t_traj + self._window.duration_s
+        self._t_land = self._t_hover + cfg.hover_s
+        self.errors.start(self._t_traj)
+        self._controlling = cfg.control == "companion" and self.degraded is None
+
+    def _land(self):
+        """NAV_LAND, then wait for the vehicle to land and disarm (disarm it if needed)."""
+        cfg = self.cfg
+        self.phase = "landing"
+        self._controlling = False
+        self.monitor.landing(self.t_s)
+        yield from self._command(mavlink.MAV_CMD_NAV_LAND, (), "land", temp_retries=10)
+        t_limit = self.t_s + cfg.landing_timeout_s
+        t_ground = None
+
+        def landed() -> bool:
+            nonlocal t_ground
+            if not self.armed:
+                return True
+            if self.landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND:
+                if t_ground is None:
+                    t_ground = self.t_s
+                return self.t_s - t_ground > 3.0
+            return self.t_s >= t_limit
+
+        yield landed
+        if self.armed and self.landed_state != mavlink.MAV_LANDED_STATE_ON_GROUND:
+            raise LinkError(f"vehicle did not land and disarm within {cfg.landing_timeout_s:g} s of vehicle time")
+        if self.armed:
+            yield from self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (0,), "disarm")
+            self.armed = False
+        if self.phase == "landing":
+            self.phase = "done"
+        self._finish()
+
+    def _stop(self, action: str) -> None:
+        """React to a violation or an interruption (``Violation.action``)."""
+        if self.finished:
+            return
+        if self._proc is not None:
+            self._proc.close()
+        self._waiting = None
+        in_air = self.armed and self.phase in FLYING
+        if action == "land" and in_air:
+            self._proc = self._abort_land()
+        elif action == "hold" and in_air:
+            self._proc = self._abort_hold()
+        elif action == "release" and self.armed:
+            self._proc = self._release()
+        elif self.phase == "landing" and self.armed and action != "end":
+            self._proc = self._land()
+        else:
+            self._proc = None
+            self._controlling = False
+            self._finish()
+            return
+        self._drive()
+
+    def _abort_land(self):
+        yield from self._land()
+
+    def _abort_hold(self):
+        """AUTO.LOITER: the vehicle holds where it is under its own control; we let go."""
+        self._controlling = False
+        self.phase = "holding"
+        self.monitor.landing(self.t_s)
+        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
+                                 (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, codec.PX4_MAIN_MODE_AUTO, 3),
+                                 "set AUTO.LOITER (hold)", temp_retries=4)
+        self._finish()
+
+    def _release(self):
+        """Somebody else flies the vehicle: stop commanding, watch until it is disarmed."""
+        self._controlling = False
+        self.phase = "released"
+        self.monitor.landing(self.t_s)
+        t_limit = self.t_s + self.cfg.landing_timeout_s
+        yield lambda: not self.armed or self.t_s >= t_limit
+        self._finish()
+
+    def _attach(self):
+        """The vehicle is already armed: refuse, land it, or resume the trajectory."""
+        action = self.cfg.attach
+        if action == "refuse":
+            self.monitor.fail(self.t_s, "vehicle_not_ready",
+                              "vehicle already armed at connection (use --attach resume|land)", "end")
+            self._finish()
+            return
+        self.monitor.armed(self.t_s, self.custom_mode)
+        if action == "land":
+            self.monitor.fail(self.t_s, "attached", "attached to a flying vehicle and landed it", "land")
+            self.phase = "hover"
+            yield from self._land()
+            return
+        # resume: fly from where the vehicle is to the nearest way-point's
+        # trajectory time, then on along the trajectory.
+        import numpy as np
+
+        self._window = TrajectoryWindow(self.inputs.trajectory, self.period_us * 1e-6, self.target)
+        traj = self.inputs.trajectory
+        wt = np.asarray(traj.waypoint_times_s, dtype=float)
+        wp = np.asarray(traj.waypoint_targets[:, 0, :], dtype=float)
+        k = int(np.argmin(np.linalg.norm(wp - np.asarray(self._pos), axis=1)))
+        t_resume = float(wt[k])
+        self.resumed_from_s = t_resume - traj.t0
+        # the window starts at the resume time: a trajectory truncated in time
+        self._window = TrajectoryWindow(_Shifted(traj, t_resume), self.period_us * 1e-6, self.target)
+        self._hold_first = at_rest(self._window.first())
+        self._hold_last = at_rest(self._window.last())
+        self._preflight_ref = self._static_ref(self._pos)
+        self.phase = "preflight"
+        t_ready = self.t_s + self.cfg.preflight_s
+        yield lambda: self.t_s >= t_ready
+        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
+                                 (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, codec.PX4_MAIN_MODE_OFFBOARD, 0),
+                                 "set OFFBOARD", temp_retries=10)
+        self.monitor.expect_mode(_OFFBOARD)
+        self._schedule(self.t_s)
+        if self.ctrl is not None:
+            self.ctrl.reset()
+        self.phase = "takeoff"
+        yield lambda: self.phase == "landing"
+        yield from self._land()
+
+    def _finish(self) -> None:
+        self._controlling = False
+        self.finished = True
+        self._proc = None
+        self._waiting = None
+
+    # --- message handlers ---------------------------------------------------------------
+
+    def _on_local_position(self, m) -> None:
+        self._pos = (m.y, m.x, -m.z)          # NED -> ENU (codec.decode_local_position_ned, inlined)
+        self._vel = (m.vy, m.vx, -m.vz)
+        self._nav_t = m.time_boot_ms * 1e-3
+
+    def _on_odometry(self, m) -> None:
+        if m.get_srcComponent() != self.tc:
+            return
+        # Decoded when used (``_truth_update``, after the frame's answer was
+        # queued): the controller never reads the true state.
+        self._odom = m
+        self.truth_source = "sim_truth"
+
+    def _truth_update(self) -> None:
+        m = self._odom
+        if m is not None:
+            self._odom = None
+            self._truth, self._R = codec.decode_odometry_pose(m)
+
+    def _on_attitude(self, m) -> None:
+        if self.truth_source != "sim_truth":
+            self._R = tuple(codec.decode_attitude(m).R_enu_flu.ravel().tolist())
+
+    def _on_heartbeat(self, m) -> None:
+        if m.get_srcComponent() != self.tc:
+            return
+        vs = codec.decode_heartbeat(m)
+        self.vstate = vs
+        self.armed = vs.armed
+        self.custom_mode = int(m.custom_mode)
+        v = self.monitor.on_heartbeat(self.t_s, vs.armed, self.custom_mode, vs.system_status)
+        if v is not None:
+            self._react(v)
+
+    def _on_ext_state(self, m) -> None:
+        self.landed_state = int(m.landed_state)
+        if self.t_s is not None:
+            v = self.monitor.on_landed_state(self.t_s, self.landed_state)
+            if v is not None:
+                self._react(v)
+
+    def _on_distance(self, m) -> None:
+        if self.phase not in ("trajectory", "hover", "hold") or m.orientation == _SENSOR_DOWN:
+            return
+        r = codec.decode_distance_sensor(m)
+        if math.isfinite(r.distance_m) and (self.min_clearance_m is None or r.distance_m < self.min_clearance_m):
+            self.min_clearance_m = r.distance_m
+
+    def _on_statustext(self, m) -> None:
+        text = str(m.text)
+        if len(self.statustext) < 200:   # bounded: the .tlog has them all
+            self.statustext.append(text)
+        v = self.monitor.on_statustext(self.t_s, int(m.severity), text)
+        if v is not None:
+            self._react(v)
+
+    def _on_command_ack(self, m) -> None:
+        if self._ack_for is not None and m.command == self._ack_for:
+            self._ack = m
+
+    def _on_mission_msg(self, m) -> None:
+        self._mission_msg = m
+
+    def _on_param_value(self, m) -> None:
+        if self._param_for is not None and m.param_id == self._param_for:
+            self._param = m
+
+    def _react(self, v: Violation) -> None:
+        if v.action == "land":
+            self._stop(self.cfg.on_failure)
+        else:
+            self._stop(v.action)
+
+    def _on_imu(self, m) -> None:
+        # The per-frame path (250 Hz, lockstep: the vehicle waits for our answer).
+        t_us = int(m.time_usec)
+        t = t_us * 1e-6
+        if self.period_us is None:
+            self._imu_times.append(t_us)
+            if len(self._imu_times) >= 2 and self._imu_times[-1] > self._imu_times[-2]:
+                self.period_us = self._imu_times[-1] - self._imu_times[-2]
+        if self.t_first_s is None:
+            self.t_first_s = t
+        self.t_us = t_us
+        self.t_s = t
+        self.n_frames += 1
+        gyro = (m.xgyro, -m.ygyro, -m.zgyro)      # FRD -> FLU: y, z negated
+        acc = (m.xacc, -m.yacc, -m.zacc)
+        mag = (m.xmag, -m.ymag, -m.zmag)
+        self._imu = (acc, mag)
+        hb = self._hb_t
+        if hb is None or t - hb >= 1.0 or t < hb:
+            self._hb_t = t
+            self._emit(self.heartbeat())
+        self._advance_phase(t)
+        ref = self._reference(t)
+        cmd = None
+        out = None
+        if ref is not None:
+            if t >= self._next_sp_t:
+                self._next_sp_t = t + self._sp_dt - 1e-9
+                self._emit(codec.encode_set_position_target(
+                    self.enc, t_us // 1000, ref.p, ref.v, ref.a, setpoint_yaw_enu(ref.s, ref.a), self.ts, self.tc))
+            if self._controlling and self._pos is not None:
+                ctrl = self.ctrl
+                tap = self.input_tap
+                if tap is not None:
+                    tap(t, gyro, acc, mag, self._pos, self._vel, self._nav_t)
+                try:
+                    cmd = ctrl.update_fast(t, gyro, acc, mag, self._pos, self._vel, self._nav_t,
+                                           ref.p, ref.v, ref.a, ref.jerk, ref.snap, ref.target)
+                    out = ctrl.last_desired
+                except (ValueError, ZeroDivisionError, OverflowError):
+                    # a non-finite or degenerate measurement: let the vehicle fly this frame
+                    self.n_control_faults += 1
+        self.outbox.append(ActuatorOut(t_us, cmd, self.armed))
+        if ref is not None:
+            self._record(t, ref, out)
+
+    def _record(self, t: float, ref: RefSample, out) -> None:
+        """Error statistics, monitor checks, coverage and one (decimated) FlightLog row."""
+        if self._odom is not None:
+            self._truth_update()
+        truth = self._truth if self._truth is not None else self._pos
+        phase = self.phase
+        if truth is not None:
+            p = ref.p
+            err = math.sqrt((truth[0] - p[0]) ** 2 + (truth[1] - p[1]) ** 2 + (truth[2] - p[2]) ** 2)
+            self._last_err = err
+            if phase == "trajectory":
+                self.errors.add(t, err)
+                if self.coverage is not None and self.n_frames % 4 == 0:
+                    self.coverage.visit(truth[0], truth[1])
+                v = self.monitor.on_tracking(t, self._t_traj, err, self.truth_source)
+                if v is not None:
+                    self._react(v)
+        if phase in FLYING:
+            v = self.monitor.on_nav_age(t, self._nav_t)
+            if v is not None:
+                self._react(v)
+        log = self.log
+        if log.wants():
+            est = self._pos if self._pos is not None else _NAN3
+            R = self._R
+            log.append((t, PHASE_CODE[phase]), ref.p, truth if truth is not None else _NAN3, est,
+                       _NAN9 if R is None else R, _NAN_CTRL if out is None else out, ref.s)
+        else:
+            log.n_offered += 1
+
+    # --- the reference, by phase ----------------------------------------------------------
+
+    def _advance_phase(self, t: float) -> None:
+        ph = self.phase
+        if ph == "takeoff" and t >= self._t_hold:
+            self.phase = ph = "hold"
+        if ph == "hold" and t >= self._t_traj:
+            self.phase = ph = "trajectory"
+        if ph == "trajectory" and t >= self._t_hover:
+            self.phase = ph = "hover"
+        if ph == "hover" and t >= self._t_land:
+            self.phase = "landing"
+            self._controlling = False
+
+    def _reference(self, t: float) -> RefSample | None:
+        ph = self.phase
+        if ph == "trajectory":
+            w = self._window
+            return w.sample(int(round((t - self._t_traj) / w.dt_s)))
+        if ph == "hold":
+            return self._hold_first
+        if ph == "hover":
+            return self._hold_last
+        if ph == "takeoff":
+            dt = t - self._t_arm
+            rest = dt
+            for p0, p1, T in self._segments:
+                if rest < T:
+                    break
+                rest -= T
+            else:
+                rest = T      # past the last segment: its end
+            p, v, a, j, s = smooth_segment(p0, p1, T, rest)
+            # Turn the pointing direction smoothly from the heading at arming to
+            # the trajectory's first pointing s0 and hand the controller a target
+            # "at infinity" in that direction: the straight transfer may pass
+            # through S_p itself, where pointing at it would flip the heading.
+            sp = self._takeoff_pointing(dt)
+            far = (p[0] + 1e4 * sp[0], p[1] + 1e4 * sp[1], p[2] + 1e4 * sp[2])
+            return RefSample(p, v, a, j, s, sp, far)
+        if ph == "preflight" and self._preflight_ref is not None:
+            return self._preflight_ref
+        return None
+
+    def _takeoff_pointing(self, dt: float) -> tuple:
+        s0 = self._hold_first.s
+        T = self._takeoff_T
+        sig = smooth_segment((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), T, dt)[0][0]
+        psi = self._psi_arm + sig * self._dpsi
+        h = math.sqrt(max(0.0, 1.0 - (sig * s0[2]) ** 2))
+        return (h * math.cos(psi), h * math.sin(psi), sig * s0[2])
+
+    def _static_ref(self, p) -> RefSample:
+        p = tuple(float(c) for c in p)
+        return RefSample(p, _Z3, _Z3, _Z3, _Z3, pointing_at(p, self.target))
+
+    # --- the report --------------------------------------------------------------------------
+
+    def report(self, wall_s: float, tlog: str | None, link_stats: dict | None = None) -> FlightReport:
+        es = self.errors
+        tr = TrackingStats(es.max_m, es.rms_m, self.cfg.settle_s, es.n, self.truth_source)
+        sim_s = (self.t_s - self.t_first_s) if self.t_s is not None and self.t_first_s is not None else 0.0
+        completed = self.phase == "done" and self.monitor.ok and self.error is None
+        cov = self.inputs.coverage_fraction
+        flown = None
+        if self.coverage is not None:
+            flown = self.coverage.fraction()
+        v = self.monitor.first
+        return FlightReport(
+            completed=completed,
+            control=self.cfg.control,
+            sim_time_s=float(sim_s),
+            wall_time_s=float(wall_s),
+            tracking=tr,
+            replanning=ReplanningStats(0, self.min_clearance_m, 0.0),
+            coverage_fraction=None if cov is None else (cov * flown if flown is not None else
+                                                         (cov if completed else None)),
+            tlog=tlog,
+            mission=self.inputs.mission_name,
+            phase=self.phase,
+            error=self.error if self.error is not None else (v.detail if v is not None else None),
+            real_time_factor=(sim_s / wall_s) if wall_s > 0 else None,
+            n_frames=self.n_frames,
+            trajectory_duration_s=float(self.inputs.trajectory.tf - self.inputs.trajectory.t0),
+            crashed=self.monitor.crash is not None,
+            crash=self.monitor.crash,
+            violation=None if v is None else v.to_dict(),
+            planned_coverage_fraction=cov,
+            path_flown_fraction=flown,
+            degraded=self.degraded,
+            interrupted=self.interrupted,
+            link=link_stats,
+            resumed_from_s=self.resumed_from_s,
+        )
+
+
+class _Shifted:
+    """A trajectory seen from ``t_start`` on (for resuming mid-flight)."""
+
+    def __init__(self, traj, t_start: float) -> None:
+        self._traj = traj
+        self.t0 = float(t_start)
+        self.tf = float(traj.tf)
+
+    def sample(self, times):
+        return self._traj.sample(times)

@@ -1,0 +1,129 @@
+"""Output comparison field by field, and the codec pieces replay adds (both ways)."""
+
+from __future__ import annotations
+
+import math
+import struct
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from companion import frames
+from companion.flight.core import ActuatorOut
+from companion.link import codec
+from companion.link.tlog_scan import RawRecord
+from companion.replay.compare import OutputComparer, computed_payload, field_values
+
+MAV = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
+
+
+def record_of(msg) -> RawRecord:
+    pkt = bytes(msg.pack(MAV))
+    return RawRecord(0, 0, msg.get_msgId(), 1, 191, pkt)
+
+
+def f32_next(x: float) -> float:
+    """The next float32 above ``x``."""
+    (i,) = struct.unpack("<i", struct.pack("<f", x))
+    return struct.unpack("<f", struct.pack("<i", i + 1))[0]
+
+
+def test_actuator_payload_is_pymavlinks():
+    for cmd, armed in (((0.1, 0.2, 0.3, 0.4), True), (None, False), ((0.0, 0.0, 0.0, 0.0), True)):
+        msg = codec.encode_hil_actuator_controls(MAV, 123456, cmd, armed)
+        pkt = msg.pack(MAV)
+        mid, payload = computed_payload(ActuatorOut(123456, cmd, armed), MAV)
+        assert mid == 93 and payload == bytes(pkt[10:10 + pkt[1]])
+
+
+def test_field_values_match_pymavlinks_decoding():
+    msgs = [MAV.hil_actuator_controls_encode(5, [0.5, -0.25] + [0.0] * 14, 129, 1),
+            MAV.statustext_encode(4, b"companion: hello", 0x4353, 3),
+            MAV.set_position_target_local_ned_encode(7, 1, 1, 1, 0, 1.5, -2.5, 3.0, 0, 0, 0, 0, 0, 0, 0.25, 0)]
+    for m in msgs:
+        pkt = m.pack(MAV)
+        got = dict(field_values(m.get_msgId(), bytes(pkt[10:10 + pkt[1]])))
+        ref = mavlink.MAVLink(None).decode(bytearray(pkt))
+        for name in ref.get_fieldnames():
+            v = getattr(ref, name)
+            if isinstance(v, list):
+                assert [got[f"{name}[{k}]"] for k in range(len(v))] == v
+            else:
+                assert got[name] == v
+
+
+def test_comparer_bit_for_bit_and_tolerance():
+    rec = record_of(MAV.set_position_target_local_ned_encode(7, 1, 1, 1, 0, 1.5, -2.5, 3.0, 0, 0, 0, 0, 0, 0, 0, 0))
+    same = MAV.set_position_target_local_ned_encode(7, 1, 1, 1, 0, 1.5, -2.5, 3.0, 0, 0, 0, 0, 0, 0, 0, 0)
+    c = OutputComparer()
+    assert c.compare(same, rec) is None and c.n_bitwise == 1
+    # one float32 step in y: caught, named, with both values
+    nudged = MAV.set_position_target_local_ned_encode(7, 1, 1, 1, 0, 1.5, f32_next(-2.5), 3.0, 0, 0, 0, 0, 0, 0,
+                                                       0, 0)
+    d = c.compare(nudged, rec)
+    assert d.field == "y" and d.recorded_value == -2.5 and d.computed_value == f32_next(-2.5)
+    # -0.0 is not 0.0 bit for bit
+    neg = MAV.set_position_target_local_ned_encode(7, 1, 1, 1, 0, 1.5, -2.5, 3.0, 0, 0, 0, 0, 0, 0, -0.0, 0)
+    assert c.compare(neg, rec).field == "yaw"
+    # within a tolerance: accepted and measured
+    t = OutputComparer(tolerance=1e-3)
+    off = MAV.set_position_target_local_ned_encode(7, 1, 1, 1, 0, 1.5, -2.5005, 3.0, 0, 0, 0, 0, 0, 0, 0, 0)
+    assert t.compare(off, rec) is None and t.n_within == 1
+    assert t.max_abs_diff["SET_POSITION_TARGET_LOCAL_NED.y"] == pytest.approx(5e-4, rel=1e-3)
+    far = MAV.set_position_target_local_ned_encode(7, 1, 1, 1, 0, 1.5, -2.6, 3.0, 0, 0, 0, 0, 0, 0, 0, 0)
+    assert t.compare(far, rec).field == "y"
+    # integers are never within a tolerance
+    late = MAV.set_position_target_local_ned_encode(8, 1, 1, 1, 0, 1.5, -2.5, 3.0, 0, 0, 0, 0, 0, 0, 0, 0)
+    assert t.compare(late, rec).field == "time_boot_ms"
+
+
+def test_comparer_nan_and_types():
+    rec = record_of(codec.encode_hil_actuator_controls(MAV, 10, None, True))
+    c = OutputComparer()
+    assert c.compare(ActuatorOut(10, None, True), rec) is None            # NaN ticks are equal
+    d = c.compare(ActuatorOut(10, (0.5, 0.5, 0.5, 0.5), True), rec)
+    assert d.field == "controls[0]" and math.isnan(d.recorded_value) and d.computed_value == 0.5
+    d = c.compare(MAV.heartbeat_encode(18, 8, 0, 0, 4), rec)
+    assert d.field is None and (d.recorded_value, d.computed_value) == ("HIL_ACTUATOR_CONTROLS", "HEARTBEAT")
+    # a STATUSTEXT's ``id`` field is not its message id
+    st = MAV.statustext_encode(7, b"cs:x", 0x4353, 0)
+    assert c.compare(st, record_of(st)) is None
+
+
+def test_global_position_round_trip_with_the_sitls_encoder():
+    from sitl import codec as sitl_codec
+
+    origin = sitl_codec.GeoOrigin(44.8, -0.6, 30.0)
+    home = (0.0, 0.0, 0.0)
+    for p, v in (((12.3456, -7.891, 2.5), (1.0, -0.5, 0.25)), ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))):
+        msg = sitl_codec.global_position_int(MAV, 1234, origin, home, p, v, 0.3)
+        g = codec.decode_global_position_int(msg)
+        e, n, u = frames.geodetic2enu(g.lat_deg, g.lon_deg, g.alt_m, origin.lat_deg, origin.lon_deg, origin.alt_m)
+        assert abs(n - p[1]) <= 0.0056 and abs(e - p[0]) <= 0.0056 and abs(u - p[2]) <= 0.0005
+        assert g.relative_alt_m == pytest.approx(p[2], abs=5e-4)
+        assert g.vel_enu_m_s == pytest.approx(v, abs=0.005)
+        assert g.time_boot_ms == 1234
+
+
+def test_home_position_round_trip_with_the_sitls_encoder():
+    from sitl import codec as sitl_codec
+
+    origin = sitl_codec.GeoOrigin(44.8, -0.6, 30.0)
+    home_enu = (3.0, -4.0, 0.5)
+    h = codec.decode_home_position(sitl_codec.home_position(MAV, origin, home_enu, 0))
+    assert h.pos_enu_m == pytest.approx(home_enu, abs=1e-6)
+    # its geodetic pose is the local point's
+    lat, lon, alt = frames.enu2geodetic(*home_enu, origin.lat_deg, origin.lon_deg, origin.alt_m)
+    assert (h.lat_deg, h.lon_deg, h.alt_m) == pytest.approx((lat, lon, alt), abs=1e-7)
+
+
+def test_figures_take_any_plan_or_none():
+    from companion.flight_plot import _plan_points
+
+    wp = np.zeros((3, 3))
+    assert _plan_points(None) == (None, None)
+    a = _plan_points(SimpleNamespace(waypoints=SimpleNamespace(p_enu_m=wp), target_enu_m=(1, 2, 3)))
+    b = _plan_points(SimpleNamespace(waypoints_p_enu_m=wp, target_enu_m=(1, 2, 3)))
+    assert a[0] is wp and b[0] is wp and a[1] == b[1] == (1, 2, 3)

@@ -1,0 +1,318 @@
+"""Replay regression tests over the recorded corpus (``tests/data/replay``,
+recorded by ``scripts/record_corpus.py``): they fail when what the companion
+computes from the same vehicle messages changes.
+
+- Every corpus flight replays with every output identical (float32 fields bit
+  for bit), and the re-run core's own report is the live flight's report.
+- A change of one controller gain by one part in a million, or of a
+  trajectory weight, is caught at the first output it touches, named.
+- No truth in the companion (issue 7): replayed with the ground truth
+  withheld (ODOMETRY, ATTITUDE*), the outputs stay identical; a controller fed
+  the true attitude through a side channel fails exactly that replay; the
+  controller's inputs (``FlightCore.input_tap``) are what the link delivered.
+
+Re-record the corpus (``python scripts/record_corpus.py``) after an
+intended change of the controller, the flight core or the SITL.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import lzma
+import math
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from companion.cli import main
+from companion.commands.demo import missions_dir
+from companion.commands.fly import prepare
+from companion.flight.core import ActuatorOut
+from companion.link import codec
+from companion.link.tlog_scan import TlogScanner
+from companion.mission import load_mission
+from companion.replay import build_core, find_setup, replay_chunks
+
+DATA = Path(__file__).parent / "data" / "replay"
+MISSION = missions_dir() / "flat-rectangle" / "mission.yaml"
+PLAN = DATA / "plan-flat-rectangle.json"
+FLIGHTS = ("companion-cut4", "vehicle-cut4", "linkloss")
+TRUTH = (mavlink.MAVLINK_MSG_ID_ODOMETRY, mavlink.MAVLINK_MSG_ID_ATTITUDE, mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION)
+#: Report keys that are not the flight's (wall clock, file, link counters).
+NOT_FLIGHT = ("wall_time_s", "real_time_factor", "tlog", "link")
+
+
+@pytest.fixture(scope="module")
+def tlogs() -> dict:
+    return {n: lzma.decompress((DATA / f"{n}.tlog.xz").read_bytes()) for n in FLIGHTS}
+
+
+@pytest.fixture(scope="module")
+def mission():
+    return load_mission(MISSION)
+
+
+@pytest.fixture(scope="module")
+def flight_plan(mission):
+    return prepare(mission, str(PLAN))
+
+
+@pytest.fixture(scope="module")
+def replayed(tlogs, mission, flight_plan) -> dict:
+    """Each corpus flight re-run as recorded (computed once)."""
+    return {n: rerun(tlogs[n], mission, flight_plan) for n in FLIGHTS}
+
+
+def rerun(data: bytes, mission, flight_plan, tolerance=0.0, withhold=(), hook=None):
+    core = build_core(find_setup([data]), mission, flight_plan)
+    if hook is not None:
+        hook(core)
+    return replay_chunks([data], core, tolerance, withhold)
+
+
+def raw_records(data: bytes) -> list:
+    sc = TlogScanner()
+    recs = sc.feed(data) + sc.close()
+    assert sc.summary.n_skipped_bytes == 0
+    return recs
+
+
+@pytest.mark.parametrize("name", FLIGHTS)
+def test_corpus_replays_identically(name, tlogs, replayed):
+    res = replayed[name]
+    c = res.comparison
+    assert c.identical, c.first_divergence.describe()
+    assert c.tolerance == 0.0 and c.n_bitwise == c.n_compared
+    # every companion record compared, but the runner's heartbeats before the vehicle clock
+    recs = raw_records(tlogs[name])
+    n_companion = sum(r.compid == 191 for r in recs)
+    first_imu = next(i for i, r in enumerate(recs) if r.msgid == mavlink.MAVLINK_MSG_ID_HIGHRES_IMU)
+    n_early_hb = sum(r.compid == 191 and r.msgid == 0 for r in recs[:first_imu])
+    assert c.n_runner_heartbeats == n_early_hb >= 1
+    assert c.n_compared == n_companion - n_early_hb
+    # the re-run core's report is the live flight's report
+    live = json.loads((DATA / f"{name}.report.json").read_text())
+    replayed = res.flight.to_dict()
+    assert {k: v for k, v in replayed.items() if k not in NOT_FLIGHT} == \
+        {k: v for k, v in live.items() if k not in NOT_FLIGHT}
+
+
+def test_linkloss_is_the_failsafe_story(replayed):
+    """The companion stopped reaching the vehicle 2 s into the trajectory: the vehicle's own
+    failsafe held then landed; the companion saw a mode it had not asked for and let go."""
+    res = replayed["linkloss"]
+    f, m = res.flight, res.metrics
+    assert not f.completed and f.phase == "released" and f.violation["kind"] == "mode_change"
+    texts = [e.text for e in m.events if e.source == "vehicle"]
+    assert any("free-running" in t for t in texts)          # SIM_LS_TMO
+    assert any("onboard controller holds" in t for t in texts)   # COM_HIL_TMO
+    assert any("Failsafe" in t and "landing" in t for t in texts)
+    assert [c.mode for c in m.mode_changes][-3:] == ["AUTO.LOITER", "AUTO.LAND", "AUTO.LAND"]
+    assert m.mode_changes[-1].armed is False
+
+
+def first_motor_command_s(data: bytes) -> float:
+    """Vehicle time of the first HIL_ACTUATOR_CONTROLS with motor commands (not NaN), from the recording."""
+    dec = mavlink.MAVLink(None)
+    for r in raw_records(data):
+        if r.compid == 191 and r.msgid == mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS:
+            m = dec.decode(bytearray(r.packet))
+            if not math.isnan(m.controls[0]):
+                return m.time_usec * 1e-6
+    raise AssertionError("no motor command recorded")
+
+
+def test_a_gain_change_is_caught_at_once(tlogs, mission, flight_plan):
+    changed = dataclasses.replace(mission, control=dataclasses.replace(mission.control,
+                                                                       kx=mission.control.kx * (1 + 1e-6)))
+    res = rerun(tlogs["companion-cut4"], changed, flight_plan)
+    d = res.comparison.first_divergence
+    assert not res.comparison.identical
+    assert d.recorded == d.computed == "HIL_ACTUATOR_CONTROLS"
+    assert re.fullmatch(r"controls\[[0-3]\]", d.field)
+    assert d.recorded_value != d.computed_value
+    # within the first frames of control (at the very first the position error, which kx
+    # multiplies, is still zero: the reference starts where the vehicle stands)
+    t0 = first_motor_command_s(tlogs["companion-cut4"])
+    assert t0 <= d.t_s <= t0 + 0.02
+    assert "HIL_ACTUATOR_CONTROLS.controls[" in d.describe()
+
+
+def test_a_tolerance_accepts_a_tiny_change_and_says_how_tiny(tlogs, mission, flight_plan):
+    changed = dataclasses.replace(mission, control=dataclasses.replace(mission.control,
+                                                                       kx=mission.control.kx * (1 + 1e-6)))
+    res = rerun(tlogs["companion-cut4"], changed, flight_plan, tolerance=1e-4)
+    c = res.comparison
+    assert c.identical and c.n_within_tolerance > 0 and c.n_bitwise + c.n_within_tolerance == c.n_compared
+    worst = max(v for k, v in c.max_abs_diff.items() if k.startswith("HIL_ACTUATOR_CONTROLS.controls["))
+    assert 0 < worst <= 1e-4
+
+
+def test_a_trajectory_change_is_caught_in_the_setpoints(tlogs, mission, flight_plan):
+    traj = dataclasses.replace(mission.trajectory, s_velocity=mission.trajectory.s_velocity * 1.001)
+    changed = dataclasses.replace(mission, trajectory=traj)
+    res = rerun(tlogs["vehicle-cut4"], changed, prepare(changed, str(PLAN)))
+    d = res.comparison.first_divergence
+    assert d.recorded == d.computed == "SET_POSITION_TARGET_LOCAL_NED"
+    assert d.field in ("x", "y", "z", "vx", "vy", "vz", "afx", "afy", "afz", "yaw")
+
+
+def test_cli_names_the_divergence_and_the_changed_mission(tmp_path, capsys):
+    mdir = tmp_path / "flat-rectangle"
+    shutil.copytree(MISSION.parent, mdir)
+    text = (mdir / "mission.yaml").read_text()
+    assert "control:" not in text or "kx:" not in text
+    (mdir / "mission.yaml").write_text(text + "\ncontrol: {kx: 60.001}\n")
+    report = tmp_path / "replay.json"
+    rc = main(["replay", str(DATA / "companion-cut4.tlog.xz"), "--mission", str(mdir / "mission.yaml"),
+               "--plan", str(PLAN), "--report", str(report)])
+    out, err = capsys.readouterr()
+    assert rc == 4
+    assert "mission file differs from the recorded one" in out
+    first = err.strip().splitlines()[0]
+    assert first.startswith("companion replay: DIVERGED at t=") and "HIL_ACTUATOR_CONTROLS.controls[" in first
+    doc = json.loads(report.read_text())
+    assert doc["comparison"]["identical"] is False
+    assert doc["comparison"]["first_divergence"]["field"].startswith("controls[")
+
+
+# --- no truth in the companion (issue 7) -------------------------------------------------
+
+
+def test_outputs_identical_with_the_truth_withheld(tlogs, mission, flight_plan):
+    res = rerun(tlogs["companion-cut4"], mission, flight_plan, withhold=TRUTH)
+    assert res.comparison.identical, res.comparison.first_divergence.describe()
+    assert res.comparison.withheld == ("ATTITUDE", "ATTITUDE_QUATERNION", "ODOMETRY")
+    # the core really went without: its report falls back to the estimate
+    assert res.flight.tracking.truth_source == "estimate"
+    live = json.loads((DATA / "companion-cut4.report.json").read_text())
+    assert live["tracking"]["truth_source"] == "sim_truth"
+
+
+class TruthPeeker:
+    """A controller that also reads the true attitude (the core's ODOMETRY) through a side channel."""
+
+    def __init__(self, ctrl, core) -> None:
+        self.ctrl, self.core = ctrl, core
+
+    def __getattr__(self, name):
+        return getattr(self.ctrl, name)
+
+    def update_fast(self, *args):
+        cmd = self.ctrl.update_fast(*args)
+        R = self.core._R
+        if R is None:
+            return cmd
+        return tuple(c + 1e-4 * R[0] for c in cmd)
+
+
+def _peek(core) -> None:
+    core.ctrl = TruthPeeker(core.ctrl, core)
+
+
+def rerecord(data: bytes, mission, flight_plan, hook) -> bytes:
+    """The recording as the core built by ``hook`` would have made it: the same vehicle records,
+    each followed by what that core sends in answer."""
+    from companion.link.tlog_scan import decode_record, new_decoder
+
+    core = build_core(find_setup([data]), mission, flight_plan)
+    hook(core)
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
+    dec = new_decoder()
+    out = []
+    for r in raw_records(data):
+        if r.compid == 191:
+            continue
+        out.append(r.stamp_us.to_bytes(8, "big") + r.packet)
+        core.handle(decode_record(r, dec))
+        for o in core.take_outbox():
+            if type(o) is ActuatorOut:
+                pkt = codec.pack_hil_actuator_controls(0, 1, 191, o.time_usec, o.motor_cmd, o.armed)
+            else:
+                pkt = bytes(o.pack(mav))
+            out.append(r.stamp_us.to_bytes(8, "big") + pkt)
+    return b"".join(out)
+
+
+def test_a_controller_fed_the_true_attitude_is_noticed(tlogs, mission, flight_plan):
+    cheat = rerecord(tlogs["companion-cut4"], mission, flight_plan, _peek)
+    # its own recording replays (the re-recording is faithful) ...
+    res = rerun(cheat, mission, flight_plan, hook=_peek)
+    assert res.comparison.identical, res.comparison.first_divergence.describe()
+    # ... until the truth is withheld: then the first command it shaped with the truth differs
+    res = rerun(cheat, mission, flight_plan, withhold=TRUTH, hook=_peek)
+    d = res.comparison.first_divergence
+    assert d is not None and d.recorded == "HIL_ACTUATOR_CONTROLS" and d.field.startswith("controls[")
+    # (the honest controller passes the same test on its own recording: above)
+
+
+def test_controller_inputs_are_what_the_link_delivered(tlogs, mission, flight_plan):
+    data = tlogs["companion-cut4"]
+    taps = []
+    rerun(data, mission, flight_plan, hook=lambda core: setattr(core, "input_tap", lambda *a: taps.append(a)))
+    # independently: pymavlink decodes the recorded vehicle messages; FRD -> FLU and NED -> ENU by hand
+    dec = mavlink.MAVLink(None)
+    expect = {}
+    lpos = None
+    for r in raw_records(data):
+        if r.compid == 191:
+            continue
+        m = dec.decode(bytearray(r.packet))
+        if m.get_type() == "LOCAL_POSITION_NED":
+            lpos = ((m.y, m.x, -m.z), (m.vy, m.vx, -m.vz), m.time_boot_ms * 1e-3)
+        elif m.get_type() == "HIGHRES_IMU" and lpos is not None:
+            expect[m.time_usec * 1e-6] = ((m.xgyro, -m.ygyro, -m.zgyro), (m.xacc, -m.yacc, -m.zacc),
+                                          (m.xmag, -m.ymag, -m.zmag)) + lpos
+    assert taps
+    for t, gyro, acc, mag, pos, vel, nav_t in taps:
+        assert (gyro, acc, mag, tuple(pos), tuple(vel), nav_t) == expect[t]
+    # one tap per controlled frame: as many as motor commands were recorded
+    n_cmd = 0
+    for r in raw_records(data):
+        if r.compid == 191 and r.msgid == mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS:
+            n_cmd += not math.isnan(dec.decode(bytearray(r.packet)).controls[0])
+    assert len(taps) == n_cmd
+
+
+# --- events from outside the core, re-injected where the recording announces them ------------------
+
+
+def _event_at(t_s: float, event: str):
+    """A hook making the core meet an outside event right after the frame at ``t_s`` (as the runner does)."""
+
+    def hook(core):
+        handle = core.handle
+
+        def handle_then_event(m):
+            handle(m)
+            if m.get_type() == "HIGHRES_IMU" and core.t_s >= t_s and not getattr(core, "_event_done", False):
+                core._event_done = True
+                if event == "interrupt":
+                    core.interrupt("SIGTERM")
+                else:
+                    core.degrade("jitter p95 31 ms > 20 ms")
+
+        core.handle = handle_then_event
+
+    return hook
+
+
+@pytest.mark.parametrize("event", ["interrupt", "degrade"])
+def test_outside_events_are_reinjected(event, tlogs, mission, flight_plan):
+    data = rerecord(tlogs["companion-cut4"], mission, flight_plan, _event_at(8.0, event))
+    res = rerun(data, mission, flight_plan)          # a fresh core: nobody calls interrupt/degrade
+    c = res.comparison
+    assert c.identical, c.first_divergence.describe()
+    prefix = "companion: interrupted by " if event == "interrupt" else "companion: inner loop to vehicle: "
+    assert len(c.injected) == 1 and c.injected[0].startswith(prefix)
+    if event == "interrupt":
+        assert res.flight.interrupted == "SIGTERM" and not res.flight.completed
+    else:
+        # the reason as it went on the wire: STATUSTEXT holds 50 characters, prefix included
+        assert res.flight.degraded["reason"] == ("companion: inner loop to vehicle: jitter p95 31 ms > 20 ms"[:50]
+                                                 [len(prefix):])
+        assert res.flight.degraded["t_s"] == pytest.approx(8.0, abs=0.004)
