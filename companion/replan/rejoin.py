@@ -83,14 +83,18 @@ class CandidateCheck:
 
 
 def check_candidate(trajectory, t0_s: float, obstacles_enu_m: np.ndarray,
-                    ceiling_z: Callable[[float, float], float] | None = None) -> CandidateCheck:
-    """Check a candidate trajectory's first ``CHECK_S`` seconds (``CandidateCheck``)."""
+                    ceiling_z: Callable[[float, float], float] | None = None,
+                    free_xy: Callable[[float, float], bool] | None = None) -> CandidateCheck:
+    """Check a candidate trajectory's first ``CHECK_S`` seconds (``CandidateCheck``;
+    a sample over a cell ``free_xy`` refuses counts as infinitely above the ceiling)."""
     t = np.arange(t0_s, min(t0_s + CHECK_S, trajectory.tf) + 1e-9, CHECK_DT_S)
     s = trajectory.sample(t)
     jerk = float(np.max(np.abs(s.jerk)))
     above = -math.inf
     if ceiling_z is not None:
         above = max(float(z) - ceiling_z(float(x), float(y)) for x, y, z in s.p)
+    if free_xy is not None and not all(free_xy(float(x), float(y)) for x, y, _ in s.p):
+        above = math.inf
     obs = np.asarray(obstacles_enu_m, dtype=float).reshape(-1, 3)
     if len(obs) == 0:
         return CandidateCheck(jerk, math.inf, above)
@@ -100,7 +104,8 @@ def check_candidate(trajectory, t0_s: float, obstacles_enu_m: np.ndarray,
 
 def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_enu_m: np.ndarray,
            clearance_m: float, jerk_limit_m_s3: float, vertical_speed_m_s: float,
-           ceiling_z: Callable[[float, float], float] | None = None) -> RejoinResult:
+           ceiling_z: Callable[[float, float], float] | None = None,
+           free_xy: Callable[[float, float], bool] | None = None) -> RejoinResult:
     """Re-solve ``plan`` from ``state`` at ``t_now_s`` through way-points ``first_kept..``.
 
     Parameters
@@ -119,6 +124,9 @@ def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_e
     ceiling_z : callable (x, y) -> z, optional
         Highest allowed z (ENU m) over (x, y); a candidate going above it
         (by more than ``CEILING_TOL_M``) is stretched like one with too much jerk.
+    free_xy : callable (x, y) -> bool, optional
+        Where the candidate may fly (the map's free cells); one that leaves
+        them is refused like one above the ceiling.
 
     Returns
     -------
@@ -141,7 +149,7 @@ def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_e
                                        target_enu_m=plan.target_enu_m)
         except PlanError:
             return result
-        chk = check_candidate(traj, t_now_s, obstacles_enu_m, ceiling_z)
+        chk = check_candidate(traj, t_now_s, obstacles_enu_m, ceiling_z, free_xy)
         jerk, clear = chk.max_jerk_m_s3, chk.min_clearance_m
         if clear < clearance_m:
             return RejoinResult(None, "clearance", jerk, clear)

@@ -569,6 +569,9 @@ class Replanner:
             self._dev_leg = (self._dev_leg[-1], (A[:2].copy(), B[:2].copy()))   # this leg and the one before
             self._progress = float((P[:2] - A[:2]) @ u)
             self._t_progress = tau
+            # along-leg coordinates change with the leg: restart the escape's goals on it
+            self._far_along = float(P[:2] @ u)
+            self._rise_xy = A[:2] + float((P[:2] - A[:2]) @ u) * u
         pts = self.memory.points()
         rel = pts - P
         dist = np.sqrt(np.einsum("ki,ki->k", rel, rel))
@@ -748,6 +751,11 @@ class Replanner:
         return max(abs(x) for x in a) <= CALM_FRACTION * self.cfg.accel_m_s2 and \
             max(abs(x) for x in j) <= CALM_FRACTION * self.cfg.jerk_m_s3
 
+    def _on_free_cell(self, x: float, y: float) -> bool:
+        """(x, y) (ENU m) is over a free cell of the map (not a row, not unknown, not off the map)."""
+        cell = self.known.cell_of(x, y)
+        return cell is not None and bool(self.known.free.free[cell])
+
     def _ceiling_z(self, x: float, y: float) -> float:
         return self.known.ground_z(x, y) + self.cfg.ceiling_agl_m
 
@@ -763,7 +771,7 @@ class Replanner:
             start += int(at_A[0])
         first = first_waypoint_ahead(plan, start, P, u, self.speed_m_s, self.cfg.vertical_speed_m_s)
         res = rejoin(plan, st, tau, first, self.memory.points(), self._keep_m,
-                     self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z)
+                     self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z, self._on_free_cell)
         if res.plan is None:
             self._next_rejoin = tau + REJOIN_RETRY_S
             return None
