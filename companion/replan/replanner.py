@@ -84,7 +84,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mission.replan import ReplanConfig
-from ..reference import RefSample
+from ..flight.reference import RefSample
 from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
 from .globalplan import GlobalPlan
