@@ -8,8 +8,8 @@ Per-step cost (wall time of one frame: ``on_pose``, the frame's
 over a whole flight of the mission at 250 Hz, ray cast by the SITL's
 ``World`` against the mission's rows and terrain (the casting itself is not
 timed), with a ring of 16 horizontal rangefinders (22.5 deg wide,
-MAV_SENSOR_ROTATION_CUSTOM), a ring of 16 pitched 20 deg down (22.5 deg wide)
-and one looking down, each at 25 Hz (a reading: the nearest of five rays
+MAV_SENSOR_ROTATION_CUSTOM), a ring of 16 pitched 20 deg down (22.5 deg wide),
+a ring of 8 pitched 45 deg down (45 deg wide) and one looking down, each at 25 Hz (a reading: the nearest of five rays
 across the field of view):
 
 - ``clear way``: no obstacle (the replanner follows the plan);
@@ -58,6 +58,12 @@ RING_FOV = math.radians(360.0 / N_RING)
 N_LOW = 16
 LOW_FOV = math.radians(360.0 / N_LOW)
 LOW_PITCH_DEG = -20.0
+#: and a ring of 8 pitched 45 deg down: the band between the two rings and the
+#: horizontal, near and below the vehicle, is otherwise blind (a low crate met
+#: while descending after a climb is seen only when it is under the vehicle)
+N_STEEP = 8
+STEEP_FOV = math.radians(360.0 / N_STEEP)
+STEEP_PITCH_DEG = -45.0
 
 
 def _custom(yaw_deg: float, pitch_deg: float) -> tuple:
@@ -70,7 +76,10 @@ def _sensors():
     out = [(k, codec.MAV_SENSOR_ROTATION_CUSTOM, _custom(k * 360.0 / N_RING, 0.0), RING_FOV) for k in range(N_RING)]
     out += [(N_RING + k, codec.MAV_SENSOR_ROTATION_CUSTOM, _custom(k * 360.0 / N_LOW, LOW_PITCH_DEG), LOW_FOV)
             for k in range(N_LOW)]
-    out.append((N_RING + N_LOW, 25, codec.sensor_rotation_flu(25), 0.0))
+    n = N_RING + N_LOW
+    out += [(n + k, codec.MAV_SENSOR_ROTATION_CUSTOM, _custom(k * 360.0 / N_STEEP, STEEP_PITCH_DEG), STEEP_FOV)
+            for k in range(N_STEEP)]
+    out.append((n + N_STEEP, 25, codec.sensor_rotation_flu(25), 0.0))
     fans = []
     for _, _, R, h in out:
         S = np.array(R).reshape(3, 3)
