@@ -65,6 +65,17 @@ def R_ned_frd2enu_flu(R_ned_frd):
     return T_ENU_NED @ np.asarray(R_ned_frd, dtype=float) @ T_FLU_FRD
 
 
+def R_frd2flu(R_frd_x):
+    """A rotation into body FRD (3x3) -> the same rotation into body FLU.
+
+    For a frame X attached to the body (a sensor) given in the FRD
+    convention (x forward, y right, z down, both for X and for the body),
+    ``R_flu_x = T_fb @ R_frd_x @ T_fb``: the rotation from X in the FLU
+    convention (x forward, y left, z up) to body FLU. Its own inverse.
+    """
+    return T_FLU_FRD @ np.asarray(R_frd_x, dtype=float) @ T_FLU_FRD
+
+
 def rotmat2quat_wxyz(R):
     """Rotation matrix (3x3, proper) -> unit quaternion [w, x, y, z], w >= 0.
 

@@ -151,6 +151,44 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "vehicle.max_thrust_per_rotor_n": ("N", "4 x this > mass_kg x 9.81", "Thrust of one rotor at "
                                        "command 1 (thrust is linear in the command)."),
     "vehicle.motor_time_constant_s": ("s", ">= 0", "First-order rotor lag (SITL plant)."),
+    "replan.enabled": ("", "", "Run the obstacle-avoiding replanner in flight (companion/replan)."),
+    "replan.k_att": ("1/s^2", "> 0", "Attractive gain k_att of the improved APF, eq. (14)."),
+    "replan.k_rep": ("m^(4-n)/s^2", ">= 0", "Repulsive gain k_rep, eq. (16)."),
+    "replan.influence_range_m": ("m", "above clearance_m + body_radius_m", "Influence range d_o of an "
+                                 "obstacle, eq. (16) (the paper: 2.1)."),
+    "replan.n": ("", ">= 0", "Exponent of the goal-distance factor d^n(P, P_g), eq. (16) (the paper: 2)."),
+    "replan.clearance_m": ("m", "above 0, clearance_m + body_radius_m below influence_range_m",
+                           "Closest the vehicle's body may come to an unknown obstacle."),
+    "replan.body_radius_m": ("m", "0 to 10 or null, clearance_m + body_radius_m below influence_range_m",
+                             "Sphere holding the vehicle (arms and propellers); null: vehicle.arm_m + 0.127 m."),
+    "replan.lateral_limit_m": ("m", "> 0", "Largest sideways deviation from the path while avoiding "
+                               "(the rows are walls)."),
+    "replan.ceiling_agl_m": ("m", "above floor_agl_m", "Highest climb above the terrain to pass over an "
+                             "obstacle; taller obstacles make the vehicle stop and re-route."),
+    "replan.floor_agl_m": ("m", "0 or more, below ceiling_agl_m", "Lowest the avoidance may go above the "
+                           "terrain."),
+    "replan.speed_m_s": ("m/s", "> 0 or null", "Speed limit while avoiding; null: flight.speed_m_s."),
+    "replan.vertical_speed_m_s": ("m/s", "> 0", "Vertical speed limit while avoiding and rejoining."),
+    "replan.accel_m_s2": ("m/s^2", "> 0", "Acceleration limit of the avoidance reference (per axis)."),
+    "replan.jerk_m_s3": ("m/s^3", "> 0", "Jerk limit of the avoidance reference and of a rejoin (per axis)."),
+    "replan.canopy_height_m": ("m", "> 0", "Height of the rows above the terrain: returns from them are "
+                               "known, not obstacles."),
+    "replan.known_tolerance_m": ("m", ">= 0", "A return this close to the terrain or an occupied cell is known."),
+    "replan.memory_s": ("s", "> 0", "Lifetime of an unknown obstacle point not seen again."),
+    "replan.memory_radius_m": ("m", "> 0", "Obstacle points farther than this from the vehicle are forgotten."),
+    "replan.voxel_m": ("m", "> 0, at most clearance_m", "Resolution of the obstacle memory."),
+    "replan.stall_s": ("s", "> 0", "No progress for this long while avoiding starts the vertical escape."),
+    "replan.escape_timeout_s": ("s", "> 0", "The escape must get past within this time, else hold."),
+    "replan.obstacle_depth_m": ("m", ">= 0", "Assumed depth behind the face seen, when an obstacle is "
+                                "added to the map for a re-route."),
+    "replan.clearance_governor": ("", "", "Limit the approach speed to obstacles (false: ablation only)."),
+    "replan.vertical_escape": ("", "", "Climb over obstacles the corridor does not let pass (false: "
+                               "ablation only)."),
+    "replan.sensors": ("", "ids unique", "Where each rangefinder sits on the airframe (ids not listed: "
+                       "at the centre of mass)."),
+    "replan.sensors[].id": ("", "0 to 255", "DISTANCE_SENSOR id."),
+    "replan.sensors[].offset_flu_m": ("m", "each within 10", "Sensor position from the centre of mass, "
+                                      "body FLU."),
     "sim.obstacles": ("", "", "Obstacles unknown to the planner (SITL only)."),
     "sim.obstacles[].type": ("", "", "`cylinder` or `box`."),
     "sim.obstacles[].x": ("m", "[-1e6, 1e6]", "Centre, ENU x on the map frame."),

@@ -117,18 +117,31 @@ class VehicleState:
 
 @dataclass(frozen=True, slots=True)
 class Range:
-    """DISTANCE_SENSOR reading.
+    """DISTANCE_SENSOR reading, frame-free (the sensor's rotation is in body FLU).
 
     Attributes
     ----------
     time_boot_ms : int
     sensor_id : int
     distance_m : float
-        Measured range (m); NaN when outside [min, max] (no return).
+        Measured range (m); NaN when outside [min, max] (no return, or too close).
     min_m, max_m : float
         Sensor limits (m).
     orientation : int
-        MAV_SENSOR_ORIENTATION (body FRD convention, as on the wire).
+        MAV_SENSOR_ORIENTATION as on the wire (100: MAV_SENSOR_ROTATION_CUSTOM).
+    hfov_rad, vfov_rad : float
+        Full horizontal/vertical fields of view (rad; 0 when the sender leaves them unset).
+    covariance_m2 : float
+        Measurement variance (m^2); NaN when unknown (255 on the wire).
+    no_return : bool
+        The sensor saw nothing within ``max_m`` (``current_distance > max_distance``,
+        as PX4 and the bundled SITL send it): the whole beam is free up to ``max_m``.
+    R_flu_sensor : tuple (9,) or None
+        Rotation from the sensor frame (x along the beam, y left, z up: the
+        FLU convention) to body FLU, row-major; its first column is the beam
+        direction in body FLU. From the orientation (0..7, 24, 25) or, for
+        MAV_SENSOR_ROTATION_CUSTOM, the quaternion field. None when the
+        orientation is not supported or the quaternion is invalid (zero).
     """
 
     time_boot_ms: int
@@ -137,6 +150,11 @@ class Range:
     min_m: float
     max_m: float
     orientation: int
+    hfov_rad: float = 0.0
+    vfov_rad: float = 0.0
+    covariance_m2: float = math.nan
+    no_return: bool = False
+    R_flu_sensor: tuple | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -211,16 +229,68 @@ def decode_heartbeat(msg) -> VehicleState:
     )
 
 
+#: MAV_SENSOR_ORIENTATION -> (roll, pitch, yaw) degrees of the sensor frame
+#: in body FRD (MAVLink's definition): the yaw-only rotations and the
+#: vertical ones a rangefinder uses.
+SENSOR_ORIENTATION_EULER_DEG = {
+    **{k: (0.0, 0.0, 45.0 * k) for k in range(8)},   # NONE (forward), YAW_45 .. YAW_315
+    24: (0.0, 90.0, 0.0),                             # PITCH_90: up
+    25: (0.0, 270.0, 0.0),                            # PITCH_270: down
+}
+MAV_SENSOR_ROTATION_CUSTOM = mavlink.MAV_SENSOR_ROTATION_CUSTOM
+
+
+def _sensor_R_flu(R_frd) -> tuple:
+    R = frames.R_frd2flu(R_frd)
+    R[np.abs(R) < 1e-15] = 0.0
+    return tuple(R.ravel().tolist())
+
+
+_SENSOR_R_FLU = {k: _sensor_R_flu(frames.euler_zyx2rotmat(*np.radians(e)))
+                 for k, e in SENSOR_ORIENTATION_EULER_DEG.items()}
+
+
+def sensor_rotation_flu(orientation: int, quaternion_wxyz=None) -> tuple | None:
+    """Rotation sensor (FLU convention) -> body FLU, row-major 9-tuple, or None.
+
+    Parameters
+    ----------
+    orientation : int
+        MAV_SENSOR_ORIENTATION: 0..7 (yaw k 45 deg, turning from forward to
+        the right as in FRD), 24 (PITCH_90, up), 25 (PITCH_270, down) or 100
+        (MAV_SENSOR_ROTATION_CUSTOM).
+    quaternion_wxyz : sequence of 4 floats, optional
+        DISTANCE_SENSOR.quaternion: the sensor's rotation in body FRD
+        ([w, x, y, z], zero rotation = along body x), used with CUSTOM;
+        all zeros (MAVLink's "invalid") or non-finite gives None.
+    """
+    if orientation == MAV_SENSOR_ROTATION_CUSTOM:
+        if quaternion_wxyz is None:
+            return None
+        q = [float(c) for c in quaternion_wxyz]
+        if len(q) != 4 or not all(math.isfinite(c) for c in q) or sum(c * c for c in q) < 0.25:
+            return None
+        return _sensor_R_flu(frames.quat_wxyz2rotmat(q))
+    return _SENSOR_R_FLU.get(int(orientation))
+
+
 def decode_distance_sensor(msg) -> Range:
-    """DISTANCE_SENSOR (cm on the wire) -> ``Range`` in metres.
+    """DISTANCE_SENSOR (cm on the wire, sensor rotation in FRD) -> ``Range`` (m, body FLU).
 
     A reading beyond ``max_distance`` (PX4 and the bundled SITL send
     ``max_distance + 1`` for "no return") or below ``min_distance`` decodes
-    to NaN; a reading of exactly ``max_distance`` is a valid range, as in PX4.
+    to NaN (the first with ``no_return``); a reading of exactly
+    ``max_distance`` is a valid range, as in PX4. ``covariance`` is cm^2
+    (255: unknown).
     """
     d_cm, lo_cm, hi_cm = msg.current_distance, msg.min_distance, msg.max_distance
     d_m = d_cm / 100.0 if lo_cm <= d_cm <= hi_cm else math.nan
-    return Range(int(msg.time_boot_ms), int(msg.id), d_m, lo_cm / 100.0, hi_cm / 100.0, int(msg.orientation))
+    cov = int(msg.covariance)
+    orientation = int(msg.orientation)
+    q = msg.quaternion if orientation == MAV_SENSOR_ROTATION_CUSTOM else None
+    return Range(int(msg.time_boot_ms), int(msg.id), d_m, lo_cm / 100.0, hi_cm / 100.0, orientation,
+                 float(msg.horizontal_fov), float(msg.vertical_fov),
+                 math.nan if cov == 255 else cov * 1e-4, d_cm > hi_cm, sensor_rotation_flu(orientation, q))
 
 
 def decode_odometry(msg) -> TruthState:

@@ -2,9 +2,10 @@
 
 from .loader import load_mission
 from .schema import CoverageConfig, FlightConfig, HomeConfig, Mission, PointingConfig
+from .replan import ReplanConfig, SensorMount
 from .sim import NoiseConfig, ObstacleConfig, SimConfig
 
 __all__ = [
     "load_mission", "Mission", "HomeConfig", "FlightConfig", "CoverageConfig",
-    "PointingConfig", "SimConfig", "NoiseConfig", "ObstacleConfig",
+    "PointingConfig", "ReplanConfig", "SensorMount", "SimConfig", "NoiseConfig", "ObstacleConfig",
 ]

@@ -19,6 +19,7 @@ from ..control.config import ControlConfig
 from ..energy import EnergyConfig
 from ..vehicle import VehicleConfig
 from ..trajectory.config import TrajectoryConfig
+from .replan import ReplanConfig
 from .sim import SimConfig
 
 #: Upper bounds of the lengths a vineyard mission can sensibly hold (m): flight
@@ -142,6 +143,7 @@ class Mission:
     control: ControlConfig = _field(default_factory=ControlConfig)
     vehicle: VehicleConfig = _field(default_factory=VehicleConfig)
     energy: EnergyConfig = _field(default_factory=EnergyConfig)
+    replan: ReplanConfig = _field(default_factory=ReplanConfig)
     sim: SimConfig = _field(default_factory=SimConfig)
     description: str = ""
     base_dir: str = "."   # set by the loader: directory of the mission file

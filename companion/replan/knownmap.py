@@ -1,0 +1,216 @@
+"""What the companion knows of the field: the OGM's rows extruded to the
+canopy height, the DEM terrain, and the obstacles added in flight.
+
+A rangefinder hit at (x, y, z) (ENU, m) is a *known* feature when
+
+- ``ground``: z <= terrain(x, y) + tolerance;
+- ``row``: (x, y) lies within the tolerance of an occupied OGM cell and
+  z <= terrain(x, y) + canopy height + tolerance (a row is a box from the
+  ground to the canopy height over each occupied cell, as the SITL renders it);
+- ``added``: (x, y) lies within the tolerance of an obstacle cell added by a
+  re-route (any height: its top is unknown);
+
+and *unknown* otherwise (an unknown OGM cell is not a known feature). The
+tolerance is applied on the grid as a dilation of the occupied cells by the
+disk of radius tolerance + one cell (the hit lies on a cell's face, so the
+extra cell keeps a face hit inside), computed once.
+
+For planning (re-routes) the map also carries the free space eroded by the
+mission's safety margin (``companion.coverage.freespace``), updated locally
+when an obstacle is added.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..coverage.freespace import FreeSpace, dilate_runs, disk_half_widths, erode_free_space
+from ..maps.grid import ElevationModel, OccupancyGrid
+from ..maps.heightfield import HeightField
+
+KNOWN_GROUND, KNOWN_ROW, KNOWN_ADDED, UNKNOWN = "ground", "row", "added", "unknown"
+#: ``explains``: a ray enters a row within this distance (m) beyond the return ...
+SURFACE_AHEAD_M = 0.1
+#: ... and is outside it this far (m) before the return.
+SURFACE_BEHIND_M = 0.1
+
+
+@dataclass(frozen=True, eq=False)
+class KnownMap:
+    """The companion's map (module doc). Build with ``KnownMap.build``.
+
+    Attributes
+    ----------
+    grid : OccupancyGrid
+        The mission's OGM as loaded (never modified).
+    dem : ElevationModel
+    free : FreeSpace
+        Free space eroded by the safety margin, with the added obstacles.
+    canopy_height_m, tolerance_m : float
+    known_rows : (rows, cols) bool
+        Occupied cells dilated by the tolerance (grid array convention).
+    added : (rows, cols) bool
+        Cells of the obstacles added in flight (not dilated).
+    known_added : (rows, cols) bool
+        ``added`` dilated by the tolerance.
+    height : HeightField
+        Scalar terrain lookup.
+    """
+
+    grid: OccupancyGrid
+    dem: ElevationModel
+    free: FreeSpace
+    canopy_height_m: float
+    tolerance_m: float
+    known_rows: np.ndarray
+    added: np.ndarray
+    known_added: np.ndarray
+    height: HeightField
+
+    @classmethod
+    def build(cls, grid: OccupancyGrid, dem: ElevationModel, free: FreeSpace,
+              canopy_height_m: float, tolerance_m: float) -> "KnownMap":
+        """Precompute the classification masks.
+
+        Parameters
+        ----------
+        grid, dem : the mission's maps.
+        free : FreeSpace
+            The planner's eroded free space (``erode_free_space(grid, safety_margin_m)``;
+            the plan's ``coverage.free_eroded`` is its ``eroded``).
+        canopy_height_m : float
+            Height of the rows above the terrain (m).
+        tolerance_m : float
+            Classification tolerance (m, >= 0).
+        """
+        widths = disk_half_widths(tolerance_m / grid.resolution_m + 1.0)
+        known_rows = dilate_runs(np.asarray(grid.occupied, dtype=bool), widths, outside=False)
+        empty = np.zeros(grid.shape, dtype=bool)
+        return cls(grid, dem, free, float(canopy_height_m), float(tolerance_m), known_rows,
+                   empty, empty, HeightField(dem))
+
+    @classmethod
+    def from_mission(cls, mission, grid: OccupancyGrid, dem: ElevationModel,
+                     free_eroded: np.ndarray | None = None) -> "KnownMap":
+        """The map of a mission: its ``replan`` canopy height and tolerance, the free
+        space eroded by its coverage safety margin (``free_eroded``: the plan's
+        ``coverage.free_eroded`` when at hand, else computed here)."""
+        margin = mission.coverage.safety_margin_m
+        if free_eroded is None:
+            free = erode_free_space(grid, margin)
+        else:
+            free = FreeSpace(np.asarray(free_eroded, dtype=bool), grid.free & ~grid.occupied, grid.resolution_m,
+                             margin + grid.resolution_m)
+        return cls.build(grid, dem, free, mission.replan.canopy_height_m, mission.replan.known_tolerance_m)
+
+    # --- scalar queries (per reading) --------------------------------------------------
+
+    def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
+        """(row, col) of the grid cell holding the ENU point (m); None off the grid."""
+        g = self.grid
+        dx, dy = x - g.origin_xy_m[0], y - g.origin_xy_m[1]
+        c, s = math.cos(g.origin_yaw_rad), math.sin(g.origin_yaw_rad)
+        col = math.floor((c * dx + s * dy) / g.resolution_m)
+        row = math.floor((-s * dx + c * dy) / g.resolution_m)
+        rows, cols = g.shape
+        if 0 <= row < rows and 0 <= col < cols:
+            return row, col
+        return None
+
+    def ground_z(self, x: float, y: float) -> float:
+        """Terrain height (m) under (x, y) (clamped outside the DEM)."""
+        return self.height(x, y)
+
+    def classify(self, x: float, y: float, z: float) -> str:
+        """``"ground"``, ``"row"``, ``"added"`` or ``"unknown"`` for a hit at (x, y, z) (module doc)."""
+        ground = self.height(x, y)
+        if z <= ground + self.tolerance_m:
+            return KNOWN_GROUND
+        cell = self.cell_of(x, y)
+        if cell is not None:
+            if self.known_added[cell]:
+                return KNOWN_ADDED
+            if self.known_rows[cell] and z <= ground + self.canopy_height_m + self.tolerance_m:
+                return KNOWN_ROW
+        return UNKNOWN
+
+    def is_known(self, x: float, y: float, z: float) -> bool:
+        """True when the hit lies on a known feature (``classify`` is not ``"unknown"``)."""
+        return self.classify(x, y, z) != UNKNOWN
+
+    def _in_row(self, x: float, y: float, z: float) -> bool:
+        cell = self.cell_of(x, y)
+        return cell is not None and bool(self.grid.occupied[cell]) and z <= self.height(x, y) + self.canopy_height_m
+
+    def explains(self, origin, direction, distance_m: float) -> bool:
+        """Is a return at ``distance_m`` along the unit ``direction`` from ``origin``
+        (ENU m) the surface of a known feature?
+
+        - the terrain: the hit is within the tolerance of the ground;
+        - an added obstacle: the hit is within the tolerance of its cells;
+        - a row: the ray *enters* it there: within ``SURFACE_AHEAD_M`` beyond
+          the hit (probed at 0.2, 0.5 and 1 times it) it is inside an
+          occupied cell below the canopy (or the hit is within half a cell
+          of one: a ray that touches a row's corner), ``SURFACE_BEHIND_M``
+          before the hit it is not. A return from an unknown obstacle whose
+          beam would reach a row farther on is not explained (a wide beam
+          always has a row somewhere in its field of view in a corridor), a
+          beam grazing a row's face is.
+        """
+        ox, oy, oz = origin
+        dx, dy, dz = direction
+        d = float(distance_m)
+        hx, hy, hz = ox + d * dx, oy + d * dy, oz + d * dz
+        c = self.classify(hx, hy, hz)
+        if c in (KNOWN_GROUND, KNOWN_ADDED):
+            return True
+        # inside a row just beyond the return (probed at a few depths: a ray that
+        # clips a row's corner is inside for a few centimetres only) ...
+        if not any(self._in_row(ox + a * dx, oy + a * dy, oz + a * dz)
+                   for a in (d + 0.2 * SURFACE_AHEAD_M, d + 0.5 * SURFACE_AHEAD_M, d + SURFACE_AHEAD_M)):
+            # ... or the hit touches a row's corner (within half a cell)
+            e = 0.5 * self.grid.resolution_m
+            if not any(self._in_row(hx + ex, hy + ey, hz) for ex, ey in ((e, e), (e, -e), (-e, e), (-e, -e))):
+                return False
+        b = max(d - SURFACE_BEHIND_M, 0.0)
+        return not self._in_row(ox + b * dx, oy + b * dy, oz + b * dz)
+
+    # --- obstacles added in flight -------------------------------------------------------
+
+    def with_obstacle(self, points_xy_m: np.ndarray, keep_m: float | None = None) -> "KnownMap":
+        """A copy with the cells under ``points_xy_m`` ((k, 2), ENU m) occupied.
+
+        The eroded free space loses every cell within ``keep_m`` (at least,
+        and by default, the erosion threshold) of a new cell (the disk of
+        ``erode_free_space``, computed in a window around the points), the
+        classification masks gain the cells dilated by the tolerance. Points
+        off the grid are ignored.
+        """
+        pts = np.asarray(points_xy_m, dtype=float).reshape(-1, 2)
+        cells = [c for c in (self.cell_of(float(x), float(y)) for x, y in pts) if c is not None]
+        if not cells:
+            return self
+        rc = np.array(cells)
+        h = self.grid.resolution_m
+        keep = max(self.free.threshold_m, keep_m if keep_m is not None else 0.0)
+        erode_w = disk_half_widths(keep / h)
+        known_w = disk_half_widths(self.tolerance_m / h + 1.0)
+        k = int(math.ceil(keep / h)) + int(math.ceil(self.tolerance_m / h)) + 2
+        rows, cols = self.grid.shape
+        r0, r1 = max(0, rc[:, 0].min() - k), min(rows, rc[:, 0].max() + k + 1)
+        c0, c1 = max(0, rc[:, 1].min() - k), min(cols, rc[:, 1].max() + k + 1)
+        added = self.added.copy()
+        added[rc[:, 0], rc[:, 1]] = True
+        win = added[r0:r1, c0:c1]
+        eroded = self.free.eroded.copy()
+        eroded[r0:r1, c0:c1] &= ~dilate_runs(win, erode_w, outside=False)
+        free_cells = self.free.free.copy()
+        free_cells[rc[:, 0], rc[:, 1]] = False
+        known_added = self.known_added.copy()
+        known_added[r0:r1, c0:c1] |= dilate_runs(win, known_w, outside=False)
+        free = FreeSpace(eroded=eroded, free=free_cells, resolution_m=self.free.resolution_m,
+                         threshold_m=self.free.threshold_m)
+        return replace(self, free=free, added=added, known_added=known_added)

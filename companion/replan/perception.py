@@ -1,0 +1,236 @@
+"""From a DISTANCE_SENSOR reading and the vehicle pose to evidence in ENU.
+
+Geometry (all ENU world / FLU body, m)::
+
+    origin = p + R_enu_flu @ offset_flu                 sensor position
+    R_enu_sensor = R_enu_flu @ R_flu_sensor             sensor frame -> world
+    axis = R_enu_sensor[:, 0]                            beam direction
+    hit = origin + distance * axis                       (a return)
+
+``R_flu_sensor`` comes decoded with the reading (``companion.link.codec``:
+orientations 0..7, 24, 25 and MAV_SENSOR_ROTATION_CUSTOM's quaternion).
+The return is placed on the beam axis, and a rangefinder reports the
+nearest surface anywhere in its field of view, so the true point may be off
+the axis by up to ``distance * tan(fov / 2)``: ``fan_hits`` are the four
+edge midpoints of the field of view at the measured distance, and half-way
+to them for a wide field (the replanner asks the known map about all of them
+and, for a wide beam, remembers them all). The beam's
+pyramid (its horizontal and vertical fields of view about its axis) is free
+of obstacles up to the distance, or up to ``max_m`` for a reading with no
+return. A reading below ``min_m`` (NaN without ``no_return``) is no
+evidence.
+
+The pose at the reading's time comes from ``PoseHistory``: position
+interpolated linearly between the two poses around that time (or
+extrapolated from the last two, at most ``MAX_EXTRAPOLATION_S``), attitude
+from the nearer pose (one frame, 4 ms, apart: the rotation in between is
+below 0.1 deg at the yaw rates flown).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+#: A reading newer than the last pose by more than this (s) waits for no pose: it is dropped.
+MAX_EXTRAPOLATION_S = 0.05
+#: Poses kept (s of history).
+HISTORY_S = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class Pose:
+    """Vehicle pose at ``t_s``: position ENU (m, 3-tuple), ``R_enu_flu`` row-major 9-tuple."""
+
+    t_s: float
+    p: tuple
+    R: tuple
+
+
+class PoseHistory:
+    """The last ``HISTORY_S`` seconds of estimated poses (vehicle time), oldest first."""
+
+    def __init__(self, history_s: float = HISTORY_S) -> None:
+        self.history_s = float(history_s)
+        self._poses: deque[Pose] = deque()
+        self._last: Pose | None = None          # the last answer (one frame's readings share a time)
+
+    def add(self, t_s: float, pos_enu_m, R_enu_flu) -> None:
+        """Append a pose (times non-decreasing; an older one restarts the history).
+
+        ``R_enu_flu``: a (3, 3) array, three rows, or a row-major 9-sequence.
+        """
+        if hasattr(R_enu_flu, "ravel"):
+            R_enu_flu = R_enu_flu.ravel().tolist()
+        elif len(R_enu_flu) == 3:
+            R_enu_flu = [*R_enu_flu[0], *R_enu_flu[1], *R_enu_flu[2]]
+        R = tuple(float(x) for x in R_enu_flu)
+        if len(R) != 9:
+            raise ValueError("R_enu_flu must have 9 elements")
+        pose = Pose(float(t_s), (float(pos_enu_m[0]), float(pos_enu_m[1]), float(pos_enu_m[2])), R)
+        q = self._poses
+        if q and pose.t_s < q[-1].t_s:
+            q.clear()
+        q.append(pose)
+        self._last = None
+        while q[0].t_s < pose.t_s - self.history_s:
+            q.popleft()
+
+    def __len__(self) -> int:
+        return len(self._poses)
+
+    def at(self, t_s: float) -> Pose | None:
+        """Pose at ``t_s`` (module doc); None when ``t_s`` is outside the history
+        (older than its first pose, or newer than the last by more than
+        ``MAX_EXTRAPOLATION_S``)."""
+        last = self._last
+        if last is not None and last.t_s == t_s:
+            return last
+        q = self._poses
+        if not q or t_s < q[0].t_s - 1e-9 or t_s > q[-1].t_s + MAX_EXTRAPOLATION_S:
+            return None
+        if len(q) == 1:
+            return q[0]
+        # newest first: readings are about the latest frame
+        i = len(q) - 1
+        while i > 1 and q[i - 1].t_s > t_s:
+            i -= 1
+        a, b = q[i - 1], q[i]
+        span = b.t_s - a.t_s
+        f = 1.0 if span <= 0.0 else (t_s - a.t_s) / span
+        ap, bp = a.p, b.p
+        p = (ap[0] + f * (bp[0] - ap[0]), ap[1] + f * (bp[1] - ap[1]), ap[2] + f * (bp[2] - ap[2]))
+        self._last = Pose(float(t_s), p, a.R if f < 0.5 else b.R)
+        return self._last
+
+
+@dataclass(frozen=True, slots=True)
+class BeamEvidence:
+    """What one reading says (ENU, m).
+
+    Attributes
+    ----------
+    origin : 3-tuple
+        Sensor position.
+    axis, h_axis, v_axis : 3-tuples
+        The sensor frame in ENU: unit beam direction, and the directions in
+        which the horizontal and the vertical fields of view open (sensor y
+        and z).
+    half_h_rad, half_v_rad : float
+        Half the horizontal and vertical fields of view (0 when unset).
+    free_m : float
+        The beam (the pyramid of its fields of view) is free of obstacles
+        from the origin up to this range.
+    hit : 3-tuple or None
+        The return on the axis at the measured distance; None without a return.
+    distance_m : float
+        The measured distance (NaN without a return).
+    fan_hits : tuple of 3-tuples
+        Where the return may also lie: the points at the measured distance
+        along the four edge midpoints of the field of view, and half-way to
+        them for a field wider than ``WIDE_FOV_RAD`` (empty without a return
+        or without a field of view). The replanner asks the known map about
+        ``hit`` and these (``KnownMap.explains``).
+    """
+
+    origin: tuple
+    axis: tuple
+    h_axis: tuple
+    v_axis: tuple
+    half_h_rad: float
+    half_v_rad: float
+    free_m: float
+    hit: tuple | None
+    distance_m: float
+    fan_hits: tuple = ()
+
+    @property
+    def half_max_rad(self) -> float:
+        """Half the larger field of view."""
+        return max(self.half_h_rad, self.half_v_rad)
+
+
+def _half(fov: float) -> float:
+    return 0.5 * fov if math.isfinite(fov) and 0.0 <= fov < math.pi else 0.0
+
+
+def beam_evidence(reading, pose: Pose, offset_flu_m=(0.0, 0.0, 0.0)) -> BeamEvidence | None:
+    """Evidence of one reading at ``pose`` (module doc).
+
+    Parameters
+    ----------
+    reading : companion.link.codec.Range
+        Decoded DISTANCE_SENSOR (``R_flu_sensor``, ``distance_m``, ``no_return``,
+        ``max_m``, ``hfov_rad``, ``vfov_rad``).
+    pose : Pose
+        Vehicle pose at the reading's time.
+    offset_flu_m : 3 floats
+        Sensor position relative to the centre of mass, body FLU (m).
+
+    Returns
+    -------
+    BeamEvidence or None
+        None when the reading carries no evidence: unsupported orientation,
+        a distance below ``min_m``, or non-finite values.
+    """
+    S = reading.R_flu_sensor
+    if S is None:
+        return None
+    d = reading.distance_m
+    if math.isfinite(d):
+        if not d > 0.0 or d < reading.min_m:
+            return None                  # below the sensor's range: no evidence
+        free = d
+    elif reading.no_return and math.isfinite(reading.max_m):
+        free = reading.max_m
+    else:
+        return None
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = pose.R
+    ox, oy, oz = offset_flu_m
+    px, py, pz = pose.p
+    origin = (px + r00 * ox + r01 * oy + r02 * oz,
+              py + r10 * ox + r11 * oy + r12 * oz,
+              pz + r20 * ox + r21 * oy + r22 * oz)
+    cols = []
+    for c in range(3):                                    # the sensor's axes, body FLU -> ENU
+        bx, by, bz = S[c], S[3 + c], S[6 + c]
+        cols.append((r00 * bx + r01 * by + r02 * bz, r10 * bx + r11 * by + r12 * bz,
+                     r20 * bx + r21 * by + r22 * bz))
+    axis = cols[0]
+    n = math.sqrt(axis[0] ** 2 + axis[1] ** 2 + axis[2] ** 2)
+    if not (abs(n - 1.0) < 1e-6) or not math.isfinite(origin[0] + origin[1] + origin[2]):
+        return None
+    hit = None
+    fan = ()
+    if math.isfinite(d):
+        hit = (origin[0] + d * axis[0], origin[1] + d * axis[1], origin[2] + d * axis[2])
+        fan = tuple(_fan_points(pose.R, S, origin, d, reading.hfov_rad, reading.vfov_rad))
+    return BeamEvidence(origin, axis, cols[1], cols[2], _half(reading.hfov_rad), _half(reading.vfov_rad),
+                        float(free), hit, d, fan)
+
+
+#: A field of view wider than this (rad) is also sampled half-way to its edges.
+WIDE_FOV_RAD = math.radians(10.0)
+
+
+def _fan_points(R, S, origin, d: float, hfov: float, vfov: float):
+    """Points at range ``d`` across the field of view (ENU): the edge midpoints,
+    and half-way to them for a field wider than ``WIDE_FOV_RAD``."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+    for col, fov in ((1, hfov), (2, vfov)):
+        if not (math.isfinite(fov) and 0.0 < fov < math.pi):
+            continue
+        half = 0.5 * fov
+        angles = (half, -half, 0.5 * half, -0.5 * half) if fov > WIDE_FOV_RAD else (half, -half)
+        for a in angles:
+            # sensor-frame ray (1, tan a, 0) or (1, 0, tan a), to body FLU, then ENU
+            t = math.tan(a)
+            bx = S[0] + t * S[col]
+            by = S[3] + t * S[3 + col]
+            bz = S[6] + t * S[6 + col]
+            ex = r00 * bx + r01 * by + r02 * bz
+            ey = r10 * bx + r11 * by + r12 * bz
+            ez = r20 * bx + r21 * by + r22 * bz
+            k = d / math.sqrt(ex * ex + ey * ey + ez * ez)
+            yield (origin[0] + k * ex, origin[1] + k * ey, origin[2] + k * ez)

@@ -1,0 +1,166 @@
+"""Rejoin the plan after an avoidance without a jump: re-solve the LQR from the
+current reference state through the remaining way-points, time-shifted.
+
+The new trajectory starts at ``t_now`` in the exact state the reference is
+in (p, v, a and jerk: ``generate_trajectory``'s ``initial_state``), so the
+setpoint is continuous up to the jerk; only the snap may step. The first
+kept way-point is given the time a smooth move needs to reach it::
+
+    T = max(d_h / V + t_ramp, 1.875 |dz| / v_z)       (quintic rest-to-rest peak speed)
+
+(d_h horizontal and dz vertical distance, V the cruise speed, t_ramp the
+speed ramp of ``companion.coverage.waypoints``); the later way-points keep
+their intervals. A candidate is accepted only if, over its first
+``CHECK_S`` seconds, the jerk stays within the limit (per axis), the path
+stays below the ceiling and keeps the clearance from the remembered obstacle
+points; too much jerk or height stretches T by ``STRETCH`` (up to
+``MAX_TRIES`` times).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..coverage.waypoints import A_REF_M_S2
+from ..errors import PlanError
+from ..trajectory import generate_trajectory
+from .globalplan import GlobalPlan, Segment
+
+#: Horizon (s) over which a candidate is checked.
+CHECK_S = 6.0
+#: Sampling step (s) of the check.
+CHECK_DT_S = 0.05
+STRETCH = 1.5
+MAX_TRIES = 4
+#: A candidate may exceed the ceiling by this much (m).
+CEILING_TOL_M = 0.05
+_QUINTIC_PEAK_V = 1.875
+
+
+@dataclass(frozen=True)
+class RejoinResult:
+    """Outcome of ``rejoin``.
+
+    Attributes
+    ----------
+    plan : GlobalPlan or None
+        The re-solved plan (None: no acceptable candidate).
+    reason : str
+        "" when accepted, else why not ("jerk", "clearance", "solver").
+    max_jerk_m_s3 : float
+        Largest |jerk| over the checked horizon of the last candidate.
+    min_clearance_m : float
+        Smallest distance to an obstacle point over that horizon (inf without points).
+    """
+
+    plan: GlobalPlan | None
+    reason: str
+    max_jerk_m_s3: float
+    min_clearance_m: float
+
+
+def first_time_s(p0, p1, speed_m_s: float, vertical_speed_m_s: float) -> float:
+    """Duration (s) allotted to reach way-point ``p1`` from ``p0`` (ENU m; module doc)."""
+    d = np.asarray(p1, dtype=float) - np.asarray(p0, dtype=float)
+    t_ramp = 0.5 * _QUINTIC_PEAK_V * speed_m_s / A_REF_M_S2
+    return max(float(np.hypot(d[0], d[1])) / speed_m_s + t_ramp,
+               _QUINTIC_PEAK_V * abs(float(d[2])) / vertical_speed_m_s, 1.0)
+
+
+@dataclass(frozen=True)
+class CandidateCheck:
+    """Figures of a candidate over [t0, t0 + CHECK_S]: largest per-axis |jerk| (m/s^3),
+    smallest distance to an obstacle point (m, inf without points), largest height
+    above the ceiling (m, -inf without a ceiling)."""
+
+    max_jerk_m_s3: float
+    min_clearance_m: float
+    above_ceiling_m: float
+
+
+def check_candidate(trajectory, t0_s: float, obstacles_enu_m: np.ndarray,
+                    ceiling_z: Callable[[float, float], float] | None = None,
+                    free_xy: Callable[[float, float], bool] | None = None) -> CandidateCheck:
+    """Check a candidate trajectory's first ``CHECK_S`` seconds (``CandidateCheck``;
+    a sample over a cell ``free_xy`` refuses counts as infinitely above the ceiling)."""
+    t = np.arange(t0_s, min(t0_s + CHECK_S, trajectory.tf) + 1e-9, CHECK_DT_S)
+    s = trajectory.sample(t)
+    jerk = float(np.max(np.abs(s.jerk)))
+    above = -math.inf
+    if ceiling_z is not None:
+        above = max(float(z) - ceiling_z(float(x), float(y)) for x, y, z in s.p)
+    if free_xy is not None and not all(free_xy(float(x), float(y)) for x, y, _ in s.p):
+        above = math.inf
+    obs = np.asarray(obstacles_enu_m, dtype=float).reshape(-1, 3)
+    if len(obs) == 0:
+        return CandidateCheck(jerk, math.inf, above)
+    d2 = np.einsum("nki,nki->nk", s.p[:, None, :] - obs[None], s.p[:, None, :] - obs[None])
+    return CandidateCheck(jerk, float(np.sqrt(d2.min())), above)
+
+
+def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_enu_m: np.ndarray,
+           clearance_m: float, jerk_limit_m_s3: float, vertical_speed_m_s: float,
+           ceiling_z: Callable[[float, float], float] | None = None,
+           free_xy: Callable[[float, float], bool] | None = None) -> RejoinResult:
+    """Re-solve ``plan`` from ``state`` at ``t_now_s`` through way-points ``first_kept..``.
+
+    Parameters
+    ----------
+    plan : GlobalPlan
+    state : ShapedState or any object with p, v, a, jerk (ENU 3-sequences)
+        The reference state to continue from.
+    t_now_s : float
+        Plan-clock time of the switch.
+    first_kept : int
+        Index of the first remaining way-point (0 < first_kept < N).
+    obstacles_enu_m : (k, 3) remembered obstacle points.
+    clearance_m, jerk_limit_m_s3, vertical_speed_m_s : float
+        Acceptance limits (clearance; per-axis jerk) and the vertical speed
+        used for the time allocation.
+    ceiling_z : callable (x, y) -> z, optional
+        Highest allowed z (ENU m) over (x, y); a candidate going above it
+        (by more than ``CEILING_TOL_M``) is stretched like one with too much jerk.
+    free_xy : callable (x, y) -> bool, optional
+        Where the candidate may fly (the map's free cells); one that leaves
+        them is refused like one above the ceiling.
+
+    Returns
+    -------
+    RejoinResult
+    """
+    n = len(plan.t_s)
+    if not 0 < first_kept < n:
+        raise ValueError(f"first_kept must be in (0, {n}), got {first_kept}")
+    kept = np.arange(first_kept, n)
+    x0 = np.array([state.p, state.v, state.a, state.jerk], dtype=float)
+    T = first_time_s(x0[0], plan.p_enu_m[first_kept], plan.flight.speed_m_s, vertical_speed_m_s)
+    result = RejoinResult(None, "solver", float("nan"), float("nan"))
+    for _ in range(MAX_TRIES):
+        times = np.concatenate([[t_now_s], t_now_s + T + (plan.t_s[kept] - plan.t_s[first_kept])])
+        P = np.vstack([x0[0], plan.p_enu_m[kept]])
+        V = np.vstack([x0[1], plan.v_enu_m_s[kept]])
+        A = np.vstack([x0[2], plan.a_enu_m_s2[kept]])
+        try:
+            traj = generate_trajectory(times, P, V, A, plan.trajectory_config, initial_state=x0,
+                                       target_enu_m=plan.target_enu_m)
+        except PlanError:
+            return result
+        chk = check_candidate(traj, t_now_s, obstacles_enu_m, ceiling_z, free_xy)
+        jerk, clear = chk.max_jerk_m_s3, chk.min_clearance_m
+        if clear < clearance_m:
+            return RejoinResult(None, "clearance", jerk, clear)
+        if jerk <= jerk_limit_m_s3 and chk.above_ceiling_m <= CEILING_TOL_M:
+            corner = np.concatenate([[True], plan.corner[kept]])
+            segs = tuple(replace(s, first_wp=max(0, s.first_wp - first_kept + 1),
+                                 last_wp=s.last_wp - first_kept + 1)
+                         for s in plan.segments if s.last_wp >= first_kept)
+            new = replace(plan, trajectory=traj, t_s=times, p_enu_m=P, v_enu_m_s=V, a_enu_m_s2=A,
+                          corner=corner, segments=segs)
+            return RejoinResult(new, "", jerk, clear)
+        result = RejoinResult(None, "jerk" if jerk > jerk_limit_m_s3 else "ceiling", jerk, clear)
+        T *= STRETCH
+    return result

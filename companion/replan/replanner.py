@@ -1,0 +1,807 @@
+"""The replanner's state machine (paper Fig. 5, issue 8): follow the plan while
+clear, follow the improved APF while an unknown obstacle is within range,
+climb over it or stop and re-route, rejoin without a jump.
+
+Modes (``ReplanStep.mode``)
+
+``follow``  the plan's trajectory, evaluated by a forward cursor (no cache).
+            An unknown obstacle point within the trigger range (d_o, or the
+            braking distance plus the clearance if longer) and not behind
+            the vehicle starts ``avoid`` from the current reference state.
+``avoid``   the improved APF (eqs. 14-19), start = the reference where the
+            obstacle was detected, goal = the end of the current leg (the
+            next turning point, Fig. 5), obstacles = the remembered points
+            within d_o (one per cluster, ``CLUSTER_M``). Its force sets a
+            velocity command, the gradient flow F / (k_att ``FLOW_TIME_S``)
+            (it slows where the forces balance), which is constrained and
+            shaped (``shaper``) into p, v, a, jerk, snap:
+
+            - speed: the plan's (or ``speed_m_s``) horizontally,
+              ``vertical_speed_m_s`` vertically;
+
+            - corridor: the lateral offset from the leg's line stays within
+              ``lateral_limit_m`` (soft walls, the rows are walls);
+            - height: between ``floor_agl_m`` and ``ceiling_agl_m`` above the terrain;
+            - clearance governor (our addition, see below): the speed v
+              toward any remembered point d away satisfies v^2 / (2 a_b) +
+              v ``GOVERNOR_LAG_S`` <= d - clearance - ``GOVERNOR_MARGIN_M``,
+              a_b = ``accel_m_s2`` / 2, so the shaped reference can always
+              brake before the clearance.
+``climb``   the vertical escape (Fig. 19: "the obstacle avoidance was
+            performed vertically"), the same APF with virtual goals. When no
+            lateral gap of the corridor lets the vehicle pass an obstacle
+            ahead at its height with the clearance, or when the APF makes no
+            progress along the leg for ``stall_s`` (a local minimum, or an
+            oscillation), the pass height is the top of the obstacle points
+            ahead plus the clearance and margins (``PASS_MARGIN_M``), at most
+            the ceiling; it grows with the points seen while rising. *Rise*:
+            the goal is the pass height above the point of the leg's line
+            where the escape began. *Over*: once the way ahead is clear at that height, the
+            goal is on the leg's line at the pass height, d_o beyond the
+            farthest obstacle point seen (a goal this near keeps the
+            improved repulsion, scaled by the goal distance squared, from
+            pushing the vehicle far above the obstacle).
+``stop``    when the obstacle's top (plus margins) is above the ceiling, or
+            the escape did not pass the obstacle within
+            ``escape_timeout_s``: the velocity command is zero until the
+            reference is at rest (the governor's braking law left the room
+            for it).
+``reroute`` after a stop for a tall obstacle, ``reroute.reroute`` re-plans
+            the remaining coverage from the current state; this mode lasts
+            until the new plan's second way-point, then ``follow``.
+``rejoin``  when no remembered point within d_o is ahead of (or beside)
+            the vehicle, the LQR is re-solved from the reference state
+            through the way-points still ahead (``rejoin.rejoin``, checked
+            for jerk and clearance; retried every ``REJOIN_RETRY_S``); this
+            mode lasts until its first way-point, then ``follow``.
+``hold``    no route after a stop, or the escape timed out: hold the
+            position and report (``ReplanStep.hold``).
+``done``    the (re)planned coverage trajectory reached its end.
+
+Never pressing on: in every mode but ``follow``/``rejoin``/``reroute``
+the governor limits the approach speed to every remembered point, and
+``follow`` hands over to ``avoid`` with room to brake.
+
+Departures from the paper, each with an ablation in
+``tests/test_replan_closedloop.py`` (same flight, one switch): the
+clearance governor (``clearance_governor``; the improved APF alone lets a
+vehicle whose goal is near an obstacle come within the clearance, since
+U_rep -> 0 at the goal); the corridor walls (``lateral_limit_m``; the APF
+alone pushes the vehicle toward the rows); the vertical escape
+(``vertical_escape``; without it the APF stays in the local minimum in front
+of a post across the corridor, Fig. 19 goes over such obstacles without
+saying how); the velocity-command shaping (``accel_m_s2``/``jerk_m_s3``;
+the paper moves a particle along the force, whose setpoint steps no vehicle
+can follow).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..mission.replan import ReplanConfig
+from ..flight.reference import RefSample
+from ..trajectory.cursor import TrajectoryCursor
+from .apf import ApfParams, apf_force
+from .globalplan import GlobalPlan
+from .knownmap import UNKNOWN, KnownMap
+from .memory import ObstacleMemory
+from .perception import PoseHistory, beam_evidence
+from .rejoin import rejoin
+from .reroute import reroute
+from .shaper import ReferenceShaper
+
+MODES = ("follow", "avoid", "climb", "stop", "reroute", "rejoin", "hold", "done")
+_FOLLOWING = ("follow", "rejoin", "reroute")
+
+#: The governor keeps the reference this much (m) beyond the clearance while braking.
+GOVERNOR_MARGIN_M = 0.1
+#: The governor's braking law allows for this lag (s) of the shaped reference: with the
+#: default limits (1 m/s^2, 2 m/s^3) the shaper stops from 1 m/s in 0.97 m, from
+#: 0.5 m/s in 0.37 m; v^2 / (2 a_b) + v t_lag gives 1.6 m and 0.55 m.
+GOVERNOR_LAG_S = 0.6
+#: A re-route keeps this much (m) beyond the clearance and body from the obstacle's
+#: footprint: the sensors saw one face of it, its sides may reach a little farther.
+ROUTE_MARGIN_M = 0.3
+#: Extra height (m) above the top of an obstacle plus the clearance and the governor margin.
+PASS_MARGIN_M = 0.1
+#: Obstacle points closer than this (m) to a nearer one belong to the same obstacle.
+CLUSTER_M = 1.0
+#: At most this many obstacles enter the APF sum.
+MAX_OBSTACLES = 4
+#: The rise of the vertical escape ends within this height (m) of the pass height.
+RISE_TOL_M = 0.1
+#: A rejoin waits until |a| and |jerk| are within this fraction of their limits (per axis).
+CALM_FRACTION = 0.5
+#: Time constant of the gradient flow (s): the velocity command is F / (k_att T), so
+#: the attraction alone closes on the goal at 1/T of the distance per second.
+FLOW_TIME_S = 1.0
+#: The rejoin waits until no point is within the trigger range plus this (m).
+REJOIN_HYSTERESIS_M = 0.3
+#: A rejoin that fails its checks is tried again after this long (s).
+REJOIN_RETRY_S = 0.25
+#: Soft-wall gain (1/s): the speed toward a wall is at most this times the distance left.
+WALL_GAIN_1_S = 2.0
+#: The lateral wall sits this far (m) inside ``lateral_limit_m`` (the shaper's lag).
+WALL_MARGIN_M = 0.1
+#: Progress along the leg smaller than this (m) does not count (stall detection).
+PROGRESS_M = 0.05
+#: Points with a beam this much (m) short of their return are cleared by it.
+CLEAR_MARGIN_M = 0.15
+#: Within this distance (m) of the leg's end corner the APF goal moves to the next one.
+GOAL_REACHED_M = 0.3
+#: The reference is at rest below these speed (m/s) and acceleration (m/s^2).
+REST_V_M_S, REST_A_M_S2 = 0.02, 0.05
+#: Propeller radius (m) added to the arm length for the body radius when the mission gives none.
+PROP_RADIUS_M = 0.127
+#: Lifetime (s) of the field-of-view edge candidates of a wide beam's return (the
+#: axis point lives ``memory_s``).
+CANDIDATE_LIFETIME_S = 1.0
+#: Events kept in the statistics (the count goes on).
+MAX_EVENTS_KEPT = 1000
+
+
+@dataclass(frozen=True, slots=True)
+class ReplanEvent:
+    """A replanning event.
+
+    Attributes
+    ----------
+    t_s : float
+        Vehicle time (s).
+    pos_enu_m : 3-tuple
+        Vehicle position (the estimate passed to ``step``; ENU m).
+    obstacle_range_m : float or None
+        Distance from the reference to the nearest remembered obstacle point (m).
+    action : str
+        ``avoid``, ``climb``, ``stop``, ``reroute``, ``rejoin`` or ``hold``.
+    detail : str
+        Why, in a few words.
+    """
+
+    t_s: float
+    pos_enu_m: tuple
+    obstacle_range_m: float | None
+    action: str
+    detail: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class ReplanStep:
+    """What the replanner answers every frame.
+
+    Attributes
+    ----------
+    ref : RefSample
+        The reference to fly this frame (ENU).
+    mode : str
+        One of ``MODES``.
+    finished : bool
+        The coverage trajectory, however replanned, has reached its end.
+    hold : bool
+        No route: the vehicle holds; land and report.
+    events : tuple of ReplanEvent
+        Events of this step.
+    """
+
+    ref: RefSample
+    mode: str
+    finished: bool
+    hold: bool
+    events: tuple
+
+
+@dataclass(frozen=True)
+class ReplanStats:
+    """Summary for report.json ``replanning``.
+
+    Attributes
+    ----------
+    events : int
+        Number of events.
+    event_list : tuple of ReplanEvent
+        The first ``MAX_EVENTS_KEPT`` events.
+    max_lateral_deviation_m : float
+        Largest horizontal distance from the reference to the leg being
+        avoided (or the one before it, after a turn), while avoiding and
+        rejoining (m).
+    extra_path_m : float
+        Length of the flown reference minus the planned trajectory's length (m).
+    max_climb_m : float
+        Largest height of the reference above the planned flight height while
+        avoiding and rejoining (m).
+    min_obstacle_range_m : float or None
+        Smallest distance from the reference to a remembered obstacle point (m).
+    readings, unknown_hits, ignored_readings : int
+        DISTANCE_SENSOR readings handled, returns classified unknown, readings without evidence.
+    """
+
+    events: int
+    event_list: tuple
+    max_lateral_deviation_m: float
+    extra_path_m: float
+    max_climb_m: float
+    min_obstacle_range_m: float | None
+    readings: int
+    unknown_hits: int
+    ignored_readings: int
+
+    def to_dict(self) -> dict:
+        """Plain JSON types (report.json ``replanning``; events as {t_s, pos_enu_m, obstacle_range_m, action, detail})."""
+        def num(x):
+            return None if x is None else float(x)
+        return {
+            "events": int(self.events),
+            "event_list": [{"t_s": float(e.t_s), "pos_enu_m": [float(c) for c in e.pos_enu_m],
+                            "obstacle_range_m": num(e.obstacle_range_m), "action": e.action, "detail": e.detail}
+                           for e in self.event_list],
+            "max_lateral_deviation_m": float(self.max_lateral_deviation_m),
+            "extra_path_m": float(self.extra_path_m),
+            "max_climb_m": float(self.max_climb_m),
+            "min_obstacle_range_m": num(self.min_obstacle_range_m),
+            "readings": int(self.readings),
+            "unknown_hits": int(self.unknown_hits),
+            "ignored_readings": int(self.ignored_readings),
+        }
+
+
+def _pointing(p, target) -> tuple:
+    if target is None:
+        return (0.0, 1.0, 0.0)
+    u = (target[0] - p[0], target[1] - p[1], target[2] - p[2])
+    n = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    return (0.0, 1.0, 0.0) if n < 1e-9 else (u[0] / n, u[1] / n, u[2] / n)
+
+
+def _segment_distance(p, a, b) -> float:
+    """Horizontal distance (m) from the point p to the segment a-b (ENU xy)."""
+    ax, ay = float(a[0]), float(a[1])
+    dx, dy = float(b[0]) - ax, float(b[1]) - ay
+    L2 = dx * dx + dy * dy
+    t = 0.0 if L2 <= 0.0 else min(max(((p[0] - ax) * dx + (p[1] - ay) * dy) / L2, 0.0), 1.0)
+    return math.hypot(p[0] - ax - t * dx, p[1] - ay - t * dy)
+
+
+def lateral_gap(lat_m: np.ndarray, half_width_m: float, clearance_m: float, min_gap_m: float = 0.02) -> bool:
+    """True if some lateral position in [-half_width, half_width] keeps ``clearance_m``
+    from every obstacle offset in ``lat_m`` (a gap of at least ``min_gap_m``)."""
+    lat = np.sort(np.asarray(lat_m, dtype=float))
+    lo, hi = lat - clearance_m, lat + clearance_m
+    cur = -half_width_m
+    for s, e in zip(lo.tolist(), hi.tolist()):
+        if s - cur > min_gap_m:
+            return True
+        cur = max(cur, e)
+        if cur >= half_width_m:
+            return False
+    return half_width_m - cur > min_gap_m
+
+
+def cluster_nearest(points: np.ndarray, dist: np.ndarray, merge_m: float, k_max: int) -> np.ndarray:
+    """Up to ``k_max`` points, one per cluster: repeatedly the nearest point left,
+    then drop every point within ``merge_m`` of it. ``dist``: the points' distances."""
+    order = np.argsort(dist)
+    pts = points[order]
+    out = []
+    alive = np.ones(len(pts), dtype=bool)
+    for i in range(len(pts)):
+        if not alive[i]:
+            continue
+        out.append(pts[i])
+        if len(out) == k_max:
+            break
+        d = pts - pts[i]
+        alive &= np.einsum("ki,ki->k", d, d) > merge_m * merge_m
+    return np.array(out).reshape(-1, 3)
+
+
+def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m_s: float,
+                         vertical_speed_m_s: float) -> int:
+    """The first way-point to rejoin after an avoidance along the leg direction ``u_xy``.
+
+    From the way-point after ``wp_leave`` (the last passed when the avoidance
+    began) on: the first turning point still ahead of the reference by more
+    than ``GOAL_REACHED_M`` (a turn is never cut; one the avoidance reached,
+    its goal, counts as passed), or the first other way-point ahead of it by more than the
+    lead: 1 m, 1 s at the plan speed, and the distance flown at that speed
+    while coming down (or up) to it at the vertical speed (no turning back to
+    reach it). ``u_xy`` is the direction of the leg the avoidance is on
+    (it moves to the next leg when the avoidance reaches a turn), so way-points
+    behind a turn already passed are measured along the new leg.
+    """
+    P = np.asarray(p_enu_m, dtype=float)
+    n = len(plan.t_s)
+    for i in range(wp_leave + 1, n):
+        q = plan.p_enu_m[i]
+        a_i = float((q[:2] - P[:2]) @ u_xy)
+        if plan.corner[i]:
+            if a_i > GOAL_REACHED_M:
+                return i
+            continue                      # a turn reached or passed (the avoidance went round it)
+        t_down = 1.875 * abs(float(q[2] - P[2])) / vertical_speed_m_s
+        if a_i > max(1.0, speed_m_s, speed_m_s * t_down):
+            return i
+    return n - 1
+
+
+def mission_replan_config(mission) -> ReplanConfig:
+    """The mission's ``replan`` settings with ``body_radius_m`` filled in from the
+    vehicle when unset: the arm length plus ``PROP_RADIUS_M`` (a 10-inch propeller)."""
+    cfg = mission.replan
+    if cfg.body_radius_m is None:
+        cfg = dataclasses.replace(cfg, body_radius_m=float(mission.vehicle.arm_m) + PROP_RADIUS_M)
+    return cfg
+
+
+class Replanner:
+    """Obstacle-avoiding reference generator (module doc).
+
+    Parameters
+    ----------
+    cfg : ReplanConfig
+    known : KnownMap
+    plan : GlobalPlan
+
+    Call ``start`` once at the start of the trajectory phase, ``on_pose``
+    every frame with the estimated pose, ``on_range`` with every decoded
+    DISTANCE_SENSOR, then ``step`` every frame.
+    """
+
+    def __init__(self, cfg: ReplanConfig, known: KnownMap, plan: GlobalPlan) -> None:
+        self.cfg = cfg
+        self.known = known
+        self.apf = ApfParams(cfg.k_att, cfg.k_rep, cfg.influence_range_m, cfg.n)
+        self.speed_m_s = float(cfg.speed_m_s if cfg.speed_m_s is not None else plan.flight.speed_m_s)
+        #: distance kept from every obstacle point by the vehicle's centre: the clearance plus the body
+        self._keep_m = cfg.clearance_m + (cfg.body_radius_m or 0.0)
+        self.memory = ObstacleMemory(cfg.voxel_m, cfg.memory_s, cfg.memory_radius_m, CLEAR_MARGIN_M)
+        self.poses = PoseHistory()
+        self.shaper = ReferenceShaper(cfg.accel_m_s2, cfg.jerk_m_s3)
+        self._brake = 0.5 * cfg.accel_m_s2
+        self._target = None if plan.target_enu_m is None else tuple(float(x) for x in plan.target_enu_m)
+        self.mode = "follow"
+        self._offset: float | None = None
+        self._tau_prev: float | None = None
+        self._set_plan(plan)
+        t = np.arange(plan.trajectory.t0, plan.trajectory.tf, 0.05)
+        pp = plan.trajectory.sample(np.append(t, plan.trajectory.tf)).p
+        self._planned_length = float(np.sum(np.linalg.norm(np.diff(pp, axis=0), axis=1)))
+        # statistics
+        self._events: list[ReplanEvent] = []
+        self._n_events = 0
+        self._flown = 0.0
+        self._p_prev: tuple | None = None
+        self._max_lat = 0.0
+        self._max_climb = 0.0
+        self._min_range: float | None = None
+        self.n_readings = self.n_unknown = self.n_ignored = 0
+        # avoidance context
+        self._static: RefSample | None = None
+        self._mode_until = -math.inf
+        self._stop_then = ""
+        self._next_rejoin = -math.inf
+        self._dev_leg: tuple | None = None
+
+    @classmethod
+    def from_plan(cls, plan, mission) -> "Replanner":
+        """For a ``companion.planner.Plan`` of ``mission`` (its maps, coverage and trajectory);
+        ``replan.body_radius_m`` unset is taken from the vehicle (``mission_body_radius_m``)."""
+        known = KnownMap.from_mission(mission, plan.grid, plan.dem, plan.coverage.free_eroded)
+        return cls(mission_replan_config(mission), known, GlobalPlan.from_plan(plan, mission))
+
+    # --- plan bookkeeping -------------------------------------------------------------
+
+    def _set_plan(self, plan: GlobalPlan) -> None:
+        self.plan = plan
+        self._cursor = TrajectoryCursor(plan.trajectory)
+        self._n_legs = max(1, len(plan.turns_enu_m) - 1)
+
+    def _leg_frame(self, k: int):
+        """(A (3,), B (3,), u_t (2,), u_n (2,)) of leg k of the plan (``GlobalPlan.leg_frame``)."""
+        return self.plan.leg_frame(k)
+
+    # --- the contract ----------------------------------------------------------------------
+
+    def start(self, t_s: float) -> None:
+        """The trajectory phase starts at vehicle time ``t_s`` (the plan's t0 maps onto it)."""
+        self._offset = float(t_s) - self.plan.trajectory.t0
+        self._tau_prev = None
+
+    def on_pose(self, t_s: float, pos_enu_m, R_enu_flu) -> None:
+        """The estimated pose at vehicle time ``t_s`` (position ENU m, R body FLU -> ENU)."""
+        self.poses.add(t_s, pos_enu_m, R_enu_flu)
+
+    def on_range(self, t_s: float, reading) -> None:
+        """One decoded DISTANCE_SENSOR (``companion.link.codec.Range``) received at ``t_s``."""
+        self.n_readings += 1
+        pose = self.poses.at(reading.time_boot_ms * 1e-3)
+        if pose is None:
+            pose = self.poses.at(t_s)
+        ev = None if pose is None else beam_evidence(reading, pose, self.cfg.offset_of(reading.sensor_id))
+        if ev is None:
+            self.n_ignored += 1
+            return
+        mem = self.memory
+        if len(mem):
+            mem.clear_beam(ev)
+        if ev.hit is not None and not self._explained(ev):
+            # the return may come from anywhere in the field of view: keep the edge
+            # points too where they are a voxel apart and not on a known feature,
+            # briefly (CANDIDATE_LIFETIME_S) unless seen again: later beams clear the
+            # wrong ones, and those no beam passes through again (a wide beam's
+            # candidates over a row seen from above the canopy) must not linger
+            mem.add(t_s, ev.hit)
+            if ev.distance_m * math.tan(ev.half_max_rad) > self.cfg.voxel_m:
+                for q in ev.fan_hits:
+                    if self.known.classify(*q) == UNKNOWN:
+                        mem.add(t_s, q, CANDIDATE_LIFETIME_S)
+            self.n_unknown += 1
+
+    def _explained(self, ev) -> bool:
+        """The known map accounts for the return along the axis or a field-of-view edge."""
+        known, o, d = self.known, ev.origin, ev.distance_m
+        if known.explains(o, ev.axis, d):
+            return True
+        for q in ev.fan_hits:
+            if known.explains(o, ((q[0] - o[0]) / d, (q[1] - o[1]) / d, (q[2] - o[2]) / d), d):
+                return True
+        return False
+
+    def step(self, t_s: float, pos_enu_m, vel_enu_m_s) -> ReplanStep:
+        """The reference for this frame (vehicle time ``t_s``; the estimated state)."""
+        if self._offset is None:
+            self.start(t_s)
+        tau = t_s - self._offset
+        dt = 0.0 if self._tau_prev is None else tau - self._tau_prev
+        self._tau_prev = tau
+        self._pos = pos_enu_m
+        self._t_s = t_s
+        events: list = []
+        if len(self.memory):
+            p = self._p_prev if self._p_prev is not None else pos_enu_m
+            self.memory.expire(t_s, p)
+        mode = self.mode
+        if mode in _FOLLOWING:
+            ref = self._follow(tau, events)
+        elif mode in ("avoid", "climb"):
+            ref = self._avoid(tau, dt, events)
+        elif mode == "stop":
+            ref = self._stop(tau, dt, events)
+        else:
+            ref = self._static
+        self._account(ref)
+        return ReplanStep(ref, self.mode, self.mode == "done", self.mode == "hold", tuple(events))
+
+    @property
+    def stats(self) -> ReplanStats:
+        """Statistics so far (report.json ``replanning``)."""
+        return ReplanStats(self._n_events, tuple(self._events), self._max_lat,
+                           self._flown - self._planned_length, self._max_climb, self._min_range,
+                           self.n_readings, self.n_unknown, self.n_ignored)
+
+    # --- modes --------------------------------------------------------------------------
+
+    def _event(self, events: list, action: str, rng: float | None, detail: str = "") -> None:
+        pos = tuple(float(x) for x in self._pos)
+        e = ReplanEvent(float(self._t_s), pos, rng, action, detail)
+        events.append(e)
+        self._n_events += 1
+        if len(self._events) < MAX_EVENTS_KEPT:
+            self._events.append(e)
+
+    def _ref(self, p, v, a, j, s) -> RefSample:
+        return RefSample(tuple(p), tuple(v), tuple(a), tuple(j), tuple(s), _pointing(p, self._target))
+
+    def _rest(self, p) -> RefSample:
+        z = (0.0, 0.0, 0.0)
+        return RefSample(tuple(float(x) for x in p), z, z, z, z, _pointing(p, self._target))
+
+    def _follow(self, tau: float, events: list) -> RefSample:
+        cur = self._cursor
+        s = cur.sample(tau)
+        if tau >= cur.tf:
+            self.mode = "done"
+            self._static = RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
+            return self._static
+        if self.mode != "follow" and tau >= self._mode_until:
+            self.mode = "follow"
+            self._dev_leg = None
+        if self._dev_leg is not None:
+            self._deviation(s.p)
+        if len(self.memory):
+            rng = self._threat(s.p, s.v, self._leg_frame(self.plan.leg_near(s.p, s.v[:2]))[2])
+            if rng is not None:
+                self._enter_avoid(tau, s, rng, events)
+        return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
+
+    def _trigger_m(self, speed: float) -> float:
+        """Range (m) at which an obstacle point starts an avoidance: d_o, or farther when
+        the governor's braking distance from ``speed`` (plus 0.5 m) needs it."""
+        return max(self.cfg.influence_range_m, speed * speed / (2.0 * self._brake) + speed * GOVERNOR_LAG_S
+                   + self._keep_m + GOVERNOR_MARGIN_M + 0.5)
+
+    def _threat(self, p, v, leg_u, extra_m: float = 0.0) -> float | None:
+        """Distance to the nearest remembered point within the trigger range (plus
+        ``extra_m``) that is not behind (along the horizontal velocity, or ``leg_u``
+        when hovering, at least -(clearance + body + ``extra_m``)); None if none.
+        The same test starts an avoidance and (with ``REJOIN_HYSTERESIS_M``, and
+        the leg ``follow`` will use) allows the rejoin, so the two cannot
+        alternate."""
+        pts = self.memory.points()
+        if not len(pts):
+            return None
+        rel = pts - np.asarray(p)
+        dist = np.sqrt(np.einsum("ki,ki->k", rel, rel))
+        vh = math.hypot(v[0], v[1])
+        u = np.array([v[0] / vh, v[1] / vh]) if vh > 0.05 else leg_u
+        along = rel[:, :2] @ u
+        speed = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+        ok = (dist <= self._trigger_m(speed) + extra_m) & (along >= -self._keep_m - extra_m)
+        return float(dist[ok].min()) if ok.any() else None
+
+    def _enter_avoid(self, tau: float, s, rng: float, events: list) -> None:
+        self.shaper.reset(s.p, s.v, s.a, s.jerk)
+        k = self.plan.leg_near(s.p, s.v[:2])
+        self._avoid_leg = k
+        self._wp_leave = self.plan.waypoint_index_at(tau)
+        A, B, u, n = self._leg_frame(k)
+        self._dev_leg = ((A[:2].copy(), B[:2].copy()),)
+        along = float((np.asarray(s.p[:2]) - A[:2]) @ u)
+        self._progress = along
+        self._t_progress = tau
+        self._t_avoid = tau
+        self._t_climb = None
+        self.mode = "avoid"
+        self._event(events, "avoid", rng, f"unknown obstacle within {self._trigger_m(self.speed_m_s):.2f} m")
+
+    def _avoid(self, tau: float, dt: float, events: list) -> RefSample:
+        cfg = self.cfg
+        P = np.array(self.shaper.p)
+        k = self._avoid_leg
+        A, B, u, n = self._leg_frame(k)
+        if math.hypot(*(B[:2] - P[:2])) < GOAL_REACHED_M and k < self._n_legs - 1:
+            k = self._avoid_leg = k + 1
+            A, B, u, n = self._leg_frame(k)
+            self._dev_leg = (self._dev_leg[-1], (A[:2].copy(), B[:2].copy()))   # this leg and the one before
+            self._progress = float((P[:2] - A[:2]) @ u)
+            self._t_progress = tau
+            # along-leg coordinates change with the leg: restart the escape's goals on it
+            self._far_along = float(P[:2] @ u)
+            self._rise_xy = A[:2] + float((P[:2] - A[:2]) @ u) * u
+        pts = self.memory.points()
+        rel = pts - P
+        dist = np.sqrt(np.einsum("ki,ki->k", rel, rel))
+        along = rel[:, :2] @ u
+        c = self._keep_m
+        near = dist <= cfg.influence_range_m
+        v = self.shaper.v
+        if tau >= self._next_rejoin and self._calm() and self._threat(
+                P, v, self._leg_frame(self.plan.leg_near(P, v[:2]))[2], REJOIN_HYSTERESIS_M) is None:
+            ref = self._try_rejoin(tau, events)
+            if ref is not None:
+                return ref
+        # the way ahead, at the current height
+        c_pass = c + GOVERNOR_MARGIN_M
+        lat_o = (pts[:, :2] - A[:2]) @ n
+        ahead = (along > -c) & (along <= cfg.influence_range_m) & (np.abs(lat_o) <= cfg.lateral_limit_m + c_pass)
+        band = ahead & (np.abs(pts[:, 2] - P[2]) < c_pass)
+        passable = not band.any() or lateral_gap(lat_o[band], cfg.lateral_limit_m - WALL_MARGIN_M, c_pass)
+        stalled = tau - self._t_progress > cfg.stall_s
+        ground = self.known.ground_z(float(P[0]), float(P[1]))
+        z_ceiling = ground + cfg.ceiling_agl_m
+        if tau - self._t_avoid > cfg.escape_timeout_s and self.mode == "avoid" and not cfg.vertical_escape:
+            return self._enter_stop(tau, events, "hold", f"no way past in {cfg.escape_timeout_s:g} s "
+                                    "(vertical escape off)")
+        if self.mode == "avoid" and (not passable or stalled) and cfg.vertical_escape:
+            self.mode = "climb"
+            self._t_climb = tau
+            self._climb_phase = "rise"
+            self._rise_xy = A[:2] + float((P[:2] - A[:2]) @ u) * u      # on the leg's line
+            self._z_pass = P[2]
+            self._far_along = float(P[:2] @ u)
+            self._event(events, "climb", self._nearest(dist), "no lateral gap" if not passable else "no progress")
+        goal = B.copy()
+        if self.mode == "climb":
+            if ahead.any():
+                z_top = float(pts[ahead, 2].max())
+                self._z_pass = max(self._z_pass, z_top + c_pass + PASS_MARGIN_M)
+                if not passable and self._z_pass > z_ceiling:
+                    return self._enter_stop(tau, events, "reroute", f"obstacle top above {z_top - ground:.2f} m, "
+                                            f"ceiling {cfg.ceiling_agl_m:g} m")
+                self._far_along = float(along[ahead].max()) + float(P[:2] @ u)
+            if tau - self._t_climb > cfg.escape_timeout_s:
+                return self._enter_stop(tau, events, "hold", f"escape not through in {cfg.escape_timeout_s:g} s")
+            z_goal = min(self._z_pass, z_ceiling - WALL_MARGIN_M)
+            if self._climb_phase == "rise" and passable and P[2] >= z_goal - RISE_TOL_M:
+                self._climb_phase = "over"
+            if self._climb_phase == "rise":
+                goal = np.array([self._rise_xy[0], self._rise_xy[1], z_goal])
+            else:
+                # beyond the farthest point seen, on the leg's line, one influence range on
+                s_goal = min(self._far_along + cfg.influence_range_m, float(B[:2] @ u))
+                xy = A[:2] + (s_goal - float(A[:2] @ u)) * u
+                goal = np.array([xy[0], xy[1], z_goal])
+        v_cmd = self._apf_velocity(P, pts[near], dist[near], goal, A, u, n, ground)
+        st = self.shaper.step(dt, v_cmd)
+        prog = float((np.asarray(st.p[:2]) - A[:2]) @ u)
+        if prog > self._progress + PROGRESS_M:
+            self._progress = prog
+            self._t_progress = tau
+        self._deviation(st.p)
+        return self._ref(st.p, st.v, st.a, st.jerk, st.snap)
+
+    def _nearest(self, dist: np.ndarray) -> float | None:
+        return float(dist.min()) if len(dist) else None
+
+    def _apf_velocity(self, P, obs, obs_dist, goal, A, u, n, ground) -> list:
+        """Velocity command (ENU m/s) from the APF force, constrained (module doc)."""
+        if len(obs):
+            obstacles = cluster_nearest(obs, obs_dist, CLUSTER_M, MAX_OBSTACLES)
+        else:
+            obstacles = obs
+        # gradient flow: v = F / (k_att T_FLOW), then the speed limits (in _constrain)
+        v = apf_force(P, obstacles, goal, self.apf).total / (self.apf.k_att * FLOW_TIME_S)
+        v = self._constrain(P, v, A, u, n, ground)
+        if len(obs) and self.cfg.clearance_governor:
+            v = self._govern(P, v, obs, obs_dist)
+            v = self._constrain(P, v, A, u, n, ground)
+            v = self._govern(P, v, obs, obs_dist, scale_only=True)
+        return v.tolist()
+
+    def _constrain(self, P, v, A, u, n, ground) -> np.ndarray:
+        """Corridor walls, height band and speed limits on a velocity command."""
+        cfg = self.cfg
+        vt, vn, vz = float(v[:2] @ u), float(v[:2] @ n), float(v[2])
+        lat = float((P[:2] - A[:2]) @ n)
+        L = cfg.lateral_limit_m - WALL_MARGIN_M
+        wall = self._wall_speed
+        vn = min(max(vn, -wall(L + lat)), wall(L - lat))
+        z_lo, z_hi = ground + cfg.floor_agl_m + WALL_MARGIN_M, ground + cfg.ceiling_agl_m - WALL_MARGIN_M
+        vz = min(max(vz, -cfg.vertical_speed_m_s, -wall(P[2] - z_lo)),
+                 cfg.vertical_speed_m_s, wall(z_hi - P[2]))
+        h = math.hypot(vt, vn)
+        if h > self.speed_m_s:
+            vt, vn = vt * self.speed_m_s / h, vn * self.speed_m_s / h
+        return np.array([vt * u[0] + vn * n[0], vt * u[1] + vn * n[1], vz])
+
+    def _allowed_speed(self, room_m):
+        """Largest speed (m/s) that stops within ``room_m`` (scalar or array): braking at
+        a_b after a lag, v^2 / (2 a_b) + v t_lag = room."""
+        bt = self._brake * GOVERNOR_LAG_S
+        return np.sqrt(bt * bt + 2.0 * self._brake * room_m) - bt
+
+    def _wall_speed(self, d: float) -> float:
+        """Largest speed (m/s) toward a wall ``d`` m away (negative: pushed back from beyond it):
+        the soft-wall gain and the braking law, whichever is lower."""
+        if d <= 0.0:
+            return WALL_GAIN_1_S * d
+        return min(WALL_GAIN_1_S * d, float(self._allowed_speed(d)))
+
+    def _govern(self, P, v, obs, obs_dist, scale_only: bool = False) -> np.ndarray:
+        """Clearance governor: the approach speed to each point is at most the v with
+        v^2 / (2 a_b) + v t_lag = d - clearance - margin (braking at a_b after the
+        shaper's lag t_lag = ``GOVERNOR_LAG_S``)."""
+        d = np.maximum(obs_dist, 1e-9)
+        nrm = (P - obs) / d[:, None]                        # from each point to the vehicle
+        allow = self._allowed_speed(np.maximum(0.0, d - self._keep_m - GOVERNOR_MARGIN_M))
+        if scale_only:
+            approach = -(nrm @ v)
+            bad = approach > allow + 1e-12
+            if bad.any():
+                v = v * float(np.min(allow[bad] / approach[bad]))
+            return v
+        v = v.copy()
+        for i in np.argsort(d)[:64]:
+            approach = -float(nrm[i] @ v)
+            if approach > allow[i]:
+                v = v + (approach - allow[i]) * nrm[i]
+        return v
+
+    def _enter_stop(self, tau: float, events: list, then: str, detail: str) -> RefSample:
+        self.mode = "stop"
+        self._stop_then = then
+        self._stop_detail = detail
+        pts = self.memory.points()
+        P = np.array(self.shaper.p)
+        self._event(events, "stop", self._nearest(np.linalg.norm(pts - P, axis=1)), detail)
+        return self._stop(tau, 0.0, events)
+
+    def _stop(self, tau: float, dt: float, events: list) -> RefSample:
+        P = np.array(self.shaper.p)
+        pts = self.memory.points()
+        v = np.zeros(3)
+        st = self.shaper.step(dt, v.tolist())
+        self._deviation(st.p)
+        at_rest = math.sqrt(sum(x * x for x in st.v)) < REST_V_M_S and \
+            math.sqrt(sum(x * x for x in st.a)) < REST_A_M_S2
+        if not at_rest:
+            return self._ref(st.p, st.v, st.a, st.jerk, st.snap)
+        dist = np.linalg.norm(pts - P, axis=1) if len(pts) else np.zeros(0)
+        if self._stop_then == "reroute":
+            blocking = pts[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else pts
+            travel = self._leg_frame(self._avoid_leg)[2]       # the leg the avoidance was on
+            res = reroute(self.plan, self.known, st, tau, self._wp_leave, blocking, travel,
+                          self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s, self._keep_m + ROUTE_MARGIN_M)
+            self.known = res.known
+            self.memory.forget(lambda q: np.array([self.known.classify(*map(float, x)) != UNKNOWN for x in q]))
+            if res.plan is not None:
+                self._set_plan(res.plan)
+                self._dev_leg = None
+                self.mode = "reroute"
+                self._mode_until = float(res.plan.t_s[1]) if len(res.plan.t_s) > 1 else tau
+                self._event(events, "reroute", self._nearest(dist),
+                            f"{res.n_pieces} coverage pieces left, {res.n_skipped} unreachable")
+                s = self._cursor.sample(tau)
+                return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
+            detail = res.reason
+        else:
+            detail = self._stop_detail
+        self.mode = "hold"
+        self._static = self._rest(st.p)
+        self._event(events, "hold", self._nearest(dist), detail)
+        return self._static
+
+    def _calm(self) -> bool:
+        """The reference is not manoeuvring hard (a rejoin from a hard manoeuvre overshoots)."""
+        a, j = self.shaper.a, self.shaper.j
+        return max(abs(x) for x in a) <= CALM_FRACTION * self.cfg.accel_m_s2 and \
+            max(abs(x) for x in j) <= CALM_FRACTION * self.cfg.jerk_m_s3
+
+    def _on_free_cell(self, x: float, y: float) -> bool:
+        """(x, y) (ENU m) is over a free cell of the map (not a row, not unknown, not off the map)."""
+        cell = self.known.cell_of(x, y)
+        return cell is not None and bool(self.known.free.free[cell])
+
+    def _ceiling_z(self, x: float, y: float) -> float:
+        return self.known.ground_z(x, y) + self.cfg.ceiling_agl_m
+
+    def _try_rejoin(self, tau: float, events: list) -> RefSample | None:
+        st = self.shaper.state()
+        plan = self.plan
+        P = np.asarray(st.p)
+        A, B, u, n = self._leg_frame(self._avoid_leg)
+        # way-points of earlier legs are behind, whatever their projection on this one
+        start = self._wp_leave
+        at_A = np.flatnonzero(plan.corner[start:] & (np.hypot(*(plan.p_enu_m[start:, :2] - A[:2]).T) < 0.05))
+        if len(at_A):
+            start += int(at_A[0])
+        first = first_waypoint_ahead(plan, start, P, u, self.speed_m_s, self.cfg.vertical_speed_m_s)
+        res = rejoin(plan, st, tau, first, self.memory.points(), self._keep_m,
+                     self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z, self._on_free_cell)
+        if res.plan is None:
+            self._next_rejoin = tau + REJOIN_RETRY_S
+            return None
+        self._set_plan(res.plan)
+        self.mode = "rejoin"
+        self._mode_until = float(res.plan.t_s[1])
+        self._event(events, "rejoin", None, f"LQR re-solved through {len(res.plan.t_s) - 1} way-points")
+        s = self._cursor.sample(tau)
+        return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
+
+    # --- statistics ---------------------------------------------------------------------
+
+    def _deviation(self, p) -> None:
+        if self._dev_leg is None:
+            return
+        lat = min(_segment_distance(p, a, b) for a, b in self._dev_leg)
+        if lat > self._max_lat:
+            self._max_lat = lat
+        climb = p[2] - (self.known.ground_z(p[0], p[1]) + self.plan.flight.height_agl_m)
+        if climb > self._max_climb:
+            self._max_climb = climb
+
+    def _account(self, ref: RefSample) -> None:
+        p = ref.p
+        q = self._p_prev
+        if q is not None:
+            self._flown += math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
+        self._p_prev = p
+        if len(self.memory):
+            pts = self.memory.points()
+            d = float(np.sqrt(np.min(np.einsum("ki,ki->k", pts - p, pts - p))))
+            if self._min_range is None or d < self._min_range:
+                self._min_range = d

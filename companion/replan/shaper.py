@@ -1,0 +1,109 @@
+"""Turn a velocity command into a smooth, dynamically feasible reference.
+
+The APF (and the stop) give a desired velocity each frame; the controller
+needs p, v, a, jerk and snap that are continuous and bounded. A
+third-order reference model tracks the command with nested saturations::
+
+    a_des = sat(k_v (v_cmd - v - a |a| / (2 j_max)), a_max)
+    j_des = sat(k_a (a_des - a), j_max)
+    snap  = sat(k_j (j_des - j), s_max)
+
+per axis (ENU; so the norms are within sqrt(3) of the limits), integrated
+exactly over each frame for constant snap. Per-axis limits keep the axes
+decoupled: with a shared (norm) limit, braking along the track uses up the
+jerk a climb needs to level off, and the vertical speed overshoots. Unsaturated, v follows v_cmd
+with the triple pole s = -omega (k_j = 3 omega, k_a = omega, k_v = omega / 3:
+s^3 + k_j s^2 + k_j k_a s + k_j k_a k_v = (s + omega)^3), so a step of the
+command gives no overshoot; saturated, the term a |a| / (2 j_max) (the
+speed still gained while the acceleration is ramped down at j_max) keeps
+the overshoot small (tested: below 2 % on speed steps). Per
+axis |a| <= a_max (up to one frame of jerk), |jerk| <= j_max and
+|snap| <= s_max. p, v, a and jerk are
+continuous by construction (the state is integrated, never reset, except
+by ``reset`` which takes the state to continue from).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+#: Pole of the reference model (rad/s).
+OMEGA_RAD_S = 6.0
+
+
+def _sat(x: float, limit: float) -> float:
+    return limit if x > limit else (-limit if x < -limit else x)
+
+
+@dataclass(frozen=True, slots=True)
+class ShapedState:
+    """Reference state (ENU, float 3-tuples): p m, v m/s, a m/s^2, jerk m/s^3, snap m/s^4."""
+
+    p: tuple
+    v: tuple
+    a: tuple
+    jerk: tuple
+    snap: tuple
+
+
+class ReferenceShaper:
+    """Third-order velocity-command tracker (module doc).
+
+    Parameters
+    ----------
+    accel_m_s2, jerk_m_s3, snap_m_s4 : float
+        Per-axis limits of a, jerk and snap (default snap: 5 jerk_m_s3 per s).
+    omega_rad_s : float
+        Pole of the unsaturated model.
+    """
+
+    def __init__(self, accel_m_s2: float, jerk_m_s3: float, snap_m_s4: float | None = None,
+                 omega_rad_s: float = OMEGA_RAD_S) -> None:
+        self.a_max = float(accel_m_s2)
+        self.j_max = float(jerk_m_s3)
+        self.s_max = float(snap_m_s4) if snap_m_s4 is not None else 5.0 * self.j_max
+        self.k_j = 3.0 * omega_rad_s
+        self.k_a = omega_rad_s
+        self.k_v = omega_rad_s / 3.0
+        self.p = [0.0, 0.0, 0.0]
+        self.v = [0.0, 0.0, 0.0]
+        self.a = [0.0, 0.0, 0.0]
+        self.j = [0.0, 0.0, 0.0]
+        self.s = [0.0, 0.0, 0.0]
+
+    def reset(self, p, v, a, jerk) -> None:
+        """Continue from this state (ENU 3-sequences)."""
+        self.p = [float(x) for x in p]
+        self.v = [float(x) for x in v]
+        self.a = [float(x) for x in a]
+        self.j = [float(x) for x in jerk]
+        self.s = [0.0, 0.0, 0.0]
+
+    def state(self) -> ShapedState:
+        return ShapedState(tuple(self.p), tuple(self.v), tuple(self.a), tuple(self.j), tuple(self.s))
+
+    def step(self, dt_s: float, v_cmd) -> ShapedState:
+        """Advance by ``dt_s`` toward the velocity command ``v_cmd`` (ENU m/s); the new state."""
+        if dt_s <= 0.0:
+            return self.state()
+        p, v, a, j = self.p, self.v, self.a, self.j
+        s = [0.0, 0.0, 0.0]
+        for i in range(3):
+            # the speed error left once a is ramped to zero at j_max: braking on it
+            # keeps the speed from overshooting while the acceleration unwinds
+            e = v_cmd[i] - v[i] - a[i] * abs(a[i]) / (2.0 * self.j_max)
+            a_des = _sat(self.k_v * e, self.a_max)
+            j_des = _sat(self.k_a * (a_des - a[i]), self.j_max)
+            si = _sat(self.k_j * (j_des - j[i]), self.s_max)
+            # do not let the jerk overshoot its target within one frame
+            if abs(si) * dt_s > abs(j_des - j[i]):
+                si = (j_des - j[i]) / dt_s
+            s[i] = si
+        h, h2, h3, h4 = dt_s, dt_s * dt_s / 2.0, dt_s ** 3 / 6.0, dt_s ** 4 / 24.0
+        self.p = [p[i] + v[i] * h + a[i] * h2 + j[i] * h3 + s[i] * h4 for i in range(3)]
+        self.v = [v[i] + a[i] * h + j[i] * h2 + s[i] * h3 for i in range(3)]
+        self.a = [a[i] + j[i] * h + s[i] * h2 for i in range(3)]
+        self.j = [j[i] + s[i] * h for i in range(3)]
+        self.s = s
+        return self.state()

@@ -1,0 +1,544 @@
+"""Closed-loop kinematic flights of the replanner (pure, in-test).
+
+A point mass follows the reference exactly (position = reference, level
+attitude, body y toward the pointing direction as the controller flies it);
+16 rangefinders in a horizontal ring (MAV_SENSOR_ROTATION_CUSTOM with yaw
+quaternions, 22.5 deg wide: three rays, the axis and the two edges) and one
+looking down (one ray) are ray cast
+against hand-placed geometry with an analytic caster written here (ground
+plane, two vine rows as boxes, cylinders and boxes), independent of the
+replanner's perception code and of the SITL. The field: two rows 12 m long
+(x 3..15 m, y 2.3..2.7 and 4.8..5.2 m) and a path over three lines (the
+corridor y = 3.75 east, the south headland y = 1.25 west, the north
+headland y = 6.25 east), the plan made by the project's own way-point and
+LQR code. The true clearance is the distance from the reference to the
+obstacle's surface, computed analytically here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pytest
+
+from companion.coverage.freespace import erode_free_space
+from companion.coverage.waypoints import waypoints_along
+from companion.link import codec
+from companion.maps.grid import ElevationModel, OccupancyGrid
+from companion.mission.replan import ReplanConfig
+from companion.mission.schema import FlightConfig
+from companion.replan import GlobalPlan, KnownMap, Replanner
+from companion.trajectory import TrajectoryConfig, generate_trajectory
+
+RES = 0.1
+ROWS = ((3.0, 15.0, 2.3, 2.7), (3.0, 15.0, 4.8, 5.2))     # x0, x1, y0, y1 (m)
+CANOPY_M = 2.0
+CORRIDOR_Y = 3.75
+PATH = np.array([[1.0, 3.75], [17.0, 3.75], [17.0, 1.25], [1.0, 1.25], [1.0, 6.25], [17.0, 6.25]])
+SEGMENTS = np.array([PATH[0:2], PATH[2:4], PATH[4:6]])
+TARGET = np.array([9.0, 3.75, 1.5])
+N_RING = 16
+RING_FOV = math.radians(360.0 / N_RING)
+NARROW_FOV = math.radians(5.0)
+MAX_RANGE_M = 10.0
+
+
+# --- the world, cast analytically ---------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    x: float
+    y: float
+    r: float
+    h: float
+
+    def cast(self, o, d, lim):
+        ex, ey = o[0] - self.x, o[1] - self.y
+        a = d[0] * d[0] + d[1] * d[1]
+        best = math.inf
+        if a > 0.0:
+            b = ex * d[0] + ey * d[1]
+            c = ex * ex + ey * ey - self.r * self.r
+            disc = b * b - a * c
+            if disc >= 0.0:
+                t = (-b - math.sqrt(disc)) / a
+                if 0.0 <= t < lim and 0.0 <= o[2] + t * d[2] <= self.h:
+                    best = t
+        if d[2] != 0.0:
+            t = (self.h - o[2]) / d[2]
+            if 0.0 <= t < min(best, lim) and (ex + t * d[0]) ** 2 + (ey + t * d[1]) ** 2 <= self.r ** 2:
+                best = t
+        return best
+
+    def clearance(self, p):
+        dh = math.hypot(p[0] - self.x, p[1] - self.y) - self.r
+        dz = p[2] - self.h
+        if dz <= 0.0:
+            return max(dh, 0.0)
+        return math.hypot(max(dh, 0.0), dz)
+
+
+@dataclass(frozen=True)
+class Box:
+    x0: float
+    x1: float
+    y0: float
+    y1: float
+    h: float
+
+    def cast(self, o, d, lim):
+        t0, t1 = 0.0, lim
+        for q, dq, lo, hi in ((o[0], d[0], self.x0, self.x1), (o[1], d[1], self.y0, self.y1),
+                              (o[2], d[2], 0.0, self.h)):
+            if dq == 0.0:
+                if q < lo or q > hi:
+                    return math.inf
+                continue
+            ta, tb = (lo - q) / dq, (hi - q) / dq
+            if ta > tb:
+                ta, tb = tb, ta
+            t0, t1 = max(t0, ta), min(t1, tb)
+            if t0 > t1:
+                return math.inf
+        return t0
+
+    def clearance(self, p):
+        dx = max(self.x0 - p[0], 0.0, p[0] - self.x1)
+        dy = max(self.y0 - p[1], 0.0, p[1] - self.y1)
+        dz = max(p[2] - self.h, 0.0)
+        return math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+ROW_BOXES = tuple(Box(x0, x1, y0, y1, CANOPY_M) for x0, x1, y0, y1 in ROWS)
+
+
+def cast(o, d, bodies, lim=MAX_RANGE_M):
+    best = -o[2] / d[2] if d[2] < 0.0 else math.inf          # ground z = 0
+    for b in bodies:
+        t = b.cast(o, d, min(best, lim))
+        best = min(best, t)
+    return best if best <= lim else math.inf
+
+
+# --- the plan ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Field:
+    known: KnownMap
+    plan: GlobalPlan
+
+
+def build_field(safety_margin_m: float = 0.5) -> Field:
+    rows, cols = 75, 200
+    occ = np.zeros((rows, cols), dtype=bool)
+    for x0, x1, y0, y1 in ROWS:
+        occ[int(round(y0 / RES)):int(round(y1 / RES)), int(round(x0 / RES)):int(round(x1 / RES))] = True
+    grid = OccupancyGrid(occupied=occ, free=~occ, resolution_m=RES)
+    dem = ElevationModel(np.zeros((6, 12)), x0_m=-1.0, y0_m=-1.0, cellsize_m=2.0)
+    flight = FlightConfig(height_agl_m=1.5, speed_m_s=1.0, waypoint_interval_s=4.0)
+    wps = waypoints_along(PATH, dem, flight)
+    traj = generate_trajectory(wps.t_s, wps.p_enu_m, wps.v_enu_m_s, wps.a_enu_m_s2, TrajectoryConfig(),
+                               target_enu_m=TARGET)
+    plan = GlobalPlan.from_waypoints(traj, wps.t_s, wps.p_enu_m, wps.v_enu_m_s, wps.a_enu_m_s2, wps.corner,
+                                     SEGMENTS, TARGET, flight, TrajectoryConfig(), 1.0, tuple(PATH[-1]))
+    known = KnownMap.build(grid, dem, erode_free_space(grid, safety_margin_m), CANOPY_M, 0.2)
+    return Field(known, plan)
+
+
+@pytest.fixture(scope="module")
+def field() -> Field:
+    return build_field()
+
+
+
+
+# --- the flight ------------------------------------------------------------------------------
+
+
+def _yaw_quat(deg):
+    return (math.cos(math.radians(deg) / 2), 0.0, 0.0, math.sin(math.radians(deg) / 2))
+
+
+def _fan_body(R_flu_sensor, hfov, vfov):
+    """Body FLU rays of a sensor: the axis and the edge midpoints of the non-zero fields of view."""
+    S = np.array(R_flu_sensor).reshape(3, 3)
+    rays = [(1.0, 0.0, 0.0)]
+    for k, fov in ((1, hfov), (2, vfov)):
+        if fov > 0:
+            for sgn in (1.0, -1.0):
+                r = [1.0, 0.0, 0.0]
+                r[k] = sgn * math.tan(fov / 2)
+                rays.append(tuple(r))
+    return [tuple(S @ (np.array(r) / np.linalg.norm(r))) for r in rays]
+
+
+SENSORS = tuple((k, codec.MAV_SENSOR_ROTATION_CUSTOM, _yaw_quat(k * 360.0 / N_RING), RING_FOV, 0.0)
+                for k in range(N_RING)) + ((N_RING, 25, None, 0.0, 0.0),)
+SENSOR_GEOMETRY = tuple((sid, o, codec.sensor_rotation_flu(o, q), h, v) for sid, o, q, h, v in SENSORS)
+SENSOR_FANS = tuple(_fan_body(R, h, v) for _, _, R, h, v in SENSOR_GEOMETRY)
+
+
+def level_attitude(s) -> np.ndarray:
+    """R_enu_flu, level, body y toward the horizontal pointing direction (b1 = b2 x e3)."""
+    n = math.hypot(s[0], s[1])
+    bx, by = s[0] / n, s[1] / n
+    return np.array([[by, bx, 0.0], [-bx, by, 0.0], [0.0, 0.0, 1.0]])
+
+
+@dataclass
+class Flight:
+    t: np.ndarray
+    ref: np.ndarray           # (n, 15): p, v, a, jerk, snap
+    modes: list
+    events: list
+    replanner: Replanner
+    steps: list
+
+    def clearance(self, obstacles) -> np.ndarray:
+        return np.array([min((o.clearance(p) for o in obstacles), default=math.inf) for p in self.ref[:, :3]])
+
+
+def fly(field: Field, obstacles=(), cfg: ReplanConfig = ReplanConfig(), t_end_s: float = 200.0,
+        dt_s: float = 0.05, sensor_every: int = 2, stop_after=None) -> Flight:
+    rp = Replanner(cfg, field.known, field.plan)
+    rp.start(0.0)
+    p = tuple(field.plan.trajectory.sample(0.0).p)
+    s = (0.0, 1.0, 0.0)
+    ts, refs, modes, events, steps = [], [], [], [], []
+    k = 0
+    t = 0.0
+    bodies = ROW_BOXES + tuple(obstacles)
+    while t <= t_end_s:
+        R = level_attitude(s)
+        rp.on_pose(t, p, R)
+        if k % sensor_every == 0:
+            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+            for (sid, orient, Rs, h, v), fan in zip(SENSOR_GEOMETRY, SENSOR_FANS):
+                best = min(cast(p, (r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z,
+                                    r20 * x + r21 * y + r22 * z), bodies) for x, y, z in fan)
+                none = not math.isfinite(best)
+                rp.on_range(t, codec.Range(int(round(t * 1000)), sid, math.nan if none else best, 0.1,
+                                           MAX_RANGE_M, orient, h, v, math.nan, none, Rs))
+        st = rp.step(t, p, (0.0, 0.0, 0.0))
+        r = st.ref
+        ts.append(t)
+        refs.append(r.p + r.v + r.a + r.jerk + r.snap)
+        modes.append(st.mode)
+        events.extend(st.events)
+        steps.append(st)
+        p, s = r.p, r.s
+        if st.finished or st.hold or (stop_after is not None and stop_after(st, t)):
+            break
+        t += dt_s
+        k += 1
+    return Flight(np.array(ts), np.array(refs), modes, events, rp, steps)
+
+
+def _actions(f: Flight) -> list:
+    return [e.action for e in f.events]
+
+
+# --- the flights -----------------------------------------------------------------------------
+
+LOW_POST = Cylinder(9.0, CORRIDOR_Y, 0.25, 1.6)         # top 1.6 m: 1.6 + 0.5 + margins < 3 m ceiling
+BESIDE_POST = Cylinder(9.0, CORRIDOR_Y - 0.8, 0.2, 4.0)  # near the south row: a gap remains to its north
+
+
+@pytest.fixture(scope="module")
+def low_flight(field):
+    """The low post across the corridor, flown until the plan is followed again after the rejoin."""
+    return fly(field, [LOW_POST], stop_after=_after_rejoin())
+
+
+@pytest.fixture(scope="module")
+def beside_flight(field):
+    return fly(field, [BESIDE_POST], stop_after=_after_rejoin())
+
+
+def test_no_obstacle_reference_is_the_plan(field):
+    f = fly(field, sensor_every=4)
+    assert f.steps[-1].finished and f.events == []
+    assert set(f.modes) == {"follow", "done"}
+    smp = field.plan.trajectory.sample(f.t)
+    got = f.ref
+    for k, name in enumerate(("p", "v", "a", "jerk", "snap")):
+        np.testing.assert_allclose(got[:, 3 * k:3 * k + 3], getattr(smp, name), atol=1e-9, rtol=0, err_msg=name)
+    assert f.replanner.stats.unknown_hits == 0          # rows and ground are all known
+    assert f.replanner.stats.readings > 1000
+
+
+def _after_rejoin(seconds=None):
+    """Stop ``seconds`` after the first rejoin, or (None) when following the plan again after it."""
+    state = {"t": None}
+
+    def stop(st, t):
+        if state["t"] is None and any(e.action == "rejoin" for e in st.events):
+            state["t"] = t
+        if state["t"] is None:
+            return False
+        return st.mode == "follow" if seconds is None else t >= state["t"] + seconds
+    return stop
+
+
+def test_low_obstacle_is_climbed_over(low_flight):
+    post, f = LOW_POST, low_flight
+    acts = _actions(f)
+    assert acts == ["avoid", "climb", "rejoin"], acts
+    assert "stop" not in acts and "reroute" not in acts
+    clear = f.clearance([post])
+    assert clear.min() >= ReplanConfig().clearance_m
+    over = (np.abs(f.ref[:, 0] - post.x) <= post.r) & (np.abs(f.ref[:, 1] - post.y) <= post.r)
+    assert over.any() and f.ref[over, 2].min() >= post.h + ReplanConfig().clearance_m   # went over it
+    # the corridor: within 0.5 m of its centre line all along the rows
+    in_rows = (f.ref[:, 0] > 3.0) & (f.ref[:, 0] < 15.0) & (np.abs(f.ref[:, 1] - CORRIDOR_Y) < 1.25)
+    assert np.abs(f.ref[in_rows, 1] - CORRIDOR_Y).max() <= 0.5
+    assert f.ref[:, 2].max() <= 1.5 + 0.0 + ReplanConfig().ceiling_agl_m        # below the ceiling (flat ground)
+    st = f.replanner.stats
+    assert st.max_lateral_deviation_m <= 0.5
+    assert post.h - 1.5 < st.max_climb_m <= ReplanConfig().ceiling_agl_m - 1.5
+    # back on the plan's line and height when the rejoin ends (at a way-point)
+    assert f.modes[-1] == "follow" and f.t[-1] < 30.0
+    assert abs(f.ref[-1, 1] - CORRIDOR_Y) < 0.05 and abs(f.ref[-1, 2] - 1.5) < 0.05
+    # no jump anywhere, the switches included: each frame's change of p, v, a is
+    # bounded by the speed, acceleration and jerk limits (per axis) times the frame
+    cfg = ReplanConfig()
+    dt = np.diff(f.t)[:, None]
+    assert np.all(np.abs(np.diff(f.ref[:, 0:3], axis=0)) <= 1.05 * 1.0 * dt + 1e-9)
+    assert np.all(np.abs(np.diff(f.ref[:, 3:6], axis=0)) <= 1.05 * cfg.accel_m_s2 * dt + 1e-9)
+    assert np.all(np.abs(np.diff(f.ref[:, 6:9], axis=0)) <= 1.05 * cfg.jerk_m_s3 * dt + 1e-9)
+    assert np.abs(f.ref[:, 9:12]).max() <= cfg.jerk_m_s3 + 1e-9
+
+
+def test_tall_obstacle_stop_then_reroute_and_finish(field):
+    """With the paper's vehicle's size: its body (a sphere of 0.442 m, arms and
+    propellers) keeps the 0.5 m clearance, so its centre keeps 0.942 m."""
+    post = Cylinder(9.0, CORRIDOR_Y, 0.25, 4.0)           # above the ceiling: cannot climb over
+    cfg = replace(ReplanConfig(), body_radius_m=0.442)
+    keep = cfg.clearance_m + cfg.body_radius_m
+    f = fly(field, [post], cfg=cfg)
+    acts = _actions(f)
+    assert "stop" in acts and "reroute" in acts and "hold" not in acts, acts
+    assert acts.index("stop") < acts.index("reroute")
+    assert f.steps[-1].finished                             # completed the re-planned coverage
+    clear = f.clearance([post])
+    assert clear.min() >= keep
+    # where it stopped, in front of the post
+    i_stop = next(i for i, st in enumerate(f.steps) if any(e.action == "reroute" for e in st.events))
+    assert f.ref[i_stop, 0] < post.x - post.r - keep
+    assert np.linalg.norm(f.ref[i_stop, 3:6]) < 0.05        # at rest when re-routing
+    # the rest of the blocked corridor was flown from its other end: the reference
+    # comes back along y = 3.75 from x = 17 to just beyond the post, heading west
+    after = np.arange(len(f.t)) > i_stop
+    west = after & (np.abs(f.ref[:, 1] - CORRIDOR_Y) < 0.1) & (f.ref[:, 3] < -0.5)
+    assert west.any()
+    assert f.ref[west, 0].max() > 14.0 and f.ref[west, 0].min() < post.x + 2.0
+    # and the south headland line (the coverage after the corridor) is flown
+    south = after & (np.abs(f.ref[:, 1] - 1.25) < 0.1)
+    assert np.ptp(f.ref[south, 0]) > 14.0
+
+
+def test_obstacle_beside_the_line_is_passed_within_the_corridor(beside_flight):
+    post, f = BESIDE_POST, beside_flight
+    acts = _actions(f)
+    assert "avoid" in acts and "stop" not in acts and "hold" not in acts, acts
+    assert f.clearance([post]).min() >= ReplanConfig().clearance_m
+    in_rows = (f.ref[:, 0] > 3.0) & (f.ref[:, 0] < 15.0) & (np.abs(f.ref[:, 1] - CORRIDOR_Y) < 1.25)
+    assert np.abs(f.ref[in_rows, 1] - CORRIDOR_Y).max() <= 0.5
+    assert f.replanner.stats.max_lateral_deviation_m <= 0.5
+
+
+def test_ablation_clearance_governor():
+    """Our addition, the clearance governor, against the APF alone (same plan,
+    same obstacle, nothing else changed): a thin post 0.4 m from the turning
+    point that is the APF's goal, beside the line so that the corridor leaves
+    a gap. The improved repulsion is scaled by the goal distance squared and
+    vanishes at the goal, so the APF alone settles at the goal, within the
+    clearance; with the governor the reference keeps the clearance. The post
+    is given to the memory directly (a column of points), no sensors."""
+    from companion.mission.schema import FlightConfig
+    t = np.array([0.0, 12.0, 16.0])
+    P = np.array([[0.0, 0.0, 1.5], [10.0, 0.0, 1.5], [10.0, -3.0, 1.5]])
+    traj = generate_trajectory(t, P, target_enu_m=np.array([5.0, 5.0, 1.5]))
+    plan = GlobalPlan.from_waypoints(traj, t, P, np.zeros((3, 3)), np.zeros((3, 3)), np.ones(3, bool),
+                                     np.zeros((0, 2, 2)), np.array([5.0, 5.0, 1.5]), FlightConfig(),
+                                     TrajectoryConfig(), 1.0, (10.0, -3.0))
+    post = np.array([[10.2, 0.35, z] for z in np.arange(0.0, 4.0, 0.1)])
+    out = {}
+    for governor in (True, False):
+        rp = Replanner(replace(ReplanConfig(), clearance_governor=governor, memory_s=1e3), build_field().known, plan)
+        for q in post:
+            rp.memory.add(0.0, q)
+        d = []
+        for k in range(1000):
+            st = rp.step(0.02 * k, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+            d.append(np.min(np.linalg.norm(post - st.ref.p, axis=1)))
+            if st.mode in ("reroute", "hold", "done"):
+                break
+        out[governor] = min(d)
+    assert out[True] >= ReplanConfig().clearance_m > out[False]
+
+
+def test_ablation_corridor_walls(field, beside_flight):
+    """The corridor walls against the APF alone (lateral limit 5 m): the post
+    beside the line pushes the free APF 0.95 m sideways, to 0.1 m from the
+    row's face; with the 0.5 m walls the reference keeps 0.6 m from it."""
+    gaps = {}
+    for limit in (0.5, 5.0):
+        f = beside_flight if limit == 0.5 else fly(field, [BESIDE_POST], cfg=replace(
+            ReplanConfig(), lateral_limit_m=limit), stop_after=_after_rejoin())
+        in_rows = (f.ref[:, 0] > 3.0) & (f.ref[:, 0] < 15.0)
+        gaps[limit] = (np.abs(f.ref[in_rows, 1] - CORRIDOR_Y).max(), (4.8 - f.ref[in_rows, 1]).min())
+    assert gaps[0.5][0] <= 0.5 < gaps[5.0][0]
+    assert gaps[5.0][1] < 0.5 <= gaps[0.5][1]               # the safety margin to the row
+
+
+def test_ablation_vertical_escape(field, low_flight):
+    """The vertical escape against the APF alone: across the corridor, a
+    1.6 m post is a local minimum of the APF; without the escape the
+    vehicle stops in front of it and holds, with it it goes over."""
+    post, with_escape = LOW_POST, low_flight
+    without = fly(field, [post], cfg=replace(ReplanConfig(), vertical_escape=False, escape_timeout_s=10.0),
+                  t_end_s=60.0)
+    assert _actions(with_escape) == ["avoid", "climb", "rejoin"] and with_escape.ref[-1, 0] > post.x
+    assert _actions(without) == ["avoid", "stop", "hold"] and without.ref[-1, 0] < post.x - post.r
+    assert min(with_escape.clearance([post]).min(), without.clearance([post]).min()) >= 0.5
+
+
+def test_ablation_reference_shaping(field, low_flight):
+    """The shaper's limits against (nearly) none: the same avoidance asks for
+    about twice the acceleration and five times the jerk of the limits."""
+    shaped = low_flight
+    loose = fly(field, [LOW_POST], cfg=replace(ReplanConfig(), accel_m_s2=1e3, jerk_m_s3=1e4), stop_after=_after_rejoin())
+    cfg = ReplanConfig()
+    assert np.abs(shaped.ref[:, 6:9]).max() <= cfg.accel_m_s2 + 1e-6
+    assert np.abs(shaped.ref[:, 9:12]).max() <= cfg.jerk_m_s3 + 1e-6
+    assert np.abs(loose.ref[:, 6:9]).max() > 1.5 * cfg.accel_m_s2
+    assert np.abs(loose.ref[:, 9:12]).max() > 4.0 * cfg.jerk_m_s3
+
+
+# --- re-route, as a pure function -------------------------------------------------------------
+
+
+def test_reroute_flies_the_rest_of_the_corridor_from_its_other_end(field):
+    from companion.replan import ShapedState, reroute
+    post_xy = np.array([[8.75, CORRIDOR_Y + d] for d in (-0.2, -0.1, 0.0, 0.1, 0.2)])   # the face seen
+    pts = np.column_stack([post_xy, np.full(len(post_xy), 1.5)])
+    st = ShapedState((8.2, CORRIDOR_Y, 1.5), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    plan = field.plan
+    wp = plan.waypoint_index_at(8.0)                    # in the corridor, the first segment
+    assert plan.segment_at(wp)[0] == 0
+    res = reroute(plan, field.known, st, 20.0, wp, pts, (1.0, 0.0), 0.5, 0.5)
+    assert res.reason == "" and res.n_skipped == 0 and res.n_pieces == 3
+    new = res.plan
+    # starts in the current state, backs off westward first
+    s0 = new.trajectory.sample(20.0)
+    np.testing.assert_allclose(s0.p, st.p, atol=1e-9)
+    assert res.path_xy_m[1, 0] < 8.2 and res.path_xy_m[1, 1] == pytest.approx(CORRIDOR_Y)
+    # the first piece is the corridor beyond the post, entered from x = 17 and flown west
+    a, b = new.segments[0].start_xy, new.segments[0].end_xy
+    assert a[0] == pytest.approx(17.0, abs=0.1) and a[1] == pytest.approx(CORRIDOR_Y, abs=0.1)   # a cell
+    assert b[1] == pytest.approx(CORRIDOR_Y, abs=0.1) and 9.25 < b[0] < 9.25 + 0.5 + 1.5
+    # then the two lines not yet flown, in their planned order (each entered by its nearer end: as planned here)
+    np.testing.assert_allclose([new.segments[1].start_xy, new.segments[1].end_xy], SEGMENTS[1], atol=0.1)
+    np.testing.assert_allclose([new.segments[2].start_xy, new.segments[2].end_xy], SEGMENTS[2], atol=0.1)
+    # the new trajectory keeps the post (and its assumed depth) out of reach
+    smp = new.trajectory.sample(np.arange(new.trajectory.t0, new.trajectory.tf, 0.05)).p
+    post = Box(8.75, 9.25, CORRIDOR_Y - 0.25, CORRIDOR_Y + 0.25, 4.0)
+    assert min(post.clearance(p) for p in smp) >= 0.5
+    # and the map now knows the obstacle
+    assert res.known.classify(8.8, CORRIDOR_Y, 3.0) != "unknown"
+
+
+def test_reroute_without_a_route_reports(field):
+    from companion.replan import ShapedState, reroute
+    # a wall across the whole field east of the post: what is left of the corridor
+    # (between the post and the wall, and beyond the wall) cannot be reached
+    wall = field.known.with_obstacle(np.array([[15.0 + 0.05 * k, y] for k in range(3)
+                                               for y in np.arange(0.0, 7.5, 0.05)]))
+    pts = np.array([[8.75, CORRIDOR_Y + d, 1.5] for d in (-0.2, 0.0, 0.2)])
+    st = ShapedState((8.2, CORRIDOR_Y, 1.5), (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3)
+    plan = replace(field.plan, segments=field.plan.segments[:1])       # only this corridor left
+    res = reroute(plan, wall, st, 20.0, plan.waypoint_index_at(8.0), pts, (1.0, 0.0), 0.5, 0.5)
+    assert res.plan is None and "none of the 2 coverage pieces left can be reached" in res.reason
+
+
+# --- time-bounded escape, garbage, the report --------------------------------------------------
+
+
+def test_escape_is_time_bounded_then_holds(field):
+    """A climb that cannot get through in ``escape_timeout_s`` stops and holds
+    (here a 1 s bound against the 1.6 m post the default climbs in about 6 s)."""
+    post = LOW_POST
+    f = fly(field, [post], cfg=replace(ReplanConfig(), escape_timeout_s=1.0), t_end_s=40.0)
+    acts = _actions(f)
+    assert acts == ["avoid", "climb", "stop", "hold"], acts
+    assert f.steps[-1].hold and not f.steps[-1].finished and f.modes[-1] == "hold"
+    assert "escape" in f.events[2].detail
+    assert np.linalg.norm(f.ref[-1, 3:6]) == 0.0                 # holding still
+    assert f.clearance([post]).min() >= ReplanConfig().clearance_m
+
+
+def test_body_radius_from_the_vehicle():
+    from companion.mission import load_mission
+    from companion.replan.replanner import PROP_RADIUS_M, mission_replan_config
+    from pathlib import Path
+    m = load_mission(Path(__file__).resolve().parents[1] / "missions" / "flat-rectangle" / "mission.yaml")
+    assert mission_replan_config(m).body_radius_m == pytest.approx(m.vehicle.arm_m + PROP_RADIUS_M)
+    m2 = replace(m, replan=replace(m.replan, body_radius_m=0.3))
+    assert mission_replan_config(m2).body_radius_m == 0.3
+
+
+def test_garbage_readings_are_ignored(field):
+    import json
+    rp = Replanner(ReplanConfig(), field.known, field.plan)
+    rp.start(0.0)
+    eye = tuple(np.eye(3).ravel())
+    rp.on_range(0.0, codec.Range(0, 1, 2.0, 0.1, 10.0, 0, 0.1, 0.1, math.nan, False, eye))   # before any pose
+    rp.on_pose(0.0, (1.0, CORRIDOR_Y, 1.5), eye)
+    bad = [codec.Range(0, 1, 2.0, 0.1, 10.0, 8, 0.1, 0.1, math.nan, False, None),          # unsupported
+           codec.Range(0, 1, math.nan, 0.1, 10.0, 0, 0.1, 0.1, math.nan, False, eye),      # below min
+           codec.Range(0, 1, math.inf, 0.1, math.inf, 0, math.nan, -1.0, math.nan, True, eye),
+           codec.Range(0, 1, 2.0, 0.1, 10.0, 0, math.nan, math.inf, math.nan, False, (math.nan,) * 9)]
+    for r in bad:
+        rp.on_range(0.0, r)
+    st = rp.step(0.0, (1.0, CORRIDOR_Y, 1.5), (0.0, 0.0, 0.0))
+    assert st.mode == "follow" and len(rp.memory) == 0
+    assert rp.stats.ignored_readings == len(bad) + 1 and rp.stats.readings == len(bad) + 1
+    assert json.loads(json.dumps(rp.stats.to_dict()))["readings"] == len(bad) + 1
+    # a reading stamped on another clock is placed with the pose at its arrival
+    rp.on_range(0.0, codec.Range(10 ** 9, 1, 2.0, 0.1, 10.0, 0, 0.1, 0.1, math.nan, False, eye))
+    assert rp.memory.points()[0] == pytest.approx((3.0, CORRIDOR_Y, 1.5))
+
+
+def test_stats_for_the_report(field, low_flight):
+    f = low_flight
+    d = f.replanner.stats.to_dict()
+    assert d["events"] == 3 and [e["action"] for e in d["event_list"]] == ["avoid", "climb", "rejoin"]
+    e0 = d["event_list"][0]
+    assert e0["obstacle_range_m"] <= f.replanner._trigger_m(1.0) and len(e0["pos_enu_m"]) == 3
+    # the reference's climb above the flight height, from the log
+    assert d["max_climb_m"] == pytest.approx(f.ref[:, 2].max() - 1.5, abs=1e-9)
+    lateral = np.abs(f.ref[:, 1] - CORRIDOR_Y).max()
+    assert d["max_lateral_deviation_m"] == pytest.approx(lateral, abs=1e-9)
+    # extra path: flown length minus the plan's, both from the log and the plan
+    flown = np.sum(np.linalg.norm(np.diff(f.ref[:, :3], axis=0), axis=1))
+    tr = field.plan.trajectory
+    planned = np.sum(np.linalg.norm(np.diff(tr.sample(np.append(np.arange(tr.t0, tr.tf, 0.05), tr.tf)).p,
+                                            axis=0), axis=1))
+    assert d["extra_path_m"] == pytest.approx(flown - planned, abs=1e-6)
+
+
+def test_back_off_to_the_nearest_free_cell_not_through_the_obstacle(field):
+    from companion.replan.reroute import nearest_free
+    pts = np.array([[9.0, CORRIDOR_Y + d] for d in (-0.2, 0.0, 0.2)])
+    known = field.known.with_obstacle(pts, 1.3)
+    p = np.array([9.6, CORRIDOR_Y])                     # stopped east of the post, inside its margin
+    q = nearest_free(known, p, pts, 0.5)
+    g = known.cell_of(*q)
+    assert known.free.eroded[g]
+    assert q[0] > 9.6                                     # east, away from the post, not across it
+    assert np.hypot(*(q - p)) < 1.0                     # the margin (1.3 m) minus where it stopped

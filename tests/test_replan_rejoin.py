@@ -1,0 +1,128 @@
+"""The trajectory cursor and the rejoin (LQR re-solved from the current state)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from companion.mission.schema import FlightConfig
+from companion.replan import GlobalPlan, ShapedState, rejoin
+from companion.replan.rejoin import CHECK_S, first_time_s
+from companion.trajectory import TrajectoryConfig, generate_trajectory
+from companion.trajectory.cursor import TrajectoryCursor
+
+T_WP = np.array([0.0, 4.85, 8.85, 12.85, 16.85, 21.7, 27.0, 31.9])
+P_WP = np.array([[0, 0, 1.5], [3, 0, 1.5], [7, 0, 1.5], [11, 0, 1.5], [15, 0, 1.5], [18, 0, 1.5],
+                 [18, 2.5, 1.5], [15, 2.5, 1.5]], dtype=float)
+V_WP = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 0], [1, 0, 0], [1, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]], float)
+CORNER = np.array([True, False, False, False, False, True, True, True])
+TARGET = np.array([9.0, 5.0, 1.5])
+
+
+def _plan() -> GlobalPlan:
+    traj = generate_trajectory(T_WP, P_WP, V_WP, None, TrajectoryConfig(), target_enu_m=TARGET)
+    segs = np.array([[[0, 0], [18, 0]], [[18, 2.5], [15, 2.5]]], dtype=float)
+    return GlobalPlan.from_waypoints(traj, T_WP, P_WP, V_WP, np.zeros_like(P_WP), CORNER, segs, TARGET,
+                                     FlightConfig(), TrajectoryConfig(), 1.0, (15.0, 2.5))
+
+
+# --- cursor -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("q_jerk", [0.0, 3.0])
+def test_cursor_equals_vectorised_sampling(q_jerk):
+    cfg = replace(TrajectoryConfig(), q_acceleration=1.0 if q_jerk else 0.0, q_jerk=q_jerk)
+    traj = generate_trajectory(T_WP, P_WP, V_WP, None, cfg)
+    cur = TrajectoryCursor(traj)
+    rng = np.random.default_rng(5)
+    forward = np.sort(rng.uniform(-1.0, 33.0, 400))
+    back = rng.uniform(0.0, 31.9, 50)                       # time going back works too
+    times = np.concatenate([forward, back, [traj.t0, traj.tf]])
+    ref = traj.sample(times)
+    got = [cur.sample(float(t)) for t in times]
+    for name in ("p", "v", "a", "jerk", "snap"):
+        np.testing.assert_allclose([getattr(s, name) for s in got], getattr(ref, name), atol=1e-9, rtol=1e-9)
+    assert cur.sample(-5.0).t_s == traj.t0 and cur.sample(99.0).t_s == traj.tf
+
+
+# --- rejoin -----------------------------------------------------------------------------------
+
+
+def _off_path_state():
+    # 0.4 m to the side, 0.8 m up, slowed, still accelerating and with jerk
+    return ShapedState(p=(8.0, 0.4, 2.3), v=(0.6, -0.05, -0.1), a=(0.2, -0.1, -0.3), jerk=(0.1, 0.05, 0.2),
+                       snap=(0.0, 0.0, 0.0))
+
+
+def test_rejoin_starts_in_the_current_state_and_keeps_the_rest_time_shifted():
+    plan = _plan()
+    st = _off_path_state()
+    t_now = 14.0
+    res = rejoin(plan, st, t_now, 3, np.zeros((0, 3)), 0.5, 2.0, 0.5)
+    assert res.reason == "" and res.plan is not None
+    new = res.plan
+    s0 = new.trajectory.sample(t_now)
+    for name, want in (("p", st.p), ("v", st.v), ("a", st.a), ("jerk", st.jerk)):
+        np.testing.assert_allclose(getattr(s0, name), want, atol=1e-9)      # no jump up to the jerk
+    # the first kept way-point gets the allocated time; the rest keep their intervals
+    T = first_time_s(st.p, P_WP[3], plan.flight.speed_m_s, 0.5)
+    np.testing.assert_allclose(new.t_s, np.concatenate([[t_now], t_now + T + T_WP[3:] - T_WP[3]]))
+    np.testing.assert_allclose(new.p_enu_m[1:], P_WP[3:])
+    # and the trajectory passes them (soft constraints: within the LQR's few cm)
+    assert np.max(np.linalg.norm(new.trajectory.sample(new.t_s[1:]).p - P_WP[3:], axis=1)) < 0.05
+    assert res.max_jerk_m_s3 <= 2.0
+    # the segments are re-indexed on the new way-points: the current one from 0, the next unchanged in space
+    assert [(s.first_wp, s.last_wp) for s in new.segments] == [(0, 3), (4, 5)]
+    assert new.segments[1].start_xy == (18.0, 2.5)
+
+
+def test_rejoin_stretches_time_for_the_jerk_limit():
+    plan = _plan()
+    st = _off_path_state()
+    loose = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 10.0, 0.5)
+    tight = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 0.5 * loose.max_jerk_m_s3, 0.5)
+    assert tight.plan is not None and tight.max_jerk_m_s3 <= 0.5 * loose.max_jerk_m_s3
+    assert tight.plan.t_s[1] - 14.0 > loose.plan.t_s[1] - 14.0
+    impossible = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 1e-4, 0.5)
+    assert impossible.plan is None and impossible.reason == "jerk"
+
+
+def test_rejoin_refused_when_the_path_would_pass_an_obstacle():
+    plan = _plan()
+    st = _off_path_state()
+    ok = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 2.0, 0.5)
+    # a point right on the candidate's path one second on
+    on_path = ok.plan.trajectory.sample(15.0).p
+    res = rejoin(plan, st, 14.0, 3, on_path[None], 0.5, 2.0, 0.5)
+    assert res.plan is None and res.reason == "clearance" and res.min_clearance_m < 0.05
+    # points farther than the horizon checked do not matter
+    far = ok.plan.trajectory.sample(14.0 + CHECK_S + 3.0).p
+    assert rejoin(plan, st, 14.0, 3, far[None], 0.5, 2.0, 0.5).plan is not None
+
+
+def test_rejoin_respects_the_ceiling():
+    plan = _plan()
+    st = replace(_off_path_state(), v=(0.6, 0.0, 0.45), a=(0.0, 0.0, 0.6))   # still climbing hard
+    free = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5)
+    z = free.plan.trajectory.sample(np.arange(14.0, 14.0 + CHECK_S, 0.05)).p[:, 2]
+    assert z.max() > 2.45 + 0.05                          # overshoots upward from this state
+    res = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5, ceiling_z=lambda x, y: 2.45)
+    assert res.plan is None and res.reason == "ceiling"
+    ok = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5, ceiling_z=lambda x, y: z.max() + 0.01)
+    assert ok.plan is not None
+
+
+def test_rejoin_way_point_ahead_not_back_round_a_turn():
+    from companion.replan.replanner import first_waypoint_ahead
+    plan = _plan()          # east along y = 0 to the turn at (18, 0), then north to (18, 2.5), west to (15, 2.5)
+    # on the first leg at x = 8.5 heading east: 11 is 2.5 m ahead (more than the 1 m lead)
+    assert first_waypoint_ahead(plan, 2, (8.5, 0.0, 1.5), np.array([1.0, 0.0]), 1.0, 0.5) == 3
+    # 1.2 m above the line: coming down at 0.5 m/s takes 4.5 s, so 4.5 m of lead: 15 (6.5 m ahead)
+    assert first_waypoint_ahead(plan, 2, (8.5, 0.0, 2.7), np.array([1.0, 0.0]), 1.0, 0.5) == 4
+    # near the turn: the turn itself, never cut
+    assert first_waypoint_ahead(plan, 4, (17.5, 0.0, 1.5), np.array([1.0, 0.0]), 1.0, 0.5) == 5
+    # the avoidance went round the turns at (18, 0) and (18, 2.5) and is heading west at x = 16.8:
+    # the way-points behind it are skipped, the next ahead is the end (15, 2.5)
+    assert first_waypoint_ahead(plan, 4, (16.8, 2.5, 1.5), np.array([-1.0, 0.0]), 1.0, 0.5) == 7
