@@ -49,21 +49,58 @@ class TrackingStats:
 
 @dataclass(frozen=True)
 class ReplanningStats:
-    """Reactive replanning summary.
+    """Reactive replanning summary (docs/report-json.md ``replanning``).
 
     Attributes
     ----------
+    enabled : bool
+        The replanner flew the trajectory phase (mission ``replan.enabled``).
     events : int
-        Number of replanning events (APF activations).
+        Number of replanning events (avoid, climb, stop, reroute, rejoin, hold).
     min_clearance_m : float or None
-        Smallest DISTANCE_SENSOR reading seen in flight (m); None if none seen.
+        Smallest true clearance (m) between the vehicle sphere and an unknown
+        obstacle, from the SITL's ODOMETRY and the obstacles' geometry
+        (``clearance_source`` "sim_truth"); None without truth or obstacles.
+    clearance_source : str or None
+    min_clearance_t_s : float or None
+        Vehicle time of the smallest clearance (s).
+    min_clearance_obstacle : int or None
+        Index of that obstacle in ``sim.obstacles``.
+    min_range_m : float or None
+        Smallest non-downward DISTANCE_SENSOR reading (m) in hold, trajectory and hover.
     max_lateral_deviation_m : float
-        Largest horizontal distance between the flown reference and the plan (m).
+        Largest horizontal distance between the reference and the leg being
+        avoided, while avoiding and rejoining (m).
+    extra_path_m : float
+        Length of the flown reference minus the planned trajectory's (m).
+    max_climb_m : float
+        Largest climb of the reference above the planned height while avoiding (m).
+    min_obstacle_range_m : float or None
+        Smallest distance from the reference to a remembered obstacle point (m).
+    event_list : tuple of dict
+        The events: {t_s, pos_enu_m, obstacle_range_m, action, detail}.
+    readings, unknown_hits, ignored_readings : int
+        DISTANCE_SENSOR readings handed to the replanner, classified unknown, without evidence.
+    mode : str or None
+        The replanner's last mode.
     """
 
     events: int = 0
     min_clearance_m: float | None = None
     max_lateral_deviation_m: float = 0.0
+    enabled: bool = False
+    clearance_source: str | None = None
+    min_clearance_t_s: float | None = None
+    min_clearance_obstacle: int | None = None
+    min_range_m: float | None = None
+    extra_path_m: float = 0.0
+    max_climb_m: float = 0.0
+    min_obstacle_range_m: float | None = None
+    event_list: tuple = ()
+    readings: int = 0
+    unknown_hits: int = 0
+    ignored_readings: int = 0
+    mode: str | None = None
 
 
 @dataclass(frozen=True)

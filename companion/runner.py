@@ -171,9 +171,13 @@ class MissionRunner:
         core = self.core
         frac = 0.0
         if core.phase == "trajectory" and core.t_s is not None:
-            frac = (core.t_s - core._t_traj) / max(core._window.duration_s, 1e-9)
+            frac = min((core.t_s - core._t_traj) / max(core._window.duration_s, 1e-9), 0.999)
         elif core.phase in ("hover", "landing", "done"):
             frac = 1.0
         err = core._last_err
-        self.progress.update(core.phase, frac, err if err is not None and math.isfinite(err) else None, 0,
+        phase = core.phase
+        if phase == "trajectory" and core.replan_mode not in (None, "follow"):
+            phase = core.replan_mode          # avoid, climb, stop, reroute, rejoin, hold
+        self.progress.update(phase, frac, err if err is not None and math.isfinite(err) else None,
+                             core.replan_events,
                              core.t_s or 0.0, force=force)

@@ -156,7 +156,8 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
     sitl.wait_ready()
     try:
         result = execute(mission, fp, sitl.url, args.control, str(out / "flight.tlog"), progress, args.cut,
-                         {"mute_streams": UNUSED_STREAMS + (ATTITUDE,), **(overrides or {})},
+                         {"mute_streams": UNUSED_STREAMS + (() if mission.replan.enabled else (ATTITUDE,)),
+                          **(overrides or {})},
                          signing_key=signing_key)
     finally:
         sitl.stop()

@@ -123,6 +123,8 @@ class FlightPlan:
     waypoints_v_enu_m_s: np.ndarray | None = None
     waypoints_a_enu_m_s2: np.ndarray | None = None
     path_xy_m: np.ndarray | None = None
+    waypoints_corner: np.ndarray | None = None
+    main_segments_xy: np.ndarray | None = None
 
     @classmethod
     def from_plan(cls, plan) -> "FlightPlan":
@@ -131,7 +133,8 @@ class FlightPlan:
         return cls(plan.trajectory, np.asarray(w.p_enu_m, dtype=float), np.asarray(plan.target_enu_m, dtype=float),
                    float(plan.stats.coverage_fraction), np.asarray(w.t_s, dtype=float),
                    np.asarray(w.v_enu_m_s, dtype=float), np.asarray(w.a_enu_m_s2, dtype=float),
-                   np.asarray(plan.coverage.path_xy_m, dtype=float))
+                   np.asarray(plan.coverage.path_xy_m, dtype=float), np.asarray(w.corner, dtype=bool),
+                   np.asarray([[a, b] for a, b in plan.coverage.main_segments], dtype=float).reshape(-1, 2, 2))
 
     def cut(self, cut_s: float, config) -> "FlightPlan":
         """The way-points up to the first one at or after ``cut_s`` seconds
@@ -155,13 +158,18 @@ class FlightPlan:
         v[-1] = 0.0
         a[-1] = 0.0
         traj = generate_trajectory(t, p, v, a, config, target_enu_m=self.target_enu_m)
+        corner = None
+        if self.waypoints_corner is not None:
+            corner = self.waypoints_corner[:n].copy()
+            corner[-1] = True
         # The coverage stays the whole plan's: the report's flown coverage is
-        # then the part of it this shorter flight covered.
-        return FlightPlan(traj, p, self.target_enu_m, self.coverage_fraction, t, v, a, self.path_xy_m)
+        # then the part of it this shorter flight covered. The replanner takes
+        # the cut's legs as its coverage segments.
+        return FlightPlan(traj, p, self.target_enu_m, self.coverage_fraction, t, v, a, self.path_xy_m, corner)
 
 
 def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config,
-                       path_xy_m=None) -> FlightPlan:
+                       path_xy_m=None, corner=None) -> FlightPlan:
     """The FlightPlan of one sortie's way-points (ENU map frame): the LQR trajectory
     through them with the mission's weights; the runner flies it like a whole plan."""
     from ..trajectory import generate_trajectory
@@ -169,7 +177,8 @@ def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config
     t, p, v, a = (np.asarray(x, dtype=float) for x in (t_s, p_enu_m, v_enu_m_s, a_enu_m_s2))
     traj = generate_trajectory(t, p, v, a, config, target_enu_m=target_enu_m)
     return FlightPlan(traj, p, np.asarray(target_enu_m, dtype=float), None, t, v, a,
-                      None if path_xy_m is None else np.asarray(path_xy_m, dtype=float))
+                      None if path_xy_m is None else np.asarray(path_xy_m, dtype=float),
+                      None if corner is None else np.asarray(corner, dtype=bool))
 
 
 def _pick_sortie(count: int, sortie: int, source: str) -> int:
@@ -198,7 +207,7 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None) -> Flight
         so = plan.sorties.sorties[_pick_sortie(len(plan.sorties.sorties), sortie, mission.name)]
         w = so.waypoints
         return sortie_flight_plan(w.t_s, w.p_enu_m, w.v_enu_m_s, w.a_enu_m_s2, plan.target_enu_m,
-                                  mission.trajectory, so.path_xy_m)
+                                  mission.trajectory, so.path_xy_m, w.corner)
     from ..plan_io import load_plan
     from ..trajectory import generate_trajectory
 
@@ -219,7 +228,7 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None) -> Flight
     cov = pf.stats.get("coverage_fraction")
     return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
                       None if cov is None else float(cov), pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
-                      pf.waypoint_a_enu_m_s2, pf.path_xy_m if len(pf.path_xy_m) else None)
+                      pf.waypoint_a_enu_m_s2, pf.path_xy_m if len(pf.path_xy_m) else None, pf.waypoint_corner)
 
 
 def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
@@ -288,20 +297,19 @@ def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | No
     }
 
 
-#: Vine canopy height (m) assumed for the take-off transfer until the mission gives one.
-DEFAULT_CANOPY_M = 2.0
 #: Clearance (m) of the take-off transfer above the highest canopy of the field.
 TRANSIT_CLEARANCE_M = 1.0
 
 
 def transit_floor_z_m(mission) -> float:
     """Lowest height (ENU z, m) at which a level flight across the field cannot touch a
-    vine row: the DEM's highest point, plus the canopy, plus ``TRANSIT_CLEARANCE_M``."""
+    vine row: the DEM's highest point, plus the canopy (``replan.canopy_height_m``),
+    plus ``TRANSIT_CLEARANCE_M``."""
     from ..maps.field import load_mission_dem
 
     dem = load_mission_dem(mission)
     h = np.asarray(dem.heights_m, dtype=float)
-    return float(np.nanmax(h)) + DEFAULT_CANOPY_M + TRANSIT_CLEARANCE_M
+    return float(np.nanmax(h)) + mission.replan.canopy_height_m + TRANSIT_CLEARANCE_M
 
 
 def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None):
@@ -313,13 +321,60 @@ def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None)
     ctrl = None
     if cfg.control == "companion":
         ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
+    replanner = build_replanner(mission, flight_plan) if mission.replan.enabled else None
     inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
                           (mission.home.lat, mission.home.lon, mission.home.alt_m),
                           tuple(float(x) for x in flight_plan.target_enu_m),
                           tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
                           flight_plan.coverage_fraction, flight_plan.path_xy_m, setup,
-                          transit_floor_z_m(mission))
+                          transit_floor_z_m(mission), replanner, obstacle_clearance_fn(mission))
     return FlightCore(inputs, cfg, mission.vehicle, ctrl)
+
+
+def build_replanner(mission, flight_plan: FlightPlan):
+    """The replanner (``companion.replan``) of ``flight_plan``: the mission's maps as the
+    known map, the plan's way-points, turning points and coverage segments. Way-points
+    without a turning-point flag (a plan.json sortie) take their stops (v = 0) as turns."""
+    from ..maps.field import load_mission_maps
+    from ..replan import GlobalPlan, KnownMap, Replanner
+    from ..replan.replanner import mission_replan_config
+
+    fp = flight_plan
+    if fp.waypoints_t_s is None:
+        return None
+    grid, dem = load_mission_maps(mission)
+    known = KnownMap.from_mission(mission, grid, dem)
+    corner = fp.waypoints_corner
+    if corner is None:
+        corner = np.linalg.norm(fp.waypoints_v_enu_m_s, axis=1) < 1e-9
+        corner[[0, -1]] = True
+    plan = GlobalPlan.from_waypoints(fp.trajectory, fp.waypoints_t_s, fp.waypoints_p_enu_m, fp.waypoints_v_enu_m_s,
+                                     fp.waypoints_a_enu_m_s2, corner, fp.main_segments_xy, fp.target_enu_m,
+                                     mission.flight, mission.trajectory, mission.coverage.min_segment_m,
+                                     None if fp.path_xy_m is None or fp.main_segments_xy is None
+                                     else tuple(fp.path_xy_m[-1]))
+    return Replanner(mission_replan_config(mission), known, plan)
+
+
+def obstacle_clearance_fn(mission):
+    """``f(pos_enu_m) -> (clearance_m, index)``: the vehicle sphere's distance to the nearest
+    of the mission's simulated obstacles (``sim.obstacles``); None without any. Applied to the
+    SITL's true position only (report ``replanning.min_clearance_m``)."""
+    obstacles = mission.sim.obstacles if mission.sim is not None else ()
+    if not obstacles:
+        return None
+    from ..geometry import scene_from_maps
+    from ..maps.field import load_mission_maps
+    from ..mission.sim import vehicle_radius_m
+
+    _, dem = load_mission_maps(mission)
+    scene = scene_from_maps(None, dem, tuple(obstacles), mission.sim.canopy_height_m)
+    radius = vehicle_radius_m(mission.sim, mission.vehicle.arm_m)
+
+    def clearance(pos):
+        d, k = scene.nearest_obstacle(float(pos[0]), float(pos[1]), float(pos[2]))
+        return d - radius, k
+    return clearance
 
 
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,

@@ -92,6 +92,23 @@ _NAN3 = (math.nan, math.nan, math.nan)
 _NAN9 = (math.nan,) * 9
 _NAN_CTRL = (math.nan,) * 10
 _Z3 = (0.0, 0.0, 0.0)
+#: A replanned trajectory phase longer than this factor times the plan's, plus
+#: ``REPLAN_TIME_EXTRA_S``, is a failure (the replanner's own escape is time-bounded).
+REPLAN_TIME_FACTOR = 3.0
+REPLAN_TIME_EXTRA_S = 120.0
+#: STATUSTEXT prefix of the replanner's events (``companion.replay.metrics`` counts them).
+REPLAN_PREFIX = "companion: replan "
+
+
+def replan_text(action: str, range_m: float | None, detail: str = "") -> str:
+    """The STATUSTEXT of one replanning event (at most 50 characters)."""
+    rng = "" if range_m is None or not math.isfinite(range_m) else f" {range_m:.2f} m"
+    text = f"{REPLAN_PREFIX}{action}{rng}"
+    if detail:
+        text += ": " + detail
+    return text[:50]
+
+
 #: STATUSTEXT prefixes of the events that come from outside the core (replay re-injects them).
 INTERRUPT_PREFIX = "companion: interrupted by "
 DEGRADE_PREFIX = "companion: inner loop to vehicle: "
@@ -119,6 +136,14 @@ class FlightInputs:
     path_xy_m : (M, 2) array or None
         The plan's 2D coverage path; the report's flown coverage is the
         planned coverage times the fraction of this path actually flown.
+    replanner : companion.replan.Replanner or None
+        Flies the trajectory phase around unknown obstacles (``replan``
+        mission key); None: the trajectory is flown as planned.
+    obstacle_clearance : callable or None
+        ``f(pos_enu_m) -> (clearance_m, obstacle_index)``: the vehicle
+        sphere's distance to the nearest unknown obstacle, from the SITL's
+        geometry (``sim.obstacles``). Applied to the true position (ODOMETRY)
+        only, for the report's ``replanning.min_clearance_m``.
     transit_floor_z_m : float or None
         Lowest safe height (ENU z, m) of a straight level flight across the
         field: the take-off's transfer to the first point flies at least this
@@ -138,6 +163,8 @@ class FlightInputs:
     path_xy_m: object = None
     setup: dict | None = None
     transit_floor_z_m: float | None = None
+    replanner: object = None
+    obstacle_clearance: object = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -234,7 +261,14 @@ class FlightCore:
         self._R = None                  # attitude for the log: truth (ODOMETRY) or the vehicle's ATTITUDE
         self._odom = None
         self.truth_source = "estimate"
-        self.min_clearance_m = None
+        self.min_range_m = None         # smallest non-downward rangefinder reading
+        # replanning (issue 8): the replanner flies the trajectory phase
+        self.replanner = inputs.replanner
+        self._R_est = None              # the vehicle's attitude estimate (ATTITUDE): poses of readings
+        self.replan_mode = None
+        self.replan_events = 0
+        self.min_clearance = None       # (true clearance m, t_s, obstacle index, position) from ODOMETRY
+        self._traj_deadline = math.inf
         self.statustext: list[str] = []
         self.n_control_faults = 0
         self.n_stale_frames = 0
@@ -695,8 +729,11 @@ class FlightCore:
             self._truth, self._R = codec.decode_odometry_pose(m)
 
     def _on_attitude(self, m) -> None:
-        if self.truth_source != "sim_truth":
-            self._R = tuple(codec.decode_attitude(m).R_enu_flu.ravel().tolist())
+        if self.truth_source != "sim_truth" or self.replanner is not None:
+            R = tuple(codec.decode_attitude(m).R_enu_flu.ravel().tolist())
+            self._R_est = R
+            if self.truth_source != "sim_truth":
+                self._R = R
 
     def _on_heartbeat(self, m) -> None:
         if m.get_srcComponent() != self.tc:
@@ -717,11 +754,17 @@ class FlightCore:
                 self._react(v)
 
     def _on_distance(self, m) -> None:
-        if self.phase not in ("trajectory", "hover", "hold") or m.orientation == _SENSOR_DOWN:
+        if self.phase not in ("trajectory", "hover", "hold") or self.t_s is None:
             return
-        r = codec.decode_distance_sensor(m)
-        if math.isfinite(r.distance_m) and (self.min_clearance_m is None or r.distance_m < self.min_clearance_m):
-            self.min_clearance_m = r.distance_m
+        try:
+            r = codec.decode_distance_sensor(m)
+        except (ValueError, ZeroDivisionError, OverflowError):
+            return          # a malformed reading (e.g. a zero CUSTOM quaternion) is no evidence
+        if (m.orientation != _SENSOR_DOWN and math.isfinite(r.distance_m)
+                and (self.min_range_m is None or r.distance_m < self.min_range_m)):
+            self.min_range_m = r.distance_m
+        if self.replanner is not None:
+            self.replanner.on_range(self.t_s, r)
 
     def _on_statustext(self, m) -> None:
         text = str(m.text)
@@ -770,6 +813,8 @@ class FlightCore:
             self._hb_t = t
             self._emit(self.heartbeat())
         self._advance_phase(t)
+        if self.replanner is not None and self.phase in ("hold", "trajectory", "hover"):
+            self._replan_pose(t)
         ref = self._reference(t)
         cmd = None
         out = None
@@ -815,6 +860,12 @@ class FlightCore:
                 v = self.monitor.on_tracking(t, self._t_traj, err, self.truth_source)
                 if v is not None:
                     self._react(v)
+        if self.inputs.obstacle_clearance is not None and self.truth_source == "sim_truth" and phase in FLYING \
+                and self._truth is not None and self.n_frames % 2 == 0:
+            c, k = self.inputs.obstacle_clearance(self._truth)
+            mc = self.min_clearance
+            if mc is None or c < mc[0]:
+                self.min_clearance = (float(c), t, k, tuple(float(x) for x in self._truth))
         if phase in FLYING:
             v = self.monitor.on_nav_age(t, self._nav_t)
             if v is not None:
@@ -836,7 +887,10 @@ class FlightCore:
             self.phase = ph = "hold"
         if ph == "hold" and t >= self._t_traj:
             self.phase = ph = "trajectory"
-        if ph == "trajectory" and t >= self._t_hover:
+            if self.replanner is not None:
+                self.replanner.start(self._t_traj)
+                self._traj_deadline = self._t_traj + REPLAN_TIME_FACTOR * self._window.duration_s + REPLAN_TIME_EXTRA_S
+        if ph == "trajectory" and t >= self._t_hover and self.replanner is None:
             self.phase = ph = "hover"
         if ph == "hover" and t >= self._t_land:
             self.phase = "landing"
@@ -845,6 +899,8 @@ class FlightCore:
     def _reference(self, t: float) -> RefSample | None:
         ph = self.phase
         if ph == "trajectory":
+            if self.replanner is not None:
+                return self._replan_step(t)
             w = self._window
             return w.sample(int(round((t - self._t_traj) / w.dt_s)))
         if ph == "hold":
@@ -871,6 +927,52 @@ class FlightCore:
         if ph == "preflight" and self._preflight_ref is not None:
             return self._preflight_ref
         return None
+
+    # --- replanning (issue 8): the replanner flies the trajectory phase --------------------
+
+    def _replan_pose(self, t: float) -> None:
+        """The estimated pose of this frame for the rangefinder readings: the
+        companion's observer while it flies the inner loop, else the vehicle's
+        ATTITUDE (never the truth)."""
+        if self._pos is None:
+            return
+        R = None
+        if self._controlling:
+            est = self.ctrl.attitude_estimate()
+            if est is not None:
+                R = est.R_enu_flu
+        if R is None:
+            R = self._R_est
+        if R is not None:
+            self.replanner.on_pose(t, self._pos, R)
+
+    def _replan_step(self, t: float) -> RefSample:
+        rp = self.replanner
+        pos = self._pos if self._pos is not None else self._hold_first.p
+        vel = self._vel if self._vel is not None else _Z3
+        st = rp.step(t, pos, vel)
+        self.replan_mode = st.mode
+        for e in st.events:
+            self.replan_events += 1
+            self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_NOTICE,
+                                                  replan_text(e.action, e.obstacle_range_m, e.detail).encode()))
+        ref = st.ref
+        if st.finished:
+            # the (re)planned coverage is flown: hover at its end, then land
+            self.phase = "hover"
+            self._hold_last = at_rest(ref)
+            self._t_hover = t
+            self._t_land = t + self.cfg.hover_s
+        elif st.hold:
+            v = self.monitor.fail(t, "no_route", "replanner: no route around the obstacle, holding", "land",
+                                  position_enu_m=[float(c) for c in pos])
+            self._react(v)
+        elif t > self._traj_deadline:
+            v = self.monitor.fail(t, "replan_timeout",
+                                  f"replanned trajectory not finished {t - self._t_traj:.0f} s after its start",
+                                  "land", planned_s=self._window.duration_s)
+            self._react(v)
+        return ref
 
     def _takeoff_pointing(self, dt: float) -> tuple:
         s0 = self._hold_first.s
@@ -902,7 +1004,7 @@ class FlightCore:
             sim_time_s=float(sim_s),
             wall_time_s=float(wall_s),
             tracking=tr,
-            replanning=ReplanningStats(0, self.min_clearance_m, 0.0),
+            replanning=self._replanning_stats(),
             coverage_fraction=None if cov is None else (cov * flown if flown is not None else
                                                          (cov if completed else None)),
             tlog=tlog,
@@ -922,6 +1024,25 @@ class FlightCore:
             link=link_stats,
             resumed_from_s=self.resumed_from_s,
         )
+
+
+    def _replanning_stats(self) -> ReplanningStats:
+        mc = self.min_clearance
+        clearance = dict(min_clearance_m=None if mc is None else mc[0],
+                         clearance_source=None if mc is None else "sim_truth",
+                         min_clearance_t_s=None if mc is None else mc[1],
+                         min_clearance_obstacle=None if mc is None else mc[2],
+                         min_range_m=self.min_range_m)
+        rp = self.replanner
+        if rp is None:
+            return ReplanningStats(enabled=False, **clearance)
+        st = rp.stats
+        d = st.to_dict()
+        return ReplanningStats(enabled=True, events=st.events, max_lateral_deviation_m=st.max_lateral_deviation_m,
+                               extra_path_m=st.extra_path_m, max_climb_m=st.max_climb_m,
+                               min_obstacle_range_m=st.min_obstacle_range_m, event_list=tuple(d["event_list"]),
+                               readings=st.readings, unknown_hits=st.unknown_hits,
+                               ignored_readings=st.ignored_readings, mode=self.replan_mode, **clearance)
 
 
 class _Shifted:

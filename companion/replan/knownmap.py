@@ -34,8 +34,14 @@ from ..maps.heightfield import HeightField
 KNOWN_GROUND, KNOWN_ROW, KNOWN_ADDED, UNKNOWN = "ground", "row", "added", "unknown"
 #: ``explains``: a ray enters a row within this distance (m) beyond the return ...
 SURFACE_AHEAD_M = 0.1
-#: ... and is outside it this far (m) before the return.
-SURFACE_BEHIND_M = 0.1
+#: ... and is outside it this far (m) before the return. Not less: a beam grazing
+#: a row's face (a sensor looking along the corridor, 5-15 deg off the face) is
+#: 1-3 cm deep in the row 0.1 m before its return once the range is rounded to
+#: the centimetre of DISTANCE_SENSOR and noised, and 0.5 m back it is out.
+SURFACE_BEHIND_M = 0.5
+#: A return beside a row (within a cell of it) is the row when the beam was
+#: outside the rows this far (m) before it.
+GRAZE_BACK_M = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,6 +147,14 @@ class KnownMap:
         """True when the hit lies on a known feature (``classify`` is not ``"unknown"``)."""
         return self.classify(x, y, z) != UNKNOWN
 
+    def _beside_row(self, x: float, y: float) -> bool:
+        """An occupied cell is the point's cell or one of its eight neighbours."""
+        cell = self.cell_of(x, y)
+        if cell is None:
+            return False
+        r, c = cell
+        return bool(self.grid.occupied[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2].any())
+
     def _in_row(self, x: float, y: float, z: float) -> bool:
         cell = self.cell_of(x, y)
         return cell is not None and bool(self.grid.occupied[cell]) and z <= self.height(x, y) + self.canopy_height_m
@@ -167,6 +181,16 @@ class KnownMap:
         c = self.classify(hx, hy, hz)
         if c in (KNOWN_GROUND, KNOWN_ADDED):
             return True
+        if c == KNOWN_ROW and self._beside_row(hx, hy):
+            # Within a cell of a row's box: a beam that grazes a row's face or
+            # clips its top edge returns a few centimetres off the face (the
+            # range is rounded to the centimetre and noised, the pose is an
+            # estimate), so its return is the row unless the beam ran inside
+            # the row for ``GRAZE_BACK_M`` before it (then the row would have
+            # answered earlier).
+            b = max(d - GRAZE_BACK_M, 0.0)
+            if not self._in_row(ox + b * dx, oy + b * dy, oz + b * dz):
+                return True
         # inside a row just beyond the return (probed at a few depths: a ray that
         # clips a row's corner is inside for a few centimetres only) ...
         if not any(self._in_row(ox + a * dx, oy + a * dy, oz + a * dz)
