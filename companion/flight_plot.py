@@ -182,3 +182,94 @@ def _run_parallel(jobs) -> None:
     if child.exitcode != 0:
         for job in jobs[::2]:
             job()
+
+
+def write_avoidance_figure(log, plan, obstacles, events, out_dir, grid=None) -> str | None:
+    """``avoidance.png`` in the style of the paper's Fig. 19: top view of the
+    planned path, the reference the replanner flew and the true path, with the
+    vine rows (``grid``), the obstacles (``sim.obstacles``, drawn from the
+    mission: the companion did not know them) and the replanning events; below,
+    the side view of the height along the flight (the climb over an obstacle).
+
+    ``plan``: anything with a ``trajectory`` (the planned one); ``events``: the
+    report's ``replanning.event_list`` dicts. Returns the path, or None when
+    the log holds no trajectory phase.
+
+    Raises
+    ------
+    ImportError
+        matplotlib is not installed.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle, Polygon
+
+    from .runner import FlightLog, _PHASE_CODE
+
+    a = log.array()
+    if a.shape[0] == 0:
+        return None
+    col = {n: i for i, n in enumerate(FlightLog.COLUMNS)}
+    traj = a[:, col["phase"]] == _PHASE_CODE["trajectory"]
+    if not traj.any():
+        return None
+    a = a[traj]
+    t = a[:, 0] - a[0, 0]
+    ref = a[:, [col["ref_x"], col["ref_y"], col["ref_z"]]]
+    tru = a[:, [col["true_x"], col["true_y"], col["true_z"]]]
+    tr = plan.trajectory
+    planned = tr.sample(np.linspace(tr.t0, tr.tf, 2000)).p
+
+    fig = Figure(figsize=(10, 8))
+    ax = fig.add_subplot(2, 1, 1)
+    if grid is not None:
+        occ = np.asarray(grid.occupied, dtype=float)
+        rows_, cols_ = occ.shape
+        x0, y0 = grid.origin_xy_m[0], grid.origin_xy_m[1]
+        h = grid.resolution_m
+        if abs(getattr(grid, "origin_yaw_rad", 0.0)) < 1e-12:
+            ax.imshow(occ, origin="lower", cmap="Greens", alpha=0.5, vmin=0, vmax=1.5,
+                      extent=(x0, x0 + cols_ * h, y0, y0 + rows_ * h))
+    ax.plot(planned[:, 0], planned[:, 1], "k--", lw=0.8, label="planned path")
+    ax.plot(ref[:, 0], ref[:, 1], "C1", lw=1.2, label="replanned reference")
+    ax.plot(tru[:, 0], tru[:, 1], "C0", lw=0.8, label="flown (truth)")
+    for k, ob in enumerate(obstacles or ()):
+        if ob.type == "cylinder":
+            ax.add_patch(Circle((ob.x, ob.y), ob.radius, color="C3", alpha=0.8))
+        else:
+            c, s = np.cos(np.radians(ob.yaw_deg)), np.sin(np.radians(ob.yaw_deg))
+            hx, hy = 0.5 * ob.size_x, 0.5 * ob.size_y
+            corners = [(ob.x + c * u - s * v, ob.y + s * u + c * v) for u, v in
+                       ((hx, hy), (-hx, hy), (-hx, -hy), (hx, -hy))]
+            ax.add_patch(Polygon(corners, closed=True, color="C3", alpha=0.8))
+        ax.annotate(f"#{k + 1} {ob.height:g} m", (ob.x, ob.y), xytext=(4, 4), textcoords="offset points",
+                    fontsize=7, color="C3")
+    marks = {"avoid": "o", "climb": "^", "stop": "s", "reroute": "D", "rejoin": "v", "hold": "X"}
+    seen = set()
+    for e in events or ():
+        m = marks.get(e["action"], "o")
+        lab = e["action"] if e["action"] not in seen else None
+        seen.add(e["action"])
+        ax.scatter(e["pos_enu_m"][0], e["pos_enu_m"][1], marker=m, s=30, c="k", zorder=5, label=lab)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x east [m]")
+    ax.set_ylabel("y north [m]")
+    ax.set_title("Obstacle avoidance: top view (obstacles unknown to the plan)")
+    ax.legend(fontsize=7, loc="upper right", ncol=2)
+    ax = fig.add_subplot(2, 1, 2)
+    ax.plot(t, ref[:, 2], "C1", lw=1.2, label="replanned reference")
+    ax.plot(t, tru[:, 2], "C0", lw=0.8, label="flown (truth)")
+    t0 = a[0, 0]
+    for e in events or ():
+        ax.axvline(e["t_s"] - t0, color="0.6", lw=0.6)
+        ax.annotate(e["action"], (e["t_s"] - t0, ax.get_ylim()[1]), fontsize=6, rotation=90, va="top")
+    ax.set_xlabel("time since the trajectory started [s]")
+    ax.set_ylabel("z up [m]")
+    ax.set_title("Side view: height along the flight")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    FigureCanvasAgg(fig)
+    p = Path(out_dir) / "avoidance.png"
+    fig.savefig(p, dpi=110)
+    return str(p)

@@ -1,7 +1,7 @@
 """The obstacle scenarios (missions/obstacle-low, missions/obstacle-tall)
 against the flat-rectangle plan: what the geometry says about them, and
-what today's ``companion demo`` (no replanner) makes of one: the crash the
-SITL reports."""
+what ``companion demo`` without its replanner (``replan.enabled: false``)
+makes of one: the crash the SITL reports (with it: tests/test_replan_e2e.py)."""
 
 from __future__ import annotations
 
@@ -76,12 +76,22 @@ def test_tall_post_blocks_its_corridor():
     assert best == pytest.approx(-(2 * r - (1.05 - 0.25)) / 2, abs=0.01)   # the gap is 0.80 m, the vehicle 0.884
 
 
-def test_scenarios_carry_ring_and_custom_rangefinders():
+def test_scenarios_carry_closed_rings_of_custom_rangefinders_and_their_mounts():
     for name in ("obstacle-low", "obstacle-tall"):
-        rfs = load_mission(missions_dir() / name / "mission.yaml").sim.rangefinders
-        assert sorted(r.orientation for r in rfs if r.orientation < 8) == list(range(8))
-        assert sum(r.orientation == 100 for r in rfs) == 5 and any(r.orientation == 25 for r in rfs)
+        m = load_mission(missions_dir() / name / "mission.yaml")
+        rfs = m.sim.rangefinders
+        custom = [r for r in rfs if r.orientation == 100]
+        assert len(custom) == 40 and any(r.orientation == 25 for r in rfs)
+        for pitch, n in ((0.0, 16), (20.0, 16), (45.0, 8)):
+            ring = [r for r in custom if r.rotation_flu_deg[1] == pitch]
+            assert len(ring) == n
+            # closed: the yaws are evenly spaced and each beam is as wide as the spacing
+            yaws = sorted(r.rotation_flu_deg[2] for r in ring)
+            assert np.allclose(np.diff(yaws), 360.0 / n) and all(r.hfov_deg == 360.0 / n for r in ring)
         assert all(math.hypot(*r.position_flu_m) > 0 for r in rfs)
+        # the companion knows where each one sits (the offset is not on the wire)
+        mounts = {s.id: s.offset_flu_m for s in m.replan.sensors}
+        assert mounts == {r.id: tuple(r.position_flu_m) for r in rfs}
 
 
 @pytest.mark.slow
@@ -92,7 +102,8 @@ def test_demo_without_a_replanner_ends_in_the_crash_the_sitl_reports(tmp_path, c
     src = missions_dir() / "obstacle-low" / "mission.yaml"
     text = src.read_text().replace("../flat-rectangle/", str(missions_dir() / "flat-rectangle") + "/")
     text = text.replace("{type: box, x: 7.0, y: 6.25,", "{type: box, x: 19.0, y: 8.75,")
-    assert "x: 19.0, y: 8.75" in text
+    text = text.replace("\nreplan:\n", "\nreplan:\n  enabled: false\n")
+    assert "x: 19.0, y: 8.75" in text and "enabled: false" in text
     mission = tmp_path / "mission.yaml"
     mission.write_text(text)
     out = tmp_path / "out"

@@ -104,12 +104,14 @@ def test_schemas_are_draft_2020_12_and_describe_version_1():
     for schema in (PLAN_SCHEMA, REPORT_SCHEMA):
         assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
         Draft202012Validator.check_schema(schema)
-    assert PLAN_FORMAT_VERSION == REPORT_FORMAT_VERSION == "1.0"
+    assert PLAN_FORMAT_VERSION == "1.0" and REPORT_FORMAT_VERSION == "2.0"
     # the writers' version is one the schemas accept, the next major is not
     for validator, doc_version in ((PLAN, PLAN_FORMAT_VERSION), (REPORT, REPORT_FORMAT_VERSION)):
         version_schema = validator.schema["properties"]["format_version"]
         assert Draft202012Validator(version_schema).is_valid(doc_version)
-        assert not Draft202012Validator(version_schema).is_valid("2.0")
+        major = int(doc_version.split(".")[0])
+        assert not Draft202012Validator(version_schema).is_valid(f"{major + 1}.0")
+        assert not Draft202012Validator(version_schema).is_valid(f"{major - 1}.0") or major == 1
 
 
 # --- every file the project writes validates ----------------------------------------
@@ -203,11 +205,16 @@ def test_plan_schema_rejects_a_missing_key(plan_doc, key):
 
 
 REPORT_BREAKAGES = [
-    ("format_version", "2.0"), ("format_version", None),
+    ("format_version", "1.0"), ("format_version", "3.0"), ("format_version", None),
     ("completed", "yes"), ("control", "pilot"), ("sim_time_s", -1.0), ("sim_time_s", None),
     ("tracking.max_error_m", -0.1), ("tracking.max_error_m", "0.1"), ("tracking.truth_source", "gps"),
     ("tracking.n_samples", 1.5), ("tracking.p95_error_m", 0.1), ("tracking.settle_s", _DELETE),
     ("replanning.events", -1), ("replanning.min_clearance_m", _DELETE), ("coverage_fraction", 1.2),
+    ("replanning.clearance_source", "rangefinder"), ("replanning.min_range_m", -0.1),
+    ("replanning.event_list", [{"t_s": 1.0, "pos_enu_m": [0, 0], "obstacle_range_m": None, "action": "avoid",
+                                "detail": ""}]),
+    ("replanning.event_list", [{"t_s": 1.0, "pos_enu_m": [0, 0, 0], "obstacle_range_m": None,
+                                "action": "dodge", "detail": ""}]),
     ("tlog", 0), ("phase", "flying"), ("n_frames", 1.5),
     ("error", "vehicle silent"),          # completed with an error
     ("phase", "landing"),                 # completed before the end
@@ -255,8 +262,8 @@ def test_schemas_accept_later_minor_versions_where_growth_is_expected(plan_doc):
     plan_doc["timings_s"]["sorties"] = 0.01
     assert _errors(PLAN, plan_doc) == []
     doc = _report_doc()
-    doc.update(format_version="1.1", sorties=[{"completed": True}])
-    doc["replanning"]["event_list"] = [{"t_s": 12.0}]
+    doc.update(format_version="2.1", sorties=[{"completed": True}])
+    doc["replanning"]["replans_per_corridor"] = [1, 0]
     doc["link"]["auth_rejected"] = 0
     assert _errors(REPORT, doc) == []
     doc = _crashed_report_doc()

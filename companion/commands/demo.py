@@ -85,6 +85,21 @@ def launch_pose(trajectory, target_enu_m) -> tuple[float, float, float]:
     return (p0[0], p0[1], math.degrees(yaw))
 
 
+def _replanning_row(rp) -> str:
+    if not rp.enabled:
+        return "off"
+    text = f"{rp.events} events"
+    if rp.event_list:
+        acts = []
+        for e in rp.event_list:
+            if e["action"] not in acts:
+                acts.append(e["action"])
+        text += f" ({', '.join(acts)})"
+    if rp.min_clearance_m is not None:
+        text += f", min clearance {rp.min_clearance_m:.2f} m (truth)"
+    return text
+
+
 def _table(rows: list[tuple[str, str]]) -> str:
     w = max(len(k) for k, _ in rows)
     line = "+" + "-" * (w + 2) + "+" + "-" * 34 + "+"
@@ -174,6 +189,14 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
         else:
             try:
                 figures = write_flight_figures(result.log, plan, out)
+                rp = rep.replanning
+                if mission.sim.obstacles or rp.events:
+                    from ..flight_plot import write_avoidance_figure
+
+                    f = write_avoidance_figure(result.log, plan, mission.sim.obstacles, rp.event_list, out,
+                                               plan.grid)
+                    if f is not None:
+                        figures.append(f)
             except ImportError:
                 figures = None
     total = time.monotonic() - t_start
@@ -188,6 +211,7 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
         ("max error (after settle)", mm(tr.max_error_m)),
         ("rms error (after settle)", mm(tr.rms_error_m)),
         ("truth source", tr.truth_source),
+        ("replanning", _replanning_row(rep.replanning)),
         ("planning", f"{t_planned - t_start:.2f} s"),
         ("flight wall time", f"{rep.wall_time_s:.2f} s ({rep.real_time_factor or 0:.1f}x real time)"),
         ("demo wall time", f"{total:.2f} s"),

@@ -90,7 +90,7 @@ class Violation:
     kind : str
         ``crash``, ``disarmed``, ``mode_change``, ``emergency``, ``on_ground``,
         ``tracking``, ``nav_stale``, ``interrupted``, ``command_rejected``,
-        ``link``, ``vehicle_not_ready``.
+        ``link``, ``vehicle_not_ready``, ``attached``, ``no_route``, ``replan_timeout``.
     detail : str
         One human-readable line.
     action : str
