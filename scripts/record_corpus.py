@@ -17,6 +17,10 @@ Flights (``FLIGHTS``):
   ground-truth ODOMETRY (the side-channel test withholds it);
 - ``vehicle-cut4``: ``--control vehicle --cut 4``, no ground truth (the
   metrics use the vehicle's estimate);
+- ``obstacle``: ``--control companion --cut 12`` of ``mission-obstacle.yaml``
+  (the flat-rectangle plan with an unknown 1.2 m crate 5.45 m into the first
+  corridor): the replanner climbs over it and rejoins; its decisions are
+  STATUSTEXT ``companion: replan ...`` and the setpoints;
 - ``linkloss``: ``--control companion --cut 8``; 2 s into the trajectory a
   relay between the companion and the SITL drops everything the companion
   sends (the companion stops answering, as far as the vehicle can tell):
@@ -27,7 +31,7 @@ Flights (``FLIGHTS``):
   landing. Not a completed flight (the report says why).
 
 Streams the replay does not need are muted (ATTITUDE, ATTITUDE_QUATERNION,
-POSITION_TARGET_LOCAL_NED, DISTANCE_SENSOR); the position streams for log
+POSITION_TARGET_LOCAL_NED, and DISTANCE_SENSOR but in ``obstacle``); the position streams for log
 tools stay at 5 Hz. Re-record after any intended change of the controller,
 the flight core or the SITL (the replay tests then pass again).
 """
@@ -55,11 +59,17 @@ PLAN_NAME = "plan-flat-rectangle.json"
 ATTITUDE, ATTITUDE_QUATERNION, POSITION_TARGET_LOCAL_NED, DISTANCE_SENSOR = 30, 31, 85, 132
 MUTE = (ATTITUDE, ATTITUDE_QUATERNION, POSITION_TARGET_LOCAL_NED, DISTANCE_SENSOR)
 
-#: name -> (control, cut_s, request_truth, link cut: vehicle seconds after the trajectory starts or None)
+OBSTACLE_MISSION = ROOT / "tests" / "data" / "replay" / "mission-obstacle.yaml"
+
+#: name -> (control, cut_s, request_truth, link cut: vehicle seconds after the trajectory starts or None,
+#: mission, muted streams)
 FLIGHTS = {
-    "companion-cut4": ("companion", 4.0, True, None),
-    "vehicle-cut4": ("vehicle", 4.0, False, None),
-    "linkloss": ("companion", 8.0, False, 2.0),
+    "companion-cut4": ("companion", 4.0, True, None, MISSION, MUTE),
+    "vehicle-cut4": ("vehicle", 4.0, False, None, MISSION, MUTE),
+    "linkloss": ("companion", 8.0, False, 2.0, MISSION, MUTE),
+    # the replanner's decisions: DISTANCE_SENSOR (41 sensors at 20 Hz) kept
+    "obstacle": ("companion", 12.0, True, None, OBSTACLE_MISSION, (ATTITUDE, ATTITUDE_QUATERNION,
+                                                                  POSITION_TARGET_LOCAL_NED)),
 }
 
 
@@ -123,14 +133,14 @@ def record(name: str, out: Path, plan_path: Path) -> dict:
     from companion.report import write_report
     from companion.runner import UNUSED_STREAMS
 
-    control, cut_s, truth, link_cut = FLIGHTS[name]
-    mission = load_mission(MISSION)
+    control, cut_s, truth, link_cut, mission_path, mute = FLIGHTS[name]
+    mission = load_mission(mission_path)
     fp = prepare(mission, str(plan_path))
-    overrides = {"mute_streams": tuple(sorted(set(UNUSED_STREAMS + MUTE))), "request_truth": truth}
+    overrides = {"mute_streams": tuple(sorted(set(UNUSED_STREAMS + mute))), "request_truth": truth}
     with tempfile.TemporaryDirectory(prefix="corpus_") as tmp:
         tlog = Path(tmp) / f"{name}.tlog"
         pose = launch_pose(fp.cut(cut_s, mission.trajectory).trajectory, fp.target_enu_m)
-        with SitlProcess(MISSION, lockstep=True, speed=1.0, start=pose) as sitl:
+        with SitlProcess(mission_path, lockstep=True, speed=1.0, start=pose) as sitl:
             relay = None
             url = sitl.url
             if link_cut is not None:
@@ -147,7 +157,7 @@ def record(name: str, out: Path, plan_path: Path) -> dict:
         write_report(rep, out / f"{name}.report.json")
         data = tlog.read_bytes()
     (out / f"{name}.tlog.xz").write_bytes(lzma.compress(data, preset=9 | lzma.PRESET_EXTREME))
-    info = {"name": name, "control": control, "cut_s": cut_s, "request_truth": truth, "link_cut_s": link_cut,
+    info = {"name": name, "mission": str(mission_path.relative_to(ROOT)), "control": control, "cut_s": cut_s, "request_truth": truth, "link_cut_s": link_cut,
             "completed": rep.completed, "sim_time_s": rep.sim_time_s, "tlog_bytes": len(data),
             "xz_bytes": (out / f"{name}.tlog.xz").stat().st_size}
     if relay is not None:
