@@ -242,6 +242,26 @@ def test_explains_a_return_only_where_the_ray_enters_a_known_surface():
     assert km.explains((3.0, 1.0, 1.5), down, 1.5 - 0.3)
 
 
+def test_grazing_return_a_few_centimetres_off_the_face_is_the_row():
+    """A beam along the corridor 8 deg off the row's face (y = 1.8 m): the range comes
+    rounded to the centimetre, with noise, from an estimated pose, so its point lands a
+    few centimetres before or inside the face, where the 0.1 m along-ray window sees
+    only a centimetre of depth. Within a cell of the face it is the row; 0.3 m short of
+    the face (a post standing in front of the row) it is not. (Seen in the SITL: every
+    beam looking along a corridor made phantom obstacles before this rule.)"""
+    km = _known()
+    a = math.radians(8.0)
+    g = (math.cos(a), math.sin(a), 0.0)
+    o = (1.0, 1.3, 1.5)
+    d_face = 0.5 / math.sin(a)                      # where the ray meets y = 1.8
+    for short_m in (0.04, 0.02, -0.03):             # before the face, and 3 cm inside it
+        assert km.explains(o, g, d_face - short_m / math.sin(a)), short_m
+    assert not km.explains(o, g, d_face - 0.3 / math.sin(a))
+    # a ray that already ran through the row a metre before its return: not the row's surface
+    o_in = (1.0, 1.9, 1.5)
+    assert not km.explains(o_in, (1.0, 0.0, 0.0), 1.5)
+
+
 def test_wide_beam_in_a_corridor_sees_the_post_not_the_row():
     """A 40 deg beam in front of a post: its edge reaches the row only beyond
     the post's range, so the row does not explain the return."""

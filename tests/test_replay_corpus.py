@@ -376,3 +376,40 @@ def test_a_replanner_change_is_caught_at_its_first_decision(obstacle_case):
     # the trigger range grows with the clearance: at most a second earlier than recorded
     assert t_avoid - 1.0 <= d.t_s <= t_avoid + 1.0
     assert d.recorded in ("SET_POSITION_TARGET_LOCAL_NED", "STATUSTEXT", "HIL_ACTUATOR_CONTROLS")
+
+
+def test_the_replanner_sees_no_truth(obstacle_case):
+    """Replayed without the SITL's ground truth (ODOMETRY, ATTITUDE*), every output
+    of the avoidance flight is the same: the replanner's poses come from the
+    companion's observer, not from the truth (which only the report's clearance reads)."""
+    data, mission, fp = obstacle_case
+    res = rerun(data, mission, fp, withhold=TRUTH)
+    assert res.comparison.identical, res.comparison.first_divergence.describe()
+    assert res.flight.replanning.min_clearance_m is None          # no truth: no true clearance
+    assert res.flight.replanning.events == len(_recorded_replan_texts(data))
+
+
+def test_no_way_past_holds_reports_and_lands(obstacle_case):
+    """The recorded crate with the vertical escape switched off (ablation) and a 2 s
+    escape bound: the APF alone cannot pass (the crate spans the corridor's free
+    width), so the replanner holds, and the flight core makes that a violation
+    (``no_route``): not completed, the land command follows (``--on-failure land``)."""
+    data, mission, fp = obstacle_case
+    changed = dataclasses.replace(mission, replan=dataclasses.replace(mission.replan, vertical_escape=False,
+                                                                      escape_timeout_s=2.0))
+    setup = find_setup([data])
+    # the recorded vehicle flew on over the crate while this reference stops: its
+    # tracking error is not what this test is about
+    setup["runner"]["max_tracking_error_m"] = 100.0
+    core = build_core(setup, changed, fp)
+    res = replay_chunks([data], core, 0.0, ())
+    f = res.flight
+    actions = [e["action"] for e in f.replanning.event_list]
+    assert actions == ["avoid", "stop", "hold"]
+    assert not f.completed and f.violation["kind"] == "no_route"
+    t_avoid, t_stop, t_hold = (e["t_s"] for e in f.replanning.event_list)
+    # the escape bound, then the braking of the shaped reference (<= 1 m/s at 1 m/s^2, 2 m/s^3: < 3 s)
+    assert t_avoid + 2.0 <= t_stop <= t_avoid + 2.0 + 0.01
+    assert t_stop < t_hold <= t_stop + 3.0
+    assert f.violation["t_s"] == pytest.approx(t_hold)
+    assert core.phase in ("landing", "done")
