@@ -453,6 +453,11 @@ def run(args) -> int:
     print(f"companion fly: {'completed' if rep.completed else 'NOT completed'} ({rep.control} control), "
           f"{rep.sim_time_s:.1f} s flown in {rep.wall_time_s:.1f} s wall, tracking {err} "
           f"({tr.truth_source}); report {args.report}")
+    rp = rep.replanning
+    if rp.enabled and rp.events:
+        clr = "" if rp.min_clearance_m is None else f", min clearance {rp.min_clearance_m:.2f} m (sim truth)"
+        acts = ", ".join(dict.fromkeys(e["action"] for e in rp.event_list))
+        print(f"companion fly: replanning: {rp.events} events ({acts}){clr}")
     if not rep.completed:
         print(f"companion fly: NOT completed: {rep.error or rep.phase}", file=sys.stderr)
     return 0 if rep.completed else EXIT_FAILED
