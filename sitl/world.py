@@ -34,6 +34,7 @@ import numpy as np
 from scipy import ndimage
 
 from companion.geometry import ExtrudedCells, SceneGeometry, obstacle_solids
+from companion.maps.heightfield import HeightField
 from companion.maps.grid import ElevationModel, OccupancyGrid
 from companion.mission.sim import ObstacleConfig
 
@@ -64,50 +65,25 @@ class Terrain:
         h = np.asarray(dem.heights_m, dtype=float)
         if h.ndim != 2 or h.size == 0:
             raise ValueError("DEM heights must be a non-empty 2D array")
-        bad = ~np.isfinite(h)
-        if bad.all():
-            raise ValueError(f"{dem.source}: DEM has no valid cell")
-        if bad.any():
-            idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
-            h = h[tuple(idx)]
+        # the companion's own lookup (NODATA filled from the nearest valid cell,
+        # bilinear between cell centres, clamped): the terrain the SITL renders is
+        # the one the companion's replanner knows
+        field = HeightField(dem)
+        h = field.heights_m
         self.flat = bool(np.all(h == h.flat[0]))
         self.z = float(h.flat[0])
         self.min_height_m = float(h.min())
         self.max_height_m = float(h.max())
-        self._h = h.tolist()
-        self._x0, self._y0, self._cs = float(dem.x0_m), float(dem.y0_m), float(dem.cellsize_m)
-        self._nr, self._nc = h.shape
+        self._cs = float(dem.cellsize_m)
         # Lipschitz bound of the bilinear interpolant: on each cell the
         # gradient is bounded by the largest edge difference per axis.
         gx = np.abs(np.diff(h, axis=1)).max() if h.shape[1] > 1 else 0.0
         gy = np.abs(np.diff(h, axis=0)).max() if h.shape[0] > 1 else 0.0
         self.max_slope = float(math.hypot(gx, gy) / self._cs)
-        self.height = self._flat_height if self.flat else self._bilinear
+        self.height = self._flat_height if self.flat else field
 
     def _flat_height(self, x: float, y: float) -> float:
         return self.z
-
-    def _bilinear(self, x: float, y: float) -> float:
-        fx = (x - self._x0) / self._cs
-        fy = (y - self._y0) / self._cs
-        nc1, nr1 = self._nc - 1, self._nr - 1
-        fx = 0.0 if fx < 0.0 else (nc1 if fx > nc1 else fx)
-        fy = 0.0 if fy < 0.0 else (nr1 if fy > nr1 else fy)
-        j = int(fx)
-        i = int(fy)
-        if j >= nc1:
-            j = nc1 - 1 if nc1 > 0 else 0
-        if i >= nr1:
-            i = nr1 - 1 if nr1 > 0 else 0
-        tx = fx - j
-        ty = fy - i
-        h = self._h
-        row0 = h[i]
-        row1 = h[i + 1] if nr1 > 0 else row0
-        j1 = j + 1 if nc1 > 0 else j
-        a = row0[j] + (row0[j1] - row0[j]) * tx
-        b = row1[j] + (row1[j1] - row1[j]) * tx
-        return a + (b - a) * ty
 
     def raycast(self, ox, oy, oz, dx, dy, dz, max_m) -> float:
         """Distance along the unit ray to the ground (inf if none within max_m)."""

@@ -33,6 +33,8 @@ class HeightField:
         if bad.any():
             idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
             h = h[tuple(idx)]
+        #: The filled heights (rows, cols), m.
+        self.heights_m = h
         self._h = h.tolist()
         self._x0, self._y0, self._cs = float(dem.x0_m), float(dem.y0_m), float(dem.cellsize_m)
         self._nr, self._nc = h.shape
