@@ -5,7 +5,7 @@ flown in the bundled SITL, in lockstep over MAVLink/UDP, through the real
 Usage::
 
     python benchmarks/bench_obstacles_sitl.py [--flights 50] [--seed 1] [--cut 60]
-        [--json results.json] [--keep DIR] [--only I ...] [--dry-run]
+        [--json results.json] [--keep DIR] [--only I ...] [--dry-run] [--from-json results.json]
 
 Every flight is one ``companion demo --mission M --out DIR --no-plots --quiet
 --cut S --seed N`` in a fresh process (SITL subprocess, planning, the flight,
@@ -43,6 +43,9 @@ and ``replanning`` (events, the true clearance of the vehicle sphere to the
 obstacles from the SITL's ODOMETRY, lateral deviation, extra path, climb,
 the event list with the nearest obstacle to each event) and
 ``tracking.max_error_m``.
+
+``--from-json`` prints the flights and the summary of an earlier ``--json``
+without flying. Results: BENCHMARKS.md, "Obstacle avoidance in the SITL".
 
 Issue 8's targets: every flight completed (re-routed where a corridor is
 blocked) or, where no route exists, held and reported; 0 crashes; minimum
@@ -321,6 +324,9 @@ def summary(rows: list[dict]) -> dict:
     extra_repl = [r["extra_path_m"] for r in by["completed"] if r.get("events") and r.get("extra_path_m") is not None]
     track = [r["tracking_max_error_m"] for r in rows if r.get("tracking_max_error_m") is not None]
     acts = [a for r in rows for a in r.get("actions", [])]
+    skipped = {r["flight"]: sum(int(mt.group(1)) for e in r.get("event_list", []) if e["action"] == "reroute"
+                                for mt in [re.search(r"(\d+) unreachable", e.get("detail") or "")] if mt)
+               for r in rows}
     flown = [r["path_flown_fraction"] for r in by["completed"] if r.get("path_flown_fraction") is not None]
     flown_free = [r["path_flown_fraction"] for r in by["completed"]
                   if not r["n_obstacles"] and r.get("path_flown_fraction") is not None]
@@ -338,6 +344,7 @@ def summary(rows: list[dict]) -> dict:
         "failures": [{"flight": r["flight"], "outcome": r["outcome"], "reason": r.get("reason")}
                      for r in rows if r["outcome"] in ("crashed", "failed")],
         "held": [{"flight": r["flight"], "reason": r.get("reason")} for r in by["held"]],
+        "completed_with_pieces_skipped": [r["flight"] for r in by["completed"] if skipped[r["flight"]]],
         "min_clearance_m": min(clear) if clear else None,
         "flights_below_0_5_m": sum(1 for c in clear if c < 0.5),
         "max_lateral_deviation_m": max(lat) if lat else None,
@@ -365,6 +372,8 @@ def markdown(s: dict) -> str:
         f"{s['obstacles']}, {s['unclimbable_obstacles']}) | | |",
         f"| completed (of which with a re-route; with a climb event) | {s['completed']} ({s['completed_rerouted']}; "
         f"{s['completed_climbed']}) | | |",
+        f"| completed with coverage pieces left out by a re-route as unreachable | "
+        f"{len(s['completed_with_pieces_skipped'])} | | |",
         f"| held and reported (`no_route`) | {s['held_no_route']} | | |",
         f"| completed or held and reported | {ok} / {n} | 100% | {yes(ok == n)} |",
         f"| crashed | {s['crashed']} | 0 | {yes(s['crashed'] == 0)} |",
@@ -401,7 +410,14 @@ def main() -> int:
     ap.add_argument("--mission", default=str(BASE_MISSION), help="base mission (default missions/obstacle-low)")
     ap.add_argument("--timeout", type=float, default=FLIGHT_TIMEOUT_S, help="wall seconds per flight")
     ap.add_argument("--dry-run", action="store_true", help="print the placements, fly nothing")
+    ap.add_argument("--from-json", default=None, metavar="PATH",
+                    help="fly nothing: print the flights and the summary of an earlier --json")
     a = ap.parse_args()
+    if a.from_json:
+        rows = json.loads(Path(a.from_json).read_text())["flights"]
+        for r in rows:
+            print(flight_line(r))
+        return report(rows)
     base = Path(a.mission).resolve()
     keep = Path(a.keep).resolve() if a.keep else None
     if keep is not None:
@@ -431,6 +447,10 @@ def main() -> int:
         if a.json:
             Path(a.json).write_text(json.dumps({"meta": meta, "summary": summary(rows), "flights": rows},
                                                indent=1) + "\n")
+    return report(rows)
+
+
+def report(rows: list[dict]) -> int:
     s = summary(rows)
     print()
     print(markdown(s))
