@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import math
+
 import numpy as np
 import pytest
 
@@ -126,3 +128,21 @@ def test_rejoin_way_point_ahead_not_back_round_a_turn():
     # the avoidance went round the turns at (18, 0) and (18, 2.5) and is heading west at x = 16.8:
     # the way-points behind it are skipped, the next ahead is the end (15, 2.5)
     assert first_waypoint_ahead(plan, 4, (16.8, 2.5, 1.5), np.array([-1.0, 0.0]), 1.0, 0.5) == 7
+
+
+def test_rejoin_refused_when_the_path_leaves_the_free_cells_after_the_horizon():
+    """The map's rows are not remembered obstacle points: a candidate must stay over
+    free cells over its whole length, not only over the first CHECK_S seconds (the
+    randomized SITL benchmark crashed into a row 10 s into an accepted rejoin)."""
+    plan = _plan()
+    st = _off_path_state()
+    ok = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 2.0, 0.5)
+    assert ok.plan is not None
+    late = ok.plan.trajectory.sample(14.0 + CHECK_S + 3.0).p
+    assert ok.plan.trajectory.tf > 14.0 + CHECK_S + 3.0
+
+    def free(x, y):          # a "row" cell under the candidate 9 s on, nothing else
+        return math.hypot(x - late[0], y - late[1]) > 0.2
+
+    res = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 2.0, 0.5, free_xy=free)
+    assert res.plan is None and res.reason == "ceiling"

@@ -979,16 +979,26 @@ class FlightCore:
     def _replan_pose(self, t: float) -> None:
         """The estimated pose of this frame for the rangefinder readings: the
         companion's observer while it flies the inner loop, else the vehicle's
-        ATTITUDE (never the truth)."""
+        ATTITUDE (its estimator's), else the raw vector pairs' rotation (never
+        the truth). Without the observer the raw pairs' degree of noise put
+        returns from the rows off the rows: phantom obstacles."""
         if self._pos is None:
             return
         R = None
-        if self._controlling:
-            est = self.ctrl.attitude_estimate()
+        ctrl = self.ctrl
+        observing = self._controlling and getattr(ctrl, "observer", None) is not None
+        if observing:
+            est = ctrl.attitude_estimate()
             if est is not None:
                 R = est.R_enu_flu
         if R is None:
             R = self._R_est
+        if R is None and self._controlling:
+            # no observer and no ATTITUDE: the rotation the two raw vector pairs
+            # define (noisy: about a degree at the paper's noise)
+            est = ctrl.attitude_estimate()
+            if est is not None:
+                R = est.R_enu_flu
         if R is not None:
             self.replanner.on_pose(t, self._pos, R)
 

@@ -11,10 +11,15 @@ kept way-point is given the time a smooth move needs to reach it::
 (d_h horizontal and dz vertical distance, V the cruise speed, t_ramp the
 speed ramp of ``companion.coverage.waypoints``); the later way-points keep
 their intervals. A candidate is accepted only if, over its first
-``CHECK_S`` seconds, the jerk stays within the limit (per axis), the path
-stays below the ceiling and keeps the clearance from the remembered obstacle
-points; too much jerk or height stretches T by ``STRETCH`` (up to
-``MAX_TRIES`` times).
+``CHECK_S`` seconds, the jerk stays within the limit (per axis) and the path
+keeps the clearance from the remembered obstacle points (farther on, the
+replanner meets them again as it follows), and, over its **whole** length,
+it stays below the ceiling and over the map's free cells: the map's rows are
+not in the obstacle memory, so nothing else would stop a candidate that cuts
+across them later (a rejoin through a way-point 13 m away across two rows,
+checked over 6 s only, climbed to 5 m and came down into a row in the
+randomized SITL benchmark). Too much jerk or height stretches T by
+``STRETCH`` (up to ``MAX_TRIES`` times).
 """
 
 from __future__ import annotations
@@ -34,6 +39,8 @@ from .globalplan import GlobalPlan, Segment
 CHECK_S = 6.0
 #: Sampling step (s) of the check.
 CHECK_DT_S = 0.05
+#: Sampling step (s) of the map check beyond ``CHECK_S`` (0.1 m at 1 m/s: a cell).
+MAP_CHECK_DT_S = 0.1
 STRETCH = 1.5
 MAX_TRIES = 4
 #: A candidate may exceed the ceiling by this much (m).
@@ -85,16 +92,21 @@ class CandidateCheck:
 def check_candidate(trajectory, t0_s: float, obstacles_enu_m: np.ndarray,
                     ceiling_z: Callable[[float, float], float] | None = None,
                     free_xy: Callable[[float, float], bool] | None = None) -> CandidateCheck:
-    """Check a candidate trajectory's first ``CHECK_S`` seconds (``CandidateCheck``;
-    a sample over a cell ``free_xy`` refuses counts as infinitely above the ceiling)."""
-    t = np.arange(t0_s, min(t0_s + CHECK_S, trajectory.tf) + 1e-9, CHECK_DT_S)
+    """Check a candidate (``CandidateCheck``): jerk and obstacle clearance over its first
+    ``CHECK_S`` seconds, ceiling and free cells over all of it (a sample over a cell
+    ``free_xy`` refuses counts as infinitely above the ceiling)."""
+    t_end = min(t0_s + CHECK_S, trajectory.tf)
+    t = np.arange(t0_s, t_end + 1e-9, CHECK_DT_S)
     s = trajectory.sample(t)
     jerk = float(np.max(np.abs(s.jerk)))
     above = -math.inf
-    if ceiling_z is not None:
-        above = max(float(z) - ceiling_z(float(x), float(y)) for x, y, z in s.p)
-    if free_xy is not None and not all(free_xy(float(x), float(y)) for x, y, _ in s.p):
-        above = math.inf
+    if ceiling_z is not None or free_xy is not None:
+        rest = np.arange(t_end, trajectory.tf, MAP_CHECK_DT_S)
+        pts = np.vstack([s.p, trajectory.sample(np.append(rest, trajectory.tf)).p]) if len(rest) else s.p
+        if ceiling_z is not None:
+            above = max(float(z) - ceiling_z(float(x), float(y)) for x, y, z in pts)
+        if free_xy is not None and not all(free_xy(float(x), float(y)) for x, y, _ in pts):
+            above = math.inf
     obs = np.asarray(obstacles_enu_m, dtype=float).reshape(-1, 3)
     if len(obs) == 0:
         return CandidateCheck(jerk, math.inf, above)

@@ -299,6 +299,40 @@ def cluster_nearest(points: np.ndarray, dist: np.ndarray, merge_m: float, k_max:
     return np.array(out).reshape(-1, 3)
 
 
+def horizontal_clusters(points: np.ndarray, link_m: float) -> np.ndarray:
+    """Cluster label of each point (k, 3): single linkage on the horizontal distance
+    (points closer than ``link_m`` belong together)."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(points)
+    if n == 0:
+        return np.zeros(0, dtype=int)
+    d = points[:, None, :2] - points[None, :, :2]
+    adj = np.einsum("ijk,ijk->ij", d, d) <= link_m * link_m
+    return connected_components(csr_matrix(adj), directed=False)[1]
+
+
+def unpassable_points(points: np.ndarray, ground_z, ceiling_agl_m: float, keep_m: float,
+                      link_m: float = CLUSTER_M) -> np.ndarray:
+    """The points of the obstacles (horizontal clusters) the vehicle cannot pass over:
+    top + ``keep_m`` + ``PASS_MARGIN_M`` above ``ceiling_agl_m`` over the ground
+    (``ground_z(x, y)``). A re-route goes round these; a low obstacle near them is
+    climbed over when the new route meets it (walling it off too sealed the vehicle
+    into a pocket of the free space in the randomized SITL benchmark)."""
+    if len(points) == 0:
+        return points
+    labels = horizontal_clusters(points, link_m)
+    keep = np.zeros(len(points), dtype=bool)
+    for c in np.unique(labels):
+        m = labels == c
+        k = int(np.argmax(points[m, 2]))
+        top = points[m][k]
+        if top[2] + keep_m + PASS_MARGIN_M > ground_z(float(top[0]), float(top[1])) + ceiling_agl_m:
+            keep |= m
+    return points[keep]
+
+
 def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m_s: float,
                          vertical_speed_m_s: float) -> int:
     """The first way-point to rejoin after an avoidance along the leg direction ``u_xy``.
@@ -722,7 +756,12 @@ class Replanner:
             return self._ref(st.p, st.v, st.a, st.jerk, st.snap)
         dist = np.linalg.norm(pts - P, axis=1) if len(pts) else np.zeros(0)
         if self._stop_then == "reroute":
-            blocking = pts[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else pts
+            near = pts[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else pts
+            # only what cannot be climbed over blocks the corridor (a low obstacle
+            # beside a tall one is climbed when the new route meets it)
+            blocking = unpassable_points(near, self.known.ground_z, self.cfg.ceiling_agl_m, self._keep_m)
+            if len(blocking) == 0:
+                blocking = near
             travel = self._leg_frame(self._avoid_leg)[2]       # the leg the avoidance was on
             res = reroute(self.plan, self.known, st, tau, self._wp_leave, blocking, travel,
                           self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s, self._keep_m + ROUTE_MARGIN_M)
