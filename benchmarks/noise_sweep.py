@@ -59,9 +59,13 @@ def _fly_inprocess(mission: str, control: str, cfg: dict, noise: dict, sensors, 
         m = load_mission(ROOT / "missions" / mission / "mission.yaml")
         cache[mission] = (m, plan_mission(m))
     m, plan = cache[mission]
-    r = fly(m.source, control, ControlConfig(**cfg) if control == "companion" else None, seed=seed, cut_s=cut_s,
-            plan=plan, mission=m, sensors=sensors if control == "companion" else None, noise_overrides=noise,
-            abort_m=5.0)
+    try:
+        r = fly(m.source, control, ControlConfig(**cfg) if control == "companion" else None, seed=seed, cut_s=cut_s,
+                plan=plan, mission=m, sensors=sensors if control == "companion" else None, noise_overrides=noise,
+                abort_m=5.0)
+    except (ValueError, ZeroDivisionError, OverflowError) as exc:
+        # the controller broke down (e.g. a degenerate vector): a failed point, not a crash of the sweep
+        return {"completed": False, "max_mm": float("nan"), "rms_mm": float("nan"), "error": str(exc)[:60]}
     return {"completed": not r.extra["diverged"], "max_mm": 1e3 * r.max_m, "rms_mm": 1e3 * r.rms_m}
 
 
@@ -79,7 +83,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=None)
     ap.add_argument("--controllers", nargs="*", default=list(CONTROLLERS), choices=list(CONTROLLERS))
     ap.add_argument("--realistic", action="store_true", help="the realistic profile instead of the grid")
-    ap.add_argument("--profile", default="realistic", help="SITL sensor profile name (--mode mavlink --realistic)")
+    ap.add_argument("--profile", default="icm42688p-bmm150-zedf9p",
+                    help="SITL sensor profile name (--mode mavlink --realistic)")
     args = ap.parse_args(argv)
     cache: dict = {}
     with tempfile.TemporaryDirectory() as tmp:

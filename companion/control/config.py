@@ -171,14 +171,14 @@ class ControlConfig:
     SITL's plant, mission seeds, max / RMS error after 5 s): the default on
     the SITL's default sensors (physical IMU, the paper's noise, exact
     position) 0.42 / 0.13 mm on flat-rectangle (0.41 / 0.12 without the
-    observer); on the paper's sensors (``vectors: paper``) 0.33 / 0.32 mm
+    observer); on the paper's sensors (``vectors: paper``) 0.34 / 0.32 mm
     max on flat-rectangle / tilted-hexagon, where the paper's law gets 21.0
-    / 19.5 mm (4.95 / 4.39 with the pointing governor). White velocity
+    / 18.7 mm (4.95 / 4.84 with the pointing governor). White velocity
     noise 1 cm/s and 5 cm/s (every frame): 1.43 and 2.32 mm max (the
     previous default, no observer: 1.8 m, diverged). Windy flat-rectangle
     4.9 / 2.0 mm. Over MAVLink ``companion demo`` on the default mission 0.38
-    / 0.13 mm; on the paper's sensors 0.33 mm (the paper's law 19.4 mm,
-    3.9 mm with the governor).
+    / 0.13 mm; on the paper's sensors 0.33 mm (the paper's law 19.8 mm,
+    3.8 mm with the governor). BENCHMARKS.md "Controller on real sensors".
 
     The previous figures (no observer, tilt from the differentiated exact
     velocity; ``python benchmarks/bench_control.py``, in-process plant,
