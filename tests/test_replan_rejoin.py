@@ -146,3 +146,19 @@ def test_rejoin_refused_when_the_path_leaves_the_free_cells_after_the_horizon():
 
     res = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 2.0, 0.5, free_xy=free)
     assert res.plan is None and res.reason == "ceiling"
+
+
+def test_planned_length_in_chunks_is_the_length_and_the_polyline_bound():
+    """The replanner's planned length (extra_path_m's reference), sampled in chunks
+    so that a many-hour plan never holds all its samples: the chunk size does not
+    change it, and it lies between the straight way-point polyline's length and
+    a little above it (the trajectory passes near the way-points)."""
+    from companion.replan.replanner import path_length_m
+
+    plan = _plan()
+    tr = plan.trajectory
+    whole = path_length_m(tr)
+    assert path_length_m(tr, chunk=7) == pytest.approx(whole, rel=1e-12)
+    assert path_length_m(tr, chunk=1) == pytest.approx(whole, rel=1e-12)
+    poly = float(np.sum(np.linalg.norm(np.diff(plan.p_enu_m, axis=0), axis=1)))
+    assert 0.95 * poly <= whole <= 1.1 * poly
