@@ -94,7 +94,8 @@ class KnownMap:
         """
         widths = disk_half_widths(tolerance_m / grid.resolution_m + 1.0)
         known_rows = dilate_runs(np.asarray(grid.occupied, dtype=bool), widths, outside=False)
-        empty = np.zeros(grid.shape, dtype=bool)
+        # nothing added yet: a read-only view of one False (no memory; ``with_obstacle`` copies)
+        empty = np.broadcast_to(np.zeros(1, dtype=bool), grid.shape)
         return cls(grid, dem, free, float(canopy_height_m), float(tolerance_m), known_rows,
                    empty, empty, HeightField(dem))
 
