@@ -301,13 +301,10 @@ def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | No
 TRANSIT_CLEARANCE_M = 1.0
 
 
-def transit_floor_z_m(mission) -> float:
+def transit_floor_z_m(mission, dem) -> float:
     """Lowest height (ENU z, m) at which a level flight across the field cannot touch a
-    vine row: the DEM's highest point, plus the canopy (``replan.canopy_height_m``),
-    plus ``TRANSIT_CLEARANCE_M``."""
-    from ..maps.field import load_mission_dem
-
-    dem = load_mission_dem(mission)
+    vine row: the DEM's (``load_mission_dem``) highest point, plus the canopy
+    (``replan.canopy_height_m``), plus ``TRANSIT_CLEARANCE_M``."""
     h = np.asarray(dem.heights_m, dtype=float)
     return float(np.nanmax(h)) + mission.replan.canopy_height_m + TRANSIT_CLEARANCE_M
 
@@ -318,31 +315,37 @@ def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None)
     from ..control import GeometricController
     from ..runner import FlightCore, FlightInputs
 
+    from ..maps.field import load_mission_dem, load_mission_maps
+
     ctrl = None
     if cfg.control == "companion":
         ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
-    replanner = build_replanner(mission, flight_plan) if mission.replan.enabled else None
+    # the maps are read once: the take-off floor, the replanner and the report's clearance share them
+    if mission.replan.enabled:
+        grid, dem = load_mission_maps(mission)
+        replanner = build_replanner(mission, flight_plan, grid, dem)
+    else:
+        dem, replanner = load_mission_dem(mission), None
     inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
                           (mission.home.lat, mission.home.lon, mission.home.alt_m),
                           tuple(float(x) for x in flight_plan.target_enu_m),
                           tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
                           flight_plan.coverage_fraction, flight_plan.path_xy_m, setup,
-                          transit_floor_z_m(mission), replanner, obstacle_clearance_fn(mission))
+                          transit_floor_z_m(mission, dem), replanner, obstacle_clearance_fn(mission, dem))
     return FlightCore(inputs, cfg, mission.vehicle, ctrl)
 
 
-def build_replanner(mission, flight_plan: FlightPlan):
-    """The replanner (``companion.replan``) of ``flight_plan``: the mission's maps as the
-    known map, the plan's way-points, turning points and coverage segments. Way-points
-    without a turning-point flag (a plan.json sortie) take their stops (v = 0) as turns."""
-    from ..maps.field import load_mission_maps
+def build_replanner(mission, flight_plan: FlightPlan, grid, dem):
+    """The replanner (``companion.replan``) of ``flight_plan``: the mission's maps
+    (``load_mission_maps``) as the known map, the plan's way-points, turning points and
+    coverage segments. Way-points without a turning-point flag (a plan.json sortie) take
+    their stops (v = 0) as turns."""
     from ..replan import GlobalPlan, KnownMap, Replanner
     from ..replan.replanner import mission_replan_config
 
     fp = flight_plan
     if fp.waypoints_t_s is None:
         return None
-    grid, dem = load_mission_maps(mission)
     known = KnownMap.from_mission(mission, grid, dem)
     corner = fp.waypoints_corner
     if corner is None:
@@ -356,18 +359,16 @@ def build_replanner(mission, flight_plan: FlightPlan):
     return Replanner(mission_replan_config(mission), known, plan)
 
 
-def obstacle_clearance_fn(mission):
+def obstacle_clearance_fn(mission, dem):
     """``f(pos_enu_m) -> (clearance_m, index)``: the vehicle sphere's distance to the nearest
-    of the mission's simulated obstacles (``sim.obstacles``); None without any. Applied to the
-    SITL's true position only (report ``replanning.min_clearance_m``)."""
+    of the mission's simulated obstacles (``sim.obstacles``, standing on ``dem``); None
+    without any. Applied to the SITL's true position only (report ``replanning.min_clearance_m``)."""
     obstacles = mission.sim.obstacles if mission.sim is not None else ()
     if not obstacles:
         return None
     from ..geometry import scene_from_maps
-    from ..maps.field import load_mission_maps
     from ..mission.sim import vehicle_radius_m
 
-    _, dem = load_mission_maps(mission)
     scene = scene_from_maps(None, dem, tuple(obstacles), mission.sim.canopy_height_m)
     radius = vehicle_radius_m(mission.sim, mission.vehicle.arm_m)
 
@@ -456,8 +457,7 @@ def run(args) -> int:
     rp = rep.replanning
     if rp.enabled and rp.events:
         clr = "" if rp.min_clearance_m is None else f", min clearance {rp.min_clearance_m:.2f} m (sim truth)"
-        acts = ", ".join(dict.fromkeys(e["action"] for e in rp.event_list))
-        print(f"companion fly: replanning: {rp.events} events ({acts}){clr}")
+        print(f"companion fly: replanning: {rp.events} events ({', '.join(rp.actions)}){clr}")
     if not rep.completed:
         print(f"companion fly: NOT completed: {rep.error or rep.phase}", file=sys.stderr)
     return 0 if rep.completed else EXIT_FAILED
