@@ -102,6 +102,11 @@ class ReplanningStats:
     ignored_readings: int = 0
     mode: str | None = None
 
+    @property
+    def actions(self) -> tuple[str, ...]:
+        """The distinct actions of ``event_list``, in the order they first happened."""
+        return tuple(dict.fromkeys(e["action"] for e in self.event_list))
+
 
 @dataclass(frozen=True)
 class FlightReport:

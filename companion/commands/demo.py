@@ -90,11 +90,7 @@ def _replanning_row(rp) -> str:
         return "off"
     text = f"{rp.events} events"
     if rp.event_list:
-        acts = []
-        for e in rp.event_list:
-            if e["action"] not in acts:
-                acts.append(e["action"])
-        text += f" ({', '.join(acts)})"
+        text += f" ({', '.join(rp.actions)})"
     if rp.min_clearance_m is not None:
         text += f", min clearance {rp.min_clearance_m:.2f} m (truth)"
     return text

@@ -984,21 +984,16 @@ class FlightCore:
         returns from the rows off the rows: phantom obstacles."""
         if self._pos is None:
             return
-        R = None
         ctrl = self.ctrl
-        observing = self._controlling and getattr(ctrl, "observer", None) is not None
-        if observing:
-            est = ctrl.attitude_estimate()
-            if est is not None:
-                R = est.R_enu_flu
-        if R is None:
+        est = ctrl.attitude_estimate() if self._controlling else None
+        if est is not None and ctrl.observer is not None:
+            R = est.R_enu_flu
+        elif self._R_est is not None:
             R = self._R_est
-        if R is None and self._controlling:
+        else:
             # no observer and no ATTITUDE: the rotation the two raw vector pairs
             # define (noisy: about a degree at the paper's noise)
-            est = ctrl.attitude_estimate()
-            if est is not None:
-                R = est.R_enu_flu
+            R = None if est is None else est.R_enu_flu
         if R is not None:
             self.replanner.on_pose(t, self._pos, R)
 
