@@ -6,7 +6,9 @@ SITL's answers come back to the relay's own socket and are forwarded to the
 last companion address seen. Each datagram, in each direction independently,
 is dropped with probability ``loss`` or delayed by a uniform draw in
 ``[delay_min_s, delay_max_s]`` (so datagrams can be reordered, as on a real
-lossy radio link). Seeded: ``numpy.random.Generator(seed)``.
+lossy radio link). Seeded: ``numpy.random.Generator(seed)``. ``drop``, a
+predicate ``(direction, datagram) -> bool`` (0: to the vehicle, 1: to the
+companion), discards chosen datagrams as well (a test's targeted loss).
 
 Command line: ``python -m sitl.relay --to udpin-address --listen 127.0.0.1:PORT
 --loss 0.2 --delay-ms 0,30 --seed 1``.
@@ -28,7 +30,7 @@ class UdpRelay:
     """See the module docstring. ``start()`` runs it in a thread; ``stop()`` ends it."""
 
     def __init__(self, target: tuple[str, int], listen: tuple[str, int] = ("127.0.0.1", 0), loss: float = 0.0,
-                 delay_min_s: float = 0.0, delay_max_s: float = 0.0, seed: int = 0) -> None:
+                 delay_min_s: float = 0.0, delay_max_s: float = 0.0, seed: int = 0, drop=None) -> None:
         if not 0.0 <= loss < 1.0:
             raise ValueError("loss must be in [0, 1)")
         if not 0.0 <= delay_min_s <= delay_max_s < 10.0:
@@ -38,6 +40,7 @@ class UdpRelay:
         self.loss = float(loss)
         self.delay = (float(delay_min_s), float(delay_max_s))
         self.rng = np.random.default_rng(seed)
+        self.drop = drop
         self.n_forwarded = [0, 0]     # to the vehicle, to the companion
         self.n_dropped = [0, 0]
         self._stop = threading.Event()
@@ -102,7 +105,7 @@ class UdpRelay:
                     if peer is None:
                         continue
                     d, out, to = 1, self.front, peer
-                if self.rng.random() < self.loss:
+                if self.rng.random() < self.loss or (self.drop is not None and self.drop(d, data)):
                     self.n_dropped[d] += 1
                     continue
                 self.n_forwarded[d] += 1

@@ -542,3 +542,39 @@ def test_back_off_to_the_nearest_free_cell_not_through_the_obstacle(field):
     assert known.free.eroded[g]
     assert q[0] > 9.6                                     # east, away from the post, not across it
     assert np.hypot(*(q - p)) < 1.0                     # the margin (1.3 m) minus where it stopped
+
+
+def test_reroute_leaves_a_pocket_of_free_space_through_an_open_gap(field):
+    """Stopped between a wall across the corridor ahead and a wall behind with a
+    1.2 m gap in it: the gap (wider than twice the 0.47 m a back-off leg keeps,
+    narrower than twice the 0.94 m margin) is open to fly through but closed in
+    the eroded free space, so the free cells around the vehicle are an island.
+    Starting the route there no piece is reachable (the old behaviour: hold);
+    the start must be taken in the free space that holds the pieces left, here
+    beyond the gap, reached by a straight leg through its middle."""
+    from companion.replan import ShapedState, reroute
+
+    keep = 0.94
+    ahead = [[10.2, y, 1.5] for y in np.arange(2.7, 4.81, 0.05)]
+    behind = [[7.8, y, 1.5] for y in np.arange(2.7, 3.151, 0.05)] + \
+             [[7.8, y, 1.5] for y in np.arange(4.35, 4.81, 0.05)]
+    pts = np.array(ahead + behind)
+    st = ShapedState((9.0, CORRIDOR_Y, 1.5), (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3)
+    res = reroute(field.plan, field.known, st, 20.0, field.plan.waypoint_index_at(8.0), pts, (1.0, 0.0),
+                  0.1, 0.5, keep)
+    # the island is real: the vehicle's cell is free after erosion but cut off
+    from scipy import ndimage
+    lab, _ = ndimage.label(res.known.free.eroded)
+    here = lab[res.known.cell_of(9.0, CORRIDOR_Y)]
+    west = lab[res.known.cell_of(5.0, CORRIDOR_Y)]
+    assert here != 0 and west != 0 and here != west
+    assert res.plan is not None, res.reason
+    assert res.n_pieces >= 2
+    start = res.path_xy_m[1]
+    assert start[0] < 7.8 and abs(start[1] - CORRIDOR_Y) < 0.6 and lab[res.known.cell_of(*start)] == west
+    # the leg to it passes the gap's edges at >= 0.47 m (half the margin) and crosses no row
+    a, b = np.array([9.0, CORRIDOR_Y]), start
+    s = np.linspace(0.0, 1.0, 200)[:, None]
+    leg = a + s * (b - a)
+    d = np.hypot(*(leg[:, None, :] - pts[None, :, :2]).transpose(2, 0, 1))
+    assert d.min() >= 0.47 - 1e-9

@@ -162,3 +162,28 @@ def test_planned_length_in_chunks_is_the_length_and_the_polyline_bound():
     assert path_length_m(tr, chunk=1) == pytest.approx(whole, rel=1e-12)
     poly = float(np.sum(np.linalg.norm(np.diff(plan.p_enu_m, axis=0), axis=1)))
     assert 0.95 * poly <= whole <= 1.1 * poly
+
+
+def test_a_remembered_point_is_the_top_of_a_grounded_column():
+    """A point seen 0.6 m below the candidate's path: as a point it is 0.6 m away
+    (clear of 0.5 m); as the top of a post standing on the ground it is 0.6 m
+    away only above it, and a path passing 0.3 m beside the post's column at the
+    point's height or below is refused (hand-worked distances)."""
+    from companion.replan.rejoin import column_clearance_m
+
+    path = np.array([[0.0, 0.0, 1.5], [1.0, 0.0, 1.5], [2.0, 0.0, 0.8]])
+    top = np.array([[1.0, 0.0, 0.9]])
+    assert column_clearance_m(path[:2], top) == pytest.approx(0.6)          # straight above the top
+    beside = np.array([[2.0, 0.3, 1.2]])                                     # path at 0.8 m: below the top
+    assert column_clearance_m(path[2:], beside) == pytest.approx(0.3)
+    assert np.sqrt(((path[2] - beside[0]) ** 2).sum()) == pytest.approx(0.5)   # 0.5 m as a bare point
+    # rejoin refuses a candidate that comes down past a post's top within the clearance
+    plan = _plan()
+    st = _off_path_state()
+    ok = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 2.0, 0.5)
+    p1 = ok.plan.trajectory.sample(15.0).p
+    post_top = np.array([[p1[0], p1[1], p1[2] - 1.0]])                 # 1 m under the path, a point
+    assert rejoin(plan, st, 14.0, 3, post_top, 0.5, 2.0, 0.5).plan is not None
+    post_top_high = np.array([[p1[0], p1[1] + 0.3, p1[2] + 0.4]])     # column top above the path, 0.3 m aside
+    res = rejoin(plan, st, 14.0, 3, post_top_high, 0.5, 2.0, 0.5)
+    assert res.plan is None and res.reason == "clearance" and res.min_clearance_m <= 0.3 + 1e-9

@@ -64,6 +64,7 @@ from ..control.observer import heading_from_accel_mag
 from ..errors import CommandRejected, LinkError
 from ..link import codec
 from ..report import FlightReport, ReplanningStats, TrackingStats
+from ..replan.perception import propagated_pose
 from ..vehicle import VehicleConfig
 from .config import RunnerConfig
 from .coverage import PathCoverage
@@ -279,6 +280,9 @@ class FlightCore:
         # replanning (issue 8): the replanner flies the trajectory phase
         self.replanner = inputs.replanner
         self._R_est = None              # the vehicle's attitude estimate (ATTITUDE): poses of readings
+        self.n_unacked_effects = 0      # commands taken as done from the vehicle's state, their ACKs lost
+        self._att_t = None              # ... its time (s) and body rates (FLU rad/s)
+        self._att_w = _Z3
         self.replan_mode = None
         self.replan_events = 0
         self.min_clearance = None       # (true clearance m, t_s, obstacle index, position) from ODOMETRY
@@ -425,8 +429,14 @@ class FlightCore:
         return (self.t_s - t0) if (self.t_s is not None and t0 is not None) else 0.0
 
     def _command(self, command: int, params=(), what: str = "", retries: int | None = None, temp_retries: int = 0,
-                 optional: bool = False):
+                 optional: bool = False, effect=None):
         """Send COMMAND_LONG, wait for its COMMAND_ACK (generator; returns the ACK or None).
+
+        ``effect``: a predicate on the vehicle's reported state that shows the
+        command was carried out (say AUTO.LAND in HEARTBEAT). When it holds
+        the command is done even without its ACK: over a lossy link the ACKs
+        of every retry may be lost while the vehicle obeyed (20 % loss each
+        way: a round trip fails 36 % of the time, and eight do 0.03 %).
 
         Raises CommandRejected on a final refusal, LinkError when unanswered
         after ``retries`` sends (unless ``optional``: then returns None).
@@ -444,8 +454,13 @@ class FlightCore:
             sends += 1
             t0 = self.t_s
             while True:
-                yield lambda: self._ack is not None or self._elapsed(t0) > timeout
+                yield lambda: (self._ack is not None or self._elapsed(t0) > timeout
+                               or (effect is not None and effect()))
                 ack = self._ack
+                if ack is None and effect is not None and effect():
+                    self._ack_for = None
+                    self.n_unacked_effects += 1
+                    return None
                 if ack is not None and ack.result == mavlink.MAV_RESULT_IN_PROGRESS:
                     self._ack = None
                     t0 = self.t_s
@@ -604,7 +619,7 @@ class FlightCore:
         self.phase = "landing"
         self._controlling = False
         self.monitor.landing(self.t_s)
-        yield from self._command(mavlink.MAV_CMD_NAV_LAND, (), "land", temp_retries=10)
+        yield from self._command(mavlink.MAV_CMD_NAV_LAND, (), "land", temp_retries=10, effect=self._landing_seen)
         t_limit = self.t_s + cfg.landing_timeout_s
         t_ground = None
 
@@ -627,6 +642,13 @@ class FlightCore:
         if self.phase == "landing":
             self.phase = "done"
         self._finish()
+
+    def _landing_seen(self) -> bool:
+        """The vehicle reports AUTO.LAND (HEARTBEAT) or a landing (EXTENDED_SYS_STATE)."""
+        vs = self.vstate
+        return ((vs is not None and vs.main_mode == codec.PX4_MAIN_MODE_AUTO
+                 and vs.sub_mode == codec.PX4_SUB_MODE_AUTO_LAND)
+                or self.landed_state == mavlink.MAV_LANDED_STATE_LANDING)
 
     def _stop(self, action: str) -> None:
         """React to a violation or an interruption (``Violation.action``)."""
@@ -752,6 +774,8 @@ class FlightCore:
         if self.truth_source != "sim_truth" or self.replanner is not None:
             R = tuple(codec.decode_attitude(m).R_enu_flu.ravel().tolist())
             self._R_est = R
+            self._att_t = m.time_boot_ms * 1e-3
+            self._att_w = (m.rollspeed, -m.pitchspeed, -m.yawspeed)     # FRD -> FLU
             if self.truth_source != "sim_truth":
                 self._R = R
 
@@ -979,23 +1003,29 @@ class FlightCore:
     def _replan_pose(self, t: float) -> None:
         """The estimated pose of this frame for the rangefinder readings: the
         companion's observer while it flies the inner loop, else the vehicle's
-        ATTITUDE (its estimator's), else the raw vector pairs' rotation (never
-        the truth). Without the observer the raw pairs' degree of noise put
-        returns from the rows off the rows: phantom obstacles."""
+        ATTITUDE (its estimator's) carried to the frame's time with its body
+        rates, else the raw vector pairs' rotation (never the truth); the last
+        position carried with its velocity (``propagated_pose``). Without the
+        observer the raw pairs' degree of noise put returns from the rows off
+        the rows, and over a lossy link an attitude 80 ms old did the same."""
         if self._pos is None:
             return
         ctrl = self.ctrl
         est = ctrl.attitude_estimate() if self._controlling else None
+        dt_R, w = 0.0, _Z3
         if est is not None and ctrl.observer is not None:
             R = est.R_enu_flu
         elif self._R_est is not None:
-            R = self._R_est
+            R, dt_R, w = self._R_est, t - self._att_t, self._att_w
         else:
             # no observer and no ATTITUDE: the rotation the two raw vector pairs
             # define (noisy: about a degree at the paper's noise)
             R = None if est is None else est.R_enu_flu
         if R is not None:
-            self.replanner.on_pose(t, self._pos, R)
+            if hasattr(R, "ravel"):
+                R = R.ravel().tolist()
+            p, R = propagated_pose(t - self._nav_t, self._pos, self._vel or _Z3, dt_R, R, w)
+            self.replanner.on_pose(t, p, R)
 
     def _replan_step(self, t: float) -> RefSample:
         rp = self.replanner

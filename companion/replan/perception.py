@@ -37,6 +37,41 @@ from dataclasses import dataclass
 MAX_EXTRAPOLATION_S = 0.05
 #: Poses kept (s of history).
 HISTORY_S = 0.5
+#: ``propagated_pose`` carries a measurement at most this far (s) in time.
+MAX_PROPAGATION_S = 0.25
+
+
+def propagated_pose(dt_p: float, pos_enu_m, vel_enu_m_s, dt_R: float, R_enu_flu, rate_flu_rad_s):
+    """The pose a little later (or earlier) than its measurements: position
+    ``pos + vel * dt_p``, attitude ``R @ exp([rate]x * dt_R)`` (body rates, FLU
+    rad/s; Rodrigues). Both intervals are clipped to +-``MAX_PROPAGATION_S``.
+
+    Over a lossy link the last position and attitude messages may be several
+    frames old when a reading is placed: at 12 deg/s of yaw an attitude 80 ms
+    old turns a 5.7 m return 13 cm sideways (off a row's face: a phantom
+    obstacle). Returns (position 3-tuple, row-major 9-tuple R).
+    """
+    tp = min(max(float(dt_p), -MAX_PROPAGATION_S), MAX_PROPAGATION_S)
+    p = (pos_enu_m[0] + vel_enu_m_s[0] * tp, pos_enu_m[1] + vel_enu_m_s[1] * tp,
+         pos_enu_m[2] + vel_enu_m_s[2] * tp)
+    R = tuple(float(x) for x in R_enu_flu)
+    tr = min(max(float(dt_R), -MAX_PROPAGATION_S), MAX_PROPAGATION_S)
+    wx, wy, wz = (rate_flu_rad_s[0] * tr, rate_flu_rad_s[1] * tr, rate_flu_rad_s[2] * tr)
+    th = math.sqrt(wx * wx + wy * wy + wz * wz)
+    if not th > 1e-12 or not math.isfinite(th):
+        return p, R
+    kx, ky, kz = wx / th, wy / th, wz / th
+    s, c = math.sin(th), math.cos(th)
+    v = 1.0 - c
+    # exp([k]x th) = I + s [k]x + (1 - c) [k]x^2
+    E = (c + v * kx * kx, v * kx * ky - s * kz, v * kx * kz + s * ky,
+         v * ky * kx + s * kz, c + v * ky * ky, v * ky * kz - s * kx,
+         v * kz * kx - s * ky, v * kz * ky + s * kx, c + v * kz * kz)
+    out = []
+    for i in range(3):
+        a, b, d = R[3 * i], R[3 * i + 1], R[3 * i + 2]
+        out.extend((a * E[0] + b * E[3] + d * E[6], a * E[1] + b * E[4] + d * E[7], a * E[2] + b * E[5] + d * E[8]))
+    return p, tuple(out)
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,7 +92,9 @@ class PoseHistory:
         self._last: Pose | None = None          # the last answer (one frame's readings share a time)
 
     def add(self, t_s: float, pos_enu_m, R_enu_flu) -> None:
-        """Append a pose (times non-decreasing; an older one restarts the history).
+        """Add a pose. One older than the last (datagrams reordered by the link)
+        is inserted in time order; one older than the whole history (a restart)
+        starts it again.
 
         ``R_enu_flu``: a (3, 3) array, three rows, or a row-major 9-sequence.
         """
@@ -70,10 +107,17 @@ class PoseHistory:
             raise ValueError("R_enu_flu must have 9 elements")
         pose = Pose(float(t_s), (float(pos_enu_m[0]), float(pos_enu_m[1]), float(pos_enu_m[2])), R)
         q = self._poses
-        if q and pose.t_s < q[-1].t_s:
-            q.clear()
-        q.append(pose)
         self._last = None
+        if q and pose.t_s < q[-1].t_s:
+            if pose.t_s < q[-1].t_s - self.history_s:
+                q.clear()
+            else:
+                i = len(q) - 1
+                while i > 0 and q[i - 1].t_s > pose.t_s:
+                    i -= 1
+                q.insert(i, pose)
+                return
+        q.append(pose)
         while q[0].t_s < pose.t_s - self.history_s:
             q.popleft()
 

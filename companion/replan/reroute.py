@@ -21,7 +21,11 @@ Steps of ``reroute`` (pure: maps, plan and state in, a new plan out):
    that finds no free space, or the leg would pass closer to the obstacle
    than the vehicle is, straight away from the obstacle, or else to the
    nearest free cell such a leg reaches) to the first point of the eroded
-   free space (the vehicle stopped within the margin of the obstacle), then
+   free space (the vehicle stopped within the margin of the obstacle) *in a
+   component of it that holds a piece left to cover* (in a headland the
+   obstacle's margin and the field boundary's can close a small pocket of
+   free space around the vehicle: starting there, no piece is reachable
+   although the track it came along is open), then
    an auxiliary connection (``coverage.gridpath.aux_path``:
    straight where clear, else the shortest grid path) to each piece in
    turn; a piece that cannot be reached is skipped (counted).
@@ -39,6 +43,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from ..coverage.freespace import grid_to_world, lookup, world_to_grid
 from ..coverage.gridpath import aux_path
@@ -113,8 +118,24 @@ def free_runs(known: KnownMap, a_xy, b_xy) -> list[tuple[float, float]]:
     return runs
 
 
-def back_off(known: KnownMap, p_xy, direction_xy, max_m: float = MAX_BACK_OFF_M) -> np.ndarray | None:
-    """First point of the eroded free space from ``p_xy`` along ``-direction_xy`` (ENU m), or None."""
+def _labels_at(known: KnownMap, labels: np.ndarray, pts_xy: np.ndarray) -> np.ndarray:
+    """Component label of the eroded cell under each point (0: not eroded free or off the map)."""
+    g = world_to_grid(known.grid, np.asarray(pts_xy, dtype=float).reshape(-1, 2))
+    h = known.free.resolution_m
+    r = np.floor(g[:, 1] / h).astype(int)
+    c = np.floor(g[:, 0] / h).astype(int)
+    ok = (r >= 0) & (r < labels.shape[0]) & (c >= 0) & (c < labels.shape[1])
+    out = np.zeros(len(g), dtype=labels.dtype)
+    out[ok] = labels[r[ok], c[ok]]
+    return out
+
+
+def back_off(known: KnownMap, p_xy, direction_xy, max_m: float = MAX_BACK_OFF_M,
+             labels: np.ndarray | None = None, wanted=None) -> np.ndarray | None:
+    """First point of the eroded free space from ``p_xy`` along ``-direction_xy`` (ENU m), or None.
+
+    With ``labels`` (the eroded space's components) and ``wanted`` (a set of
+    labels), only points of those components count."""
     p = np.asarray(p_xy, dtype=float)
     u = np.asarray(direction_xy, dtype=float)
     h = known.free.resolution_m
@@ -122,6 +143,8 @@ def back_off(known: KnownMap, p_xy, direction_xy, max_m: float = MAX_BACK_OFF_M)
     pts = p - s[:, None] * u
     g = world_to_grid(known.grid, pts)
     free = lookup(known.free.eroded, h, g[:, 0], g[:, 1])
+    if labels is not None and wanted:
+        free &= np.isin(_labels_at(known, labels, pts), list(wanted))
     ok = np.flatnonzero(free)
     if len(ok) == 0:
         return None
@@ -131,10 +154,12 @@ def back_off(known: KnownMap, p_xy, direction_xy, max_m: float = MAX_BACK_OFF_M)
 
 
 def nearest_free(known: KnownMap, p_xy, points_xy: np.ndarray, keep_m: float,
-                 max_m: float = MAX_BACK_OFF_M, tries: int = 400) -> np.ndarray | None:
+                 max_m: float = MAX_BACK_OFF_M, tries: int = 400, labels: np.ndarray | None = None,
+                 wanted=None) -> np.ndarray | None:
     """The nearest centre of an eroded free cell within ``max_m`` of ``p_xy`` (ENU m)
-    reached by a straight leg clear of the obstacle points (``_segment_clear_of``);
-    None if none of the ``tries`` nearest is."""
+    reached by a straight leg clear of the obstacle points (``_segment_clear_of``)
+    and over the map's free cells (no row crossed); with ``labels``/``wanted``
+    only cells of those components. None if none of the ``tries`` nearest is."""
     grid = known.grid
     h = known.free.resolution_m
     rc = known.cell_of(float(p_xy[0]), float(p_xy[1]))
@@ -146,15 +171,29 @@ def nearest_free(known: KnownMap, p_xy, points_xy: np.ndarray, keep_m: float,
     rows, cols = np.nonzero(win)
     if len(rows) == 0:
         return None
+    if labels is not None and wanted:
+        keep = np.isin(labels[rows + r0, cols + c0], list(wanted))
+        rows, cols = rows[keep], cols[keep]
     x, y = grid.cell_to_world(rows + r0, cols + c0)
     cand = np.column_stack([x, y])
     d = np.hypot(*(cand - np.asarray(p_xy, dtype=float)).T)
     for i in np.argsort(d)[:tries]:
         if d[i] > max_m:
             break
-        if _segment_clear_of(p_xy, cand[i], points_xy, keep_m):
+        if _segment_clear_of(p_xy, cand[i], points_xy, keep_m) and _over_free_cells(known, p_xy, cand[i]):
             return cand[i]
     return None
+
+
+def _over_free_cells(known: KnownMap, a, b) -> bool:
+    """The straight leg a-b (ENU xy) stays over free (non-row, known) cells of the map,
+    sampled every half cell; the cell under ``a`` is not asked (the vehicle is there)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    h = known.free.resolution_m
+    n = max(2, int(np.ceil(np.hypot(*(b - a)) / (0.5 * h))) + 1)
+    pts = a + np.linspace(0.0, 1.0, n)[1:, None] * (b - a)
+    g = world_to_grid(known.grid, pts)
+    return bool(lookup(known.free.free, h, g[:, 0], g[:, 1]).all())
 
 
 def _snap(known: KnownMap, xy) -> np.ndarray:
@@ -241,18 +280,6 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
     def fail(reason: str) -> RerouteResult:
         return RerouteResult(None, new_known, reason, 0, 0, np.zeros((0, 2)))
 
-    start = None
-    keep_back = _min_keep(keep_m, new_known)
-    for direction in (travel, toward):
-        cand = back_off(new_known, p[:2], direction)
-        if cand is not None and _segment_clear_of(p[:2], cand, obs[:, :2], keep_back):
-            start = cand
-            break
-    if start is None:
-        start = nearest_free(new_known, p[:2], obs[:, :2], keep_back)
-    if start is None:
-        return fail(f"no free space within {MAX_BACK_OFF_M:g} m behind the vehicle or away from the obstacle")
-
     # what is left to cover, in flight order: (entry, exit) pairs (ENU xy)
     pieces: list[tuple[np.ndarray, np.ndarray]] = []
     n_forced = 0
@@ -275,6 +302,27 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
         for s0, s1 in free_runs(new_known, a, b):
             if s1 - s0 >= min_len:
                 pieces.append((a + s0 * u, a + s1 * u))
+
+    # the start: in a component of the eroded free space that holds a piece left
+    labels, _ = ndimage.label(new_known.free.eroded)
+    ends = [np.asarray(q, dtype=float) for piece in pieces for q in piece]
+    wanted = set(int(x) for x in _labels_at(new_known, labels, np.array(ends).reshape(-1, 2))) - {0} if ends else set()
+    start = None
+    keep_back = _min_keep(keep_m, new_known)
+    for direction in (travel, toward):
+        cand = back_off(new_known, p[:2], direction, labels=labels, wanted=wanted)
+        if cand is not None and _segment_clear_of(p[:2], cand, obs[:, :2], keep_back) \
+                and _over_free_cells(new_known, p[:2], cand):
+            start = cand
+            break
+    if start is None:
+        start = nearest_free(new_known, p[:2], obs[:, :2], keep_back, labels=labels, wanted=wanted,
+                             tries=2000)
+    if start is None and wanted:
+        return fail(f"none of the {len(pieces)} coverage pieces left can be reached: no free space "
+                    f"connected to them within {MAX_BACK_OFF_M:g} m of the vehicle")
+    if start is None:
+        return fail(f"no free space within {MAX_BACK_OFF_M:g} m behind the vehicle or away from the obstacle")
 
     grid = new_known.grid
     route = [p[:2], start]
