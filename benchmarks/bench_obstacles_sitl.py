@@ -287,7 +287,7 @@ def fly(index: int, obstacles: list[dict], sim_seed: int, cut_s: float, base: Pa
             tracking_max_error_m=(rep.get("tracking") or {}).get("max_error_m"),
             sim_time_s=rep.get("sim_time_s"), trajectory_duration_s=rep.get("trajectory_duration_s"),
             path_flown_fraction=rep.get("path_flown_fraction"), event_list=events)
-    if keep is not None and rec["outcome"] != "completed":
+    if keep is not None and (rec["outcome"] != "completed" or KEEP_ALL):
         dest = keep / f"flight-{index:03d}"
         if dest.exists():
             shutil.rmtree(dest)
@@ -295,6 +295,10 @@ def fly(index: int, obstacles: list[dict], sim_seed: int, cut_s: float, base: Pa
         rec["kept"] = str(dest)
     shutil.rmtree(work, ignore_errors=True)
     return rec
+
+
+#: --keep-all: keep the completed flights' directories too
+KEEP_ALL = False
 
 
 # --- summary -------------------------------------------------------------------------------------
@@ -403,6 +407,7 @@ def main() -> int:
     ap.add_argument("--cut", type=float, default=60.0,
                     help="fly the first S seconds of the trajectory (default %(default)s)")
     ap.add_argument("--json", default=None, metavar="PATH", help="write the per-flight results here")
+    ap.add_argument("--keep-all", action="store_true", help="with --keep: keep completed flights too")
     ap.add_argument("--keep", default=None, metavar="DIR",
                     help="keep the mission and out dir of every flight that did not complete here")
     ap.add_argument("--only", type=int, nargs="+", default=None, metavar="I",
@@ -420,6 +425,8 @@ def main() -> int:
         return report(rows)
     base = Path(a.mission).resolve()
     keep = Path(a.keep).resolve() if a.keep else None
+    global KEEP_ALL
+    KEEP_ALL = bool(a.keep_all)
     if keep is not None:
         keep.mkdir(parents=True, exist_ok=True)
 

@@ -578,3 +578,22 @@ def test_reroute_leaves_a_pocket_of_free_space_through_an_open_gap(field):
     leg = a + s * (b - a)
     d = np.hypot(*(leg[:, None, :] - pts[None, :, :2]).transpose(2, 0, 1))
     assert d.min() >= 0.47 - 1e-9
+
+
+def test_climb_over_a_low_post_then_meet_a_tall_one_stops_and_reroutes(field):
+    """A low post, then 5 m on a tall one (randomized SITL flight 43): after
+    going over the low one the vehicle sees the tall one beyond the APF's
+    influence range but within the trigger distance, so it may not rejoin; it
+    must fly on at the pass height until the tall one is in range, then stop
+    and re-route (it used to sit at a goal left behind until the 20 s escape
+    timeout held it)."""
+    low = Cylinder(7.0, CORRIDOR_Y + 0.5, 0.17, 1.6)
+    tall = Cylinder(12.0, CORRIDOR_Y - 0.5, 0.28, 4.0)
+    cfg = replace(ReplanConfig(), body_radius_m=0.442)
+    f = fly(field, [low, tall], cfg=cfg, t_end_s=150.0)
+    acts = _actions(f)
+    assert "hold" not in acts, [(e.action, e.detail) for e in f.events]
+    assert "climb" in acts and "reroute" in acts, acts
+    assert f.steps[-1].finished
+    keep = cfg.clearance_m + cfg.body_radius_m
+    assert f.clearance([low, tall]).min() >= keep - 0.05

@@ -671,8 +671,12 @@ class Replanner:
             if self._climb_phase == "rise":
                 goal = np.array([self._rise_xy[0], self._rise_xy[1], z_goal])
             else:
-                # beyond the farthest point seen, on the leg's line, one influence range on
-                s_goal = min(self._far_along + cfg.influence_range_m, float(B[:2] @ u))
+                # beyond the farthest point seen, on the leg's line, one influence range on,
+                # and at least that far ahead of the vehicle: with the next obstacle
+                # seen beyond the influence range but within the trigger distance no
+                # rejoin is allowed, and a goal left behind held the vehicle there
+                # (20 s, then "escape not through": randomized benchmark flight 43)
+                s_goal = min(max(self._far_along, float(P[:2] @ u)) + cfg.influence_range_m, float(B[:2] @ u))
                 xy = A[:2] + (s_goal - float(A[:2] @ u)) * u
                 goal = np.array([xy[0], xy[1], z_goal])
         v_cmd = self._apf_velocity(P, pts[near], dist[near], goal, A, u, n, ground)
