@@ -597,3 +597,25 @@ def test_climb_over_a_low_post_then_meet_a_tall_one_stops_and_reroutes(field):
     assert f.steps[-1].finished
     keep = cfg.clearance_m + cfg.body_radius_m
     assert f.clearance([low, tall]).min() >= keep - 0.05
+
+
+def test_avoiding_reference_does_not_come_down_over_remembered_points(field):
+    """The APF's goal (the plan's height) pulls an avoiding reference down; over
+    a remembered point below it (horizontally within clearance + body + margin +
+    1 s of travel) it must hold its height: the top of a low obstacle can stand
+    above every point the beams saw on its sides (randomized SITL flight 37:
+    0.24 m higher, passed at 0.35 m). Once the points are behind, it descends."""
+    from companion.replan.replanner import GOVERNOR_MARGIN_M, HOLD_HEIGHT_LAG_S
+
+    cfg = replace(ReplanConfig(), body_radius_m=0.442)
+    rp = Replanner(cfg, field.known, field.plan)
+    k = field.plan.leg_near(np.array([8.0, CORRIDOR_Y, 2.8]), np.array([1.0, 0.0]))
+    A, B, u, n = rp._leg_frame(k)
+    P = np.array([8.0, CORRIDOR_Y, 2.8])
+    goal = np.array([B[0], B[1], 1.5])
+    reach = cfg.clearance_m + 0.442 + GOVERNOR_MARGIN_M          # + the travel in HOLD_HEIGHT_LAG_S
+    for dx, held in ((reach - 0.05, True), (-(reach + 1.0 * HOLD_HEIGHT_LAG_S + 0.5), False)):
+        obs = np.array([[8.0 + dx, CORRIDOR_Y + dy, 1.4] for dy in (-0.1, 0.0, 0.1)])
+        dist = np.linalg.norm(obs - P, axis=1)
+        v = rp._apf_velocity(P, obs, dist, goal, A, u, n, 0.0)
+        assert (v[2] >= 0.0) if held else (v[2] < -0.1), (dx, v)

@@ -419,14 +419,21 @@ def test_memory_cleared_by_a_beam_through_the_point_not_beside_it():
     assert len(m) == 0
 
 
-def test_memory_clearing_follows_the_field_of_view():
-    # a fan 40 deg wide, flat (no vertical field of view), looking east from the origin
+def test_memory_clearing_follows_the_inner_field_of_view():
+    """A fan 40 deg wide (20 deg half-angle), flat, looking east: it clears within
+    half its half-angle (10 deg) only; a point 18 deg off the axis, at the edge
+    where a sensor may miss a small object, stays (hand-worked angles)."""
     fan = _beam((0.0, 0.0, 1.5), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), 8.0, math.radians(20), 0.0)
     m = _memory()
-    m.add(0.0, (3.0, 1.0, 1.5))          # 18 deg off the axis, in the fan: cleared
+    m.add(0.0, (3.0, 0.45, 1.5))         # 8.5 deg off the axis: cleared
+    m.add(0.0, (3.0, 1.0, 1.5))          # 18 deg off: in the fan's edge, kept
     m.add(0.0, (3.0, 1.2, 1.5))          # 22 deg off: outside
     m.add(0.0, (3.0, 0.0, 1.8))          # above the flat fan
-    assert m.clear_beam(fan) == 1 and len(m) == 2
+    assert m.clear_beam(fan) == 1 and len(m) == 3
+    # a short-lived candidate (a wide beam's possible return position) at 18 deg
+    # is cleared by the whole field of view
+    m.add(0.0, (3.0, -1.0, 1.5), 1.0)
+    assert m.clear_beam(fan) == 1 and len(m) == 3
 
 
 def test_memory_bounded_and_local():
