@@ -599,9 +599,15 @@ class VelocityAidedObserver:
             R = _orthonormalise(R)
         self.R = R
         # --- translational propagation and the tilt integral ---------------------------
-        sb, ub = self._body_vectors(t_s, ax, ay, az)
-        fw = _apply(R, *sb)
-        uw = _apply(R, *ub)
+        if self.paper:
+            sbx, sby, sbz = 0.0, 0.0, self._f_model / self.m
+            ubx, uby, ubz = _E3
+        else:
+            sbx, sby, sbz = ax, ay, az
+            ubx, uby, ubz = self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+        fw = (r0 * sbx + r1 * sby + r2 * sbz, r3 * sbx + r4 * sby + r5 * sbz, r6 * sbx + r7 * sby + r8 * sbz)
+        uw = (r0 * ubx + r1 * uby + r2 * ubz, r3 * ubx + r4 * uby + r5 * ubz, r6 * ubx + r7 * uby + r8 * ubz)
         cx, cy, cz = self.c
         a0 = 0.5 * (self._fw[0] + fw[0]) + cx
         a1 = 0.5 * (self._fw[1] + fw[1]) + cy
@@ -688,24 +694,29 @@ class VelocityAidedObserver:
         self.fix_interval_s = dtau
         py = (float(pos[0]), float(pos[1]), float(pos[2]))
         vy = (float(vel[0]), float(vel[1]), float(vel[2]))
-        at = self._at(tau)
-        if at is None:                       # older than the history: cannot be placed
-            self.n_late_fixes += 1
-            return
-        i, w = at
-        At = self._interp(i, w, 4)
+        hist = self._hist
+        last = hist[-1]
+        if tau >= last[0]:                   # measured at the latest frame (no latency): that entry
+            i, w = len(hist) - 1, 0.0
+            pt, vt, At = last[2], last[3], last[4]
+        else:
+            at = self._at(tau)
+            if at is None:                   # older than the history: cannot be placed
+                self.n_late_fixes += 1
+                return
+            i, w = at
+            At = self._interp(i, w, 4)
+            pt, vt = self._interp(i, w, 2), self._interp(i, w, 3)
         self._noise_step(dtau, py, vy, At)
         sp, sv = self.noise_std(0)
         # --- translational filter: innovation at tau, carried to every later frame -----
         (k00, k01), (k10, k11), (k20, k21) = self._nav_gains(dtau, sp, sv)        # x and y
         (z00, z01), (z10, z11), (z20, z21) = self._nav_gains(dtau, *self.noise_std(1))   # z
-        pt, vt = self._interp(i, w, 2), self._interp(i, w, 3)
         ep0, ep1, ep2 = py[0] - pt[0], py[1] - pt[1], py[2] - pt[2]
         ev0, ev1, ev2 = vy[0] - vt[0], vy[1] - vt[1], vy[2] - vt[2]
         dp0, dp1, dp2 = k00 * ep0 + k01 * ev0, k00 * ep1 + k01 * ev1, z00 * ep2 + z01 * ev2
         dv0, dv1, dv2 = k10 * ep0 + k11 * ev0, k10 * ep1 + k11 * ev1, z10 * ep2 + z11 * ev2
         dc0, dc1, dc2 = k20 * ep0 + k21 * ev0, k20 * ep1 + k21 * ev1, z20 * ep2 + z21 * ev2
-        hist = self._hist
         for j in range(i + (1 if w > 0.0 else 0), len(hist)):
             tj, Sj, pj, vj, Aj = hist[j]
             T = tj - tau
