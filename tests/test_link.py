@@ -437,7 +437,8 @@ def _random_fields(rng, msg_class):
 
 
 @pytest.mark.parametrize("cls", [mavlink.MAVLink_highres_imu_message, mavlink.MAVLink_local_position_ned_message,
-                                 mavlink.MAVLink_odometry_message, mavlink.MAVLink_distance_sensor_message])
+                                 mavlink.MAVLink_odometry_message, mavlink.MAVLink_distance_sensor_message,
+                                 mavlink.MAVLink_attitude_message])
 def test_fast_decoders_match_pymavlink(cls):
     rng = np.random.default_rng(7)
     mav = _vehicle_mav()

@@ -53,23 +53,32 @@ class PathCoverage:
         k1 = k1[order]
         starts = np.flatnonzero(np.r_[True, k1[1:] != k1[:-1]])
         ends = np.r_[starts[1:], len(k1)]
-        self._slices = dict(zip(k1[starts].tolist(), zip(starts.tolist(), ends.tolist())))
+        # per cell: the (index, x, y) of its points not flown yet, as Python floats (a visit
+        # looks at a few points: plain floats beat numpy slices there)
+        self._todo = {int(k): [(j, float(self._x[j]), float(self._y[j])) for j in range(a, b)]
+                      for k, a, b in zip(k1[starts].tolist(), starts.tolist(), ends.tolist())}
         self.flown = np.zeros(len(self.points), dtype=bool)
         self._r2 = self.radius_m ** 2
 
     def visit(self, x_m: float, y_m: float) -> None:
         """The vehicle is at (x, y) (ENU m)."""
         cx, cy = math.floor(x_m / self._cell), math.floor(y_m / self._cell)
-        sl, r2 = self._slices, self._r2
+        todo, r2 = self._todo, self._r2
         for dx in (-1, 0, 1):
             base = (cx + dx) * _KEY_STRIDE + cy
             for dy in (-1, 0, 1):
-                se = sl.get(base + dy)
-                if se is None:
+                pts = todo.get(base + dy)
+                if not pts:
                     continue
-                a, b = se
-                d2 = (self._x[a:b] - x_m) ** 2 + (self._y[a:b] - y_m) ** 2
-                self.flown[a:b] |= d2 <= r2
+                left = []
+                for p in pts:
+                    ex, ey = p[1] - x_m, p[2] - y_m
+                    if ex * ex + ey * ey <= r2:
+                        self.flown[p[0]] = True
+                    else:
+                        left.append(p)
+                if len(left) < len(pts):
+                    todo[base + dy] = left
 
     def fraction(self) -> float:
         return float(np.count_nonzero(self.flown)) / len(self.flown)
