@@ -36,6 +36,7 @@ from .coverage.transit import build_transit_tree
 from .coverage.waypoints import Waypoints, run_duration_s, run_waypoints, waypoints_along
 from .energy import EnergyConfig, EnergyEstimate, cruise_power_w, flight_energy, leg_energy_j
 from .errors import PlanError
+from .maps.grid import mask_centroid_rc
 from .vehicle import GRAVITY_M_S2, VehicleConfig
 
 #: Mission items of a sortie besides its way-points: take-off, ROI, return and the
@@ -120,8 +121,7 @@ def central_launch_xy(grid, free, bg, route_start_g: np.ndarray) -> np.ndarray:
     centroid of the free cells, in the component of the route (so every corridor
     is at most about half the field away)."""
     h = free.resolution_m
-    r, c = np.nonzero(grid.free)
-    rc = np.array([r.mean(), c.mean()])
+    rc = np.array(mask_centroid_rc(grid.free))
     comp = bg.components_of(np.array([int(route_start_g[1] // h)]), np.array([int(route_start_g[0] // h)]))[0]
     rows, cols = free.eroded.shape
     rad = 16

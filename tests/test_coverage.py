@@ -356,6 +356,44 @@ def test_vectorised_visibility_matches_segment_test():
         assert list(visible_from(fs, a, targets)) == [is_clear(fs, a, b) for b in targets]
 
 
+def test_farthest_visible_is_the_last_clear_segment_of_a_per_segment_check():
+    """The strided pre-test must never drop a clear segment nor keep a blocked one:
+    single-cell obstacles that long segments' every-16th samples step over."""
+    from companion.coverage.freespace import FreeSpace
+    from companion.coverage.gridpath import _STRIDE, _sample_counts, _samples_clear, farthest_visible
+
+    def clear(mask, a, b):        # independent: every half cell, nearest cell, off-map blocked
+        n = int(np.ceil(np.hypot(*(b - a)) / (RES / 2))) + 1
+        p = a + (np.arange(n) / max(n - 1, 1))[:, None] * (b - a)
+        r, c = np.floor(p[:, 1] / RES).astype(int), np.floor(p[:, 0] / RES).astype(int)
+        inside = (r >= 0) & (r < mask.shape[0]) & (c >= 0) & (c < mask.shape[1])
+        return bool(inside.all() and mask[r, c].all())
+
+    rng = np.random.default_rng(11)
+    mask = rng.random((120, 120)) > 0.003
+    fs = FreeSpace(eroded=mask, free=mask, resolution_m=RES, threshold_m=RES)
+    stepped_over = 0
+    for _ in range(200):
+        a = rng.random(2) * 12
+        targets = rng.random((int(rng.integers(1, 40)), 2)) * 12.5 - 0.25
+        ok = [clear(mask, a, b) for b in targets]
+        want = int(np.flatnonzero(ok)[-1]) if any(ok) else -1
+        assert farthest_visible(fs, a, targets) == want
+        coarse = _samples_clear(fs, a, targets, _sample_counts(fs, a, targets), _STRIDE)
+        stepped_over += int(np.sum(coarse & ~np.array(ok)))
+    assert stepped_over > 100     # blocked segments that only the full test catches
+
+
+def test_mask_centroid_is_the_mean_of_the_true_cells():
+    from companion.maps.grid import mask_centroid_rc
+
+    rng = np.random.default_rng(5)
+    mask = rng.random((37, 53)) < 0.3
+    r, c = np.nonzero(mask)
+    assert mask_centroid_rc(mask) == (r.mean(), c.mean())
+    assert all(np.isnan(mask_centroid_rc(np.zeros((3, 4), bool))))
+
+
 def test_lcas_mission_flies_each_detected_corridor_once_inside_free_space():
     """The bundled real SLAM map: rows from sparse laser hits, spacing detected.
 

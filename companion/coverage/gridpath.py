@@ -22,7 +22,11 @@ cell. Otherwise:
    pulling): from each kept point, a far visible point is found by testing
    many candidates per vectorised call (the next points, then points
    64, 128, 256, ... ahead, then evenly spaced probes in the last gap), a
-   few calls per kept point (:func:`simplify`). Consecutive cell centres see
+   few calls per kept point (:func:`simplify`). Each call only needs the
+   farthest visible candidate (:func:`farthest_visible`): every 16th sample
+   of every candidate first, then the survivors in full from the far end,
+   so the many visible candidates before it are never sampled in full.
+   Consecutive cell centres see
    each other (a diagonal step's samples at 1/3 and 2/3 lie in its two
    cells), so every kept point sees the next one.
 """
@@ -41,6 +45,9 @@ _SQRT2 = float(np.sqrt(2.0))
 _WINDOW = 64
 #: points tested at once when the string pulling narrows a gap
 _PROBES = 32
+#: farthest_visible: every _STRIDE-th sample first, then _BATCH segments in full at a time
+_STRIDE = 16
+_BATCH = 4
 #: cells this close to the edge of the eroded space cost _EDGE_COST times more to cross
 _EDGE_CELLS = 2
 _EDGE_COST = 4.0
@@ -61,16 +68,57 @@ def visible_from(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> np.ndar
     Samples every half cell or closer, both ends included, for all targets
     in one vectorised lookup.
     """
-    h = free.resolution_m
     a = np.asarray(a, float)
     targets = np.asarray(targets, float).reshape(-1, 2)
-    n = np.ceil(np.hypot(*(targets - a).T) / (h / 2)).astype(np.int64) + 1
-    seg = np.repeat(np.arange(len(targets)), n)
-    first = np.concatenate([[0], np.cumsum(n)[:-1]])
-    s = (np.arange(len(seg)) - first[seg]) / np.maximum(n[seg] - 1, 1)
+    return _samples_clear(free, a, targets, _sample_counts(free, a, targets))
+
+
+def farthest_visible(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> int:
+    """Largest j such that the segment a-targets[j] (G, m) is clear (:func:`visible_from`), or -1.
+
+    The same answer as ``flatnonzero(visible_from(free, a, targets))[-1]``
+    at a fraction of the samples: every ``_STRIDE``-th sample of every
+    segment is tested first (a subset of the very same sample points, so a
+    segment failing there is blocked), then the segments that pass are
+    tested in full from the last one backwards, ``_BATCH`` at a time, until
+    one is clear. The visible segments before it are never sampled in full.
+    """
+    a = np.asarray(a, float)
+    targets = np.asarray(targets, float).reshape(-1, 2)
+    if len(targets) == 0:
+        return -1
+    n = _sample_counts(free, a, targets)
+    cand = np.flatnonzero(_samples_clear(free, a, targets, n, _STRIDE))
+    for hi in range(len(cand), 0, -_BATCH):
+        idx = cand[max(0, hi - _BATCH): hi]
+        ok = np.flatnonzero(_samples_clear(free, a, targets[idx], n[idx]))
+        if len(ok):
+            return int(idx[ok[-1]])
+    return -1
+
+
+def _sample_counts(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(k,) samples of each segment a-targets[j]: every half cell or closer, both ends included."""
+    return np.ceil(np.hypot(*(targets - a).T) / (free.resolution_m / 2)).astype(np.int64) + 1
+
+
+def _samples_clear(free: FreeSpace, a: np.ndarray, targets: np.ndarray, n: np.ndarray,
+                   stride: int = 1) -> np.ndarray:
+    """(k,) bool: samples ``0, stride, 2 stride, ... <= n[j] - 1`` of the ``n[j]`` evenly
+    spaced samples of each segment a-targets[j] are all in eroded space (stride 1: all
+    of them). A sample's position does not depend on the stride (same arithmetic)."""
+    m = n if stride == 1 else (n - 1) // stride + 1
+    seg = np.repeat(np.arange(len(targets)), m)
+    if len(seg) == 0:
+        return np.zeros(0, dtype=bool)
+    first = np.concatenate([[0], np.cumsum(m)[:-1]])
+    j = np.arange(len(seg)) - first[seg]
+    if stride != 1:
+        j *= stride
+    s = j / np.maximum(n[seg] - 1, 1)
     p = a + s[:, None] * (targets[seg] - a)
     ok = free.raster().sample_points(p[:, 0], p[:, 1])
-    return np.logical_and.reduceat(ok, first) if len(seg) else np.zeros(0, dtype=bool)
+    return np.logical_and.reduceat(ok, first)
 
 
 def cell_graph(rr: np.ndarray, cc: np.ndarray, neighbours=None,
@@ -158,9 +206,8 @@ def simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
         near = np.arange(i + 1, min(n, i + 1 + _WINDOW))
         far = i + _WINDOW * 2 ** np.arange(1, 40)
         cand = np.unique(np.concatenate([near, far[far < n], [n - 1]]))
-        vis = visible_from(free, pts[i], pts[cand])
-        vis[0] = True                               # pts[i + 1] is visible by assumption
-        k = int(np.flatnonzero(vis)[-1])
+        # pts[i + 1] (cand[0]) is visible by assumption
+        k = max(farthest_visible(free, pts[i], pts[cand]), 0)
         lo = int(cand[k])
         hi = int(cand[k + 1]) if k + 1 < len(cand) else n
         while hi - lo > 1:
@@ -168,9 +215,8 @@ def simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
             probe = probe[(probe > lo) & (probe < hi)]
             if len(probe) == 0:
                 break
-            v = visible_from(free, pts[i], pts[probe])
-            if v.any():
-                j = int(np.flatnonzero(v)[-1])
+            j = farthest_visible(free, pts[i], pts[probe])
+            if j >= 0:
                 lo = int(probe[j])
                 hi = int(probe[j + 1]) if j + 1 < len(probe) else hi
             else:
