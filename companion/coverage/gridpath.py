@@ -108,16 +108,24 @@ def _samples_clear(free: FreeSpace, a: np.ndarray, targets: np.ndarray, n: np.nd
     spaced samples of each segment a-targets[j] are all in eroded space (stride 1: all
     of them). A sample's position does not depend on the stride (same arithmetic)."""
     m = n if stride == 1 else (n - 1) // stride + 1
-    seg = np.repeat(np.arange(len(targets)), m)
-    if len(seg) == 0:
+    ends = np.cumsum(m)
+    total = int(ends[-1]) if len(ends) else 0
+    if total == 0:
         return np.zeros(0, dtype=bool)
-    first = np.concatenate([[0], np.cumsum(m)[:-1]])
-    j = np.arange(len(seg)) - first[seg]
+    first = ends - m
+    seg = np.repeat(np.arange(len(m)), m)
+    j = np.arange(total)
+    j -= first[seg]
     if stride != 1:
         j *= stride
-    s = j / np.maximum(n[seg] - 1, 1)
-    p = a + s[:, None] * (targets[seg] - a)
-    ok = free.raster().sample_points(p[:, 0], p[:, 1])
+    s = j / np.maximum(n - 1, 1)[seg]
+    # a + s (target - a) per axis (the same arithmetic as one segment at a time)
+    d = targets - a
+    px = s * d[:, 0].take(seg)
+    px += a[0]
+    s *= d[:, 1].take(seg)
+    s += a[1]
+    ok = free.raster().sample_xy(px, s)
     return np.logical_and.reduceat(ok, first)
 
 
