@@ -384,6 +384,51 @@ def test_farthest_visible_is_the_last_clear_segment_of_a_per_segment_check():
     assert stepped_over > 100     # blocked segments that only the full test catches
 
 
+def test_mask_graph_and_min_pool_match_their_reference_constructions():
+    """The grid-of-node-numbers graph is the searchsorted graph of the same cells (same
+    CSR arrays, so Dijkstra breaks ties the same way); min-pooling is the 4-D ``all``."""
+    from companion.coverage.freespace import min_pool
+    from companion.coverage.gridpath import NEIGHBOURS_4, cell_graph, mask_graph
+
+    rng = np.random.default_rng(9)
+    mask = rng.random((41, 57)) > 0.3
+    for kw in ({}, {"neighbours": NEIGHBOURS_4, "edge_cells": 0}):
+        g1, order = cell_graph(*np.nonzero(mask), **kw)
+        g2, rows, cols = mask_graph(mask, **kw)
+        assert np.array_equal(order, np.arange(len(order)))
+        assert np.array_equal(np.column_stack([rows, cols]), np.column_stack(np.nonzero(mask)))
+        for attr in ("indptr", "indices", "data"):
+            assert np.array_equal(getattr(g1, attr), getattr(g2, attr)), (kw, attr)
+    for f in (1, 2, 3):
+        R, C = -(-mask.shape[0] // f), -(-mask.shape[1] // f)
+        padded = np.zeros((R * f, C * f), dtype=bool)
+        padded[: mask.shape[0], : mask.shape[1]] = mask
+        assert np.array_equal(min_pool(mask, f), padded.reshape(R, f, C, f).all(axis=(1, 3))), f
+
+
+def test_cell_graph_neighbour_lookups_agree(monkeypatch):
+    """The grid-of-node-numbers lookup and the searchsorted lookup give the same CSR
+    arrays for shuffled, offset cell lists (both ways of cell_graph)."""
+    from companion.coverage import gridpath
+
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        mask = rng.random((int(rng.integers(1, 30)), int(rng.integers(1, 30)))) > rng.random()
+        rr, cc = np.nonzero(mask)
+        if len(rr) == 0:
+            continue
+        perm = rng.permutation(len(rr))
+        rr, cc = rr[perm] + rng.integers(0, 50), cc[perm] + rng.integers(0, 50)
+        for kw in ({}, {"neighbours": gridpath.NEIGHBOURS_4, "edge_cells": 0}):
+            monkeypatch.setattr(gridpath, "_DENSE_BOX", 10**9)
+            g1, o1 = gridpath.cell_graph(rr, cc, **kw)
+            monkeypatch.setattr(gridpath, "_DENSE_BOX", 0)
+            g2, o2 = gridpath.cell_graph(rr, cc, **kw)
+            assert np.array_equal(o1, o2)
+            for attr in ("indptr", "indices", "data"):
+                assert np.array_equal(getattr(g1, attr), getattr(g2, attr))
+
+
 def test_mask_centroid_is_the_mean_of_the_true_cells():
     from companion.maps.grid import mask_centroid_rc
 

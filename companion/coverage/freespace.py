@@ -177,6 +177,22 @@ def pool(mask: np.ndarray, f: int) -> np.ndarray:
     return acc.astype(np.int32) * 2 >= f * f
 
 
+def min_pool(mask: np.ndarray, f: int) -> np.ndarray:
+    """True where the whole ``f x f`` block is True (the mask padded with False to
+    whole blocks): ``f^2`` strided slice ANDs, not a reduction over a 4-D view."""
+    if f <= 1:
+        return mask.copy()
+    m = np.zeros((-(-mask.shape[0] // f) * f, -(-mask.shape[1] // f) * f), dtype=bool)
+    m[: mask.shape[0], : mask.shape[1]] = mask
+    rows = m[0::f].copy()
+    for i in range(1, f):
+        rows &= m[i::f]
+    out = rows[:, 0::f].copy()
+    for j in range(1, f):
+        out &= rows[:, j::f]
+    return out
+
+
 def bbox_cells(mask: np.ndarray) -> tuple[int, int, int, int]:
     """Half-open ``(r0, r1, c0, c1)`` bounding box of the True cells of ``mask`` (zeros if none)."""
     rows = np.flatnonzero(mask.any(axis=1))

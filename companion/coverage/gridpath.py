@@ -51,6 +51,9 @@ _BATCH = 4
 #: cells this close to the edge of the eroded space cost _EDGE_COST times more to cross
 _EDGE_CELLS = 2
 _EDGE_COST = 4.0
+#: cell_graph looks neighbours up in a grid of node numbers over the cells' bounding box
+#: when it has at most this many cells per listed cell, else by searchsorted
+_DENSE_BOX = 16
 #: 8-neighbourhood offsets (dr, dc) and step lengths (cells).
 _NEIGHBOURS = ((0, 1, 1.0), (0, -1, 1.0), (1, 0, 1.0), (-1, 0, 1.0),
                (1, 1, _SQRT2), (1, -1, _SQRT2), (-1, 1, _SQRT2), (-1, -1, _SQRT2))
@@ -134,8 +137,9 @@ def cell_graph(rr: np.ndarray, cc: np.ndarray, neighbours=None,
     """Directed CSR graph of 8-connected grid cells given by their rows and columns.
 
     The cells are sorted by linear index and each one's eight neighbours are
-    found by ``searchsorted``, so only the listed cells are touched (a long
-    diagonal corridor costs its own cells, not its bounding box). Edge
+    found in a grid of node numbers over their bounding box when the cells
+    fill enough of it, else by ``searchsorted``, so a long diagonal corridor
+    costs its own cells, not its bounding box. Edge
     weight: the step (1 or sqrt 2 cells) times the cost of the cell stepped
     into: ``_EDGE_COST`` within ``edge_cells`` (default ``_EDGE_CELLS``) of a
     cell that is not listed, 1 elsewhere (cell_path's doc). ``neighbours``:
@@ -143,17 +147,55 @@ def cell_graph(rr: np.ndarray, cc: np.ndarray, neighbours=None,
     and the order that sorts the input cells into node order.
     """
     neighbours = _NEIGHBOURS if neighbours is None else neighbours
-    edge_cells = _EDGE_CELLS if edge_cells is None else edge_cells
     width = int(cc.max()) + 3
     lin = (rr.astype(np.int64) + 1) * width + (cc.astype(np.int64) + 1)
     order = np.argsort(lin, kind="stable")
     lin = lin[order]
     n = len(lin)
     nb = np.empty((n, len(neighbours)), dtype=np.int64)
+    r0, c0 = int(rr.min()), int(cc.min())
+    wl = int(cc.max()) - c0 + 3
+    box = (int(rr.max()) - r0 + 3) * wl
+    if box <= _DENSE_BOX * n:
+        # a grid of node numbers over the bounding box (and a ring): one lookup per neighbour
+        ids = np.full(box, -1, dtype=np.int32 if n < 2**31 else np.int64)
+        local = (rr[order].astype(np.int64) - (r0 - 1)) * wl + (cc[order].astype(np.int64) - (c0 - 1))
+        ids[local] = np.arange(n)
+        for k, (dr, dc, _) in enumerate(neighbours):
+            nb[:, k] = ids.take(local + (dr * wl + dc))
+    else:
+        for k, (dr, dc, _) in enumerate(neighbours):
+            t = lin + dr * width + dc
+            pos = np.minimum(np.searchsorted(lin, t), n - 1)
+            nb[:, k] = np.where(lin[pos] == t, pos, -1)
+    return _graph_of(nb, neighbours, edge_cells), order
+
+
+def mask_graph(mask: np.ndarray, neighbours=None, edge_cells: int | None = None):
+    """:func:`cell_graph` of the True cells of a 2-D mask, nodes in ``np.nonzero`` order.
+
+    The same graph as ``cell_graph(*np.nonzero(mask), ...)`` (whose order is then
+    the identity), its neighbours looked up in a grid of node numbers instead
+    of by ``searchsorted``: for masks whose cells fill their bounding box.
+    Returns the graph and the nodes' rows and columns.
+    """
+    neighbours = _NEIGHBOURS if neighbours is None else neighbours
+    rows, cols = np.nonzero(mask)
+    n = len(rows)
+    width = mask.shape[1] + 2
+    ids = np.full((mask.shape[0] + 2) * width, -1, dtype=np.int32 if n < 2**31 else np.int64)
+    lin = (rows + 1) * width + (cols + 1)
+    ids[lin] = np.arange(n)
+    nb = np.empty((n, len(neighbours)), dtype=np.int64)
     for k, (dr, dc, _) in enumerate(neighbours):
-        t = lin + dr * width + dc
-        pos = np.minimum(np.searchsorted(lin, t), n - 1)
-        nb[:, k] = np.where(lin[pos] == t, pos, -1)
+        nb[:, k] = ids.take(lin + (dr * width + dc))
+    return _graph_of(nb, neighbours, edge_cells), rows, cols
+
+
+def _graph_of(nb: np.ndarray, neighbours, edge_cells: int | None) -> csr_matrix:
+    """CSR graph from each node's neighbour nodes (-1: none), weights as :func:`cell_graph`."""
+    edge_cells = _EDGE_CELLS if edge_cells is None else edge_cells
+    n = len(nb)
     ok = nb >= 0
     if edge_cells > 0:
         inner = ok.all(axis=1)
@@ -165,7 +207,7 @@ def cell_graph(rr: np.ndarray, cc: np.ndarray, neighbours=None,
     step = np.array([s for _, _, s in neighbours])
     w = step[None, :] * cost[np.where(ok, nb, 0)]
     indptr = np.concatenate([[0], np.cumsum(ok.sum(axis=1))])
-    return csr_matrix((w[ok], nb[ok], indptr), shape=(n, n)), order
+    return csr_matrix((w[ok], nb[ok], indptr), shape=(n, n))
 
 
 def cell_path(rr: np.ndarray, cc: np.ndarray, src: tuple[int, int], dst: tuple[int, int]) -> np.ndarray | None:

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
-from .freespace import FreeSpace
-from .gridpath import NEIGHBOURS_4, aux_path, cell_graph, simplify, visible_from
+from .freespace import FreeSpace, min_pool
+from .gridpath import NEIGHBOURS_4, aux_path, mask_graph, simplify, visible_from
 
 #: pooled cell edge (m) aimed at; at least one fine cell
 POOL_M = 0.2
@@ -112,18 +112,13 @@ def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>
     p = max(1, int(round(POOL_M / h)))
     r0, r1, c0, c1 = free.bbox_cells
     win = free.eroded[r0:r1, c0:c1]
-    R, C = -(-win.shape[0] // p), -(-win.shape[1] // p)
-    padded = np.zeros((R * p, C * p), dtype=bool)
-    padded[: win.shape[0], : win.shape[1]] = win
-    pooled = padded.reshape(R, p, C, p).all(axis=(1, 3))
-    rows, cols = np.nonzero(pooled)
-    width = C + 2
-    if len(rows) == 0:
+    pooled = min_pool(win, p)
+    width = pooled.shape[1] + 2
+    if not pooled.any():
         empty = np.zeros(0, dtype=np.int64)
         return TransitTree(free, np.asarray(root_g, float), p, r0, c0, empty, width, empty, empty,
                            np.zeros(0), empty, source)
-    graph, order = cell_graph(rows, cols, neighbours=NEIGHBOURS_4, edge_cells=0)
-    rows, cols = rows[order], cols[order]
+    graph, rows, cols = mask_graph(pooled, neighbours=NEIGHBOURS_4, edge_cells=0)
     lin = rows * width + cols
     tree = TransitTree(free, np.asarray(root_g, float), p, r0, c0, lin, width, rows, cols,
                        np.full(len(rows), np.inf), np.full(len(rows), -9999), source)
