@@ -195,19 +195,32 @@ def mask_graph(mask: np.ndarray, neighbours=None, edge_cells: int | None = None)
 def _graph_of(nb: np.ndarray, neighbours, edge_cells: int | None) -> csr_matrix:
     """CSR graph from each node's neighbour nodes (-1: none), weights as :func:`cell_graph`."""
     edge_cells = _EDGE_CELLS if edge_cells is None else edge_cells
-    n = len(nb)
+    n, k = nb.shape
     ok = nb >= 0
     if edge_cells > 0:
-        inner = ok.all(axis=1)
+        inner = _rows_all(ok)
         for _ in range(edge_cells - 1):
-            inner = inner & np.where(ok, inner[np.where(ok, nb, 0)], False).all(axis=1)
+            inner = inner & _rows_all(np.where(ok, inner[np.where(ok, nb, 0)], False))
         cost = np.where(inner, 1.0, _EDGE_COST)
     else:
         cost = np.ones(n)
     step = np.array([s for _, _, s in neighbours])
-    w = step[None, :] * cost[np.where(ok, nb, 0)]
-    indptr = np.concatenate([[0], np.cumsum(ok.sum(axis=1))])
-    return csr_matrix((w[ok], nb[ok], indptr), shape=(n, n))
+    to = nb[ok]
+    w = np.broadcast_to(step, (n, k))[ok] * cost[to]
+    per_row = ok[:, 0].astype(np.int64)
+    for j in range(1, k):
+        per_row += ok[:, j]
+    indptr = np.concatenate([[0], np.cumsum(per_row)])
+    return csr_matrix((w, to, indptr), shape=(n, n))
+
+
+def _rows_all(b: np.ndarray) -> np.ndarray:
+    """``b.all(axis=1)`` for an (n, k) bool array; k = 4 or 8 read as one integer per row
+    (a reduction over so short an axis is slow)."""
+    if b.shape[1] in (4, 8) and b.flags.c_contiguous:
+        dt = np.uint32 if b.shape[1] == 4 else np.uint64
+        return b.view(dt).ravel() == np.ones(b.shape[1], dtype=np.uint8).view(dt)[0]
+    return b.all(axis=1)
 
 
 def cell_path(rr: np.ndarray, cc: np.ndarray, src: tuple[int, int], dst: tuple[int, int]) -> np.ndarray | None:
@@ -255,14 +268,16 @@ def simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
     while i < n - 1:
         near = np.arange(i + 1, min(n, i + 1 + _WINDOW))
         far = i + _WINDOW * 2 ** np.arange(1, 40)
-        cand = np.unique(np.concatenate([near, far[far < n], [n - 1]]))
+        cand = np.concatenate([near, far[far < n]])      # sorted, distinct
+        if cand[-1] != n - 1:
+            cand = np.append(cand, n - 1)
         # pts[i + 1] (cand[0]) is visible by assumption
         k = max(farthest_visible(free, pts[i], pts[cand]), 0)
         lo = int(cand[k])
         hi = int(cand[k + 1]) if k + 1 < len(cand) else n
         while hi - lo > 1:
-            probe = np.unique(np.linspace(lo, hi, _PROBES + 2)[1:-1].astype(np.int64))
-            probe = probe[(probe > lo) & (probe < hi)]
+            probe = np.linspace(lo, hi, _PROBES + 2)[1:-1].astype(np.int64)     # non-decreasing
+            probe = probe[(probe > lo) & (probe < hi) & np.append(True, probe[1:] != probe[:-1])]
             if len(probe) == 0:
                 break
             j = farthest_visible(free, pts[i], pts[probe])

@@ -36,6 +36,16 @@ POOL_M = 0.2
 _SEARCH = 4
 
 
+def _search_offsets() -> tuple[np.ndarray, np.ndarray]:
+    """(dr, dc) pooled-cell offsets within ``_SEARCH``, nearest first (stable ties)."""
+    dr, dc = np.meshgrid(np.arange(-_SEARCH, _SEARCH + 1), np.arange(-_SEARCH, _SEARCH + 1), indexing="ij")
+    order = np.argsort((dr * dr + dc * dc).ravel(), kind="stable")
+    return dr.ravel()[order], dc.ravel()[order]
+
+
+_DR, _DC = _search_offsets()
+
+
 @dataclass(frozen=True, eq=False)
 class TransitTree:
     """Shortest-path tree of the pooled eroded space from ``root_g`` (module doc)."""
@@ -64,10 +74,8 @@ class TransitTree:
         cell = self.pool * self.free.resolution_m
         pr = int((q_g[1] - self.r0 * self.free.resolution_m) // cell)
         pc = int((q_g[0] - self.c0 * self.free.resolution_m) // cell)
-        dr, dc = np.meshgrid(np.arange(-_SEARCH, _SEARCH + 1), np.arange(-_SEARCH, _SEARCH + 1), indexing="ij")
-        order = np.argsort((dr * dr + dc * dc).ravel(), kind="stable")
-        r = pr + dr.ravel()[order]
-        c = pc + dc.ravel()[order]
+        r = pr + _DR
+        c = pc + _DC
         t = r * self.width + c
         pos = np.minimum(np.searchsorted(self.lin, t), len(self.lin) - 1)
         hit = (self.lin[pos] == t) & (r >= 0) & (c >= 0)
@@ -93,9 +101,14 @@ class TransitTree:
         node = self._attach(q_g)
         if node is None:
             return aux_path(self.free, self.root_g, q_g, self.source)
+        pred = self.__dict__.get("_pred_list")
+        if pred is None:        # walked in Python ints: a numpy scalar per step costs more
+            pred = self.__dict__.setdefault("_pred_list", self.pred.tolist())
         chain = [node]
-        while self.pred[chain[-1]] >= 0:
-            chain.append(int(self.pred[chain[-1]]))
+        p = pred[node]
+        while p >= 0:
+            chain.append(p)
+            p = pred[p]
         chain = np.array(chain[::-1])
         centres = self._centre_g(self.rows[chain], self.cols[chain])
         # string pulling on the pooled mask first (pooled cells are wholly eroded, so a
@@ -127,10 +140,8 @@ def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>
     cell = p * h
     pr = int((root_g[1] - r0 * h) // cell)
     pc = int((root_g[0] - c0 * h) // cell)
-    dr, dc = np.meshgrid(np.arange(-_SEARCH, _SEARCH + 1), np.arange(-_SEARCH, _SEARCH + 1), indexing="ij")
-    order2 = np.argsort((dr * dr + dc * dc).ravel(), kind="stable")
-    r = pr + dr.ravel()[order2]
-    c = pc + dc.ravel()[order2]
+    r = pr + _DR
+    c = pc + _DC
     t = r * width + c
     pos = np.minimum(np.searchsorted(lin, t), len(lin) - 1)
     nodes = pos[(lin[pos] == t) & (r >= 0) & (c >= 0)]
