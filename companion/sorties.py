@@ -256,6 +256,30 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
         n += int((out_d[s] + back_d[e]) / (Vt * flight.waypoint_interval_s)) + 8
         return j, n
 
+    def grow(s: int) -> int:
+        """Last segment of the sortie from segment s by the estimate (greedy split)."""
+        e = s
+        while e + 1 < k:
+            j, n = estimate(s, e + 1)
+            if j > budget_j or n > limit:
+                break
+            e += 1
+        return e
+
+    # The transits the split will most likely need (by the estimate alone: the first way
+    # out and each sortie's way back), string-pulled together in lock step; any other
+    # one (a sortie that gives back a segment) is searched when asked for.
+    if cfg.split == "none":
+        ends = [k - 1]
+    else:
+        ends, s = [], 0
+        while s < k:
+            ends.append(grow(s))
+            s = ends[-1] + 1
+    want = [("out", 0)] + [("back", e) for e in ends]
+    pulled = tree.paths_to([world_to_grid(grid, mains[i][0] if kind == "out" else mains[i][-1])
+                            for kind, i in want])
+    prefetched = dict(zip(want, pulled))
     cache: dict[tuple[str, int], Waypoints] = {}
 
     def transit(kind: str, i: int) -> tuple[np.ndarray, Waypoints]:
@@ -266,8 +290,11 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
                 back_path = cache[("back", i - 1)][0]
                 path = np.vstack([back_path[::-1], auxs[i - 1][1:]])
             else:
-                q = mains[i][0] if kind == "out" else mains[i][-1]
-                path = grid_to_world(grid, tree.path_to(world_to_grid(grid, q)))
+                path_g = prefetched.pop((kind, i), None)
+                if path_g is None:
+                    q = mains[i][0] if kind == "out" else mains[i][-1]
+                    path_g = tree.path_to(world_to_grid(grid, q))
+                path = grid_to_world(grid, path_g)
                 path = path if kind == "out" else path[::-1]
             path, _, _ = _join_runs([(path, Vt)])
             if len(path) < 2:
@@ -304,12 +331,7 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
     sorties: list[Sortie] = []
     s = 0
     while s < k:
-        e = s
-        while e + 1 < k:
-            j, n = estimate(s, e + 1)
-            if j > budget_j or n > limit:
-                break
-            e += 1
+        e = grow(s)
         while True:
             sortie = build(s, e, len(sorties) + 1)
             if sortie.energy.energy_wh <= cfg.usable_wh and sortie.n_items <= cfg.max_mission_items:

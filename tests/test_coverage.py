@@ -429,6 +429,40 @@ def test_cell_graph_neighbour_lookups_agree(monkeypatch):
                 assert np.array_equal(getattr(g1, attr), getattr(g2, attr))
 
 
+def test_lock_step_string_pulling_and_transits_equal_one_at_a_time():
+    """simplify_many / paths_to answer every polyline's questions in shared calls: the
+    result must be what each gets alone, and every kept hop must be clear (checked
+    with the per-segment test)."""
+    from companion.coverage.freespace import FreeSpace
+    from companion.coverage.gridpath import cell_path, is_clear, simplify, simplify_many
+    from companion.coverage.transit import build_transit_tree
+
+    rng = np.random.default_rng(4)
+    mask = np.ones((150, 150), dtype=bool)
+    for _ in range(25):                      # rectangular obstacles
+        r, c = rng.integers(0, 140, 2)
+        mask[r: r + rng.integers(2, 12), c: c + rng.integers(2, 12)] = False
+    mask[[0, -1], :] = mask[:, [0, -1]] = False
+    fs = FreeSpace(eroded=mask, free=mask, resolution_m=RES, threshold_m=RES)
+    rr, cc = np.nonzero(mask)
+    lines = []
+    while len(lines) < 12:
+        a, b = rng.integers(0, len(rr), 2)
+        cells = cell_path(rr, cc, (rr[a], cc[a]), (rr[b], cc[b]))
+        if cells is not None and len(cells) > 2:
+            lines.append(np.column_stack([(cells[:, 1] + 0.5) * RES, (cells[:, 0] + 0.5) * RES]))
+    together = simplify_many(fs, lines)
+    for line, got in zip(lines, together):
+        assert np.array_equal(got, simplify(fs, line))
+        assert np.array_equal(got[[0, -1]], line[[0, -1]])
+        assert all(is_clear(fs, p, q) for p, q in zip(got[:-1], got[1:]))
+    tree = build_transit_tree(fs, lines[0][0])
+    qs = [line[-1] for line in lines]
+    for q, got in zip(qs, tree.paths_to(qs)):
+        assert np.array_equal(got, tree.path_to(q))
+        assert all(is_clear(fs, p, r) for p, r in zip(got[:-1], got[1:]))
+
+
 def test_mask_centroid_is_the_mean_of_the_true_cells():
     from companion.maps.grid import mask_centroid_rc
 

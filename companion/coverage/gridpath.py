@@ -86,22 +86,47 @@ def farthest_visible(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> int
     tested in full from the last one backwards, ``_BATCH`` at a time, until
     one is clear. The visible segments before it are never sampled in full.
     """
-    a = np.asarray(a, float)
-    targets = np.asarray(targets, float).reshape(-1, 2)
-    if len(targets) == 0:
-        return -1
-    n = _sample_counts(free, a, targets)
-    cand = np.flatnonzero(_samples_clear(free, a, targets, n, _STRIDE))
-    for hi in range(len(cand), 0, -_BATCH):
-        idx = cand[max(0, hi - _BATCH): hi]
-        ok = np.flatnonzero(_samples_clear(free, a, targets[idx], n[idx]))
-        if len(ok):
-            return int(idx[ok[-1]])
-    return -1
+    return farthest_visible_many(free, np.asarray(a, float)[None], [targets])[0]
+
+
+def farthest_visible_many(free: FreeSpace, origins: np.ndarray, targets: list) -> list[int]:
+    """:func:`farthest_visible` of several queries (origin ``origins[q]`` (G, m), targets
+    ``targets[q]`` (k_q, 2)) with one vectorised call per stage for all of them."""
+    origins = np.asarray(origins, float).reshape(-1, 2)
+    targets = [np.asarray(t, float).reshape(-1, 2) for t in targets]
+    sizes = np.array([len(t) for t in targets], dtype=np.int64)
+    res = [-1] * len(targets)
+    if sizes.sum() == 0:
+        return res
+    tg = np.concatenate(targets)
+    org = np.repeat(origins, sizes, axis=0)
+    n = _sample_counts(free, org, tg)
+    coarse = _samples_clear(free, org, tg, n, _STRIDE)
+    offset = np.concatenate([[0], np.cumsum(sizes)])
+    surv = [np.flatnonzero(coarse[offset[q]: offset[q + 1]]) + offset[q] for q in range(len(targets))]
+    top = [len(x) for x in surv]
+    pending = [q for q in range(len(targets)) if top[q]]
+    while pending:
+        batch = [surv[q][max(0, top[q] - _BATCH): top[q]] for q in pending]
+        idx = np.concatenate(batch)
+        ok = _samples_clear(free, org[idx], tg[idx], n[idx])
+        nxt, at = [], 0
+        for q, bq in zip(pending, batch):
+            hit = np.flatnonzero(ok[at: at + len(bq)])
+            at += len(bq)
+            if len(hit):
+                res[q] = int(bq[hit[-1]] - offset[q])
+            else:
+                top[q] -= _BATCH
+                if top[q] > 0:
+                    nxt.append(q)
+        pending = nxt
+    return res
 
 
 def _sample_counts(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """(k,) samples of each segment a-targets[j]: every half cell or closer, both ends included."""
+    """(k,) samples of each segment a-targets[j]: every half cell or closer, both ends included
+    (``a``: (2,) or (k, 2))."""
     return np.ceil(np.hypot(*(targets - a).T) / (free.resolution_m / 2)).astype(np.int64) + 1
 
 
@@ -109,7 +134,8 @@ def _samples_clear(free: FreeSpace, a: np.ndarray, targets: np.ndarray, n: np.nd
                    stride: int = 1) -> np.ndarray:
     """(k,) bool: samples ``0, stride, 2 stride, ... <= n[j] - 1`` of the ``n[j]`` evenly
     spaced samples of each segment a-targets[j] are all in eroded space (stride 1: all
-    of them). A sample's position does not depend on the stride (same arithmetic)."""
+    of them). A sample's position does not depend on the stride (same arithmetic).
+    ``a``: (2,), or (k, 2) for one origin per segment."""
     m = n if stride == 1 else (n - 1) // stride + 1
     ends = np.cumsum(m)
     total = int(ends[-1]) if len(ends) else 0
@@ -125,9 +151,13 @@ def _samples_clear(free: FreeSpace, a: np.ndarray, targets: np.ndarray, n: np.nd
     # a + s (target - a) per axis (the same arithmetic as one segment at a time)
     d = targets - a
     px = s * d[:, 0].take(seg)
-    px += a[0]
     s *= d[:, 1].take(seg)
-    s += a[1]
+    if a.ndim == 1:
+        px += a[0]
+        s += a[1]
+    else:                                   # one origin per segment
+        px += a[:, 0].take(seg)
+        s += a[:, 1].take(seg)
     ok = free.raster().sample_xy(px, s)
     return np.logical_and.reduceat(ok, first)
 
@@ -261,34 +291,69 @@ def simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
     testing ``_PROBES`` evenly spaced points at once (a few rounds). A few
     calls per kept point, each testing many segments.
     """
-    pts = np.asarray(pts, float)
-    n = len(pts)
-    out = [0]
-    i = 0
-    while i < n - 1:
+    return simplify_many(free, [pts])[0]
+
+
+class _Pull:
+    """State of one polyline's string pulling (:func:`simplify_many`)."""
+
+    __slots__ = ("pts", "n", "out", "i", "lo", "hi", "ask", "probing")
+
+    def __init__(self, pts: np.ndarray):
+        self.pts = np.asarray(pts, float)
+        self.n = len(self.pts)
+        self.out = [0]
+        self.i = 0
+        self.probing = False
+        if self.n - 1 > 0:
+            self._candidates()
+
+    def _candidates(self) -> None:
+        i, n = self.i, self.n
         near = np.arange(i + 1, min(n, i + 1 + _WINDOW))
         far = i + _WINDOW * 2 ** np.arange(1, 40)
         cand = np.concatenate([near, far[far < n]])      # sorted, distinct
         if cand[-1] != n - 1:
             cand = np.append(cand, n - 1)
-        # pts[i + 1] (cand[0]) is visible by assumption
-        k = max(farthest_visible(free, pts[i], pts[cand]), 0)
-        lo = int(cand[k])
-        hi = int(cand[k + 1]) if k + 1 < len(cand) else n
-        while hi - lo > 1:
+        self.ask, self.probing = cand, False
+
+    def answer(self, j: int) -> bool:
+        """Take the farthest visible one of ``ask`` (index or -1); True while more to ask."""
+        ask = self.ask
+        if not self.probing:
+            k = max(j, 0)                       # pts[i + 1] (ask[0]) is visible by assumption
+            self.lo = int(ask[k])
+            self.hi = int(ask[k + 1]) if k + 1 < len(ask) else self.n
+        elif j >= 0:
+            self.lo = int(ask[j])
+            self.hi = int(ask[j + 1]) if j + 1 < len(ask) else self.hi
+        else:
+            self.hi = int(ask[0])
+        lo, hi = self.lo, self.hi
+        if hi - lo > 1:
             probe = np.linspace(lo, hi, _PROBES + 2)[1:-1].astype(np.int64)     # non-decreasing
             probe = probe[(probe > lo) & (probe < hi) & np.append(True, probe[1:] != probe[:-1])]
-            if len(probe) == 0:
-                break
-            j = farthest_visible(free, pts[i], pts[probe])
-            if j >= 0:
-                lo = int(probe[j])
-                hi = int(probe[j + 1]) if j + 1 < len(probe) else hi
-            else:
-                hi = int(probe[0])
-        out.append(lo)
-        i = lo
-    return pts[out]
+            if len(probe):
+                self.ask, self.probing = probe, True
+                return True
+        self.out.append(lo)
+        self.i = lo
+        if self.i < self.n - 1:
+            self._candidates()
+            return True
+        return False
+
+
+def simplify_many(free: FreeSpace, polylines: list) -> list[np.ndarray]:
+    """:func:`simplify` of several polylines in lock step: each round asks every
+    unfinished one's next question in one :func:`farthest_visible_many` call."""
+    pulls = [_Pull(p) for p in polylines]
+    active = [p for p in pulls if p.n - 1 > 0]
+    while active:
+        res = farthest_visible_many(free, np.array([p.pts[p.i] for p in active]),
+                                    [p.pts[p.ask] for p in active])
+        active = [p for p, j in zip(active, res) if p.answer(j)]
+    return [p.pts[p.out] for p in pulls]
 
 
 def aux_path(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>") -> np.ndarray:

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
 from .freespace import FreeSpace, min_pool
-from .gridpath import NEIGHBOURS_4, aux_path, mask_graph, simplify, visible_from
+from .gridpath import NEIGHBOURS_4, aux_path, mask_graph, simplify_many, visible_from
 
 #: pooled cell edge (m) aimed at; at least one fine cell
 POOL_M = 0.2
@@ -97,26 +97,40 @@ class TransitTree:
 
     def path_to(self, q_g: np.ndarray) -> np.ndarray:
         """(k, 2) G polyline from the root to ``q_g`` in eroded free space (module doc)."""
-        q_g = np.asarray(q_g, float)
-        node = self._attach(q_g)
-        if node is None:
-            return aux_path(self.free, self.root_g, q_g, self.source)
+        return self.paths_to([q_g])[0]
+
+    def paths_to(self, qs_g: list) -> list[np.ndarray]:
+        """:meth:`path_to` of several points, their string pulling in lock step
+        (``gridpath.simplify_many``): the same paths, far fewer vectorised calls."""
+        out: list = [None] * len(qs_g)
+        who, chains, ends = [], [], []
         pred = self.__dict__.get("_pred_list")
-        if pred is None:        # walked in Python ints: a numpy scalar per step costs more
-            pred = self.__dict__.setdefault("_pred_list", self.pred.tolist())
-        chain = [node]
-        p = pred[node]
-        while p >= 0:
-            chain.append(p)
-            p = pred[p]
-        chain = np.array(chain[::-1])
-        centres = self._centre_g(self.rows[chain], self.cols[chain])
+        off = np.array([self.c0, self.r0]) * self.free.resolution_m
+        for k, q_g in enumerate(qs_g):
+            q_g = np.asarray(q_g, float)
+            node = self._attach(q_g)
+            if node is None:
+                out[k] = aux_path(self.free, self.root_g, q_g, self.source)
+                continue
+            if pred is None:        # walked in Python ints: a numpy scalar per step costs more
+                pred = self.__dict__.setdefault("_pred_list", self.pred.tolist())
+            chain = [node]
+            p = pred[node]
+            while p >= 0:
+                chain.append(p)
+                p = pred[p]
+            chain = np.array(chain[::-1])
+            who.append(k)
+            ends.append(q_g)
+            chains.append(self._centre_g(self.rows[chain], self.cols[chain]) - off)
         # string pulling on the pooled mask first (pooled cells are wholly eroded, so a
         # segment clear there is clear in the fine mask; half the samples), then on the
         # fine mask over the few points left, with the two end hops
-        off = np.array([self.c0, self.r0]) * self.free.resolution_m
-        coarse = simplify(self.pooled, centres - off) + off
-        return simplify(self.free, np.vstack([self.root_g, coarse, q_g]))
+        coarse = simplify_many(self.pooled, chains) if chains else []
+        fine = simplify_many(self.free, [np.vstack([self.root_g, c + off, q]) for c, q in zip(coarse, ends)])
+        for k, f in zip(who, fine):
+            out[k] = f
+        return out
 
 
 def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>") -> TransitTree:
