@@ -434,7 +434,7 @@ def test_lock_step_string_pulling_and_transits_equal_one_at_a_time():
     result must be what each gets alone, and every kept hop must be clear (checked
     with the per-segment test)."""
     from companion.coverage.freespace import FreeSpace
-    from companion.coverage.gridpath import cell_path, is_clear, simplify, simplify_many
+    from companion.coverage.gridpath import aux_path, aux_paths, cell_path, is_clear, simplify, simplify_many
     from companion.coverage.transit import build_transit_tree
 
     rng = np.random.default_rng(4)
@@ -456,6 +456,9 @@ def test_lock_step_string_pulling_and_transits_equal_one_at_a_time():
         assert np.array_equal(got, simplify(fs, line))
         assert np.array_equal(got[[0, -1]], line[[0, -1]])
         assert all(is_clear(fs, p, q) for p, q in zip(got[:-1], got[1:]))
+    starts, ends = np.array([x[0] for x in lines]), np.array([x[-1] for x in lines])
+    for p, q, got in zip(starts, ends, aux_paths(fs, starts, ends)):
+        assert np.array_equal(got, aux_path(fs, p, q))
     tree = build_transit_tree(fs, lines[0][0])
     qs = [line[-1] for line in lines]
     for q, got in zip(qs, tree.paths_to(qs)):

@@ -364,21 +364,40 @@ def aux_path(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>
     PlanError
         If a or b is not in the eroded free space or they are not connected in it.
     """
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    if is_clear(free, a, b):
-        return np.array([a, b])
+    return aux_paths(free, np.asarray(a, float)[None], np.asarray(b, float)[None], source)[0]
+
+
+def aux_paths(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>") -> list[np.ndarray]:
+    """:func:`aux_path` from each ``a[j]`` to ``b[j]`` ((k, 2), G, m): the straight ones
+    found in one visibility call, the cell paths of the others string-pulled in lock step
+    (:func:`simplify_many`). Raises for the first pair (in order) that has no connection."""
+    a = np.asarray(a, float).reshape(-1, 2)
+    b = np.asarray(b, float).reshape(-1, 2)
+    out: list = [None] * len(a)
+    if len(a) == 0:
+        return out
+    clear = _samples_clear(free, a, b, _sample_counts(free, a, b))
     h = free.resolution_m
-    ra, ca = int(a[1] // h), int(a[0] // h)
-    rb, cb = int(b[1] // h), int(b[0] // h)
-    bg = free.block_graph()
-    corridor = bg.corridor(bg.sub_at(ra, ca), bg.sub_at(rb, cb))
-    if corridor is None:
-        raise PlanError(source, f"no collision-free connection from ({a[0]:.2f}, {a[1]:.2f}) to "
-                                f"({b[0]:.2f}, {b[1]:.2f}) m (grid frame) in the eroded free space")
-    rr, cc = bg.cells_of(corridor)
-    cells = cell_path(rr, cc, (ra, ca), (rb, cb))
-    if cells is None:   # cannot happen: the corridor holds a fine path (module doc)
-        raise PlanError(source, f"internal: no path in the corridor from ({a[0]:.2f}, {a[1]:.2f}) "
-                                f"to ({b[0]:.2f}, {b[1]:.2f}) m")
-    centres = np.column_stack([(cells[:, 1] + 0.5) * h, (cells[:, 0] + 0.5) * h])
-    return simplify(free, np.vstack([a, centres, b]))
+    bg = free.block_graph() if not clear.all() else None
+    who, lines = [], []
+    for j, (p, q) in enumerate(zip(a, b)):
+        if clear[j]:
+            out[j] = np.array([p, q])
+            continue
+        ra, ca = int(p[1] // h), int(p[0] // h)
+        rb, cb = int(q[1] // h), int(q[0] // h)
+        corridor = bg.corridor(bg.sub_at(ra, ca), bg.sub_at(rb, cb))
+        if corridor is None:
+            raise PlanError(source, f"no collision-free connection from ({p[0]:.2f}, {p[1]:.2f}) to "
+                                    f"({q[0]:.2f}, {q[1]:.2f}) m (grid frame) in the eroded free space")
+        rr, cc = bg.cells_of(corridor)
+        cells = cell_path(rr, cc, (ra, ca), (rb, cb))
+        if cells is None:   # cannot happen: the corridor holds a fine path (module doc)
+            raise PlanError(source, f"internal: no path in the corridor from ({p[0]:.2f}, {p[1]:.2f}) "
+                                    f"to ({q[0]:.2f}, {q[1]:.2f}) m")
+        centres = np.column_stack([(cells[:, 1] + 0.5) * h, (cells[:, 0] + 0.5) * h])
+        who.append(j)
+        lines.append(np.vstack([p, centres, q]))
+    for j, line in zip(who, simplify_many(free, lines)):
+        out[j] = line
+    return out
