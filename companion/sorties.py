@@ -217,11 +217,12 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
         raise PlanError(key, f"({launch[0]:.2f}, {launch[1]:.2f}) m has no room around it in the eroded "
                              f"free space for a transit")
 
-    def transit_estimate(p_world: np.ndarray) -> float:
-        d = tree.distance_m(world_to_grid(grid, p_world))
-        if not np.isfinite(d):     # a narrow passage: the exact search will find it
-            d = float(np.hypot(*(p_world - launch))) * 2.0
-        return d
+    def transit_estimates(p_world: np.ndarray) -> np.ndarray:
+        d = tree.distances_m(world_to_grid(grid, p_world))
+        for j, p in enumerate(p_world):
+            if not np.isfinite(d[j]):     # a narrow passage: the exact search will find it
+                d[j] = float(np.hypot(*(p - launch))) * 2.0
+        return np.array(d)
 
     V, Vt = flight.speed_m_s, flight.transit_speed_m_s
     p_transit = float(cruise_power_w(Vt, vehicle, cfg))
@@ -229,8 +230,8 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
     i_start = _corner_indices(waypoints, np.array([m[0] for m in mains]))
     i_end = _corner_indices(waypoints, np.array([m[-1] for m in mains]))
     e_cum = np.concatenate([[0.0], np.cumsum(leg_energy_j(waypoints.t_s, waypoints.p_enu_m, vehicle, cfg))])
-    out_d = np.array([transit_estimate(m[0]) for m in mains])
-    back_d = np.array([transit_estimate(m[-1]) for m in mains])
+    out_d = transit_estimates(np.array([m[0] for m in mains]))
+    back_d = transit_estimates(np.array([m[-1] for m in mains]))
     weight = vehicle.mass_kg * GRAVITY_M_S2
     vertical_j = (2 * flight.height_agl_m / cfg.climb_speed_m_s * float(cruise_power_w(0.0, vehicle, cfg))
                   + weight * flight.height_agl_m / cfg.drive_efficiency)

@@ -461,6 +461,7 @@ def test_lock_step_string_pulling_and_transits_equal_one_at_a_time():
         assert np.array_equal(got, aux_path(fs, p, q))
     tree = build_transit_tree(fs, lines[0][0])
     qs = [line[-1] for line in lines]
+    assert tree.distances_m(qs) == [tree.distance_m(q) for q in qs]
     for q, got in zip(qs, tree.paths_to(qs)):
         assert np.array_equal(got, tree.path_to(q))
         assert all(is_clear(fs, p, r) for p, r in zip(got[:-1], got[1:]))

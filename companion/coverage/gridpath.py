@@ -69,7 +69,7 @@ def visible_from(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> np.ndar
     """(k,) bool: which straight segments a-targets[j] (G, m) stay in eroded free space.
 
     Samples every half cell or closer, both ends included, for all targets
-    in one vectorised lookup.
+    in one vectorised lookup. ``a``: (2,), or (k, 2) for one origin per target.
     """
     a = np.asarray(a, float)
     targets = np.asarray(targets, float).reshape(-1, 2)
@@ -182,7 +182,7 @@ def cell_graph(rr: np.ndarray, cc: np.ndarray, neighbours=None,
     order = np.argsort(lin, kind="stable")
     lin = lin[order]
     n = len(lin)
-    nb = np.empty((n, len(neighbours)), dtype=np.int64)
+    nb = np.empty((n, len(neighbours)), dtype=np.int32 if n < 2**31 else np.int64)
     r0, c0 = int(rr.min()), int(cc.min())
     wl = int(cc.max()) - c0 + 3
     box = (int(rr.max()) - r0 + 3) * wl
@@ -216,7 +216,7 @@ def mask_graph(mask: np.ndarray, neighbours=None, edge_cells: int | None = None)
     ids = np.full((mask.shape[0] + 2) * width, -1, dtype=np.int32 if n < 2**31 else np.int64)
     lin = (rows + 1) * width + (cols + 1)
     ids[lin] = np.arange(n)
-    nb = np.empty((n, len(neighbours)), dtype=np.int64)
+    nb = np.empty((n, len(neighbours)), dtype=np.int32 if n < 2**31 else np.int64)
     for k, (dr, dc, _) in enumerate(neighbours):
         nb[:, k] = ids.take(lin + (dr * width + dc))
     return _graph_of(nb, neighbours, edge_cells), rows, cols
@@ -376,7 +376,7 @@ def aux_paths(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map
     out: list = [None] * len(a)
     if len(a) == 0:
         return out
-    clear = _samples_clear(free, a, b, _sample_counts(free, a, b))
+    clear = visible_from(free, a, b)
     h = free.resolution_m
     bg = free.block_graph() if not clear.all() else None
     who, lines = [], []

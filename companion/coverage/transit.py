@@ -69,31 +69,47 @@ class TransitTree:
         return np.column_stack([(self.c0 * self.free.resolution_m + (np.asarray(c) + 0.5) * cell),
                                 (self.r0 * self.free.resolution_m + (np.asarray(r) + 0.5) * cell)])
 
-    def _attach(self, q_g: np.ndarray) -> int | None:
-        """Node of the nearest reachable pooled cell whose centre ``q_g`` sees, or None."""
-        cell = self.pool * self.free.resolution_m
-        pr = int((q_g[1] - self.r0 * self.free.resolution_m) // cell)
-        pc = int((q_g[0] - self.c0 * self.free.resolution_m) // cell)
-        r = pr + _DR
-        c = pc + _DC
+    def _attach(self, qs_g: np.ndarray) -> list[int | None]:
+        """For each point (m, 2) of ``qs_g``: the node of the nearest reachable pooled cell
+        whose centre it sees, or None; all visibility tests in one call."""
+        qs_g = np.asarray(qs_g, float).reshape(-1, 2)
+        out: list = [None] * len(qs_g)
+        if len(self.lin) == 0 or len(qs_g) == 0:
+            return out
+        h = self.free.resolution_m
+        cell = self.pool * h
+        pr = np.array([int((q[1] - self.r0 * h) // cell) for q in qs_g])
+        pc = np.array([int((q[0] - self.c0 * h) // cell) for q in qs_g])
+        r = pr[:, None] + _DR
+        c = pc[:, None] + _DC
         t = r * self.width + c
         pos = np.minimum(np.searchsorted(self.lin, t), len(self.lin) - 1)
         hit = (self.lin[pos] == t) & (r >= 0) & (c >= 0)
-        nodes = pos[hit]
-        nodes = nodes[np.isfinite(self.dist[nodes])]
-        if len(nodes) == 0:
-            return None
-        vis = visible_from(self.free, q_g, self._centre_g(self.rows[nodes], self.cols[nodes]))
-        good = nodes[vis]
-        return int(good[0]) if len(good) else None
+        hit[hit] = np.isfinite(self.dist[pos[hit]])
+        qi, k = np.nonzero(hit)                 # per point, nearest offsets first
+        nodes = pos[qi, k]
+        vis = visible_from(self.free, qs_g[qi], self._centre_g(self.rows[nodes], self.cols[nodes]))
+        first_q, first = np.unique(qi[vis], return_index=True)
+        for q, node in zip(first_q, nodes[vis][first]):
+            out[int(q)] = int(node)
+        return out
 
     def distance_m(self, q_g: np.ndarray) -> float:
         """Length (m) of the pooled transit from the root to ``q_g``; inf if it cannot attach."""
-        node = self._attach(np.asarray(q_g, float))
-        if node is None:
-            return np.inf
-        centre = self._centre_g(self.rows[node], self.cols[node])[0]
-        return float(self.dist[node]) * self.pool * self.free.resolution_m + float(np.hypot(*(centre - q_g)))
+        return self.distances_m(np.asarray(q_g, float)[None])[0]
+
+    def distances_m(self, qs_g: np.ndarray) -> list[float]:
+        """:meth:`distance_m` of each point (m, 2) of ``qs_g``."""
+        qs_g = np.asarray(qs_g, float).reshape(-1, 2)
+        out = []
+        for q_g, node in zip(qs_g, self._attach(qs_g)):
+            if node is None:
+                out.append(np.inf)
+                continue
+            centre = self._centre_g(self.rows[node], self.cols[node])[0]
+            out.append(float(self.dist[node]) * self.pool * self.free.resolution_m
+                       + float(np.hypot(*(centre - q_g))))
+        return out
 
     def path_to(self, q_g: np.ndarray) -> np.ndarray:
         """(k, 2) G polyline from the root to ``q_g`` in eroded free space (module doc)."""
@@ -106,9 +122,8 @@ class TransitTree:
         who, chains, ends = [], [], []
         pred = self.__dict__.get("_pred_list")
         off = np.array([self.c0, self.r0]) * self.free.resolution_m
-        for k, q_g in enumerate(qs_g):
-            q_g = np.asarray(q_g, float)
-            node = self._attach(q_g)
+        qs_g = np.asarray(qs_g, float).reshape(-1, 2)
+        for k, (q_g, node) in enumerate(zip(qs_g, self._attach(qs_g))):
             if node is None:
                 out[k] = aux_path(self.free, self.root_g, q_g, self.source)
                 continue

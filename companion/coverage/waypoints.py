@@ -159,8 +159,8 @@ def waypoints_along(path_xy_m: np.ndarray, dem: ElevationModel, flight: FlightCo
         raise PlanError("<plan>", "the coverage path has fewer than two points")
     if speeds_m_s is None:
         speeds_m_s = np.full(len(path) - 1, flight.speed_m_s)
-    p0 = np.append(path[0], dem.height_at(path[0, 0], path[0, 1]) + agl)
     dense_all, first = _dense_runs(path, dem, agl)
+    p0 = dense_all[0]                 # path[0] exactly: the first run's first sample
     step_all = np.linalg.norm(np.diff(dense_all, axis=0), axis=1)
     # per run: the corner (always) after its intermediate way-points (if any)
     ts, xs, ys, tangents, speeds, corners = [np.zeros(1)], [], [], [], [], [p0[None]]
