@@ -18,6 +18,7 @@ from .coverage import extract_waypoints, plan_coverage
 from .errors import PlanError
 from .maps import ElevationModel, OccupancyGrid
 from .maps.field import load_mission_maps
+from .maps.grid import mask_centroid_rc
 from .mission import Mission
 from .sorties import plan_sorties
 from .trajectory import Trajectory, generate_trajectory
@@ -121,14 +122,9 @@ def free_centroid_xy(grid: OccupancyGrid) -> np.ndarray:
     of the flyable ground (the field minus the vine rows; unknown cells
     outside the field do not count).
     """
-    free = grid.free
-    n = np.count_nonzero(free)
-    if n == 0:
+    if not grid.free.any():
         raise PlanError(grid.source, "the map has no free cells")
-    # Mean of indices from the row/column marginals, then one affine map:
-    # exact, and no index arrays over the whole grid.
-    row_mean = float(np.arange(free.shape[0]) @ np.count_nonzero(free, axis=1)) / n
-    col_mean = float(np.arange(free.shape[1]) @ np.count_nonzero(free, axis=0)) / n
+    row_mean, col_mean = mask_centroid_rc(grid.free)
     x, y = grid.cell_to_world(row_mean, col_mean)
     return np.array([float(x), float(y)])
 

@@ -36,6 +36,7 @@ from .coverage.transit import build_transit_tree
 from .coverage.waypoints import Waypoints, run_duration_s, run_waypoints, waypoints_along
 from .energy import EnergyConfig, EnergyEstimate, cruise_power_w, flight_energy, leg_energy_j
 from .errors import PlanError
+from .maps.grid import mask_centroid_rc
 from .vehicle import GRAVITY_M_S2, VehicleConfig
 
 #: Mission items of a sortie besides its way-points: take-off, ROI, return and the
@@ -120,8 +121,7 @@ def central_launch_xy(grid, free, bg, route_start_g: np.ndarray) -> np.ndarray:
     centroid of the free cells, in the component of the route (so every corridor
     is at most about half the field away)."""
     h = free.resolution_m
-    r, c = np.nonzero(grid.free)
-    rc = np.array([r.mean(), c.mean()])
+    rc = np.array(mask_centroid_rc(grid.free))
     comp = bg.components_of(np.array([int(route_start_g[1] // h)]), np.array([int(route_start_g[0] // h)]))[0]
     rows, cols = free.eroded.shape
     rad = 16
@@ -217,11 +217,12 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
         raise PlanError(key, f"({launch[0]:.2f}, {launch[1]:.2f}) m has no room around it in the eroded "
                              f"free space for a transit")
 
-    def transit_estimate(p_world: np.ndarray) -> float:
-        d = tree.distance_m(world_to_grid(grid, p_world))
-        if not np.isfinite(d):     # a narrow passage: the exact search will find it
-            d = float(np.hypot(*(p_world - launch))) * 2.0
-        return d
+    def transit_estimates(p_world: np.ndarray) -> np.ndarray:
+        d = tree.distances_m(world_to_grid(grid, p_world))
+        for j, p in enumerate(p_world):
+            if not np.isfinite(d[j]):     # a narrow passage: the exact search will find it
+                d[j] = float(np.hypot(*(p - launch))) * 2.0
+        return np.array(d)
 
     V, Vt = flight.speed_m_s, flight.transit_speed_m_s
     p_transit = float(cruise_power_w(Vt, vehicle, cfg))
@@ -229,8 +230,8 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
     i_start = _corner_indices(waypoints, np.array([m[0] for m in mains]))
     i_end = _corner_indices(waypoints, np.array([m[-1] for m in mains]))
     e_cum = np.concatenate([[0.0], np.cumsum(leg_energy_j(waypoints.t_s, waypoints.p_enu_m, vehicle, cfg))])
-    out_d = np.array([transit_estimate(m[0]) for m in mains])
-    back_d = np.array([transit_estimate(m[-1]) for m in mains])
+    out_d = transit_estimates(np.array([m[0] for m in mains]))
+    back_d = transit_estimates(np.array([m[-1] for m in mains]))
     weight = vehicle.mass_kg * GRAVITY_M_S2
     vertical_j = (2 * flight.height_agl_m / cfg.climb_speed_m_s * float(cruise_power_w(0.0, vehicle, cfg))
                   + weight * flight.height_agl_m / cfg.drive_efficiency)
@@ -256,6 +257,30 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
         n += int((out_d[s] + back_d[e]) / (Vt * flight.waypoint_interval_s)) + 8
         return j, n
 
+    def grow(s: int) -> int:
+        """Last segment of the sortie from segment s by the estimate (greedy split)."""
+        e = s
+        while e + 1 < k:
+            j, n = estimate(s, e + 1)
+            if j > budget_j or n > limit:
+                break
+            e += 1
+        return e
+
+    # The transits the split will most likely need (by the estimate alone: the first way
+    # out and each sortie's way back), string-pulled together in lock step; any other
+    # one (a sortie that gives back a segment) is searched when asked for.
+    if cfg.split == "none":
+        ends = [k - 1]
+    else:
+        ends, s = [], 0
+        while s < k:
+            ends.append(grow(s))
+            s = ends[-1] + 1
+    want = [("out", 0)] + [("back", e) for e in ends]
+    pulled = tree.paths_to([world_to_grid(grid, mains[i][0] if kind == "out" else mains[i][-1])
+                            for kind, i in want])
+    prefetched = dict(zip(want, pulled))
     cache: dict[tuple[str, int], Waypoints] = {}
 
     def transit(kind: str, i: int) -> tuple[np.ndarray, Waypoints]:
@@ -266,8 +291,11 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
                 back_path = cache[("back", i - 1)][0]
                 path = np.vstack([back_path[::-1], auxs[i - 1][1:]])
             else:
-                q = mains[i][0] if kind == "out" else mains[i][-1]
-                path = grid_to_world(grid, tree.path_to(world_to_grid(grid, q)))
+                path_g = prefetched.pop((kind, i), None)
+                if path_g is None:
+                    q = mains[i][0] if kind == "out" else mains[i][-1]
+                    path_g = tree.path_to(world_to_grid(grid, q))
+                path = grid_to_world(grid, path_g)
                 path = path if kind == "out" else path[::-1]
             path, _, _ = _join_runs([(path, Vt)])
             if len(path) < 2:
@@ -304,12 +332,7 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
     sorties: list[Sortie] = []
     s = 0
     while s < k:
-        e = s
-        while e + 1 < k:
-            j, n = estimate(s, e + 1)
-            if j > budget_j or n > limit:
-                break
-            e += 1
+        e = grow(s)
         while True:
             sortie = build(s, e, len(sorties) + 1)
             if sortie.energy.energy_wh <= cfg.usable_wh and sortie.n_items <= cfg.max_mission_items:

@@ -356,6 +356,127 @@ def test_vectorised_visibility_matches_segment_test():
         assert list(visible_from(fs, a, targets)) == [is_clear(fs, a, b) for b in targets]
 
 
+def test_farthest_visible_is_the_last_clear_segment_of_a_per_segment_check():
+    """The strided pre-test must never drop a clear segment nor keep a blocked one:
+    single-cell obstacles that long segments' every-16th samples step over."""
+    from companion.coverage.freespace import FreeSpace
+    from companion.coverage.gridpath import _STRIDE, _sample_counts, _samples_clear, farthest_visible
+
+    def clear(mask, a, b):        # independent: every half cell, nearest cell, off-map blocked
+        n = int(np.ceil(np.hypot(*(b - a)) / (RES / 2))) + 1
+        p = a + (np.arange(n) / max(n - 1, 1))[:, None] * (b - a)
+        r, c = np.floor(p[:, 1] / RES).astype(int), np.floor(p[:, 0] / RES).astype(int)
+        inside = (r >= 0) & (r < mask.shape[0]) & (c >= 0) & (c < mask.shape[1])
+        return bool(inside.all() and mask[r, c].all())
+
+    rng = np.random.default_rng(11)
+    mask = rng.random((120, 120)) > 0.003
+    fs = FreeSpace(eroded=mask, free=mask, resolution_m=RES, threshold_m=RES)
+    stepped_over = 0
+    for _ in range(200):
+        a = rng.random(2) * 12
+        targets = rng.random((int(rng.integers(1, 40)), 2)) * 12.5 - 0.25
+        ok = [clear(mask, a, b) for b in targets]
+        want = int(np.flatnonzero(ok)[-1]) if any(ok) else -1
+        assert farthest_visible(fs, a, targets) == want
+        coarse = _samples_clear(fs, a, targets, _sample_counts(fs, a, targets), _STRIDE)
+        stepped_over += int(np.sum(coarse & ~np.array(ok)))
+    assert stepped_over > 100     # blocked segments that only the full test catches
+
+
+def test_mask_graph_and_min_pool_match_their_reference_constructions():
+    """The grid-of-node-numbers graph is the searchsorted graph of the same cells (same
+    CSR arrays, so Dijkstra breaks ties the same way); min-pooling is the 4-D ``all``."""
+    from companion.coverage.freespace import min_pool
+    from companion.coverage.gridpath import NEIGHBOURS_4, cell_graph, mask_graph
+
+    rng = np.random.default_rng(9)
+    mask = rng.random((41, 57)) > 0.3
+    for kw in ({}, {"neighbours": NEIGHBOURS_4, "edge_cells": 0}):
+        g1, order = cell_graph(*np.nonzero(mask), **kw)
+        g2, rows, cols = mask_graph(mask, **kw)
+        assert np.array_equal(order, np.arange(len(order)))
+        assert np.array_equal(np.column_stack([rows, cols]), np.column_stack(np.nonzero(mask)))
+        for attr in ("indptr", "indices", "data"):
+            assert np.array_equal(getattr(g1, attr), getattr(g2, attr)), (kw, attr)
+    for f in (1, 2, 3):
+        R, C = -(-mask.shape[0] // f), -(-mask.shape[1] // f)
+        padded = np.zeros((R * f, C * f), dtype=bool)
+        padded[: mask.shape[0], : mask.shape[1]] = mask
+        assert np.array_equal(min_pool(mask, f), padded.reshape(R, f, C, f).all(axis=(1, 3))), f
+
+
+def test_cell_graph_neighbour_lookups_agree(monkeypatch):
+    """The grid-of-node-numbers lookup and the searchsorted lookup give the same CSR
+    arrays for shuffled, offset cell lists (both ways of cell_graph)."""
+    from companion.coverage import gridpath
+
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        mask = rng.random((int(rng.integers(1, 30)), int(rng.integers(1, 30)))) > rng.random()
+        rr, cc = np.nonzero(mask)
+        if len(rr) == 0:
+            continue
+        perm = rng.permutation(len(rr))
+        rr, cc = rr[perm] + rng.integers(0, 50), cc[perm] + rng.integers(0, 50)
+        for kw in ({}, {"neighbours": gridpath.NEIGHBOURS_4, "edge_cells": 0}):
+            monkeypatch.setattr(gridpath, "_DENSE_BOX", 10**9)
+            g1, o1 = gridpath.cell_graph(rr, cc, **kw)
+            monkeypatch.setattr(gridpath, "_DENSE_BOX", 0)
+            g2, o2 = gridpath.cell_graph(rr, cc, **kw)
+            assert np.array_equal(o1, o2)
+            for attr in ("indptr", "indices", "data"):
+                assert np.array_equal(getattr(g1, attr), getattr(g2, attr))
+
+
+def test_lock_step_string_pulling_and_transits_equal_one_at_a_time():
+    """simplify_many / paths_to answer every polyline's questions in shared calls: the
+    result must be what each gets alone, and every kept hop must be clear (checked
+    with the per-segment test)."""
+    from companion.coverage.freespace import FreeSpace
+    from companion.coverage.gridpath import aux_path, aux_paths, cell_path, is_clear, simplify, simplify_many
+    from companion.coverage.transit import build_transit_tree
+
+    rng = np.random.default_rng(4)
+    mask = np.ones((150, 150), dtype=bool)
+    for _ in range(25):                      # rectangular obstacles
+        r, c = rng.integers(0, 140, 2)
+        mask[r: r + rng.integers(2, 12), c: c + rng.integers(2, 12)] = False
+    mask[[0, -1], :] = mask[:, [0, -1]] = False
+    fs = FreeSpace(eroded=mask, free=mask, resolution_m=RES, threshold_m=RES)
+    rr, cc = np.nonzero(mask)
+    lines = []
+    while len(lines) < 12:
+        a, b = rng.integers(0, len(rr), 2)
+        cells = cell_path(rr, cc, (rr[a], cc[a]), (rr[b], cc[b]))
+        if cells is not None and len(cells) > 2:
+            lines.append(np.column_stack([(cells[:, 1] + 0.5) * RES, (cells[:, 0] + 0.5) * RES]))
+    together = simplify_many(fs, lines)
+    for line, got in zip(lines, together):
+        assert np.array_equal(got, simplify(fs, line))
+        assert np.array_equal(got[[0, -1]], line[[0, -1]])
+        assert all(is_clear(fs, p, q) for p, q in zip(got[:-1], got[1:]))
+    starts, ends = np.array([x[0] for x in lines]), np.array([x[-1] for x in lines])
+    for p, q, got in zip(starts, ends, aux_paths(fs, starts, ends)):
+        assert np.array_equal(got, aux_path(fs, p, q))
+    tree = build_transit_tree(fs, lines[0][0])
+    qs = [line[-1] for line in lines]
+    assert tree.distances_m(qs) == [tree.distance_m(q) for q in qs]
+    for q, got in zip(qs, tree.paths_to(qs)):
+        assert np.array_equal(got, tree.path_to(q))
+        assert all(is_clear(fs, p, r) for p, r in zip(got[:-1], got[1:]))
+
+
+def test_mask_centroid_is_the_mean_of_the_true_cells():
+    from companion.maps.grid import mask_centroid_rc
+
+    rng = np.random.default_rng(5)
+    mask = rng.random((37, 53)) < 0.3
+    r, c = np.nonzero(mask)
+    assert mask_centroid_rc(mask) == (r.mean(), c.mean())
+    assert all(np.isnan(mask_centroid_rc(np.zeros((3, 4), bool))))
+
+
 def test_lcas_mission_flies_each_detected_corridor_once_inside_free_space():
     """The bundled real SLAM map: rows from sparse laser hits, spacing detected.
 

@@ -82,6 +82,37 @@ def test_intermediate_spacing_and_times():
     assert w.t_s[i + 1] - w.t_s[i] == pytest.approx(expected, rel=1e-6)
 
 
+def test_each_run_keeps_its_own_speed():
+    """Per-run speeds (a sortie's transits at the transit speed): spacing speed x
+    interval, |v| the run's speed, the ramp time of that speed, runs of several lengths."""
+    from companion.coverage.waypoints import waypoints_along
+
+    flight = FlightConfig(height_agl_m=1.0, speed_m_s=1.0, waypoint_interval_s=2.0)
+    path = np.array([(0.0, 0.0), (30.0, 0.0), (30.0, 0.2), (30.0, 12.0), (2.0, 12.0)])
+    speeds = np.array([3.0, 3.0, 1.0, 2.0])
+    w = waypoints_along(path, plane_dem(), flight, speeds_m_s=speeds)
+    assert np.allclose(w.p_enu_m[w.corner, :2], path)
+    x, y, z = w.p_enu_m.T
+    assert np.allclose(z, A * x + B * y + C + 1.0, atol=1e-9)
+    ic = np.flatnonzero(w.corner)
+    for k, V in enumerate(speeds):
+        mid = np.arange(ic[k] + 1, ic[k + 1])
+        d3 = np.append(path[k + 1] - path[k], A * (path[k + 1, 0] - path[k, 0]) + B * (path[k + 1, 1] - path[k, 1]))
+        S = np.linalg.norm(d3)
+        t_acc = 1.875 * V / A_REF_M_S2
+        g_min = max(V * 2.0 / 2, V * t_acc / 2)
+        n_mid = int(np.floor((S - 2 * g_min) / (V * 2.0))) + 1 if S >= 2 * g_min else 0
+        assert len(mid) == n_mid, k
+        if n_mid:
+            assert np.allclose(w.v_enu_m_s[mid], V * d3 / S, atol=1e-9)
+            assert np.allclose(np.linalg.norm(np.diff(w.p_enu_m[mid], axis=0), axis=1), 2.0 * V, atol=1e-6)
+            g = (S - (n_mid - 1) * V * 2.0) / 2
+            assert w.t_s[mid[0]] - w.t_s[ic[k]] == pytest.approx(g / V + t_acc / 2)
+        else:
+            expected = max(1.875 * S / V, np.sqrt(10 / np.sqrt(3) * S / A_REF_M_S2))
+            assert w.t_s[ic[k + 1]] - w.t_s[ic[k]] == pytest.approx(expected, rel=1e-6)
+
+
 def test_dem_not_covering_the_path_is_an_error():
     dem = plane_dem()
     with pytest.raises(MapError, match="plane.asc"):

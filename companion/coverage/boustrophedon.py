@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .freespace import FreeSpace
-from .gridpath import aux_path
+from .gridpath import aux_paths
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,10 +92,8 @@ def join_segments(free: FreeSpace, starts: np.ndarray, ends: np.ndarray, line: n
     a = np.where(rev[:, None], ends[order], starts[order])
     b = np.where(rev[:, None], starts[order], ends[order])
     pts = [a[0], b[0]]
-    aux = []
-    for i in range(1, len(order)):
-        conn = aux_path(free, b[i - 1], a[i], source)
-        aux.append(conn)
+    aux = aux_paths(free, b[:-1], a[1:], source)
+    for i, conn in enumerate(aux, start=1):
         pts.extend(conn[1:])
         pts.append(b[i])
     verts = _drop_collinear(np.array(pts), 1e-6)

@@ -119,6 +119,21 @@ class Raster:
         yi = np.clip(np.floor(y), 0, self.rows + 1).astype(np.int64)
         return self.flat.take(yi * (self.cols + 2) + xi)
 
+    def sample_xy(self, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+        """(n,) bool: :meth:`sample_points` at G points given as float64 arrays, which it
+        overwrites (the same arithmetic in place, fewer temporaries)."""
+        for v, origin, hi in ((gx, self.x0_m, self.cols + 1), (gy, self.y0_m, self.rows + 1)):
+            v -= origin
+            v *= 1.0 / self.cell_m
+            v += 1.0
+            np.floor(v, out=v)
+            np.maximum(v, 0.0, out=v)
+            np.minimum(v, float(hi), out=v)
+        idx = gy.astype(np.int64)
+        idx *= self.cols + 2
+        idx += gx.astype(np.int64)
+        return self.flat.take(idx)
+
     def sample_lines(self, alpha: float, offsets: np.ndarray, t: np.ndarray,
                      dtype=np.float32) -> np.ndarray:
         """(lines, samples) bool: the mask at ``offsets[i] n + t[j] u`` (G, m)."""
@@ -160,6 +175,22 @@ def pool(mask: np.ndarray, f: int) -> np.ndarray:
     for j in range(1, f):
         acc += rows[:, j::f]
     return acc.astype(np.int32) * 2 >= f * f
+
+
+def min_pool(mask: np.ndarray, f: int) -> np.ndarray:
+    """True where the whole ``f x f`` block is True (the mask padded with False to
+    whole blocks): ``f^2`` strided slice ANDs, not a reduction over a 4-D view."""
+    if f <= 1:
+        return mask.copy()
+    m = np.zeros((-(-mask.shape[0] // f) * f, -(-mask.shape[1] // f) * f), dtype=bool)
+    m[: mask.shape[0], : mask.shape[1]] = mask
+    rows = m[0::f].copy()
+    for i in range(1, f):
+        rows &= m[i::f]
+    out = rows[:, 0::f].copy()
+    for j in range(1, f):
+        out &= rows[:, j::f]
+    return out
 
 
 def bbox_cells(mask: np.ndarray) -> tuple[int, int, int, int]:

@@ -22,7 +22,11 @@ cell. Otherwise:
    pulling): from each kept point, a far visible point is found by testing
    many candidates per vectorised call (the next points, then points
    64, 128, 256, ... ahead, then evenly spaced probes in the last gap), a
-   few calls per kept point (:func:`simplify`). Consecutive cell centres see
+   few calls per kept point (:func:`simplify`). Each call only needs the
+   farthest visible candidate (:func:`farthest_visible`): every 16th sample
+   of every candidate first, then the survivors in full from the far end,
+   so the many visible candidates before it are never sampled in full.
+   Consecutive cell centres see
    each other (a diagonal step's samples at 1/3 and 2/3 lie in its two
    cells), so every kept point sees the next one.
 """
@@ -41,9 +45,15 @@ _SQRT2 = float(np.sqrt(2.0))
 _WINDOW = 64
 #: points tested at once when the string pulling narrows a gap
 _PROBES = 32
+#: farthest_visible: every _STRIDE-th sample first, then _BATCH segments in full at a time
+_STRIDE = 16
+_BATCH = 4
 #: cells this close to the edge of the eroded space cost _EDGE_COST times more to cross
 _EDGE_CELLS = 2
 _EDGE_COST = 4.0
+#: cell_graph looks neighbours up in a grid of node numbers over the cells' bounding box
+#: when it has at most this many cells per listed cell, else by searchsorted
+_DENSE_BOX = 16
 #: 8-neighbourhood offsets (dr, dc) and step lengths (cells).
 _NEIGHBOURS = ((0, 1, 1.0), (0, -1, 1.0), (1, 0, 1.0), (-1, 0, 1.0),
                (1, 1, _SQRT2), (1, -1, _SQRT2), (-1, 1, _SQRT2), (-1, -1, _SQRT2))
@@ -59,18 +69,97 @@ def visible_from(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> np.ndar
     """(k,) bool: which straight segments a-targets[j] (G, m) stay in eroded free space.
 
     Samples every half cell or closer, both ends included, for all targets
-    in one vectorised lookup.
+    in one vectorised lookup. ``a``: (2,), or (k, 2) for one origin per target.
     """
-    h = free.resolution_m
     a = np.asarray(a, float)
     targets = np.asarray(targets, float).reshape(-1, 2)
-    n = np.ceil(np.hypot(*(targets - a).T) / (h / 2)).astype(np.int64) + 1
-    seg = np.repeat(np.arange(len(targets)), n)
-    first = np.concatenate([[0], np.cumsum(n)[:-1]])
-    s = (np.arange(len(seg)) - first[seg]) / np.maximum(n[seg] - 1, 1)
-    p = a + s[:, None] * (targets[seg] - a)
-    ok = free.raster().sample_points(p[:, 0], p[:, 1])
-    return np.logical_and.reduceat(ok, first) if len(seg) else np.zeros(0, dtype=bool)
+    return _samples_clear(free, a, targets, _sample_counts(free, a, targets))
+
+
+def farthest_visible(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> int:
+    """Largest j such that the segment a-targets[j] (G, m) is clear (:func:`visible_from`), or -1.
+
+    The same answer as ``flatnonzero(visible_from(free, a, targets))[-1]``
+    at a fraction of the samples: every ``_STRIDE``-th sample of every
+    segment is tested first (a subset of the very same sample points, so a
+    segment failing there is blocked), then the segments that pass are
+    tested in full from the last one backwards, ``_BATCH`` at a time, until
+    one is clear. The visible segments before it are never sampled in full.
+    """
+    return farthest_visible_many(free, np.asarray(a, float)[None], [targets])[0]
+
+
+def farthest_visible_many(free: FreeSpace, origins: np.ndarray, targets: list) -> list[int]:
+    """:func:`farthest_visible` of several queries (origin ``origins[q]`` (G, m), targets
+    ``targets[q]`` (k_q, 2)) with one vectorised call per stage for all of them."""
+    origins = np.asarray(origins, float).reshape(-1, 2)
+    targets = [np.asarray(t, float).reshape(-1, 2) for t in targets]
+    sizes = np.array([len(t) for t in targets], dtype=np.int64)
+    res = [-1] * len(targets)
+    if sizes.sum() == 0:
+        return res
+    tg = np.concatenate(targets)
+    org = np.repeat(origins, sizes, axis=0)
+    n = _sample_counts(free, org, tg)
+    coarse = _samples_clear(free, org, tg, n, _STRIDE)
+    offset = np.concatenate([[0], np.cumsum(sizes)])
+    surv = [np.flatnonzero(coarse[offset[q]: offset[q + 1]]) + offset[q] for q in range(len(targets))]
+    top = [len(x) for x in surv]
+    pending = [q for q in range(len(targets)) if top[q]]
+    while pending:
+        batch = [surv[q][max(0, top[q] - _BATCH): top[q]] for q in pending]
+        idx = np.concatenate(batch)
+        ok = _samples_clear(free, org[idx], tg[idx], n[idx])
+        nxt, at = [], 0
+        for q, bq in zip(pending, batch):
+            hit = np.flatnonzero(ok[at: at + len(bq)])
+            at += len(bq)
+            if len(hit):
+                res[q] = int(bq[hit[-1]] - offset[q])
+            else:
+                top[q] -= _BATCH
+                if top[q] > 0:
+                    nxt.append(q)
+        pending = nxt
+    return res
+
+
+def _sample_counts(free: FreeSpace, a: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(k,) samples of each segment a-targets[j]: every half cell or closer, both ends included
+    (``a``: (2,) or (k, 2))."""
+    return np.ceil(np.hypot(*(targets - a).T) / (free.resolution_m / 2)).astype(np.int64) + 1
+
+
+def _samples_clear(free: FreeSpace, a: np.ndarray, targets: np.ndarray, n: np.ndarray,
+                   stride: int = 1) -> np.ndarray:
+    """(k,) bool: samples ``0, stride, 2 stride, ... <= n[j] - 1`` of the ``n[j]`` evenly
+    spaced samples of each segment a-targets[j] are all in eroded space (stride 1: all
+    of them). A sample's position does not depend on the stride (same arithmetic).
+    ``a``: (2,), or (k, 2) for one origin per segment."""
+    m = n if stride == 1 else (n - 1) // stride + 1
+    ends = np.cumsum(m)
+    total = int(ends[-1]) if len(ends) else 0
+    if total == 0:
+        return np.zeros(0, dtype=bool)
+    first = ends - m
+    seg = np.repeat(np.arange(len(m)), m)
+    j = np.arange(total)
+    j -= first[seg]
+    if stride != 1:
+        j *= stride
+    s = j / np.maximum(n - 1, 1)[seg]
+    # a + s (target - a) per axis (the same arithmetic as one segment at a time)
+    d = targets - a
+    px = s * d[:, 0].take(seg)
+    s *= d[:, 1].take(seg)
+    if a.ndim == 1:
+        px += a[0]
+        s += a[1]
+    else:                                   # one origin per segment
+        px += a[:, 0].take(seg)
+        s += a[:, 1].take(seg)
+    ok = free.raster().sample_xy(px, s)
+    return np.logical_and.reduceat(ok, first)
 
 
 def cell_graph(rr: np.ndarray, cc: np.ndarray, neighbours=None,
@@ -78,8 +167,9 @@ def cell_graph(rr: np.ndarray, cc: np.ndarray, neighbours=None,
     """Directed CSR graph of 8-connected grid cells given by their rows and columns.
 
     The cells are sorted by linear index and each one's eight neighbours are
-    found by ``searchsorted``, so only the listed cells are touched (a long
-    diagonal corridor costs its own cells, not its bounding box). Edge
+    found in a grid of node numbers over their bounding box when the cells
+    fill enough of it, else by ``searchsorted``, so a long diagonal corridor
+    costs its own cells, not its bounding box. Edge
     weight: the step (1 or sqrt 2 cells) times the cost of the cell stepped
     into: ``_EDGE_COST`` within ``edge_cells`` (default ``_EDGE_CELLS``) of a
     cell that is not listed, 1 elsewhere (cell_path's doc). ``neighbours``:
@@ -87,29 +177,80 @@ def cell_graph(rr: np.ndarray, cc: np.ndarray, neighbours=None,
     and the order that sorts the input cells into node order.
     """
     neighbours = _NEIGHBOURS if neighbours is None else neighbours
-    edge_cells = _EDGE_CELLS if edge_cells is None else edge_cells
     width = int(cc.max()) + 3
     lin = (rr.astype(np.int64) + 1) * width + (cc.astype(np.int64) + 1)
     order = np.argsort(lin, kind="stable")
     lin = lin[order]
     n = len(lin)
-    nb = np.empty((n, len(neighbours)), dtype=np.int64)
+    nb = np.empty((n, len(neighbours)), dtype=np.int32 if n < 2**31 else np.int64)
+    r0, c0 = int(rr.min()), int(cc.min())
+    wl = int(cc.max()) - c0 + 3
+    box = (int(rr.max()) - r0 + 3) * wl
+    if box <= _DENSE_BOX * n:
+        # a grid of node numbers over the bounding box (and a ring): one lookup per neighbour
+        ids = np.full(box, -1, dtype=np.int32 if n < 2**31 else np.int64)
+        local = (rr[order].astype(np.int64) - (r0 - 1)) * wl + (cc[order].astype(np.int64) - (c0 - 1))
+        ids[local] = np.arange(n)
+        for k, (dr, dc, _) in enumerate(neighbours):
+            nb[:, k] = ids.take(local + (dr * wl + dc))
+    else:
+        for k, (dr, dc, _) in enumerate(neighbours):
+            t = lin + dr * width + dc
+            pos = np.minimum(np.searchsorted(lin, t), n - 1)
+            nb[:, k] = np.where(lin[pos] == t, pos, -1)
+    return _graph_of(nb, neighbours, edge_cells), order
+
+
+def mask_graph(mask: np.ndarray, neighbours=None, edge_cells: int | None = None):
+    """:func:`cell_graph` of the True cells of a 2-D mask, nodes in ``np.nonzero`` order.
+
+    The same graph as ``cell_graph(*np.nonzero(mask), ...)`` (whose order is then
+    the identity), its neighbours looked up in a grid of node numbers instead
+    of by ``searchsorted``: for masks whose cells fill their bounding box.
+    Returns the graph and the nodes' rows and columns.
+    """
+    neighbours = _NEIGHBOURS if neighbours is None else neighbours
+    rows, cols = np.nonzero(mask)
+    n = len(rows)
+    width = mask.shape[1] + 2
+    ids = np.full((mask.shape[0] + 2) * width, -1, dtype=np.int32 if n < 2**31 else np.int64)
+    lin = (rows + 1) * width + (cols + 1)
+    ids[lin] = np.arange(n)
+    nb = np.empty((n, len(neighbours)), dtype=np.int32 if n < 2**31 else np.int64)
     for k, (dr, dc, _) in enumerate(neighbours):
-        t = lin + dr * width + dc
-        pos = np.minimum(np.searchsorted(lin, t), n - 1)
-        nb[:, k] = np.where(lin[pos] == t, pos, -1)
+        nb[:, k] = ids.take(lin + (dr * width + dc))
+    return _graph_of(nb, neighbours, edge_cells), rows, cols
+
+
+def _graph_of(nb: np.ndarray, neighbours, edge_cells: int | None) -> csr_matrix:
+    """CSR graph from each node's neighbour nodes (-1: none), weights as :func:`cell_graph`."""
+    edge_cells = _EDGE_CELLS if edge_cells is None else edge_cells
+    n, k = nb.shape
     ok = nb >= 0
     if edge_cells > 0:
-        inner = ok.all(axis=1)
+        inner = _rows_all(ok)
         for _ in range(edge_cells - 1):
-            inner = inner & np.where(ok, inner[np.where(ok, nb, 0)], False).all(axis=1)
+            inner = inner & _rows_all(np.where(ok, inner[np.where(ok, nb, 0)], False))
         cost = np.where(inner, 1.0, _EDGE_COST)
     else:
         cost = np.ones(n)
     step = np.array([s for _, _, s in neighbours])
-    w = step[None, :] * cost[np.where(ok, nb, 0)]
-    indptr = np.concatenate([[0], np.cumsum(ok.sum(axis=1))])
-    return csr_matrix((w[ok], nb[ok], indptr), shape=(n, n)), order
+    to = nb[ok]
+    w = np.broadcast_to(step, (n, k))[ok] * cost[to]
+    per_row = ok[:, 0].astype(np.int64)
+    for j in range(1, k):
+        per_row += ok[:, j]
+    indptr = np.concatenate([[0], np.cumsum(per_row)])
+    return csr_matrix((w, to, indptr), shape=(n, n))
+
+
+def _rows_all(b: np.ndarray) -> np.ndarray:
+    """``b.all(axis=1)`` for an (n, k) bool array; k = 4 or 8 read as one integer per row
+    (a reduction over so short an axis is slow)."""
+    if b.shape[1] in (4, 8) and b.flags.c_contiguous:
+        dt = np.uint32 if b.shape[1] == 4 else np.uint64
+        return b.view(dt).ravel() == np.ones(b.shape[1], dtype=np.uint8).view(dt)[0]
+    return b.all(axis=1)
 
 
 def cell_path(rr: np.ndarray, cc: np.ndarray, src: tuple[int, int], dst: tuple[int, int]) -> np.ndarray | None:
@@ -150,34 +291,69 @@ def simplify(free: FreeSpace, pts: np.ndarray) -> np.ndarray:
     testing ``_PROBES`` evenly spaced points at once (a few rounds). A few
     calls per kept point, each testing many segments.
     """
-    pts = np.asarray(pts, float)
-    n = len(pts)
-    out = [0]
-    i = 0
-    while i < n - 1:
+    return simplify_many(free, [pts])[0]
+
+
+class _Pull:
+    """State of one polyline's string pulling (:func:`simplify_many`)."""
+
+    __slots__ = ("pts", "n", "out", "i", "lo", "hi", "ask", "probing")
+
+    def __init__(self, pts: np.ndarray):
+        self.pts = np.asarray(pts, float)
+        self.n = len(self.pts)
+        self.out = [0]
+        self.i = 0
+        self.probing = False
+        if self.n - 1 > 0:
+            self._candidates()
+
+    def _candidates(self) -> None:
+        i, n = self.i, self.n
         near = np.arange(i + 1, min(n, i + 1 + _WINDOW))
         far = i + _WINDOW * 2 ** np.arange(1, 40)
-        cand = np.unique(np.concatenate([near, far[far < n], [n - 1]]))
-        vis = visible_from(free, pts[i], pts[cand])
-        vis[0] = True                               # pts[i + 1] is visible by assumption
-        k = int(np.flatnonzero(vis)[-1])
-        lo = int(cand[k])
-        hi = int(cand[k + 1]) if k + 1 < len(cand) else n
-        while hi - lo > 1:
-            probe = np.unique(np.linspace(lo, hi, _PROBES + 2)[1:-1].astype(np.int64))
-            probe = probe[(probe > lo) & (probe < hi)]
-            if len(probe) == 0:
-                break
-            v = visible_from(free, pts[i], pts[probe])
-            if v.any():
-                j = int(np.flatnonzero(v)[-1])
-                lo = int(probe[j])
-                hi = int(probe[j + 1]) if j + 1 < len(probe) else hi
-            else:
-                hi = int(probe[0])
-        out.append(lo)
-        i = lo
-    return pts[out]
+        cand = np.concatenate([near, far[far < n]])      # sorted, distinct
+        if cand[-1] != n - 1:
+            cand = np.append(cand, n - 1)
+        self.ask, self.probing = cand, False
+
+    def answer(self, j: int) -> bool:
+        """Take the farthest visible one of ``ask`` (index or -1); True while more to ask."""
+        ask = self.ask
+        if not self.probing:
+            k = max(j, 0)                       # pts[i + 1] (ask[0]) is visible by assumption
+            self.lo = int(ask[k])
+            self.hi = int(ask[k + 1]) if k + 1 < len(ask) else self.n
+        elif j >= 0:
+            self.lo = int(ask[j])
+            self.hi = int(ask[j + 1]) if j + 1 < len(ask) else self.hi
+        else:
+            self.hi = int(ask[0])
+        lo, hi = self.lo, self.hi
+        if hi - lo > 1:
+            probe = np.linspace(lo, hi, _PROBES + 2)[1:-1].astype(np.int64)     # non-decreasing
+            probe = probe[(probe > lo) & (probe < hi) & np.append(True, probe[1:] != probe[:-1])]
+            if len(probe):
+                self.ask, self.probing = probe, True
+                return True
+        self.out.append(lo)
+        self.i = lo
+        if self.i < self.n - 1:
+            self._candidates()
+            return True
+        return False
+
+
+def simplify_many(free: FreeSpace, polylines: list) -> list[np.ndarray]:
+    """:func:`simplify` of several polylines in lock step: each round asks every
+    unfinished one's next question in one :func:`farthest_visible_many` call."""
+    pulls = [_Pull(p) for p in polylines]
+    active = [p for p in pulls if p.n - 1 > 0]
+    while active:
+        res = farthest_visible_many(free, np.array([p.pts[p.i] for p in active]),
+                                    [p.pts[p.ask] for p in active])
+        active = [p for p, j in zip(active, res) if p.answer(j)]
+    return [p.pts[p.out] for p in pulls]
 
 
 def aux_path(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>") -> np.ndarray:
@@ -188,21 +364,40 @@ def aux_path(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>
     PlanError
         If a or b is not in the eroded free space or they are not connected in it.
     """
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    if is_clear(free, a, b):
-        return np.array([a, b])
+    return aux_paths(free, np.asarray(a, float)[None], np.asarray(b, float)[None], source)[0]
+
+
+def aux_paths(free: FreeSpace, a: np.ndarray, b: np.ndarray, source: str = "<map>") -> list[np.ndarray]:
+    """:func:`aux_path` from each ``a[j]`` to ``b[j]`` ((k, 2), G, m): the straight ones
+    found in one visibility call, the cell paths of the others string-pulled in lock step
+    (:func:`simplify_many`). Raises for the first pair (in order) that has no connection."""
+    a = np.asarray(a, float).reshape(-1, 2)
+    b = np.asarray(b, float).reshape(-1, 2)
+    out: list = [None] * len(a)
+    if len(a) == 0:
+        return out
+    clear = visible_from(free, a, b)
     h = free.resolution_m
-    ra, ca = int(a[1] // h), int(a[0] // h)
-    rb, cb = int(b[1] // h), int(b[0] // h)
-    bg = free.block_graph()
-    corridor = bg.corridor(bg.sub_at(ra, ca), bg.sub_at(rb, cb))
-    if corridor is None:
-        raise PlanError(source, f"no collision-free connection from ({a[0]:.2f}, {a[1]:.2f}) to "
-                                f"({b[0]:.2f}, {b[1]:.2f}) m (grid frame) in the eroded free space")
-    rr, cc = bg.cells_of(corridor)
-    cells = cell_path(rr, cc, (ra, ca), (rb, cb))
-    if cells is None:   # cannot happen: the corridor holds a fine path (module doc)
-        raise PlanError(source, f"internal: no path in the corridor from ({a[0]:.2f}, {a[1]:.2f}) "
-                                f"to ({b[0]:.2f}, {b[1]:.2f}) m")
-    centres = np.column_stack([(cells[:, 1] + 0.5) * h, (cells[:, 0] + 0.5) * h])
-    return simplify(free, np.vstack([a, centres, b]))
+    bg = free.block_graph() if not clear.all() else None
+    who, lines = [], []
+    for j, (p, q) in enumerate(zip(a, b)):
+        if clear[j]:
+            out[j] = np.array([p, q])
+            continue
+        ra, ca = int(p[1] // h), int(p[0] // h)
+        rb, cb = int(q[1] // h), int(q[0] // h)
+        corridor = bg.corridor(bg.sub_at(ra, ca), bg.sub_at(rb, cb))
+        if corridor is None:
+            raise PlanError(source, f"no collision-free connection from ({p[0]:.2f}, {p[1]:.2f}) to "
+                                    f"({q[0]:.2f}, {q[1]:.2f}) m (grid frame) in the eroded free space")
+        rr, cc = bg.cells_of(corridor)
+        cells = cell_path(rr, cc, (ra, ca), (rb, cb))
+        if cells is None:   # cannot happen: the corridor holds a fine path (module doc)
+            raise PlanError(source, f"internal: no path in the corridor from ({p[0]:.2f}, {p[1]:.2f}) "
+                                    f"to ({q[0]:.2f}, {q[1]:.2f}) m")
+        centres = np.column_stack([(cells[:, 1] + 0.5) * h, (cells[:, 0] + 0.5) * h])
+        who.append(j)
+        lines.append(np.vstack([p, centres, q]))
+    for j, line in zip(who, simplify_many(free, lines)):
+        out[j] = line
+    return out

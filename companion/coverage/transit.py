@@ -27,13 +27,23 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
-from .freespace import FreeSpace
-from .gridpath import NEIGHBOURS_4, aux_path, cell_graph, simplify, visible_from
+from .freespace import FreeSpace, min_pool
+from .gridpath import NEIGHBOURS_4, aux_path, mask_graph, simplify_many, visible_from
 
 #: pooled cell edge (m) aimed at; at least one fine cell
 POOL_M = 0.2
 #: how far (pooled cells) a point looks for a pooled cell it sees
 _SEARCH = 4
+
+
+def _search_offsets() -> tuple[np.ndarray, np.ndarray]:
+    """(dr, dc) pooled-cell offsets within ``_SEARCH``, nearest first (stable ties)."""
+    dr, dc = np.meshgrid(np.arange(-_SEARCH, _SEARCH + 1), np.arange(-_SEARCH, _SEARCH + 1), indexing="ij")
+    order = np.argsort((dr * dr + dc * dc).ravel(), kind="stable")
+    return dr.ravel()[order], dc.ravel()[order]
+
+
+_DR, _DC = _search_offsets()
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,51 +69,83 @@ class TransitTree:
         return np.column_stack([(self.c0 * self.free.resolution_m + (np.asarray(c) + 0.5) * cell),
                                 (self.r0 * self.free.resolution_m + (np.asarray(r) + 0.5) * cell)])
 
-    def _attach(self, q_g: np.ndarray) -> int | None:
-        """Node of the nearest reachable pooled cell whose centre ``q_g`` sees, or None."""
-        cell = self.pool * self.free.resolution_m
-        pr = int((q_g[1] - self.r0 * self.free.resolution_m) // cell)
-        pc = int((q_g[0] - self.c0 * self.free.resolution_m) // cell)
-        dr, dc = np.meshgrid(np.arange(-_SEARCH, _SEARCH + 1), np.arange(-_SEARCH, _SEARCH + 1), indexing="ij")
-        order = np.argsort((dr * dr + dc * dc).ravel(), kind="stable")
-        r = pr + dr.ravel()[order]
-        c = pc + dc.ravel()[order]
+    def _attach(self, qs_g: np.ndarray) -> list[int | None]:
+        """For each point (m, 2) of ``qs_g``: the node of the nearest reachable pooled cell
+        whose centre it sees, or None; all visibility tests in one call."""
+        qs_g = np.asarray(qs_g, float).reshape(-1, 2)
+        out: list = [None] * len(qs_g)
+        if len(self.lin) == 0 or len(qs_g) == 0:
+            return out
+        h = self.free.resolution_m
+        cell = self.pool * h
+        pr = np.array([int((q[1] - self.r0 * h) // cell) for q in qs_g])
+        pc = np.array([int((q[0] - self.c0 * h) // cell) for q in qs_g])
+        r = pr[:, None] + _DR
+        c = pc[:, None] + _DC
         t = r * self.width + c
         pos = np.minimum(np.searchsorted(self.lin, t), len(self.lin) - 1)
         hit = (self.lin[pos] == t) & (r >= 0) & (c >= 0)
-        nodes = pos[hit]
-        nodes = nodes[np.isfinite(self.dist[nodes])]
-        if len(nodes) == 0:
-            return None
-        vis = visible_from(self.free, q_g, self._centre_g(self.rows[nodes], self.cols[nodes]))
-        good = nodes[vis]
-        return int(good[0]) if len(good) else None
+        hit[hit] = np.isfinite(self.dist[pos[hit]])
+        qi, k = np.nonzero(hit)                 # per point, nearest offsets first
+        nodes = pos[qi, k]
+        vis = visible_from(self.free, qs_g[qi], self._centre_g(self.rows[nodes], self.cols[nodes]))
+        first_q, first = np.unique(qi[vis], return_index=True)
+        for q, node in zip(first_q, nodes[vis][first]):
+            out[int(q)] = int(node)
+        return out
 
     def distance_m(self, q_g: np.ndarray) -> float:
         """Length (m) of the pooled transit from the root to ``q_g``; inf if it cannot attach."""
-        node = self._attach(np.asarray(q_g, float))
-        if node is None:
-            return np.inf
-        centre = self._centre_g(self.rows[node], self.cols[node])[0]
-        return float(self.dist[node]) * self.pool * self.free.resolution_m + float(np.hypot(*(centre - q_g)))
+        return self.distances_m(np.asarray(q_g, float)[None])[0]
+
+    def distances_m(self, qs_g: np.ndarray) -> list[float]:
+        """:meth:`distance_m` of each point (m, 2) of ``qs_g``."""
+        qs_g = np.asarray(qs_g, float).reshape(-1, 2)
+        out = []
+        for q_g, node in zip(qs_g, self._attach(qs_g)):
+            if node is None:
+                out.append(np.inf)
+                continue
+            centre = self._centre_g(self.rows[node], self.cols[node])[0]
+            out.append(float(self.dist[node]) * self.pool * self.free.resolution_m
+                       + float(np.hypot(*(centre - q_g))))
+        return out
 
     def path_to(self, q_g: np.ndarray) -> np.ndarray:
         """(k, 2) G polyline from the root to ``q_g`` in eroded free space (module doc)."""
-        q_g = np.asarray(q_g, float)
-        node = self._attach(q_g)
-        if node is None:
-            return aux_path(self.free, self.root_g, q_g, self.source)
-        chain = [node]
-        while self.pred[chain[-1]] >= 0:
-            chain.append(int(self.pred[chain[-1]]))
-        chain = np.array(chain[::-1])
-        centres = self._centre_g(self.rows[chain], self.cols[chain])
+        return self.paths_to([q_g])[0]
+
+    def paths_to(self, qs_g: list) -> list[np.ndarray]:
+        """:meth:`path_to` of several points, their string pulling in lock step
+        (``gridpath.simplify_many``): the same paths, far fewer vectorised calls."""
+        out: list = [None] * len(qs_g)
+        who, chains, ends = [], [], []
+        pred = self.__dict__.get("_pred_list")
+        off = np.array([self.c0, self.r0]) * self.free.resolution_m
+        qs_g = np.asarray(qs_g, float).reshape(-1, 2)
+        for k, (q_g, node) in enumerate(zip(qs_g, self._attach(qs_g))):
+            if node is None:
+                out[k] = aux_path(self.free, self.root_g, q_g, self.source)
+                continue
+            if pred is None:        # walked in Python ints: a numpy scalar per step costs more
+                pred = self.__dict__.setdefault("_pred_list", self.pred.tolist())
+            chain = [node]
+            p = pred[node]
+            while p >= 0:
+                chain.append(p)
+                p = pred[p]
+            chain = np.array(chain[::-1])
+            who.append(k)
+            ends.append(q_g)
+            chains.append(self._centre_g(self.rows[chain], self.cols[chain]) - off)
         # string pulling on the pooled mask first (pooled cells are wholly eroded, so a
         # segment clear there is clear in the fine mask; half the samples), then on the
         # fine mask over the few points left, with the two end hops
-        off = np.array([self.c0, self.r0]) * self.free.resolution_m
-        coarse = simplify(self.pooled, centres - off) + off
-        return simplify(self.free, np.vstack([self.root_g, coarse, q_g]))
+        coarse = simplify_many(self.pooled, chains) if chains else []
+        fine = simplify_many(self.free, [np.vstack([self.root_g, c + off, q]) for c, q in zip(coarse, ends)])
+        for k, f in zip(who, fine):
+            out[k] = f
+        return out
 
 
 def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>") -> TransitTree:
@@ -112,18 +154,13 @@ def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>
     p = max(1, int(round(POOL_M / h)))
     r0, r1, c0, c1 = free.bbox_cells
     win = free.eroded[r0:r1, c0:c1]
-    R, C = -(-win.shape[0] // p), -(-win.shape[1] // p)
-    padded = np.zeros((R * p, C * p), dtype=bool)
-    padded[: win.shape[0], : win.shape[1]] = win
-    pooled = padded.reshape(R, p, C, p).all(axis=(1, 3))
-    rows, cols = np.nonzero(pooled)
-    width = C + 2
-    if len(rows) == 0:
+    pooled = min_pool(win, p)
+    width = pooled.shape[1] + 2
+    if not pooled.any():
         empty = np.zeros(0, dtype=np.int64)
         return TransitTree(free, np.asarray(root_g, float), p, r0, c0, empty, width, empty, empty,
                            np.zeros(0), empty, source)
-    graph, order = cell_graph(rows, cols, neighbours=NEIGHBOURS_4, edge_cells=0)
-    rows, cols = rows[order], cols[order]
+    graph, rows, cols = mask_graph(pooled, neighbours=NEIGHBOURS_4, edge_cells=0)
     lin = rows * width + cols
     tree = TransitTree(free, np.asarray(root_g, float), p, r0, c0, lin, width, rows, cols,
                        np.full(len(rows), np.inf), np.full(len(rows), -9999), source)
@@ -132,10 +169,8 @@ def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>
     cell = p * h
     pr = int((root_g[1] - r0 * h) // cell)
     pc = int((root_g[0] - c0 * h) // cell)
-    dr, dc = np.meshgrid(np.arange(-_SEARCH, _SEARCH + 1), np.arange(-_SEARCH, _SEARCH + 1), indexing="ij")
-    order2 = np.argsort((dr * dr + dc * dc).ravel(), kind="stable")
-    r = pr + dr.ravel()[order2]
-    c = pc + dc.ravel()[order2]
+    r = pr + _DR
+    c = pc + _DC
     t = r * width + c
     pos = np.minimum(np.searchsorted(lin, t), len(lin) - 1)
     nodes = pos[(lin[pos] == t) & (r >= 0) & (c >= 0)]

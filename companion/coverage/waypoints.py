@@ -72,16 +72,24 @@ class Waypoints:
     corner: np.ndarray
 
 
-def _run(a: np.ndarray, b: np.ndarray, dem: ElevationModel, agl: float):
-    """Dense terrain-following samples of the run a-b: (k, 3) points and (k,) 3D arc length."""
-    L = float(np.hypot(*(b - a)))
-    k = max(2, int(np.ceil(L / _DENSE_STEP_M)) + 1)
-    s = np.linspace(0.0, 1.0, k)[:, None]
-    xy = (1 - s) * a + s * b
+def _dense_runs(path: np.ndarray, dem: ElevationModel, agl: float):
+    """Dense terrain-following samples of every straight run of ``path`` (K, 2), ENU m.
+
+    Run ``i`` is sampled at ``k_i = max(2, ceil(L_i / _DENSE_STEP_M) + 1)``
+    evenly spaced points, both corners included (``np.linspace`` arithmetic),
+    all runs in one DEM lookup. Returns the (sum k, 3) points and the index
+    where each run starts (length K, the last entry the total).
+    """
+    a, b = path[:-1], path[1:]
+    L = np.hypot(*(b - a).T)
+    k = np.maximum(2, np.ceil(L / _DENSE_STEP_M).astype(np.int64) + 1)
+    first = np.concatenate([[0], np.cumsum(k)])
+    run = np.repeat(np.arange(len(k)), k)
+    s = ((np.arange(first[-1]) - first[run]) * (1.0 / (k - 1))[run])[:, None]
+    s[first[1:] - 1] = 1.0                      # np.linspace sets the end point exactly
+    xy = (1 - s) * a[run] + s * b[run]
     z = dem.height_at(xy[:, 0], xy[:, 1]) + agl
-    p = np.column_stack([xy, z])
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
-    return p, arc
+    return np.column_stack([xy, z]), first
 
 
 def run_duration_s(length_m, flight: FlightConfig, a_ref_m_s2: float = A_REF_M_S2, speed_m_s: float | None = None):
@@ -151,37 +159,52 @@ def waypoints_along(path_xy_m: np.ndarray, dem: ElevationModel, flight: FlightCo
         raise PlanError("<plan>", "the coverage path has fewer than two points")
     if speeds_m_s is None:
         speeds_m_s = np.full(len(path) - 1, flight.speed_m_s)
-    p0 = np.append(path[0], dem.height_at(path[0, 0], path[0, 1]) + agl)
-    ts, ps, vs, cs = [0.0], [p0], [np.zeros(3)], [True]
+    dense_all, first = _dense_runs(path, dem, agl)
+    p0 = dense_all[0]                 # path[0] exactly: the first run's first sample
+    step_all = np.linalg.norm(np.diff(dense_all, axis=0), axis=1)
+    # per run: the corner (always) after its intermediate way-points (if any)
+    ts, xs, ys, tangents, speeds, corners = [np.zeros(1)], [], [], [], [], [p0[None]]
+    n_mids = []
     t = 0.0
-    for a, b, V in zip(path[:-1], path[1:], speeds_m_s):
+    for i, V in enumerate(speeds_m_s):
         d = V * dt
         t_acc = _QUINTIC_PEAK_V * V / a_ref_m_s2
         g_min = max(d / 2, V * t_acc / 2)
-        dense, arc = _run(a, b, dem, agl)
+        i0, i1 = first[i], first[i + 1]
+        dense = dense_all[i0:i1]
+        arc = np.concatenate([[0.0], np.cumsum(step_all[i0:i1 - 1])])
         S = float(arc[-1])
         n_mid = int(np.floor((S - 2 * g_min) / d)) + 1 if S >= 2 * g_min else 0
         if n_mid > 0:
             g = 0.5 * (S - (n_mid - 1) * d)
             s_mid = g + d * np.arange(n_mid)
-            x = np.interp(s_mid, arc, dense[:, 0])
-            y = np.interp(s_mid, arc, dense[:, 1])
-            z = dem.height_at(x, y) + agl
-            tangent = np.column_stack([np.interp(s_mid, arc, np.gradient(dense[:, i], arc))
-                                       for i in range(3)])
-            tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+            xs.append(np.interp(s_mid, arc, dense[:, 0]))
+            ys.append(np.interp(s_mid, arc, dense[:, 1]))
+            grad = np.gradient(dense, arc, axis=0)
+            tangents.append(np.column_stack([np.interp(s_mid, arc, grad[:, j]) for j in range(3)]))
+            speeds.append(np.full(n_mid, V))
             times = t + g / V + t_acc / 2 + dt * np.arange(n_mid)
-            ts.extend(times)
-            ps.extend(np.column_stack([x, y, z]))
-            vs.extend(V * tangent)
-            cs.extend([False] * n_mid)
+            ts.append(times)
             t = times[-1] + g / V + t_acc / 2
         else:
             t += max(_QUINTIC_PEAK_V * S / V, np.sqrt(_QUINTIC_PEAK_A * S / a_ref_m_s2))
-        ts.append(t)
-        ps.append(dense[-1])
-        vs.append(np.zeros(3))
-        cs.append(True)
-    n = len(ts)
-    return Waypoints(t_s=np.asarray(ts), p_enu_m=np.asarray(ps), v_enu_m_s=np.asarray(vs),
-                     a_enu_m_s2=np.zeros((n, 3)), corner=np.asarray(cs))
+        ts.append(np.array([t]))
+        n_mids.append(n_mid)
+    corners.append(dense_all[first[1:] - 1])
+    n_mid = np.array(n_mids, dtype=np.int64)
+    n = 1 + len(n_mid) + int(n_mid.sum())
+    # row of each way-point: p0, then per run its n_mid intermediate ones and its corner
+    is_corner = np.zeros(n, dtype=bool)
+    is_corner[0] = True
+    is_corner[np.cumsum(n_mid + 1)] = True
+    ps = np.empty((n, 3))
+    vs = np.zeros((n, 3))
+    ps[is_corner] = np.vstack(corners)
+    if n_mid.sum():
+        x, y = np.concatenate(xs), np.concatenate(ys)
+        tangent = np.vstack(tangents)
+        tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+        ps[~is_corner] = np.column_stack([x, y, dem.height_at(x, y) + agl])
+        vs[~is_corner] = np.concatenate(speeds)[:, None] * tangent
+    return Waypoints(t_s=np.concatenate(ts), p_enu_m=ps, v_enu_m_s=vs,
+                     a_enu_m_s2=np.zeros((n, 3)), corner=is_corner)

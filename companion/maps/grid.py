@@ -15,6 +15,19 @@ import numpy as np
 from ..errors import MapError
 
 
+def mask_centroid_rc(mask: np.ndarray) -> tuple[float, float]:
+    """Mean (row, column) index of the True cells of a 2-D mask (nan if there are none).
+
+    From the row and column marginals: integer sums, so exactly the mean of
+    ``np.nonzero(mask)``, without index arrays over the whole mask.
+    """
+    n = np.count_nonzero(mask)
+    if n == 0:
+        return float("nan"), float("nan")
+    return (float(np.arange(mask.shape[0]) @ np.count_nonzero(mask, axis=1)) / n,
+            float(np.arange(mask.shape[1]) @ np.count_nonzero(mask, axis=0)) / n)
+
+
 @dataclass(frozen=True, eq=False)
 class OccupancyGrid:
     """Trinary occupancy grid (ROS map_server semantics).
