@@ -203,12 +203,13 @@ def bbox_cells(mask: np.ndarray) -> tuple[int, int, int, int]:
 
 
 def lookup(mask: np.ndarray, cell_m: float, gx, gy) -> np.ndarray:
-    """Nearest-cell lookup of a bool mask at G-frame points (m); False off the map."""
+    """Nearest-cell lookup of a grid (a bool mask, or labels) at G-frame points (m);
+    False (0) off the map. The result has the grid's dtype."""
     c = np.floor(np.asarray(gx) / cell_m).astype(np.int64)
     r = np.floor(np.asarray(gy) / cell_m).astype(np.int64)
     rows, cols = mask.shape
     ok = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
-    out = np.zeros(np.shape(ok), dtype=bool)
+    out = np.zeros(np.shape(ok), dtype=mask.dtype)
     out[ok] = mask[r[ok], c[ok]]
     return out
 

@@ -280,7 +280,6 @@ class FlightCore:
         # replanning (issue 8): the replanner flies the trajectory phase
         self.replanner = inputs.replanner
         self._R_est = None              # the vehicle's attitude estimate (ATTITUDE): poses of readings
-        self.n_unacked_effects = 0      # commands taken as done from the vehicle's state, their ACKs lost
         self._att_t = None              # ... its time (s) and body rates (FLU rad/s)
         self._att_w = _Z3
         self.replan_mode = None
@@ -459,7 +458,6 @@ class FlightCore:
                 ack = self._ack
                 if ack is None and effect is not None and effect():
                     self._ack_for = None
-                    self.n_unacked_effects += 1
                     return None
                 if ack is not None and ack.result == mavlink.MAV_RESULT_IN_PROGRESS:
                     self._ack = None
@@ -1022,9 +1020,7 @@ class FlightCore:
             # define (noisy: about a degree at the paper's noise)
             R = None if est is None else est.R_enu_flu
         if R is not None:
-            if hasattr(R, "ravel"):
-                R = R.ravel().tolist()
-            p, R = propagated_pose(t - self._nav_t, self._pos, self._vel or _Z3, dt_R, R, w)
+            p, R = propagated_pose(t - self._nav_t, self._pos, self._vel, dt_R, R, w)
             self.replanner.on_pose(t, p, R)
 
     def _replan_step(self, t: float) -> RefSample:

@@ -41,6 +41,19 @@ HISTORY_S = 0.5
 MAX_PROPAGATION_S = 0.25
 
 
+def flat_rotation(R_enu_flu) -> tuple:
+    """A rotation as a row-major 9-tuple of floats, from a (3, 3) array, three rows
+    or a row-major 9-sequence."""
+    if hasattr(R_enu_flu, "ravel"):
+        R_enu_flu = R_enu_flu.ravel().tolist()
+    elif len(R_enu_flu) == 3:
+        R_enu_flu = [*R_enu_flu[0], *R_enu_flu[1], *R_enu_flu[2]]
+    R = tuple(float(x) for x in R_enu_flu)
+    if len(R) != 9:
+        raise ValueError("R_enu_flu must have 9 elements")
+    return R
+
+
 def propagated_pose(dt_p: float, pos_enu_m, vel_enu_m_s, dt_R: float, R_enu_flu, rate_flu_rad_s):
     """The pose a little later (or earlier) than its measurements: position
     ``pos + vel * dt_p``, attitude ``R @ exp([rate]x * dt_R)`` (body rates, FLU
@@ -49,12 +62,13 @@ def propagated_pose(dt_p: float, pos_enu_m, vel_enu_m_s, dt_R: float, R_enu_flu,
     Over a lossy link the last position and attitude messages may be several
     frames old when a reading is placed: at 12 deg/s of yaw an attitude 80 ms
     old turns a 5.7 m return 13 cm sideways (off a row's face: a phantom
-    obstacle). Returns (position 3-tuple, row-major 9-tuple R).
+    obstacle). ``R_enu_flu`` as ``flat_rotation`` takes it. Returns (position
+    3-tuple, row-major 9-tuple R).
     """
     tp = min(max(float(dt_p), -MAX_PROPAGATION_S), MAX_PROPAGATION_S)
     p = (pos_enu_m[0] + vel_enu_m_s[0] * tp, pos_enu_m[1] + vel_enu_m_s[1] * tp,
          pos_enu_m[2] + vel_enu_m_s[2] * tp)
-    R = tuple(float(x) for x in R_enu_flu)
+    R = flat_rotation(R_enu_flu)
     tr = min(max(float(dt_R), -MAX_PROPAGATION_S), MAX_PROPAGATION_S)
     wx, wy, wz = (rate_flu_rad_s[0] * tr, rate_flu_rad_s[1] * tr, rate_flu_rad_s[2] * tr)
     th = math.sqrt(wx * wx + wy * wy + wz * wz)
@@ -98,13 +112,7 @@ class PoseHistory:
 
         ``R_enu_flu``: a (3, 3) array, three rows, or a row-major 9-sequence.
         """
-        if hasattr(R_enu_flu, "ravel"):
-            R_enu_flu = R_enu_flu.ravel().tolist()
-        elif len(R_enu_flu) == 3:
-            R_enu_flu = [*R_enu_flu[0], *R_enu_flu[1], *R_enu_flu[2]]
-        R = tuple(float(x) for x in R_enu_flu)
-        if len(R) != 9:
-            raise ValueError("R_enu_flu must have 9 elements")
+        R = flat_rotation(R_enu_flu)
         pose = Pose(float(t_s), (float(pos_enu_m[0]), float(pos_enu_m[1]), float(pos_enu_m[2])), R)
         q = self._poses
         self._last = None

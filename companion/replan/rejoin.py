@@ -15,9 +15,9 @@ their intervals. A candidate is accepted only if, over its first
 keeps the clearance from the remembered obstacle points (farther on, the
 replanner meets them again as it follows). A remembered point stands for
 the column below it down to the ground: obstacles stand on the ground, and
-the beams see a low one's top edge, not its sides (a rejoin that came down
-just past the few points seen on a 0.9 m post passed its shoulder at 0.41 m
-in the randomized SITL benchmark). And over its **whole** length,
+the beams may see a low one's top edge and not its sides below, so a
+candidate that comes down past the points must keep the clearance from
+what stands under them too. And over its **whole** length,
 it stays below the ceiling and over the map's free cells: the map's rows are
 not in the obstacle memory, so nothing else would stop a candidate that cuts
 across them later (a rejoin through a way-point 13 m away across two rows,

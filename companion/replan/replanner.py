@@ -716,8 +716,7 @@ class Replanner:
 
     def _over_points(self, P, v, obs) -> bool:
         """A remembered point below the reference lies horizontally within the
-        clearance, the body, the governor margin and ``HOLD_HEIGHT_LAG_S`` of travel
-        (``HOLD_HEIGHT_LAG_S``)."""
+        clearance, the body, the governor margin and ``HOLD_HEIGHT_LAG_S`` of travel."""
         below = obs[:, 2] < P[2]
         if not below.any():
             return False

@@ -121,13 +121,7 @@ def free_runs(known: KnownMap, a_xy, b_xy) -> list[tuple[float, float]]:
 def _labels_at(known: KnownMap, labels: np.ndarray, pts_xy: np.ndarray) -> np.ndarray:
     """Component label of the eroded cell under each point (0: not eroded free or off the map)."""
     g = world_to_grid(known.grid, np.asarray(pts_xy, dtype=float).reshape(-1, 2))
-    h = known.free.resolution_m
-    r = np.floor(g[:, 1] / h).astype(int)
-    c = np.floor(g[:, 0] / h).astype(int)
-    ok = (r >= 0) & (r < labels.shape[0]) & (c >= 0) & (c < labels.shape[1])
-    out = np.zeros(len(g), dtype=labels.dtype)
-    out[ok] = labels[r[ok], c[ok]]
-    return out
+    return lookup(labels, known.free.resolution_m, g[:, 0], g[:, 1])
 
 
 def back_off(known: KnownMap, p_xy, direction_xy, max_m: float = MAX_BACK_OFF_M,
