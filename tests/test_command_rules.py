@@ -325,3 +325,41 @@ def test_the_companion_sends_its_own_commands():
     for cmd, p in ((SET_MODE, (CUSTOM, 6, 0)), (ARM, (1,)), (ARM, (0,)), (LAND, ()), (INTERVAL, (LPOS, 4000)),
                    (INTERVAL, (HB, -1))):
         assert rules.command_problem(cmd, tuple(p) + (0.0,) * (7 - len(p))) is None
+
+
+class _Core:
+    """The parts of ``FlightCore`` the runner's refusal path uses."""
+
+    def __init__(self, outbox):
+        self.outbox, self.degraded, self.interrupted, self.finished = list(outbox), None, None, False
+
+    def take_outbox(self):
+        out, self.outbox = self.outbox, []
+        return out
+
+    def degrade(self, reason):
+        self.degraded = reason
+
+    def interrupt(self, reason):
+        self.interrupted = reason
+
+
+def test_the_runner_turns_refused_motor_commands_into_a_tick_and_hands_over(companion_link):
+    from companion.runner import ActuatorOut, MissionRunner
+
+    conn, vehicle = companion_link
+    core = _Core([ActuatorOut(4000, (0.5, math.nan, 0.5, 0.5), True)])
+    MissionRunner(conn, core)._send_outbox()
+    data, _ = vehicle.recvfrom(4096)
+    m = mavlink.MAVLink(None).parse_buffer(data)[0]
+    assert m.get_type() == "HIL_ACTUATOR_CONTROLS" and all(math.isnan(c) for c in m.controls[:4])
+    assert "HIL_ACTUATOR_CONTROLS" in core.degraded and core.interrupted is None
+
+
+def test_the_runner_stops_the_flight_on_any_other_refused_message(companion_link):
+    from companion.runner import MissionRunner
+
+    conn, vehicle = companion_link
+    core = _Core([_target(conn.mav, pos=(math.nan, 0.0, -2.0))])
+    MissionRunner(conn, core)._send_outbox()
+    assert conn.n_sent == 0 and "SET_POSITION_TARGET_LOCAL_NED" in core.interrupted
