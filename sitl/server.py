@@ -1500,8 +1500,10 @@ class SitlServer:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
         item = codec.mission_item_from_float(msg)
-        if item is not None:
-            self._mission_item(link, msg, item)
+        if item is None:
+            self._refuse("MISSION_ITEM", "x or y not finite or beyond the int32 of MISSION_ITEM_INT")
+            return
+        self._mission_item(link, msg, item)
 
     def _mission_item(self, link, msg, item) -> None:
         was = self.missions.uploading

@@ -169,6 +169,8 @@ HOSTILE_MESSAGES = [
     ("mission-alt-nan", "MISSION_ITEM_INT", lambda m: _item(m, z=NAN)),
     ("mission-param4-inf", "MISSION_ITEM_INT", lambda m: _item(m, p4=INF)),
     ("mission-frame-99", "MISSION_ITEM_INT", lambda m: _item(m, frame=99)),
+    ("legacy-mission-item-x-inf", "MISSION_ITEM",
+     lambda m: m.mission_item_encode(1, 1, 0, mavlink.MAV_FRAME_GLOBAL, 16, 0, 1, 0, 0, 0, NAN, INF, -0.6, 32.0, 0)),
 ]
 
 

@@ -197,3 +197,30 @@ def test_resume_index_needs_a_finite_position():
     assert resume_index(wp, (0.0, math.inf, 1.5)) is None
     assert resume_index(wp, None) is None
     assert resume_index(np.zeros((0, 3)), (0.0, 0.0, 0.0)) is None
+
+
+def test_fly_checks_what_it_flies_before_opening_anything(field, tmp_path):
+    """``execute`` (fly and demo) checks the flight plan it is given (here a sortie
+    whose re-solved trajectory leaves the band) before the link or the tlog."""
+    import socket
+
+    from companion.commands.fly import execute, sortie_flight_plan
+
+    mission, _, _ = field
+    t = np.array([0.0, 4.0, 8.0])
+    p = np.array([[3.0, 8.75, 1.5], [6.5, 8.75, 1.5], [10.0, 8.75, 1.5]])
+    v = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -5.0], [0.0, 0.0, 0.0]])
+    fp = sortie_flight_plan(t, p, v, np.zeros((3, 3)), [12.0, 20.0, 1.5], mission.trajectory,
+                            source="plan.json --sortie 2")
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    vehicle.bind(("127.0.0.1", 0))
+    vehicle.settimeout(0.2)
+    try:
+        with pytest.raises(PlanError, match=r"plan\.json --sortie 2: key 'trajectory\(t="):
+            execute(mission, fp, f"udpout:127.0.0.1:{vehicle.getsockname()[1]}", "companion",
+                    str(tmp_path / "flight.tlog"))
+        with pytest.raises(socket.timeout):
+            vehicle.recvfrom(4096)
+    finally:
+        vehicle.close()
+    assert not (tmp_path / "flight.tlog").exists()
