@@ -156,7 +156,8 @@ def test_a_trajectory_that_leaves_the_band_is_refused(field):
     v = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -5.0], [0.0, 0.0, 0.0]])
     fp = sortie_flight_plan(t, p, v, np.zeros((3, 3)), [12.0, 20.0, 1.5], mission.trajectory, source="p.json --cut 9")
     check_waypoints("p.json", "w", t, p, v, np.zeros((3, 3)), mission, grid, dem)      # the way-points pass
-    with pytest.raises(PlanError, match=r"p\.json --cut 9: key 'trajectory\(t=[0-9.]+ s\)\.p': .* outside \[0\.75, 3\.5\] m"):
+    with pytest.raises(PlanError,
+                       match=r"p\.json --cut 9: key 'trajectory\(t=[0-9.]+ s\)\.p': .* outside \[0\.75, 3\.5\] m"):
         check_flight_plan(fp.source, fp, mission, grid, dem)
 
 
