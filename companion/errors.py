@@ -56,3 +56,22 @@ class CommandRejected(RuntimeError):
 
 class LinkError(RuntimeError):
     """The MAVLink peer did not answer in time or the link failed."""
+
+
+class UnsafeMessage(ValueError):
+    """The companion refused to send a message that breaks
+    ``companion.link.command_rules`` (a non-finite or out-of-range command
+    parameter, setpoint or motor command): nothing was sent.
+
+    Parameters
+    ----------
+    msg_type : str
+        The MAVLink message type.
+    problem : str
+        What is wrong with it.
+    """
+
+    def __init__(self, msg_type: str, problem: str) -> None:
+        super().__init__(f"refused to send {msg_type}: {problem}")
+        self.msg_type = msg_type
+        self.problem = problem

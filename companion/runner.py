@@ -29,7 +29,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-from .errors import LinkError
+from .errors import LinkError, UnsafeMessage
 from .flight.config import RunnerConfig  # noqa: F401  (re-export)
 from .flight.core import (LAUNCH_TOLERANCE_M, PHASES, UNUSED_STREAMS, ActuatorOut,  # noqa: F401
                           FlightCore, FlightInputs)
@@ -95,10 +95,24 @@ class MissionRunner:
     def _send_outbox(self) -> None:
         conn = self.conn
         for out in self.core.take_outbox():
-            if type(out) is ActuatorOut:
-                conn.send_actuators(out.time_usec, out.motor_cmd, out.armed)
-            else:
-                conn.send(out)
+            try:
+                if type(out) is ActuatorOut:
+                    conn.send_actuators(out.time_usec, out.motor_cmd, out.armed)
+                else:
+                    conn.send(out)
+            except UnsafeMessage as exc:
+                self._refused(out, exc)
+
+    def _refused(self, out, exc: UnsafeMessage) -> None:
+        """The link refused to send ``out`` (``companion.link.command_rules``): unusable
+        motor commands become a tick without override and the vehicle's controller
+        takes over (``degrade``); any other message stops the flight (land or hold)."""
+        core = self.core
+        if type(out) is ActuatorOut:
+            self.conn.send_actuators(out.time_usec, None, out.armed)
+            core.degrade(str(exc))
+        elif core.interrupted is None and not core.finished:
+            core.interrupt(str(exc))
 
     def run(self) -> FlightResult:
         """Fly; returns the report (``completed`` False with the reason on failure)."""

@@ -64,6 +64,10 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion import frames
+# Sanity limits on decoded setpoints (a message beyond them is ignored) and the
+# actuator rule: ``companion.link.command_rules``, the one table of both ends.
+from companion.link.command_rules import (MAX_SETPOINT_ACC_M_S2, MAX_SETPOINT_POS_M, MAX_SETPOINT_VEL_M_S,
+                                          actuator_problem)
 
 # --- constants named once ---------------------------------------------------
 
@@ -93,10 +97,6 @@ TM_POS = TM_X | TM_Y | TM_Z
 TM_VEL = TM_VX | TM_VY | TM_VZ
 TM_ACC = TM_AX | TM_AY | TM_AZ
 
-#: Sanity limits on decoded setpoints: a message beyond them is ignored.
-MAX_SETPOINT_POS_M = 1.0e5
-MAX_SETPOINT_VEL_M_S = 100.0
-MAX_SETPOINT_ACC_M_S2 = 100.0
 
 _NAN3 = (math.nan, math.nan, math.nan)
 
@@ -193,11 +193,15 @@ class ActuatorAnswer:
         otherwise unusable.
     lockstep : bool
         ``flags & HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP``.
+    refused : str or None
+        Why controls[0..3] are unusable (``command_rules.actuator_problem``:
+        NaN mixed with numbers, infinite, outside [-1, 1]); None otherwise.
     """
 
     time_usec: int
     motor_cmd: tuple | None
     lockstep: bool
+    refused: str | None = None
 
 
 def addressed_to_us(msg, system_id: int = 1, component_id: int = 1) -> bool:
@@ -285,18 +289,21 @@ def decode_position_target(msg, yaw_enu_rad: float = 0.0,
 def decode_actuator_controls(msg) -> ActuatorAnswer | None:
     """HIL_ACTUATOR_CONTROLS -> ``ActuatorAnswer``.
 
-    controls[0..3] all NaN: a lockstep tick without override. Any other
-    non-finite value among them makes the command unusable (``motor_cmd``
-    None) but the message still counts as a lockstep answer. Finite values
-    are clipped to [0, 1].
+    controls[0..3] all NaN: a lockstep tick without override. Values that
+    break ``command_rules.actuator_problem`` (NaN mixed with numbers,
+    infinite, outside MAVLink's [-1, 1]) make the command unusable
+    (``motor_cmd`` None, ``refused`` says why) but the message still counts
+    as a lockstep answer. Usable values are clipped to [0, 1].
     """
     c = msg.controls
-    c0, c1, c2, c3 = c[0], c[1], c[2], c[3]
-    lockstep = bool(int(msg.flags) & HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP)
-    t = int(msg.time_usec)
-    if math.isfinite(c0) and math.isfinite(c1) and math.isfinite(c2) and math.isfinite(c3):
+    return _answer(int(msg.time_usec), c[0], c[1], c[2], c[3],
+                   bool(int(msg.flags) & HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP))
+
+
+def _answer(t: int, c0: float, c1: float, c2: float, c3: float, lockstep: bool) -> ActuatorAnswer:
+    if -1.0 <= c0 <= 1.0 and -1.0 <= c1 <= 1.0 and -1.0 <= c2 <= 1.0 and -1.0 <= c3 <= 1.0:
         return ActuatorAnswer(t, _clip01(c0, c1, c2, c3), lockstep)
-    return ActuatorAnswer(t, None, lockstep)
+    return ActuatorAnswer(t, None, lockstep, actuator_problem(c0, c1, c2, c3))
 
 
 def decode_takeoff_altitude(param7: float, origin_alt_amsl_m: float) -> float | None:
@@ -773,11 +780,7 @@ def decode_actuator_datagram(data: bytes) -> ActuatorAnswer | None:
     if plen < _HIL_LEN:
         payload = payload + bytes(_HIL_LEN - plen)   # MAVLink 2 zero-truncation
     f = _HIL_PAYLOAD.unpack(payload)
-    c0, c1, c2, c3 = f[2], f[3], f[4], f[5]
-    lockstep = bool(f[1] & HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP)
-    if math.isfinite(c0) and math.isfinite(c1) and math.isfinite(c2) and math.isfinite(c3):
-        return ActuatorAnswer(f[0], _clip01(c0, c1, c2, c3), lockstep)
-    return ActuatorAnswer(f[0], None, lockstep)
+    return _answer(f[0], f[2], f[3], f[4], f[5], bool(f[1] & HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP))
 
 
 def _clip01(c0: float, c1: float, c2: float, c3: float) -> tuple:

@@ -61,6 +61,8 @@ from enum import Enum
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.link.command_rules import mission_item_problem
+
 from .collision import CrashEvent, landing_intended
 from .onboard import Setpoint
 
@@ -344,6 +346,8 @@ class MissionProtocol:
         self._acked_count: int | None = None
         self._last_s = 0.0
         self._retries = 0
+        #: Why the last item handled was refused (``command_rules.mission_item_problem``), else None.
+        self.refused: str | None = None
 
     @property
     def uploading(self) -> bool:
@@ -371,6 +375,7 @@ class MissionProtocol:
 
     def handle_item(self, item: MissionItem, now_s: float) -> list:
         mt = item.mission_type
+        self.refused = None
         if (self._upload is None and mt == mavlink.MAV_MISSION_TYPE_MISSION
                 and self._acked_count is not None and item.seq == self._acked_count - 1):
             # The last item again after our ACCEPTED: the peer lost the ACK
@@ -384,6 +389,13 @@ class MissionProtocol:
             # Duplicate or skipped item: ask again for the one we need.
             self._last_s = now_s
             return [SendRequest(expected, mt)]
+        bad = mission_item_problem(item.frame, (item.param1, item.param2, item.param3, item.param4),
+                                   item.x, item.y, item.z)
+        if bad is not None:
+            # the upload ends with the error (mission protocol): the stored mission stays as it was
+            self._upload = None
+            self.refused = f"mission item {item.seq}: {bad[1]}"
+            return [SendAck(bad[0], mt)]
         self._upload.append(item)
         self._last_s = now_s
         self._retries = 0
@@ -741,7 +753,9 @@ class FlightStack:
 
     def takeoff(self, now_us: int, state: NavState, target_z_enu_m: float | None) -> CommandResult:
         """MAV_CMD_NAV_TAKEOFF: climb to ``target_z_enu_m`` (None, or not above
-        home: home + MIS_TAKEOFF_ALT; more than 150 m above home: DENIED).
+        home: home + MIS_TAKEOFF_ALT; more than 150 m above home: DENIED). In the
+        air below the vehicle: its own height (PX4 does not descend for a take-off).
+        The parameters were checked by ``companion.link.command_rules`` first.
 
         Disarmed: switches to AUTO.TAKEOFF; arming then takes off (PX4).
         """
@@ -758,6 +772,11 @@ class FlightStack:
             # altitude with a warning rather than refusing.
             self._say(SEVERITY_WARNING, f"Using minimum takeoff altitude: {z_min - home_z:.2f} m")
             z = z_min
+        z_now = float(state.pos_enu_m[2])
+        if self.armed and not state.landed and z < z_now:
+            # In the air below where it is: PX4's navigator does not go down.
+            self._say(SEVERITY_WARNING, "Already higher than takeoff altitude (not descending)")
+            z = z_now
         self._takeoff_z = z
         self._failsafe = None
         self._enter(FlightMode.TAKEOFF, state)

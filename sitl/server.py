@@ -108,6 +108,7 @@ from . import codec
 from companion.link.signing import (
     SignatureVerifier, disable_outgoing_signing, enable_outgoing_signing, signing_timestamp,
 )
+from companion.link import command_rules as rules
 from companion.link.sockets import is_udp_url, open_udp
 
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
@@ -630,7 +631,9 @@ class SitlServer:
         }
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
-        self.stats = {"bad_packets": 0, "ignored": collections.Counter(), "unsupported": collections.Counter()}
+        self.stats = {"bad_packets": 0, "ignored": collections.Counter(), "unsupported": collections.Counter(),
+                      "refused": collections.Counter()}
+        self._refusal_said_s = -math.inf    # wall time of the last STATUSTEXT about a refused input
         #: Who may control the vehicle (``sitl.auth``); its ``counts`` are the
         #: accepted and ignored control messages.
         self.auth = ControlPolicy(
@@ -711,6 +714,7 @@ class SitlServer:
             "dropped_unparsed": {"oversized": self._intake.n_oversized, "over_rate": self._intake.n_over_rate},
             "ignored_types": dict(self.stats["ignored"]),
             "unsupported_commands": {str(k): v for k, v in self.stats["unsupported"].items()},
+            "refused": dict(self.stats["refused"]),
             "links": [{"url": l.url, "control": l.control, "clients": len(l.clients),
                        "clients_evicted": l.clients.n_evicted, "clients_expired": l.clients.n_expired}
                       for l in self.links],
@@ -1214,6 +1218,19 @@ class SitlServer:
     def _state(self) -> NavState:
         return self._nav_state(self._frame)
 
+    #: Wall seconds between two STATUSTEXTs about refused inputs (a flood of
+    #: bad messages must not become a flood of texts to every link).
+    REFUSAL_TEXT_S = 1.0
+
+    def _refuse(self, kind: str, why: str) -> None:
+        """Count a message refused by ``companion.link.command_rules`` and say why
+        (at most once per ``REFUSAL_TEXT_S``)."""
+        self.stats["refused"][kind] += 1
+        now = time.monotonic()
+        if now - self._refusal_said_s >= self.REFUSAL_TEXT_S:
+            self._refusal_said_s = now
+            self._say(SEVERITY_WARNING, f"Refused {kind}: {why}")
+
     # ------------------------------------------------------------------ commands
     def _on_command_long(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
@@ -1225,13 +1242,20 @@ class SitlServer:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
         params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
-        self._command(link, msg, int(msg.command), params)
+        self._command(link, msg, int(msg.command), params, int(msg.frame))
 
-    def _command(self, link, msg, command: int, params) -> None:
+    def _command(self, link, msg, command: int, params, int_frame: int | None = None) -> None:
         handler = self._commands.get(command)
         result, after = mavlink.MAV_RESULT_UNSUPPORTED, None
+        why = None
+        if handler is not None:
+            landed = not self.stack.armed or self._state().landed
+            why = rules.command_problem(command, params, int_frame=int_frame, landed=landed)
         if handler is None:
             self.stats["unsupported"][command] += 1
+        elif why is not None:      # even from an allowed controller
+            result = mavlink.MAV_RESULT_DENIED
+            self._refuse(rules.command_name(command), why)
         else:
             try:
                 result, after = handler(params)
@@ -1348,13 +1372,24 @@ class SitlServer:
         if msg.target_system != SYSTEM_ID:
             return
         if not int(msg.base_mode) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            self._refuse("SET_MODE", f"base_mode {int(msg.base_mode)} without CUSTOM_MODE_ENABLED")
             return
         main, sub = codec.px4_modes_from_custom(msg.custom_mode)
-        self.stack.set_mode(self.sim.time_us, self._state(), FlightMode.from_px4(main, sub))
+        mode = FlightMode.from_px4(main, sub)
+        if mode is None:
+            self._refuse("SET_MODE", f"unknown custom mode {int(msg.custom_mode)}")
+            return
+        self.stack.set_mode(self.sim.time_us, self._state(), mode)
 
     # ------------------------------------------------------------------ setpoints
     def _on_position_target(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        why = rules.position_target_problem(
+            msg.coordinate_frame, msg.type_mask,
+            (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, msg.afx, msg.afy, msg.afz), msg.yaw, msg.yaw_rate)
+        if why is not None:
+            self._refuse("SET_POSITION_TARGET_LOCAL_NED", why)
             return
         nav = self._state()   # the flight stack's own heading and position (estimate or truth)
         target = codec.decode_position_target(msg, nav.yaw_enu_rad, nav.pos_enu_m)
@@ -1366,6 +1401,8 @@ class SitlServer:
 
     def _on_answer(self, ans: codec.ActuatorAnswer) -> None:
         now = self.sim.time_us
+        if ans.refused is not None:       # unusable controls: still a lockstep answer
+            self._refuse("HIL_ACTUATOR_CONTROLS", ans.refused)
         self.stack.actuator_controls(now, ans.motor_cmd)
         if not (ans.lockstep and self.config.lockstep):
             return
@@ -1463,12 +1500,16 @@ class SitlServer:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
         item = codec.mission_item_from_float(msg)
-        if item is not None:
-            self._mission_item(link, msg, item)
+        if item is None:
+            self._refuse("MISSION_ITEM", "x or y not finite or beyond the int32 of MISSION_ITEM_INT")
+            return
+        self._mission_item(link, msg, item)
 
     def _mission_item(self, link, msg, item) -> None:
         was = self.missions.uploading
         replies = self.missions.handle_item(item, time.monotonic())
+        if self.missions.refused is not None:
+            self._refuse(msg.get_type(), self.missions.refused)
         self._send_mission_replies(link, self._peer(msg), replies)
         if was and not self.missions.uploading and self.missions.items:
             self._say(SEVERITY_INFO, f"Mission stored: {len(self.missions.items)} items")

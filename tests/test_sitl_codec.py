@@ -243,8 +243,11 @@ def hil(mav, t, controls, flags):
 
 
 def test_actuator_controls_decoding(mav):
-    a = codec.decode_actuator_controls(hil(mav, 7, [0.2, -1.0, 1.5, 0.6], 1))
+    a = codec.decode_actuator_controls(hil(mav, 7, [0.2, -1.0, 1.0, 0.6], 1))
     assert a.time_usec == 7 and a.lockstep and a.motor_cmd == pytest.approx((0.2, 0.0, 1.0, 0.6))
+    assert a.refused is None
+    a = codec.decode_actuator_controls(hil(mav, 7, [0.2, -1.0, 1.5, 0.6], 1))
+    assert a.motor_cmd is None and a.lockstep and "outside [-1, 1]" in a.refused   # MAVLink's range, not clipped
     a = codec.decode_actuator_controls(hil(mav, 8, [NAN] * 16, 1))
     assert a.motor_cmd is None and a.lockstep              # a lockstep tick without override
     a = codec.decode_actuator_controls(hil(mav, 9, [0.5, NAN, 0.5, 0.5], 0))

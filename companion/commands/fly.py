@@ -125,16 +125,19 @@ class FlightPlan:
     path_xy_m: np.ndarray | None = None
     waypoints_corner: np.ndarray | None = None
     main_segments_xy: np.ndarray | None = None
+    #: Where it comes from, for the preflight check's messages (plan file, mission, option).
+    source: str = ""
 
     @classmethod
-    def from_plan(cls, plan) -> "FlightPlan":
+    def from_plan(cls, plan, source: str = "") -> "FlightPlan":
         """From a ``companion.planner.Plan``."""
         w = plan.waypoints
         return cls(plan.trajectory, np.asarray(w.p_enu_m, dtype=float), np.asarray(plan.target_enu_m, dtype=float),
                    float(plan.stats.coverage_fraction), np.asarray(w.t_s, dtype=float),
                    np.asarray(w.v_enu_m_s, dtype=float), np.asarray(w.a_enu_m_s2, dtype=float),
                    np.asarray(plan.coverage.path_xy_m, dtype=float), np.asarray(w.corner, dtype=bool),
-                   np.asarray([[a, b] for a, b in plan.coverage.main_segments], dtype=float).reshape(-1, 2, 2))
+                   np.asarray([[a, b] for a, b in plan.coverage.main_segments], dtype=float).reshape(-1, 2, 2),
+                   source)
 
     def cut(self, cut_s: float, config) -> "FlightPlan":
         """The way-points up to the first one at or after ``cut_s`` seconds
@@ -165,11 +168,12 @@ class FlightPlan:
         # The coverage stays the whole plan's: the report's flown coverage is
         # then the part of it this shorter flight covered. The replanner takes
         # the cut's legs as its coverage segments.
-        return FlightPlan(traj, p, self.target_enu_m, self.coverage_fraction, t, v, a, self.path_xy_m, corner)
+        return FlightPlan(traj, p, self.target_enu_m, self.coverage_fraction, t, v, a, self.path_xy_m, corner,
+                          source=f"{self.source} --cut {cut_s:g}".strip())
 
 
 def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config,
-                       path_xy_m=None, corner=None) -> FlightPlan:
+                       path_xy_m=None, corner=None, source: str = "") -> FlightPlan:
     """The FlightPlan of one sortie's way-points (ENU map frame): the LQR trajectory
     through them with the mission's weights; the runner flies it like a whole plan."""
     from ..trajectory import generate_trajectory
@@ -178,7 +182,7 @@ def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config
     traj = generate_trajectory(t, p, v, a, config, target_enu_m=target_enu_m)
     return FlightPlan(traj, p, np.asarray(target_enu_m, dtype=float), None, t, v, a,
                       None if path_xy_m is None else np.asarray(path_xy_m, dtype=float),
-                      None if corner is None else np.asarray(corner, dtype=bool))
+                      None if corner is None else np.asarray(corner, dtype=bool), source=source)
 
 
 def _pick_sortie(count: int, sortie: int, source: str) -> int:
@@ -203,17 +207,18 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None) -> Flight
 
         plan = plan_mission(mission)
         if sortie is None:
-            return FlightPlan.from_plan(plan)
+            return FlightPlan.from_plan(plan, f"{mission.source} (planned)")
         so = plan.sorties.sorties[_pick_sortie(len(plan.sorties.sorties), sortie, mission.name)]
         w = so.waypoints
         return sortie_flight_plan(w.t_s, w.p_enu_m, w.v_enu_m_s, w.a_enu_m_s2, plan.target_enu_m,
-                                  mission.trajectory, so.path_xy_m, w.corner)
+                                  mission.trajectory, so.path_xy_m, w.corner,
+                                  source=f"{mission.source} (planned) --sortie {sortie}")
     from ..plan_io import load_plan
     from ..trajectory import generate_trajectory
 
     pf = load_plan(plan_path)
     from ..preflight import check_plan_file
-    check_plan_file(pf, mission)      # on the map, above the terrain, for this field (companion/preflight.py)
+    check_plan_file(pf, mission)      # whole plan and every sortie: on the map, above the terrain, for this field
     target = pf.target_enu_m
     if target is None:
         # A plan.json without ``target_enu_m`` (the loader does not require
@@ -222,13 +227,15 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None) -> Flight
     if sortie is not None:
         so = pf.sorties[_pick_sortie(len(pf.sorties), sortie, str(plan_path))]
         return sortie_flight_plan(so["waypoint_t_s"], so["waypoint_p_enu_m"], so["waypoint_v_enu_m_s"],
-                                  so["waypoint_a_enu_m_s2"], target, mission.trajectory)
+                                  so["waypoint_a_enu_m_s2"], target, mission.trajectory,
+                                  source=f"{plan_path} --sortie {sortie}")
     traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
                                pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")
     return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
                       None if cov is None else float(cov), pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
-                      pf.waypoint_a_enu_m_s2, pf.path_xy_m if len(pf.path_xy_m) else None, pf.waypoint_corner)
+                      pf.waypoint_a_enu_m_s2, pf.path_xy_m if len(pf.path_xy_m) else None, pf.waypoint_corner,
+                      source=str(plan_path))
 
 
 def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
@@ -309,9 +316,10 @@ def transit_floor_z_m(mission, dem) -> float:
     return float(np.nanmax(h)) + mission.replan.canopy_height_m + TRANSIT_CLEARANCE_M
 
 
-def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None):
+def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None, maps=None):
     """The ``FlightCore`` that flies ``flight_plan`` (already cut) with ``cfg``: the
-    same construction for ``companion fly`` and ``companion replay``."""
+    same construction for ``companion fly`` and ``companion replay``. ``maps``: the
+    mission's (grid, dem) when already read (``load_mission_maps``)."""
     from ..control import GeometricController
     from ..runner import FlightCore, FlightInputs
 
@@ -322,10 +330,10 @@ def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None)
         ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
     # the maps are read once: the take-off floor, the replanner and the report's clearance share them
     if mission.replan.enabled:
-        grid, dem = load_mission_maps(mission)
+        grid, dem = load_mission_maps(mission) if maps is None else maps
         replanner = build_replanner(mission, flight_plan, grid, dem)
     else:
-        dem, replanner = load_mission_dem(mission), None
+        dem, replanner = (load_mission_dem(mission) if maps is None else maps[1]), None
     inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
                           (mission.home.lat, mission.home.lon, mission.home.alt_m),
                           tuple(float(x) for x in flight_plan.target_enu_m),
@@ -386,16 +394,22 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
 
     The link is opened before the tlog is created: a link that cannot be
     opened (unknown host, port in use, refused) is bad input and leaves no
-    file behind.
+    file behind. What is flown (the plan, a sortie, a cut and its re-solved
+    trajectory) passes ``companion.preflight.check_flight_plan`` first
+    (``PlanError``: nothing has been sent).
     """
+    from ..maps.field import load_mission_maps
+    from ..preflight import check_flight_plan
     from ..runner import MissionRunner, RunnerConfig
 
     try:
         if cut_s is not None:
             flight_plan = flight_plan.cut(cut_s, mission.trajectory)
+        maps = load_mission_maps(mission)
+        check_flight_plan(flight_plan.source or str(plan_path or mission.source), flight_plan, mission, *maps)
         cfg = RunnerConfig(control=control, **(runner_overrides or {}))
         core = build_flight_core(mission, flight_plan, cfg,
-                                 flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}))
+                                 flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}), maps)
     except BaseException:
         if conn is not None:
             conn.close()

@@ -715,7 +715,16 @@ class FlightCore:
         traj = self.inputs.trajectory
         wt = np.asarray(traj.waypoint_times_s, dtype=float)
         wp = np.asarray(traj.waypoint_targets[:, 0, :], dtype=float)
-        k = int(np.argmin(np.linalg.norm(wp - np.asarray(self._pos), axis=1)))
+        from ..preflight import resume_index
+
+        k = resume_index(wp, self._pos)
+        if k is None or not math.isfinite(float(wt[k])):
+            # no position (or a non-finite one): the nearest way-point is unknown
+            self.monitor.fail(self.t_s, "attached", "attached to a flying vehicle whose position is not "
+                              "finite: cannot resume, landed it", "land")
+            self.phase = "hover"
+            yield from self._land()
+            return
         t_resume = float(wt[k])
         self.resumed_from_s = t_resume - traj.t0
         # the window starts at the resume time: a trajectory truncated in time

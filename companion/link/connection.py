@@ -35,8 +35,9 @@ from typing import Callable, Iterable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from ..errors import CommandRejected, InputError, LinkError
+from ..errors import CommandRejected, InputError, LinkError, UnsafeMessage
 from . import codec
+from .command_rules import actuator_problem, outgoing_problem
 from .auth import LinkStats, VehicleFilter
 from .signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
 from .sockets import is_udp_url, open_udp
@@ -218,7 +219,18 @@ class Connection:
     # --- send ---------------------------------------------------------------
 
     def send(self, msg) -> None:
-        """Pack, send and record one message."""
+        """Pack, send and record one message.
+
+        Raises
+        ------
+        UnsafeMessage
+            ``msg`` breaks ``command_rules`` (a non-finite or out-of-range
+            command parameter, setpoint field, motor command or mission item):
+            nothing is sent.
+        """
+        why = outgoing_problem(msg)
+        if why is not None:
+            raise UnsafeMessage(msg.get_type(), why)
         if self._sock is None:
             self._mav.send(msg)
         else:
@@ -290,8 +302,13 @@ class Connection:
     def send_actuators(self, time_usec: int, motor_cmd, armed: bool) -> None:
         """Send and record ``codec.encode_hil_actuator_controls(mav, time_usec,
         motor_cmd, armed)``, packed by ``codec.pack_hil_actuator_controls``
-        (the lockstep answer: once per sensor frame)."""
+        (the lockstep answer: once per sensor frame). ``UnsafeMessage`` (nothing
+        sent) for motor commands that break ``command_rules.actuator_problem``."""
         mav = self._mav
+        if motor_cmd is not None:
+            why = actuator_problem(*motor_cmd)
+            if why is not None:
+                raise UnsafeMessage("HIL_ACTUATOR_CONTROLS", why)
         if self._sock is None or mav.signing.sign_outgoing:
             self.send(codec.encode_hil_actuator_controls(mav, time_usec, motor_cmd, armed))
             if self.tlog is not None:
