@@ -6,7 +6,8 @@ fetch would be blocked, and every blocked attempt is counted in the body's
 ``data-csp-violations`` attribute (the tests read it back). North is up;
 the ENU map frame is drawn by ``MapView`` (one scale for x and y). Layers,
 bottom to top: fence, vine rows, obstacles, the route (a wide band), the
-sorties (one colour each), the flown track, the launch point; check boxes
+sorties (one colour each), the flown track (a triangle at its take-off), the
+sorties' launch point; check boxes
 under the map hide and show them, and the pointer's ENU position is shown.
 """
 
@@ -102,8 +103,11 @@ def html_map_text(layers: MapLayers, title: str = "") -> str:
                       f'stroke-linejoin="round"><title>sortie {s.index}: {s.energy_wh:.1f} Wh, '
                       f'{s.duration_s / 60:.1f} min</title></polyline>' for s in layers.sorties])
     if layers.flown_enu_m is not None and len(layers.flown_enu_m):
-        group("flown", [f'<polyline points="{_points(view, np.asarray(layers.flown_enu_m, float))}" '
-                        f'stroke="{LAYER_COLOURS["flown"]}" stroke-width="1.5"/>'])
+        f = np.asarray(layers.flown_enu_m, float)
+        c0, r0 = view.to_px(f[0, 0], f[0, 1])
+        group("flown", [f'<polyline points="{_points(view, f)}" stroke="{LAYER_COLOURS["flown"]}" stroke-width="2"/>',
+                        f'<path d="M{c0:.1f},{r0 - 8:.1f} l7,13 h-14 z" fill="{LAYER_COLOURS["flown"]}" '
+                        f'stroke="#000"><title>take-off</title></path>'])
     if layers.launch_enu_m is not None:
         c, r = view.to_px(layers.launch_enu_m[0], layers.launch_enu_m[1])
         group("launch", [f'<circle cx="{c:.1f}" cy="{r:.1f}" r="7" fill="{LAYER_COLOURS["launch"]}" '
@@ -121,7 +125,7 @@ def html_map_text(layers: MapLayers, title: str = "") -> str:
     if layers.launch_enu_m is not None:
         legend.append(("launch", "launch point", LAYER_COLOURS["launch"]))
     if layers.flown_enu_m is not None and len(layers.flown_enu_m):
-        legend.append(("flown", "flown track", LAYER_COLOURS["flown"]))
+        legend.append(("flown", "flown track (triangle: take-off)", LAYER_COLOURS["flown"]))
     if layers.obstacles:
         legend.append(("obstacles", "obstacles", LAYER_COLOURS["obstacles"]))
     seen, boxes = set(), []

@@ -25,10 +25,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 #: Sortie colours (hex sRGB), shared by plan.png and the HTML map; none of them is
-#: a colour of another layer (``LAYER_COLOURS``). Beyond ten, further hues are
-#: spread by the golden angle.
-SORTIE_COLOURS = ("#1f3fbf", "#9467bd", "#17becf", "#8c564b", "#bcbd22", "#e377c2",
-                  "#7f7f7f", "#003f5c", "#6b4226", "#2f4f4f")
+#: a colour of another layer (``LAYER_COLOURS``), and none is blue like the flown
+#: track. Beyond ten, further hues are spread by the golden angle.
+SORTIE_COLOURS = ("#9467bd", "#8c564b", "#008080", "#bcbd22", "#e377c2", "#7f7f7f",
+                  "#4b0082", "#556b2f", "#a0522d", "#2f4f4f")
 #: Colours of the other layers (hex sRGB): the route (a wide band under the sorties),
 #: the vine rows, the fence, the launch point, the flown track, the obstacles.
 LAYER_COLOURS = {"path": "#ffb000", "rows": "#2ca02c", "fence": "#000000", "launch": "#ff00ff",

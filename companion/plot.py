@@ -1,10 +1,11 @@
 """Figure of a plan (needs the ``plot`` extra, matplotlib; Agg backend, no display).
 
 Left: top view (ENU map frame) of the occupancy grid (vines black, free
-white, unknown grey), the eroded free space (light green), the coverage path,
-the way-points (corners as squares), the LQR trajectory and the pointing
-target. Right: altitude of the trajectory and of the terrain under it
-against time.
+white, unknown grey), the eroded free space (light green), the sorties (a
+wide band each, in its own colour: ``map_layers.sortie_colour``), the
+coverage path, the way-points (corners as squares), the LQR trajectory, the
+pointing target and the sorties' launch point. Right: altitude of the
+trajectory and of the terrain under it against time.
 """
 
 from __future__ import annotations
@@ -53,6 +54,15 @@ def render_plan(plan, fmt: str = "png", title: str = "", sample_hz: float = 10.0
 
     Pure apart from matplotlib: nothing is written to disk.
     """
+    buf = io.BytesIO()
+    plan_figure(plan, title, sample_hz).savefig(buf, format=fmt, dpi=110)
+    return buf.getvalue()
+
+
+def plan_figure(plan, title: str = "", sample_hz: float = 10.0):
+    """The figure of ``plan`` (module doc): a matplotlib ``Figure`` on the Agg canvas."""
+    from .map_layers import sortie_colour
+
     Figure, FigureCanvasAgg = require_matplotlib()
     grid = plan.grid
     fig = Figure(figsize=(13, 6), layout="constrained")
@@ -73,6 +83,11 @@ def render_plan(plan, fmt: str = "png", title: str = "", sample_hz: float = 10.0
         X, Y = grid.cell_to_world(R, C)
         ax.pcolormesh(X, Y, img[: len(rows) - 1, : len(cols) - 1], shading="flat")
 
+    sp = plan.sorties
+    for so in (sp.sorties if sp is not None else ()):
+        sw = np.asarray(so.waypoints.p_enu_m)
+        ax.plot(sw[:, 0], sw[:, 1], "-", color=sortie_colour(so.index), lw=5, alpha=0.55, solid_capstyle="round",
+                label=f"sortie {so.index}: {so.energy.energy_wh:.0f} Wh, {so.energy.duration_s / 60:.1f} min")
     path = np.asarray(plan.coverage.path_xy_m)
     ax.plot(path[:, 0], path[:, 1], "-", color="tab:blue", lw=1.0, label="coverage path")
     traj = plan.trajectory
@@ -86,10 +101,13 @@ def render_plan(plan, fmt: str = "png", title: str = "", sample_hz: float = 10.0
     ax.plot(wp[corner, 0], wp[corner, 1], "s", ms=5, mfc="none", color="tab:purple", label="corners")
     tgt = plan.target_enu_m
     ax.plot(tgt[0], tgt[1], "*", ms=12, color="gold", mec="k", label="pointing target")
+    if sp is not None:
+        ax.plot(sp.launch_xy_m[0], sp.launch_xy_m[1], "^", ms=11, color="magenta", mec="k", zorder=6,
+                label="launch point")
     ax.set_aspect("equal")
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=5, fontsize=8, frameon=False)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=4, fontsize=8, frameon=False)
     st = plan.stats
     ax.set_title((f"{title}: " if title else "") + (f"{len(wp)} way-points, path {st.path_length_m:.1f} m, "
                            f"{st.duration_s:.1f} s, coverage {100 * st.coverage_fraction:.1f} %, "
@@ -106,7 +124,4 @@ def render_plan(plan, fmt: str = "png", title: str = "", sample_hz: float = 10.0
     axz.set_ylabel("z up (m)")
     axz.legend(fontsize=8)
     axz.grid(alpha=0.3)
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format=fmt, dpi=110)
-    return buf.getvalue()
+    return fig

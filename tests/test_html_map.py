@@ -34,20 +34,13 @@ def test_map_view_hand_worked():
 
 
 @pytest.fixture(scope="module")
-def flight_layers():
+def flight_layers(multi_sortie_plan):
     """flat-rectangle with several sorties, a made-up flown track (a 1 m circle
     about (6, 6.25) m) and a box obstacle between a row and a lane."""
-    import dataclasses
-
     from companion.map_layers import plan_layers, with_flight
-    from companion.mission import load_mission
     from companion.mission.sim import ObstacleConfig
-    from companion.planner import plan_mission
 
-    m = load_mission(ROOT / "missions" / "flat-rectangle" / "mission.yaml")
-    m = dataclasses.replace(m, energy=dataclasses.replace(m.energy, battery_capacity_ah=0.9))
-    plan = plan_mission(m)
-    assert len(plan.sorties.sorties) >= 2
+    m, plan = multi_sortie_plan
     th = np.linspace(0, 2 * np.pi, 200)
     flown = np.column_stack([6.0 + np.cos(th), 6.25 + np.sin(th), np.full_like(th, 1.5)])
     box = ObstacleConfig(type="box", x=17.0, y=5.6, height=2.0, size_x=1.0, size_y=0.6)
