@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .map_layers import LAYER_COLOURS, MapLayers, sortie_colour
+from .map_layers import LAYER_COLOURS, MapLayers, sortie_colour, sortie_legend
 
 #: The page's Content-Security-Policy: nothing from the network, inline style and script only.
 CSP = "default-src 'none'; style-src 'unsafe-inline'; script-src 'unsafe-inline'; img-src data:"
@@ -121,7 +121,8 @@ def html_map_text(layers: MapLayers, title: str = "") -> str:
 
     legend = [("path", "route (way-points)", LAYER_COLOURS["path"]), ("rows", "vine rows", LAYER_COLOURS["rows"]),
               ("fence", "inclusion fence", LAYER_COLOURS["fence"])]
-    legend += [("sorties", f"sortie {s.index}", sortie_colour(s.index)) for s in layers.sorties]
+    legend += [("sorties", label, sortie_colour(i) if i else "linear-gradient(90deg, #9467bd, #bcbd22, #e377c2)")
+               for i, label in sortie_legend([s.index for s in layers.sorties])]
     if layers.launch_enu_m is not None:
         legend.append(("launch", "launch point", LAYER_COLOURS["launch"]))
     if layers.flown_enu_m is not None and len(layers.flown_enu_m):

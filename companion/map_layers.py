@@ -29,6 +29,8 @@ import numpy as np
 #: track. Beyond ten, further hues are spread by the golden angle.
 SORTIE_COLOURS = ("#9467bd", "#8c564b", "#008080", "#bcbd22", "#e377c2", "#7f7f7f",
                   "#4b0082", "#556b2f", "#a0522d", "#2f4f4f")
+#: Sorties named one by one in a legend; the rest get one entry together.
+LEGEND_SORTIES = 12
 #: Colours of the other layers (hex sRGB): the route (a wide band under the sorties),
 #: the vine rows, the fence, the launch point, the flown track, the obstacles.
 LAYER_COLOURS = {"path": "#ffb000", "rows": "#2ca02c", "fence": "#000000", "launch": "#ff00ff",
@@ -37,12 +39,24 @@ LAYER_COLOURS = {"path": "#ffb000", "rows": "#2ca02c", "fence": "#000000", "laun
 CYLINDER_VERTICES = 32
 
 
+def sortie_legend(indices) -> list[tuple[int, str]]:
+    """Legend entries of the sorties: ``(index, label)``; all of them up to
+    ``LEGEND_SORTIES``, else the first ``LEGEND_SORTIES - 1`` and one entry
+    (index 0) for the rest."""
+    idx = list(indices)
+    if len(idx) <= LEGEND_SORTIES:
+        return [(i, f"sortie {i}") for i in idx]
+    k = LEGEND_SORTIES - 1
+    return [(i, f"sortie {i}") for i in idx[:k]] + [(0, f"sorties {idx[k]}-{idx[-1]} (a colour each)")]
+
+
 def sortie_colour(index: int) -> str:
     """Hex colour of the sortie with 1-based ``index``: distinct for every index."""
     i = index - 1
     if i < len(SORTIE_COLOURS):
         return SORTIE_COLOURS[i]
-    h = (0.1 + 0.618033988749895 * (i - len(SORTIE_COLOURS))) % 1.0
+    h = 0.83 * ((0.1 + 0.618033988749895 * (i - len(SORTIE_COLOURS))) % 1.0)
+    h = h + 0.17 if h >= 0.53 else h          # no blue (hues 0.53..0.70): that is the flown track's
     r, g, b = colorsys.hsv_to_rgb(h, 0.85, 0.55 + 0.3 * ((i // 7) % 2))
     return "#{:02x}{:02x}{:02x}".format(round(255 * r), round(255 * g), round(255 * b))
 

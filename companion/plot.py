@@ -3,8 +3,8 @@
 Left: top view (ENU map frame) of the occupancy grid (vines black, free
 white, unknown grey), the eroded free space (light green), the sorties (a
 wide band each, in its own colour: ``map_layers.sortie_colour``), the
-coverage path, the way-points (corners as squares), the LQR trajectory, the
-pointing target and the sorties' launch point. Right: altitude of the
+coverage path, the way-points (corners as squares; up to ``MAX_MARKERS`` of
+them), the LQR trajectory, the pointing target and the sorties' launch point. Right: altitude of the
 trajectory and of the terrain under it against time.
 """
 
@@ -18,6 +18,8 @@ from .errors import InputError
 
 #: Largest image side drawn; bigger grids are strided (display only).
 MAX_IMAGE_PX = 1500
+#: Most way-points drawn as markers on the map (the title gives their number).
+MAX_MARKERS = 2000
 
 
 def require_matplotlib(option: str = "--plot"):
@@ -61,7 +63,7 @@ def render_plan(plan, fmt: str = "png", title: str = "", sample_hz: float = 10.0
 
 def plan_figure(plan, title: str = "", sample_hz: float = 10.0):
     """The figure of ``plan`` (module doc): a matplotlib ``Figure`` on the Agg canvas."""
-    from .map_layers import sortie_colour
+    from .map_layers import sortie_colour, sortie_legend
 
     Figure, FigureCanvasAgg = require_matplotlib()
     grid = plan.grid
@@ -83,22 +85,33 @@ def plan_figure(plan, title: str = "", sample_hz: float = 10.0):
         X, Y = grid.cell_to_world(R, C)
         ax.pcolormesh(X, Y, img[: len(rows) - 1, : len(cols) - 1], shading="flat")
 
+    # A big plan's lanes are a pixel apart: thin lines, so the sorties' colours show.
+    dense = len(plan.waypoints.t_s) > MAX_MARKERS
     sp = plan.sorties
-    for so in (sp.sorties if sp is not None else ()):
+    sorties = sp.sorties if sp is not None else ()
+    named = {i for i, _ in sortie_legend([so.index for so in sorties]) if i}
+    rest = [lab for i, lab in sortie_legend([so.index for so in sorties]) if not i]
+    for so in sorties:
         sw = np.asarray(so.waypoints.p_enu_m)
-        ax.plot(sw[:, 0], sw[:, 1], "-", color=sortie_colour(so.index), lw=5, alpha=0.55, solid_capstyle="round",
-                label=f"sortie {so.index}: {so.energy.energy_wh:.0f} Wh, {so.energy.duration_s / 60:.1f} min")
+        if so.index in named:
+            label = f"sortie {so.index}: {so.energy.energy_wh:.0f} Wh, {so.energy.duration_s / 60:.1f} min"
+        else:
+            label, rest = (rest[0], []) if rest else (None, [])
+        ax.plot(sw[:, 0], sw[:, 1], "-", color=sortie_colour(so.index), lw=1.0 if dense else 5,
+                alpha=1.0 if dense else 0.55, solid_capstyle="round",
+                label=label)
     path = np.asarray(plan.coverage.path_xy_m)
-    ax.plot(path[:, 0], path[:, 1], "-", color="tab:blue", lw=1.0, label="coverage path")
+    ax.plot(path[:, 0], path[:, 1], "-", color="tab:blue", lw=0.2 if dense else 1.0, label="coverage path")
     traj = plan.trajectory
     n = max(2, int(traj.duration_s * sample_hz) + 1)
     t = np.linspace(traj.t0, traj.tf, n)
     s = traj.sample(t)
-    ax.plot(s.p[:, 0], s.p[:, 1], "-", color="tab:red", lw=1.2, label="LQR trajectory")
+    ax.plot(s.p[:, 0], s.p[:, 1], "-", color="tab:red", lw=0.2 if dense else 1.2, label="LQR trajectory")
     wp = np.asarray(plan.waypoints.p_enu_m)
     corner = np.asarray(plan.waypoints.corner, dtype=bool)
-    ax.plot(wp[~corner, 0], wp[~corner, 1], "o", ms=3.5, color="tab:orange", label="way-points")
-    ax.plot(wp[corner, 0], wp[corner, 1], "s", ms=5, mfc="none", color="tab:purple", label="corners")
+    if len(wp) <= MAX_MARKERS:     # more would hide the sorties and the path under them
+        ax.plot(wp[~corner, 0], wp[~corner, 1], "o", ms=3.5, color="tab:orange", label="way-points")
+        ax.plot(wp[corner, 0], wp[corner, 1], "s", ms=5, mfc="none", color="tab:purple", label="corners")
     tgt = plan.target_enu_m
     ax.plot(tgt[0], tgt[1], "*", ms=12, color="gold", mec="k", label="pointing target")
     if sp is not None:
@@ -119,9 +132,10 @@ def plan_figure(plan, title: str = "", sample_hz: float = 10.0):
         ground[covered] = plan.dem.height_at(s.p[covered, 0], s.p[covered, 1])
     axz.plot(t, s.p[:, 2], color="tab:red", label="trajectory z")
     axz.plot(t, ground, color="tab:brown", label="terrain under it")
-    axz.plot(plan.waypoints.t_s, wp[:, 2], "o", ms=3, color="tab:orange", label="way-points")
+    if len(wp) <= MAX_MARKERS:
+        axz.plot(plan.waypoints.t_s, wp[:, 2], "o", ms=3, color="tab:orange", label="way-points")
     axz.set_xlabel("t (s)")
     axz.set_ylabel("z up (m)")
-    axz.legend(fontsize=8)
+    axz.legend(fontsize=8, loc="upper right")
     axz.grid(alpha=0.3)
     return fig
