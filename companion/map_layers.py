@@ -160,11 +160,12 @@ def obstacle_layers(obstacles) -> tuple:
                  for k, ob in enumerate(obstacles))
 
 
-def plan_layers(plan, mission) -> MapLayers:
+def plan_layers(plan, mission, fence_xy_m: np.ndarray | None = None) -> MapLayers:
     """The layers of an in-memory plan (``companion.planner.Plan``) of ``mission``.
 
-    The fence is the exports' (``plan_io.field_fence``), the rows those of
-    ``row_lines_xy``; the mission's ``sim.obstacles`` are not part of a plan.
+    The fence is the exports' (``plan_io.field_fence``; ``fence_xy_m`` when the
+    caller has it already), the rows those of ``row_lines_xy``; the mission's
+    ``sim.obstacles`` are not part of a plan.
     """
     from .plan_io import field_fence
 
@@ -179,7 +180,8 @@ def plan_layers(plan, mission) -> MapLayers:
         launch = np.array([lx, ly, lz])
     return MapLayers(name=mission.name, home=(float(h.lat), float(h.lon), float(h.alt_m)),
                      path_enu_m=np.asarray(plan.waypoints.p_enu_m, float), sorties=sorties, launch_enu_m=launch,
-                     fence_xy_m=np.asarray(field_fence(plan, mission), float).reshape(-1, 2),
+                     fence_xy_m=np.asarray(field_fence(plan, mission) if fence_xy_m is None else fence_xy_m,
+                                           float).reshape(-1, 2),
                      rows_xy_m=row_lines_xy(plan.grid))
 
 
