@@ -91,7 +91,9 @@ def test_chromium_screenshot_and_no_network(flight_layers, tmp_path):
     page = tmp_path / "map.html"
     page.write_text(html_map_text(layers, "flight"), encoding="utf-8")
     shot = tmp_path / "shot.png"
-    chromium(f"--screenshot={shot}", f"--window-size={WINDOW[0]},{WINDOW[1]}", page.as_uri())
+    # one run: the screenshot, and the DOM after the page's script ran
+    dom = chromium(f"--screenshot={shot}", "--dump-dom", f"--window-size={WINDOW[0]},{WINDOW[1]}",
+                   page.as_uri()).stdout
     img = np.asarray(Image.open(shot).convert("RGB"))
     assert img.shape[:2] == (WINDOW[1], WINDOW[0])
     # not blank: many non-white pixels, many colours
@@ -124,7 +126,6 @@ def test_chromium_screenshot_and_no_network(flight_layers, tmp_path):
     assert not colour_near(img, *view.to_px(11.5, 0.05), LAYER_COLOURS["path"], radius=2)
 
     # no network: the page's script ran under its CSP and counted no blocked fetch ...
-    dom = chromium("--dump-dom", page.as_uri()).stdout
     body = re.search(r"<body[^>]*>", dom).group(0)
     assert 'data-ready="1"' in body and 'data-csp-violations="0"' in body, body
     # ... and a page that does fetch something is caught by the same count
