@@ -4,7 +4,9 @@ Left: top view (ENU map frame) of the occupancy grid (vines black, free
 white, unknown grey), the eroded free space (light green), the sorties (a
 wide band each, in its own colour: ``map_layers.sortie_colour``), the
 coverage path, the way-points (corners as squares; up to ``MAX_MARKERS`` of
-them), the LQR trajectory, the pointing target and the sorties' launch point. Right: altitude of the
+them), the LQR trajectory, the pointing target and the sorties' launch point;
+the title gives the lines' direction as a compass bearing (degrees clockwise
+from north, in [0, 180): ``(90 - orientation_deg) mod 180``). Right: altitude of the
 trajectory and of the terrain under it against time.
 """
 
@@ -124,7 +126,7 @@ def plan_figure(plan, title: str = "", sample_hz: float = 10.0):
     st = plan.stats
     ax.set_title((f"{title}: " if title else "") + (f"{len(wp)} way-points, path {st.path_length_m:.1f} m, "
                            f"{st.duration_s:.1f} s, coverage {100 * st.coverage_fraction:.1f} %, "
-                           f"orientation {st.orientation_deg:.1f} deg"), fontsize=10)
+                           f"lines at compass bearing {(90.0 - st.orientation_deg) % 180.0:.1f} deg"), fontsize=10)
 
     covered = plan.dem.covers(s.p[:, 0], s.p[:, 1])
     ground = np.full(len(t), np.nan)

@@ -33,3 +33,11 @@ def test_plan_figure_shows_sorties_and_launch(multi_sortie_plan):
     assert "launch point" in labels
     launch = lines["launch point"]
     np.testing.assert_array_equal([launch.get_xdata()[0], launch.get_ydata()[0]], plan.sorties.launch_xy_m)
+
+
+def test_plan_title_gives_a_compass_bearing(multi_sortie_plan):
+    from companion.plot import plan_figure
+
+    _, plan = multi_sortie_plan
+    # flat-rectangle's lines run east-west: ENU orientation 0 deg, compass bearing 90 deg
+    assert "compass bearing 90.0 deg" in plan_figure(plan).axes[0].get_title()
