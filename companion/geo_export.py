@@ -3,7 +3,8 @@
 Pure: ``MapLayers`` (``companion.map_layers``, ENU metres) in, text out.
 Latitude/longitude come from the project's one ENU -> geodetic conversion,
 ``companion.frames.enu2geodetic`` about the mission home, called through the
-module so that whatever that function becomes is what the exports use.
+module so that whatever that function becomes is what the exports use (in one
+call on arrays where it takes them, else point by point).
 
 GeoJSON
     A FeatureCollection in WGS 84, positions ``[lon, lat]`` (RFC 7946 section
@@ -48,8 +49,13 @@ def enu_to_lon_lat_alt(p_enu_m: np.ndarray, home: tuple[float, float, float]) ->
     p = np.asarray(p_enu_m, dtype=float)
     if p.shape[-1] == 2:
         p = np.column_stack([p.reshape(-1, 2), np.zeros(p.reshape(-1, 2).shape[0])])
-    out = np.empty((p.shape[0], 3))
     lat0, lon0, alt0 = home
+    try:        # one call where the conversion takes arrays (a pyproj transformer does) ...
+        lat, lon, alt = frames.enu2geodetic(p[:, 0], p[:, 1], p[:, 2], lat0, lon0, alt0)
+        return np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), (p.shape[0],)) for c in (lon, lat, alt)])
+    except TypeError:
+        pass    # ... else point by point (the flat-earth one takes scalars)
+    out = np.empty((p.shape[0], 3))
     for i, (x, y, z) in enumerate(p):
         lat, lon, alt = frames.enu2geodetic(float(x), float(y), float(z), lat0, lon0, alt0)
         out[i] = (lon, lat, alt)
