@@ -45,6 +45,8 @@ def _demo(tmp_path, mission: str, control: str, cut: str):
                "--no-plots", "--quiet"])
     rep = json.loads((out / "report.json").read_text())
     msgs = [r.msg for r in read_tlog(out / "flight.tlog")]
+    page = (out / "map.html").read_text()          # the flight's map: flown track and obstacles
+    assert 'id="layer-flown"' in page and 'id="layer-obstacles"' in page
     return rc, rep, msgs
 
 

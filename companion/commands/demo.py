@@ -4,8 +4,9 @@ No arguments needed: starts the bundled SITL (``python -m sitl``, a separate
 process, lockstep, loopback UDP on a free port), plans the bundled
 ``flat-rectangle`` mission, flies it with the geometric controller, prints a
 summary table and writes ``out/``: ``plan.json``, ``flight.tlog``,
-``report.json`` and, with matplotlib (the ``plot`` extra), the paper's
-Figs. 14-18 style figures (``companion.flight_plot``).
+``report.json``, ``map.html`` (the plan and the flown track on a
+self-contained map, ``companion.html_map``) and, with matplotlib (the
+``plot`` extra), the paper's Figs. 14-18 style figures (``companion.flight_plot``).
 """
 
 from __future__ import annotations
@@ -120,7 +121,7 @@ def run(args) -> int:
         raise InputError(f"--out {out}", f"directory {out.parent} does not exist")
     if out.is_dir():
         from .fly import check_output_paths
-        check_output_paths([("--out", out / n) for n in ("plan.json", "flight.tlog", "report.json")])
+        check_output_paths([("--out", out / n) for n in ("plan.json", "flight.tlog", "report.json", "map.html")])
     key = None
     if args.signing_key is not None:
         from ..link.signing import load_signing_key
@@ -184,7 +185,7 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
             figures = None
         else:
             try:
-                figures = write_flight_figures(result.log, plan, out)
+                figures = write_flight_figures(result.log, plan, out, obstacles=mission.sim.obstacles)
                 rp = rep.replanning
                 if mission.sim.obstacles or rp.events:
                     from ..flight_plot import write_avoidance_figure
@@ -195,6 +196,11 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
                         figures.append(f)
             except ImportError:
                 figures = None
+    from ..html_map import html_map_text
+    from ..map_layers import flown_track, plan_layers, with_flight
+
+    layers = with_flight(plan_layers(plan, mission), flown_track(result.log), mission.sim.obstacles)
+    (out / "map.html").write_text(html_map_text(layers, f"{mission.name}: flight"), encoding="utf-8")
     total = time.monotonic() - t_start
     tr = rep.tracking
     mm = (lambda x: "n/a" if x is None else f"{x * 1000:.2f} mm")
@@ -213,7 +219,7 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
         ("demo wall time", f"{total:.2f} s"),
     ]
     print(_table(rows))
-    files = ["plan.json", "flight.tlog", "report.json"] + [Path(f).name for f in (figures or [])]
+    files = ["plan.json", "flight.tlog", "report.json", "map.html"] + [Path(f).name for f in (figures or [])]
     print(f"wrote {out}/: {', '.join(files)}" + ("" if figures is not None else
                                                  " (figures skipped: install the plot extra)"))
     if not rep.completed:

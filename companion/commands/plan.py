@@ -1,5 +1,6 @@
 """``companion plan MISSION.yaml -o plan.json [--sample-hz 10] [--plot plan.png]
-[--qgc plan.plan] [--waypoints plan.waypoints]``.
+[--qgc plan.plan] [--waypoints plan.waypoints] [--geojson plan.geojson] [--kml plan.kml]
+[--html map.html]``.
 
 Plans the mission (``companion.planner.plan_mission``), prints a short
 summary and writes the outputs. Every output is rendered in memory first and
@@ -27,6 +28,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--plot", metavar="PLAN.png", help="figure of the plan (needs the plot extra)")
     parser.add_argument("--qgc", metavar="PLAN.plan", help="QGroundControl .plan export of the way-points")
     parser.add_argument("--waypoints", metavar="PLAN.waypoints", help='"QGC WPL 110" export of the way-points')
+    parser.add_argument("--geojson", metavar="PLAN.geojson",
+                        help="GeoJSON (WGS 84) of the path, sorties, launch point, fence and rows (docs/maps.md)")
+    parser.add_argument("--kml", metavar="PLAN.kml", help="KML of the same layers as --geojson")
+    parser.add_argument("--html", metavar="MAP.html", help="self-contained HTML map of the plan (no network)")
 
 
 def write_atomically(outputs: dict[str, bytes]) -> None:
@@ -77,7 +82,7 @@ def run(args) -> int:
         plot_fmt = Path(args.plot).suffix.lower().lstrip(".") or "png"
         if plot_fmt not in supported_formats():
             raise InputError(args.plot, f"unsupported figure format {plot_fmt!r} (use .png, .pdf, .svg, ...)")
-    outputs = [p for p in (args.output, args.plot, args.qgc, args.waypoints) if p]
+    outputs = [p for p in (args.output, args.plot, args.qgc, args.waypoints, args.geojson, args.kml, args.html) if p]
     if len(set(map(os.path.abspath, outputs))) != len(outputs):
         raise InputError("command line", "the same file is given for two outputs")
     for p in outputs:
@@ -111,6 +116,19 @@ def run(args) -> int:
     if args.plot:
         from ..plot import render_plan
         files[args.plot] = render_plan(plan, fmt=plot_fmt, title=f"{mission.name}")
+    if args.geojson or args.kml or args.html:
+        from ..map_layers import plan_layers
+
+        layers = plan_layers(plan, mission)
+        if args.geojson:
+            from ..geo_export import geojson_text
+            files[args.geojson] = geojson_text(layers).encode("utf-8")
+        if args.kml:
+            from ..geo_export import kml_text
+            files[args.kml] = kml_text(layers).encode("utf-8")
+        if args.html:
+            from ..html_map import html_map_text
+            files[args.html] = html_map_text(layers, f"{mission.name}: plan").encode("utf-8")
     write_atomically(files)
 
     for w in plan.warnings:

@@ -236,7 +236,17 @@ def run(args) -> int:
         from ..flight_plot import write_flight_figures
 
         Path(args.plot).mkdir(exist_ok=True)
-        figs = write_flight_figures(result.log, core.inputs if core is not None else None, args.plot)
+        dem = grid = None
+        obstacles = ()
+        if args.mission:      # the terrain (heights above ground), the rows and the obstacles
+            from ..maps.field import load_mission_maps
+            from ..mission import load_mission
+
+            m = load_mission(args.mission)
+            grid, dem = load_mission_maps(m)
+            obstacles = m.sim.obstacles
+        figs = write_flight_figures(result.log, core.inputs if core is not None else None, args.plot,
+                                    obstacles=obstacles, dem=dem, grid=grid)
         print(f"  figures: {', '.join(Path(f).name for f in figs) or 'none (no flight rows)'} in {args.plot}")
     c = result.comparison
     if c is not None and not c.identical:
