@@ -21,7 +21,8 @@ Exit code 0 when the flight completed (every check of
 error within ``--max-error``; landed and disarmed; the .tlog and the report
 written), 3 when it did not (the report's ``violation`` says why, and what
 was flown), 2 on bad input (checked before anything is flown or written:
-outputs included, ``check_output_paths`` and ``check_free_space``).
+outputs included, ``check_output_paths``, ``check_free_space`` and
+``check_writable``).
 
 An output that fails in flight (the .tlog: ENOSPC, EIO, deleted, replaced,
 not growing) is a fault like a lost link: the vehicle lands (or holds,
@@ -82,18 +83,15 @@ def check_output_paths(outputs) -> None:
     ------
     InputError
         A path is a directory or another non-regular file, its directory does
-        not exist or is not writable (a temporary file is created and removed
-        there), its name (or the report's temporary sibling,
+        not exist, its name (or the report's temporary sibling,
         ``companion.report.temp_name``) is longer than the file system
         allows, or two options name the same file (one line naming the
-        option and path).
+        option and path). Whether the directory is writable is tried later,
+        when all input is known good (``check_writable``): trying changes it.
     """
-    import tempfile
-
     from ..report import temp_name
 
     seen = {}
-    probed = set()
     for opt, path in outputs:
         p = Path(path)
         if p.is_dir():
@@ -111,20 +109,41 @@ def check_output_paths(outputs) -> None:
         full = len(os.fsencode(os.path.abspath(p)))
         if full >= _path_max(p.parent):
             raise InputError(f"{opt} {str(path)[:60]}...", f"path of {full} bytes is too long")
-        d = os.path.abspath(p.parent)
-        if d not in probed:
-            try:
-                fd, probe = tempfile.mkstemp(prefix=".cmp-", suffix=".probe", dir=d)
-                os.close(fd)
-                os.unlink(probe)
-            except OSError as exc:
-                raise InputError(f"{opt} {path}", f"directory {p.parent} is not writable: "
-                                                  f"{exc.strerror or exc}") from None
-            probed.add(d)
         key = os.path.abspath(p)
         if key in seen:
             raise InputError(f"{opt} {path}", f"is also given as {seen[key]}")
         seen[key] = opt
+
+
+def check_writable(outputs) -> None:
+    """Fail before arming when an output's directory is not writable: a temporary
+    file is created there and removed (permissions, a read-only mount, ACLs and
+    quotas all answer; ``os.access`` would not see most of them).
+
+    Parameters
+    ----------
+    outputs : iterable of (option, path)
+
+    Raises
+    ------
+    InputError
+        One line naming the option, the directory and the system's error.
+    """
+    import tempfile
+
+    probed = set()
+    for opt, path in outputs:
+        d = os.path.abspath(Path(path).parent)
+        if d in probed:
+            continue
+        try:
+            fd, probe = tempfile.mkstemp(prefix=".cmp-", suffix=".probe", dir=d)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            raise InputError(f"{opt} {path}", f"directory {Path(path).parent} is not writable: "
+                                              f"{exc.strerror or exc}") from None
+        probed.add(d)
 
 
 def expected_tlog_bytes(trajectory_duration_s: float) -> int:
@@ -507,6 +526,7 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
         if report_path:
             outputs.append((option_names[1], report_path, REPORT_RESERVE_BYTES))
         check_free_space(outputs)
+        check_writable([o[:2] for o in outputs])
         cfg = RunnerConfig(control=control, **(runner_overrides or {}))
         core = build_flight_core(mission, flight_plan, cfg,
                                  flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}))
