@@ -94,21 +94,29 @@ def check_output_paths(outputs) -> None:
     seen = {}
     for opt, path in outputs:
         p = Path(path)
-        if p.is_dir():
-            raise InputError(f"{opt} {path}", "is a directory (give a file name)")
-        if not p.parent.is_dir():
-            raise InputError(f"{opt} {path}", f"directory {p.parent} does not exist")
-        if p.exists() and not p.is_file():
-            raise InputError(f"{opt} {path}", "exists and is not a regular file")
-        limit = _name_max(p.parent)
+        shown = f"{opt} {str(path)[:60]}{'...' if len(str(path)) > 60 else ''}"
+        # names first: a too-long name fails every other question with ENAMETOOLONG
+        try:
+            parent_ok = p.parent.is_dir()
+        except OSError:          # the directory's own name too long
+            parent_ok = False
+        limit = _name_max(p.parent) if parent_ok else 255
         for name in (p.name, temp_name(p).name):
             n = len(os.fsencode(name))
             if n > limit:
-                raise InputError(f"{opt} {str(path)[:60]}{'...' if len(str(path)) > 60 else ''}",
-                                 f"file name of {n} bytes is longer than the {limit} the file system allows")
+                raise InputError(shown, f"file name of {n} bytes is longer than the {limit} the file system allows")
         full = len(os.fsencode(os.path.abspath(p)))
-        if full >= _path_max(p.parent):
-            raise InputError(f"{opt} {str(path)[:60]}...", f"path of {full} bytes is too long")
+        if full >= _path_max(p.parent if parent_ok else Path(".")):
+            raise InputError(shown, f"path of {full} bytes is too long")
+        try:
+            if p.is_dir():
+                raise InputError(f"{opt} {path}", "is a directory (give a file name)")
+            if not p.parent.is_dir():
+                raise InputError(f"{opt} {path}", f"directory {p.parent} does not exist")
+            if p.exists() and not p.is_file():
+                raise InputError(f"{opt} {path}", "exists and is not a regular file")
+        except OSError as exc:
+            raise InputError(shown, f"cannot be used: {exc.strerror or exc}") from None
         key = os.path.abspath(p)
         if key in seen:
             raise InputError(f"{opt} {path}", f"is also given as {seen[key]}")
