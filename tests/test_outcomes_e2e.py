@@ -254,7 +254,7 @@ def test_attach_land_brings_a_flying_vehicle_down(tmp_path):
     assert not hb[-1].base_mode & 128
 
 
-def test_jittery_real_time_link_hands_the_inner_loop_to_the_vehicle(tmp_path):
+def test_jittery_real_time_link_hands_the_inner_loop_to_the_vehicle(tmp_path, capsys):
     """0-30 ms of jitter on a free-running (real-time) link: the companion's
     inner loop cannot be closed safely, so it hands control to the vehicle's
     controller, keeps streaming setpoints, completes, and says so."""
@@ -269,6 +269,14 @@ def test_jittery_real_time_link_hands_the_inner_loop_to_the_vehicle(tmp_path):
     assert rep["degraded"] is not None and "jitter" in rep["degraded"]["reason"]
     assert not rep["crashed"]
     assert rc == 0 and rep["completed"], rep["violation"]
+    # the report and the console say who flew, and since when
+    deg = rep["degraded"]
+    assert rep["control"] == "companion" and rep["control_in_use"] == "vehicle"
+    assert rep["control_mode_changes"] == [{"t_s": deg["t_s"], "from": "companion", "to": "vehicle",
+                                            "reason": deg["reason"],
+                                            "phase": rep["control_mode_changes"][0]["phase"]}]
+    out = capsys.readouterr().out
+    assert f"companion control, vehicle control from t={deg['t_s']:.1f} s ({deg['reason']})" in out
     # on the wire: finite motor commands stop once the hand-over is announced
     texts = [i for i, m in enumerate(msgs) if m.get_type() == "STATUSTEXT" and m.get_srcComponent() == 191
              and m.text.startswith("companion: inner loop to vehicle")]
