@@ -409,7 +409,12 @@ class FlightCore:
         if self.error is None:
             self.error = detail
         in_air = self.armed and ph in FLYING
-        action = self.cfg.on_failure if in_air else ("end" if ph in BEFORE_ARMING else "land")
+        if in_air:
+            action = self.cfg.on_failure
+        elif ph == "landing" and self.armed and not self.finished:
+            action = "land"           # the landing under way goes on
+        else:
+            action = "end"            # on the ground before arming, or the flight is over
         self.monitor.fail(self.t_s, "output", detail, action, output=kind)
         self._note_failure(ph)
         if self.finished:
