@@ -26,8 +26,18 @@ _TS = struct.Struct(">Q")
 
 def open_tlog_file(path: Path):
     """The writer's file (binary, buffered): the one place a .tlog is opened for
-    writing, so tests can wrap it (a disk that fills up, a failing device)."""
-    return open(path, "wb", buffering=1 << 16)
+    writing, so tests can wrap it (a disk that fills up, a failing device).
+
+    Created or truncated, and opened for appending (O_APPEND): a file that
+    somebody truncates behind our back then ends short of what was written
+    (``TlogWriter.check``: stopped growing) instead of growing a hole back
+    to our offset."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o666)
+    try:
+        return open(fd, "wb", buffering=1 << 16)
+    except BaseException:
+        os.close(fd)
+        raise
 
 
 class TlogWriter:
