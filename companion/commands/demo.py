@@ -209,7 +209,7 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
         ("control", control_text(rep)),
         ("completed", "yes" if rep.completed else f"NO ({outcome_text(rep)})"),
         ("trajectory", f"{rep.trajectory_duration_s:.1f} s"),
-        ("coverage", coverage_text(rep.coverage_fraction, rep.planned_coverage_fraction)),
+        ("coverage", coverage_text(rep.coverage_fraction, rep.planned_coverage_fraction).removeprefix("coverage ")),
         ("vehicle time flown", f"{rep.sim_time_s:.1f} s ({rep.n_frames} frames)"),
         ("max error (after settle)", mm(tr.max_error_m)),
         ("rms error (after settle)", mm(tr.rms_error_m)),
