@@ -422,6 +422,13 @@ class FlightCore:
         if in_air:
             self._stop(self.cfg.on_failure)
         elif ph in BEFORE_ARMING and not self.armed:
+            if ph == "preflight":
+                # OFFBOARD and the arming may be on their way with no answer yet:
+                # a disarm (once; a disarmed vehicle just refuses it) so that
+                # the vehicle is not left armed on the ground without setpoints.
+                self._emit(self.enc.command_long_encode(self.ts, self.tc,
+                                                        mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0,
+                                                        0, 0, 0, 0, 0, 0, 0))
             self._stop("end")
         # landing, holding, released: what is under way goes on
 
