@@ -40,13 +40,23 @@ class Progress:
         self._width = 0
 
     @staticmethod
-    def format(phase: str, fraction: float, error_m: float | None, events: int, sim_time_s: float) -> str:
+    def format(phase: str, fraction: float, error_m: float | None, events: int, sim_time_s: float,
+               coverage: float | None = None, control: str | None = None) -> str:
+        """The line. ``fraction``: of the trajectory's time; ``coverage``: the
+        coverage flown so far (``FlightCore.coverage_flown``, report.json's
+        ``coverage_fraction``); ``control``: who flies the inner loop now."""
         err = "  -  " if error_m is None or not math.isfinite(error_m) else f"{error_m * 1000:7.1f} mm"
         pct = max(0.0, min(1.0, fraction)) * 100.0
-        return f"[{phase:<10}] {pct:5.1f}%  t={sim_time_s:7.1f} s  error {err}  events {events}"
+        line = f"[{phase:<10}] {pct:5.1f}%  t={sim_time_s:7.1f} s  error {err}  events {events}"
+        if coverage is not None:
+            line += f"  coverage {coverage:6.1%}"
+        if control is not None:
+            line += f"  ({control} control)"
+        return line
 
     def update(self, phase: str, fraction: float, error_m: float | None = None, events: int = 0,
-               sim_time_s: float = 0.0, force: bool = False) -> None:
+               sim_time_s: float = 0.0, force: bool = False, coverage: float | None = None,
+               control: str | None = None) -> None:
         """Show the state if it is time to (by wall clock) or the phase changed."""
         if not self.enabled:
             return
@@ -55,7 +65,7 @@ class Progress:
         if not (force or changed or now >= self._next):
             return
         self._phase = phase
-        line = self.format(phase, fraction, error_m, events, sim_time_s)
+        line = self.format(phase, fraction, error_m, events, sim_time_s, coverage, control)
         if self.tty:
             pad = max(0, self._width - len(line))
             self.stream.write("\r" + line + " " * pad)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 #: report.json format written here ("MAJOR.MINOR", docs/README.md "Versions").
-REPORT_FORMAT_VERSION = "2.0"
+REPORT_FORMAT_VERSION = "3.0"
 
 
 @dataclass(frozen=True)
@@ -149,6 +149,24 @@ class FlightReport:
         Link statistics (messages received, rejected, bad bytes).
     resumed_from_s : float or None
         ``--attach resume``: trajectory time (s from its start) the flight resumed at.
+    phase : str
+        "done" for a completed flight; otherwise the phase in which the first
+        violation or fault happened (where it failed).
+    end_phase : str
+        The phase the flight ended in ("done": landed and disarmed, "holding",
+        "released", "ended", or where the link was lost).
+    control_in_use : str
+        Who flew the inner loop at the end: ``control``, or "vehicle" after a
+        ``degraded`` hand-over.
+    control_mode_changes : tuple of dict
+        ``{t_s, from, to, reason, phase}`` of each change of ``control_in_use``.
+    faults : tuple of dict
+        Output faults, ``{t_s, kind, detail, phase}``: kind "tlog" (a write
+        error, the file deleted, replaced or not growing) or "report" (the
+        report could not be written where asked).
+    report_fallback : dict or None
+        ``{path, wanted, reason}`` when this report was written to ``path``
+        because ``wanted`` could not be written.
     """
 
     completed: bool
@@ -174,6 +192,18 @@ class FlightReport:
     interrupted: str | None = None
     link: dict | None = None
     resumed_from_s: float | None = None
+    end_phase: str = ""
+    control_in_use: str = ""
+    control_mode_changes: tuple = ()
+    faults: tuple = ()
+    report_fallback: dict | None = None
+
+    def __post_init__(self) -> None:
+        # Unset: the flight ended where it stopped, flown as configured.
+        if not self.end_phase:
+            object.__setattr__(self, "end_phase", self.phase)
+        if not self.control_in_use:
+            object.__setattr__(self, "control_in_use", self.control)
 
     def to_dict(self) -> dict:
         """The report.json document: ``format_version`` first, then the fields."""
@@ -216,11 +246,80 @@ def tracking_stats(t_s, err_m, t_start_s: float, settle_s: float = 5.0,
                          int(es.size), truth_source)
 
 
-def write_report(report: FlightReport, path: str | Path) -> Path:
-    """Write ``report`` as JSON to ``path`` atomically; returns the path."""
+def temp_name(path: str | Path) -> Path:
+    """The temporary sibling ``write_report`` writes first: a short name of its own
+    (``.cmp-<pid>.tmp``, at most 21 bytes), so any legal final name works."""
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".part")
-    tmp.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, p)
+    return p.with_name(f".cmp-{os.getpid()}.tmp")
+
+
+def write_report(report: FlightReport, path: str | Path) -> Path:
+    """Write ``report`` as JSON to ``path`` atomically (``temp_name`` + rename);
+    returns the path. The directory must exist (a deleted output directory is
+    a fault, not something to recreate). Raises OSError; nothing is left
+    behind on failure."""
+    p = Path(path)
+    tmp = temp_name(p)
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(json.dumps(report.to_dict(), indent=2) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, p)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
     return p
+
+
+def fallback_report_path(wanted: str | Path, tmp_dir: str | None = None) -> Path:
+    """Where a report goes when ``wanted`` cannot be written: the temporary
+    directory (``tempfile.gettempdir()``), a new name with the process id and
+    the wall time."""
+    import tempfile
+    import time
+
+    d = Path(tmp_dir if tmp_dir is not None else tempfile.gettempdir())
+    stem = Path(wanted).stem[:40] or "report"
+    return d / f"companion-{stem}-{os.getpid()}-{int(time.time())}.json"
+
+
+@dataclass(frozen=True)
+class ReportWritten:
+    """What ``write_report_or_fallback`` did: the report as written and where."""
+
+    report: FlightReport
+    path: Path | None
+    fallback: bool
+    error: str | None = None
+
+
+def write_report_or_fallback(report: FlightReport, path: str | Path, tmp_dir: str | None = None) -> ReportWritten:
+    """Write ``report`` to ``path``; if that fails, record a "report" fault and
+    the fallback (``report_fallback``, ``completed`` False) in the report and
+    write it to ``fallback_report_path``. ``path`` None when neither could be
+    written (``error`` says why; the caller prints the report elsewhere)."""
+    import errno as _errno
+    from dataclasses import replace
+
+    def why(exc: OSError) -> str:
+        name = _errno.errorcode.get(exc.errno, "") if exc.errno else ""
+        return f"{exc.strerror or exc}" + (f" ({name})" if name else "")
+
+    try:
+        return ReportWritten(report, write_report(report, path), False)
+    except OSError as exc:
+        reason = f"{path}: cannot write the report: {why(exc)}"
+    fb = fallback_report_path(path, tmp_dir)
+    fault = {"t_s": None, "kind": "report", "detail": reason, "phase": report.end_phase or report.phase}
+    phase = report.phase if not report.completed else (report.end_phase or report.phase)
+    rep = replace(report, completed=False, phase=phase, faults=tuple(report.faults) + (fault,),
+                  error=report.error or reason,
+                  report_fallback={"path": str(fb), "wanted": str(path), "reason": reason})
+    try:
+        return ReportWritten(rep, write_report(rep, fb), True, reason)
+    except OSError as exc:
+        return ReportWritten(rep, None, True, f"{reason}; fallback {fb}: {why(exc)}")

@@ -17,7 +17,11 @@ to a ``Connection``:
   loss that the inner loop cannot take hands it to the vehicle (``degrade``);
 - SIGINT/SIGTERM: ``FlightCore.interrupt`` (land or hold), the flight is
   pumped until that is done, report.json is written by the caller; a second
-  signal stops at once.
+  signal stops at once;
+- the .tlog: a write that fails (ENOSPC, EIO) or a file that ``TlogWriter.check``
+  (about once a wall second) finds deleted, replaced or not growing is an
+  output fault (``FlightCore.output_fault``): land or hold like a lost link,
+  and go on flying until that is done.
 """
 
 from __future__ import annotations
@@ -41,6 +45,8 @@ from .progress import Progress
 from .report import FlightReport
 
 _PHASE_CODE = {p: i for i, p in enumerate(PHASES)}
+#: Wall seconds between checks that the .tlog on disk is still ours and growing.
+TLOG_CHECK_INTERVAL_S = 1.0
 
 
 @dataclass
@@ -127,6 +133,8 @@ class MissionRunner:
         last_t = None
         next_hb = 0.0
         next_show, shown = 0.0, None
+        tlog = conn.tlog
+        next_check = time.monotonic() + TLOG_CHECK_INTERVAL_S
         try:
             while not core.finished:
                 now = time.monotonic()
@@ -164,6 +172,13 @@ class MissionRunner:
                 elif core.t_s is not None and now - last_clock > cfg.link_timeout_s:
                     core.link_lost(f"{conn.url}: vehicle clock stopped for {cfg.link_timeout_s:g} s "
                                    f"while in phase {core.phase}")
+                if tlog is not None and not core.faults:
+                    if now >= next_check:
+                        tlog.check()
+                        next_check = now + TLOG_CHECK_INTERVAL_S
+                    if tlog.fault is not None:
+                        core.output_fault("tlog", tlog.fault)
+                        self._send_outbox()
                 if now >= next_show or core.phase != shown:   # 20 updates a second are enough
                     next_show, shown = now + 0.05, core.phase
                     self._show()
@@ -178,8 +193,13 @@ class MissionRunner:
         wall = time.monotonic() - wall0
         stats = {"received": conn.n_received, "sent": conn.n_sent, "bad": conn.n_bad}
         stats.update(getattr(conn, "auth_stats", lambda: {})())
-        tlog = str(conn.tlog.path) if conn.tlog is not None else None
-        return FlightResult(core.report(wall, tlog, stats), core.log)
+        if tlog is not None:
+            # What is still buffered goes to disk now: a failure here is in the report too.
+            if getattr(conn, "_flush_rx", None) is not None:
+                conn._flush_rx()
+            if tlog.check() is not None and not core.faults:
+                core.output_fault("tlog", tlog.fault)
+        return FlightResult(core.report(wall, str(tlog.path) if tlog is not None else None, stats), core.log)
 
     def _show(self, force: bool = False) -> None:
         core = self.core
@@ -194,4 +214,5 @@ class MissionRunner:
             phase = core.replan_mode          # avoid, climb, stop, reroute, rejoin, hold
         self.progress.update(phase, frac, err if err is not None and math.isfinite(err) else None,
                              core.replan_events,
-                             core.t_s or 0.0, force=force)
+                             core.t_s or 0.0, force=force, coverage=core.coverage_flown(),
+                             control=core.control_mode)

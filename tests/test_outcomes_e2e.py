@@ -136,7 +136,8 @@ def test_mode_change_by_a_ground_station_releases_the_vehicle(tmp_path):
     assert rc == 3 and not rep["completed"]
     v = rep["violation"]
     assert v["kind"] == "mode_change" and v["values"]["got"] == "AUTO.LAND" and v["action"] == "release"
-    assert rep["phase"] == "released"
+    assert rep["end_phase"] == "released"
+    assert rep["phase"] in ("takeoff", "hold", "trajectory")   # where it failed: in the air
     # after the release the companion did not fight the pilot: no more motor
     # commands, and it did not command a mode or a landing of its own
     t_v = v["t_s"] * 1e6
@@ -165,7 +166,8 @@ def test_sigint_lands_writes_the_report_and_flushes_the_tlog(tmp_path):
     rep = json.loads(report.read_text())
     assert not rep["completed"] and rep["interrupted"] == "SIGINT"
     assert rep["violation"]["kind"] == "interrupted"
-    assert rep["phase"] == "done"          # it landed and disarmed before exiting
+    assert rep["end_phase"] == "done"      # it landed and disarmed before exiting
+    assert rep["phase"] in ("takeoff", "hold", "trajectory")   # where it was stopped
     msgs = [r.msg for r in read_tlog(tlog)]
     assert NAV_LAND in _sent_commands(msgs)
     hb = [m for m in msgs if m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1]
@@ -188,7 +190,7 @@ def _hold_by_sigint(tmp_path, sitl):
     finally:
         gcs.close()
     rep = json.loads(report.read_text())
-    assert rc == 3 and rep["phase"] == "holding" and rep["interrupted"] == "SIGINT", proc.stderr.read()
+    assert rc == 3 and rep["end_phase"] == "holding" and rep["interrupted"] == "SIGINT", proc.stderr.read()
     msgs = [r.msg for r in read_tlog(tmp_path / "held.tlog")]
     hb = [m for m in msgs if m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1]
     assert hb[-1].base_mode & 128                           # still armed, flying
@@ -247,12 +249,12 @@ def test_attach_land_brings_a_flying_vehicle_down(tmp_path):
     with SitlProcess(MISSION, lockstep=True, start=LAUNCH) as sitl:
         _hold_by_sigint(tmp_path, sitl)
         rc, rep, msgs = _fly(tmp_path, sitl, "--attach", "land")
-    assert rc == 3 and rep["violation"]["kind"] == "attached" and rep["phase"] == "done"
+    assert rc == 3 and rep["violation"]["kind"] == "attached" and rep["end_phase"] == "done"
     hb = [m for m in msgs if m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1]
     assert not hb[-1].base_mode & 128
 
 
-def test_jittery_real_time_link_hands_the_inner_loop_to_the_vehicle(tmp_path):
+def test_jittery_real_time_link_hands_the_inner_loop_to_the_vehicle(tmp_path, capsys):
     """0-30 ms of jitter on a free-running (real-time) link: the companion's
     inner loop cannot be closed safely, so it hands control to the vehicle's
     controller, keeps streaming setpoints, completes, and says so."""
@@ -267,6 +269,14 @@ def test_jittery_real_time_link_hands_the_inner_loop_to_the_vehicle(tmp_path):
     assert rep["degraded"] is not None and "jitter" in rep["degraded"]["reason"]
     assert not rep["crashed"]
     assert rc == 0 and rep["completed"], rep["violation"]
+    # the report and the console say who flew, and since when
+    deg = rep["degraded"]
+    assert rep["control"] == "companion" and rep["control_in_use"] == "vehicle"
+    assert rep["control_mode_changes"] == [{"t_s": deg["t_s"], "from": "companion", "to": "vehicle",
+                                            "reason": deg["reason"],
+                                            "phase": rep["control_mode_changes"][0]["phase"]}]
+    out = capsys.readouterr().out
+    assert f"companion control, vehicle control from t={deg['t_s']:.1f} s ({deg['reason']})" in out
     # on the wire: finite motor commands stop once the hand-over is announced
     texts = [i for i, m in enumerate(msgs) if m.get_type() == "STATUSTEXT" and m.get_srcComponent() == 191
              and m.text.startswith("companion: inner loop to vehicle")]

@@ -106,7 +106,8 @@ def test_linkloss_is_the_failsafe_story(replayed):
     failsafe held then landed; the companion saw a mode it had not asked for and let go."""
     res = replayed["linkloss"]
     f, m = res.flight, res.metrics
-    assert not f.completed and f.phase == "released" and f.violation["kind"] == "mode_change"
+    assert not f.completed and f.end_phase == "released" and f.violation["kind"] == "mode_change"
+    assert f.phase == "trajectory"          # where it failed: 2 s into the trajectory (cut at 7.35 s)
     texts = [e.text for e in m.events if e.source == "vehicle"]
     assert any("free-running" in t for t in texts)          # SIM_LS_TMO
     assert any("onboard controller holds" in t for t in texts)   # COM_HIL_TMO

@@ -95,7 +95,16 @@ def _crashed_report_doc() -> dict:
     return _report_doc(completed=False, phase="trajectory", error=monitor.first.detail, crashed=True,
                        crash=monitor.crash, violation=monitor.first.to_dict(), coverage_fraction=0.4,
                        path_flown_fraction=0.4, degraded={"t_s": 20.0, "reason": "frame jitter",
-                                                          "jitter_p95_s": 0.012, "frames_lost": 3})
+                                                          "jitter_p95_s": 0.012, "frames_lost": 3},
+                       end_phase="ended", control_in_use="vehicle",
+                       control_mode_changes=({"t_s": 20.0, "from": "companion", "to": "vehicle",
+                                              "reason": "frame jitter", "phase": "trajectory"},),
+                       faults=({"t_s": 30.0, "kind": "tlog", "detail": "f.tlog: cannot write: No space left "
+                                "on device (ENOSPC)", "phase": "trajectory"},
+                               {"t_s": None, "kind": "report", "detail": "r.json: cannot write the report",
+                                "phase": "ended"}),
+                       report_fallback={"path": "/tmp/companion-r-1-2.json", "wanted": "r.json",
+                                        "reason": "r.json: cannot write the report"})
 
 
 # --- the schemas themselves --------------------------------------------------------
@@ -104,7 +113,7 @@ def test_schemas_are_draft_2020_12_and_describe_version_1():
     for schema in (PLAN_SCHEMA, REPORT_SCHEMA):
         assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
         Draft202012Validator.check_schema(schema)
-    assert PLAN_FORMAT_VERSION == "1.0" and REPORT_FORMAT_VERSION == "2.0"
+    assert PLAN_FORMAT_VERSION == "1.0" and REPORT_FORMAT_VERSION == "3.0"
     # the writers' version is one the schemas accept, the next major is not
     for validator, doc_version in ((PLAN, PLAN_FORMAT_VERSION), (REPORT, REPORT_FORMAT_VERSION)):
         version_schema = validator.schema["properties"]["format_version"]
@@ -205,7 +214,9 @@ def test_plan_schema_rejects_a_missing_key(plan_doc, key):
 
 
 REPORT_BREAKAGES = [
-    ("format_version", "1.0"), ("format_version", "3.0"), ("format_version", None),
+    ("format_version", "2.0"), ("format_version", "4.0"), ("format_version", None),
+    ("faults", [{"t_s": 1.0, "kind": "disk", "detail": "", "phase": "trajectory"}]), ("end_phase", "flying"),
+    ("control_in_use", "pilot"), ("report_fallback", {"path": "/tmp/r.json"}),
     ("completed", "yes"), ("control", "pilot"), ("sim_time_s", -1.0), ("sim_time_s", None),
     ("tracking.max_error_m", -0.1), ("tracking.max_error_m", "0.1"), ("tracking.truth_source", "gps"),
     ("tracking.n_samples", 1.5), ("tracking.p95_error_m", 0.1), ("tracking.settle_s", _DELETE),
@@ -262,7 +273,7 @@ def test_schemas_accept_later_minor_versions_where_growth_is_expected(plan_doc):
     plan_doc["timings_s"]["sorties"] = 0.01
     assert _errors(PLAN, plan_doc) == []
     doc = _report_doc()
-    doc.update(format_version="2.1", sorties=[{"completed": True}])
+    doc.update(format_version="3.1", sorties=[{"completed": True}])
     doc["replanning"]["replans_per_corridor"] = [1, 0]
     doc["link"]["auth_rejected"] = 0
     assert _errors(REPORT, doc) == []

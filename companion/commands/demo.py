@@ -99,10 +99,11 @@ def _replanning_row(rp) -> str:
 
 def _table(rows: list[tuple[str, str]]) -> str:
     w = max(len(k) for k, _ in rows)
-    line = "+" + "-" * (w + 2) + "+" + "-" * 34 + "+"
+    vw = max([32] + [len(v) for _, v in rows])
+    line = "+" + "-" * (w + 2) + "+" + "-" * (vw + 2) + "+"
     out = [line]
     for k, v in rows:
-        out.append(f"| {k:<{w}} | {v:<32} |")
+        out.append(f"| {k:<{w}} | {v:<{vw}} |")
     out.append(line)
     return "\n".join(out)
 
@@ -144,8 +145,9 @@ def run(args) -> int:
 def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides=None) -> int:
     from ..plan_io import plan_json_text, plan_to_json_dict
     from ..progress import Progress
-    from ..report import write_report
+    from ..report import write_report_or_fallback
     from ..runner import UNUSED_STREAMS
+    from ..summary import control_text, coverage_text, failure_lines, outcome_text
     from .fly import EXIT_FAILED, FlightPlan, execute
 
     ATTITUDE = 30   # MAVLINK_MSG_ID_ATTITUDE: the SITL's ground-truth ODOMETRY carries the attitude
@@ -170,11 +172,15 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
         result = execute(mission, fp, sitl.url, args.control, str(out / "flight.tlog"), progress, args.cut,
                          {"mute_streams": UNUSED_STREAMS + (() if mission.replan.enabled else (ATTITUDE,)),
                           **(overrides or {})},
-                         signing_key=signing_key)
+                         signing_key=signing_key, report_path=str(out / "report.json"),
+                         option_names=("--out", "--out"))
     finally:
         sitl.stop()
-    rep = result.report
-    write_report(rep, out / "report.json")
+    written = write_report_or_fallback(result.report, out / "report.json")
+    rep = written.report
+    if written.fallback:
+        where = f"written to {written.path} instead" if written.path is not None else "not written"
+        print(f"companion demo: {written.error}; report {where}", file=sys.stderr)
     t_flown = time.monotonic()
 
     figures = []
@@ -206,9 +212,10 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
     mm = (lambda x: "n/a" if x is None else f"{x * 1000:.2f} mm")
     rows = [
         ("mission", f"{mission.name} ({len(plan.waypoints.t_s)} way-points)"),
-        ("control", rep.control),
-        ("completed", "yes" if rep.completed else f"NO ({rep.error or rep.phase})"),
-        ("trajectory", f"{rep.trajectory_duration_s:.1f} s, coverage {plan.stats.coverage_fraction:.0%}"),
+        ("control", control_text(rep)),
+        ("completed", "yes" if rep.completed else f"NO ({outcome_text(rep)})"),
+        ("trajectory", f"{rep.trajectory_duration_s:.1f} s"),
+        ("coverage", coverage_text(rep.coverage_fraction, rep.planned_coverage_fraction).removeprefix("coverage ")),
         ("vehicle time flown", f"{rep.sim_time_s:.1f} s ({rep.n_frames} frames)"),
         ("max error (after settle)", mm(tr.max_error_m)),
         ("rms error (after settle)", mm(tr.rms_error_m)),
@@ -222,6 +229,6 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
     files = ["plan.json", "flight.tlog", "report.json", "map.html"] + [Path(f).name for f in (figures or [])]
     print(f"wrote {out}/: {', '.join(files)}" + ("" if figures is not None else
                                                  " (figures skipped: install the plot extra)"))
-    if not rep.completed:
-        print(f"companion demo: NOT completed: {rep.error or rep.phase}", file=sys.stderr)
+    for line in failure_lines(rep):
+        print(f"companion demo: {line}", file=sys.stderr)
     return 0 if rep.completed else EXIT_FAILED

@@ -18,9 +18,17 @@ launch point through its transit, its corridors, and back) instead of the
 whole route; the runner flies it like any trajectory.
 Exit code 0 when the flight completed (every check of
 ``companion.flight.monitor`` held: armed, airborne, in our mode, no crash,
-error within ``--max-error``; landed and disarmed), 3 when it did not (the
-report's ``violation`` says why, and what was flown), 2 on bad input
-(checked before anything is flown or written).
+error within ``--max-error``; landed and disarmed; the .tlog and the report
+written), 3 when it did not (the report's ``violation`` says why, and what
+was flown), 2 on bad input (checked before anything is flown or written:
+outputs included, ``check_output_paths``, ``check_free_space`` and
+``check_writable``).
+
+An output that fails in flight (the .tlog: ENOSPC, EIO, deleted, replaced,
+not growing) is a fault like a lost link: the vehicle lands (or holds,
+``--on-failure``), and the report says so (``faults``). A report that cannot
+be written where asked goes to the temporary directory, named on stderr and
+in the report (``report_fallback``); exit code 3 either way.
 """
 
 from __future__ import annotations
@@ -38,6 +46,31 @@ from ..errors import InputError
 DEFAULT_CONNECT = "udpout:127.0.0.1:14540"
 
 
+#: Bytes a second of flight that a .tlog takes, rounded up from recordings of
+#: the bundled SITL (BENCHMARKS.md "h19-inflight": 61 kB/s vehicle control,
+#: 125 kB/s companion control, 173 kB/s with the rangefinders of replanning).
+TLOG_BYTES_PER_S = 200_000
+#: Vehicle seconds a flight takes besides its trajectory (take-off, hold,
+#: hover, landing), for the free-space estimate.
+FLIGHT_OVERHEAD_S = 120.0
+#: Room kept for report.json and the file system's own blocks.
+REPORT_RESERVE_BYTES = 1 << 20
+
+
+def _name_max(directory: Path) -> int:
+    try:
+        return int(os.pathconf(directory, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):
+        return 255
+
+
+def _path_max(directory: Path) -> int:
+    try:
+        return int(os.pathconf(directory, "PC_PATH_MAX"))
+    except (OSError, ValueError, AttributeError):
+        return 4096
+
+
 def check_output_paths(outputs) -> None:
     """Fail before any work when an output cannot be written where asked.
 
@@ -49,20 +82,118 @@ def check_output_paths(outputs) -> None:
     Raises
     ------
     InputError
-        A path is a directory, its directory does not exist, or two options
-        name the same file (one line naming the option and path).
+        A path is a directory or another non-regular file, its directory does
+        not exist, its name (or the report's temporary sibling,
+        ``companion.report.temp_name``) is longer than the file system
+        allows, or two options name the same file (one line naming the
+        option and path). Whether the directory is writable is tried later,
+        when all input is known good (``check_writable``): trying changes it.
     """
+    from ..report import temp_name
+
     seen = {}
     for opt, path in outputs:
         p = Path(path)
-        if p.is_dir():
-            raise InputError(f"{opt} {path}", "is a directory (give a file name)")
-        if not p.parent.is_dir():
-            raise InputError(f"{opt} {path}", f"directory {p.parent} does not exist")
+        shown = f"{opt} {str(path)[:60]}{'...' if len(str(path)) > 60 else ''}"
+        # names first: a too-long name fails every other question with ENAMETOOLONG
+        try:
+            parent_ok = p.parent.is_dir()
+        except OSError:          # the directory's own name too long
+            parent_ok = False
+        limit = _name_max(p.parent) if parent_ok else 255
+        for name in (p.name, temp_name(p).name):
+            n = len(os.fsencode(name))
+            if n > limit:
+                raise InputError(shown, f"file name of {n} bytes is longer than the {limit} the file system allows")
+        full = len(os.fsencode(os.path.abspath(p)))
+        if full >= _path_max(p.parent if parent_ok else Path(".")):
+            raise InputError(shown, f"path of {full} bytes is too long")
+        try:
+            if p.is_dir():
+                raise InputError(f"{opt} {path}", "is a directory (give a file name)")
+            if not p.parent.is_dir():
+                raise InputError(f"{opt} {path}", f"directory {p.parent} does not exist")
+            if p.exists() and not p.is_file():
+                raise InputError(f"{opt} {path}", "exists and is not a regular file")
+        except OSError as exc:
+            raise InputError(shown, f"cannot be used: {exc.strerror or exc}") from None
         key = os.path.abspath(p)
         if key in seen:
             raise InputError(f"{opt} {path}", f"is also given as {seen[key]}")
         seen[key] = opt
+
+
+def check_writable(outputs) -> None:
+    """Fail before arming when an output's directory is not writable: a temporary
+    file is created there and removed (permissions, a read-only mount, ACLs and
+    quotas all answer; ``os.access`` would not see most of them).
+
+    Parameters
+    ----------
+    outputs : iterable of (option, path)
+
+    Raises
+    ------
+    InputError
+        One line naming the option, the directory and the system's error.
+    """
+    import tempfile
+
+    probed = set()
+    for opt, path in outputs:
+        d = os.path.abspath(Path(path).parent)
+        if d in probed:
+            continue
+        try:
+            fd, probe = tempfile.mkstemp(prefix=".cmp-", suffix=".probe", dir=d)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            raise InputError(f"{opt} {path}", f"directory {Path(path).parent} is not writable: "
+                                              f"{exc.strerror or exc}") from None
+        probed.add(d)
+
+
+def expected_tlog_bytes(trajectory_duration_s: float) -> int:
+    """Expected .tlog size (bytes) of a flight whose trajectory lasts
+    ``trajectory_duration_s``: (trajectory + ``FLIGHT_OVERHEAD_S``) x ``TLOG_BYTES_PER_S``."""
+    return int(math.ceil((max(0.0, trajectory_duration_s) + FLIGHT_OVERHEAD_S) * TLOG_BYTES_PER_S))
+
+
+def check_free_space(outputs, statvfs=os.statvfs) -> None:
+    """Fail before arming when a file system cannot hold what the flight will write.
+
+    Parameters
+    ----------
+    outputs : iterable of (option, path, bytes)
+        Each output and the bytes it is expected to take; outputs on one
+        file system (``st_dev`` of the directory) add up.
+    statvfs : callable
+        ``os.statvfs`` (tests pass a fake one).
+
+    Raises
+    ------
+    InputError
+        One line naming the option, the bytes needed and the bytes free.
+    """
+    need: dict = {}
+    for opt, path, nbytes in outputs:
+        d = os.path.abspath(Path(path).parent)
+        try:
+            dev = os.stat(d).st_dev
+        except OSError:
+            dev = d
+        first, total, _ = need.get(dev, ((opt, path, d), 0, None))
+        need[dev] = (first, total + int(nbytes), None)
+    for (opt, path, d), total, _ in need.values():
+        try:
+            st = statvfs(d)
+        except OSError:
+            continue            # nothing to go on (the write itself is guarded in flight)
+        free = st.f_bavail * st.f_frsize
+        if free < total:
+            raise InputError(f"{opt} {path}", f"not enough free space in {d}: the flight needs about "
+                                              f"{total / 1e6:.1f} MB, {free / 1e6:.1f} MB free")
 
 
 def add_arguments(parser) -> None:
@@ -388,7 +519,8 @@ def obstacle_clearance_fn(mission, dem):
 
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
             progress=None, cut_s: float | None = None, runner_overrides: dict | None = None,
-            plan_path: str | None = None, signing_key: bytes | None = None, conn=None):
+            plan_path: str | None = None, signing_key: bytes | None = None, conn=None,
+            report_path: str | None = None, option_names=("--tlog", "--report")):
     """Open the link (unless ``conn``, from ``open_link``, is given), fly, close.
     Returns ``companion.runner.FlightResult``.
 
@@ -396,7 +528,9 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
     opened (unknown host, port in use, refused) is bad input and leaves no
     file behind. What is flown (the plan, a sortie, a cut and its re-solved
     trajectory) passes ``companion.preflight.check_flight_plan`` first
-    (``PlanError``: nothing has been sent).
+    (``PlanError``: nothing has been sent). Then the file systems of
+    ``tlog_path`` and ``report_path`` must hold the flight's expected .tlog
+    (``check_free_space``; InputError otherwise).
     """
     from ..maps.field import load_mission_maps
     from ..preflight import check_flight_plan
@@ -407,6 +541,14 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
             flight_plan = flight_plan.cut(cut_s, mission.trajectory)
         maps = load_mission_maps(mission)
         check_flight_plan(flight_plan.source or str(plan_path or mission.source), flight_plan, mission, *maps)
+        traj = flight_plan.trajectory
+        outputs = []
+        if tlog_path:
+            outputs.append((option_names[0], tlog_path, expected_tlog_bytes(float(traj.tf - traj.t0))))
+        if report_path:
+            outputs.append((option_names[1], report_path, REPORT_RESERVE_BYTES))
+        check_free_space(outputs)
+        check_writable([o[:2] for o in outputs])
         cfg = RunnerConfig(control=control, **(runner_overrides or {}))
         core = build_flight_core(mission, flight_plan, cfg,
                                  flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}), maps)
@@ -437,7 +579,6 @@ def run(args) -> int:
     from ..link import check_connection_string
     from ..mission import load_mission
     from ..progress import Progress
-    from ..report import write_report
 
     check_connection_string(args.connect)
     if args.cut is not None and not (math.isfinite(args.cut) and args.cut > 0):
@@ -460,20 +601,38 @@ def run(args) -> int:
         raise
     progress = Progress(enabled=not args.quiet)
     result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, overrides,
-                     args.plan, conn=conn)
-    rep = result.report
-    write_report(rep, args.report)
+                     args.plan, conn=conn, report_path=args.report)
+    return finish_report(result.report, args.report, "companion fly")
+
+
+def finish_report(rep, report_path, prog: str) -> int:
+    """Write the report (``write_report_or_fallback``: the configured path, else
+    the temporary directory, named on stderr), print the summary rendered
+    from it (``companion.summary``) and return the exit code."""
+    from ..report import write_report_or_fallback
+    from ..summary import control_text, coverage_text, failure_lines, outcome_text
+
+    written = write_report_or_fallback(rep, report_path)
+    rep = written.report
+    if written.fallback:
+        where = (f"written to {written.path} instead" if written.path is not None
+                 else "not written anywhere; it follows on stdout")
+        print(f"{prog}: {written.error}; report {where}", file=sys.stderr)
+        if written.path is None:
+            import json
+            print(json.dumps(rep.to_dict()))
     tr = rep.tracking
     err = "n/a" if tr.max_error_m is None else f"max {tr.max_error_m * 1000:.2f} mm, rms {tr.rms_error_m * 1000:.2f} mm"
-    print(f"companion fly: {'completed' if rep.completed else 'NOT completed'} ({rep.control} control), "
-          f"{rep.sim_time_s:.1f} s flown in {rep.wall_time_s:.1f} s wall, tracking {err} "
-          f"({tr.truth_source}); report {args.report}")
+    print(f"{prog}: {outcome_text(rep)} ({control_text(rep)}), "
+          f"{rep.sim_time_s:.1f} s flown in {rep.wall_time_s:.1f} s wall, "
+          f"{coverage_text(rep.coverage_fraction, rep.planned_coverage_fraction)}, tracking {err} "
+          f"({tr.truth_source}); report {written.path if written.path is not None else '(stdout)'}")
     rp = rep.replanning
     if rp.enabled and rp.events:
         clr = "" if rp.min_clearance_m is None else f", min clearance {rp.min_clearance_m:.2f} m (sim truth)"
-        print(f"companion fly: replanning: {rp.events} events ({', '.join(rp.actions)}){clr}")
-    if not rep.completed:
-        print(f"companion fly: NOT completed: {rep.error or rep.phase}", file=sys.stderr)
+        print(f"{prog}: replanning: {rp.events} events ({', '.join(rp.actions)}){clr}")
+    for line in failure_lines(rep):
+        print(f"{prog}: {line}", file=sys.stderr)
     return 0 if rep.completed else EXIT_FAILED
 
 

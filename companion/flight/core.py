@@ -120,6 +120,9 @@ def replan_text(action: str, range_m: float | None, detail: str = "") -> str:
 #: STATUSTEXT prefixes of the events that come from outside the core (replay re-injects them).
 INTERRUPT_PREFIX = "companion: interrupted by "
 DEGRADE_PREFIX = "companion: inner loop to vehicle: "
+OUTPUT_FAULT_PREFIX = "companion: output fault: "
+#: Phases before arming: an output fault there ends the flight on the ground.
+BEFORE_ARMING = ("connect", "setup", "upload", "preflight")
 
 
 @dataclass(frozen=True)
@@ -292,6 +295,13 @@ class FlightCore:
         self._last_err = None
         self._controlling = False
         self.degraded: dict | None = None
+        #: Who flies the inner loop, and each change: {t_s, from, to, reason}.
+        self.control_mode = cfg.control
+        self.control_mode_changes: list[dict] = []
+        #: Output faults (the .tlog, the report): {t_s, kind, detail, phase}.
+        self.faults: list[dict] = []
+        #: The phase in which the first violation happened (report ``phase`` of a failed flight).
+        self.failed_phase: str | None = None
         self.interrupted: str | None = None
         self._next_sp_t = -math.inf
         self._sp_dt = 1.0 / cfg.setpoint_hz
@@ -340,11 +350,18 @@ class FlightCore:
         """Process one message from the vehicle (in arrival order)."""
         if m.get_srcSystem() != self.ts:
             return
+        ph = self.phase
         h = self._dispatch.get(m.get_type())
         if h is not None:
             h(m)
         if self._proc is not None:
             self._drive()
+        if self.failed_phase is None and self.monitor.first is not None:
+            self.failed_phase = ph
+
+    def _note_failure(self, phase: str) -> None:
+        if self.failed_phase is None and self.monitor.first is not None:
+            self.failed_phase = phase
 
     @property
     def handled_types(self) -> frozenset:
@@ -361,11 +378,13 @@ class FlightCore:
         """Stop the flight from outside (SIGINT/SIGTERM): land or hold, report not completed."""
         if self.finished:
             return
+        ph = self.phase
         self.interrupted = reason
         # Said on the wire (and so in the .tlog, where replay finds it).
         self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_WARNING,
                                               f"{INTERRUPT_PREFIX}{reason}"[:50].encode()))
         self.monitor.fail(self.t_s, "interrupted", f"interrupted by {reason}", self.cfg.on_failure)
+        self._note_failure(ph)
         self._stop(self.cfg.on_failure)
 
     def link_lost(self, detail: str) -> None:
@@ -373,13 +392,54 @@ class FlightCore:
         if self.error is None:
             self.error = detail
         self.monitor.fail(self.t_s, "link", detail, "end")
+        self._note_failure(self.phase)
         self._finish()
+
+    def output_fault(self, kind: str, detail: str) -> None:
+        """An output of the flight failed (``kind`` "tlog": a write error, the file
+        deleted, replaced or not growing; docs/report-json.md ``faults``): a fault
+        like a lost link. In the air the flight stops with the configured
+        action (``on_failure``: land or hold) and goes on being flown until
+        that is done; before arming it ends on the ground; while landing (or
+        after) the landing goes on. The flight is not completed either way."""
+        ph = self.phase
+        self.faults.append({"t_s": self.t_s, "kind": kind, "detail": detail, "phase": ph})
+        self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_CRITICAL,
+                                              f"{OUTPUT_FAULT_PREFIX}{kind}"[:50].encode()))
+        if self.error is None:
+            self.error = detail
+        in_air = self.armed and ph in FLYING
+        if in_air:
+            action = self.cfg.on_failure
+        elif ph == "landing" and self.armed and not self.finished:
+            action = "land"           # the landing under way goes on
+        else:
+            action = "end"            # on the ground before arming, or the flight is over
+        self.monitor.fail(self.t_s, "output", detail, action, output=kind)
+        self._note_failure(ph)
+        if self.finished:
+            return
+        if in_air:
+            self._stop(self.cfg.on_failure)
+        elif ph in BEFORE_ARMING and not self.armed:
+            if ph == "preflight":
+                # OFFBOARD and the arming may be on their way with no answer yet:
+                # a disarm (once; a disarmed vehicle just refuses it) so that
+                # the vehicle is not left armed on the ground without setpoints.
+                self._emit(self.enc.command_long_encode(self.ts, self.tc,
+                                                        mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0,
+                                                        0, 0, 0, 0, 0, 0, 0))
+            self._stop("end")
+        # landing, holding, released: what is under way goes on
 
     def degrade(self, reason: str, **values) -> None:
         """Hand the inner loop back to the vehicle's controller (setpoints only)."""
         if self.degraded is not None or self.cfg.control != "companion":
             return
         self.degraded = {"t_s": self.t_s, "reason": reason, **values}
+        self.control_mode_changes.append({"t_s": self.t_s, "from": self.control_mode, "to": "vehicle",
+                                          "reason": reason, "phase": self.phase})
+        self.control_mode = "vehicle"
         self._controlling = False
         self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_WARNING,
                                               f"{DEGRADE_PREFIX}{reason}"[:50].encode()))
@@ -1084,6 +1144,10 @@ class FlightCore:
         if self.coverage is not None:
             flown = self.coverage.fraction()
         v = self.monitor.first
+        if completed:
+            phase = self.phase
+        else:
+            phase = self.failed_phase if self.failed_phase is not None else self.phase
         return FlightReport(
             completed=completed,
             control=self.cfg.control,
@@ -1091,11 +1155,11 @@ class FlightCore:
             wall_time_s=float(wall_s),
             tracking=tr,
             replanning=self._replanning_stats(),
-            coverage_fraction=None if cov is None else (cov * flown if flown is not None else
-                                                         (cov if completed else None)),
+            coverage_fraction=self.coverage_flown(completed),
             tlog=tlog,
             mission=self.inputs.mission_name,
-            phase=self.phase,
+            phase=phase,
+            end_phase=self.phase,
             error=self.error if self.error is not None else (v.detail if v is not None else None),
             real_time_factor=(sim_s / wall_s) if wall_s > 0 else None,
             n_frames=self.n_frames,
@@ -1109,7 +1173,22 @@ class FlightCore:
             interrupted=self.interrupted,
             link=link_stats,
             resumed_from_s=self.resumed_from_s,
+            control_in_use=self.control_mode,
+            control_mode_changes=tuple(dict(c) for c in self.control_mode_changes),
+            faults=tuple(dict(f) for f in self.faults),
         )
+
+    def coverage_flown(self, completed: bool = False) -> float | None:
+        """Coverage flown so far: the plan's coverage times the fraction of its
+        coverage path flown (``PathCoverage``); without a path, the plan's
+        coverage if the flight completed, else None. The one source of the
+        figure: report.json, the progress line and the summaries read it."""
+        cov = self.inputs.coverage_fraction
+        if cov is None:
+            return None
+        if self.coverage is not None:
+            return cov * self.coverage.fraction()
+        return cov if completed else None
 
 
     def _replanning_stats(self) -> ReplanningStats:

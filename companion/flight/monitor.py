@@ -90,7 +90,8 @@ class Violation:
     kind : str
         ``crash``, ``disarmed``, ``mode_change``, ``emergency``, ``on_ground``,
         ``tracking``, ``nav_stale``, ``interrupted``, ``command_rejected``,
-        ``link``, ``vehicle_not_ready``, ``attached``, ``no_route``, ``replan_timeout``.
+        ``link``, ``vehicle_not_ready``, ``attached``, ``no_route``, ``replan_timeout``,
+        ``output`` (the .tlog could not be written: ``FlightCore.output_fault``).
     detail : str
         One human-readable line.
     action : str

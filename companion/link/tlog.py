@@ -12,6 +12,8 @@ reads these files; ``read_tlog`` here is a dependency-light reader for replay.
 
 from __future__ import annotations
 
+import errno
+import os
 import struct
 import time
 from dataclasses import dataclass
@@ -20,6 +22,22 @@ from typing import Iterator
 
 
 _TS = struct.Struct(">Q")
+
+
+def open_tlog_file(path: Path):
+    """The writer's file (binary, buffered): the one place a .tlog is opened for
+    writing, so tests can wrap it (a disk that fills up, a failing device).
+
+    Created or truncated, and opened for appending (O_APPEND): a file that
+    somebody truncates behind our back then ends short of what was written
+    (``TlogWriter.check``: stopped growing) instead of growing a hole back
+    to our offset."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o666)
+    try:
+        return open(fd, "wb", buffering=1 << 16)
+    except BaseException:
+        os.close(fd)
+        raise
 
 
 class TlogWriter:
@@ -35,6 +53,13 @@ class TlogWriter:
     Notes
     -----
     The constructor does no I/O; ``open`` (or ``with``) creates the file.
+
+    After ``open``, writing never raises: the first failure (ENOSPC, EIO, a
+    file that ``check`` finds deleted, replaced or not growing) is kept in
+    ``fault`` (one line naming the file), the file is let go, and later
+    packets are counted in ``n_dropped``. The flight loop reads ``fault``
+    and treats it like a lost link (``FlightCore.output_fault``): a flight
+    must never fall out of the sky because its recording failed.
     """
 
     def __init__(self, path: str | Path, flush_interval_s: float = 0.5) -> None:
@@ -43,44 +68,87 @@ class TlogWriter:
         self._file = None
         self._next_flush = 0.0
         self.n_records = 0
+        #: Bytes handed to the file (timestamps and packets).
+        self.n_bytes = 0
+        #: Packets not recorded after a fault.
+        self.n_dropped = 0
+        #: The first write failure, one line naming the file; None while all is well.
+        self.fault: str | None = None
+        self._ident = None
 
     def open(self) -> "TlogWriter":
+        """Create (truncate) the file. Raises OSError: the caller reports it as bad input."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "wb", buffering=1 << 16)
+        self._file = open_tlog_file(self.path)
+        try:
+            st = os.fstat(self._file.fileno())
+            self._ident = (st.st_dev, st.st_ino)
+        except (OSError, AttributeError, ValueError):   # a wrapped file without a descriptor
+            self._ident = None
         self._next_flush = time.monotonic() + self.flush_interval_s
         return self
+
+    def _fail(self, what: str) -> None:
+        """Keep the first fault and let the file go (closing it may fail as well)."""
+        if self.fault is None:
+            self.fault = f"{self.path}: {what}"
+        f, self._file = self._file, None
+        if f is not None:
+            try:
+                f.close()
+            except (OSError, ValueError):
+                pass
+
+    def _os_fail(self, exc: OSError) -> None:
+        name = errno.errorcode.get(exc.errno, "") if exc.errno else ""
+        self._fail(f"cannot write: {exc.strerror or exc}" + (f" ({name})" if name else ""))
 
     def write(self, packet: bytes | bytearray, time_usec: int | None = None) -> None:
         """Record one raw packet; ``time_usec`` defaults to the wall clock now."""
         if self._file is None:
+            if self.fault is not None:
+                self.n_dropped += 1
             return
         if time_usec is None:
             time_usec = int(time.time() * 1e6)
-        self._file.write(_TS.pack(time_usec))
-        self._file.write(packet)
+        try:
+            self._file.write(_TS.pack(time_usec) + packet)
+        except OSError as exc:
+            self.n_dropped += 1
+            self._os_fail(exc)
+            return
         self.n_records += 1
-        now = time.monotonic()
-        if now >= self._next_flush:
-            self._file.flush()
-            self._next_flush = now + self.flush_interval_s
+        self.n_bytes += _TS.size + len(packet)
+        self.tick()
 
     def write_many(self, packets, time_usec: int | None = None) -> None:
         """Record several raw packets with one timestamp (default: now) in one write."""
-        if self._file is None or not packets:
+        if not packets:
+            return
+        if self._file is None:
+            if self.fault is not None:
+                self.n_dropped += len(packets)
             return
         if time_usec is None:
             time_usec = int(time.time() * 1e6)
         ts = _TS.pack(time_usec)
-        self._file.write(ts + ts.join(packets))   # ts p0 ts p1 ... ts pn
+        buf = ts + ts.join(packets)    # ts p0 ts p1 ... ts pn
+        try:
+            self._file.write(buf)
+        except OSError as exc:
+            self.n_dropped += len(packets)
+            self._os_fail(exc)
+            return
         self.n_records += len(packets)
-        now = time.monotonic()
-        if now >= self._next_flush:
-            self._file.flush()
-            self._next_flush = now + self.flush_interval_s
+        self.n_bytes += len(buf)
+        self.tick()
 
     def flush(self) -> None:
         if self._file is not None:
-            self._file.flush()
+            try:
+                self._file.flush()
+            except OSError as exc:
+                self._os_fail(exc)
 
     def tick(self) -> None:
         """Flush if the interval has passed since the last flush. ``write`` flushes
@@ -90,14 +158,48 @@ class TlogWriter:
         if self._file is not None:
             now = time.monotonic()
             if now >= self._next_flush:
-                self._file.flush()
+                self.flush()
                 self._next_flush = now + self.flush_interval_s
+
+    def check(self) -> str | None:
+        """Flush, then check that what was written is on disk: the path still
+        names our file (not deleted, its directory not deleted, not replaced
+        by another file) and holds every byte written (not truncated: a file
+        that stopped growing). Returns ``fault``. A few system calls: the
+        runner calls it about once a wall second."""
+        if self._file is None:
+            return self.fault
+        self.flush()
+        if self._file is None:
+            return self.fault
+        try:
+            size = os.fstat(self._file.fileno()).st_size
+        except (OSError, AttributeError, ValueError):
+            size = None
+        try:
+            st = os.stat(self.path)
+        except FileNotFoundError:
+            self._fail("disappeared during the flight (the file or its directory was deleted)")
+            return self.fault
+        except OSError as exc:
+            self._fail(f"cannot be checked: {exc.strerror or exc}")
+            return self.fault
+        if self._ident is not None and (st.st_dev, st.st_ino) != self._ident:
+            self._fail("was replaced by another file during the flight")
+        elif size is not None and size < self.n_bytes:
+            self._fail(f"stopped growing: {size} bytes on disk of {self.n_bytes} written")
+        return self.fault
 
     def close(self) -> None:
         if self._file is not None:
-            self._file.flush()
-            self._file.close()
-            self._file = None
+            self.flush()
+        if self._file is not None:
+            f, self._file = self._file, None
+            try:
+                f.close()
+            except OSError as exc:
+                self._file = None
+                self._os_fail(exc)
 
     def __enter__(self) -> "TlogWriter":
         return self.open()
