@@ -6,10 +6,11 @@ plan.json
     ENU metres in the map frame, SI units. Keys: ``format_version``
     (``PLAN_FORMAT_VERSION``; docs/schemas/plan.schema.json), ``frame`` ("ENU"),
     ``origin`` {lat, lon, alt_m} (the mission home = map frame origin),
-    ``path``, ``waypoints`` [{t, p, v, a, corner}], ``trajectory`` {t, p, v,
-    a, pointing} sampled at ``sample_hz``, ``stats``, ``timings_s``; plus
-    ``name``, ``sample_hz``, ``target_enu_m`` (S_p of eq. 21) and
-    ``trajectory_weights`` (the LQR weights used).
+    ``path``, ``waypoints`` [{t, p, v, a, corner}], ``trajectory`` (2.x: the
+    exact polynomial pieces, their coefficients as base64 float64; 1.x: samples),
+    ``stats``, ``timings_s``; plus ``name``, ``target_enu_m`` (S_p of eq. 21),
+    ``trajectory_weights`` (the LQR weights used) and, on request, ``samples``
+    (the trajectory sampled at ``samples.hz``). ``load_plan`` reads 2.x and 1.x.
 
 QGroundControl exports
     The flight-ready mission of ``companion.mission_items`` (take-off, speed,
@@ -23,9 +24,12 @@ QGroundControl exports
 
 from __future__ import annotations
 
+import base64
+import binascii
 import dataclasses
 import json
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,16 +50,26 @@ MAV_AUTOPILOT_PX4 = 12
 MAV_TYPE_QUADROTOR = 2
 
 #: plan.json format written here ("MAJOR.MINOR", docs/README.md "Versions");
-#: ``load_plan`` reads every file of the same major version.
-PLAN_FORMAT_VERSION = "1.0"
+#: ``load_plan`` reads every file of this major version and of ``LEGACY_PLAN_MAJOR``.
+#: 2.0: ``trajectory`` holds the polynomial pieces instead of samples; the samples,
+#: now optional, moved to ``samples``; ``timings_s`` gained ``write`` and ``wall``.
+PLAN_FORMAT_VERSION = "2.0"
 PLAN_FORMAT_MAJOR = int(PLAN_FORMAT_VERSION.split(".")[0])
+#: The previous major version, still read (its ``trajectory`` is samples only:
+#: ``companion fly`` re-solves the LQR through its way-points).
+LEGACY_PLAN_MAJOR = 1
 
 STATS_KEYS = ("coverage_fraction", "path_length_m", "duration_s", "n_waypoints", "orientation_deg",
               "max_speed_m_s", "max_accel_m_s2", "waypoint_residual_m")
 TIMING_KEYS = ("load", "coverage", "trajectory", "total")
+#: ``timings_s`` keys added by ``companion plan`` when it writes the file (2.0).
+WRITE_TIMING_KEYS = ("write", "wall")
 #: Most trajectory samples plan.json may hold (a 10 ha field at 10 Hz needs ~4e5):
-#: beyond it --sample-hz is a typo and the document would not fit in memory.
+#: beyond it --samples is a typo and the document would not fit in memory.
 MAX_SAMPLES = 2_000_000
+#: ``trajectory.form`` of format 2.x and the dtype of its coefficients.
+TRAJECTORY_FORM = "piecewise-polynomial"
+COEFFICIENTS_DTYPE = "<f8"
 
 
 def _rows(a) -> list:
@@ -73,7 +87,36 @@ def sample_times(t0: float, tf: float, sample_hz: float) -> np.ndarray:
     return t
 
 
-def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
+def trajectory_json(traj) -> dict:
+    """plan.json's ``trajectory`` (2.x): the knot times and the position
+    coefficients of every piece, exactly (float64, little-endian, base64).
+
+    On piece m, s = (t - t[m]) / (t[m + 1] - t[m]) in [0, 1] and
+    p(t) = sum_j c[m, j, :] s^j; v, a, jerk and snap are its derivatives
+    (``companion.trajectory.sampling.derivative_coefficients``).
+    """
+    c = np.ascontiguousarray(traj.position_coefficients, dtype=COEFFICIENTS_DTYPE)
+    return {"form": TRAJECTORY_FORM, "degree": int(c.shape[1] - 1),
+            "t": _rows(traj.knot_times_s),
+            "coefficients": {"dtype": COEFFICIENTS_DTYPE, "shape": list(c.shape),
+                             "base64": base64.b64encode(c.tobytes()).decode("ascii")}}
+
+
+def samples_json(traj, sample_hz: float) -> dict:
+    """plan.json's optional ``samples``: the trajectory at ``sample_times`` (``--samples HZ``)."""
+    if not (sample_hz > 0 and math.isfinite(sample_hz)):
+        raise PlanError("--samples", f"must be a positive number of Hz, got {sample_hz}")
+    n_samples = (traj.tf - traj.t0) * sample_hz
+    if n_samples > MAX_SAMPLES:
+        raise PlanError("--samples", f"{sample_hz:g} Hz over {traj.tf - traj.t0:.1f} s would be "
+                        f"{n_samples:.3g} samples (at most {MAX_SAMPLES}); use a lower rate")
+    t = sample_times(traj.t0, traj.tf, sample_hz)
+    s = traj.sample(t)
+    return {"hz": float(sample_hz), "t": _rows(t), "p": _rows(s.p), "v": _rows(s.v), "a": _rows(s.a),
+            "pointing": _rows(s.pointing)}
+
+
+def plan_to_json_dict(plan, mission: Mission, sample_hz: float | None = None) -> dict:
     """The plan.json document (docs/plan-json.md) as plain JSON types.
 
     Parameters
@@ -81,30 +124,20 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
     plan : companion.planner.Plan
     mission : Mission
         For the name, origin (home) and weights.
-    sample_hz : float
-        Trajectory sampling rate (Hz), > 0.
+    sample_hz : float, optional
+        Also store the trajectory sampled at this rate (Hz, > 0) as ``samples``.
     """
-    if not (sample_hz > 0 and math.isfinite(sample_hz)):
-        raise PlanError("--sample-hz", f"must be a positive number, got {sample_hz}")
     traj = plan.trajectory
-    n_samples = (traj.tf - traj.t0) * sample_hz
-    if n_samples > MAX_SAMPLES:
-        raise PlanError("--sample-hz", f"{sample_hz:g} Hz over {traj.tf - traj.t0:.1f} s would be "
-                        f"{n_samples:.3g} samples (at most {MAX_SAMPLES}); use a lower rate")
-    wp = plan.waypoints
-    t = sample_times(traj.t0, traj.tf, sample_hz)
-    s = traj.sample(t)
+    samples = None if sample_hz is None else samples_json(traj, sample_hz)
     home = mission.home
-    return {
+    doc = {
         "format_version": PLAN_FORMAT_VERSION,
         "name": mission.name,
         "frame": "ENU",
         "origin": {"lat": home.lat, "lon": home.lon, "alt_m": home.alt_m},
         "path": _rows(plan.coverage.path_xy_m),
-        "waypoints": _waypoints_json(wp),
-        "sample_hz": float(sample_hz),
-        "trajectory": {"t": _rows(t), "p": _rows(s.p), "v": _rows(s.v), "a": _rows(s.a),
-                       "pointing": _rows(s.pointing)},
+        "waypoints": _waypoints_json(plan.waypoints),
+        "trajectory": trajectory_json(traj),
         "target_enu_m": _rows(plan.target_enu_m),
         "trajectory_weights": to_dict(mission.trajectory),
         "stats": {k: getattr(plan.stats, k) for k in STATS_KEYS},
@@ -112,11 +145,16 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
         "warnings": list(plan.warnings),
         **sorties_json(plan, mission),
     }
+    if samples is not None:
+        doc["samples"] = samples
+    return doc
 
 
 def _waypoints_json(w) -> list:
-    return [{"t": float(ti), "p": _rows(p), "v": _rows(v), "a": _rows(a), "corner": bool(c)}
-            for ti, p, v, a, c in zip(w.t_s, w.p_enu_m, w.v_enu_m_s, w.a_enu_m_s2, w.corner)]
+    # whole-array tolist (one call per array, not one per way-point: 10 ha has ~1.6e4)
+    cols = [np.asarray(x, dtype=float).tolist() for x in (w.t_s, w.p_enu_m, w.v_enu_m_s, w.a_enu_m_s2)]
+    corner = np.asarray(w.corner, dtype=bool).tolist()
+    return [{"t": ti, "p": p, "v": v, "a": a, "corner": c} for ti, p, v, a, c in zip(*cols, corner)]
 
 
 def sorties_json(plan, mission: Mission) -> dict:
@@ -143,9 +181,31 @@ def sorties_json(plan, mission: Mission) -> dict:
     }
 
 
-def plan_json_text(doc: dict) -> str:
-    """Serialise a plan.json document (NaN/inf are a bug, not output)."""
-    return json.dumps(doc, allow_nan=False, separators=(",", ":")) + "\n"
+def _dumps(value) -> str:
+    return json.dumps(value, allow_nan=False, separators=(",", ":"))
+
+
+def plan_json_text(doc: dict, render_start_s: float | None = None) -> str:
+    """Serialise a plan.json document (NaN/inf are a bug, not output).
+
+    Parameters
+    ----------
+    doc : dict
+    render_start_s : float, optional
+        ``time.perf_counter()`` when the rendering of the outputs began. Then
+        ``timings_s`` gains ``write`` (since then) and ``wall`` (since the
+        process started, ``companion.process_clock``), taken after every other
+        key has been encoded so that they include the encoding; ``doc`` is
+        updated with them. The text is ``json.dumps(doc)``'s (compact).
+    """
+    parts = {k: _dumps(v) for k, v in doc.items() if render_start_s is None or k != "timings_s"}
+    if render_start_s is not None:
+        from .process_clock import process_wall_s
+
+        doc["timings_s"] = dict(doc["timings_s"], write=time.perf_counter() - render_start_s,
+                                wall=process_wall_s())
+        parts["timings_s"] = _dumps(doc["timings_s"])
+    return "{" + ",".join(f"{_dumps(k)}:{parts[k]}" for k in doc) + "}\n"
 
 
 # --- reading plan.json ----------------------------------------------------------
@@ -159,8 +219,8 @@ class PlanFile:
     origin : (lat_deg, lon_deg, alt_m)
     path_xy_m : (K, 2)
     waypoint_t_s : (N,), waypoint_p_enu_m, waypoint_v_enu_m_s, waypoint_a_enu_m_s2 : (N, 3), waypoint_corner : (N,) bool
-    t_s : (n,) ; p_enu_m, v_enu_m_s, a_enu_m_s2, pointing_enu : (n, 3)
-        The sampled trajectory.
+    t_s : (n,) or None ; p_enu_m, v_enu_m_s, a_enu_m_s2, pointing_enu : (n, 3) or None
+        The sampled trajectory: 2.x ``samples`` (None without it), 1.x ``trajectory``.
     target_enu_m : (3,) or None
     stats, timings_s : dict
     data : dict
@@ -169,6 +229,10 @@ class PlanFile:
     sorties : list of dict
         Per sortie: ``waypoint_t_s``, ``waypoint_p_enu_m``, ``waypoint_v_enu_m_s``,
         ``waypoint_a_enu_m_s2`` arrays (empty list for a plan.json without sorties).
+    trajectory : Trajectory or None
+        2.x: the trajectory rebuilt from its pieces (exact, carrying
+        ``target_enu_m``); None for a 1.x plan (re-solve through the way-points).
+    format_major : int
     """
 
     origin: tuple[float, float, float]
@@ -178,17 +242,19 @@ class PlanFile:
     waypoint_v_enu_m_s: np.ndarray
     waypoint_a_enu_m_s2: np.ndarray
     waypoint_corner: np.ndarray
-    t_s: np.ndarray
-    p_enu_m: np.ndarray
-    v_enu_m_s: np.ndarray
-    a_enu_m_s2: np.ndarray
-    pointing_enu: np.ndarray
+    t_s: np.ndarray | None
+    p_enu_m: np.ndarray | None
+    v_enu_m_s: np.ndarray | None
+    a_enu_m_s2: np.ndarray | None
+    pointing_enu: np.ndarray | None
     target_enu_m: np.ndarray | None
     stats: dict
     timings_s: dict
     data: dict
     source: str
     sorties: list = dataclasses.field(default_factory=list)
+    trajectory: object = None
+    format_major: int = PLAN_FORMAT_MAJOR
 
 
 def _num_array(value, shape_tail: tuple[int, ...], src: str, key: str) -> np.ndarray:
@@ -212,8 +278,78 @@ def _get(d, key: str, src: str, prefix: str = ""):
     return d[key]
 
 
+def _waypoint_columns(wps, src: str, prefix: str) -> dict:
+    """``t``, ``p``, ``v``, ``a`` arrays of a way-point list (checked, times increasing)."""
+    if not isinstance(wps, list) or len(wps) < 2:
+        raise PlanError(f"{src}: key '{prefix}'", "expected a list of at least 2 way-points")
+    cols = {}
+    for k, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
+        cols[k] = _num_array([_get(w, k, src, f"{prefix}[{i}]") for i, w in enumerate(wps)],
+                             tail, src, f"{prefix}[].{k}")
+    if np.any(np.diff(cols["t"]) <= 0):
+        raise PlanError(f"{src}: key '{prefix}[].t'", "times must be strictly increasing")
+    return cols
+
+
+def _samples(tr, src: str, key: str) -> dict:
+    """``t``, ``p``, ``v``, ``a``, ``pointing`` arrays of sampled trajectory ``key`` (checked)."""
+    t = _num_array(_get(tr, "t", src, key), (), src, f"{key}.t")
+    arrays = {k: _num_array(_get(tr, k, src, key), (3,), src, f"{key}.{k}")
+              for k in ("p", "v", "a", "pointing")}
+    for k, arr in arrays.items():
+        if arr.shape[0] != t.shape[0]:
+            raise PlanError(f"{src}: key '{key}.{k}'", f"{arr.shape[0]} samples for {t.shape[0]} times")
+    if t.shape[0] < 2 or np.any(np.diff(t) <= 0):
+        raise PlanError(f"{src}: key '{key}.t'", "expected at least 2 strictly increasing times")
+    return dict(arrays, t=t)
+
+
+def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, src: str):
+    """The 2.x ``trajectory`` (pieces) as a ``Trajectory``, checked against the way-points."""
+    from .trajectory import Trajectory, TrajectoryConfig
+
+    tr = _get(data, "trajectory", src)
+    if _get(tr, "form", src, "trajectory") != TRAJECTORY_FORM:
+        raise PlanError(f"{src}: key 'trajectory.form'", f"expected {TRAJECTORY_FORM!r}, got {tr['form']!r}")
+    degree = _get(tr, "degree", src, "trajectory")
+    if not isinstance(degree, int) or isinstance(degree, bool) or not 4 <= degree <= 64:
+        raise PlanError(f"{src}: key 'trajectory.degree'", f"expected an integer in [4, 64], got {degree!r}")
+    knots = _num_array(_get(tr, "t", src, "trajectory"), (), src, "trajectory.t")
+    if knots.shape[0] < 2 or np.any(np.diff(knots) <= 0):
+        raise PlanError(f"{src}: key 'trajectory.t'", "expected at least 2 strictly increasing knot times")
+    co = _get(tr, "coefficients", src, "trajectory")
+    want = [knots.shape[0] - 1, degree + 1, 3]
+    if _get(co, "dtype", src, "trajectory.coefficients") != COEFFICIENTS_DTYPE:
+        raise PlanError(f"{src}: key 'trajectory.coefficients.dtype'", f"expected {COEFFICIENTS_DTYPE!r}")
+    if _get(co, "shape", src, "trajectory.coefficients") != want:
+        raise PlanError(f"{src}: key 'trajectory.coefficients.shape'",
+                        f"expected {want} (pieces, degree + 1, axes), got {co['shape']!r}")
+    b64 = _get(co, "base64", src, "trajectory.coefficients")
+    try:
+        raw = base64.b64decode(b64, validate=True) if isinstance(b64, str) else None
+    except (binascii.Error, ValueError):
+        raw = None
+    if raw is None or len(raw) != 8 * want[0] * want[1] * want[2]:
+        raise PlanError(f"{src}: key 'trajectory.coefficients.base64'",
+                        f"expected base64 of {want[0] * want[1] * want[2]} float64 numbers")
+    c = np.frombuffer(raw, dtype=COEFFICIENTS_DTYPE).astype(float).reshape(want)
+    if not np.all(np.isfinite(c)):
+        raise PlanError(f"{src}: key 'trajectory.coefficients'", "non-finite value")
+    wk = np.minimum(np.searchsorted(knots, wp_t), knots.shape[0] - 1)
+    if knots[0] != wp_t[0] or knots[-1] != wp_t[-1] or not np.array_equal(knots[wk], wp_t):
+        raise PlanError(f"{src}: key 'trajectory.t'", "the way-point times are not knots of the trajectory")
+    weights = _get(data, "trajectory_weights", src)
+    try:
+        config = TrajectoryConfig(**weights) if isinstance(weights, dict) else None
+    except (TypeError, ValueError) as exc:
+        raise PlanError(f"{src}: key 'trajectory_weights'", str(exc)) from None
+    if config is None:
+        raise PlanError(f"{src}: key 'trajectory_weights'", "expected a mapping")
+    return Trajectory.from_pieces(knots, c, wk, wp_targets, config, target)
+
+
 def load_plan(path: str | Path) -> PlanFile:
-    """Read and validate a plan.json written by ``companion plan``.
+    """Read and validate a plan.json written by ``companion plan`` (format 2.x or 1.x).
 
     Raises
     ------
@@ -231,7 +367,7 @@ def load_plan(path: str | Path) -> PlanFile:
         raise PlanError(f"{src}: line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
     if not isinstance(data, dict):
         raise PlanError(src, "expected a JSON object")
-    check_format_version(data, PLAN_FORMAT_MAJOR, src, PlanError)
+    major = check_format_version(data, (PLAN_FORMAT_MAJOR, LEGACY_PLAN_MAJOR), src, PlanError).major
     if _get(data, "frame", src) != "ENU":
         raise PlanError(f"{src}: key 'frame'", f"expected 'ENU', got {data['frame']!r}")
     origin = _get(data, "origin", src)
@@ -239,26 +375,10 @@ def load_plan(path: str | Path) -> PlanFile:
               for k in ("lat", "lon", "alt_m"))
     path_xy = _num_array(_get(data, "path", src), (2,), src, "path")
     wps = _get(data, "waypoints", src)
-    if not isinstance(wps, list) or len(wps) < 2:
-        raise PlanError(f"{src}: key 'waypoints'", "expected a list of at least 2 way-points")
-    cols = {}
-    for k, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
-        cols[k] = _num_array([_get(w, k, src, f"waypoints[{i}]") for i, w in enumerate(wps)],
-                             tail, src, f"waypoints[].{k}")
+    cols = _waypoint_columns(wps, src, "waypoints")
     corner = [_get(w, "corner", src, f"waypoints[{i}]") for i, w in enumerate(wps)]
     if not all(isinstance(c, bool) for c in corner):
         raise PlanError(f"{src}: key 'waypoints[].corner'", "expected true or false")
-    if np.any(np.diff(cols["t"]) <= 0):
-        raise PlanError(f"{src}: key 'waypoints[].t'", "times must be strictly increasing")
-    tr = _get(data, "trajectory", src)
-    t = _num_array(_get(tr, "t", src, "trajectory"), (), src, "trajectory.t")
-    arrays = {k: _num_array(_get(tr, k, src, "trajectory"), (3,), src, f"trajectory.{k}")
-              for k in ("p", "v", "a", "pointing")}
-    for k, arr in arrays.items():
-        if arr.shape[0] != t.shape[0]:
-            raise PlanError(f"{src}: key 'trajectory.{k}'", f"{arr.shape[0]} samples for {t.shape[0]} times")
-    if t.shape[0] < 2 or np.any(np.diff(t) <= 0):
-        raise PlanError(f"{src}: key 'trajectory.t'", "expected at least 2 strictly increasing times")
     stats = _get(data, "stats", src)
     for k in STATS_KEYS:
         _num_array([_get(stats, k, src, "stats")], (), src, f"stats.{k}")
@@ -266,30 +386,31 @@ def load_plan(path: str | Path) -> PlanFile:
     for k in TIMING_KEYS:
         _num_array([_get(timings, k, src, "timings_s")], (), src, f"timings_s.{k}")
     target = None
-    if "target_enu_m" in data:
-        target = _num_array([data["target_enu_m"]], (3,), src, "target_enu_m")[0]
+    if major == LEGACY_PLAN_MAJOR:
+        samples = _samples(_get(data, "trajectory", src), src, "trajectory")
+        if "target_enu_m" in data:
+            target = _num_array([data["target_enu_m"]], (3,), src, "target_enu_m")[0]
+        trajectory = None
+    else:
+        samples = _samples(data["samples"], src, "samples") if "samples" in data else {}
+        target = _num_array([_get(data, "target_enu_m", src)], (3,), src, "target_enu_m")[0]
+        wp_targets = np.stack([cols["p"], cols["v"], cols["a"]], axis=1)
+        trajectory = _trajectory(data, cols["t"], wp_targets, target, src)
     sorties = []
     raw_sorties = data.get("sorties", [])
     if not isinstance(raw_sorties, list):
         raise PlanError(f"{src}: key 'sorties'", "expected a list")
     for j, so in enumerate(raw_sorties):
-        ws = _get(so, "waypoints", src, f"sorties[{j}]")
-        if not isinstance(ws, list) or len(ws) < 2:
-            raise PlanError(f"{src}: key 'sorties[{j}].waypoints'", "expected a list of at least 2 way-points")
-        cols_s = {}
-        for k_, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
-            cols_s[k_] = _num_array([_get(w, k_, src, f"sorties[{j}].waypoints[{i}]") for i, w in enumerate(ws)],
-                                    tail, src, f"sorties[{j}].waypoints[].{k_}")
-        if np.any(np.diff(cols_s["t"]) <= 0):
-            raise PlanError(f"{src}: key 'sorties[{j}].waypoints[].t'", "times must be strictly increasing")
+        cols_s = _waypoint_columns(_get(so, "waypoints", src, f"sorties[{j}]"), src, f"sorties[{j}].waypoints")
         sorties.append({"waypoint_t_s": cols_s["t"], "waypoint_p_enu_m": cols_s["p"],
                         "waypoint_v_enu_m_s": cols_s["v"], "waypoint_a_enu_m_s2": cols_s["a"]})
     return PlanFile(origin=o, path_xy_m=path_xy, waypoint_t_s=cols["t"], waypoint_p_enu_m=cols["p"],
                     waypoint_v_enu_m_s=cols["v"], waypoint_a_enu_m_s2=cols["a"],
-                    waypoint_corner=np.array(corner, dtype=bool), t_s=t, p_enu_m=arrays["p"],
-                    v_enu_m_s=arrays["v"], a_enu_m_s2=arrays["a"], pointing_enu=arrays["pointing"],
-                    target_enu_m=target, stats=dict(stats), timings_s=dict(timings), data=data, source=src,
-                    sorties=sorties)
+                    waypoint_corner=np.array(corner, dtype=bool), t_s=samples.get("t"),
+                    p_enu_m=samples.get("p"), v_enu_m_s=samples.get("v"), a_enu_m_s2=samples.get("a"),
+                    pointing_enu=samples.get("pointing"), target_enu_m=target, stats=dict(stats),
+                    timings_s=dict(timings), data=data, source=src, sorties=sorties,
+                    trajectory=trajectory, format_major=major)
 
 
 # --- QGroundControl exports ------------------------------------------------------

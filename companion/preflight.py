@@ -76,10 +76,12 @@ def check_plan(pf, mission, grid, dem) -> None:
             i = int(np.argmax(n > limit))
             raise PlanError(f"{src}: key 'waypoints[{i}].{key}'", f"|{key}| = {n[i]:.3g} {unit}, "
                                                                   f"more than {limit:g} {unit}")
-    s = np.linalg.norm(np.asarray(pf.pointing_enu, dtype=float), axis=1)
-    if np.any(~(s > 1e-9)):
-        i = int(np.argmax(~(s > 1e-9)))
-        raise PlanError(f"{src}: key 'trajectory.pointing'", f"sample {i} is a zero vector")
+    if pf.pointing_enu is not None:
+        s = np.linalg.norm(np.asarray(pf.pointing_enu, dtype=float), axis=1)
+        if np.any(~(s > 1e-9)):
+            i = int(np.argmax(~(s > 1e-9)))
+            key = "trajectory.pointing" if pf.format_major == 1 else "samples.pointing"
+            raise PlanError(f"{src}: key '{key}'", f"sample {i} is a zero vector")
     if pf.target_enu_m is not None and not all(math.isfinite(float(x)) for x in pf.target_enu_m):
         raise PlanError(f"{src}: key 'target_enu_m'", "non-finite value")
 

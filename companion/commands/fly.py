@@ -223,8 +223,11 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None) -> Flight
         so = pf.sorties[_pick_sortie(len(pf.sorties), sortie, str(plan_path))]
         return sortie_flight_plan(so["waypoint_t_s"], so["waypoint_p_enu_m"], so["waypoint_v_enu_m_s"],
                                   so["waypoint_a_enu_m_s2"], target, mission.trajectory)
-    traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
-                               pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
+    traj = pf.trajectory
+    if traj is None:
+        # a 1.x plan stores samples only: the LQR solution through its way-points is exact
+        traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
+                                   pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")
     return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
                       None if cov is None else float(cov), pf.waypoint_t_s, pf.waypoint_v_enu_m_s,

@@ -8,6 +8,7 @@ a, jerk, snap). With Q = 0 these are the exact degree-7 optimal pieces.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +19,36 @@ from .pointing import pointing_derivatives
 #: Below this many samples per non-empty interval a gather is cheaper than
 #: the per-interval matrix products.
 _GATHER_MAX_SAMPLES = 4096
+
+
+def derivative_coefficients(position_coefficients: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
+    """Coefficients of p and its first four time derivatives from those of p.
+
+    Parameters
+    ----------
+    position_coefficients : (M, deg + 1, d) array
+        On piece m, p(s) = sum_j c[m, j] s^j with s = (t - t_m) / dt_m.
+    dt_s : (M,) array
+        Piece lengths dt_m [s].
+
+    Returns
+    -------
+    (M, deg + 1, 5, d) array
+        Entry [m, j, k] is the coefficient of s^j in d^k p / dt^k (k = 0..4),
+        d^k/dt^k sum_j c_j s^j = dt^-k sum_j c_{j+k} (j+k)!/j! s^j. The same
+        arithmetic as the solver's, so a trajectory rebuilt from its position
+        coefficients (plan.json) has bit-identical pieces.
+    """
+    c = np.asarray(position_coefficients, dtype=float)
+    dt = np.asarray(dt_s, dtype=float)
+    M, deg1, d = c.shape
+    coeffs = np.zeros((M, deg1, 5, d))
+    for k in range(5):
+        if k >= deg1:
+            break
+        falling = np.array([math.perm(j + k, k) for j in range(deg1 - k)], dtype=float)
+        coeffs[:, : deg1 - k, k, :] = c[:, k:, :] * falling[None, :, None] / (dt**k)[:, None, None]
+    return coeffs
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,6 +112,44 @@ class Trajectory:
     coefficients: np.ndarray
     config: TrajectoryConfig
     target_enu_m: np.ndarray | None = None
+
+    @classmethod
+    def from_pieces(cls, knot_times_s: np.ndarray, position_coefficients: np.ndarray,
+                    waypoint_knots: np.ndarray, waypoint_targets: np.ndarray, config: TrajectoryConfig,
+                    target_enu_m: np.ndarray | None = None) -> "Trajectory":
+        """The trajectory from its pieces as stored in plan.json (docs/plan-json.md).
+
+        Parameters
+        ----------
+        knot_times_s : (M + 1,) array
+            Knot times [s], strictly increasing.
+        position_coefficients : (M, deg + 1, 3) array
+            ``coefficients[:, :, 0, :]`` of the solved trajectory (ENU m).
+        waypoint_knots, waypoint_targets, config, target_enu_m
+            As the attributes.
+
+        Returns
+        -------
+        Trajectory
+            Pieces bit-identical to the solved trajectory's (``derivative_coefficients``).
+            ``knot_states`` are the pieces evaluated at the knots (the solver's
+            own knot states differ from them in the last bits only).
+        """
+        knots = np.asarray(knot_times_s, dtype=float)
+        coeffs = derivative_coefficients(position_coefficients, np.diff(knots))
+        states = np.empty((knots.shape[0], 4, coeffs.shape[3]))
+        states[:-1] = coeffs[:, 0, :4, :]                    # s = 0: the constant terms
+        states[-1] = coeffs[-1, :, :4, :].sum(axis=0)        # s = 1 on the last piece
+        return cls(knot_times_s=knots, knot_states=states,
+                   waypoint_knots=np.asarray(waypoint_knots, dtype=np.intp),
+                   waypoint_targets=np.asarray(waypoint_targets, dtype=float),
+                   coefficients=coeffs, config=config,
+                   target_enu_m=None if target_enu_m is None else np.asarray(target_enu_m, dtype=float).reshape(3))
+
+    @property
+    def position_coefficients(self) -> np.ndarray:
+        """(M, deg + 1, 3) coefficients of p on each piece (what plan.json stores)."""
+        return self.coefficients[:, :, 0, :]
 
     @property
     def t0(self) -> float:
