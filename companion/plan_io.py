@@ -7,7 +7,8 @@ plan.json
     (``PLAN_FORMAT_VERSION``; docs/schemas/plan.schema.json), ``frame`` ("ENU"),
     ``origin`` {lat, lon, alt_m} (the mission home = map frame origin),
     ``path``, ``waypoints`` [{t, p, v, a, corner}], ``trajectory`` (2.x: the
-    exact polynomial pieces, their coefficients as base64 float64; 1.x: samples),
+    exact polynomial pieces, as knot states or coefficients in base64 float64;
+    1.x: samples),
     ``stats``, ``timings_s``; plus ``name``, ``target_enu_m`` (S_p of eq. 21),
     ``trajectory_weights`` (the LQR weights used) and, on request, ``samples``
     (the trajectory sampled at ``samples.hz``). ``load_plan`` reads 2.x and 1.x.
@@ -67,10 +68,12 @@ WRITE_TIMING_KEYS = ("write", "wall")
 #: Most trajectory samples plan.json may hold (a 10 ha field at 10 Hz needs ~4e5):
 #: beyond it --samples is a typo and the document would not fit in memory.
 MAX_SAMPLES = 2_000_000
-#: ``trajectory.form`` of format 2.x and the dtype of its coefficients.
-TRAJECTORY_FORM = "piecewise-polynomial"
-COEFFICIENTS_DTYPE = "<f8"
-
+#: ``trajectory.form`` of format 2.x: the knot states (Q = 0: degree-7 pieces,
+#: half the numbers) or the position coefficients of every piece (any Q).
+FORM_KNOT_STATES = "knot-states"
+FORM_POLYNOMIAL = "polynomial"
+#: dtype of ``trajectory.values`` (little-endian IEEE float64).
+VALUES_DTYPE = "<f8"
 
 def _rows(a) -> list:
     return np.asarray(a, dtype=float).tolist()
@@ -88,18 +91,26 @@ def sample_times(t0: float, tf: float, sample_hz: float) -> np.ndarray:
 
 
 def trajectory_json(traj) -> dict:
-    """plan.json's ``trajectory`` (2.x): the knot times and the position
-    coefficients of every piece, exactly (float64, little-endian, base64).
+    """plan.json's ``trajectory`` (2.x): the knot times and, exactly (float64,
+    little-endian, base64), the numbers that fix every piece.
 
-    On piece m, s = (t - t[m]) / (t[m + 1] - t[m]) in [0, 1] and
-    p(t) = sum_j c[m, j, :] s^j; v, a, jerk and snap are its derivatives
-    (``companion.trajectory.sampling.derivative_coefficients``).
+    With Q = 0 (``FORM_KNOT_STATES``) the optimal p is a degree-7 polynomial on
+    each knot interval, fixed by [p, v, a, jerk] at its two ends: ``values``
+    are the (M + 1, 4, 3) knot states
+    (``companion.trajectory.sampling.hermite_position_coefficients``).
+    Otherwise (``FORM_POLYNOMIAL``) they are the (M, D + 1, 3) position
+    coefficients c: on piece m, s = (t - t[m]) / (t[m + 1] - t[m]) and
+    p(t) = sum_j c[m, j] s^j. v, a, jerk and snap are p's derivatives.
     """
-    c = np.ascontiguousarray(traj.position_coefficients, dtype=COEFFICIENTS_DTYPE)
-    return {"form": TRAJECTORY_FORM, "degree": int(c.shape[1] - 1),
-            "t": _rows(traj.knot_times_s),
-            "coefficients": {"dtype": COEFFICIENTS_DTYPE, "shape": list(c.shape),
-                             "base64": base64.b64encode(c.tobytes()).decode("ascii")}}
+    degree = int(traj.coefficients.shape[1] - 1)
+    if degree == 7 and not any(traj.config.q_diag):
+        form, values = FORM_KNOT_STATES, traj.knot_states
+    else:
+        form, values = FORM_POLYNOMIAL, traj.position_coefficients
+    v = np.ascontiguousarray(values, dtype=VALUES_DTYPE)
+    return {"form": form, "degree": degree, "t": _rows(traj.knot_times_s),
+            "values": {"dtype": VALUES_DTYPE, "shape": list(v.shape),
+                       "base64": base64.b64encode(v.tobytes()).decode("ascii")}}
 
 
 def samples_json(traj, sample_hz: float) -> dict:
@@ -305,47 +316,59 @@ def _samples(tr, src: str, key: str) -> dict:
 
 
 def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, src: str):
-    """The 2.x ``trajectory`` (pieces) as a ``Trajectory``, checked against the way-points."""
+    """The 2.x ``trajectory`` as a ``Trajectory``, checked against the way-points."""
     from .trajectory import Trajectory, TrajectoryConfig
+    from .trajectory.sampling import hermite_position_coefficients
 
     tr = _get(data, "trajectory", src)
-    if _get(tr, "form", src, "trajectory") != TRAJECTORY_FORM:
-        raise PlanError(f"{src}: key 'trajectory.form'", f"expected {TRAJECTORY_FORM!r}, got {tr['form']!r}")
+    form = _get(tr, "form", src, "trajectory")
+    if form not in (FORM_KNOT_STATES, FORM_POLYNOMIAL):
+        raise PlanError(f"{src}: key 'trajectory.form'",
+                        f"expected {FORM_KNOT_STATES!r} or {FORM_POLYNOMIAL!r}, got {form!r}")
     degree = _get(tr, "degree", src, "trajectory")
-    if not isinstance(degree, int) or isinstance(degree, bool) or not 4 <= degree <= 64:
-        raise PlanError(f"{src}: key 'trajectory.degree'", f"expected an integer in [4, 64], got {degree!r}")
+    if (not isinstance(degree, int) or isinstance(degree, bool) or not 4 <= degree <= 64
+            or (form == FORM_KNOT_STATES and degree != 7)):
+        raise PlanError(f"{src}: key 'trajectory.degree'",
+                        f"expected {'7' if form == FORM_KNOT_STATES else 'an integer in [4, 64]'}, got {degree!r}")
     knots = _num_array(_get(tr, "t", src, "trajectory"), (), src, "trajectory.t")
     if knots.shape[0] < 2 or np.any(np.diff(knots) <= 0):
         raise PlanError(f"{src}: key 'trajectory.t'", "expected at least 2 strictly increasing knot times")
-    co = _get(tr, "coefficients", src, "trajectory")
-    want = [knots.shape[0] - 1, degree + 1, 3]
-    if _get(co, "dtype", src, "trajectory.coefficients") != COEFFICIENTS_DTYPE:
-        raise PlanError(f"{src}: key 'trajectory.coefficients.dtype'", f"expected {COEFFICIENTS_DTYPE!r}")
-    if _get(co, "shape", src, "trajectory.coefficients") != want:
-        raise PlanError(f"{src}: key 'trajectory.coefficients.shape'",
-                        f"expected {want} (pieces, degree + 1, axes), got {co['shape']!r}")
-    b64 = _get(co, "base64", src, "trajectory.coefficients")
+    n = knots.shape[0]
+    want = [n, 4, 3] if form == FORM_KNOT_STATES else [n - 1, degree + 1, 3]
+    va = _get(tr, "values", src, "trajectory")
+    if _get(va, "dtype", src, "trajectory.values") != VALUES_DTYPE:
+        raise PlanError(f"{src}: key 'trajectory.values.dtype'", f"expected {VALUES_DTYPE!r}")
+    if _get(va, "shape", src, "trajectory.values") != want:
+        what = "knots, [p, v, a, jerk], axes" if form == FORM_KNOT_STATES else "pieces, degree + 1, axes"
+        raise PlanError(f"{src}: key 'trajectory.values.shape'", f"expected {want} ({what}), got {va['shape']!r}")
+    b64 = _get(va, "base64", src, "trajectory.values")
     try:
         raw = base64.b64decode(b64, validate=True) if isinstance(b64, str) else None
     except (binascii.Error, ValueError):
         raw = None
-    if raw is None or len(raw) != 8 * want[0] * want[1] * want[2]:
-        raise PlanError(f"{src}: key 'trajectory.coefficients.base64'",
-                        f"expected base64 of {want[0] * want[1] * want[2]} float64 numbers")
-    c = np.frombuffer(raw, dtype=COEFFICIENTS_DTYPE).astype(float).reshape(want)
-    if not np.all(np.isfinite(c)):
-        raise PlanError(f"{src}: key 'trajectory.coefficients'", "non-finite value")
-    wk = np.minimum(np.searchsorted(knots, wp_t), knots.shape[0] - 1)
+    count = want[0] * want[1] * want[2]
+    if raw is None or len(raw) != 8 * count:
+        raise PlanError(f"{src}: key 'trajectory.values.base64'", f"expected base64 of {count} float64 numbers")
+    values = np.frombuffer(raw, dtype=VALUES_DTYPE).astype(float).reshape(want)
+    if not np.all(np.isfinite(values)):
+        raise PlanError(f"{src}: key 'trajectory.values'", "non-finite value")
+    wk = np.minimum(np.searchsorted(knots, wp_t), n - 1)
     if knots[0] != wp_t[0] or knots[-1] != wp_t[-1] or not np.array_equal(knots[wk], wp_t):
         raise PlanError(f"{src}: key 'trajectory.t'", "the way-point times are not knots of the trajectory")
     weights = _get(data, "trajectory_weights", src)
+    if not isinstance(weights, dict):
+        raise PlanError(f"{src}: key 'trajectory_weights'", "expected a mapping")
     try:
-        config = TrajectoryConfig(**weights) if isinstance(weights, dict) else None
+        config = TrajectoryConfig(**weights)
     except (TypeError, ValueError) as exc:
         raise PlanError(f"{src}: key 'trajectory_weights'", str(exc)) from None
-    if config is None:
-        raise PlanError(f"{src}: key 'trajectory_weights'", "expected a mapping")
-    return Trajectory.from_pieces(knots, c, wk, wp_targets, config, target)
+    if form == FORM_KNOT_STATES:
+        if any(config.q_diag):
+            raise PlanError(f"{src}: key 'trajectory.form'",
+                            f"{FORM_KNOT_STATES!r} needs q_* = 0 in trajectory_weights (degree-7 pieces)")
+        return Trajectory.from_pieces(knots, hermite_position_coefficients(knots, values), wk, wp_targets,
+                                      config, target, knot_states=values)
+    return Trajectory.from_pieces(knots, values, wk, wp_targets, config, target)
 
 
 def load_plan(path: str | Path) -> PlanFile:

@@ -200,7 +200,7 @@ def test_plan_json_keys(planned):
     assert LOADER_KEYS <= set(doc)
     assert set(doc["stats"]) == STATS_KEYS
     assert set(doc["timings_s"]) == {"load", "coverage", "trajectory", "total", "write", "wall"}
-    assert set(doc["trajectory"]) == {"form", "degree", "t", "coefficients"}
+    assert set(doc["trajectory"]) == {"form", "degree", "t", "values"}
     assert set(doc["samples"]) == {"hz", "t", "p", "v", "a", "pointing"}
     assert doc["frame"] == "ENU"
     home = planned["mission"].home

@@ -80,10 +80,11 @@ def plan_doc(tmp_path_factory) -> dict:
     full = _plan_doc("flat-rectangle", tmp_path_factory)["doc"]
     doc = copy.deepcopy(dict(full, path=full["path"][:3], waypoints=full["waypoints"][:3]))
     tr = doc["trajectory"]
-    co = tr["coefficients"]
-    pieces = np.frombuffer(base64.b64decode(co["base64"]), "<f8").reshape(co["shape"])[:2]
+    va = tr["values"]
+    assert tr["form"] == "knot-states"                   # Q = 0: the states at the knots
+    states = np.frombuffer(base64.b64decode(va["base64"]), "<f8").reshape(va["shape"])[:3]
     tr["t"] = tr["t"][:3]
-    co.update(shape=list(pieces.shape), base64=base64.b64encode(pieces.tobytes()).decode("ascii"))
+    va.update(shape=list(states.shape), base64=base64.b64encode(states.tobytes()).decode("ascii"))
     doc["samples"] = {k: v if k == "hz" else v[:3] for k, v in full["samples"].items()}
     return doc
 
@@ -200,9 +201,9 @@ PLAN_BREAKAGES = [
     ("samples.hz", 0), ("samples.t", ["0", "1"]), ("samples.p.0", [1.0, 2.0]),
     ("samples.pointing", _DELETE), ("samples.jerk", []), ("target_enu_m", [0.0, 0.0]),
     ("trajectory.t", ["0", "1"]), ("trajectory.jerk", []), ("trajectory.form", "samples"),
-    ("trajectory.degree", 7.5), ("trajectory.coefficients.dtype", "<f4"),
-    ("trajectory.coefficients.shape", [2, 8, 2]), ("trajectory.coefficients.base64", "not base64!"),
-    ("trajectory.coefficients.base64", _DELETE), ("timings_s.wall", _DELETE), ("timings_s.write", -1.0),
+    ("trajectory.degree", 7.5), ("trajectory.values.dtype", "<f4"),
+    ("trajectory.values.shape", [3, 4, 2]), ("trajectory.values.base64", "not base64!"),
+    ("trajectory.values.base64", _DELETE), ("timings_s.wall", _DELETE), ("timings_s.write", -1.0),
     ("trajectory_weights.r_snap", 0.0), ("trajectory_weights.q_jerk", -1.0),
     ("stats.n_waypoints", 2.5), ("stats.coverage_fraction", 1.5), ("stats.path_length_m", "184"),
     ("stats.extra", "text"), ("timings_s.total", -1.0),

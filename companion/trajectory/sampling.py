@@ -51,6 +51,45 @@ def derivative_coefficients(position_coefficients: np.ndarray, dt_s: np.ndarray)
     return coeffs
 
 
+#: Two-point Hermite interpolation of degree 7 (``hermite_position_coefficients``):
+#: row k, column j - 4 is j!/(j-k)!, the factor of c_j in d^k p/ds^k at s = 1 (j = 4..7).
+_HERMITE_HIGH = np.array([[math.perm(j, k) for j in range(4, 8)] for k in range(4)], dtype=float)
+_HERMITE_LOW = np.array([[math.perm(j, k) for j in range(4)] for k in range(4)], dtype=float)
+_HERMITE_HIGH_INV = np.linalg.inv(_HERMITE_HIGH)
+_FACTORIALS = np.array([1.0, 1.0, 2.0, 6.0])
+
+
+def hermite_position_coefficients(knot_times_s: np.ndarray, knot_states: np.ndarray) -> np.ndarray:
+    """Degree-7 position coefficients of the pieces fixed by the states at their ends.
+
+    With Q = 0 the optimal position is a degree-7 polynomial on every knot
+    interval (lqr.py) and the state x = [p, v, a, jerk] is continuous, so the
+    knot states fix every piece: the one degree-7 polynomial with the given
+    p, v, a and jerk at both ends (two-point Hermite interpolation). In
+    s = (t - t_m) / dt_m: c_k = x_k(t_m) dt^k / k! for k <= 3, and c_4..c_7
+    solve sum_j c_j j!/(j-k)! = x_k(t_m+1) dt^k, k = 0..3.
+
+    Parameters
+    ----------
+    knot_times_s : (M + 1,) array
+    knot_states : (M + 1, 4, d) array
+        [p, v, a, jerk] at the knots (SI).
+
+    Returns
+    -------
+    (M, 8, d) array
+        As ``Trajectory.position_coefficients``; equal to the solver's up to
+        rounding (1e-11 m in position over a 10 ha field, BENCHMARKS.md).
+    """
+    knots = np.asarray(knot_times_s, dtype=float)
+    x = np.asarray(knot_states, dtype=float)
+    pw = np.diff(knots)[:, None] ** np.arange(4)                  # dt^k, (M, 4)
+    low = x[:-1] * (pw / _FACTORIALS)[:, :, None]                 # c_0..c_3
+    rhs = x[1:] * pw[:, :, None] - np.einsum("kj,mjd->mkd", _HERMITE_LOW, low)
+    high = np.einsum("jk,mkd->mjd", _HERMITE_HIGH_INV, rhs)      # c_4..c_7
+    return np.concatenate([low, high], axis=1)
+
+
 @dataclass(frozen=True, eq=False)
 class TrajectorySample:
     """Reference trajectory sampled at times ``t`` (ENU, SI).
@@ -116,7 +155,8 @@ class Trajectory:
     @classmethod
     def from_pieces(cls, knot_times_s: np.ndarray, position_coefficients: np.ndarray,
                     waypoint_knots: np.ndarray, waypoint_targets: np.ndarray, config: TrajectoryConfig,
-                    target_enu_m: np.ndarray | None = None) -> "Trajectory":
+                    target_enu_m: np.ndarray | None = None,
+                    knot_states: np.ndarray | None = None) -> "Trajectory":
         """The trajectory from its pieces as stored in plan.json (docs/plan-json.md).
 
         Parameters
@@ -127,19 +167,24 @@ class Trajectory:
             ``coefficients[:, :, 0, :]`` of the solved trajectory (ENU m).
         waypoint_knots, waypoint_targets, config, target_enu_m
             As the attributes.
+        knot_states : (M + 1, 4, 3) array, optional
+            Default: the pieces evaluated at the knots (the solver's own knot
+            states differ from them in the last bits only).
 
         Returns
         -------
         Trajectory
-            Pieces bit-identical to the solved trajectory's (``derivative_coefficients``).
-            ``knot_states`` are the pieces evaluated at the knots (the solver's
-            own knot states differ from them in the last bits only).
+            Pieces bit-identical to those of the trajectory the coefficients
+            came from (``derivative_coefficients``).
         """
         knots = np.asarray(knot_times_s, dtype=float)
         coeffs = derivative_coefficients(position_coefficients, np.diff(knots))
-        states = np.empty((knots.shape[0], 4, coeffs.shape[3]))
-        states[:-1] = coeffs[:, 0, :4, :]                    # s = 0: the constant terms
-        states[-1] = coeffs[-1, :, :4, :].sum(axis=0)        # s = 1 on the last piece
+        if knot_states is not None:
+            states = np.asarray(knot_states, dtype=float)
+        else:
+            states = np.empty((knots.shape[0], 4, coeffs.shape[3]))
+            states[:-1] = coeffs[:, 0, :4, :]                # s = 0: the constant terms
+            states[-1] = coeffs[-1, :, :4, :].sum(axis=0)    # s = 1 on the last piece
         return cls(knot_times_s=knots, knot_states=states,
                    waypoint_knots=np.asarray(waypoint_knots, dtype=np.intp),
                    waypoint_targets=np.asarray(waypoint_targets, dtype=float),
