@@ -295,8 +295,11 @@ def _waypoint_columns(wps, src: str, prefix: str) -> dict:
         raise PlanError(f"{src}: key '{prefix}'", "expected a list of at least 2 way-points")
     cols = {}
     for k, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
-        cols[k] = _num_array([_get(w, k, src, f"{prefix}[{i}]") for i, w in enumerate(wps)],
-                             tail, src, f"{prefix}[].{k}")
+        try:
+            values = [w[k] for w in wps]          # fast path; the slow one names the bad way-point
+        except (KeyError, TypeError):
+            values = [_get(w, k, src, f"{prefix}[{i}]") for i, w in enumerate(wps)]
+        cols[k] = _num_array(values, tail, src, f"{prefix}[].{k}")
     if np.any(np.diff(cols["t"]) <= 0):
         raise PlanError(f"{src}: key '{prefix}[].t'", "times must be strictly increasing")
     return cols
@@ -399,7 +402,10 @@ def load_plan(path: str | Path) -> PlanFile:
     path_xy = _num_array(_get(data, "path", src), (2,), src, "path")
     wps = _get(data, "waypoints", src)
     cols = _waypoint_columns(wps, src, "waypoints")
-    corner = [_get(w, "corner", src, f"waypoints[{i}]") for i, w in enumerate(wps)]
+    try:
+        corner = [w["corner"] for w in wps]
+    except (KeyError, TypeError):
+        corner = [_get(w, "corner", src, f"waypoints[{i}]") for i, w in enumerate(wps)]
     if not all(isinstance(c, bool) for c in corner):
         raise PlanError(f"{src}: key 'waypoints[].corner'", "expected true or false")
     stats = _get(data, "stats", src)
