@@ -2,12 +2,13 @@
 [--qgc plan.plan] [--waypoints plan.waypoints]``.
 
 Plans the mission (``companion.planner.plan_mission``), prints a short
-summary and writes the outputs. plan.json's ``timings_s`` gets ``write``
-(rendering every output, plan.json's encoding included) and ``wall`` (since
-the process started: start-up, imports, planning, rendering; only the final
-copy of the bytes to disk is after it, and the printed summary includes it). Every output is rendered in memory first and
+summary and writes the outputs. Every output is rendered in memory first and
 written only when the whole plan succeeded, each through a temporary file
 in the target directory and ``os.replace``: bad input leaves nothing behind.
+plan.json is encoded last, so that its ``timings_s`` can hold ``write``
+(rendering every output, plan.json's encoding included) and ``wall`` (since
+the process started: start-up, imports, planning, rendering; only the copy
+of the bytes to disk comes after it, and the printed ``wall`` includes it).
 """
 
 from __future__ import annotations
