@@ -31,8 +31,6 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import InputError
 
 DEFAULT_CONNECT = "udpout:127.0.0.1:14540"
@@ -129,6 +127,8 @@ class FlightPlan:
     @classmethod
     def from_plan(cls, plan) -> "FlightPlan":
         """From a ``companion.planner.Plan``."""
+        import numpy as np
+
         w = plan.waypoints
         return cls(plan.trajectory, np.asarray(w.p_enu_m, dtype=float), np.asarray(plan.target_enu_m, dtype=float),
                    float(plan.stats.coverage_fraction), np.asarray(w.t_s, dtype=float),
@@ -141,6 +141,8 @@ class FlightPlan:
         (so the flight lasts at least ``cut_s``), the last made a stop (v = a = 0), and the LQR trajectory re-solved through
         them with ``config`` (TrajectoryConfig): a short mission that ends at
         rest instead of a reference that halts at cruise speed."""
+        import numpy as np
+
         from ..trajectory import generate_trajectory
 
         t = self.waypoints_t_s
@@ -172,6 +174,8 @@ def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config
                        path_xy_m=None, corner=None) -> FlightPlan:
     """The FlightPlan of one sortie's way-points (ENU map frame): the LQR trajectory
     through them with the mission's weights; the runner flies it like a whole plan."""
+    import numpy as np
+
     from ..trajectory import generate_trajectory
 
     t, p, v, a = (np.asarray(x, dtype=float) for x in (t_s, p_enu_m, v_enu_m_s, a_enu_m_s2))
@@ -198,6 +202,8 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None) -> Flight
     InputError
         ``--sortie`` is not a sortie of the plan.
     """
+    import numpy as np
+
     if plan_path is None:
         from ..planner import plan_mission
 
@@ -246,6 +252,8 @@ def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
     PlanError
         The rays are (nearly) parallel, so they do not fix a point.
     """
+    import numpy as np
+
     from ..errors import PlanError
 
     p = np.asarray(p_enu_m, dtype=float)
@@ -308,6 +316,8 @@ def transit_floor_z_m(mission, dem) -> float:
     """Lowest height (ENU z, m) at which a level flight across the field cannot touch a
     vine row: the DEM's (``load_mission_dem``) highest point, plus the canopy
     (``replan.canopy_height_m``), plus ``TRANSIT_CLEARANCE_M``."""
+    import numpy as np
+
     h = np.asarray(dem.heights_m, dtype=float)
     return float(np.nanmax(h)) + mission.replan.canopy_height_m + TRANSIT_CLEARANCE_M
 
@@ -343,6 +353,8 @@ def build_replanner(mission, flight_plan: FlightPlan, grid, dem):
     (``load_mission_maps``) as the known map, the plan's way-points, turning points and
     coverage segments. Way-points without a turning-point flag (a plan.json sortie) take
     their stops (v = 0) as turns."""
+    import numpy as np
+
     from ..replan import GlobalPlan, KnownMap, Replanner
     from ..replan.replanner import mission_replan_config
 
