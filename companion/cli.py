@@ -11,6 +11,7 @@ import argparse
 import importlib
 import sys
 
+from . import process_clock  # noqa: F401  (starts the fallback clock of timings_s.wall)
 from .errors import InputError
 
 COMMANDS = {

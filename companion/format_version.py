@@ -29,7 +29,7 @@ class FormatVersion:
         return f"{self.major}.{self.minor}"
 
 
-def check_format_version(doc: dict, supported_major: int, source: str,
+def check_format_version(doc: dict, supported_major: int | tuple[int, ...], source: str,
                          error: type[Exception]) -> FormatVersion:
     """The ``format_version`` of a parsed JSON document, checked for reading.
 
@@ -37,8 +37,8 @@ def check_format_version(doc: dict, supported_major: int, source: str,
     ----------
     doc : dict
         The parsed document.
-    supported_major : int
-        The major version this reader understands.
+    supported_major : int or tuple of int
+        The major version(s) this reader understands, the current one first.
     source : str
         The file name, for the error message.
     error : InputError subclass
@@ -53,14 +53,16 @@ def check_format_version(doc: dict, supported_major: int, source: str,
     ------
     error
         The value is not a ``"MAJOR.MINOR"`` string, or its major is not
-        ``supported_major``.
+        one of ``supported_major``.
     """
+    majors = (supported_major,) if isinstance(supported_major, int) else tuple(supported_major)
     value = doc.get("format_version", UNVERSIONED)
     where = f"{source}: key 'format_version'"
     match = _VERSION.fullmatch(value) if isinstance(value, str) else None
     if match is None:
-        raise error(where, f'expected a string "MAJOR.MINOR" such as "{supported_major}.0", got {value!r}')
+        raise error(where, f'expected a string "MAJOR.MINOR" such as "{majors[0]}.0", got {value!r}')
     version = FormatVersion(int(match.group(1)), int(match.group(2)))
-    if version.major != supported_major:
-        raise error(where, f"version {version} is not supported (this companion reads {supported_major}.x)")
+    if version.major not in majors:
+        reads = " and ".join(f"{m}.x" for m in majors)
+        raise error(where, f"version {version} is not supported (this companion reads {reads})")
     return version

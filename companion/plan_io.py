@@ -6,10 +6,12 @@ plan.json
     ENU metres in the map frame, SI units. Keys: ``format_version``
     (``PLAN_FORMAT_VERSION``; docs/schemas/plan.schema.json), ``frame`` ("ENU"),
     ``origin`` {lat, lon, alt_m} (the mission home = map frame origin),
-    ``path``, ``waypoints`` [{t, p, v, a, corner}], ``trajectory`` {t, p, v,
-    a, pointing} sampled at ``sample_hz``, ``stats``, ``timings_s``; plus
-    ``name``, ``sample_hz``, ``target_enu_m`` (S_p of eq. 21) and
-    ``trajectory_weights`` (the LQR weights used).
+    ``path``, ``waypoints`` [{t, p, v, a, corner}], ``trajectory`` (2.x: the
+    exact polynomial pieces, as knot states or coefficients in base64 float64;
+    1.x: samples),
+    ``stats``, ``timings_s``; plus ``name``, ``target_enu_m`` (S_p of eq. 21),
+    ``trajectory_weights`` (the LQR weights used) and, on request, ``samples``
+    (the trajectory sampled at ``samples.hz``). ``load_plan`` reads 2.x and 1.x.
 
 QGroundControl exports
     The flight-ready mission of ``companion.mission_items`` (take-off, speed,
@@ -23,9 +25,12 @@ QGroundControl exports
 
 from __future__ import annotations
 
+import base64
+import binascii
 import dataclasses
 import json
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,17 +51,29 @@ MAV_AUTOPILOT_PX4 = 12
 MAV_TYPE_QUADROTOR = 2
 
 #: plan.json format written here ("MAJOR.MINOR", docs/README.md "Versions");
-#: ``load_plan`` reads every file of the same major version.
-PLAN_FORMAT_VERSION = "1.0"
+#: ``load_plan`` reads every file of this major version and of ``LEGACY_PLAN_MAJOR``.
+#: 2.0: ``trajectory`` holds the polynomial pieces instead of samples; the samples,
+#: now optional, moved to ``samples``; ``timings_s`` gained ``write`` and ``wall``.
+PLAN_FORMAT_VERSION = "2.0"
 PLAN_FORMAT_MAJOR = int(PLAN_FORMAT_VERSION.split(".")[0])
+#: The previous major version, still read (its ``trajectory`` is samples only:
+#: ``companion fly`` re-solves the LQR through its way-points).
+LEGACY_PLAN_MAJOR = 1
 
 STATS_KEYS = ("coverage_fraction", "path_length_m", "duration_s", "n_waypoints", "orientation_deg",
               "max_speed_m_s", "max_accel_m_s2", "waypoint_residual_m")
 TIMING_KEYS = ("load", "coverage", "trajectory", "total")
+#: ``timings_s`` keys added by ``companion plan`` when it writes the file (2.0).
+WRITE_TIMING_KEYS = ("write", "wall")
 #: Most trajectory samples plan.json may hold (a 10 ha field at 10 Hz needs ~4e5):
-#: beyond it --sample-hz is a typo and the document would not fit in memory.
+#: beyond it --samples is a typo and the document would not fit in memory.
 MAX_SAMPLES = 2_000_000
-
+#: ``trajectory.form`` of format 2.x: the knot states (Q = 0: degree-7 pieces,
+#: half the numbers) or the position coefficients of every piece (any Q).
+FORM_KNOT_STATES = "knot-states"
+FORM_POLYNOMIAL = "polynomial"
+#: dtype of ``trajectory.values`` (little-endian IEEE float64).
+VALUES_DTYPE = "<f8"
 
 def _rows(a) -> list:
     return np.asarray(a, dtype=float).tolist()
@@ -73,7 +90,44 @@ def sample_times(t0: float, tf: float, sample_hz: float) -> np.ndarray:
     return t
 
 
-def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
+def trajectory_json(traj) -> dict:
+    """plan.json's ``trajectory`` (2.x): the knot times and, exactly (float64,
+    little-endian, base64), the numbers that fix every piece.
+
+    With Q = 0 (``FORM_KNOT_STATES``) the optimal p is a degree-7 polynomial on
+    each knot interval, fixed by [p, v, a, jerk] at its two ends: ``values``
+    are the (M + 1, 4, 3) knot states
+    (``companion.trajectory.sampling.hermite_position_coefficients``).
+    Otherwise (``FORM_POLYNOMIAL``) they are the (M, D + 1, 3) position
+    coefficients c: on piece m, s = (t - t[m]) / (t[m + 1] - t[m]) and
+    p(t) = sum_j c[m, j] s^j. v, a, jerk and snap are p's derivatives.
+    """
+    degree = int(traj.coefficients.shape[1] - 1)
+    if degree == 7 and not any(traj.config.q_diag):
+        form, values = FORM_KNOT_STATES, traj.knot_states
+    else:
+        form, values = FORM_POLYNOMIAL, traj.position_coefficients
+    v = np.ascontiguousarray(values, dtype=VALUES_DTYPE)
+    return {"form": form, "degree": degree, "t": _rows(traj.knot_times_s),
+            "values": {"dtype": VALUES_DTYPE, "shape": list(v.shape),
+                       "base64": base64.b64encode(v.tobytes()).decode("ascii")}}
+
+
+def samples_json(traj, sample_hz: float) -> dict:
+    """plan.json's optional ``samples``: the trajectory at ``sample_times`` (``--samples HZ``)."""
+    if not (sample_hz > 0 and math.isfinite(sample_hz)):
+        raise PlanError("--samples", f"must be a positive number of Hz, got {sample_hz}")
+    n_samples = (traj.tf - traj.t0) * sample_hz
+    if n_samples > MAX_SAMPLES:
+        raise PlanError("--samples", f"{sample_hz:g} Hz over {traj.tf - traj.t0:.1f} s would be "
+                        f"{n_samples:.3g} samples (at most {MAX_SAMPLES}); use a lower rate")
+    t = sample_times(traj.t0, traj.tf, sample_hz)
+    s = traj.sample(t)
+    return {"hz": float(sample_hz), "t": _rows(t), "p": _rows(s.p), "v": _rows(s.v), "a": _rows(s.a),
+            "pointing": _rows(s.pointing)}
+
+
+def plan_to_json_dict(plan, mission: Mission, sample_hz: float | None = None) -> dict:
     """The plan.json document (docs/plan-json.md) as plain JSON types.
 
     Parameters
@@ -81,30 +135,20 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
     plan : companion.planner.Plan
     mission : Mission
         For the name, origin (home) and weights.
-    sample_hz : float
-        Trajectory sampling rate (Hz), > 0.
+    sample_hz : float, optional
+        Also store the trajectory sampled at this rate (Hz, > 0) as ``samples``.
     """
-    if not (sample_hz > 0 and math.isfinite(sample_hz)):
-        raise PlanError("--sample-hz", f"must be a positive number, got {sample_hz}")
     traj = plan.trajectory
-    n_samples = (traj.tf - traj.t0) * sample_hz
-    if n_samples > MAX_SAMPLES:
-        raise PlanError("--sample-hz", f"{sample_hz:g} Hz over {traj.tf - traj.t0:.1f} s would be "
-                        f"{n_samples:.3g} samples (at most {MAX_SAMPLES}); use a lower rate")
-    wp = plan.waypoints
-    t = sample_times(traj.t0, traj.tf, sample_hz)
-    s = traj.sample(t)
+    samples = None if sample_hz is None else samples_json(traj, sample_hz)
     home = mission.home
-    return {
+    doc = {
         "format_version": PLAN_FORMAT_VERSION,
         "name": mission.name,
         "frame": "ENU",
         "origin": {"lat": home.lat, "lon": home.lon, "alt_m": home.alt_m},
         "path": _rows(plan.coverage.path_xy_m),
-        "waypoints": _waypoints_json(wp),
-        "sample_hz": float(sample_hz),
-        "trajectory": {"t": _rows(t), "p": _rows(s.p), "v": _rows(s.v), "a": _rows(s.a),
-                       "pointing": _rows(s.pointing)},
+        "waypoints": _waypoints_json(plan.waypoints),
+        "trajectory": trajectory_json(traj),
         "target_enu_m": _rows(plan.target_enu_m),
         "trajectory_weights": to_dict(mission.trajectory),
         "stats": {k: getattr(plan.stats, k) for k in STATS_KEYS},
@@ -112,11 +156,16 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float) -> dict:
         "warnings": list(plan.warnings),
         **sorties_json(plan, mission),
     }
+    if samples is not None:
+        doc["samples"] = samples
+    return doc
 
 
 def _waypoints_json(w) -> list:
-    return [{"t": float(ti), "p": _rows(p), "v": _rows(v), "a": _rows(a), "corner": bool(c)}
-            for ti, p, v, a, c in zip(w.t_s, w.p_enu_m, w.v_enu_m_s, w.a_enu_m_s2, w.corner)]
+    # whole-array tolist (one call per array, not one per way-point: 10 ha has ~1.6e4)
+    cols = [np.asarray(x, dtype=float).tolist() for x in (w.t_s, w.p_enu_m, w.v_enu_m_s, w.a_enu_m_s2)]
+    corner = np.asarray(w.corner, dtype=bool).tolist()
+    return [{"t": ti, "p": p, "v": v, "a": a, "corner": c} for ti, p, v, a, c in zip(*cols, corner)]
 
 
 def sorties_json(plan, mission: Mission) -> dict:
@@ -143,9 +192,31 @@ def sorties_json(plan, mission: Mission) -> dict:
     }
 
 
-def plan_json_text(doc: dict) -> str:
-    """Serialise a plan.json document (NaN/inf are a bug, not output)."""
-    return json.dumps(doc, allow_nan=False, separators=(",", ":")) + "\n"
+def _dumps(value) -> str:
+    return json.dumps(value, allow_nan=False, separators=(",", ":"))
+
+
+def plan_json_text(doc: dict, render_start_s: float | None = None) -> str:
+    """Serialise a plan.json document (NaN/inf are a bug, not output).
+
+    Parameters
+    ----------
+    doc : dict
+    render_start_s : float, optional
+        ``time.perf_counter()`` when the rendering of the outputs began. Then
+        ``timings_s`` gains ``write`` (since then) and ``wall`` (since the
+        process started, ``companion.process_clock``), taken after every other
+        key has been encoded so that they include the encoding; ``doc`` is
+        updated with them. The text is ``json.dumps(doc)``'s (compact).
+    """
+    parts = {k: _dumps(v) for k, v in doc.items() if render_start_s is None or k != "timings_s"}
+    if render_start_s is not None:
+        from .process_clock import process_wall_s
+
+        doc["timings_s"] = dict(doc["timings_s"], write=time.perf_counter() - render_start_s,
+                                wall=process_wall_s())
+        parts["timings_s"] = _dumps(doc["timings_s"])
+    return "{" + ",".join(f"{_dumps(k)}:{parts[k]}" for k in doc) + "}\n"
 
 
 # --- reading plan.json ----------------------------------------------------------
@@ -159,8 +230,8 @@ class PlanFile:
     origin : (lat_deg, lon_deg, alt_m)
     path_xy_m : (K, 2)
     waypoint_t_s : (N,), waypoint_p_enu_m, waypoint_v_enu_m_s, waypoint_a_enu_m_s2 : (N, 3), waypoint_corner : (N,) bool
-    t_s : (n,) ; p_enu_m, v_enu_m_s, a_enu_m_s2, pointing_enu : (n, 3)
-        The sampled trajectory.
+    t_s : (n,) or None ; p_enu_m, v_enu_m_s, a_enu_m_s2, pointing_enu : (n, 3) or None
+        The sampled trajectory: 2.x ``samples`` (None without it), 1.x ``trajectory``.
     target_enu_m : (3,) or None
     stats, timings_s : dict
     data : dict
@@ -169,6 +240,10 @@ class PlanFile:
     sorties : list of dict
         Per sortie: ``waypoint_t_s``, ``waypoint_p_enu_m``, ``waypoint_v_enu_m_s``,
         ``waypoint_a_enu_m_s2`` arrays (empty list for a plan.json without sorties).
+    trajectory : Trajectory or None
+        2.x: the trajectory rebuilt from its pieces (exact, carrying
+        ``target_enu_m``); None for a 1.x plan (re-solve through the way-points).
+    format_major : int
     """
 
     origin: tuple[float, float, float]
@@ -178,17 +253,19 @@ class PlanFile:
     waypoint_v_enu_m_s: np.ndarray
     waypoint_a_enu_m_s2: np.ndarray
     waypoint_corner: np.ndarray
-    t_s: np.ndarray
-    p_enu_m: np.ndarray
-    v_enu_m_s: np.ndarray
-    a_enu_m_s2: np.ndarray
-    pointing_enu: np.ndarray
+    t_s: np.ndarray | None
+    p_enu_m: np.ndarray | None
+    v_enu_m_s: np.ndarray | None
+    a_enu_m_s2: np.ndarray | None
+    pointing_enu: np.ndarray | None
     target_enu_m: np.ndarray | None
     stats: dict
     timings_s: dict
     data: dict
     source: str
     sorties: list = dataclasses.field(default_factory=list)
+    trajectory: object = None
+    format_major: int = PLAN_FORMAT_MAJOR
 
 
 def _num_array(value, shape_tail: tuple[int, ...], src: str, key: str) -> np.ndarray:
@@ -212,8 +289,93 @@ def _get(d, key: str, src: str, prefix: str = ""):
     return d[key]
 
 
+def _waypoint_columns(wps, src: str, prefix: str) -> dict:
+    """``t``, ``p``, ``v``, ``a`` arrays of a way-point list (checked, times increasing)."""
+    if not isinstance(wps, list) or len(wps) < 2:
+        raise PlanError(f"{src}: key '{prefix}'", "expected a list of at least 2 way-points")
+    cols = {}
+    for k, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
+        try:
+            values = [w[k] for w in wps]          # fast path; the slow one names the bad way-point
+        except (KeyError, TypeError):
+            values = [_get(w, k, src, f"{prefix}[{i}]") for i, w in enumerate(wps)]
+        cols[k] = _num_array(values, tail, src, f"{prefix}[].{k}")
+    if np.any(np.diff(cols["t"]) <= 0):
+        raise PlanError(f"{src}: key '{prefix}[].t'", "times must be strictly increasing")
+    return cols
+
+
+def _samples(tr, src: str, key: str) -> dict:
+    """``t``, ``p``, ``v``, ``a``, ``pointing`` arrays of sampled trajectory ``key`` (checked)."""
+    t = _num_array(_get(tr, "t", src, key), (), src, f"{key}.t")
+    arrays = {k: _num_array(_get(tr, k, src, key), (3,), src, f"{key}.{k}")
+              for k in ("p", "v", "a", "pointing")}
+    for k, arr in arrays.items():
+        if arr.shape[0] != t.shape[0]:
+            raise PlanError(f"{src}: key '{key}.{k}'", f"{arr.shape[0]} samples for {t.shape[0]} times")
+    if t.shape[0] < 2 or np.any(np.diff(t) <= 0):
+        raise PlanError(f"{src}: key '{key}.t'", "expected at least 2 strictly increasing times")
+    return dict(arrays, t=t)
+
+
+def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, src: str):
+    """The 2.x ``trajectory`` as a ``Trajectory``, checked against the way-points."""
+    from .trajectory import Trajectory, TrajectoryConfig
+    from .trajectory.sampling import hermite_position_coefficients
+
+    tr = _get(data, "trajectory", src)
+    form = _get(tr, "form", src, "trajectory")
+    if form not in (FORM_KNOT_STATES, FORM_POLYNOMIAL):
+        raise PlanError(f"{src}: key 'trajectory.form'",
+                        f"expected {FORM_KNOT_STATES!r} or {FORM_POLYNOMIAL!r}, got {form!r}")
+    degree = _get(tr, "degree", src, "trajectory")
+    if (not isinstance(degree, int) or isinstance(degree, bool) or not 4 <= degree <= 64
+            or (form == FORM_KNOT_STATES and degree != 7)):
+        raise PlanError(f"{src}: key 'trajectory.degree'",
+                        f"expected {'7' if form == FORM_KNOT_STATES else 'an integer in [4, 64]'}, got {degree!r}")
+    knots = _num_array(_get(tr, "t", src, "trajectory"), (), src, "trajectory.t")
+    if knots.shape[0] < 2 or np.any(np.diff(knots) <= 0):
+        raise PlanError(f"{src}: key 'trajectory.t'", "expected at least 2 strictly increasing knot times")
+    n = knots.shape[0]
+    want = [n, 4, 3] if form == FORM_KNOT_STATES else [n - 1, degree + 1, 3]
+    va = _get(tr, "values", src, "trajectory")
+    if _get(va, "dtype", src, "trajectory.values") != VALUES_DTYPE:
+        raise PlanError(f"{src}: key 'trajectory.values.dtype'", f"expected {VALUES_DTYPE!r}")
+    if _get(va, "shape", src, "trajectory.values") != want:
+        what = "knots, [p, v, a, jerk], axes" if form == FORM_KNOT_STATES else "pieces, degree + 1, axes"
+        raise PlanError(f"{src}: key 'trajectory.values.shape'", f"expected {want} ({what}), got {va['shape']!r}")
+    b64 = _get(va, "base64", src, "trajectory.values")
+    try:
+        raw = base64.b64decode(b64, validate=True) if isinstance(b64, str) else None
+    except (binascii.Error, ValueError):
+        raw = None
+    count = want[0] * want[1] * want[2]
+    if raw is None or len(raw) != 8 * count:
+        raise PlanError(f"{src}: key 'trajectory.values.base64'", f"expected base64 of {count} float64 numbers")
+    values = np.frombuffer(raw, dtype=VALUES_DTYPE).astype(float).reshape(want)
+    if not np.all(np.isfinite(values)):
+        raise PlanError(f"{src}: key 'trajectory.values'", "non-finite value")
+    wk = np.minimum(np.searchsorted(knots, wp_t), n - 1)
+    if knots[0] != wp_t[0] or knots[-1] != wp_t[-1] or not np.array_equal(knots[wk], wp_t):
+        raise PlanError(f"{src}: key 'trajectory.t'", "the way-point times are not knots of the trajectory")
+    weights = _get(data, "trajectory_weights", src)
+    if not isinstance(weights, dict):
+        raise PlanError(f"{src}: key 'trajectory_weights'", "expected a mapping")
+    try:
+        config = TrajectoryConfig(**weights)
+    except (TypeError, ValueError) as exc:
+        raise PlanError(f"{src}: key 'trajectory_weights'", str(exc)) from None
+    if form == FORM_KNOT_STATES:
+        if any(config.q_diag):
+            raise PlanError(f"{src}: key 'trajectory.form'",
+                            f"{FORM_KNOT_STATES!r} needs q_* = 0 in trajectory_weights (degree-7 pieces)")
+        return Trajectory.from_pieces(knots, hermite_position_coefficients(knots, values), wk, wp_targets,
+                                      config, target, knot_states=values)
+    return Trajectory.from_pieces(knots, values, wk, wp_targets, config, target)
+
+
 def load_plan(path: str | Path) -> PlanFile:
-    """Read and validate a plan.json written by ``companion plan``.
+    """Read and validate a plan.json written by ``companion plan`` (format 2.x or 1.x).
 
     Raises
     ------
@@ -231,7 +393,7 @@ def load_plan(path: str | Path) -> PlanFile:
         raise PlanError(f"{src}: line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
     if not isinstance(data, dict):
         raise PlanError(src, "expected a JSON object")
-    check_format_version(data, PLAN_FORMAT_MAJOR, src, PlanError)
+    major = check_format_version(data, (PLAN_FORMAT_MAJOR, LEGACY_PLAN_MAJOR), src, PlanError).major
     if _get(data, "frame", src) != "ENU":
         raise PlanError(f"{src}: key 'frame'", f"expected 'ENU', got {data['frame']!r}")
     origin = _get(data, "origin", src)
@@ -239,26 +401,13 @@ def load_plan(path: str | Path) -> PlanFile:
               for k in ("lat", "lon", "alt_m"))
     path_xy = _num_array(_get(data, "path", src), (2,), src, "path")
     wps = _get(data, "waypoints", src)
-    if not isinstance(wps, list) or len(wps) < 2:
-        raise PlanError(f"{src}: key 'waypoints'", "expected a list of at least 2 way-points")
-    cols = {}
-    for k, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
-        cols[k] = _num_array([_get(w, k, src, f"waypoints[{i}]") for i, w in enumerate(wps)],
-                             tail, src, f"waypoints[].{k}")
-    corner = [_get(w, "corner", src, f"waypoints[{i}]") for i, w in enumerate(wps)]
+    cols = _waypoint_columns(wps, src, "waypoints")
+    try:
+        corner = [w["corner"] for w in wps]
+    except (KeyError, TypeError):
+        corner = [_get(w, "corner", src, f"waypoints[{i}]") for i, w in enumerate(wps)]
     if not all(isinstance(c, bool) for c in corner):
         raise PlanError(f"{src}: key 'waypoints[].corner'", "expected true or false")
-    if np.any(np.diff(cols["t"]) <= 0):
-        raise PlanError(f"{src}: key 'waypoints[].t'", "times must be strictly increasing")
-    tr = _get(data, "trajectory", src)
-    t = _num_array(_get(tr, "t", src, "trajectory"), (), src, "trajectory.t")
-    arrays = {k: _num_array(_get(tr, k, src, "trajectory"), (3,), src, f"trajectory.{k}")
-              for k in ("p", "v", "a", "pointing")}
-    for k, arr in arrays.items():
-        if arr.shape[0] != t.shape[0]:
-            raise PlanError(f"{src}: key 'trajectory.{k}'", f"{arr.shape[0]} samples for {t.shape[0]} times")
-    if t.shape[0] < 2 or np.any(np.diff(t) <= 0):
-        raise PlanError(f"{src}: key 'trajectory.t'", "expected at least 2 strictly increasing times")
     stats = _get(data, "stats", src)
     for k in STATS_KEYS:
         _num_array([_get(stats, k, src, "stats")], (), src, f"stats.{k}")
@@ -266,30 +415,31 @@ def load_plan(path: str | Path) -> PlanFile:
     for k in TIMING_KEYS:
         _num_array([_get(timings, k, src, "timings_s")], (), src, f"timings_s.{k}")
     target = None
-    if "target_enu_m" in data:
-        target = _num_array([data["target_enu_m"]], (3,), src, "target_enu_m")[0]
+    if major == LEGACY_PLAN_MAJOR:
+        samples = _samples(_get(data, "trajectory", src), src, "trajectory")
+        if "target_enu_m" in data:
+            target = _num_array([data["target_enu_m"]], (3,), src, "target_enu_m")[0]
+        trajectory = None
+    else:
+        samples = _samples(data["samples"], src, "samples") if "samples" in data else {}
+        target = _num_array([_get(data, "target_enu_m", src)], (3,), src, "target_enu_m")[0]
+        wp_targets = np.stack([cols["p"], cols["v"], cols["a"]], axis=1)
+        trajectory = _trajectory(data, cols["t"], wp_targets, target, src)
     sorties = []
     raw_sorties = data.get("sorties", [])
     if not isinstance(raw_sorties, list):
         raise PlanError(f"{src}: key 'sorties'", "expected a list")
     for j, so in enumerate(raw_sorties):
-        ws = _get(so, "waypoints", src, f"sorties[{j}]")
-        if not isinstance(ws, list) or len(ws) < 2:
-            raise PlanError(f"{src}: key 'sorties[{j}].waypoints'", "expected a list of at least 2 way-points")
-        cols_s = {}
-        for k_, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
-            cols_s[k_] = _num_array([_get(w, k_, src, f"sorties[{j}].waypoints[{i}]") for i, w in enumerate(ws)],
-                                    tail, src, f"sorties[{j}].waypoints[].{k_}")
-        if np.any(np.diff(cols_s["t"]) <= 0):
-            raise PlanError(f"{src}: key 'sorties[{j}].waypoints[].t'", "times must be strictly increasing")
+        cols_s = _waypoint_columns(_get(so, "waypoints", src, f"sorties[{j}]"), src, f"sorties[{j}].waypoints")
         sorties.append({"waypoint_t_s": cols_s["t"], "waypoint_p_enu_m": cols_s["p"],
                         "waypoint_v_enu_m_s": cols_s["v"], "waypoint_a_enu_m_s2": cols_s["a"]})
     return PlanFile(origin=o, path_xy_m=path_xy, waypoint_t_s=cols["t"], waypoint_p_enu_m=cols["p"],
                     waypoint_v_enu_m_s=cols["v"], waypoint_a_enu_m_s2=cols["a"],
-                    waypoint_corner=np.array(corner, dtype=bool), t_s=t, p_enu_m=arrays["p"],
-                    v_enu_m_s=arrays["v"], a_enu_m_s2=arrays["a"], pointing_enu=arrays["pointing"],
-                    target_enu_m=target, stats=dict(stats), timings_s=dict(timings), data=data, source=src,
-                    sorties=sorties)
+                    waypoint_corner=np.array(corner, dtype=bool), t_s=samples.get("t"),
+                    p_enu_m=samples.get("p"), v_enu_m_s=samples.get("v"), a_enu_m_s2=samples.get("a"),
+                    pointing_enu=samples.get("pointing"), target_enu_m=target, stats=dict(stats),
+                    timings_s=dict(timings), data=data, source=src, sorties=sorties,
+                    trajectory=trajectory, format_major=major)
 
 
 # --- QGroundControl exports ------------------------------------------------------

@@ -199,16 +199,28 @@ def check_sizes(mission: Mission, grid: OccupancyGrid) -> None:
                         f"no two coverage lines fit")
 
 
-def trajectory_stats(trajectory: Trajectory,
-                     per_interval: int = STATS_SAMPLES_PER_INTERVAL) -> tuple[float, float, float]:
-    """(max |v| m/s, max |a| m/s^2, max way-point residual m) of a trajectory."""
+def trajectory_stats(trajectory: Trajectory, per_interval: int = STATS_SAMPLES_PER_INTERVAL,
+                     chunk_intervals: int = 2048) -> tuple[float, float, float]:
+    """(max |v| m/s, max |a| m/s^2, max way-point residual m) of a trajectory.
+
+    Sampled ``chunk_intervals`` knot intervals at a time, so that the memory
+    does not grow with the field (a 10 ha field has ~1.6e4 intervals).
+    """
     knots = trajectory.knot_times_s
     tau = np.arange(per_interval) / per_interval
-    t = np.append((knots[:-1, None] + np.diff(knots)[:, None] * tau).ravel(), knots[-1])
     # Without the pointing target: s(t) and its derivatives are not needed here.
-    s = dataclasses.replace(trajectory, target_enu_m=None).sample(t)
-    return (float(np.linalg.norm(s.v, axis=1).max()), float(np.linalg.norm(s.a, axis=1).max()),
-            float(np.max(trajectory.waypoint_residual_m)))
+    traj = dataclasses.replace(trajectory, target_enu_m=None)
+    max_v = max_a = 0.0
+    M = knots.shape[0] - 1
+    for m0 in range(0, M, chunk_intervals):
+        k = knots[m0:min(M, m0 + chunk_intervals) + 1]
+        t = (k[:-1, None] + np.diff(k)[:, None] * tau).ravel()
+        if m0 + chunk_intervals >= M:
+            t = np.append(t, knots[-1])
+        s = traj.sample(t)
+        max_v = max(max_v, float(np.linalg.norm(s.v, axis=1).max()))
+        max_a = max(max_a, float(np.linalg.norm(s.a, axis=1).max()))
+    return max_v, max_a, float(np.max(trajectory.waypoint_residual_m))
 
 
 def plan_mission(mission: Mission) -> Plan:

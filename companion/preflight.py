@@ -178,10 +178,12 @@ def check_plan(pf, mission, grid, dem) -> None:
     for j, so in enumerate(pf.sorties):
         check_waypoints(src, f"sorties[{j}].waypoints", so["waypoint_t_s"], so["waypoint_p_enu_m"],
                         so["waypoint_v_enu_m_s"], so["waypoint_a_enu_m_s2"], mission, grid, dem)
-    s = np.linalg.norm(np.asarray(pf.pointing_enu, dtype=float), axis=1)
-    if np.any(~(s > 1e-9)):
-        i = _first(~(s > 1e-9))
-        raise PlanError(f"{src}: key 'trajectory.pointing'", f"sample {i} is a zero vector")
+    if pf.pointing_enu is not None:
+        s = np.linalg.norm(np.asarray(pf.pointing_enu, dtype=float), axis=1)
+        if np.any(~(s > 1e-9)):
+            i = _first(~(s > 1e-9))
+            key = "trajectory.pointing" if pf.format_major == 1 else "samples.pointing"
+            raise PlanError(f"{src}: key '{key}'", f"sample {i} is a zero vector")
     if pf.target_enu_m is not None and not all(math.isfinite(float(x)) for x in pf.target_enu_m):
         raise PlanError(f"{src}: key 'target_enu_m'", "non-finite value")
 

@@ -7,7 +7,7 @@ Usage::
 Flies short segments of the bundled ``flat-rectangle`` mission against the
 bundled SITL (a subprocess, lockstep, loopback UDP) with ``companion fly``'s
 own code (``companion.commands.fly.execute``), from a small ``plan.json``
-planned here (``--sample-hz 0.1``: the way-points are what replay needs), and
+planned here (format 2.x: the trajectory's pieces, no samples), and
 writes for each flight ``NAME.tlog.xz`` (the .tlog, xz-compressed; ``companion
 replay`` reads it as is) and ``NAME.report.json`` (the live flight's report).
 
@@ -183,8 +183,8 @@ def main() -> int:
     if not plan_path.exists() or not args.only:
         import subprocess
 
-        r = subprocess.run([sys.executable, "-m", "companion.cli", "plan", str(MISSION), "-o", str(plan_path),
-                            "--sample-hz", "0.1"], capture_output=True, text=True)
+        r = subprocess.run([sys.executable, "-m", "companion.cli", "plan", str(MISSION), "-o", str(plan_path)],
+                           capture_output=True, text=True)
         if r.returncode != 0:
             raise SystemExit(r.stderr)
     manifest_path = out / "manifest.json"

@@ -90,7 +90,7 @@ def test_dem_hole_between_path_vertices(capsys, tmp_path):
 
 
 def test_bad_sample_rate_and_missing_output_dir(capsys, tmp_path):
-    run_bad(capsys, tmp_path, ["--sample-hz", "0"], MISSIONS / "flat-rectangle" / "mission.yaml", "--sample-hz")
+    run_bad(capsys, tmp_path, ["--samples", "0"], MISSIONS / "flat-rectangle" / "mission.yaml", "--samples")
     rc = main(["plan", str(MISSIONS / "flat-rectangle" / "mission.yaml"), "-o", str(tmp_path / "no" / "p.json")])
     assert rc == 2 and "does not exist" in capsys.readouterr().err
     assert not (tmp_path / "no").exists()
@@ -144,7 +144,7 @@ def test_late_write_failures_leave_nothing(capsys, tmp_path):
         line = run_bad(capsys, tmp_path, ["--plot", "/proc/companion-test.png"], m, "/proc/companion-test.png")
         assert ".tmp" not in line
     # More samples than plan.json can hold.
-    run_bad(capsys, tmp_path, ["--sample-hz", "1e9"], m, "--sample-hz")
+    run_bad(capsys, tmp_path, ["--samples", "1e9"], m, "--samples")
 
 
 def argparse_plot_missing() -> bool:
@@ -181,7 +181,7 @@ def planned(request, tmp_path_factory):
     name = request.param
     out = tmp_path_factory.mktemp(name)
     mission_path = MISSIONS / name / "mission.yaml"
-    argv = ["plan", str(mission_path), "-o", str(out / "plan.json"), "--sample-hz", "20",
+    argv = ["plan", str(mission_path), "-o", str(out / "plan.json"), "--samples", "20",
             "--qgc", str(out / "p.plan"), "--waypoints", str(out / "p.waypoints")]
     try:
         import matplotlib  # noqa: F401
@@ -199,14 +199,17 @@ def test_plan_json_keys(planned):
     doc = planned["doc"]
     assert LOADER_KEYS <= set(doc)
     assert set(doc["stats"]) == STATS_KEYS
-    assert set(doc["timings_s"]) == {"load", "coverage", "trajectory", "total"}
-    assert set(doc["trajectory"]) == {"t", "p", "v", "a", "pointing"}
+    assert set(doc["timings_s"]) == {"load", "coverage", "trajectory", "total", "write", "wall"}
+    assert set(doc["trajectory"]) == {"form", "degree", "t", "values"}
+    assert set(doc["samples"]) == {"hz", "t", "p", "v", "a", "pointing"}
     assert doc["frame"] == "ENU"
     home = planned["mission"].home
     assert doc["origin"] == {"lat": home.lat, "lon": home.lon, "alt_m": home.alt_m}
     assert all(set(w) == {"t", "p", "v", "a", "corner"} for w in doc["waypoints"])
     tm = doc["timings_s"]
     assert tm["total"] >= tm["load"] + tm["coverage"] + tm["trajectory"] - 1e-9
+    # wall: the process started before the planning, which came before the writing
+    assert tm["wall"] >= tm["total"] + tm["write"] - 0.02       # /proc/uptime has 10 ms steps
 
 
 def test_path_in_free_space_and_stats(planned):
@@ -219,20 +222,21 @@ def test_path_in_free_space_and_stats(planned):
     st = doc["stats"]
     assert st["path_length_m"] == pytest.approx(np.linalg.norm(np.diff(path, axis=0), axis=1).sum(), rel=1e-6)
     assert st["n_waypoints"] == len(doc["waypoints"])
-    t = np.array(doc["trajectory"]["t"])
+    t = np.array(doc["samples"]["t"])
     assert st["duration_s"] == pytest.approx(t[-1] - t[0])
     # About the paper's 120 s at 1 m/s.
     assert 90.0 <= st["duration_s"] <= 160.0
-    v = np.linalg.norm(np.array(doc["trajectory"]["v"]), axis=1)
+    v = np.linalg.norm(np.array(doc["samples"]["v"]), axis=1)
     assert st["max_speed_m_s"] >= 0.99 * v.max()
     assert st["waypoint_residual_m"] <= 0.05
 
 
 def test_trajectory_sampling_and_pointing(planned):
     doc = planned["doc"]
-    tr = doc["trajectory"]
+    tr = doc["samples"]
     t = np.array(tr["t"])
-    assert np.allclose(np.diff(t)[:-1], 1 / 20)          # --sample-hz 20 (last step may be shorter)
+    assert tr["hz"] == 20.0
+    assert np.allclose(np.diff(t)[:-1], 1 / 20)          # --samples 20 (last step may be shorter)
     assert t[0] == doc["waypoints"][0]["t"] and t[-1] == doc["waypoints"][-1]["t"]
     p = np.array(tr["p"])
     s = np.array(tr["pointing"])
@@ -250,7 +254,7 @@ def test_altitude_follows_terrain(planned):
     h = mission.flight.height_agl_m
     wp = np.array([w["p"] for w in doc["waypoints"]])
     assert np.allclose(wp[:, 2] - dem.height_at(wp[:, 0], wp[:, 1]), h, atol=1e-9)
-    p = np.array(doc["trajectory"]["p"])
+    p = np.array(doc["samples"]["p"])
     agl = p[:, 2] - dem.height_at(p[:, 0], p[:, 1])
     assert np.abs(agl - h).max() < 0.15
 
@@ -263,8 +267,8 @@ def test_plan_json_types_and_finite(planned):
     for w in doc["waypoints"]:
         assert isinstance(w["t"], float) and isinstance(w["corner"], bool)
         assert all(len(w[k]) == 3 for k in ("p", "v", "a"))
-    n = len(doc["trajectory"]["t"])
-    assert all(len(doc["trajectory"][k]) == n and len(doc["trajectory"][k][0]) == 3
+    n = len(doc["samples"]["t"])
+    assert all(len(doc["samples"][k]) == n and len(doc["samples"][k][0]) == 3
                for k in ("p", "v", "a", "pointing"))
     assert isinstance(doc["stats"]["n_waypoints"], int)
     assert all(isinstance(v, float) for k, v in doc["stats"].items() if k != "n_waypoints")
@@ -291,7 +295,7 @@ def test_plot_written(planned):
 def test_load_plan_round_trip_and_errors(planned, tmp_path):
     pf = load_plan(planned["out"] / "plan.json")
     doc = planned["doc"]
-    assert np.array_equal(pf.p_enu_m, np.array(doc["trajectory"]["p"]))
+    assert np.array_equal(pf.p_enu_m, np.array(doc["samples"]["p"]))
     assert np.array_equal(pf.waypoint_corner, [w["corner"] for w in doc["waypoints"]])
     assert pf.origin == (doc["origin"]["lat"], doc["origin"]["lon"], doc["origin"]["alt_m"])
     bad = dict(doc)
@@ -300,9 +304,9 @@ def test_load_plan_round_trip_and_errors(planned, tmp_path):
     with pytest.raises(PlanError, match=r"a\.json: key 'stats'"):
         load_plan(tmp_path / "a.json")
     bad = json.loads(json.dumps(doc))
-    bad["trajectory"]["p"] = bad["trajectory"]["p"][:-1]
+    bad["samples"]["p"] = bad["samples"]["p"][:-1]
     (tmp_path / "b.json").write_text(json.dumps(bad))
-    with pytest.raises(PlanError, match=r"b\.json: key 'trajectory.p'"):
+    with pytest.raises(PlanError, match=r"b\.json: key 'samples.p'"):
         load_plan(tmp_path / "b.json")
     (tmp_path / "c.json").write_text("{\n  \"frame\": ")
     with pytest.raises(PlanError, match=r"c\.json: line 2"):

@@ -7,12 +7,14 @@
   a value out of range or another major version are rejected;
 - the schemas, the writers and the pages (docs/plan-json.md,
   docs/report-json.md) name the same keys, so none can fall behind;
-- the plan loader reads 1.x with or without ``format_version`` and rejects
-  another major version with one line (exit code 2 from ``companion fly``).
+- the plan loader reads 2.x, and 1.x with or without ``format_version`` (a
+  stored 1.0 plan), and rejects another major version with one line (exit
+  code 2 from ``companion fly``).
 """
 
 from __future__ import annotations
 
+import base64
 import contextlib
 import copy
 import dataclasses
@@ -21,6 +23,7 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 from jsonschema import Draft202012Validator
 
@@ -36,6 +39,10 @@ from companion.report import (REPORT_FORMAT_VERSION, FlightReport, ReplanningSta
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 BUNDLED = sorted(d.name for d in missions_dir().iterdir() if (d / "mission.yaml").is_file())
+#: A plan.json of format 1.0 as ``companion plan`` wrote it before 2.0 (the replay corpus's).
+OLD_PLAN = ROOT / "tests" / "data" / "replay" / "plan-flat-rectangle.json"
+#: Top-level keys the plan schema does not require (``--samples``).
+PLAN_OPTIONAL = {"samples"}
 
 
 def _schema(name: str) -> dict:
@@ -60,20 +67,26 @@ def _plan_doc(name: str, tmp_path_factory) -> dict:
     if name not in _PLANS:
         out = tmp_path_factory.mktemp(f"plan-{name}") / "plan.json"
         with contextlib.redirect_stdout(io.StringIO()):
-            assert main(["plan", str(missions_dir() / name / "mission.yaml"), "-o", str(out)]) == 0
+            assert main(["plan", str(missions_dir() / name / "mission.yaml"), "-o", str(out), "--samples", "2"]) == 0
         _PLANS[name] = {"path": out, "doc": json.loads(out.read_text(encoding="utf-8"))}
     return _PLANS[name]
 
 
 @pytest.fixture
 def plan_doc(tmp_path_factory) -> dict:
-    """A real plan.json document cut to its first 3 way-points, path points and
-    samples (validating the whole one takes a good fraction of a second), to be
-    spoiled by a test."""
+    """A real plan.json document cut to its first 3 way-points, path points,
+    trajectory pieces and samples (validating the whole one takes a good
+    fraction of a second), to be spoiled by a test."""
     full = _plan_doc("flat-rectangle", tmp_path_factory)["doc"]
-    doc = dict(full, path=full["path"][:3], waypoints=full["waypoints"][:3],
-               trajectory={k: v[:3] for k, v in full["trajectory"].items()})
-    return copy.deepcopy(doc)
+    doc = copy.deepcopy(dict(full, path=full["path"][:3], waypoints=full["waypoints"][:3]))
+    tr = doc["trajectory"]
+    va = tr["values"]
+    assert tr["form"] == "knot-states"                   # Q = 0: the states at the knots
+    states = np.frombuffer(base64.b64decode(va["base64"]), "<f8").reshape(va["shape"])[:3]
+    tr["t"] = tr["t"][:3]
+    va.update(shape=list(states.shape), base64=base64.b64encode(states.tobytes()).decode("ascii"))
+    doc["samples"] = {k: v if k == "hz" else v[:3] for k, v in full["samples"].items()}
+    return doc
 
 
 def _report_doc(**changes) -> dict:
@@ -113,14 +126,14 @@ def test_schemas_are_draft_2020_12_and_describe_version_1():
     for schema in (PLAN_SCHEMA, REPORT_SCHEMA):
         assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
         Draft202012Validator.check_schema(schema)
-    assert PLAN_FORMAT_VERSION == "1.0" and REPORT_FORMAT_VERSION == "3.0"
+    assert PLAN_FORMAT_VERSION == "2.0" and REPORT_FORMAT_VERSION == "3.0"
     # the writers' version is one the schemas accept, the next major is not
     for validator, doc_version in ((PLAN, PLAN_FORMAT_VERSION), (REPORT, REPORT_FORMAT_VERSION)):
         version_schema = validator.schema["properties"]["format_version"]
         assert Draft202012Validator(version_schema).is_valid(doc_version)
         major = int(doc_version.split(".")[0])
         assert not Draft202012Validator(version_schema).is_valid(f"{major + 1}.0")
-        assert not Draft202012Validator(version_schema).is_valid(f"{major - 1}.0") or major == 1
+        assert not Draft202012Validator(version_schema).is_valid(f"{major - 1}.0")
 
 
 # --- every file the project writes validates ----------------------------------------
@@ -187,14 +200,19 @@ def _set(doc: dict, path: str, value) -> None:
 _DELETE = object()
 
 PLAN_BREAKAGES = [
-    ("format_version", "2.0"), ("format_version", "1"), ("format_version", 1.0), ("format_version", "1.0.0"),
+    ("format_version", "1.0"), ("format_version", "3.0"), ("format_version", "2"), ("format_version", 2.0),
+    ("format_version", "2.0.0"),
     ("frame", "NED"), ("name", None),
     ("origin.lat", 91.0), ("origin.alt_m", _DELETE), ("origin.x", 0.0),
     ("path", [[0.0, 0.0]]), ("path.0", [0.0, 0.0, 0.0]),
     ("waypoints", []), ("waypoints.0.p", [1.0, 2.0]), ("waypoints.0.corner", "yes"),
     ("waypoints.0.t", "0"), ("waypoints.0.yaw", 0.0), ("waypoints.1.v", _DELETE),
-    ("sample_hz", 0), ("trajectory.t", ["0", "1"]), ("trajectory.p.0", [1.0, 2.0]),
-    ("trajectory.pointing", _DELETE), ("trajectory.jerk", []), ("target_enu_m", [0.0, 0.0]),
+    ("samples.hz", 0), ("samples.t", ["0", "1"]), ("samples.p.0", [1.0, 2.0]),
+    ("samples.pointing", _DELETE), ("samples.jerk", []), ("target_enu_m", [0.0, 0.0]),
+    ("trajectory.t", ["0", "1"]), ("trajectory.jerk", []), ("trajectory.form", "samples"),
+    ("trajectory.degree", 7.5), ("trajectory.values.dtype", "<f4"),
+    ("trajectory.values.shape", [3, 4, 2]), ("trajectory.values.base64", "not base64!"),
+    ("trajectory.values.base64", _DELETE), ("timings_s.wall", _DELETE), ("timings_s.write", -1.0),
     ("trajectory_weights.r_snap", 0.0), ("trajectory_weights.q_jerk", -1.0),
     ("stats.n_waypoints", 2.5), ("stats.coverage_fraction", 1.5), ("stats.path_length_m", "184"),
     ("stats.extra", "text"), ("timings_s.total", -1.0),
@@ -267,8 +285,8 @@ def test_report_schema_rejects_a_missing_key(key):
 
 def test_schemas_accept_later_minor_versions_where_growth_is_expected(plan_doc):
     assert _errors(PLAN, plan_doc) == []                 # the cut document is valid as it is
-    # a 1.x file may add keys at the top level and in the open objects
-    plan_doc.update(format_version="1.3", replans=[{"waypoints": [0, 5]}])
+    # a 2.x file may add keys at the top level and in the open objects
+    plan_doc.update(format_version="2.3", replans=[{"waypoints": [0, 5]}])
     plan_doc["stats"]["n_sorties"] = 1
     plan_doc["timings_s"]["sorties"] = 0.01
     assert _errors(PLAN, plan_doc) == []
@@ -318,9 +336,10 @@ def _doc_keys(doc, prefix: str = "") -> set[str]:
     return out
 
 
-def _every_object_requires_all_its_properties(schema: dict) -> None:
+def _every_object_requires_all_its_properties(schema: dict, optional: frozenset = frozenset()) -> None:
     if "properties" in schema:
-        assert set(schema["required"]) == set(schema["properties"]), schema.get("title", schema.get("description"))
+        assert set(schema["required"]) == set(schema["properties"]) - optional, \
+            schema.get("title", schema.get("description"))
     for sub in list(schema.get("properties", {}).values()) + [schema.get("items")]:
         if isinstance(sub, dict):
             _every_object_requires_all_its_properties(sub)
@@ -329,7 +348,7 @@ def _every_object_requires_all_its_properties(schema: dict) -> None:
 def test_plan_writer_and_schema_have_the_same_keys(tmp_path_factory):
     doc = _plan_doc("flat-rectangle", tmp_path_factory)["doc"]
     assert _doc_keys(doc) == set(_schema_keys(PLAN_SCHEMA))
-    _every_object_requires_all_its_properties(PLAN_SCHEMA)
+    _every_object_requires_all_its_properties(PLAN_SCHEMA, frozenset(PLAN_OPTIONAL))
 
 
 def test_report_fields_and_schema_have_the_same_keys():
@@ -371,19 +390,33 @@ def test_every_schema_key_is_on_its_page(page, schema):
 
 # --- format_version when reading ------------------------------------------------------
 
-@pytest.mark.parametrize("value", ["1.0", "1.12", None])
-def test_plan_loader_reads_every_1x_version_and_unversioned_files(plan_doc, tmp_path, value):
-    if value is None:
-        del plan_doc["format_version"]       # written before versioning: read as 1.0
-    else:
-        plan_doc["format_version"] = value
+@pytest.mark.parametrize("value", ["2.0", "2.12"])
+def test_plan_loader_reads_every_2x_version(plan_doc, tmp_path, value):
+    plan_doc["format_version"] = value
     path = tmp_path / "plan.json"
     path.write_text(json.dumps(plan_doc), encoding="utf-8")
-    assert load_plan(path).data == plan_doc
+    pf = load_plan(path)
+    assert pf.data == plan_doc and pf.format_major == 2 and pf.trajectory is not None
+
+
+@pytest.mark.parametrize("value", ["1.0", "1.12", None])
+def test_plan_loader_reads_a_stored_1x_plan_with_every_1x_version(tmp_path, value):
+    doc = json.loads(OLD_PLAN.read_text(encoding="utf-8"))
+    assert doc["format_version"] == "1.0" and "t" in doc["trajectory"]     # really the old format
+    if value is None:
+        del doc["format_version"]       # written before versioning: read as 1.0
+    else:
+        doc["format_version"] = value
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    pf = load_plan(path)
+    assert pf.data == doc and pf.format_major == 1 and pf.trajectory is None
+    assert np.array_equal(pf.p_enu_m, doc["trajectory"]["p"])
+    assert pf.waypoint_t_s.shape[0] == len(doc["waypoints"]) == doc["stats"]["n_waypoints"]
 
 
 @pytest.mark.parametrize("value,problem", [
-    ("2.0", r"version 2\.0 is not supported \(this companion reads 1\.x\)"),
+    ("3.0", r"version 3\.0 is not supported \(this companion reads 2\.x and 1\.x\)"),
     ("0.9", r"version 0\.9 is not supported"),
     ("1", r'expected a string "MAJOR\.MINOR"'), ("1.0.0", "MAJOR.MINOR"), ("v1.0", "MAJOR.MINOR"),
     ("01.0", "MAJOR.MINOR"), ("", "MAJOR.MINOR"), (1.0, "MAJOR.MINOR"), (None, "MAJOR.MINOR"),
@@ -406,11 +439,11 @@ def test_check_format_version_returns_the_parsed_version():
 def test_fly_with_a_plan_of_another_major_version_exits_2_and_writes_nothing(plan_doc, tmp_path, monkeypatch,
                                                                               capsys):
     monkeypatch.chdir(tmp_path)
-    plan_doc["format_version"] = "2.0"
+    plan_doc["format_version"] = "3.0"
     Path("plan.json").write_text(json.dumps(plan_doc), encoding="utf-8")
     rc = main(["fly", str(missions_dir() / "flat-rectangle" / "mission.yaml"), "--plan", "plan.json", "--quiet"])
     err = capsys.readouterr().err
     assert rc == 2
-    assert err == ("companion fly: error: plan.json: key 'format_version': version 2.0 is not supported "
-                   "(this companion reads 1.x)\n")
+    assert err == ("companion fly: error: plan.json: key 'format_version': version 3.0 is not supported "
+                   "(this companion reads 2.x and 1.x)\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["plan.json"]      # no tlog, no report

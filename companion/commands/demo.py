@@ -155,7 +155,7 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
     from ..planner import plan_mission
 
     plan = plan_mission(mission)
-    plan_text = plan_json_text(plan_to_json_dict(plan, mission, 10.0))
+    plan_text = plan_json_text(plan_to_json_dict(plan, mission), time.perf_counter())
     t_planned = time.monotonic()
     out.mkdir(parents=True, exist_ok=True)
     (out / "plan.json").write_text(plan_text, encoding="utf-8")

@@ -39,8 +39,6 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import InputError
 
 DEFAULT_CONNECT = "udpout:127.0.0.1:14540"
@@ -262,6 +260,8 @@ class FlightPlan:
     @classmethod
     def from_plan(cls, plan, source: str = "") -> "FlightPlan":
         """From a ``companion.planner.Plan``."""
+        import numpy as np
+
         w = plan.waypoints
         return cls(plan.trajectory, np.asarray(w.p_enu_m, dtype=float), np.asarray(plan.target_enu_m, dtype=float),
                    float(plan.stats.coverage_fraction), np.asarray(w.t_s, dtype=float),
@@ -275,6 +275,8 @@ class FlightPlan:
         (so the flight lasts at least ``cut_s``), the last made a stop (v = a = 0), and the LQR trajectory re-solved through
         them with ``config`` (TrajectoryConfig): a short mission that ends at
         rest instead of a reference that halts at cruise speed."""
+        import numpy as np
+
         from ..trajectory import generate_trajectory
 
         t = self.waypoints_t_s
@@ -307,6 +309,8 @@ def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config
                        path_xy_m=None, corner=None, source: str = "") -> FlightPlan:
     """The FlightPlan of one sortie's way-points (ENU map frame): the LQR trajectory
     through them with the mission's weights; the runner flies it like a whole plan."""
+    import numpy as np
+
     from ..trajectory import generate_trajectory
 
     t, p, v, a = (np.asarray(x, dtype=float) for x in (t_s, p_enu_m, v_enu_m_s, a_enu_m_s2))
@@ -333,6 +337,8 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None) -> Flight
     InputError
         ``--sortie`` is not a sortie of the plan.
     """
+    import numpy as np
+
     if plan_path is None:
         from ..planner import plan_mission
 
@@ -360,8 +366,11 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None) -> Flight
         return sortie_flight_plan(so["waypoint_t_s"], so["waypoint_p_enu_m"], so["waypoint_v_enu_m_s"],
                                   so["waypoint_a_enu_m_s2"], target, mission.trajectory,
                                   source=f"{plan_path} --sortie {sortie}")
-    traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
-                               pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
+    traj = pf.trajectory
+    if traj is None:
+        # a 1.x plan stores samples only: the LQR solution through its way-points is exact
+        traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
+                                   pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")
     return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
                       None if cov is None else float(cov), pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
@@ -381,6 +390,8 @@ def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
     PlanError
         The rays are (nearly) parallel, so they do not fix a point.
     """
+    import numpy as np
+
     from ..errors import PlanError
 
     p = np.asarray(p_enu_m, dtype=float)
@@ -443,6 +454,8 @@ def transit_floor_z_m(mission, dem) -> float:
     """Lowest height (ENU z, m) at which a level flight across the field cannot touch a
     vine row: the DEM's (``load_mission_dem``) highest point, plus the canopy
     (``replan.canopy_height_m``), plus ``TRANSIT_CLEARANCE_M``."""
+    import numpy as np
+
     h = np.asarray(dem.heights_m, dtype=float)
     return float(np.nanmax(h)) + mission.replan.canopy_height_m + TRANSIT_CLEARANCE_M
 
@@ -479,6 +492,8 @@ def build_replanner(mission, flight_plan: FlightPlan, grid, dem):
     (``load_mission_maps``) as the known map, the plan's way-points, turning points and
     coverage segments. Way-points without a turning-point flag (a plan.json sortie) take
     their stops (v = 0) as turns."""
+    import numpy as np
+
     from ..replan import GlobalPlan, KnownMap, Replanner
     from ..replan.replanner import mission_replan_config
 

@@ -1,4 +1,4 @@
-"""``companion plan MISSION.yaml -o plan.json [--sample-hz 10] [--plot plan.png]
+"""``companion plan MISSION.yaml -o plan.json [--samples HZ] [--plot plan.png]
 [--qgc plan.plan] [--waypoints plan.waypoints] [--geojson plan.geojson] [--kml plan.kml]
 [--html map.html]``.
 
@@ -6,6 +6,10 @@ Plans the mission (``companion.planner.plan_mission``), prints a short
 summary and writes the outputs. Every output is rendered in memory first and
 written only when the whole plan succeeded, each through a temporary file
 in the target directory and ``os.replace``: bad input leaves nothing behind.
+plan.json is encoded last, so that its ``timings_s`` can hold ``write``
+(rendering every output, plan.json's encoding included) and ``wall`` (since
+the process started: start-up, imports, planning, rendering; only the copy
+of the bytes to disk comes after it, and the printed ``wall`` includes it).
 """
 
 from __future__ import annotations
@@ -15,16 +19,19 @@ import math
 import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 from ..errors import InputError
+from ..process_clock import process_wall_s
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("mission", help="mission YAML file")
     parser.add_argument("-o", "--output", required=True, metavar="PLAN.json", help="plan.json to write")
-    parser.add_argument("--sample-hz", type=float, default=10.0,
-                        help="trajectory sampling rate in plan.json (Hz, default 10)")
+    parser.add_argument("--samples", "--sample-hz", dest="samples", type=float, default=None, metavar="HZ",
+                        help="also store the trajectory sampled at HZ in plan.json (default: only its exact "
+                             "polynomial pieces)")
     parser.add_argument("--plot", metavar="PLAN.png", help="figure of the plan (needs the plot extra)")
     parser.add_argument("--qgc", metavar="PLAN.plan", help="QGroundControl .plan export of the way-points")
     parser.add_argument("--waypoints", metavar="PLAN.waypoints", help='"QGC WPL 110" export of the way-points')
@@ -74,8 +81,8 @@ def write_atomically(outputs: dict[str, bytes]) -> None:
 
 def run(args) -> int:
     # Cheap checks before any work, so that a bad option costs nothing.
-    if not (math.isfinite(args.sample_hz) and args.sample_hz > 0):
-        raise InputError("--sample-hz", f"must be a positive number of Hz, got {args.sample_hz}")
+    if args.samples is not None and not (math.isfinite(args.samples) and args.samples > 0):
+        raise InputError("--samples", f"must be a positive number of Hz, got {args.samples}")
     plot_fmt = None
     if args.plot:
         from ..plot import supported_formats   # raises a one-line InputError without matplotlib
@@ -100,8 +107,9 @@ def run(args) -> int:
 
     mission = load_mission(args.mission)
     plan = plan_mission(mission)
-    doc = plan_to_json_dict(plan, mission, args.sample_hz)
-    files = {args.output: plan_json_text(doc).encode("utf-8")}
+    t_render = time.perf_counter()
+    doc = plan_to_json_dict(plan, mission, args.samples)
+    files = {args.output: b""}         # first in the summary; encoded last (its timings)
     if args.qgc or args.waypoints:
         # one flight-ready mission per sortie (``<stem>-sortie<k>`` when there are several)
         fence = field_fence(plan, mission)
@@ -129,6 +137,7 @@ def run(args) -> int:
         if args.html:
             from ..html_map import html_map_text
             files[args.html] = html_map_text(layers, f"{mission.name}: plan").encode("utf-8")
+    files[args.output] = plan_json_text(doc, t_render).encode("utf-8")
     write_atomically(files)
 
     for w in plan.warnings:
@@ -146,6 +155,7 @@ def run(args) -> int:
           f"{worst.energy.energy_wh:.1f} Wh of {mission.energy.usable_wh:.1f} Wh usable, "
           f"{max(x.n_items for x in sp.sorties)} mission items (vehicle holds {mission.energy.max_mission_items})")
     print(f"  timings: load {tm.load:.3f} s, coverage {tm.coverage:.3f} s, "
-          f"trajectory {tm.trajectory:.3f} s, total {tm.total:.3f} s")
+          f"trajectory {tm.trajectory:.3f} s, total {tm.total:.3f} s, write {doc['timings_s']['write']:.3f} s, "
+          f"wall {process_wall_s():.3f} s")
     print(f"  wrote {', '.join(files)}")
     return 0

@@ -68,7 +68,7 @@ from scipy.linalg import expm, solve_banded
 
 from ..errors import PlanError
 from .config import TrajectoryConfig
-from .sampling import Trajectory
+from .sampling import Trajectory, derivative_coefficients
 
 #: Taylor degree of the in-interval polynomials when Q != 0 (see module doc).
 TAYLOR_DEGREE_Q = 27
@@ -332,12 +332,7 @@ def solve_knots(times: np.ndarray, targets: np.ndarray, x0: np.ndarray,
         row = row @ H
     c = np.einsum("kj,mjd->mkd", rows, z[:-1]) * (h[:, None] ** np.arange(degree + 1))[:, :, None]
     c[:, 0] += shift
-    dt = np.diff(knot_times)
-    coeffs = np.zeros((M, degree + 1, 5, d))
-    for k in range(5):
-        # d^k/dt^k sum_j c_j s^j = dt^-k sum_j c_{j+k} (j+k)!/j! s^j
-        falling = np.array([math.perm(j + k, k) for j in range(degree + 1 - k)], dtype=float)
-        coeffs[:, : degree + 1 - k, k, :] = c[:, k:, :] * falling[None, :, None] / (dt**k)[:, None, None]
+    coeffs = derivative_coefficients(c, np.diff(knot_times))
 
     states = z[:, :4] / scale[None, :, None]
     states[:, 0] += shift

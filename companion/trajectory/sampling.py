@@ -8,6 +8,7 @@ a, jerk, snap). With Q = 0 these are the exact degree-7 optimal pieces.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +19,75 @@ from .pointing import pointing_derivatives
 #: Below this many samples per non-empty interval a gather is cheaper than
 #: the per-interval matrix products.
 _GATHER_MAX_SAMPLES = 4096
+
+
+def derivative_coefficients(position_coefficients: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
+    """Coefficients of p and its first four time derivatives from those of p.
+
+    Parameters
+    ----------
+    position_coefficients : (M, deg + 1, d) array
+        On piece m, p(s) = sum_j c[m, j] s^j with s = (t - t_m) / dt_m.
+    dt_s : (M,) array
+        Piece lengths dt_m [s].
+
+    Returns
+    -------
+    (M, deg + 1, 5, d) array
+        Entry [m, j, k] is the coefficient of s^j in d^k p / dt^k (k = 0..4),
+        d^k/dt^k sum_j c_j s^j = dt^-k sum_j c_{j+k} (j+k)!/j! s^j. The same
+        arithmetic as the solver's, so a trajectory rebuilt from its position
+        coefficients (plan.json) has bit-identical pieces.
+    """
+    c = np.asarray(position_coefficients, dtype=float)
+    dt = np.asarray(dt_s, dtype=float)
+    M, deg1, d = c.shape
+    coeffs = np.zeros((M, deg1, 5, d))
+    for k in range(5):
+        if k >= deg1:
+            break
+        falling = np.array([math.perm(j + k, k) for j in range(deg1 - k)], dtype=float)
+        coeffs[:, : deg1 - k, k, :] = c[:, k:, :] * falling[None, :, None] / (dt**k)[:, None, None]
+    return coeffs
+
+
+#: Two-point Hermite interpolation of degree 7 (``hermite_position_coefficients``):
+#: row k, column j - 4 is j!/(j-k)!, the factor of c_j in d^k p/ds^k at s = 1 (j = 4..7).
+_HERMITE_HIGH = np.array([[math.perm(j, k) for j in range(4, 8)] for k in range(4)], dtype=float)
+_HERMITE_LOW = np.array([[math.perm(j, k) for j in range(4)] for k in range(4)], dtype=float)
+_HERMITE_HIGH_INV = np.linalg.inv(_HERMITE_HIGH)
+_FACTORIALS = np.array([1.0, 1.0, 2.0, 6.0])
+
+
+def hermite_position_coefficients(knot_times_s: np.ndarray, knot_states: np.ndarray) -> np.ndarray:
+    """Degree-7 position coefficients of the pieces fixed by the states at their ends.
+
+    With Q = 0 the optimal position is a degree-7 polynomial on every knot
+    interval (lqr.py) and the state x = [p, v, a, jerk] is continuous, so the
+    knot states fix every piece: the one degree-7 polynomial with the given
+    p, v, a and jerk at both ends (two-point Hermite interpolation). In
+    s = (t - t_m) / dt_m: c_k = x_k(t_m) dt^k / k! for k <= 3, and c_4..c_7
+    solve sum_j c_j j!/(j-k)! = x_k(t_m+1) dt^k, k = 0..3.
+
+    Parameters
+    ----------
+    knot_times_s : (M + 1,) array
+    knot_states : (M + 1, 4, d) array
+        [p, v, a, jerk] at the knots (SI).
+
+    Returns
+    -------
+    (M, 8, d) array
+        As ``Trajectory.position_coefficients``; equal to the solver's up to
+        rounding (1e-11 m in position over a 10 ha field, BENCHMARKS.md).
+    """
+    knots = np.asarray(knot_times_s, dtype=float)
+    x = np.asarray(knot_states, dtype=float)
+    pw = np.diff(knots)[:, None] ** np.arange(4)                  # dt^k, (M, 4)
+    low = x[:-1] * (pw / _FACTORIALS)[:, :, None]                 # c_0..c_3
+    rhs = x[1:] * pw[:, :, None] - np.einsum("kj,mjd->mkd", _HERMITE_LOW, low)
+    high = np.einsum("jk,mkd->mjd", _HERMITE_HIGH_INV, rhs)      # c_4..c_7
+    return np.concatenate([low, high], axis=1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,6 +151,50 @@ class Trajectory:
     coefficients: np.ndarray
     config: TrajectoryConfig
     target_enu_m: np.ndarray | None = None
+
+    @classmethod
+    def from_pieces(cls, knot_times_s: np.ndarray, position_coefficients: np.ndarray,
+                    waypoint_knots: np.ndarray, waypoint_targets: np.ndarray, config: TrajectoryConfig,
+                    target_enu_m: np.ndarray | None = None,
+                    knot_states: np.ndarray | None = None) -> "Trajectory":
+        """The trajectory from its pieces as stored in plan.json (docs/plan-json.md).
+
+        Parameters
+        ----------
+        knot_times_s : (M + 1,) array
+            Knot times [s], strictly increasing.
+        position_coefficients : (M, deg + 1, 3) array
+            ``coefficients[:, :, 0, :]`` of the solved trajectory (ENU m).
+        waypoint_knots, waypoint_targets, config, target_enu_m
+            As the attributes.
+        knot_states : (M + 1, 4, 3) array, optional
+            Default: the pieces evaluated at the knots (the solver's own knot
+            states differ from them in the last bits only).
+
+        Returns
+        -------
+        Trajectory
+            Pieces bit-identical to those of the trajectory the coefficients
+            came from (``derivative_coefficients``).
+        """
+        knots = np.asarray(knot_times_s, dtype=float)
+        coeffs = derivative_coefficients(position_coefficients, np.diff(knots))
+        if knot_states is not None:
+            states = np.asarray(knot_states, dtype=float)
+        else:
+            states = np.empty((knots.shape[0], 4, coeffs.shape[3]))
+            states[:-1] = coeffs[:, 0, :4, :]                # s = 0: the constant terms
+            states[-1] = coeffs[-1, :, :4, :].sum(axis=0)    # s = 1 on the last piece
+        return cls(knot_times_s=knots, knot_states=states,
+                   waypoint_knots=np.asarray(waypoint_knots, dtype=np.intp),
+                   waypoint_targets=np.asarray(waypoint_targets, dtype=float),
+                   coefficients=coeffs, config=config,
+                   target_enu_m=None if target_enu_m is None else np.asarray(target_enu_m, dtype=float).reshape(3))
+
+    @property
+    def position_coefficients(self) -> np.ndarray:
+        """(M, deg + 1, 3) coefficients of p on each piece (what plan.json stores)."""
+        return self.coefficients[:, :, 0, :]
 
     @property
     def t0(self) -> float:
