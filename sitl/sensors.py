@@ -66,6 +66,7 @@ from companion import frames
 from companion.mission.sim import SENSOR_ROTATION_CUSTOM, RangefinderConfig, SimConfig
 
 from .gnss import GnssReceiver
+from .fov import Pyramid, nearest_in_view
 from .profiles import SensorModel, resolve_sensor_model
 from .world import World
 
@@ -188,10 +189,21 @@ class Rangefinder:
         self.next_due_us = int(first_due_us)
         self.hfov_rad = math.radians(cfg.hfov_deg)
         self.vfov_rad = math.radians(cfg.vfov_deg)
+        self._tan_h = math.tan(0.5 * self.hfov_rad)
+        self._tan_v = math.tan(0.5 * self.vfov_rad)
+        self._wide = self._tan_h > 0.0 or self._tan_v > 0.0
 
     def true_distance(self, world: World, p, R) -> float:
-        """Minimum ray distance (m, inf if none within max) from the sensor
-        mounted on a body at p (3-tuple, ENU) with R (row-major 9-tuple, body FLU -> ENU)."""
+        """Distance (m, inf if none within max) from the sensor mounted on a
+        body at p (3-tuple, ENU) with R (row-major 9-tuple, body FLU -> ENU)
+        to the nearest surface in its field of view.
+
+        The fan of rays (``fan_directions_flu``) samples everything (terrain,
+        rows, obstacles); obstacles and flat ground are then solved exactly
+        over the whole field of view (``sitl.fov``), and the ray toward the
+        nearest obstacle point is cast through the whole world once more, so
+        that a row or the ground in front of it is not seen through.
+        """
         ox, oy, oz = p
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
         if self._offset:
@@ -209,7 +221,54 @@ class Rangefinder:
             if t < best:
                 best = t
                 lim = t
+        if not self._wide:
+            return best
+        return self._in_view(world, (ox, oy, oz), R, best)
+
+    def _in_view(self, world: World, o, R, best: float) -> float:
+        m = self.mount_rotation_flu
+        M = tuple(R[3 * i] * m[j] + R[3 * i + 1] * m[3 + j] + R[3 * i + 2] * m[6 + j]
+                  for i in range(3) for j in range(3))
+        fov = Pyramid(o, M, self._tan_h, self._tan_v, self.cfg.max_m)
+        if world.terrain.flat:
+            t = fov.ground_distance(world.terrain.z)
+            if t < best:
+                best = t
+        ox, oy, oz = o
+        edges = None
+        for ob in world.obstacles:
+            # broad phase: the bounding sphere must reach into the field of view within range
+            cx, cy, cz = ob.x - ox, ob.y - oy, ob.zc - oz
+            if math.sqrt(cx * cx + cy * cy + cz * cz) - ob.bound_r >= min(best, self.cfg.max_m):
+                continue
+            if fov.distance_to(ob.x, ob.y, ob.zc) > ob.bound_r:
+                continue
+            # ... and no vertical plane through the sensor, tangent to the solid, may separate them
+            span = ob.azimuth_span(ox, oy)
+            if span is not None:
+                if edges is None:
+                    edges = fov.edges()
+                if _separated(edges, span[0], span[1]):
+                    continue
+            t, u = nearest_in_view(fov, ob.project, ob.raycast, best)
+            if t < best:
+                if u is not None:     # a row or the ground in front of it hides it
+                    t = min(t, world.raycast(ox, oy, oz, u[0], u[1], u[2], t))
+                best = t
         return best
+
+
+def _separated(edges, az: float, half: float) -> bool:
+    """True if every edge direction of the field of view (ENU unit vectors)
+    lies strictly beyond one of the two vertical planes at azimuths
+    ``az +- half`` that enclose a solid: then the solid is out of view."""
+    for side in (1.0, -1.0):
+        a = az + side * half
+        # normal of the plane, pointing away from the solid
+        nx, ny = -side * math.sin(a), side * math.cos(a)
+        if all(nx * e[0] + ny * e[1] > 1e-12 for e in edges):
+            return True
+    return False
 
 
 class SensorSuite:

@@ -248,6 +248,52 @@ class Obstacle:
         self.hx, self.hy = 0.5 * float(cfg.size_x), 0.5 * float(cfg.size_y)
         yaw = math.radians(cfg.yaw_deg)
         self.cy, self.sy = math.cos(yaw), math.sin(yaw)
+        # bounding sphere (the field-of-view test's broad phase)
+        self.zc = 0.5 * (self.base + self.top)
+        hz = 0.5 * (self.top - self.base)
+        self.bound_r = math.hypot(self.r, hz) if self.kind == "cylinder" else math.sqrt(
+            self.hx * self.hx + self.hy * self.hy + hz * hz)
+
+    def azimuth_span(self, ox, oy):
+        """(azimuth of the centre, half-width) (rad) of the footprint seen from
+        (ox, oy), ENU; None when (ox, oy) is over the footprint. The solid lies
+        between the two vertical planes through (ox, oy) at those azimuths."""
+        ex, ey = self.x - ox, self.y - oy
+        rho = math.hypot(ex, ey)
+        az = math.atan2(ey, ex)
+        if self.kind == "cylinder":
+            if rho <= self.r:
+                return None
+            return az, math.asin(self.r / rho)
+        c, s = self.cy, self.sy
+        lx, ly = -(c * ex + s * ey), -(-s * ex + c * ey)      # the point in the box frame
+        if abs(lx) <= self.hx and abs(ly) <= self.hy:
+            return None
+        half = 0.0
+        for sx in (-1.0, 1.0):
+            for sy in (-1.0, 1.0):
+                cx, cy = sx * self.hx, sy * self.hy
+                wx, wy = ex + c * cx - s * cy, ey + s * cx + c * cy
+                d = abs(math.atan2(wx * ey - wy * ex, wx * ex + wy * ey))   # angle from the centre's azimuth
+                if d > half:
+                    half = d
+        return az, half
+
+    def project(self, px, py, pz):
+        """Euclidean projection (ENU) of a point onto the solid (itself inside)."""
+        z = self.base if pz < self.base else (self.top if pz > self.top else pz)
+        ex, ey = px - self.x, py - self.y
+        if self.kind == "cylinder":
+            rho = math.sqrt(ex * ex + ey * ey)
+            if rho > self.r:
+                k = self.r / rho
+                ex, ey = ex * k, ey * k
+            return self.x + ex, self.y + ey, z
+        c, s = self.cy, self.sy
+        lx, ly = c * ex + s * ey, -s * ex + c * ey
+        lx = -self.hx if lx < -self.hx else (self.hx if lx > self.hx else lx)
+        ly = -self.hy if ly < -self.hy else (self.hy if ly > self.hy else ly)
+        return self.x + c * lx - s * ly, self.y + s * lx + c * ly, z
 
     def raycast(self, ox, oy, oz, dx, dy, dz, max_m) -> float:
         if self.kind == "cylinder":
