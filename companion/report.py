@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 #: report.json format written here ("MAJOR.MINOR", docs/README.md "Versions").
-REPORT_FORMAT_VERSION = "3.0"
+REPORT_FORMAT_VERSION = "3.1"
 
 
 @dataclass(frozen=True)
@@ -167,6 +167,9 @@ class FlightReport:
     report_fallback : dict or None
         ``{path, wanted, reason}`` when this report was written to ``path``
         because ``wanted`` could not be written.
+    sensor_coverage : dict or None
+        The pre-flight sensor coverage check (``--sensor-gap``): ``{mode,
+        checked, gaps, time_scale}`` (docs/report-json.md).
     """
 
     completed: bool
@@ -197,6 +200,7 @@ class FlightReport:
     control_mode_changes: tuple = ()
     faults: tuple = ()
     report_fallback: dict | None = None
+    sensor_coverage: dict | None = None
 
     def __post_init__(self) -> None:
         # Unset: the flight ended where it stopped, flown as configured.

@@ -173,7 +173,7 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
                          {"mute_streams": UNUSED_STREAMS + (() if mission.replan.enabled else (ATTITUDE,)),
                           **(overrides or {})},
                          signing_key=signing_key, report_path=str(out / "report.json"),
-                         option_names=("--out", "--out"))
+                         option_names=("--out", "--out"), sensor_gap=args.sensor_gap)
     finally:
         sitl.stop()
     written = write_report_or_fallback(result.report, out / "report.json")

@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -229,6 +230,10 @@ def add_safety_arguments(parser) -> None:
     parser.add_argument("--attach", choices=("refuse", "resume", "land"), default="refuse",
                         help="a vehicle already flying at connection: refuse, resume the trajectory from "
                              "the nearest way-point, or land it (default %(default)s)")
+    parser.add_argument("--sensor-gap", choices=("refuse", "slow"), default="refuse",
+                        help="where the rangefinders do not see the direction of travel far enough to stop "
+                             "(docs/replan.md#sensor-coverage): refuse the flight, or fly the whole plan slower "
+                             "(a direction no rangefinder sees is refused either way; default %(default)s)")
 
 
 def safety_overrides(args) -> dict:
@@ -303,6 +308,62 @@ class FlightPlan:
         # the cut's legs as its coverage segments.
         return FlightPlan(traj, p, self.target_enu_m, self.coverage_fraction, t, v, a, self.path_xy_m, corner,
                           source=f"{self.source} --cut {cut_s:g}".strip())
+
+
+def slowed_flight_plan(fp: FlightPlan, k: float) -> FlightPlan:
+    """``fp`` flown k >= 1 times slower: t -> t0 + k (t - t0), so speeds are
+    divided by k and accelerations by k^2 (the pieces' polynomials are in the
+    normalised time of each piece: only the knot times change)."""
+    import numpy as np
+
+    from ..trajectory import Trajectory
+
+    tr = fp.trajectory
+    t0 = float(tr.t0)
+    scale = np.array([1.0, 1.0 / k, 1.0 / (k * k)])[None, :, None]
+    traj = Trajectory.from_pieces(t0 + k * (tr.knot_times_s - t0), tr.position_coefficients, tr.waypoint_knots,
+                                  tr.waypoint_targets * scale, tr.config, tr.target_enu_m)
+    wt = None if fp.waypoints_t_s is None else t0 + k * (fp.waypoints_t_s - t0)
+    wv = None if fp.waypoints_v_enu_m_s is None else fp.waypoints_v_enu_m_s / k
+    wa = None if fp.waypoints_a_enu_m_s2 is None else fp.waypoints_a_enu_m_s2 / (k * k)
+    return dataclasses.replace(fp, trajectory=traj, waypoints_t_s=wt, waypoints_v_enu_m_s=wv,
+                               waypoints_a_enu_m_s2=wa)
+
+
+def sensor_coverage_gate(mission, fp: FlightPlan, mode: str) -> tuple[FlightPlan, dict]:
+    """The pre-flight sensor coverage check (``companion.replan.coverage_check``).
+
+    Returns the plan to fly (``fp``, or with ``mode`` "slow" and short gaps
+    only, ``fp`` slowed uniformly so that none is left) and report.json's
+    ``sensor_coverage``. Raises ``PlanError`` naming the first gap when
+    ``mode`` is "refuse", or when a gap is blind. Without the replanner
+    (``replan.enabled: false``) nothing reads the rangefinders: not checked.
+    """
+    from ..errors import PlanError
+    from ..replan.coverage_check import mission_coverage
+    from ..replan.replanner import mission_replan_config
+
+    if not mission.replan.enabled:
+        return fp, {"mode": mode, "checked": False, "gaps": [], "time_scale": 1.0}
+    radius = float(mission_replan_config(mission).body_radius_m)
+    cov = mission_coverage(mission, fp.trajectory, radius)
+    doc = {"mode": mode, "checked": True, "gaps": [g.to_dict() for g in cov.gaps], "time_scale": 1.0}
+    if not cov.gaps:
+        return fp, doc
+    more = f" (and {len(cov.gaps) - 1} more)" if len(cov.gaps) > 1 else ""
+    source = fp.source or str(mission.source)
+    if mode == "refuse" or cov.blind:
+        first = next(g for g in cov.gaps if g.kind == "blind") if cov.blind else cov.gaps[0]
+        hint = ("; no speed makes it safe" if first.kind == "blind" else "; --sensor-gap slow flies it slower")
+        raise PlanError(source, f"{first.describe()}{more}{hint}")
+    k = float(cov.time_scale)
+    slow = slowed_flight_plan(fp, k)
+    again = mission_coverage(mission, slow.trajectory, radius)
+    if again.gaps:   # sampling between the samples of the first check
+        k *= again.time_scale
+        slow = slowed_flight_plan(fp, k)
+    doc["time_scale"] = k
+    return slow, doc
 
 
 def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config,
@@ -535,7 +596,7 @@ def obstacle_clearance_fn(mission, dem):
 def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_path: str | None,
             progress=None, cut_s: float | None = None, runner_overrides: dict | None = None,
             plan_path: str | None = None, signing_key: bytes | None = None, conn=None,
-            report_path: str | None = None, option_names=("--tlog", "--report")):
+            report_path: str | None = None, option_names=("--tlog", "--report"), sensor_gap: str = "refuse"):
     """Open the link (unless ``conn``, from ``open_link``, is given), fly, close.
     Returns ``companion.runner.FlightResult``.
 
@@ -556,6 +617,7 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
             flight_plan = flight_plan.cut(cut_s, mission.trajectory)
         maps = load_mission_maps(mission)
         check_flight_plan(flight_plan.source or str(plan_path or mission.source), flight_plan, mission, *maps)
+        flight_plan, coverage_doc = sensor_coverage_gate(mission, flight_plan, sensor_gap)
         traj = flight_plan.trajectory
         outputs = []
         if tlog_path:
@@ -583,7 +645,9 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
                 tlog.open()
             except OSError as exc:
                 raise InputError(str(tlog_path), f"cannot write: {exc.strerror or exc}") from None
-        return MissionRunner(conn, core, progress).run()
+        result = MissionRunner(conn, core, progress).run()
+        result.report = dataclasses.replace(result.report, sensor_coverage=coverage_doc)
+        return result
     finally:
         conn.close()
         if tlog is not None:
@@ -616,7 +680,7 @@ def run(args) -> int:
         raise
     progress = Progress(enabled=not args.quiet)
     result = execute(mission, fp, args.connect, args.control, args.tlog, progress, args.cut, overrides,
-                     args.plan, conn=conn, report_path=args.report)
+                     args.plan, conn=conn, report_path=args.report, sensor_gap=args.sensor_gap)
     return finish_report(result.report, args.report, "companion fly")
 
 

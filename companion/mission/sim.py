@@ -204,14 +204,26 @@ class RangefinderConfig:
             raise ValueError("rangefinder quaternion_flu_wxyz must not be zero")
 
 
+#: The default suite (a mission that lists no ``sim.rangefinders``): a closed
+#: ring of ``DEFAULT_RING_BEAMS`` horizontal beams, ``DEFAULT_RING_HFOV_DEG``
+#: wide (the ring overlaps by 1.5 deg) and ``DEFAULT_RING_VFOV_DEG`` tall, plus
+#: one looking down. The pointing law turns body y toward the pointing target,
+#: so the direction of travel can lie anywhere round the body; a ring sees it
+#: whatever the heading, and +-10 deg vertically covers climbs along slopes up
+#: to 10 deg (``companion.replan.coverage_check``, docs/replan.md).
+DEFAULT_RING_BEAMS = 16
+DEFAULT_RING_HFOV_DEG = 24.0
+DEFAULT_RING_VFOV_DEG = 20.0
+
+
 def default_rangefinders() -> tuple[RangefinderConfig, ...]:
-    """Forward, left, right and down, as used when the mission lists none."""
-    return (
-        RangefinderConfig(id=0, orientation=0),
-        RangefinderConfig(id=1, orientation=6),
-        RangefinderConfig(id=2, orientation=2),
-        RangefinderConfig(id=3, orientation=25, max_m=20.0),
-    )
+    """The default suite: ids 0..15 the ring (id k looks 22.5 k deg left of
+    forward, ``MAV_SENSOR_ROTATION_CUSTOM``), id 16 down; 10 m (down: 20 m)."""
+    step = 360.0 / DEFAULT_RING_BEAMS
+    ring = tuple(RangefinderConfig(id=k, orientation=SENSOR_ROTATION_CUSTOM, rotation_flu_deg=(0.0, 0.0, step * k),
+                                   hfov_deg=DEFAULT_RING_HFOV_DEG, vfov_deg=DEFAULT_RING_VFOV_DEG, rate_hz=20.0)
+                 for k in range(DEFAULT_RING_BEAMS))
+    return ring + (RangefinderConfig(id=DEFAULT_RING_BEAMS, orientation=25, max_m=20.0),)
 
 
 @dataclass(frozen=True)
