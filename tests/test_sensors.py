@@ -114,11 +114,13 @@ def test_rangefinders_against_hand_placed_geometry():
     from companion.maps.grid import OccupancyGrid
     grid = OccupancyGrid(occ, ~occ, 0.1)
     cyl = ObstacleConfig("cylinder", x=10.0, y=3.75, height=3.0, radius=0.3)
-    mission = _mission(obstacles=(cyl,), noise=QUIET)
+    # 0 forward, 1 left, 2 right, 3 down (5 deg beams)
+    suite = (RangefinderConfig(id=0, orientation=0), RangefinderConfig(id=1, orientation=6),
+             RangefinderConfig(id=2, orientation=2), RangefinderConfig(id=3, orientation=25, max_m=20.0))
+    mission = _mission(obstacles=(cyl,), noise=QUIET, rangefinders=suite)
     world = World.build(grid, None, mission.sim.obstacles, mission.sim.canopy_height_m)
     sim = Simulation(mission, np.random.default_rng(1), world=world, start_enu_m=(2.0, 3.75, 1.5))
     got = _ranges_at(sim, (4.0, 3.75, 1.5), frames=250)
-    # defaults: 0 forward, 1 left, 2 right, 3 down
     assert got[0][0] == pytest.approx(6.0 - 0.3, abs=1e-9)      # cylinder ahead
     assert got[1][0] == pytest.approx(6.0 - 3.75, abs=1e-9)     # row face on the left
     assert got[2][0] is None                                    # nothing on the right within 10 m
@@ -126,6 +128,20 @@ def test_rangefinders_against_hand_placed_geometry():
     # each sensor at its rate: 25 Hz over 1 s (+1 for the phase of its first reading)
     assert all(len(v) in (25, 26) for v in got.values())
     assert all(len(set(v)) == 1 for v in got.values())          # noise off: identical readings
+
+
+def test_default_suite_is_a_closed_horizontal_ring_and_a_down_beam():
+    # every horizontal direction lies inside some ring beam: 16 beams 22.5 deg
+    # apart, each 24 deg wide; with the companion's own reading of the mounting
+    suite = SimConfig().rangefinders_or_default
+    ring = [orientation_direction_flu(25)]
+    dirs = [fan_directions_flu(c)[0] for c in suite[:-1]]
+    for az in np.radians(np.arange(0.0, 360.0, 0.5)):
+        off = min(abs(math.degrees(math.atan2(math.sin(az - math.atan2(d[1], d[0])),
+                                               math.cos(az - math.atan2(d[1], d[0]))))) for d in dirs)
+        assert off <= 12.0
+    assert all(abs(d[2]) < 1e-12 for d in dirs)
+    assert fan_directions_flu(suite[-1])[0] == ring[0]
 
 
 def test_rangefinder_below_min_clamps_and_noise_is_seeded():
