@@ -233,8 +233,12 @@ NOTES: dict[str, tuple[str, str, str]] = {
                           "estimator's output from the noisy sensors, or the true state (labelled so)."),
     "sim.seed": ("", ">= 0", "Seed of the SITL's noise and wind "
                  "(`--seed` overrides it)."),
-    "sim.rangefinders": ("", "", "Body-fixed rangefinders (one DISTANCE_SENSOR id each); null: forward, "
-                         "left, right and down; []: none."),
+    "sim.rangefinders": ("", "", "Body-fixed rangefinders (one DISTANCE_SENSOR id each); null: the default "
+                         "suite, a closed horizontal ring of 16 beams (ids 0-15, id k looking 22.5 k deg left of "
+                         "forward, orientation 100, 24 deg wide, 20 deg tall, 10 m, 20 Hz) and one looking down "
+                         "(id 16, orientation 25, 5 deg, 20 m, 25 Hz), so that the direction of travel is seen "
+                         "whatever heading the pointing law gives ([replan.md](replan.md#sensor-coverage)); "
+                         "[]: none."),
     "sim.rangefinders[].id": ("", "[0, 255]", "DISTANCE_SENSOR id, unique."),
     "sim.rangefinders[].orientation": ("", "0-7, 24, 25 or 100", "MAV_SENSOR_ORIENTATION: 0 forward, 2 right, "
                                        "4 back, 6 left (rotations about FRD axes, as PX4), odd values the "

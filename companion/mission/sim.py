@@ -287,7 +287,7 @@ class CollisionConfig:
 class SimConfig:
     """Simulation-only settings of a mission.
 
-    ``rangefinders`` None: the default set (forward, left, right, down);
+    ``rangefinders`` None: the default suite (``default_rangefinders``: a closed ring of 16 and one down);
     an empty list: none. ``canopy_height_m``: the OGM's occupied cells are
     extruded from the DEM to this height for the rangefinders.
     ``magnetic_field_enu_gauss``: Earth field (default about Bordeaux's).
