@@ -26,7 +26,11 @@ Modes (``ReplanStep.mode``)
               toward any remembered point d away satisfies v^2 / (2 a_b) +
               v ``GOVERNOR_LAG_S`` <= d - clearance - ``GOVERNOR_MARGIN_M``,
               a_b = ``accel_m_s2`` / 2, so the shaped reference can always
-              brake before the clearance.
+              brake before the clearance;
+            - no data, no go (PX4's CP_GO_NO_DATA = 0, ``nodata``): with the
+              governor on, a horizontal direction that no rangefinder has
+              reported on within ``nodata.NO_DATA_TIMEOUT_S`` is blocked;
+              the command keeps only its vertical part.
 ``climb``   the vertical escape (Fig. 19: "the obstacle avoidance was
             performed vertically"), the same APF with virtual goals. When no
             lateral gap of the corridor lets the vehicle pass an obstacle
@@ -89,6 +93,7 @@ from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
 from .globalplan import GlobalPlan
 from .knownmap import UNKNOWN, KnownMap
+from .nodata import BeamFreshness, block_no_data
 from .memory import ObstacleMemory
 from .perception import PoseHistory, beam_evidence
 from .rejoin import rejoin
@@ -418,6 +423,7 @@ class Replanner:
         self._keep_m = cfg.clearance_m + (cfg.body_radius_m or 0.0)
         self.memory = ObstacleMemory(cfg.voxel_m, cfg.memory_s, cfg.memory_radius_m, CLEAR_MARGIN_M)
         self.poses = PoseHistory()
+        self.fresh = BeamFreshness()
         self.shaper = ReferenceShaper(cfg.accel_m_s2, cfg.jerk_m_s3)
         self._brake = 0.5 * cfg.accel_m_s2
         self._target = None if plan.target_enu_m is None else tuple(float(x) for x in plan.target_enu_m)
@@ -481,6 +487,7 @@ class Replanner:
         if ev is None:
             self.n_ignored += 1
             return
+        self.fresh.on_evidence(t_s, reading.sensor_id, reading.R_flu_sensor, reading.hfov_rad, reading.vfov_rad)
         mem = self.memory
         if len(mem):
             mem.clear_beam(ev)
@@ -712,6 +719,11 @@ class Replanner:
             v = self._govern(P, v, obs, obs_dist, scale_only=True)
             if v[2] < 0.0 and self._over_points(P, v, obs):
                 v[2] = 0.0
+        t_s = getattr(self, "_t_s", None)      # None: called outside ``step``
+        if self.cfg.clearance_governor and t_s is not None:
+            pose = self.poses.at(t_s)
+            if pose is not None:
+                return block_no_data(v, self.fresh.has_data(t_s, pose.R, v))
         return v.tolist()
 
     def _over_points(self, P, v, obs) -> bool:
