@@ -226,11 +226,14 @@ class Rangefinder:
         return self._in_view(world, (ox, oy, oz), R, best)
 
     def _in_view(self, world: World, o, R, best: float) -> float:
-        m = self.mount_rotation_flu
-        M = tuple(R[3 * i] * m[j] + R[3 * i + 1] * m[3 + j] + R[3 * i + 2] * m[6 + j]
-                  for i in range(3) for j in range(3))
+        m0, m1, m2, m3, m4, m5, m6, m7, m8 = self.mount_rotation_flu
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
+        M = (r0 * m0 + r1 * m3 + r2 * m6, r0 * m1 + r1 * m4 + r2 * m7, r0 * m2 + r1 * m5 + r2 * m8,
+             r3 * m0 + r4 * m3 + r5 * m6, r3 * m1 + r4 * m4 + r5 * m7, r3 * m2 + r4 * m5 + r5 * m8,
+             r6 * m0 + r7 * m3 + r8 * m6, r6 * m1 + r7 * m4 + r8 * m7, r6 * m2 + r7 * m5 + r8 * m8)
         fov = Pyramid(o, M, self._tan_h, self._tan_v, self.cfg.max_m)
-        if world.terrain.flat:
+        # flat ground: nothing of it is nearer than the sensor's height above it
+        if world.terrain.flat and o[2] - world.terrain.z < min(best, self.cfg.max_m):
             t = fov.ground_distance(world.terrain.z)
             if t < best:
                 best = t
