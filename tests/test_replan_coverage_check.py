@@ -160,6 +160,9 @@ def test_gate_refuses_naming_the_gap_and_slow_flies_short_gaps_slower(tmp_path, 
     assert np.linalg.norm(tr1.sample(t1).v, axis=1).max() <= v_ok + 1e-9
     again, doc2 = sensor_coverage_gate(m, slow, "refuse")      # the slowed plan passes
     assert doc2["gaps"] == [] and again is slow
+    from companion.commands.fly import slowed_mission      # and avoidance is no faster than the flight
+    assert slowed_mission(m, k).replan.speed_m_s == pytest.approx(m.flight.speed_m_s / k)
+    assert slowed_mission(m, 1.0) is m
 
 
 @pytest.mark.slow

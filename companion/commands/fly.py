@@ -335,7 +335,8 @@ def sensor_coverage_gate(mission, fp: FlightPlan, mode: str) -> tuple[FlightPlan
 
     Returns the plan to fly (``fp``, or with ``mode`` "slow" and short gaps
     only, ``fp`` slowed uniformly so that none is left) and report.json's
-    ``sensor_coverage``. Raises ``PlanError`` naming the first gap when
+    ``sensor_coverage`` (``slowed_mission`` applies its ``time_scale`` to the
+    replanner's own speed limit). Raises ``PlanError`` naming the first gap when
     ``mode`` is "refuse", or when a gap is blind. Without the replanner
     (``replan.enabled: false``) nothing reads the rangefinders: not checked.
     """
@@ -364,6 +365,17 @@ def sensor_coverage_gate(mission, fp: FlightPlan, mode: str) -> tuple[FlightPlan
         slow = slowed_flight_plan(fp, k)
     doc["time_scale"] = k
     return slow, doc
+
+
+def slowed_mission(mission, time_scale: float):
+    """``mission`` with the avoidance speed limit (``replan.speed_m_s``, else
+    ``flight.speed_m_s``) divided by ``time_scale`` (itself when 1): a
+    trajectory slowed for its sensors is not avoided faster than it is flown."""
+    if time_scale <= 1.0:
+        return mission
+    rp = mission.replan
+    speed = rp.speed_m_s if rp.speed_m_s is not None else mission.flight.speed_m_s
+    return dataclasses.replace(mission, replan=dataclasses.replace(rp, speed_m_s=float(speed) / time_scale))
 
 
 def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config,
@@ -618,6 +630,7 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
         maps = load_mission_maps(mission)
         check_flight_plan(flight_plan.source or str(plan_path or mission.source), flight_plan, mission, *maps)
         flight_plan, coverage_doc = sensor_coverage_gate(mission, flight_plan, sensor_gap)
+        mission = slowed_mission(mission, coverage_doc["time_scale"])
         traj = flight_plan.trajectory
         outputs = []
         if tlog_path:
