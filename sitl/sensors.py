@@ -43,9 +43,12 @@ both modes
   the no-profile default draws exactly as before profiles existed;
 - position / velocity: ``sitl.gnss.GnssReceiver`` (white noise, rate and
   latency; exact and every frame by default, the paper's mocap-like case);
-- rangefinders: the minimum distance over a fan of rays (centre and the four
-  edge midpoints of the field of view) cast into ``World`` from the sensor's
-  mounting position (``position_flu_m``, body FLU), plus white noise
+- rangefinders: the distance to the nearest surface inside the field of
+  view (the pyramid of ``hfov_deg`` x ``vfov_deg`` about the beam), from the
+  sensor's mounting position (``position_flu_m``, body FLU): obstacles and
+  flat ground exactly over the whole field (``sitl.fov``), rows and uneven
+  ground with a fan of rays (centre and the four edge midpoints of the
+  field of view) cast into ``World``; plus white noise
   ``range_std_m``; ``None`` when nothing is within ``max_m``, clamped up to
   ``min_m`` below it. The mounting rotation (sensor frame: beam along x,
   horizontal field of view across y, vertical across z -> body FLU) comes

@@ -17,7 +17,9 @@ first surface, ``math.inf`` if none within ``max_m``:
   walks cell by cell (Amanatides-Woo) near the rows; an occupied cell is a
   box from the DEM (at the cell centre) up to ``canopy_height_m``;
 - obstacles: analytic ray/cylinder (with caps) and ray/box (slab) tests,
-  standing on the terrain under their centre.
+  standing on the terrain under their centre; ``Obstacle.project`` (the
+  nearest point of the solid) and ``Obstacle.azimuth_span`` serve the exact
+  field-of-view pass of ``sitl.fov``.
 
 ``World.geometry`` is the same scene for distance queries
 (``companion.geometry.SceneGeometry``): the collision check of
