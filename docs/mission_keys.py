@@ -235,7 +235,7 @@ NOTES: dict[str, tuple[str, str, str]] = {
                  "(`--seed` overrides it)."),
     "sim.rangefinders": ("", "", "Body-fixed rangefinders (one DISTANCE_SENSOR id each); null: the default "
                          "suite, a closed horizontal ring of 16 beams (ids 0-15, id k looking 22.5 k deg left of "
-                         "forward, orientation 100, 24 deg wide, 20 deg tall, 10 m, 20 Hz) and one looking down "
+                         "forward, orientation 100, 24 deg wide, 10 deg tall, 6 m, 20 Hz) and one looking down "
                          "(id 16, orientation 25, 5 deg, 20 m, 25 Hz), so that the direction of travel is seen "
                          "whatever heading the pointing law gives ([replan.md](replan.md#sensor-coverage)); "
                          "[]: none."),

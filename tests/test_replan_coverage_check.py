@@ -142,7 +142,7 @@ def test_gate_refuses_naming_the_gap_and_slow_flies_short_gaps_slower(tmp_path, 
             sensor_coverage_gate(m, flat_plan, mode)
     # the default ring, 1.5 m range: v^2/2 + 0.15 v = 1.5 - 0.942 allows 0.917 m/s; the plan flies 1.04
     short = [{"id": k, "orientation": 100, "rotation_flu_deg": [0.0, 0.0, 22.5 * k], "hfov_deg": 24.0,
-              "vfov_deg": 20.0, "rate_hz": 20.0, "max_m": 1.5} for k in range(16)]
+              "vfov_deg": 10.0, "rate_hz": 20.0, "max_m": 1.5} for k in range(16)]
     m = load_mission(_mission_dir(tmp_path, short))
     with pytest.raises(PlanError, match="allow 0.92 m/s"):
         sensor_coverage_gate(m, flat_plan, "refuse")

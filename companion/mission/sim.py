@@ -209,19 +209,27 @@ class RangefinderConfig:
 #: wide (the ring overlaps by 1.5 deg) and ``DEFAULT_RING_VFOV_DEG`` tall, plus
 #: one looking down. The pointing law turns body y toward the pointing target,
 #: so the direction of travel can lie anywhere round the body; a ring sees it
-#: whatever the heading, and +-10 deg vertically covers climbs along slopes up
-#: to 10 deg (``companion.replan.coverage_check``, docs/replan.md).
+#: whatever the heading (``companion.replan.coverage_check``, docs/replan.md).
+#: +-5 deg vertically and 6 m of range: from 1.5 m over flat ground the lower
+#: edge meets it beyond the range even with the vehicle pitched 8 deg, and a
+#: beam whose edge runs nearly along a corridor sees the row face only where
+#: it is at least asin(1 / 6) = 10 deg off it (nearer grazing returns, placed
+#: with a slightly stale attitude over a lossy link, read as phantom obstacles
+#: in the companion); 6 m still covers stopping from the 3 m/s transit speed
+#: (``coverage_check``: 3.03 m/s allowed).
 DEFAULT_RING_BEAMS = 16
 DEFAULT_RING_HFOV_DEG = 24.0
-DEFAULT_RING_VFOV_DEG = 20.0
+DEFAULT_RING_VFOV_DEG = 10.0
+DEFAULT_RING_MAX_M = 6.0
 
 
 def default_rangefinders() -> tuple[RangefinderConfig, ...]:
     """The default suite: ids 0..15 the ring (id k looks 22.5 k deg left of
-    forward, ``MAV_SENSOR_ROTATION_CUSTOM``), id 16 down; 10 m (down: 20 m)."""
+    forward, ``MAV_SENSOR_ROTATION_CUSTOM``), id 16 down (20 m)."""
     step = 360.0 / DEFAULT_RING_BEAMS
     ring = tuple(RangefinderConfig(id=k, orientation=SENSOR_ROTATION_CUSTOM, rotation_flu_deg=(0.0, 0.0, step * k),
-                                   hfov_deg=DEFAULT_RING_HFOV_DEG, vfov_deg=DEFAULT_RING_VFOV_DEG, rate_hz=20.0)
+                                   hfov_deg=DEFAULT_RING_HFOV_DEG, vfov_deg=DEFAULT_RING_VFOV_DEG, rate_hz=20.0,
+                                   max_m=DEFAULT_RING_MAX_M)
                  for k in range(DEFAULT_RING_BEAMS))
     return ring + (RangefinderConfig(id=DEFAULT_RING_BEAMS, orientation=25, max_m=20.0),)
 

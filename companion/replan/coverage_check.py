@@ -9,7 +9,10 @@ Pure (arrays in, a named result out). Along the trajectory, sampled at
   that acceleration adds (atan(a / g): 3 deg at 0.5 m/s^2) are left out:
   obstacles stand on the ground, and a beam tilted by that much still
   crosses them within its range;
-- the direction of travel is d = R^T v / |v| (body FLU);
+- the direction of travel is horizontal, as in PX4's collision prevention:
+  d = R^T v_h / |v_h| (body FLU, v_h the horizontal part of v; climbs and
+  descents along a slope do not take it out of a level beam); the stopping
+  distance takes the whole speed |v|;
 - a beam (one rangefinder: mounting rotation sensor -> FLU, full fields of
   view h and v, ``max_m``, reading period) sees d when, in the sensor frame
   (beam along x), ``d_x > 0``, ``|d_y| <= tan(h/2) d_x`` and
@@ -30,8 +33,8 @@ Pure (arrays in, a named result out). Along the trajectory, sampled at
   blocked, as CP_GO_NO_DATA = 0).
 
 A sample is covered when its planned speed is at most the allowed speed;
-speeds below ``MIN_SPEED_M_S`` (hovering, turning on the spot) are not
-checked. Consecutive uncovered samples form a gap: "blind" when no beam sees
+horizontal speeds below ``MIN_SPEED_M_S`` (hovering, turning on the spot,
+climbing or descending on the spot) are not checked. Consecutive uncovered samples form a gap: "blind" when no beam sees
 the direction at some sample of it, "short" when beams see it but not far
 enough for the planned speed. ``time_scale`` is the factor by which slowing
 the whole trajectory uniformly (t -> k t: speeds / k, accelerations / k^2)
@@ -208,9 +211,12 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
     v = np.asarray(v_enu_m_s, dtype=float).reshape(-1, 3)
     p = np.asarray(p_enu_m, dtype=float).reshape(-1, 3)
     speed = np.linalg.norm(v, axis=1)
-    moving = speed >= MIN_SPEED_M_S
+    vh = v.copy()
+    vh[:, 2] = 0.0
+    speed_h = np.linalg.norm(vh, axis=1)
+    moving = speed_h >= MIN_SPEED_M_S
     R = level_body_axes(p, target_enu_m)                       # body -> ENU
-    d = np.einsum("nji,nj->ni", R, v) / np.maximum(speed, 1e-12)[:, None]   # R^T v / |v|
+    d = np.einsum("nji,nj->ni", R, vh) / np.maximum(speed_h, 1e-12)[:, None]   # R^T v_h / |v_h|
     allowed = np.zeros(t.shape)
     best = np.full(t.shape, -1, dtype=int)
     for beam in beams:
