@@ -50,8 +50,8 @@ DRIFT_FIELDS = {
                                     "body_yaw_rate", "thrust")),
 }
 #: Float64 drift allowed between environments, relative to a field's scale: float64's resolution
-#: 2^-52 times a conditioning allowance of 2^18 for the observer-controller chain (docs/replay.md).
-DRIFT_REL = 2.0 ** -34
+#: 2^-52 times a conditioning allowance of 2^12 for the observer-controller chain (docs/replay.md).
+DRIFT_REL = 2.0 ** -40
 #: Smallest scale of a drifting field (in its unit): commands are normalised to [0, 1].
 DRIFT_SCALE_MIN = 1.0
 
@@ -183,7 +183,7 @@ class OutputComparer:
                 if d > self.max_abs_diff.get(key, 0.0):
                     self.max_abs_diff[key] = d
                 if field in drifting and d > 0.0:
-                    acc = self.drift_sum.setdefault(key, [0.0, DRIFT_SCALE_MIN, 0])
+                    acc = self.drift_sum.setdefault(key, [0.0, 0.0, 0])
                     acc[0] += d
                     acc[1] = max(acc[1], abs(a), abs(b))
                     acc[2] += 1
@@ -199,19 +199,17 @@ class OutputComparer:
         """Drift mode: the fields whose differences add up to more than float64 drift explains.
 
         Per ``MESSAGE.field``: ``sum |a - b|`` over the flight against the bound
-        ``DRIFT_REL * scale * n + ulp32(scale)`` (``n`` outputs of that message
-        compared, ``scale`` the field's largest magnitude among the differing
-        values, at least ``DRIFT_SCALE_MIN``). Returns dicts (``field``,
+        ``DRIFT_REL * max(m, DRIFT_SCALE_MIN) * n + ulp32(m)`` (``n`` outputs of that
+        message compared, ``m`` the field's largest magnitude among the differing
+        values: one free rounding step there). Returns dicts (``field``,
         ``mean_abs_diff``, ``bound``, ``n_outputs``, ``n_differing``), fields over
         their bound only, largest ratio first; [] in the other modes.
         """
         if self.mode != "drift":
             return []
         out = []
-        for key, (total, scale, n_diff) in self.drift_sum.items():
-            name = key.split(".", 1)[0]
-            n = max(1, next((v for k, v in self.n_by_msgid.items() if message_name(k) == name), 1))
-            bound = DRIFT_REL * scale * n + ulp32(scale)
+        for key, (total, m, n_diff) in self.drift_sum.items():
+            n, bound = self._drift_bound(key, m)
             if total > bound:
                 out.append({"field": key, "mean_abs_diff": total / n, "bound": bound / n, "n_outputs": n,
                             "n_differing": n_diff, "ratio": total / bound})
@@ -221,8 +219,13 @@ class OutputComparer:
     def drift_summary(self) -> dict:
         """Drift mode: per ``MESSAGE.field`` that differed, ``[mean |a - b| per output, its bound]``."""
         out = {}
-        for key, (total, scale, _) in sorted(self.drift_sum.items()):
-            name = key.split(".", 1)[0]
-            n = max(1, next((v for k, v in self.n_by_msgid.items() if message_name(k) == name), 1))
-            out[key] = [total / n, (DRIFT_REL * scale * n + ulp32(scale)) / n]
+        for key, (total, m, _) in sorted(self.drift_sum.items()):
+            n, bound = self._drift_bound(key, m)
+            out[key] = [total / n, bound / n]
         return out
+
+    def _drift_bound(self, key: str, m: float) -> tuple:
+        """(n outputs of the field's message, the bound on the field's sum of differences)."""
+        name = key.split(".", 1)[0]
+        n = max(1, next((v for k, v in self.n_by_msgid.items() if message_name(k) == name), 1))
+        return n, DRIFT_REL * max(m, DRIFT_SCALE_MIN) * n + ulp32(m)

@@ -88,9 +88,9 @@ class Divergence:
         """One line: when, where, what."""
         t = "before the vehicle clock" if self.t_s is None else f"t={self.t_s:.6f} s"
         if self.kind == "drift":
-            return (f"{self.recorded}.{self.field}: mean |difference| {_fmt(self.recorded_value)} per output over "
-                    f"{self.index} outputs, more than float64 drift between machines explains "
-                    f"({_fmt(self.computed_value)})")
+            return (f"{t} (end of the recording, {self.index} outputs of the message): {self.recorded}.{self.field} "
+                    f"mean |difference| {_fmt(self.recorded_value)} per output, more than float64 drift between "
+                    f"machines explains (bound {_fmt(self.computed_value)})")
         at = "after the end of the recording" if self.offset is None else f"record at byte {self.offset}"
         head = f"{t} ({at}, output #{self.index})"
         if self.recorded is None:
