@@ -124,6 +124,31 @@ filter returns the fix itself (the paper's mocap assumption); with a 10 Hz,
 100 ms-late RTK fix it gives the current position between fixes.
 
 All state is bounded: the history keeps ``history_s`` of frames.
+
+Degraded measurements
+---------------------
+A value physics allows never raises here; the observer skips what it cannot
+use and counts it in ``faults`` (kind: number of frames):
+
+- ``free_fall``: specific force below ``FREE_FALL_FRACTION`` g (a falling
+  vehicle: its accelerometer reads ~0). The specific force itself is right
+  (the translational filter integrates ``v_dot = -g e3``); only its direction
+  is undefined: no gravity innovation, the tilt vector keeps its last value,
+  the attitude propagates on the gyro (the velocity-aided tilt already skips
+  windows near free fall);
+- ``accel``: a non-finite accelerometer sample: the last valid specific
+  force is used, no gravity innovation;
+- ``gyro``: a non-finite rate: the last valid rate propagates the attitude;
+- ``mag``: a zero, non-finite or vertical (along the estimated up) field:
+  no heading innovation (a saturated but finite one is used: the heading
+  innovation cannot tilt the estimate);
+- ``fix``: a non-finite position, velocity or fix time: the fix is skipped;
+- ``time``: a non-finite frame time: the frame is skipped.
+
+Initialisation waits for an accelerometer with a direction; without a usable
+magnetometer it takes the heading of the body x axis as the world x axis
+(TRIAD with that pair) and the heading innovation corrects it once the field
+is usable.
 """
 
 from __future__ import annotations
@@ -150,6 +175,15 @@ _VEL_STD_FLOOR_M_S = 1e-6
 _N_NOISE_MIN = 10        # fixes seen before the velocity-aided tilt starts (noise estimate settled)
 _BIAS_GATE_RAD = 0.1     # the bias integrates only innovations smaller than this (no wind-up on transients)
 _TIME = itemgetter(0)    # the time of a history or fix entry (both deques are sorted by it)
+#: Below this fraction of g the specific force has no usable direction (free fall, a falling
+#: vehicle with its motors stopped): its vector is skipped, the attitude propagates on the gyro.
+FREE_FALL_FRACTION = 0.1
+#: Kinds of degraded frames counted in ``VelocityAidedObserver.faults`` (docs: module docstring).
+FAULT_KINDS = ("free_fall", "accel", "gyro", "mag", "fix", "time")
+
+
+def _finite3(x: float, y: float, z: float) -> bool:
+    return math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
 
 
 # --- small SO(3) helpers on float tuples ----------------------------------------------
@@ -484,6 +518,10 @@ class VelocityAidedObserver:
         self._n = 0
         self.n_late_fixes = 0
         self.n_tilt_updates = 0
+        #: Degraded frames per kind (module docstring, "Degraded measurements").
+        self.faults = dict.fromkeys(FAULT_KINDS, 0)
+        self._sb: Vec3 = (0.0, 0.0, 0.0)     # last valid body specific force
+        self._ub: Vec3 = _E3                 # last tilt body vector (unit)
 
     # -- outputs ------------------------------------------------------------------------
 
@@ -550,17 +588,39 @@ class VelocityAidedObserver:
         -------
         None (read :attr:`R`, :attr:`b`, :attr:`p`, :attr:`v` or :meth:`estimate`).
         """
+        faults = self.faults
+        if not math.isfinite(t_s):
+            faults["time"] += 1
+            return
         wx, wy, wz = float(gyro[0]), float(gyro[1]), float(gyro[2])
         ax, ay, az = float(accel[0]), float(accel[1]), float(accel[2])
-        tau = t_s if nav_t is None else min(float(nav_t), t_s)
+        if not _finite3(wx, wy, wz):
+            faults["gyro"] += 1
+            wx, wy, wz = self._w
+        a_ok = _finite3(ax, ay, az)
+        if not a_ok:
+            faults["accel"] += 1
+            ax, ay, az = self._sb
+        a_dir = a_ok and ax * ax + ay * ay + az * az >= (FREE_FALL_FRACTION * self.g) ** 2
+        if a_ok and not a_dir:
+            faults["free_fall"] += 1
+        fix_ok = (nav_t is None or math.isfinite(nav_t)) and _finite3(*(float(x) for x in pos)) \
+            and _finite3(*(float(x) for x in vel))
+        if not fix_ok:
+            faults["fix"] += 1
         if self.t is None:
+            if not (a_dir and fix_ok):
+                return                       # no vertical (or no position) yet: wait for one
             if thrust_n is not None:
                 self._f_model = float(thrust_n)
-            self._initialise(t_s, (wx, wy, wz), (ax, ay, az), mag, pos, vel, tau)
+            self._initialise(t_s, (wx, wy, wz), (ax, ay, az), mag, pos, vel, t_s if nav_t is None else
+                             min(float(nav_t), t_s))
             return
+        tau = (t_s if nav_t is None else min(float(nav_t), t_s)) if fix_ok else self._tau
         dt = t_s - self.t
         if not dt > 0.0:
             return
+        self._sb = (ax, ay, az)
         g = self.g
         # --- thrust model (paper's vectors) -------------------------------------------
         if self.paper and thrust_n is not None:
@@ -574,7 +634,7 @@ class VelocityAidedObserver:
         R = _mul(self.R, so3_exp(h * (pw[0] + wx) - dt * bx, h * (pw[1] + wy) - dt * by, h * (pw[2] + wz) - dt * bz))
         # --- frame innovations: gravity, heading ---------------------------------------
         sx = sy = sz = 0.0
-        if self.k_g > 0.0:
+        if self.k_g > 0.0 and a_dir:
             ux, uy, uz = _unit(ax, ay, az)
             zx, zy, zz = R[6], R[7], R[8]                       # R^T e3
             k = self.k_g
@@ -585,7 +645,9 @@ class VelocityAidedObserver:
             c = mx * zx + my * zy + mz * zz
             px, py, pz = mx - c * zx, my - c * zy, mz - c * zz
             n = math.sqrt(px * px + py * py + pz * pz)
-            if n > 0.0:
+            if not n > 0.0:                 # zero, non-finite or vertical: no heading this frame
+                faults["mag"] += 1
+            else:
                 px, py, pz = px / n, py / n, pz / n
                 hx, hy, hz = _apply_t(R, *self.h)               # R^T h (normal to R^T e3)
                 k = self.k_m * ((py * hz - pz * hy) * zx + (pz * hx - px * hz) * zy + (px * hy - py * hx) * zz)
@@ -604,7 +666,9 @@ class VelocityAidedObserver:
             ubx, uby, ubz = _E3
         else:
             sbx, sby, sbz = ax, ay, az
-            ubx, uby, ubz = self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+            if a_dir:
+                self._ub = self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+            ubx, uby, ubz = self._ub
         r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
         fw = (r0 * sbx + r1 * sby + r2 * sbz, r3 * sbx + r4 * sby + r5 * sbz, r6 * sbx + r7 * sby + r8 * sbz)
         uw = (r0 * ubx + r1 * uby + r2 * ubz, r3 * ubx + r4 * uby + r5 * ubz, r6 * ubx + r7 * uby + r8 * ubz)
@@ -631,11 +695,24 @@ class VelocityAidedObserver:
         """(s_b, u_b): the body specific force of the translational filter and the tilt vector."""
         if self.paper:
             return (0.0, 0.0, self._f_model / self.m), _E3
-        return (ax, ay, az), self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+        self._ub = self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+        return (ax, ay, az), self._ub
 
     def _initialise(self, t_s, w, a, mag, pos, vel, tau) -> None:
-        """At rest: R from TRIAD (accelerometer as the vertical, magnetometer), zero bias."""
-        self.R = triad_rotation(a, mag, _E3, self.field)
+        """At rest: R from TRIAD (accelerometer as the vertical, magnetometer), zero bias.
+        ``a`` has a direction (the caller checks); a magnetometer without a usable direction
+        (zero, non-finite, along ``a``) gives the heading of the body x axis as world x."""
+        mx, my, mz = float(mag[0]), float(mag[1]), float(mag[2])
+        a0, a1, a2 = a
+        cx, cy, cz = a1 * mz - a2 * my, a2 * mx - a0 * mz, a0 * my - a1 * mx
+        if _finite3(mx, my, mz) and cx * cx + cy * cy + cz * cz > 1e-12 * (a0 * a0 + a1 * a1 + a2 * a2) * (
+                mx * mx + my * my + mz * mz):
+            self.R = triad_rotation(a, (mx, my, mz), _E3, self.field)
+        else:
+            self.faults["mag"] += 1
+            ex = (1.0, 0.0, 0.0) if abs(a0) < 0.9 * math.sqrt(a0 * a0 + a1 * a1 + a2 * a2) else (0.0, 1.0, 0.0)
+            self.R = triad_rotation(a, ex, _E3, ex)
+        self._sb = (float(a0), float(a1), float(a2))
         self.t = t_s
         self._w = w
         self.p = (float(pos[0]), float(pos[1]), float(pos[2]))
