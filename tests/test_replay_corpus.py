@@ -277,10 +277,13 @@ def test_cli_names_the_divergence_and_the_changed_mission(tmp_path, capsys):
     out, err = capsys.readouterr()
     assert rc == 4
     assert "mission file differs from the recorded one" in out
+    # which comparison, and why: the corpus predates the environment fingerprint
+    assert "within float64 drift (the recording has no environment fingerprint); discrete fields exact" in out
     first = err.strip().splitlines()[0]
     assert first.startswith("companion replay: DIVERGED at t=") and "HIL_ACTUATOR_CONTROLS.controls[" in first
     doc = json.loads(report.read_text())
     assert doc["comparison"]["identical"] is False
+    assert doc["comparison"]["mode"] == "drift" and doc["comparison"]["environment"] == ["unknown"]
     assert doc["comparison"]["first_divergence"]["field"].startswith("controls[")
 
 
