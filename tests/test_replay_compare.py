@@ -14,7 +14,15 @@ from companion import frames
 from companion.flight.core import ActuatorOut
 from companion.link import codec
 from companion.link.tlog_scan import RawRecord
-from companion.replay.compare import DRIFT_REL, OutputComparer, computed_payload, drift_allowance, field_values, ulp32
+from companion.replay.compare import (
+    DRIFT_REL,
+    DRIFT_REL_TRAJECTORY,
+    OutputComparer,
+    computed_payload,
+    drift_allowance,
+    field_values,
+    ulp32,
+)
 
 MAV = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
 
@@ -110,6 +118,9 @@ def test_drift_mode_allows_one_rounding_step_of_continuous_outputs_only():
     sp = MAV.set_position_target_local_ned_encode(7, 1, 1, 1, 0, 1.5, -2.5, 3.0, 0, 0, 0, 0, 0, 0, 0, 0)
     assert c.compare(MAV.set_position_target_local_ned_encode(7, 1, 1, 1, 0, 1.5, f32_next(-2.5), 3.0, 0, 0, 0,
                                                                0, 0, 0, 0, 0), record_of(sp)) is None
+    # ... with the trajectory's allowance (one setpoint compared, the flip at 2.5)
+    mean, bound = c.drift_summary()["SET_POSITION_TARGET_LOCAL_NED.y"]
+    assert mean == ulp32(2.5) and bound == pytest.approx(DRIFT_REL_TRAJECTORY * 2.5 + ulp32(2.5), rel=1e-6)
 
 
 def test_drift_mode_sums_the_flips_per_field():

@@ -114,8 +114,11 @@ f/m`` from the commanded rotor thrusts and the motors' time constant).
 Propagated every IMU frame; each fix ``(p_y, v_y)`` at time ``tau`` is
 compared with the state interpolated from the history at ``tau``, and the
 steady-state Kalman correction ``K (y - H x(tau))`` (``K`` from the
-discrete algebraic Riccati equation, ``scipy.linalg.solve_discrete_are``,
-for the fix interval) is carried forward to now exactly through the
+discrete algebraic Riccati equation for the fix interval, solved by the
+structure-preserving doubling algorithm in plain float arithmetic,
+:func:`dare3`: the same bits on every machine, where LAPACK's QZ solve of
+these 3x3 blocks depends on the BLAS build and, at the exact-fix corner,
+is itself only good to ~1e-7) is carried forward to now exactly through the
 kinematics (``dp + dv T + dc T^2/2``). Noise model: white acceleration
 ``accel_noise`` (m/s^2/sqrt(Hz)), bias walk ``accel_bias_walk``
 (m/s^3/sqrt(Hz)), fix noise ``pos_std``, ``vel_std`` (floored at 1e-4:
@@ -157,12 +160,8 @@ import math
 from bisect import bisect_right
 from collections import deque
 from dataclasses import dataclass
-from functools import lru_cache
 from operator import itemgetter
 
-import numpy as np
-from scipy.linalg import solve_discrete_are
-from threadpoolctl import ThreadpoolController
 
 from .vectors import BodyVectorFilter
 
@@ -351,32 +350,91 @@ def nav_gains(dt_s: float, pos_std_m: float, vel_std_m_s: float, accel_noise: fl
     density ``accel_bias_walk`` m/s^3/sqrt(Hz)), discretised exactly over
     ``dt_s``; measurement ``(p, v)`` with white noise ``pos_std_m``,
     ``vel_std_m_s`` (each floored at 1e-4). The a-priori covariance solves
-    the discrete algebraic Riccati equation (``scipy.linalg.solve_discrete_are``);
-    ``K = P H^T (H P H^T + R)^-1``.
+    the discrete algebraic Riccati equation (:func:`dare3`);
+    ``K = P H^T (H P H^T + R)^-1`` (a 2x2 inverse, written out).
 
     Returns
     -------
     NavGains
     """
     T = float(dt_s)
-    A = np.array([[1.0, T, 0.5 * T * T], [0.0, 1.0, T], [0.0, 0.0, 1.0]])
+    A = ((1.0, T, 0.5 * T * T), (0.0, 1.0, T), (0.0, 0.0, 1.0))
     qa, qc = float(accel_noise) ** 2, float(accel_bias_walk) ** 2
-    Q = qa * np.array([[T ** 3 / 3, T ** 2 / 2, 0.0], [T ** 2 / 2, T, 0.0], [0.0, 0.0, 0.0]]) + qc * np.array(
-        [[T ** 5 / 20, T ** 4 / 8, T ** 3 / 6], [T ** 4 / 8, T ** 3 / 3, T ** 2 / 2], [T ** 3 / 6, T ** 2 / 2, T]])
-    H = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    Rm = np.diag([max(pos_std_m, _POS_STD_FLOOR_M) ** 2, max(vel_std_m_s, _VEL_STD_FLOOR_M_S) ** 2])
-    # One BLAS thread: on a loaded machine OpenBLAS's threaded triangular solves of
-    # these 3x3 blocks took 10-20 ms instead of 0.8 ms (the same numbers, bit for bit).
-    with _blas_threads().limit(limits=1, user_api="blas"):
-        P = solve_discrete_are(A.T, H.T, Q, Rm)
-    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + Rm)
-    return NavGains(tuple(tuple(float(x) for x in row) for row in K))
+    T2, T3, T4, T5 = T * T, T ** 3, T ** 4, T ** 5
+    Q = ((qa * T3 / 3 + qc * T5 / 20, qa * T2 / 2 + qc * T4 / 8, qc * T3 / 6),
+         (qa * T2 / 2 + qc * T4 / 8, qa * T + qc * T3 / 3, qc * T2 / 2),
+         (qc * T3 / 6, qc * T2 / 2, qc * T))
+    rp = max(pos_std_m, _POS_STD_FLOOR_M) ** 2
+    rv = max(vel_std_m_s, _VEL_STD_FLOOR_M_S) ** 2
+    # the filter's equation in the control form of dare3: a = A^T, G = H^T R^-1 H
+    P = dare3(_t3(A), ((1.0 / rp, 0.0, 0.0), (0.0, 1.0 / rv, 0.0), (0.0, 0.0, 0.0)), Q)
+    s00, s01, s10, s11 = P[0][0] + rp, P[0][1], P[1][0], P[1][1] + rv
+    det = s00 * s11 - s01 * s10
+    i00, i01, i10, i11 = s11 / det, -s01 / det, -s10 / det, s00 / det
+    return NavGains(tuple((P[r][0] * i00 + P[r][1] * i10, P[r][0] * i01 + P[r][1] * i11) for r in range(3)))
 
 
-@lru_cache(maxsize=1)
-def _blas_threads() -> ThreadpoolController:
-    """The process's BLAS thread pools (found once: the search scans the loaded libraries)."""
-    return ThreadpoolController()
+def _t3(X):
+    return tuple(tuple(X[c][r] for c in range(3)) for r in range(3))
+
+
+def _mm3(X, Y):
+    return tuple(tuple(X[r][0] * Y[0][c] + X[r][1] * Y[1][c] + X[r][2] * Y[2][c] for c in range(3))
+                 for r in range(3))
+
+
+def _add3(X, Y):
+    return tuple(tuple(X[r][c] + Y[r][c] for c in range(3)) for r in range(3))
+
+
+def _inv3(M):
+    """Inverse of a 3x3 matrix by its cofactors (ValueError when singular)."""
+    (a, b, c), (d, e, f), (g, h, i) = M
+    A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * A + b * B + c * C
+    if not (det != 0.0 and math.isfinite(det)):
+        raise ValueError("singular matrix")
+    return ((A / det, (c * h - b * i) / det, (b * f - c * e) / det),
+            (B / det, (a * i - c * g) / det, (c * d - a * f) / det),
+            (C / det, (b * g - a * h) / det, (a * e - b * d) / det))
+
+
+_I3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+def dare3(a, G, Q, max_iter: int = 64):
+    """Stabilising solution ``X`` of ``X = a^T X (I + G X)^-1 a + Q`` (3x3, tuples of rows).
+
+    With ``G = b r^-1 b^T`` this is the discrete algebraic Riccati equation
+    ``X = a^T X a - a^T X b (r + b^T X b)^-1 b^T X a + Q`` (scipy's
+    ``solve_discrete_are(a, b, Q, r)``, which the tests compare). Solved by
+    the structure-preserving doubling algorithm (Chu, Fan, Lin & Wang,
+    J. Phys. A 37, 2004): ``W = I + G_k H_k``, ``A_k+1 = A_k W^-1 A_k``,
+    ``G_k+1 = G_k + A_k W^-1 G_k A_k^T``, ``H_k+1 = H_k + A_k^T H_k W^-1 A_k``
+    from ``(a, G, Q)``; ``H_k`` converges quadratically to ``X`` (8-25
+    iterations for the observer's gains). Plain float arithmetic in a fixed
+    order: the result is the same bits on every IEEE-754 machine.
+
+    Raises
+    ------
+    ValueError
+        No convergence in ``max_iter`` doublings (or a singular step).
+    """
+    A, Gk, Hk = a, G, Q
+    for _ in range(max_iter):
+        Wi = _inv3(_add3(_I3, _mm3(Gk, Hk)))
+        AW = _mm3(A, Wi)
+        G1 = _add3(Gk, _mm3(_mm3(AW, Gk), _t3(A)))
+        H1 = _add3(Hk, _mm3(_mm3(_t3(A), Hk), _mm3(Wi, A)))
+        A = _mm3(AW, A)
+        step = max(abs(H1[r][c] - Hk[r][c]) for r in range(3) for c in range(3))
+        size = max(abs(H1[r][c]) for r in range(3) for c in range(3))
+        Gk, Hk = G1, H1
+        if step <= 1e-15 * size:
+            return Hk
+        if not math.isfinite(step):
+            break
+    raise ValueError("Riccati doubling did not converge")
 
 
 def tilt_gain(dt_s: float, window_s: float, vel_std_m_s: float, gyro_noise: float, gravity_m_s2: float,

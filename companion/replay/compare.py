@@ -19,9 +19,9 @@ Three modes (``OutputComparer.mode``):
   (``DRIFT_FIELDS``: motor commands, setpoint values) may differ by the float64
   rounding drift between machines, seen through float32 rounding
   (``docs/replay.md``, "Comparison across machines"): each value by at most
-  one float32 rounding step plus ``DRIFT_REL`` of its scale, and over the
-  whole flight, per field, the sum of the differences by at most ``DRIFT_REL``
-  of the scale per output plus one rounding step at that scale
+  one float32 rounding step plus ``DRIFT_REL_OF`` of its scale, and over the
+  whole flight, per field, the sum of the differences by at most that
+  fraction of the scale per output plus one rounding step at that scale
   (``drift_excess``). Everything else (message ids and order, integer and text
   fields, commands, modes, the replanner's announcements) stays exact;
 - ``absolute``: ``tolerance`` on every float field (given by the user).
@@ -52,6 +52,12 @@ DRIFT_FIELDS = {
 #: Float64 drift allowed between environments, relative to a field's scale: float64's resolution
 #: 2^-52 times a conditioning allowance of 2^12 for the observer-controller chain (docs/replay.md).
 DRIFT_REL = 2.0 ** -40
+#: The same for the setpoints and attitude targets, which come from the trajectory's solve
+#: (a min-snap system; conditioning allowance 2^20, docs/replay.md).
+DRIFT_REL_TRAJECTORY = 2.0 ** -32
+#: The relative drift allowed per message id of ``DRIFT_FIELDS``.
+DRIFT_REL_OF = {HIL_ACTUATOR_CONTROLS_ID: DRIFT_REL, _SETPOINT_ID: DRIFT_REL_TRAJECTORY,
+                _ATTITUDE_TARGET_ID: DRIFT_REL_TRAJECTORY}
 #: Smallest scale of a drifting field (in its unit): commands are normalised to [0, 1].
 DRIFT_SCALE_MIN = 1.0
 
@@ -118,10 +124,10 @@ def field_values(msgid: int, payload: bytes) -> list:
     return out
 
 
-def drift_allowance(a: float, b: float) -> float:
-    """Largest |a - b| of one drifting value: one float32 rounding step plus ``DRIFT_REL`` of its scale."""
+def drift_allowance(a: float, b: float, rel: float = DRIFT_REL) -> float:
+    """Largest |a - b| of one drifting value: one float32 rounding step plus ``rel`` of its scale."""
     m = max(abs(a), abs(b))
-    return ulp32(m) + DRIFT_REL * max(m, DRIFT_SCALE_MIN)
+    return ulp32(m) + rel * max(m, DRIFT_SCALE_MIN)
 
 
 def _same(a, b, tol: float) -> bool:
@@ -175,6 +181,7 @@ class OutputComparer:
         first = None
         name = message_name(msgid)
         drifting = DRIFT_FIELDS.get(msgid, ()) if self.mode == "drift" else ()
+        rel = DRIFT_REL_OF.get(msgid, DRIFT_REL)
         for (field, a), (_, b) in zip(field_values(msgid, recorded), field_values(msgid, payload)):
             finite = isinstance(a, float) and isinstance(b, float) and math.isfinite(a) and math.isfinite(b)
             if finite:
@@ -187,7 +194,7 @@ class OutputComparer:
                     acc[0] += d
                     acc[1] = max(acc[1], abs(a), abs(b))
                     acc[2] += 1
-                    if d <= drift_allowance(a, b):
+                    if d <= drift_allowance(a, b, rel):
                         continue
             if first is None and not _same(a, b, self.tolerance):
                 first = Difference(field, a, b)
@@ -199,7 +206,8 @@ class OutputComparer:
         """Drift mode: the fields whose differences add up to more than float64 drift explains.
 
         Per ``MESSAGE.field``: ``sum |a - b|`` over the flight against the bound
-        ``DRIFT_REL * max(m, DRIFT_SCALE_MIN) * n + ulp32(m)`` (``n`` outputs of that
+        ``rel * max(m, DRIFT_SCALE_MIN) * n + ulp32(m)`` (``rel`` the message's
+        ``DRIFT_REL_OF``, ``n`` outputs of that
         message compared, ``m`` the field's largest magnitude among the differing
         values: one free rounding step there). Returns dicts (``field``,
         ``mean_abs_diff``, ``bound``, ``n_outputs``, ``n_differing``), fields over
@@ -227,5 +235,5 @@ class OutputComparer:
     def _drift_bound(self, key: str, m: float) -> tuple:
         """(n outputs of the field's message, the bound on the field's sum of differences)."""
         name = key.split(".", 1)[0]
-        n = max(1, next((v for k, v in self.n_by_msgid.items() if message_name(k) == name), 1))
-        return n, DRIFT_REL * max(m, DRIFT_SCALE_MIN) * n + ulp32(m)
+        msgid, n = next(((k, v) for k, v in self.n_by_msgid.items() if message_name(k) == name), (None, 1))
+        return max(n, 1), DRIFT_REL_OF.get(msgid, DRIFT_REL) * max(m, DRIFT_SCALE_MIN) * max(n, 1) + ulp32(m)
