@@ -148,7 +148,9 @@ use and counts it in ``faults`` (kind: number of frames):
 - ``fix``: a non-finite position, velocity or fix time: the fix is skipped;
 - ``time``: a non-finite frame time: the frame is skipped.
 
-Initialisation waits for an accelerometer with a direction; without a usable
+Initialisation waits for an accelerometer with a direction and a finite fix
+(the controller raises ValueError until then: the flight core lets the
+vehicle fly those frames); without a usable
 magnetometer it takes the heading of the body x axis as the world x axis
 (TRIAD with that pair) and the heading innovation corrects it once the field
 is usable.
