@@ -421,10 +421,13 @@ def open_link(connect: str, tlog_path: str | None, signing_key: bytes | None = N
 
 def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | None, overrides: dict) -> dict:
     """The flight's setup record (``companion.flight.setup_record``): what ``companion replay``
-    needs to rebuild this flight from its .tlog and the same mission (and plan) files."""
+    needs to rebuild this flight from its .tlog and the same mission (and plan) files, and the
+    numeric environment it ran in (``companion.flight.environment``: bit-for-bit replay is
+    promised only in the same one)."""
     import hashlib
 
     from .. import __version__
+    from ..flight.environment import fingerprint
 
     def digest(path) -> str | None:
         try:
@@ -443,6 +446,7 @@ def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | No
         "control": control,
         "cut_s": cut_s,
         "runner": {k: (list(v) if isinstance(v, tuple) else v) for k, v in sorted(overrides.items())},
+        "environment": fingerprint(),
     }
 
 

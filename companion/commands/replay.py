@@ -1,5 +1,5 @@
 """``companion replay FLIGHT.tlog [--mission MISSION.yaml] [--plan plan.json]
-[--report replay.json] [--plot DIR] [--tolerance ABS] [--withhold TYPE,...]``.
+[--report replay.json] [--plot DIR] [--tolerance ABS | --exact] [--withhold TYPE,...]``.
 
 Without ``--mission``: the flight's metrics from the recording alone (any
 MAVLink .tlog, a foreign one included; see ``companion.replay.metrics``).
@@ -8,8 +8,10 @@ record in the .tlog, the mission (and ``--plan`` when the flight flew one),
 fed the recorded vehicle messages in order, and every output it queues is
 compared with the recorded one (``companion.replay.session``).
 
-Exit codes: 0 metrics only, or every output identical within the tolerance
-(float32 fields bit for bit by default); 4 the outputs diverged (the first
+Exit codes: 0 metrics only, or every output identical: float32 fields bit
+for bit when this environment is the recording's (``--exact``: always),
+within float64 drift when it differs or is unknown (discrete fields exact;
+``companion.replay.compare``), within ``--tolerance`` when given; 4 the outputs diverged (the first
 divergence is named: vehicle time, message, field, recorded and computed
 values); 2 bad input (one line, nothing written). A damaged .tlog is replayed
 as far as it is valid: what was skipped, and where, is printed and reported.
@@ -41,7 +43,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--report", metavar="FILE", help="write the replay report (JSON)")
     parser.add_argument("--plot", metavar="DIR", help="write the flight figures into DIR (needs the plot extra)")
     parser.add_argument("--tolerance", type=float, default=0.0, metavar="ABS",
-                        help="absolute tolerance on float fields (default 0: float32 fields bit for bit)")
+                        help="absolute tolerance on float fields (default 0: bit for bit in the recording's "
+                             "environment, float64 drift in another)")
+    parser.add_argument("--exact", action="store_true",
+                        help="compare float32 fields bit for bit even when this environment is not the recording's")
     parser.add_argument("--withhold", default="", metavar="TYPE,...",
                         help="vehicle message types not fed to the re-run (e.g. ODOMETRY: outputs must not change)")
     parser.add_argument("--settle", type=float, default=5.0, metavar="S",
@@ -97,6 +102,8 @@ def _withheld_ids(spec: str) -> tuple:
 def _check_args(args) -> tuple:
     if not (math.isfinite(args.tolerance) and args.tolerance >= 0):
         raise InputError(f"--tolerance {args.tolerance}", "must be a finite number >= 0")
+    if getattr(args, "exact", False) and args.tolerance > 0:
+        raise InputError("--exact", "cannot be combined with --tolerance")
     if not (math.isfinite(args.settle) and args.settle >= 0):
         raise InputError(f"--settle {args.settle}", "must be a finite number >= 0")
     if args.plan and not args.mission:
@@ -152,6 +159,13 @@ def _rebuild(args):
     return core, fp, warnings, setup
 
 
+def _environment(setup) -> list | None:
+    """How this environment differs from the recording's (``["unknown"]``: no fingerprint recorded)."""
+    from ..flight.environment import differences, fingerprint
+
+    return differences((setup or {}).get("environment"), fingerprint())
+
+
 def _report_doc(args, result, setup, warnings) -> dict:
     from ..report import _finite
 
@@ -202,13 +216,26 @@ def _print_summary(args, result, warnings) -> None:
         print(f"  warning: {w}")
     c = result.comparison
     if c is not None:
-        tol = "float32 fields bit for bit" if c.tolerance == 0 else f"tolerance {c.tolerance:g}"
+        tol = _mode_text(c)
         if c.identical:
             extra = f", {c.n_within_tolerance} within tolerance" if c.n_within_tolerance else ""
             inj = f"; re-injected: {', '.join(c.injected)}" if c.injected else ""
             print(f"  replay: {c.n_compared} outputs identical ({tol}{extra}){inj}")
         else:
             print(f"  replay: DIVERGED ({tol}): {c.n_differing} of {c.n_compared} outputs differ")
+
+
+def _mode_text(c) -> str:
+    """Which comparison was used, and why."""
+    if c.mode == "absolute":
+        return f"tolerance {c.tolerance:g}"
+    if c.mode == "bitwise":
+        why = "" if c.environment is None else ": same environment as the recording"
+        return f"float32 fields bit for bit{why}"
+    env = list(c.environment or ())
+    why = ("the recording has no environment fingerprint" if env == ["unknown"]
+           else "environment differs from the recording's: " + ", ".join(env[:6]) + (", ..." if len(env) > 6 else ""))
+    return f"within float64 drift ({why}); discrete fields exact"
 
 
 def run(args) -> int:
@@ -218,8 +245,11 @@ def run(args) -> int:
         core, fp, warnings, setup = _rebuild(args)
     from ..replay import replay_chunks
 
+    env = _environment(setup) if core is not None else None
+    if getattr(args, "exact", False):
+        env = None                  # bit for bit, whatever the environment
     result = replay_chunks(read_chunks(args.tlog), core, args.tolerance, withhold, args.settle,
-                           with_log=bool(args.plot))
+                           with_log=bool(args.plot), environment=env)
     if result.scan.n_records == 0:
         raise InputError(args.tlog, "no MAVLink records (not a .tlog?)")
     if setup is None:
