@@ -19,6 +19,7 @@ from .errors import PlanError
 from .maps import ElevationModel, OccupancyGrid
 from .maps.field import load_mission_maps
 from .maps.grid import mask_centroid_rc
+from .margins import PlanMargins, margin_warning, mission_airframe_radius_m, plan_margins, planning_clearance_m
 from .mission import Mission
 from .sorties import plan_sorties
 from .trajectory import Trajectory, generate_trajectory
@@ -100,6 +101,8 @@ class Plan:
         that cannot be reached and are not flown, ...), one line each.
     sorties : SortiePlan or None
         The plan split into battery-sized sorties (``companion.sorties``).
+    margins : PlanMargins or None
+        Clearances kept and the exports' tolerances (``companion.margins``).
     """
 
     grid: OccupancyGrid
@@ -112,6 +115,7 @@ class Plan:
     timings_s: PlanTimings
     warnings: tuple[str, ...] = ()
     sorties: object = None
+    margins: PlanMargins | None = None
 
 
 def free_centroid_xy(grid: OccupancyGrid) -> np.ndarray:
@@ -186,9 +190,10 @@ def check_sizes(mission: Mission, grid: OccupancyGrid) -> None:
     is built), and lines closer than one cell cannot be told apart on the grid.
     """
     cov = mission.coverage
-    if cov.safety_margin_m / grid.resolution_m > max(grid.shape):
-        raise PlanError(grid.source, f"no free space left after eroding by the safety margin "
-                        f"{cov.safety_margin_m} m (wider than the map)")
+    clearance = planning_clearance_m(mission)
+    if clearance / grid.resolution_m > max(grid.shape):
+        raise PlanError(grid.source, f"no free space left after eroding by the airframe radius + the safety "
+                        f"margin {clearance:g} m (wider than the map)")
     if cov.line_spacing_m is not None and cov.line_spacing_m < grid.resolution_m:
         raise PlanError(f"{mission.source}: key 'coverage.line_spacing_m'",
                         f"{cov.line_spacing_m:g} m is below the map resolution {grid.resolution_m:g} m")
@@ -237,7 +242,7 @@ def plan_mission(mission: Mission) -> Plan:
 
     check_sizes(mission, grid)
     check_dem_overlaps(dem, grid)
-    coverage = plan_coverage(grid, mission.coverage)
+    coverage = plan_coverage(grid, mission.coverage, mission_airframe_radius_m(mission))
     path = np.asarray(coverage.path_xy_m, dtype=float)
     if path.ndim != 2 or path.shape[0] < 2:
         raise PlanError(grid.source, "the coverage planner found no path in the free space")
@@ -271,4 +276,5 @@ def plan_mission(mission: Mission) -> Plan:
                           trajectory=t_done - t_covered, total=t_done - t_start)
     return Plan(grid=grid, dem=dem, coverage=coverage, waypoints=waypoints, trajectory=trajectory,
                 target_enu_m=target, stats=stats, timings_s=timings,
-                warnings=tuple(grid.warnings) + tuple(coverage.warnings), sorties=sorties)
+                warnings=tuple(w for w in (margin_warning(mission),) if w) + tuple(grid.warnings)
+                + tuple(coverage.warnings), sorties=sorties, margins=plan_margins(mission, grid, coverage))

@@ -78,11 +78,16 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "energy.split": ("", "", "`auto`: battery-sized sorties; `none`: the whole route as one sortie."),
     "coverage.line_spacing_m": ("m", "(0, 1000] or null",
                                 "Distance between coverage lines; null: the detected row spacing."),
-    "coverage.safety_margin_m": ("m", "[0, 1000]", "Free space eroded around obstacles before planning."),
+    "coverage.safety_margin_m": ("m", "[0, 1000]", "Clearance kept between the airframe's surface and every "
+                                 "non-free cell: the free space is eroded by the airframe radius plus this "
+                                 "(see Margins); below the airframe radius: a warning naming both."),
     "coverage.orientation_step_deg": ("deg", "(0, 1]", "Step of the ISOA orientation sweep."),
     "coverage.orientation_deg": ("deg", "", "Force the beam orientation (ENU, counter-clockwise from east); "
                                  "null: rows or the ISOA sweep choose."),
     "coverage.min_segment_m": ("m", "> 0", "Main segments shorter than this are not flown."),
+    "navigation.accuracy": ("m", "rtk, gnss or (0, 100]", "95 % horizontal position error of the flight "
+                            "stack's navigation: `rtk` (0.1 m), `gnss` (3.0 m) or metres; sizes the inclusion "
+                            "fence's margin (see Margins)."),
     "pointing.target": ("m", "", "Pointing target S_p of eq. (21): `centroid` (of the map's free cells, "
                         "at the mean way-point altitude) or an ENU point [x, y, z]."),
     "trajectory.s_position": ("1/m^2", ">= 0", "Way-point weight S on the position, eq. (4)."),

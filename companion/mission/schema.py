@@ -120,6 +120,19 @@ class FieldConfig:
 
 
 @dataclass(frozen=True)
+class NavigationConfig:
+    """The flight stack's navigation: ``accuracy`` is its 95 % horizontal position
+    error, ``rtk`` (0.1 m), ``gnss`` (3.0 m) or metres (``companion.margins``);
+    it sizes the inclusion fence's margin."""
+
+    accuracy: Literal["rtk", "gnss"] | float = "rtk"
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.accuracy, str) and not 0 < self.accuracy <= 100.0:
+            raise ValueError("navigation.accuracy must be rtk, gnss or a number in (0, 100] m")
+
+
+@dataclass(frozen=True)
 class PointingConfig:
     """Pointing target S_p of eq. (21): the field's centroid or an ENU point (m)."""
 
@@ -138,6 +151,7 @@ class Mission:
     dem_crs: str | None = None
     flight: FlightConfig = _field(default_factory=FlightConfig)
     coverage: CoverageConfig = _field(default_factory=CoverageConfig)
+    navigation: NavigationConfig = _field(default_factory=NavigationConfig)
     pointing: PointingConfig = _field(default_factory=PointingConfig)
     trajectory: TrajectoryConfig = _field(default_factory=TrajectoryConfig)
     control: ControlConfig = _field(default_factory=ControlConfig)
