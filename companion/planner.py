@@ -17,7 +17,8 @@ import numpy as np
 from .coverage import extract_waypoints, plan_coverage
 from .errors import PlanError
 from .maps import ElevationModel, OccupancyGrid
-from .maps.field import load_mission_maps
+from .launch import launch_enu_xy, launch_key
+from .maps.field import flat_field_warning, load_mission_maps
 from .maps.grid import mask_centroid_rc
 from .margins import PlanMargins, margin_warning, mission_airframe_radius_m, plan_margins, planning_clearance_m
 from .mission import Mission
@@ -259,7 +260,11 @@ def plan_mission(mission: Mission) -> Plan:
     trajectory = generate_trajectory(waypoints.t_s, waypoints.p_enu_m, waypoints.v_enu_m_s,
                                      waypoints.a_enu_m_s2, mission.trajectory, target_enu_m=target)
     max_v, max_a, residual = trajectory_stats(trajectory)
-    sorties = plan_sorties(coverage, waypoints, dem, mission.flight, mission.vehicle, mission.energy, grid, mission.source)
+    launch = launch_enu_xy(mission)
+    energy = mission.energy if launch is None else dataclasses.replace(
+        mission.energy, launch_xy_m=(float(launch[0]), float(launch[1])))
+    sorties = plan_sorties(coverage, waypoints, dem, mission.flight, mission.vehicle, energy, grid, mission.source,
+                           launch_key=launch_key(mission))
     t_done = time.perf_counter()
 
     stats = PlanStats(
@@ -276,5 +281,6 @@ def plan_mission(mission: Mission) -> Plan:
                           trajectory=t_done - t_covered, total=t_done - t_start)
     return Plan(grid=grid, dem=dem, coverage=coverage, waypoints=waypoints, trajectory=trajectory,
                 target_enu_m=target, stats=stats, timings_s=timings,
-                warnings=tuple(w for w in (margin_warning(mission),) if w) + tuple(grid.warnings)
+                warnings=tuple(w for w in (flat_field_warning(mission), margin_warning(mission)) if w)
+                + tuple(grid.warnings)
                 + tuple(coverage.warnings), sorties=sorties, margins=plan_margins(mission, grid, coverage))

@@ -86,6 +86,6 @@ def check_plan(pf, mission, grid, dem) -> None:
 
 def check_plan_file(pf, mission) -> None:
     """``check_plan`` with the mission's map and DEM read from disk (MapError if unreadable)."""
-    from .maps import load_dem, load_ogm
+    from .maps.field import load_mission_maps
 
-    check_plan(pf, mission, load_ogm(mission.map_path), load_dem(mission.dem_path))
+    check_plan(pf, mission, *load_mission_maps(mission))

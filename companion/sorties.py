@@ -198,7 +198,7 @@ def _corner_indices(w: Waypoints, points_xy: np.ndarray) -> np.ndarray:
 
 
 def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleConfig, cfg: EnergyConfig,
-                 grid, source: str = "<mission>") -> SortiePlan:
+                 grid, source: str = "<mission>", launch_key: str = "energy.launch_xy_m") -> SortiePlan:
     """Split a coverage plan into sorties (module doc).
 
     Parameters
@@ -211,6 +211,8 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
         Terrain, flight settings, vehicle, energy settings, occupancy grid.
     source : str
         The mission file (messages name its keys).
+    launch_key : str
+        The mission key that gave ``cfg.launch_xy_m`` (``launch`` or ``energy.launch_xy_m``).
 
     Raises
     ------
@@ -229,7 +231,7 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
         launch = central_launch_xy(grid, free, bg, world_to_grid(grid, mains[0][0]))
     else:
         launch = np.asarray(cfg.launch_xy_m, dtype=float)
-    key = f"{source}: key 'energy.launch_xy_m'"
+    key = f"{source}: key '{launch_key}'"
     lg = world_to_grid(grid, launch)
     if bg.sub_at(int(lg[1] // h), int(lg[0] // h)) == 0:
         raise PlanError(key, f"({launch[0]:.2f}, {launch[1]:.2f}) m is not in the free space "

@@ -278,6 +278,8 @@ def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | No
     from .. import __version__
 
     def digest(path) -> str | None:
+        if path is None:
+            return None
         try:
             return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
         except OSError:

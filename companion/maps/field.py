@@ -16,7 +16,9 @@ Occupancy grid
 Elevation model
     * a local ESRI/GDAL ASCII grid (:mod:`dem`), or
     * a georeferenced raster (:mod:`gis`, the ``gis`` extra): a GeoTIFF, or any
-      raster with a ``.prj`` beside it or the mission key ``dem_crs``.
+      raster with a ``.prj`` beside it or the mission key ``dem_crs``, or
+    * none: a flat field at ``elevation_m`` (m AMSL), or at ``home.alt_m``
+      with a warning (:func:`flat_dem`).
 Heading
     ``home.heading_deg`` is the compass bearing of the local map files' x
     axis (90 = east, the default). Local files are rotated into ENU: the
@@ -277,6 +279,14 @@ def rotate_dem(dem: ElevationModel, yaw_rad: float) -> ElevationModel:
 
 # --- the mission's maps --------------------------------------------------------------
 
+def flat_field_warning(mission) -> str | None:
+    """One line when the mission has neither ``dem`` nor ``elevation_m``, else None."""
+    if mission.dem is not None or mission.elevation_m is not None:
+        return None
+    return (f"{mission.source}: no 'dem' and no 'elevation_m': the field is taken as flat at "
+            f"home.alt_m = {mission.home.alt_m:g} m AMSL")
+
+
 def is_georeferenced(path: Path, crs: str | None) -> bool:
     """A DEM for :mod:`gis`: a TIFF, a ``.prj`` beside it, or a CRS given by the mission."""
     if crs is not None or path.with_suffix(".prj").exists():
@@ -307,10 +317,29 @@ def load_mission_maps(mission) -> tuple[OccupancyGrid, ElevationModel]:
     return grid, load_mission_dem(mission)
 
 
+#: Half-size (m) of the flat elevation model of a mission without a DEM: any field.
+FLAT_DEM_HALF_SIZE_M = 10_000.0
+
+
+def flat_dem(height_m: float, source: str) -> ElevationModel:
+    """A flat elevation model at map height ``height_m`` covering +-``FLAT_DEM_HALF_SIZE_M``
+    about the map origin (2 x 2 cells: the bilinear patch of a constant is that constant)."""
+    cell = FLAT_DEM_HALF_SIZE_M
+    return ElevationModel(heights_m=np.full((2, 2), float(height_m)), x0_m=-0.5 * cell, y0_m=-0.5 * cell,
+                          cellsize_m=cell, source=source)
+
+
 def load_mission_dem(mission) -> ElevationModel:
-    """The mission's elevation model in ENU about ``home`` (``load_mission_maps``'s second half)."""
+    """The mission's elevation model in ENU about ``home`` (``load_mission_maps``'s second half).
+
+    Without ``dem`` the field is flat: at ``elevation_m`` (m AMSL) when given,
+    else at ``home.alt_m`` (the planner warns: ``flat_field_warning``).
+    """
     home = mission.home
     dem_path = mission.dem_path
+    if dem_path is None:
+        z = 0.0 if mission.elevation_m is None else float(mission.elevation_m) - home.alt_m
+        return flat_dem(z, f"{mission.source}: flat field at {home.alt_m + z:g} m AMSL")
     if is_georeferenced(dem_path, mission.dem_crs):
         from .gis import load_geo_dem
 
