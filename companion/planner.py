@@ -238,6 +238,7 @@ def plan_mission(mission: Mission) -> Plan:
         coverage/flight settings do not fit the map (``check_sizes``, ``MAX_WAYPOINTS``).
     """
     t_start = time.perf_counter()
+    launch = launch_enu_xy(mission)          # a bad launch file fails before any work
     grid, dem = load_mission_maps(mission)
     t_loaded = time.perf_counter()
 
@@ -260,7 +261,6 @@ def plan_mission(mission: Mission) -> Plan:
     trajectory = generate_trajectory(waypoints.t_s, waypoints.p_enu_m, waypoints.v_enu_m_s,
                                      waypoints.a_enu_m_s2, mission.trajectory, target_enu_m=target)
     max_v, max_a, residual = trajectory_stats(trajectory)
-    launch = launch_enu_xy(mission)
     energy = mission.energy if launch is None else dataclasses.replace(
         mission.energy, launch_xy_m=(float(launch[0]), float(launch[1])))
     sorties = plan_sorties(coverage, waypoints, dem, mission.flight, mission.vehicle, energy, grid, mission.source,

@@ -176,28 +176,44 @@ def rasterize_field(boundary: list[np.ndarray], exclusions: list[np.ndarray], ro
     if rows * cols > MAX_FIELD_CELLS:
         raise MapError(source, f"the field rasterised at {resolution_m:g} m is {cols} x {rows} cells "
                                f"(more than {MAX_FIELD_CELLS}); use a coarser field.resolution_m")
-    free = np.zeros((rows, cols), dtype=bool)
-    occ = np.zeros((rows, cols), dtype=bool)
     xc = x_lo + (np.arange(cols) + 0.5) * resolution_m
+    yc_all = y_lo + (np.arange(rows) + 0.5) * resolution_m
+    inside = np.zeros((rows, cols), dtype=bool)
+    blocked = np.zeros((rows, cols), dtype=bool)
+
+    def window(pts: np.ndarray, pad_m: float):
+        """Row and column slices of the cells whose centres may lie within pad_m of pts' box."""
+        c0 = max(0, int(math.floor((pts[:, 0].min() - pad_m - x_lo) / resolution_m)) - 1)
+        c1 = min(cols, int(math.ceil((pts[:, 0].max() + pad_m - x_lo) / resolution_m)) + 1)
+        r0 = max(0, int(math.floor((pts[:, 1].min() - pad_m - y_lo) / resolution_m)) - 1)
+        r1 = min(rows, int(math.ceil((pts[:, 1].max() + pad_m - y_lo) / resolution_m)) + 1)
+        return slice(r0, max(r0, r1)), slice(c0, max(c0, c1))
+
+    # every shape is evaluated only over the cells of its bounding box (a 1 ha
+    # field has ~10^6 cells and ~50 rows: a row touches 1 % of them)
     chunk = max(1, 2_000_000 // max(cols, 1))
     for r0 in range(0, rows, chunk):
-        yc = y_lo + (np.arange(r0, min(rows, r0 + chunk)) + 0.5) * resolution_m
-        X, Y = np.meshgrid(xc, yc)
-        inside = points_in_polygon(X, Y, outer)
+        X, Y = np.meshgrid(xc, yc_all[r0: r0 + chunk])
+        ins = points_in_polygon(X, Y, outer)
         for hole in boundary[1:]:
-            inside &= ~points_in_polygon(X, Y, hole)
-        blocked = ~inside
-        for ex in exclusions:
-            blocked |= points_in_polygon(X, Y, ex)
-        vine = np.zeros(X.shape, dtype=bool)
-        for line in rows_xy:
-            for (ax, ay), (bx, by) in zip(line[:-1], line[1:]):
-                dx, dy = bx - ax, by - ay
-                L2 = dx * dx + dy * dy
-                t = np.clip(((X - ax) * dx + (Y - ay) * dy) / L2, 0.0, 1.0) if L2 > 0 else 0.0
-                vine |= np.hypot(X - ax - t * dx, Y - ay - t * dy) <= row_width_m / 2
-        free[r0: r0 + X.shape[0]] = inside & ~blocked & ~vine
-        occ[r0: r0 + X.shape[0]] = inside & (blocked | vine)
+            ins &= ~points_in_polygon(X, Y, hole)
+        inside[r0: r0 + X.shape[0]] = ins
+    for ex in exclusions:
+        rs, cs = window(ex, 0.0)
+        X, Y = np.meshgrid(xc[cs], yc_all[rs])
+        blocked[rs, cs] |= points_in_polygon(X, Y, ex)
+    half = row_width_m / 2
+    for line in rows_xy:
+        for a, b in zip(line[:-1], line[1:]):
+            (ax, ay), (bx, by) = a, b
+            rs, cs = window(np.array([a, b]), half)
+            X, Y = np.meshgrid(xc[cs], yc_all[rs])
+            dx, dy = bx - ax, by - ay
+            L2 = dx * dx + dy * dy
+            t = np.clip(((X - ax) * dx + (Y - ay) * dy) / L2, 0.0, 1.0) if L2 > 0 else 0.0
+            blocked[rs, cs] |= np.hypot(X - ax - t * dx, Y - ay - t * dy) <= half
+    free = inside & ~blocked
+    occ = inside & blocked
     return OccupancyGrid(occupied=occ, free=free, resolution_m=resolution_m, origin_xy_m=(x_lo, y_lo),
                          source=source)
 
