@@ -187,3 +187,24 @@ def test_bad_launch_file_is_one_line_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "none.geojson" in err[0] and "Point" in err[0]
     assert not (tmp_path / "plan.json").exists()
+
+
+def test_vineyard_files_load_in_pymavlink_with_the_acceptance_radius(vineyard, tmp_path):
+    """The WPL file of a sortie loads in pymavlink's mavwp with param2 = the acceptance
+    radius on every NAV_WAYPOINT and no NaN; the .plan holds no null param."""
+    from pymavlink import mavwp
+
+    from companion.plan_io import flight_items, qgc_plan_text, qgc_wpl_text
+
+    mission, plan = vineyard
+    items = flight_items(plan, mission, plan.sorties.sorties[0])
+    wpl = qgc_wpl_text(items)
+    assert "nan" not in wpl.lower()
+    (tmp_path / "s.waypoints").write_text(wpl)
+    loader = mavwp.MAVWPLoader()
+    assert loader.load(str(tmp_path / "s.waypoints")) == len(items.mission) + 1
+    wps = [loader.wp(i) for i in range(1, loader.count()) if loader.wp(i).command == 16]
+    assert len(wps) == sum(it.command == 16 for it in items.mission)
+    assert all(w.param2 == pytest.approx(plan.margins.acceptance_radius_m, abs=1e-6) for w in wps)
+    doc = json.loads(qgc_plan_text(items, mission.flight.speed_m_s))
+    assert all(v is not None for it in doc["mission"]["items"] for v in it["params"])
