@@ -22,13 +22,16 @@ Acceptance radius (NAV_WAYPOINT param2)
     the acceptance radius, so it turns early by up to that much; the radius is
     ``min(w / 3, w / 2 - R)``: at most a third of the corridor, and never more
     than the room between the airframe and a row when the vehicle is centred
-    in it. Not below ``MIN_ACCEPTANCE_RADIUS_M``. Without rows (an open
-    field) ``w`` is the line spacing.
+    in it. Not below ``MIN_ACCEPTANCE_RADIUS_M``. The row width is
+    ``field.row_width_m`` for a vector field; on a map ``w`` is measured
+    (:func:`measured_corridor_width_m`). Without rows (an open field) ``w``
+    is the line spacing. PX4 reads param2; ArduCopter uses WPNAV_RADIUS.
 Fence margin
     The inclusion fence must not trip on the navigation error nor on the
     tracking error the plan allows: ``fence margin = navigation accuracy
     (95 % horizontal, m) + replan.lateral_limit_m``. The fence is the field
-    grown until every point of the path is at least that far inside it.
+    grown until every point of the path is at least that far inside it
+    (``plan_io.field_fence``).
     ``navigation.accuracy``: ``rtk`` = 0.1 m, ``gnss`` = 3.0 m, or a number.
 """
 
