@@ -138,7 +138,14 @@ def test_schemas_are_draft_2020_12_and_describe_version_1():
 
 # --- every file the project writes validates ----------------------------------------
 
-@pytest.mark.parametrize("mission", BUNDLED)
+#: Bundled missions whose plan.json takes long to write and validate: the 1 ha vineyard's
+#: 79 min of trajectory sampled at 10 Hz (~40 s here, until plan.json stores the polynomial
+#: pieces, issue 18); tests/test_fields.py plans it in-process.
+SLOW_PLANS = ("vineyard-1ha",)
+
+
+@pytest.mark.parametrize("mission", [pytest.param(m, marks=pytest.mark.slow) if m in SLOW_PLANS else m
+                                     for m in BUNDLED])
 def test_plan_of_every_bundled_mission_validates_and_loads(mission, tmp_path_factory):
     planned = _plan_doc(mission, tmp_path_factory)
     doc = planned["doc"]

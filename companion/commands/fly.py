@@ -430,6 +430,8 @@ def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | No
     from ..flight.environment import fingerprint
 
     def digest(path) -> str | None:
+        if path is None:
+            return None
         try:
             return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
         except OSError:

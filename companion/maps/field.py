@@ -16,7 +16,9 @@ Occupancy grid
 Elevation model
     * a local ESRI/GDAL ASCII grid (:mod:`dem`), or
     * a georeferenced raster (:mod:`gis`, the ``gis`` extra): a GeoTIFF, or any
-      raster with a ``.prj`` beside it or the mission key ``dem_crs``.
+      raster with a ``.prj`` beside it or the mission key ``dem_crs``, or
+    * none: a flat field at ``elevation_m`` (m AMSL), or at ``home.alt_m``
+      with a warning (:func:`flat_dem`).
 Heading
     ``home.heading_deg`` is the compass bearing of the local map files' x
     axis (90 = east, the default). Local files are rotated into ENU: the
@@ -174,28 +176,44 @@ def rasterize_field(boundary: list[np.ndarray], exclusions: list[np.ndarray], ro
     if rows * cols > MAX_FIELD_CELLS:
         raise MapError(source, f"the field rasterised at {resolution_m:g} m is {cols} x {rows} cells "
                                f"(more than {MAX_FIELD_CELLS}); use a coarser field.resolution_m")
-    free = np.zeros((rows, cols), dtype=bool)
-    occ = np.zeros((rows, cols), dtype=bool)
     xc = x_lo + (np.arange(cols) + 0.5) * resolution_m
+    yc_all = y_lo + (np.arange(rows) + 0.5) * resolution_m
+    inside = np.zeros((rows, cols), dtype=bool)
+    blocked = np.zeros((rows, cols), dtype=bool)
+
+    def window(pts: np.ndarray, pad_m: float):
+        """Row and column slices of the cells whose centres may lie within pad_m of pts' box."""
+        c0 = max(0, int(math.floor((pts[:, 0].min() - pad_m - x_lo) / resolution_m)) - 1)
+        c1 = min(cols, int(math.ceil((pts[:, 0].max() + pad_m - x_lo) / resolution_m)) + 1)
+        r0 = max(0, int(math.floor((pts[:, 1].min() - pad_m - y_lo) / resolution_m)) - 1)
+        r1 = min(rows, int(math.ceil((pts[:, 1].max() + pad_m - y_lo) / resolution_m)) + 1)
+        return slice(r0, max(r0, r1)), slice(c0, max(c0, c1))
+
+    # every shape is evaluated only over the cells of its bounding box (a 1 ha
+    # field has ~10^6 cells and ~50 rows: a row touches 1 % of them)
     chunk = max(1, 2_000_000 // max(cols, 1))
     for r0 in range(0, rows, chunk):
-        yc = y_lo + (np.arange(r0, min(rows, r0 + chunk)) + 0.5) * resolution_m
-        X, Y = np.meshgrid(xc, yc)
-        inside = points_in_polygon(X, Y, outer)
+        X, Y = np.meshgrid(xc, yc_all[r0: r0 + chunk])
+        ins = points_in_polygon(X, Y, outer)
         for hole in boundary[1:]:
-            inside &= ~points_in_polygon(X, Y, hole)
-        blocked = ~inside
-        for ex in exclusions:
-            blocked |= points_in_polygon(X, Y, ex)
-        vine = np.zeros(X.shape, dtype=bool)
-        for line in rows_xy:
-            for (ax, ay), (bx, by) in zip(line[:-1], line[1:]):
-                dx, dy = bx - ax, by - ay
-                L2 = dx * dx + dy * dy
-                t = np.clip(((X - ax) * dx + (Y - ay) * dy) / L2, 0.0, 1.0) if L2 > 0 else 0.0
-                vine |= np.hypot(X - ax - t * dx, Y - ay - t * dy) <= row_width_m / 2
-        free[r0: r0 + X.shape[0]] = inside & ~blocked & ~vine
-        occ[r0: r0 + X.shape[0]] = inside & (blocked | vine)
+            ins &= ~points_in_polygon(X, Y, hole)
+        inside[r0: r0 + X.shape[0]] = ins
+    for ex in exclusions:
+        rs, cs = window(ex, 0.0)
+        X, Y = np.meshgrid(xc[cs], yc_all[rs])
+        blocked[rs, cs] |= points_in_polygon(X, Y, ex)
+    half = row_width_m / 2
+    for line in rows_xy:
+        for a, b in zip(line[:-1], line[1:]):
+            (ax, ay), (bx, by) = a, b
+            rs, cs = window(np.array([a, b]), half)
+            X, Y = np.meshgrid(xc[cs], yc_all[rs])
+            dx, dy = bx - ax, by - ay
+            L2 = dx * dx + dy * dy
+            t = np.clip(((X - ax) * dx + (Y - ay) * dy) / L2, 0.0, 1.0) if L2 > 0 else 0.0
+            blocked[rs, cs] |= np.hypot(X - ax - t * dx, Y - ay - t * dy) <= half
+    free = inside & ~blocked
+    occ = inside & blocked
     return OccupancyGrid(occupied=occ, free=free, resolution_m=resolution_m, origin_xy_m=(x_lo, y_lo),
                          source=source)
 
@@ -277,6 +295,14 @@ def rotate_dem(dem: ElevationModel, yaw_rad: float) -> ElevationModel:
 
 # --- the mission's maps --------------------------------------------------------------
 
+def flat_field_warning(mission) -> str | None:
+    """One line when the mission has neither ``dem`` nor ``elevation_m``, else None."""
+    if mission.dem is not None or mission.elevation_m is not None:
+        return None
+    return (f"{mission.source}: no 'dem' and no 'elevation_m': the field is taken as flat at "
+            f"home.alt_m = {mission.home.alt_m:g} m AMSL")
+
+
 def is_georeferenced(path: Path, crs: str | None) -> bool:
     """A DEM for :mod:`gis`: a TIFF, a ``.prj`` beside it, or a CRS given by the mission."""
     if crs is not None or path.with_suffix(".prj").exists():
@@ -307,10 +333,29 @@ def load_mission_maps(mission) -> tuple[OccupancyGrid, ElevationModel]:
     return grid, load_mission_dem(mission)
 
 
+#: Half-size (m) of the flat elevation model of a mission without a DEM: any field.
+FLAT_DEM_HALF_SIZE_M = 10_000.0
+
+
+def flat_dem(height_m: float, source: str) -> ElevationModel:
+    """A flat elevation model at map height ``height_m`` covering +-``FLAT_DEM_HALF_SIZE_M``
+    about the map origin (2 x 2 cells: the bilinear patch of a constant is that constant)."""
+    cell = FLAT_DEM_HALF_SIZE_M
+    return ElevationModel(heights_m=np.full((2, 2), float(height_m)), x0_m=-0.5 * cell, y0_m=-0.5 * cell,
+                          cellsize_m=cell, source=source)
+
+
 def load_mission_dem(mission) -> ElevationModel:
-    """The mission's elevation model in ENU about ``home`` (``load_mission_maps``'s second half)."""
+    """The mission's elevation model in ENU about ``home`` (``load_mission_maps``'s second half).
+
+    Without ``dem`` the field is flat: at ``elevation_m`` (m AMSL) when given,
+    else at ``home.alt_m`` (the planner warns: ``flat_field_warning``).
+    """
     home = mission.home
     dem_path = mission.dem_path
+    if dem_path is None:
+        z = 0.0 if mission.elevation_m is None else float(mission.elevation_m) - home.alt_m
+        return flat_dem(z, f"{mission.source}: flat field at {home.alt_m + z:g} m AMSL")
     if is_georeferenced(dem_path, mission.dem_crs):
         from .gis import load_geo_dem
 
