@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 BUNDLED = sorted(d.name for d in missions_dir().iterdir() if (d / "mission.yaml").is_file())
 #: A plan.json of format 1.0 as ``companion plan`` wrote it before 2.0 (the replay corpus's).
-OLD_PLAN = ROOT / "tests" / "data" / "replay" / "plan-flat-rectangle.json"
+OLD_PLAN = ROOT / "tests" / "data" / "plan-1.0" / "flat-rectangle.json"
 #: Top-level keys the plan schema does not require (``--samples``).
 PLAN_OPTIONAL = {"samples"}
 
