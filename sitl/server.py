@@ -700,7 +700,9 @@ class SitlServer:
             "unsupported_commands": {str(k): v for k, v in self.stats["unsupported"].items()},
             "refused": dict(self.stats["refused"]),
             "links": [{"url": l.url, "control": l.control, "clients": len(l.clients),
-                       "clients_evicted": l.clients.n_evicted, "clients_expired": l.clients.n_expired}
+                       "clients_evicted": l.clients.n_evicted, "clients_expired": l.clients.n_expired,
+                       **({"lockstep_spins": l.pipe.spin.n_spins, "lockstep_spin_hits": l.pipe.spin.n_hits}
+                          if l.pipe is not None and not l.memory else {})}
                       for l in self.links],
         }
 
