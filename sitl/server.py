@@ -3,7 +3,9 @@ pymavlink connections (docs/mavlink.md).
 
 The vehicle is system 1, component 1, MAVLink 2, common dialect. Connection
 strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
-``tcp:...``, ``tcpin:...``). Telemetry goes to every link; replies
+``tcp:...``, ``tcpin:...``), or ``inproc:NAME``: the in-process transport
+(``sitl.pipe``), where the peer's waits run the vehicle (``service``) instead
+of ``run``. Telemetry goes to every link; replies
 (COMMAND_ACK, PARAM_VALUE on read, MISSION_*) go to the link the request
 came from, addressed to the requester.
 
