@@ -1,7 +1,8 @@
 """``companion demo [--mission NAME|PATH] [--control companion|vehicle] [--out out/] [--seed N]``.
 
 No arguments needed: starts the bundled SITL (``python -m sitl``, a separate
-process, lockstep, loopback UDP on a free port), plans the bundled
+process, lockstep, loopback UDP on a free port; ``--transport inproc``: in
+this process, the same MAVLink bytes through memory, ``sitl.pipe``), plans the bundled
 ``flat-rectangle`` mission, flies it with the geometric controller, prints a
 summary table and writes ``out/``: ``plan.json``, ``flight.tlog``,
 ``report.json``, ``map.html`` (the plan and the flown track on a
@@ -19,6 +20,8 @@ from pathlib import Path
 from ..errors import InputError
 
 DEFAULT_MISSION = "flat-rectangle"
+#: How the companion reaches the bundled SITL (``--transport``).
+TRANSPORTS = ("udp", "inproc")
 
 
 def missions_dir() -> Path:
@@ -56,6 +59,9 @@ def add_arguments(parser) -> None:
                         help="MAVLink 2 signing key file for both the SITL and the companion "
                              "(32 raw bytes, or a passphrase as MAVProxy's signing setup)")
     parser.add_argument("--no-plots", action="store_true", help="skip the figures")
+    parser.add_argument("--transport", choices=TRANSPORTS, default="udp",
+                        help="udp (default): the SITL in its own process over loopback UDP; inproc: in this "
+                             "process, the same MAVLink bytes through memory (same flight, faster)")
     from .fly import add_safety_arguments
 
     add_safety_arguments(parser)
@@ -108,8 +114,20 @@ def _table(rows: list[tuple[str, str]]) -> str:
     return "\n".join(out)
 
 
+def start_sitl(transport: str, mission_path, seed, signing_key_file):
+    """The bundled SITL for ``--transport``, launched with its launch pose to
+    come (``set_start``, then ``wait_ready``): ``SitlProcess`` (a subprocess,
+    loopback UDP; it imports and loads its world while we plan) or
+    ``SitlInProcess`` (this process, ``inproc:``). Lockstep either way."""
+    from sitl.api import SitlInProcess, SitlProcess
+
+    if transport == "inproc":
+        return SitlInProcess(mission_path, seed=seed, start="later", signing_key_file=signing_key_file).launch()
+    return SitlProcess(mission_path, lockstep=True, speed=1.0, seed=seed, start="later",
+                       signing_key_file=signing_key_file).launch()
+
+
 def run(args) -> int:
-    from sitl.api import SitlProcess
 
     t_start = time.monotonic()
     mission_path = resolve_mission(args.mission)
@@ -134,8 +152,7 @@ def run(args) -> int:
     mission = load_mission(mission_path)     # bad input fails here, before the SITL starts
     # The SITL process starts now (it imports and loads its world while we
     # plan) and gets its launch pose once the plan exists.
-    sitl = SitlProcess(mission_path, lockstep=True, speed=1.0, seed=args.seed, start="later",
-                       signing_key_file=args.signing_key).launch()
+    sitl = start_sitl(getattr(args, "transport", "udp"), mission_path, args.seed, args.signing_key)
     try:
         return _plan_and_fly(args, mission, out, sitl, t_start, key, overrides)
     finally:
