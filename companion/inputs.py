@@ -92,7 +92,7 @@ class Limits:
     yaml_nodes: int = 200_000
     nesting_depth: int = 64
     tlog_bytes: int = 2 << 30
-    tlog_garbage_bytes: int = 16 << 20
+    tlog_garbage_bytes: int = 2 << 20
 
     @staticmethod
     def env_name(name: str) -> str:

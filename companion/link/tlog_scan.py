@@ -33,10 +33,12 @@ jumps (the totals count them all).
 
 from __future__ import annotations
 
+import bisect
 import struct
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from .codec import FAST_DECODERS, x25_crc
@@ -195,6 +197,26 @@ class ScanSummary:
                 "time_jumps": [j.to_dict() for j in self.time_jumps]}
 
 
+class TlogGarbage(ValueError):
+    """More bytes that frame no valid record than the scanner's cap (``max_garbage_bytes``).
+
+    Attributes
+    ----------
+    offset : int
+        Where the last run of such bytes began.
+    n_bytes : int
+        Such bytes so far (all runs).
+    n_records : int
+        Valid records so far.
+    """
+
+    def __init__(self, offset: int, n_bytes: int, n_records: int) -> None:
+        where = "from the start, no valid MAVLink record" if n_records == 0 else \
+            f"the last run from byte {offset:,}, {n_records:,} valid records"
+        super().__init__(f"{n_bytes:,} bytes that are no MAVLink record ({where})")
+        self.offset, self.n_bytes, self.n_records = offset, n_bytes, n_records
+
+
 class TlogScanner:
     """Incremental .tlog framing (see the module docstring).
 
@@ -203,7 +225,8 @@ class TlogScanner:
     totals. Pure: bytes in, records out.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, max_garbage_bytes: int | None = None) -> None:
+        self.max_garbage_bytes = max_garbage_bytes
         self.summary = ScanSummary()
         self._buf = b""
         self._base = 0            # file offset of self._buf[0]
@@ -225,6 +248,7 @@ class TlogScanner:
         out, used = self._scan(buf, final=False)
         self._buf = buf[used:]
         self._base += used
+        self._check_garbage(self._base + len(self._buf))
         return out
 
     def close(self) -> list:
@@ -242,6 +266,19 @@ class TlogScanner:
         self._buf = b""
         return out
 
+    def _check_garbage(self, end_offset: int) -> None:
+        """``TlogGarbage`` once more bytes than ``max_garbage_bytes`` were skipped in all."""
+        cap = self.max_garbage_bytes
+        if cap is None:
+            return
+        start = self._bad_start
+        if start is None and self.summary.n_records == 0:
+            start = 0
+        run = 0 if start is None else end_offset - start
+        if self.summary.n_skipped_bytes + run > cap:
+            raise TlogGarbage(start if start is not None else end_offset, self.summary.n_skipped_bytes + run,
+                              self.summary.n_records)
+
     # --- framing -----------------------------------------------------------------
 
     def _scan(self, buf: bytes, final: bool):
@@ -256,11 +293,15 @@ class TlogScanner:
         summary = self.summary
         append = out.append
         new_record = tuple.__new__          # RawRecord without its Python-level __new__ (per record)
+        cand = _candidates(buf).tolist()
+        n_cand = len(cand)
+        search = bisect.bisect_right
         while i + 16 <= n:   # stamp (8) + the shortest packet (v1, empty payload: 8)
-            h = _header(buf, i)
-            if h is None:                      # not a packet start
+            h = _header(buf, i) if buf[i] <= _STAMP_TOP else None
+            if h is None:                      # no record starts here: on to the next candidate
                 self._mark_framed(i, None, 0)
-                i += 1
+                k = search(cand, i)
+                i = min(cand[k] if k < n_cand else n, max(n - 15, i + 1))
                 continue
             if h is _MORE:
                 break
@@ -369,6 +410,20 @@ class TlogScanner:
             s.regions.append(SkippedRegion(start, n, kind, n_packets, self._last_stamp))
         self._bad_start = None
         self._bad_kind = None
+
+
+#: Largest first byte of a plausible stamp (big-endian, <= STAMP_MAX_US).
+_STAMP_TOP = STAMP_MAX_US >> 56
+
+
+def _candidates(buf: bytes) -> np.ndarray:
+    """Offsets where a record could start: a magic byte 8 bytes on and a plausible
+    first stamp byte (vectorised, so garbage costs no Python step per byte)."""
+    a = np.frombuffer(buf, dtype=np.uint8)
+    if a.size < 9:
+        return np.zeros(0, dtype=np.intp)
+    magic = a[8:]
+    return np.flatnonzero(((magic == _V2) | (magic == _V1)) & (a[:-8] <= _STAMP_TOP))
 
 
 #: ``_header``'s answer when the buffer ends inside the header.
