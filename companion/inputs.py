@@ -353,18 +353,37 @@ def parse_yaml(text: str, source: str, error: type[Exception], lim=None):
 
 # --- JSON ------------------------------------------------------------------------------
 
-def json_depth(doc) -> int:
-    """Nesting depth of parsed JSON (a scalar: 0), iteratively."""
-    deepest = 0
-    stack = [(doc, 1)]
-    while stack:
-        node, d = stack.pop()
-        if isinstance(node, dict):
-            node = list(node.values())
-        elif not isinstance(node, list):
-            continue
-        deepest = max(deepest, d)
-        stack.extend((c, d + 1) for c in node if isinstance(c, (list, dict)))
+def json_depth(text: str | bytes, chunk: int = 1 << 20) -> int:
+    """Deepest nesting of ``[``/``{`` in JSON text, outside strings (a string's
+    quote counts unless an odd run of backslashes precedes it). Vectorised, a
+    chunk at a time, before the text is parsed: a deep document never reaches
+    the recursive parser."""
+    data = text.encode("utf-8", "surrogatepass") if isinstance(text, str) else text
+    view = np.frombuffer(data, dtype=np.uint8)
+    deepest = depth = 0
+    in_string = 0
+    run = 0                                    # backslashes just before the chunk
+    for s0 in range(0, view.size, chunk):
+        a = view[s0:s0 + chunk]
+        n = a.size
+        if np.any(a == 92):
+            pos = np.arange(n, dtype=np.int64)
+            last_plain = np.maximum.accumulate(np.where(a != 92, pos, -1 - run))
+            before = np.concatenate(([-1 - run], last_plain[:-1]))
+            quote = (a == 34) & (((pos - 1 - before) & 1) == 0)
+            run = int(n - 1 - last_plain[-1])
+        else:                                  # the common case: only a carried run can escape
+            quote = a == 34
+            if run & 1:
+                quote[0] = False
+            run = 0
+        parity = (np.cumsum(quote, dtype=np.uint8) + np.uint8(in_string)) & 1
+        outside = parity == 0
+        step = ((a == 91) | (a == 123)).astype(np.int8) - ((a == 93) | (a == 125))
+        step *= outside
+        level = np.cumsum(step, dtype=np.int32) + depth
+        deepest = max(deepest, int(level.max()))
+        depth, in_string = int(level[-1]), int(parity[-1])
     return deepest
 
 
@@ -372,6 +391,8 @@ def parse_json(text: str, source: str, error: type[Exception], lim=None):
     """A JSON document with its nesting capped, or ``error("<source>[: line N]", problem)``."""
     lim = lim or limits()
     cap = lim.nesting_depth
+    if json_depth(text) > cap:
+        raise error(source, f"the JSON nesting depth is above the limit {cap:,} ({Limits.env_name('nesting_depth')})")
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -381,5 +402,4 @@ def parse_json(text: str, source: str, error: type[Exception], lim=None):
                     ) from None
     except (ValueError, OverflowError) as exc:
         raise error(source, f"not valid JSON: {clip(exc)}") from None
-    check(source, "the JSON nesting depth", json_depth(doc), "nesting_depth", error, lim)
     return doc

@@ -202,19 +202,16 @@ class TlogGarbage(ValueError):
 
     Attributes
     ----------
-    offset : int
-        Where the last run of such bytes began.
     n_bytes : int
-        Such bytes so far (all runs).
+        Such bytes so far (all runs together).
     n_records : int
         Valid records so far.
     """
 
-    def __init__(self, offset: int, n_bytes: int, n_records: int) -> None:
-        where = "from the start, no valid MAVLink record" if n_records == 0 else \
-            f"the last run from byte {offset:,}, {n_records:,} valid records"
-        super().__init__(f"{n_bytes:,} bytes that are no MAVLink record ({where})")
-        self.offset, self.n_bytes, self.n_records = offset, n_bytes, n_records
+    def __init__(self, n_bytes: int, n_records: int) -> None:
+        found = "no valid record" if n_records == 0 else f"{n_records:,} valid records"
+        super().__init__(f"{n_bytes:,} bytes that are no MAVLink record ({found})")
+        self.n_bytes, self.n_records = n_bytes, n_records
 
 
 class TlogScanner:
@@ -276,8 +273,7 @@ class TlogScanner:
             start = 0
         run = 0 if start is None else end_offset - start
         if self.summary.n_skipped_bytes + run > cap:
-            raise TlogGarbage(start if start is not None else end_offset, self.summary.n_skipped_bytes + run,
-                              self.summary.n_records)
+            raise TlogGarbage(self.summary.n_skipped_bytes + run, self.summary.n_records)
 
     # --- framing -----------------------------------------------------------------
 

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MapError
-from ..inputs import check, clip, limits, name, open_regular, parse_json, read_text
+from ..inputs import check, clip, count_tokens, limits, name, open_regular, parse_json, read_text
 from .dem import bilinear, load_dem
 from .gis import lonlat_to_enu
 from .grid import ElevationModel, OccupancyGrid
@@ -97,7 +97,15 @@ def _rings_geojson(doc, src: str):
     return polys, lines
 
 
-def _kml_coords(text: str | None, src: str) -> np.ndarray:
+def _kml_coords(text: str | None, src: str, budget: list) -> np.ndarray:
+    """(k, 2) lon/lat of a KML ``coordinates`` text; ``budget[0]``: vertices still allowed
+    (counted before the points are built, so a huge ring costs no memory)."""
+    n = count_tokens((text or "").encode("utf-8"))
+    budget[0] -= n
+    if budget[0] < 0:
+        lim = limits()
+        check(src, "the number of polygon and line vertices", lim.polygon_vertices - budget[0],
+              "polygon_vertices", MapError, lim)
     pts = []
     for tok in (text or "").split():
         parts = tok.split(",")
@@ -109,6 +117,7 @@ def _kml_coords(text: str | None, src: str) -> np.ndarray:
 
 
 def _rings_kml(text: str, src: str):
+    budget = [limits().polygon_vertices]
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
@@ -128,14 +137,14 @@ def _rings_kml(text: str, src: str):
                     if part.tag.endswith("outerBoundaryIs") or part.tag.endswith("innerBoundaryIs"):
                         for c in part.iter():
                             if c.tag.endswith("coordinates"):
-                                ring = _kml_coords(c.text, src)
+                                ring = _kml_coords(c.text, src, budget)
                                 rings.insert(0, ring) if part.tag.endswith("outerBoundaryIs") else rings.append(ring)
                 if rings:
                     polys.append((name, rings))
             elif el.tag.endswith("LineString"):
                 for c in el:
                     if c.tag.endswith("coordinates"):
-                        lines.append(_kml_coords(c.text, src))
+                        lines.append(_kml_coords(c.text, src, budget))
     return polys, lines
 
 

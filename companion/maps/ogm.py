@@ -268,10 +268,18 @@ def _read_with_pillow(p: Path, fh, lim) -> Shades:
         from PIL import Image, UnidentifiedImageError
     except ImportError:   # pragma: no cover - Pillow is a dependency
         raise MapError(src, "not a PGM image, and Pillow (needed for other formats) is not installed") from None
+    bomb_cap = Image.MAX_IMAGE_PIXELS
     try:
-        with Image.open(fh) as im:
+        Image.MAX_IMAGE_PIXELS = None    # our own cap below, without Pillow's warning on stderr
+        try:
+            opened = Image.open(fh)
+        finally:
+            Image.MAX_IMAGE_PIXELS = bomb_cap
+        with opened as im:
             w, h = im.size      # from the header: nothing is decoded yet
             check(src, f"the image's pixel count ({w} x {h})", w * h, "image_pixels", MapError, lim)
+            if w * h == 0:
+                raise MapError(src, f"the image has no pixels ({w} x {h})")
             im.load()
             mode = im.mode
             if mode == "P":
@@ -284,6 +292,8 @@ def _read_with_pillow(p: Path, fh, lim) -> Shades:
                 im = im.convert("RGB")
             mode = im.mode
             arr = np.asarray(im)
+    except MapError:
+        raise
     except UnidentifiedImageError:
         raise MapError(src, "not an image Pillow can read (expected PGM, PNG, BMP, TIFF, ...)") from None
     except Image.DecompressionBombError as exc:
