@@ -50,7 +50,7 @@ class Limits:
     text_bytes : int
         A mission YAML, map YAML or GeoJSON/KML field.
     plan_bytes : int
-        A plan.json (a 10 ha field sampled at 10 Hz is about 60 MB).
+        A plan.json (about 245 bytes per trajectory sample: a 10 ha field at 10 Hz is about 100 MB).
     dem_bytes : int
         An elevation model file (ASCII grid or raster).
     image_bytes : int
@@ -80,7 +80,7 @@ class Limits:
     """
 
     text_bytes: int = 16 << 20
-    plan_bytes: int = 256 << 20
+    plan_bytes: int = 128 << 20
     dem_bytes: int = 64 << 20
     image_bytes: int = 128 << 20
     image_pixels: int = 25_000_000
