@@ -10,10 +10,10 @@ a subprocess, with a table of times and peak RSS).
 A case is ``Case(id, build, needle, env)``: ``build(d, base)`` writes what it
 needs into ``d`` (the command's working directory) and returns the argv after
 ``companion``; ``base`` holds a good flat-rectangle mission (mission.yaml,
-map.yaml, map.pgm, dem.asc), a good plan.json for it, a good vector field
-(field.yaml + field.geojson) and a good .tlog-free replay target is not
-needed: every .tlog case is hostile by itself. ``needle`` must be in the error
-line; ``env`` adds environment variables (limit overrides).
+map.yaml, map.pgm, dem.asc), a good plan.json for it and a good vector-field
+mission (field.yaml + field.geojson); each case breaks one thing of them
+(the .tlog cases need no base). ``needle`` must be in the error line;
+``env`` adds environment variables (limit overrides).
 """
 
 from __future__ import annotations
@@ -24,6 +24,9 @@ import lzma
 import os
 import shutil
 import struct
+import subprocess
+import sys
+import time
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -96,6 +99,56 @@ def check_base(base: Path) -> None:
     for m in (M, "field.yaml"):
         load_mission_maps(load_mission(base / m))
     load_plan(base / "plan.json")
+
+
+# --- running a case under limits -------------------------------------------------------
+
+def tree(d: Path) -> dict:
+    """Every path under ``d`` with its mode, size and mtime (links not followed)."""
+    out = {}
+    for p in d.rglob("*"):
+        st = os.lstat(p)
+        out[str(p.relative_to(d))] = (st.st_mode, st.st_size, st.st_mtime_ns)
+    return out
+
+
+#: Runs ``argv`` under RLIMIT_AS and a timeout, and prints its exit status, CPU time and peak
+#: RSS (``os.wait4``). A small process of its own (``python -S``, about 10 MB): a forked
+#: child's peak RSS starts at its parent's, so the test process must not be the parent.
+_LAUNCHER = """
+import json, os, resource, subprocess, sys, time
+a = json.loads(sys.argv[1])
+def limit():
+    resource.setrlimit(resource.RLIMIT_AS, (a["as"], a["as"]))
+t0 = time.perf_counter()
+p = subprocess.Popen(a["argv"], cwd=a["cwd"], env=a["env"], preexec_fn=limit, stdout=subprocess.DEVNULL)
+timed_out = False
+while True:
+    pid, status, usage = os.wait4(p.pid, os.WNOHANG)
+    if pid:
+        break
+    if time.perf_counter() - t0 > a["timeout"]:
+        timed_out = True
+        p.kill()
+        pid, status, usage = os.wait4(p.pid, 0)
+        break
+    time.sleep(0.005)
+print(json.dumps({"rc": os.waitstatus_to_exitcode(status), "wall": time.perf_counter() - t0,
+                  "cpu": usage.ru_utime + usage.ru_stime, "rss": usage.ru_maxrss * 1024, "timed_out": timed_out}))
+"""
+
+
+def run_limited(argv: list, cwd: Path, env: dict, timeout_s: float = 5.0, max_as_bytes: int = 1 << 30):
+    """Run ``companion argv`` as a subprocess under RLIMIT_AS, killed after ``timeout_s``:
+    (rc, stderr, wall s, CPU s, peak RSS bytes, timed out), all the child's own."""
+    full_env = dict(os.environ, **env)
+    full_env.setdefault("OPENBLAS_NUM_THREADS", "1")
+    spec = {"argv": [sys.executable, "-m", "companion", *argv], "cwd": str(cwd), "env": full_env,
+            "as": max_as_bytes, "timeout": timeout_s}
+    out = subprocess.run([sys.executable, "-S", "-c", _LAUNCHER, json.dumps(spec)], capture_output=True,
+                         timeout=timeout_s + 30)
+    r = json.loads(out.stdout)
+    return r["rc"], out.stderr.decode("utf-8", "replace"), r["wall"], r["cpu"], r["rss"], r["timed_out"]
 
 
 # --- builders -------------------------------------------------------------------------

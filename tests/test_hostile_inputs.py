@@ -7,17 +7,12 @@ RSS measured (benchmarks/hostile_inputs.py runs every case that way)."""
 
 from __future__ import annotations
 
-import os
-import resource
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
 
 from companion.cli import main as companion_main
-from hostile_corpus import CASES, SUBPROCESS_IDS, check_base, make_base
+from hostile_corpus import CASES, SUBPROCESS_IDS, check_base, make_base, run_limited, tree
 
 #: The longest error line allowed: a file name (elided beyond 200 characters) and a short clause.
 MAX_LINE = 500
@@ -28,14 +23,6 @@ def base(tmp_path_factory):
     b = make_base(tmp_path_factory.mktemp("hostile-base"))
     check_base(b)
     return b
-
-
-def _tree(d: Path) -> dict:
-    out = {}
-    for p in d.rglob("*"):
-        st = os.lstat(p)
-        out[str(p.relative_to(d))] = (st.st_mode, st.st_size, st.st_mtime_ns)
-    return out
 
 
 def test_corpus_is_large_and_covers_every_kind():
@@ -55,7 +42,7 @@ def test_hostile_input_is_one_line_and_exit_2(case, base, tmp_path, capsys, monk
     for k, v in case.env.items():
         monkeypatch.setenv(k, v)
     argv = case.build(tmp_path, base)
-    before = _tree(tmp_path)
+    before = tree(tmp_path)
     capsys.readouterr()
     t0 = time.perf_counter()
     rc = companion_main(argv)
@@ -67,38 +54,8 @@ def test_hostile_input_is_one_line_and_exit_2(case, base, tmp_path, capsys, monk
     assert err.startswith(f"companion {argv[0]}: error: "), err[:500]
     assert case.needle in err, err[:1000]
     assert len(err) <= MAX_LINE, f"{len(err)} characters: {err[:300]}..."
-    assert _tree(tmp_path) == before, "something was written"
+    assert tree(tmp_path) == before, "something was written"
     assert elapsed < 15.0, f"{elapsed:.1f} s"   # wall time, in-process on a shared machine (CPU: the subprocess test)
-
-
-def run_limited(argv: list, cwd: Path, env: dict, timeout_s: float = 5.0, max_as_bytes: int = 1 << 30):
-    """Run ``companion argv`` as a subprocess under RLIMIT_AS, killed after ``timeout_s``:
-    (rc, stderr, wall s, CPU s, max RSS bytes, timed out). CPU time and peak RSS are
-    the child's own (``os.wait4``), not the maximum over every child so far."""
-    def limit():
-        resource.setrlimit(resource.RLIMIT_AS, (max_as_bytes, max_as_bytes))
-
-    full_env = dict(os.environ, **env)
-    full_env.setdefault("OPENBLAS_NUM_THREADS", "1")
-    t0 = time.perf_counter()
-    p = subprocess.Popen([sys.executable, "-m", "companion", *argv], cwd=cwd, env=full_env, preexec_fn=limit,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    timed_out = False
-    while True:
-        pid, status, usage = os.wait4(p.pid, os.WNOHANG)
-        if pid:
-            break
-        if time.perf_counter() - t0 > timeout_s:
-            timed_out = True
-            p.kill()
-            pid, status, usage = os.wait4(p.pid, 0)
-            break
-        time.sleep(0.01)
-    wall = time.perf_counter() - t0
-    p.returncode = os.waitstatus_to_exitcode(status)
-    err = p.stderr.read().decode("utf-8", "replace")
-    p.stderr.close()
-    return p.returncode, err, wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss * 1024, timed_out
 
 
 SUB = [c for c in CASES if c.id in SUBPROCESS_IDS]
@@ -109,11 +66,11 @@ def test_worst_cases_as_subprocesses_in_bounded_time_and_memory(case, base, tmp_
     """CPU time <= 5 s (wall time depends on the machine's load: a hang is caught by a
     30 s kill), peak RSS <= 500 MB under a 1 GiB address-space limit."""
     argv = case.build(tmp_path, base)
-    before = _tree(tmp_path)
+    before = tree(tmp_path)
     rc, err, wall, cpu, rss, timed_out = run_limited(argv, tmp_path, case.env, timeout_s=30.0)
     assert not timed_out, f"killed after {wall:.1f} s"
     assert cpu <= 5.0, f"{cpu:.1f} s of CPU"
     assert rc == 2, (rc, err[-2000:])
     assert err.count("\n") == 1 and case.needle in err, err[-2000:]
     assert rss <= 500e6, f"{rss / 1e6:.0f} MB"
-    assert _tree(tmp_path) == before
+    assert tree(tmp_path) == before
