@@ -89,7 +89,7 @@ class Limits:
     polygon_vertices: int = 200_000
     raster_crossings: int = 20_000_000
     yaml_aliases: int = 100
-    yaml_nodes: int = 200_000
+    yaml_nodes: int = 100_000
     nesting_depth: int = 64
     tlog_bytes: int = 2 << 30
     tlog_garbage_bytes: int = 2 << 20

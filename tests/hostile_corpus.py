@@ -453,7 +453,7 @@ CASES = [
     Case("mission-huge-key", raw_mission("k" * 1000 + ": 1\n"), "unknown key"),
     Case("mission-2mb-key", raw_mission("k" * 2_000_000 + ": 1\n"), M),
     Case("mission-huge-string-value", mission(_set("flight.speed_m_s", "x" * 1_000_000)), "flight.speed_m_s"),
-    Case("mission-huge-list-value", mission(_set("flight.speed_m_s", list(range(100_000)))), "flight.speed_m_s"),
+    Case("mission-huge-list-value", mission(_set("flight.speed_m_s", list(range(20_000)))), "flight.speed_m_s"),
     Case("mission-nan-speed", mission(_set("flight.speed_m_s", float("nan"))), "flight.speed_m_s"),
     Case("mission-inf-height", mission(_set("flight.height_agl_m", float("inf"))), "flight.height_agl_m"),
     Case("mission-negative-spacing", mission(_set("coverage.line_spacing_m", -2.5)), "coverage.line_spacing_m"),
@@ -477,7 +477,7 @@ CASES = [
     # --- the map YAML
     Case("map-alias-bomb-origin", map_file(map_yaml_text(alias_bomb(key="origin"), drop=("origin",))),
          "COMPANION_MAX_YAML_NODES"),
-    Case("map-alias-bomb-small", map_file(map_yaml_text(alias_bomb(levels=4, key="origin"), drop=("origin",))),
+    Case("map-alias-bomb-small", map_file(map_yaml_text(alias_bomb(levels=3, key="origin"), drop=("origin",))),
          "origin"),
     Case("map-deep-nesting", map_file("image: " + "[" * 200 + "]" * 200 + "\n"), "COMPANION_MAX_NESTING_DEPTH"),
     Case("map-fifo", map_file(special("fifo")), "FIFO"),
@@ -487,7 +487,9 @@ CASES = [
     Case("map-symlink-loop", map_file(special("loop")), "symbolic links"),
     Case("map-sparse-1gib", map_file(sparse(GIB)), "COMPANION_MAX_TEXT_BYTES"),
     Case("map-binary-garbage", map_file(bytes(range(128, 256)) * 32), "m.yaml"),
-    Case("map-origin-huge-list", map_yaml(lambda doc, d: doc.update(origin=list(range(100_000)))), "origin"),
+    Case("map-origin-huge-list", map_yaml(lambda doc, d: doc.update(origin=list(range(20_000)))), "origin"),
+    Case("mission-95k-nodes-under-cap", raw_mission(SRC.joinpath(M).read_text() + "pad: [" + ",".join(["0"] * 95_000)
+                                                     + "]\n"), "unknown key"),
     Case("map-origin-inf", map_yaml(lambda doc, d: doc.update(origin=[float("inf"), 0.0, 0.0])), "origin"),
     Case("map-origin-nan", map_yaml(lambda doc, d: doc.update(origin=[0.0, float("nan"), 0.0])), "origin"),
     Case("map-resolution-negative", map_yaml(lambda doc, d: doc.update(resolution=-0.1)), "resolution"),
@@ -587,9 +589,11 @@ CASES = [
     Case("geojson-nan-coordinates", geojson('{"type": "Polygon", "coordinates": [[[NaN, 0], [1, 0], [1, 1], [NaN, 0]]]}'),
          "f.geojson"),
     Case("geojson-infinity", geojson('{"type": "Polygon", "coordinates": [[[Infinity, 0], [1, 0], [1, 1], [0, 0]]]}'),
-         "f.geojson"),
+         "WGS-84"),
     Case("geojson-1e400", geojson('{"type": "Polygon", "coordinates": [[[1e400, 0], [1, 0], [1, 1], [0, 0]]]}'),
-         "f.geojson"),
+         "WGS-84"),
+    Case("geojson-1e300-area-overflow", geojson('{"type": "Polygon", "coordinates": [[[1e300, 0], [0, 1e300], '
+                                                '[-1e300, 0], [1e300, 0]]]}'), "WGS-84"),
     Case("geojson-string-coordinates", geojson({"type": "Polygon", "coordinates": [[["a", "b"], ["c", "d"]]]}),
          "malformed"),
     Case("geojson-ragged-coordinates", geojson({"type": "Polygon", "coordinates": [[[0, 0], [1], [1, 1, 1, 1]]]}),
@@ -663,4 +667,4 @@ CASES = [
 
 #: The cases tests/test_hostile_inputs.py also runs as subprocesses under the limits.
 SUBPROCESS_IDS = ("map-alias-bomb-origin", "mission-fifo", "dem-dev-zero", "png-13000-square",
-                  "geojson-1e6-vertices", "tlog-zeros-64mib", "dem-cell-1-by-0.0001", "planjson-deep-100k")
+                  "geojson-1e6-vertices", "tlog-zeros-64mib")

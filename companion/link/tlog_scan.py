@@ -305,7 +305,8 @@ class TlogScanner:
             if end > n:
                 if final:
                     self._mark_framed(i, "truncated", end)
-                    i += 1
+                    k = search(cand, i)          # the bytes up to the next candidate start no record
+                    i = min(cand[k] if k < n_cand else n, max(n - 15, i + 1))
                     continue
                 break
             extra = extras.get(msgid)
@@ -317,14 +318,16 @@ class TlogScanner:
                 continue
             if crc(buf[i + 9:crc_end - 2] + extra, 0xFFFF) != (buf[crc_end - 2] | buf[crc_end - 1] << 8):
                 self._mark_framed(i, "bad_crc", end)
-                i += 1
+                k = search(cand, i)
+                i = min(cand[k] if k < n_cand else n, max(n - 15, i + 1))
                 continue
             (stamp,) = unpack(buf, i)
             if not STAMP_MIN_US <= stamp <= STAMP_MAX_US:
                 # A 16-bit CRC passes on one random frame in 65536: a packet-looking
                 # run of garbage is also told by a time stamp no log can carry.
                 self._mark_framed(i, None, 0)
-                i += 1
+                k = search(cand, i)
+                i = min(cand[k] if k < n_cand else n, max(n - 15, i + 1))
                 continue
             sysid, compid = buf[ids], buf[ids + 1]
             # a valid record

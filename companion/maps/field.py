@@ -301,13 +301,13 @@ def load_field(path: str | Path, home: tuple[float, float, float], resolution_m:
         polys, lines = _rings_geojson(parse_json(text, src, MapError, lim), src)
     n_vertices = sum(len(r) for _, rings in polys for r in rings) + sum(len(line) for line in lines)
     check(src, "the number of polygon and line vertices", n_vertices, "polygon_vertices", MapError, lim)
+    for r in [r for _, rings in polys for r in rings] + lines:
+        if not (np.all(np.abs(r[:, 0]) <= 180) and np.all(np.abs(r[:, 1]) <= 90)):
+            raise MapError(src, "coordinates are not WGS-84 longitude/latitude (GeoJSON and KML are)")
     polys = [(n, [r for r in rings if len(r) >= 3]) for n, rings in polys]
     polys = [(n, rings) for n, rings in polys if rings and _polygon_area(rings[0]) > 0]
     if not polys:
         raise MapError(src, "no polygon (with an area) to use as the field boundary")
-    for r in [r for _, rings in polys for r in rings] + lines:
-        if not (np.all(np.abs(r[:, 0]) <= 180) and np.all(np.abs(r[:, 1]) <= 90)):
-            raise MapError(src, "coordinates are not WGS-84 longitude/latitude (GeoJSON and KML are)")
     named = [i for i, (n, _) in enumerate(polys) if n == "boundary"]
     b = named[0] if named else int(np.argmax([_polygon_area(r[0]) for _, r in polys]))
 
