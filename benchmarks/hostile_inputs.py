@@ -6,7 +6,7 @@ nothing written in its working directory. Prints one row per case (wall and
 CPU seconds, peak RSS from ``os.wait4``) and a summary; exit code 1 if any
 case fails.
 
-    python benchmarks/hostile_inputs.py [--timeout 5] [-k SUBSTRING] [--markdown]
+    python benchmarks/hostile_inputs.py [--timeout 5] [-k SUBSTRING] [--only ID,...] [--markdown]
 
 Wall time includes the interpreter's start and the imports (about 1 s idle),
 so on a loaded machine it is the CPU column that shows the work bounded.
@@ -33,9 +33,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--timeout", type=float, default=5.0, help="wall-clock limit per case (s)")
     ap.add_argument("-k", default="", help="only the cases whose id contains this")
+    ap.add_argument("--only", default="", help="only these case ids (comma-separated)")
     ap.add_argument("--markdown", action="store_true", help="print the table as markdown")
     args = ap.parse_args(argv)
-    cases = [c for c in CASES if args.k in c.id]
+    only = set(filter(None, args.only.split(",")))
+    cases = [c for c in CASES if args.k in c.id and (not only or c.id in only)]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         base = make_base(Path(tmp) / "base")
