@@ -70,7 +70,8 @@ def main(argv=None) -> int:
         print(("| " + " | ".join(c.strip() for c in cells) + " |") if args.markdown else sep.join(cells))
     bad = [r for r in rows if r[7] != "ok"]
     walls, cpus, rsss = [r[4] for r in rows], [r[5] for r in rows], [r[6] for r in rows]
-    print(f"\n{len(rows)} cases, {len(rows) - len(bad)} ok, {len(bad)} failed; wall s median {statistics.median(walls):.2f} "
+    print(f"\n{len(rows)} cases, {len(rows) - len(bad)} ok, {len(bad)} failed; "
+          f"wall s median {statistics.median(walls):.2f} "
           f"max {max(walls):.2f}; cpu s median {statistics.median(cpus):.2f} max {max(cpus):.2f}; "
           f"peak RSS MB median {statistics.median(rsss):.0f} max {max(rsss):.0f}")
     for r in bad:

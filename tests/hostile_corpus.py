@@ -26,7 +26,6 @@ import shutil
 import struct
 import subprocess
 import sys
-import time
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -433,7 +432,8 @@ CASES = [
     Case("mission-alias-undefined", raw_mission("name: *nowhere\n"), "not valid YAML"),
     Case("mission-deep-flow-100k", raw_mission("name: " + "[" * 100_000 + "]" * 100_000 + "\n"), M),
     Case("mission-deep-flow-65", raw_mission("name: " + "[" * 65 + "]" * 65 + "\n"), "COMPANION_MAX_NESTING_DEPTH"),
-    Case("mission-deep-block-100", raw_mission("".join("  " * i + f"k{i}:\n" for i in range(100)) + "  " * 100 + "v: 1\n"),
+    Case("mission-deep-block-100",
+         raw_mission("".join("  " * i + f"k{i}:\n" for i in range(100)) + "  " * 100 + "v: 1\n"),
          "COMPANION_MAX_NESTING_DEPTH"),
     Case("mission-deep-flow-mapping", raw_mission("name: " + "{a: " * 5000 + "1" + "}" * 5000 + "\n"), M),
     Case("mission-5000-digit-int", raw_mission("name: x\nflight: {speed_m_s: " + "9" * 5000 + "}\n"), M),
@@ -586,7 +586,8 @@ CASES = [
     Case("geojson-zigzag-crossings", geojson(zigzag(150_000)), "COMPANION_MAX_RASTER_CROSSINGS"),
     Case("geojson-deep-100k", geojson(deep_json(100_000)), "COMPANION_MAX_NESTING_DEPTH"),
     Case("geojson-deep-65", geojson(deep_json(65)), "COMPANION_MAX_NESTING_DEPTH"),
-    Case("geojson-nan-coordinates", geojson('{"type": "Polygon", "coordinates": [[[NaN, 0], [1, 0], [1, 1], [NaN, 0]]]}'),
+    Case("geojson-nan-coordinates",
+         geojson('{"type": "Polygon", "coordinates": [[[NaN, 0], [1, 0], [1, 1], [NaN, 0]]]}'),
          "f.geojson"),
     Case("geojson-infinity", geojson('{"type": "Polygon", "coordinates": [[[Infinity, 0], [1, 0], [1, 1], [0, 0]]]}'),
          "WGS-84"),

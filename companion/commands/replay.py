@@ -84,8 +84,9 @@ def read_chunks(path: str):
 
 
 def _garbage(path: str, exc) -> InputError:
-    return InputError(name(path), f"{exc}: above the limit {limits().tlog_garbage_bytes:,} "
-                                  f"({Limits.env_name('tlog_garbage_bytes')}); not a .tlog, or one too damaged to replay")
+    cap = limits().tlog_garbage_bytes
+    return InputError(name(path), f"{exc}: above the limit {cap:,} ({Limits.env_name('tlog_garbage_bytes')}); "
+                                  "not a .tlog, or one too damaged to replay")
 
 
 def _withheld_ids(spec: str) -> tuple:

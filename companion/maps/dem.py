@@ -88,7 +88,8 @@ def load_dem(path: str | Path) -> ElevationModel:
         try:
             header[key] = float(parts[1])
         except ValueError:
-            raise MapError(f"{src}: line {line_no}", f"{parts[0]} value {brief(parts[1], 30)} is not a number") from None
+            raise MapError(f"{src}: line {line_no}",
+                           f"{parts[0]} value {brief(parts[1], 30)} is not a number") from None
         if not math.isfinite(header[key]):
             raise MapError(f"{src}: line {line_no}", f"{parts[0]} value must be finite")
         pos = end + 1
