@@ -8,14 +8,13 @@ take-off starts on the terrain under them).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from .errors import MissionError
 from .geodesy import geodetic2enu
-from .textfile import read_text
+from .inputs import parse_json, read_text
 
 
 def _point_of_geojson(doc, src: str) -> tuple[float, float]:
@@ -76,11 +75,7 @@ def launch_enu_xy(mission) -> np.ndarray | None:
     else:
         p = Path(mission.base_dir) / cfg.file
         src = f"{mission.source}: key 'launch.file': {p}"
-        text = read_text(p, MissionError)
-        try:
-            doc = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise MissionError(f"{p}: line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
+        doc = parse_json(read_text(p, MissionError, "GeoJSON"), str(p), MissionError)
         lon, lat = _point_of_geojson(doc, src)
     h = mission.home
     x, y, _ = geodetic2enu(lat, lon, h.alt_m, h.lat, h.lon, h.alt_m)

@@ -39,7 +39,7 @@ import numpy as np
 from .config import to_dict
 from .errors import PlanError
 from .format_version import check_format_version
-from .textfile import read_text
+from .inputs import brief, parse_json, read_text
 from .mission import Mission
 
 MAV_CMD_NAV_WAYPOINT = 16
@@ -394,16 +394,12 @@ def load_plan(path: str | Path) -> PlanFile:
     """
     p = Path(path)
     src = str(p)
-    text = read_text(p, PlanError, "plan.json")
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise PlanError(f"{src}: line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
+    data = parse_json(read_text(p, PlanError, "plan.json", cap="plan_bytes"), src, PlanError)
     if not isinstance(data, dict):
         raise PlanError(src, "expected a JSON object")
     major = check_format_version(data, (PLAN_FORMAT_MAJOR, LEGACY_PLAN_MAJOR), src, PlanError).major
     if _get(data, "frame", src) != "ENU":
-        raise PlanError(f"{src}: key 'frame'", f"expected 'ENU', got {data['frame']!r}")
+        raise PlanError(f"{src}: key 'frame'", f"expected 'ENU', got {brief(data['frame'])}")
     origin = _get(data, "origin", src)
     o = tuple(float(_num_array([_get(origin, k, src, "origin")], (), src, f"origin.{k}")[0])
               for k in ("lat", "lon", "alt_m"))

@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
+from ..inputs import Limits, check, clip, limits, name, open_regular
 
 #: Exit code of a replay whose outputs differ from the recording.
 EXIT_DIVERGED = 4
@@ -54,14 +55,9 @@ def add_arguments(parser) -> None:
 
 
 def open_tlog(path: str):
-    """The .tlog's bytes as a binary stream (xz and gzip decompressed on the fly)."""
-    p = Path(path)
-    try:
-        f = open(p, "rb")
-    except IsADirectoryError:
-        raise InputError(path, "is a directory, not a .tlog") from None
-    except OSError as exc:
-        raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
+    """The .tlog's bytes as a binary stream (xz and gzip decompressed on the fly): a
+    regular file within the ``tlog_bytes`` limit (docs/limits.md)."""
+    f = open_regular(path, InputError, ".tlog", cap="tlog_bytes")
     head = f.read(6)
     f.seek(0)
     if head.startswith(b"\xfd7zXZ\x00"):
@@ -72,19 +68,30 @@ def open_tlog(path: str):
 
 
 def read_chunks(path: str):
-    """Generator of the file's bytes in chunks; InputError when it cannot be read or decompressed."""
+    """Generator of the file's bytes in chunks; InputError when it cannot be read or
+    decompressed, or decompresses to more than the ``tlog_bytes`` limit."""
+    cap = limits().tlog_bytes
+    total = 0
     f = open_tlog(path)
     try:
         while True:
             try:
                 chunk = f.read(CHUNK_BYTES)
             except (OSError, EOFError, lzma.LZMAError) as exc:
-                raise InputError(path, f"cannot read: {exc}") from None
+                raise InputError(name(path), f"cannot read: {clip(exc)}") from None
             if not chunk:
                 return
+            total += len(chunk)
+            check(name(path), "the decompressed size", total, "tlog_bytes")
             yield chunk
     finally:
         f.close()
+
+
+def _garbage(path: str, exc) -> InputError:
+    cap = limits().tlog_garbage_bytes
+    return InputError(name(path), f"{exc}: above the limit {cap:,} ({Limits.env_name('tlog_garbage_bytes')}); "
+                                  "not a .tlog, or one too damaged to replay")
 
 
 def _withheld_ids(spec: str) -> tuple:
@@ -111,11 +118,7 @@ def _check_args(args) -> tuple:
     withhold = _withheld_ids(args.withhold)
     if withhold and not args.mission:
         raise InputError("--withhold", "needs --mission (it changes what the re-run is fed)")
-    p = Path(args.tlog)
-    if not p.exists():
-        raise InputError(args.tlog, "no such file")
-    if p.is_dir():
-        raise InputError(args.tlog, "is a directory, not a .tlog")
+    open_tlog(args.tlog).close()          # a regular file within the size limit, before anything else
     if args.report:
         from .fly import check_output_paths
 
@@ -134,12 +137,15 @@ def _check_args(args) -> tuple:
 
 def _rebuild(args):
     """(core, flight plan, warnings) of the recorded flight, from its setup and the given files."""
+    from ..link.tlog_scan import TlogGarbage
     from ..mission import load_mission
     from ..replay import build_core, find_setup, setup_mismatches
     from .fly import flight_setup, prepare
 
     try:
-        setup = find_setup(read_chunks(args.tlog))
+        setup = find_setup(read_chunks(args.tlog), limits().tlog_garbage_bytes)
+    except TlogGarbage as exc:
+        raise _garbage(args.tlog, exc) from None
     except ValueError as exc:
         raise InputError(args.tlog, f"setup record unreadable: {exc}") from None
     if setup is None:
@@ -243,13 +249,18 @@ def run(args) -> int:
     core, fp, warnings, setup = (None, None, [], None)
     if args.mission:
         core, fp, warnings, setup = _rebuild(args)
+    from ..link.tlog_scan import TlogGarbage
     from ..replay import replay_chunks
 
     env = _environment(setup) if core is not None else None
     if getattr(args, "exact", False):
         env = None                  # bit for bit, whatever the environment
-    result = replay_chunks(read_chunks(args.tlog), core, args.tolerance, withhold, args.settle,
-                           with_log=bool(args.plot), environment=env)
+    try:
+        result = replay_chunks(read_chunks(args.tlog), core, args.tolerance, withhold, args.settle,
+                               with_log=bool(args.plot), environment=env,
+                               max_garbage_bytes=limits().tlog_garbage_bytes)
+    except TlogGarbage as exc:
+        raise _garbage(args.tlog, exc) from None
     if result.scan.n_records == 0:
         raise InputError(args.tlog, "no MAVLink records (not a .tlog?)")
     if setup is None:

@@ -29,11 +29,10 @@ import numpy as np
 
 from ..errors import MapError
 from .. import geodesy
+from ..inputs import check, limits, name, open_regular
 from .dem import MAX_HEIGHT_M, bilinear
 from .grid import ElevationModel
 
-#: Largest reprojected grid (cells): a DEM of a whole county is not a field.
-MAX_CELLS = 40_000_000
 
 
 def _need_gis(src: str, what: str):
@@ -78,9 +77,8 @@ def reproject_to_enu(z: np.ndarray, inv_affine, to_crs, footprint_lonlat: np.nda
     y_lo, y_hi = float(np.min(fy)), float(np.max(fy))
     nx = int(math.floor((x_hi - x_lo) / cell_m)) + 1
     ny = int(math.floor((y_hi - y_lo) / cell_m)) + 1
-    if nx * ny > MAX_CELLS:
-        raise MapError(source, f"the DEM covers {nx * cell_m:.0f} m x {ny * cell_m:.0f} m at {cell_m:g} m: "
-                               f"more than {MAX_CELLS} cells (crop it to the field)")
+    check(source, f"the DEM reprojected to {cell_m:g} m cells ({nx} x {ny}, {nx * cell_m:.0f} m x "
+                  f"{ny * cell_m:.0f} m; crop it to the field)", nx * ny, "dem_cells", MapError)
     x0 = x_lo + 0.5 * cell_m
     y0 = y_lo + 0.5 * cell_m
     X, Y = np.meshgrid(x0 + cell_m * np.arange(nx), y0 + cell_m * np.arange(ny))
@@ -112,16 +110,18 @@ def load_geo_dem(path: str | Path, home: tuple[float, float, float], crs: str | 
         Missing extra, unreadable or corrupt file, no CRS, a CRS pyproj cannot
         transform to WGS-84, heights beyond any terrain.
     """
-    src = str(path)
+    src = name(path)
     _need_gis(src, "a georeferenced DEM")
     import pyproj
     import rasterio
     from rasterio.errors import RasterioIOError
 
-    if not Path(path).exists():
-        raise MapError(src, "no such file (elevation model)")
+    lim = limits()
+    open_regular(path, MapError, "elevation model", cap="dem_bytes", lim=lim).close()
     try:
         with rasterio.open(path) as ds:
+            check(src, f"the raster's cell count ({ds.width} x {ds.height})", ds.width * ds.height, "dem_cells",
+                  MapError, lim)
             band = ds.read(1, masked=True).astype(float)
             transform = ds.transform
             file_crs = ds.crs

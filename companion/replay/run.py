@@ -51,7 +51,7 @@ class ReplayResult:
     setup: dict | None = None
 
 
-def find_setup(chunks) -> dict | None:
+def find_setup(chunks, max_garbage_bytes: int | None = None) -> dict | None:
     """The setup record of a companion .tlog (None when it has none).
 
     Raises
@@ -59,7 +59,7 @@ def find_setup(chunks) -> dict | None:
     ValueError
         Setup chunks were found but the record is incomplete or malformed.
     """
-    scanner = TlogScanner()
+    scanner = TlogScanner(max_garbage_bytes)
     dec = new_decoder()
     col = SetupCollector()
 
@@ -81,7 +81,7 @@ def find_setup(chunks) -> dict | None:
 
 
 def replay_chunks(chunks, core=None, tolerance: float = 0.0, withhold=(), settle_s: float = 5.0,
-                  with_log: bool = False, environment=None) -> ReplayResult:
+                  with_log: bool = False, environment=None, max_garbage_bytes: int | None = None) -> ReplayResult:
     """Replay a .tlog given as byte chunks (see ``ReplaySession``).
 
     Parameters
@@ -104,11 +104,14 @@ def replay_chunks(chunks, core=None, tolerance: float = 0.0, withhold=(), settle
         recording without a fingerprint): empty compares bit for bit, anything
         else in drift mode (``companion.replay.compare``); None: bit for bit
         (the caller decided). A ``tolerance`` > 0 overrides both.
+    max_garbage_bytes : int or None
+        ``TlogScanner``'s cap: ``TlogGarbage`` (a ValueError) once more bytes
+        than this frame no valid record.
     """
     log = FlightLog() if (with_log and core is None) else None
     metrics = MetricsAccumulator(settle_s, log)
     session = ReplaySession(metrics, core, tolerance, withhold, drift=bool(environment), environment=environment)
-    scanner = TlogScanner()
+    scanner = TlogScanner(max_garbage_bytes)
     for chunk in chunks:
         session.feed(scanner.feed(chunk))
     session.feed(scanner.close())
