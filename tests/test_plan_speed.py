@@ -1,0 +1,184 @@
+"""Issue 18 speed-ups keep their results exactly: each optimised function against
+the straightforward implementation it replaced, kept here as the reference, on
+several fields (random masks and images, chunk boundaries forced small)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from companion.coverage import blockgraph
+from companion.coverage.blockgraph import block_size, build_block_graph
+from companion.maps import ogm
+from companion.maps.ogm import Shades, classify
+
+
+# --- block graph: labels held per block -------------------------------------------------
+
+def reference_labels(eroded, bbox):
+    """The sub-component id of every window cell as one ``ndimage.label`` over the
+    whole stack of blocks numbers them (the implementation before issue 18)."""
+    r0, r1, c0, c1 = bbox
+    win = eroded[r0:r1, c0:c1]
+    f = block_size(win.size)
+    nbr, nbc = -(-win.shape[0] // f), -(-win.shape[1] // f)
+    padded = np.zeros((nbr * f, nbc * f), dtype=bool)
+    padded[: win.shape[0], : win.shape[1]] = win
+    stack = padded.reshape(nbr, f, nbc, f).transpose(0, 2, 1, 3).reshape(nbr * nbc, f, f)
+    structure = np.zeros((3, 3, 3), dtype=bool)
+    structure[1] = True
+    lab, k = ndimage.label(stack, structure=structure)
+    B = lab.reshape(nbr, nbc, f, f)
+    grid_ids = B.transpose(0, 2, 1, 3).reshape(nbr * f, nbc * f)[: win.shape[0], : win.shape[1]]
+    return grid_ids, k, f
+
+
+def reference_edges(grid_ids):
+    """Undirected pairs of different ids that hold 8-adjacent cells (brute force over the grid)."""
+    pairs = set()
+    g = np.pad(grid_ids, 1)
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        a = g[1:-1, 1:-1]
+        b = g[1 + dr: g.shape[0] - 1 + dr, 1 + dc: g.shape[1] - 1 + dc]
+        m = (a > 0) & (b > 0) & (a != b)
+        pairs |= {(int(min(x, y)), int(max(x, y))) for x, y in zip(a[m], b[m])}
+    return pairs
+
+
+def random_fields():
+    rng = np.random.default_rng(18)
+    out = []
+    for shape, p in (((97, 131), 0.55), ((64, 64), 0.35), ((150, 90), 0.8), ((33, 257), 0.5)):
+        mask = ndimage.binary_opening(rng.random(shape) < p) | (rng.random(shape) < 0.05)
+        out.append(mask)
+    vine = np.ones((120, 140), dtype=bool)
+    vine[::5] = False                         # rows every 5 cells, cut by a track
+    vine[:, 60:63] = True
+    out.append(vine)
+    return out
+
+
+@pytest.mark.parametrize("label_cells", [blockgraph._LABEL_CELLS, 64 * 3, 64])
+@pytest.mark.parametrize("field", range(5))
+def test_block_graph_ids_edges_and_components_match_the_whole_stack_labelling(monkeypatch, field, label_cells):
+    monkeypatch.setattr(blockgraph, "_LABEL_CELLS", label_cells)       # 1 or 3 blocks a call
+    mask = random_fields()[field]
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    bbox = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
+    bg = build_block_graph(mask, bbox)
+    ref, k, f = reference_labels(mask, bbox)
+    assert bg.block == f and bg.graph.shape == (k + 1, k + 1)
+    rr, cc = np.indices(ref.shape)
+    got = np.array([bg.sub_at(r + bbox[0], c + bbox[2]) for r, c in zip(rr.ravel(), cc.ravel())]).reshape(ref.shape)
+    np.testing.assert_array_equal(got, ref)
+    # the graph's edges are exactly the 8-adjacent pairs of different sub-components
+    coo = bg.graph.tocoo()
+    assert {(int(u), int(v)) for u, v in zip(coo.row, coo.col) if u < v} == reference_edges(ref)
+    # components: two sub-components share one exactly when their cells are 8-connected
+    fine, _ = ndimage.label(mask[bbox[0]:bbox[1], bbox[2]:bbox[3]], structure=np.ones((3, 3), bool))
+    comp = bg.components_of(rr.ravel() + bbox[0], cc.ravel() + bbox[2]).reshape(ref.shape)
+    assert np.all((comp >= 0) == (ref > 0))
+    for lab in range(1, fine.max() + 1):
+        assert len(np.unique(comp[fine == lab])) == 1
+    assert len(np.unique(comp[ref > 0])) == fine.max()
+    # cells_of gives back exactly the cells of the asked sub-components
+    subs = np.unique(ref[ref > 0])[::3]
+    r, c = bg.cells_of(subs)
+    want = np.isin(ref, subs)
+    assert sorted(zip(r.tolist(), c.tolist())) == sorted(zip((rr[want] + bbox[0]).tolist(),
+                                                              (cc[want] + bbox[2]).tolist()))
+    # block_of: the block that holds each sub-component's cells
+    for s in subs:
+        i, j = np.argwhere(ref == s)[0]
+        assert tuple(bg.block_of[s]) == (i // f, j // f)
+
+
+def test_block_labels_take_one_byte_a_cell_for_small_blocks():
+    """At most ceil(f/2)^2 pieces fit in an f x f block (one per 2 x 2 tile): a
+    checkerboard of isolated cells reaches it, and the local numbers fit one byte."""
+    mask = np.zeros((200, 200), dtype=bool)
+    mask[::2, ::2] = True
+    bg = build_block_graph(mask, (0, 200, 0, 200))
+    f = bg.block
+    assert bg.local.dtype == np.uint8
+    assert int(bg.local.max()) == ((f + 1) // 2) ** 2
+
+
+# --- map classification: table looked up in bounded chunks, flipped on the way ---------
+
+def reference_classify(img, negate, occ_t, free_t, mode):
+    """Nav2's rules as the straightforward table lookup (the implementation before issue 18)."""
+    m, key, n = img.maxval, img.channel_sum, img.n_channels
+    if img.alpha is not None and mode == "trinary":
+        key = key.astype(np.int64) + img.alpha
+        n += 1
+    shade = np.arange(n * m + 1, dtype=float) / (n * m)
+    if mode == "raw":
+        v = np.rint(shade * 255.0)
+        known = v <= 100
+        occ_lut, free_lut = known & (v / 100.0 > occ_t), known & (v / 100.0 < free_t)
+    else:
+        occ = shade if negate else 1.0 - shade
+        occ_lut = occ > occ_t
+        free_lut = (occ < free_t) & ~occ_lut
+    occupied, free = occ_lut[key], free_lut[key]
+    if mode == "scale" and img.alpha is not None:
+        opaque = img.alpha == m
+        occupied &= opaque
+        free &= opaque
+    return occupied, free
+
+
+@pytest.mark.parametrize("chunk", [ogm._LOOKUP_CELLS, 1, 37])
+@pytest.mark.parametrize("mode", ["trinary", "scale", "raw"])
+def test_classify_matches_the_whole_image_lookup(monkeypatch, chunk, mode):
+    monkeypatch.setattr(ogm, "_LOOKUP_CELLS", chunk)
+    rng = np.random.default_rng(7)
+    for maxval, n_ch, alpha in ((255, 1, False), (255, 3, True), (65535, 1, False), (100, 1, True)):
+        key = rng.integers(0, n_ch * maxval + 1, size=(23, 19)).astype(np.uint16 if maxval > 255 else np.int64)
+        a = rng.integers(0, maxval + 1, size=key.shape) if alpha else None
+        if a is not None:
+            a[rng.random(key.shape) < 0.5] = maxval
+        for negate in (False, True):
+            img = Shades(key, n_ch, maxval, a)
+            flipped = Shades(key[::-1], n_ch, maxval, None if a is None else a[::-1])
+            want = reference_classify(img, negate, 0.65, 0.196, mode)
+            got = classify(flipped, negate, 0.65, 0.196, mode)
+            for w, g in zip(want, got):
+                assert g.flags.c_contiguous
+                np.testing.assert_array_equal(g, w[::-1])
+
+
+# --- companion fly: the maps are read once ----------------------------------------------
+
+def test_fly_prepare_and_execute_share_one_reading_of_the_maps(monkeypatch):
+    """``prepare``'s preflight check reads the maps through ``MissionMaps``; what
+    ``execute`` gets afterwards is that reading, not a second one, and equals a
+    fresh reading of the files."""
+    from pathlib import Path
+
+    import companion.maps.field as field
+    from companion.commands.fly import MissionMaps, prepare
+    from companion.mission import load_mission
+
+    root = Path(__file__).resolve().parents[1]
+    mission = load_mission(root / "missions" / "flat-rectangle" / "mission.yaml")
+    calls = []
+    real = field.load_mission_maps
+
+    def counted(m):
+        calls.append(m)
+        return real(m)
+
+    monkeypatch.setattr(field, "load_mission_maps", counted)
+    maps = MissionMaps(mission)
+    prepare(mission, str(root / "tests" / "data" / "replay" / "plan-flat-rectangle.json"), maps=maps)
+    assert len(calls) == 1
+    grid, dem = maps.get()
+    assert len(calls) == 1
+    fresh_grid, fresh_dem = real(mission)
+    np.testing.assert_array_equal(grid.occupied, fresh_grid.occupied)
+    np.testing.assert_array_equal(grid.free, fresh_grid.free)
+    np.testing.assert_array_equal(dem.heights_m, fresh_dem.heights_m)
