@@ -182,3 +182,105 @@ def test_fly_prepare_and_execute_share_one_reading_of_the_maps(monkeypatch):
     np.testing.assert_array_equal(grid.occupied, fresh_grid.occupied)
     np.testing.assert_array_equal(grid.free, fresh_grid.free)
     np.testing.assert_array_equal(dem.heights_m, fresh_dem.heights_m)
+
+
+# --- cell graphs: no cost temporaries when every cell costs 1 ----------------------------
+
+def reference_graph_of(nb, neighbours, edge_cells):
+    """The weights as built before issue 18: step x cost of the cell stepped into,
+    the cost an array of ones when no cell is near an edge."""
+    from scipy.sparse import csr_matrix
+
+    from companion.coverage import gridpath
+
+    n, k = nb.shape
+    ok = nb >= 0
+    if edge_cells > 0:
+        inner = ok.all(axis=1)
+        for _ in range(edge_cells - 1):
+            inner = inner & np.where(ok, inner[np.where(ok, nb, 0)], False).all(axis=1)
+        cost = np.where(inner, 1.0, gridpath._EDGE_COST)
+    else:
+        cost = np.ones(n)
+    step = np.array([s for _, _, s in neighbours])
+    to = nb[ok]
+    w = np.broadcast_to(step, (n, k))[ok] * cost[to]
+    indptr = np.concatenate([[0], np.cumsum(ok.sum(axis=1))])
+    return csr_matrix((w, to, indptr), shape=(n, n))
+
+
+@pytest.mark.parametrize("edge_cells", [0, 1, 2, 3])
+@pytest.mark.parametrize("four", [False, True])
+@pytest.mark.parametrize("field", range(5))
+def test_mask_graph_weights_match_the_cost_array_build(field, four, edge_cells):
+    from companion.coverage import gridpath
+
+    neighbours = gridpath.NEIGHBOURS_4 if four else None
+    graph, rows, cols = gridpath.mask_graph(random_fields()[field], neighbours=neighbours, edge_cells=edge_cells)
+    nb = np.full((len(rows), 4 if four else 8), -1, dtype=np.int64)
+    index = {(r, c): i for i, (r, c) in enumerate(zip(rows.tolist(), cols.tolist()))}
+    offsets = gridpath.NEIGHBOURS_4 if four else gridpath._NEIGHBOURS
+    for i, (r, c) in enumerate(zip(rows.tolist(), cols.tolist())):
+        for j, (dr, dc, _) in enumerate(offsets):
+            nb[i, j] = index.get((r + dr, c + dc), -1)
+    ref = reference_graph_of(nb, offsets, edge_cells)
+    assert graph.data.dtype == np.float64
+    np.testing.assert_array_equal(graph.indptr, ref.indptr)
+    np.testing.assert_array_equal(graph.indices, ref.indices)
+    np.testing.assert_array_equal(graph.data, ref.data)          # bit for bit
+
+
+# --- erosion: one running OR, no copy per half-width -------------------------------------
+
+def reference_dilate_runs(mask, half_widths, outside):
+    """The dilation as built before issue 18: a copy of the running OR kept per half-width."""
+    w = np.asarray(half_widths, dtype=np.int64)
+    if len(w) == 0:
+        return mask.copy()
+    k = (len(w) - 1) // 2
+    p = max(k, int(w.max()), 0)
+    rows, cols = mask.shape
+    padded = np.full((rows + 2 * p, cols + 2 * p), outside, dtype=bool)
+    padded[p: p + rows, p: p + cols] = mask
+    runs = {0: padded[:, p: p + cols]}
+    acc = runs[0].copy()
+    for v in range(1, int(w.max()) + 1):
+        acc |= padded[:, p + v: p + v + cols]
+        acc |= padded[:, p - v: p - v + cols]
+        runs[v] = acc.copy()
+    out = np.zeros((rows, cols), dtype=bool)
+    for i, v in enumerate(w.tolist()):
+        if v >= 0:
+            out |= runs[v][p + i - k: p + i - k + rows]
+    return out
+
+
+def brute_dilate(mask, half_widths, outside):
+    """The definition: a cell is set when some (dr, dc), |dc| <= w[K + dr], reaches a set cell."""
+    k = (len(half_widths) - 1) // 2
+    rows, cols = mask.shape
+    out = np.zeros_like(mask)
+    for r in range(rows):
+        for c in range(cols):
+            for i, wv in enumerate(half_widths):
+                for dc in range(-wv, wv + 1):
+                    rr, cc = r + i - k, c + dc
+                    inside = 0 <= rr < rows and 0 <= cc < cols
+                    if (mask[rr, cc] if inside else outside):
+                        out[r, c] = True
+    return out
+
+
+@pytest.mark.parametrize("outside", [False, True])
+def test_dilate_runs_matches_the_per_width_copies_and_the_definition(outside):
+    from companion.coverage.freespace import dilate_runs, disk_half_widths
+
+    rng = np.random.default_rng(3)
+    shapes = [disk_half_widths(r) for r in (0.7, 1.5, 3.2, 6.0, 11.0)]
+    shapes += [np.array([2, -1, 0, 3, 1]), np.array([-1, -1, -1]), np.array([0]), 2 - np.abs(np.arange(-2, 3))]
+    for field in random_fields():
+        for w in shapes:
+            np.testing.assert_array_equal(dilate_runs(field, w, outside), reference_dilate_runs(field, w, outside))
+    small = rng.random((17, 13)) < 0.1
+    for w in shapes[:3] + shapes[5:]:
+        np.testing.assert_array_equal(dilate_runs(small, w, outside), brute_dilate(small, w, outside))

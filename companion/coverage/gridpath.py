@@ -227,16 +227,15 @@ def _graph_of(nb: np.ndarray, neighbours, edge_cells: int | None) -> csr_matrix:
     edge_cells = _EDGE_CELLS if edge_cells is None else edge_cells
     n, k = nb.shape
     ok = nb >= 0
+    step = np.array([s for _, _, s in neighbours])
+    to = nb[ok]
+    w = np.broadcast_to(step, (n, k))[ok]
     if edge_cells > 0:
         inner = _rows_all(ok)
         for _ in range(edge_cells - 1):
             inner = inner & _rows_all(np.where(ok, inner[np.where(ok, nb, 0)], False))
-        cost = np.where(inner, 1.0, _EDGE_COST)
-    else:
-        cost = np.ones(n)
-    step = np.array([s for _, _, s in neighbours])
-    to = nb[ok]
-    w = np.broadcast_to(step, (n, k))[ok] * cost[to]
+        w = w * np.where(inner, 1.0, _EDGE_COST)[to]
+    # else every cell costs 1: the steps themselves (x * 1.0 is x; no (n k) float temporaries)
     per_row = ok[:, 0].astype(np.int64)
     for j in range(1, k):
         per_row += ok[:, j]

@@ -120,20 +120,18 @@ class TransitTree:
         (``gridpath.simplify_many``): the same paths, far fewer vectorised calls."""
         out: list = [None] * len(qs_g)
         who, chains, ends = [], [], []
-        pred = self.__dict__.get("_pred_list")
+        pred = self.pred.item       # Python ints per step, without a list of all n nodes
         off = np.array([self.c0, self.r0]) * self.free.resolution_m
         qs_g = np.asarray(qs_g, float).reshape(-1, 2)
         for k, (q_g, node) in enumerate(zip(qs_g, self._attach(qs_g))):
             if node is None:
                 out[k] = aux_path(self.free, self.root_g, q_g, self.source)
                 continue
-            if pred is None:        # walked in Python ints: a numpy scalar per step costs more
-                pred = self.__dict__.setdefault("_pred_list", self.pred.tolist())
             chain = [node]
-            p = pred[node]
+            p = pred(node)
             while p >= 0:
                 chain.append(p)
-                p = pred[p]
+                p = pred(p)
             chain = np.array(chain[::-1])
             who.append(k)
             ends.append(q_g)
