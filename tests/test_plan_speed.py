@@ -4,6 +4,8 @@ several fields (random masks and images, chunk boundaries forced small)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -284,3 +286,201 @@ def test_dilate_runs_matches_the_per_width_copies_and_the_definition(outside):
     small = rng.random((17, 13)) < 0.1
     for w in shapes[:3] + shapes[5:]:
         np.testing.assert_array_equal(dilate_runs(small, w, outside), brute_dilate(small, w, outside))
+
+
+# --- SITL rows: compact, the same rays ---------------------------------------------------
+
+_INF = math.inf
+_EPS_T = 1e-9
+
+
+class ReferenceRowField:
+    """``sitl.world.RowField`` as it was before issue 18: nested lists of every cell's
+    occupancy, leap and base height (~90 bytes a cell)."""
+
+    def __init__(self, grid: OccupancyGrid, terrain: Terrain, canopy_height_m: float) -> None:
+        occ = np.asarray(grid.occupied, dtype=bool)
+        self.nr, self.nc = occ.shape
+        self.res = float(grid.resolution_m)
+        self.X0, self.Y0 = float(grid.origin_xy_m[0]), float(grid.origin_xy_m[1])
+        self.c, self.s = math.cos(grid.origin_yaw_rad), math.sin(grid.origin_yaw_rad)
+        self.any = bool(occ.any())
+        self.occ = occ.tolist()
+        if self.any:
+            edt = ndimage.distance_transform_edt(~occ)
+        else:
+            edt = np.full(occ.shape, float(self.nr + self.nc))
+        # Leap length (cells) that provably stays clear of every occupied cell
+        # from any point of the cell: centre distance minus both half diagonals.
+        self.leap = (edt - 1.5).tolist()
+        rows, cols = np.nonzero(occ)
+        base = np.zeros(occ.shape)
+        if rows.size:
+            xs, ys = grid.cell_to_world(rows, cols)
+            base[rows, cols] = [terrain.height(float(x), float(y)) for x, y in zip(xs, ys)]
+        self.base = base.tolist()
+        self.canopy = float(canopy_height_m)
+
+    def _band_hit(self, r, c, oz, dz, t_en, t_ex):
+        base = self.base[r][c]
+        top = base + self.canopy
+        z = oz + dz * t_en
+        if base <= z <= top:
+            return t_en
+        if z > top and dz < 0.0:
+            tc = (top - oz) / dz
+        elif z < base and dz > 0.0:
+            tc = (base - oz) / dz
+        else:
+            return None
+        return tc if tc <= t_ex else None
+
+    def raycast(self, ox, oy, oz, dx, dy, dz, max_m) -> float:
+        if not self.any:
+            return _INF
+        res, c, s = self.res, self.c, self.s
+        ex, ey = ox - self.X0, oy - self.Y0
+        u = (c * ex + s * ey) / res          # column coordinate (cells)
+        v = (-s * ex + c * ey) / res         # row coordinate (cells)
+        du = (c * dx + s * dy) / res         # cells per metre along the ray
+        dv = (-s * dx + c * dy) / res
+        nc, nr = self.nc, self.nr
+        # Clip to the grid box [0, nc] x [0, nr] (slabs).
+        t0, t1 = 0.0, max_m
+        for q, dq, hi in ((u, du, nc), (v, dv, nr)):
+            if dq == 0.0:
+                if q < 0.0 or q >= hi:
+                    return _INF
+            else:
+                ta, tb = (0.0 - q) / dq, (hi - q) / dq
+                if ta > tb:
+                    ta, tb = tb, ta
+                if ta > t0:
+                    t0 = ta
+                if tb < t1:
+                    t1 = tb
+        if t0 > t1:
+            return _INF
+        occ, leap = self.occ, self.leap
+        sp = math.hypot(du, dv)
+        if sp * (t1 - t0) < 1e-12:   # vertical ray: one column of cells
+            r, cc = int(v), int(u)
+            if 0 <= r < nr and 0 <= cc < nc and occ[r][cc]:
+                hit = self._band_hit(r, cc, oz, dz, t0, t1)
+                return _INF if hit is None else hit
+            return _INF
+        t = t0
+        t_in = t0      # exact entry of the current cell (t itself is nudged past boundaries)
+        while t <= t1:
+            uu = u + du * t
+            vv = v + dv * t
+            cc = int(uu) if uu < nc else nc - 1
+            r = int(vv) if vv < nr else nr - 1
+            # On a cell boundary moving toward lower indices the ray is in the
+            # lower cell (else the exit distance is 0 and t only creeps by _EPS_T).
+            if du < 0.0 and cc == uu:
+                cc -= 1
+            if dv < 0.0 and r == vv:
+                r -= 1
+            if cc < 0:
+                cc = 0
+            if r < 0:
+                r = 0
+            if occ[r][cc]:
+                t_ex = _ref_cell_exit(uu, vv, du, dv, cc, r) + t
+                hit = self._band_hit(r, cc, oz, dz, t_in, min(t_ex, t1))
+                if hit is not None:
+                    return hit
+                t_in = t_ex
+                t = t_ex + _EPS_T
+                continue
+            lp = leap[r][cc]
+            if lp > 1.0:
+                t += lp / sp
+                t_in = t
+            else:
+                t_in = t + _ref_cell_exit(uu, vv, du, dv, cc, r)
+                t = t_in + _EPS_T
+        return _INF
+
+
+def _ref_cell_exit(uu, vv, du, dv, cc, r):
+    """Ray parameter (m) from (uu, vv) to the boundary of cell (r, cc)."""
+    if du > 0.0:
+        tu = (cc + 1 - uu) / du
+    elif du < 0.0:
+        tu = (cc - uu) / du
+    else:
+        tu = _INF
+    if dv > 0.0:
+        tv = (r + 1 - vv) / dv
+    elif dv < 0.0:
+        tv = (r - vv) / dv
+    else:
+        tv = _INF
+    return tu if tu < tv else tv
+
+
+def sitl_fields():
+    """(grid, dem) pairs: rows on a slope, a yawed offset grid, random posts."""
+    from companion.maps.grid import ElevationModel, OccupancyGrid
+
+    rng = np.random.default_rng(11)
+    out = []
+    occ = np.zeros((60, 80), dtype=bool)
+    occ[5::8, 4:76] = True
+    occ[:, 40:42] = False
+    X, Y = np.meshgrid(np.arange(12) * 0.5, np.arange(10) * 0.5)
+    out.append((OccupancyGrid(occ, ~occ, 0.1), ElevationModel(0.3 * X - 0.2 * Y + 1.0, -1.0, -1.0, 0.5)))
+    out.append((OccupancyGrid(occ.T.copy(), ~occ.T, 0.05, (3.0, -2.0), 0.4), None))
+    posts = rng.random((50, 50)) < 0.03
+    h = rng.random((8, 8))
+    out.append((OccupancyGrid(posts, ~posts, 0.2, (-1.0, 0.5), -1.1), ElevationModel(h, -2.0, -2.0, 2.0)))
+    return out
+
+
+@pytest.mark.parametrize("field", range(3))
+def test_sitl_rows_cast_the_same_rays_as_the_nested_lists(field):
+    from sitl.world import RowField, Terrain, World
+
+    grid, dem = sitl_fields()[field]
+    terrain = Terrain(dem)
+    new, ref = RowField(grid, terrain, 1.7), ReferenceRowField(grid, terrain, 1.7)
+    rng = np.random.default_rng(field)
+    ext = max(grid.shape) * grid.resolution_m
+    for _ in range(3000):
+        o = rng.uniform(-0.3 * ext, 1.3 * ext, 3) + np.array([grid.origin_xy_m[0], grid.origin_xy_m[1], 0.0])
+        o[2] = rng.uniform(-0.5, 4.0)
+        d = rng.normal(size=3)
+        if rng.random() < 0.1:
+            d[:2] = 0.0                                     # vertical rays
+        d /= np.linalg.norm(d)
+        args = (*map(float, o), *map(float, d), float(rng.uniform(0.5, 2 * ext)))
+        assert new.raycast(*args) == ref.raycast(*args)     # bit for bit
+    # the leaps and bases it reads are the old tables' values
+    for r, c in zip(rng.integers(0, grid.shape[0], 300), rng.integers(0, grid.shape[1], 300)):
+        assert new.leap_cells(int(r), int(c)) == ref.leap[r][c]
+        if grid.occupied[r, c]:
+            assert new.base_at(int(r), int(c)) == ref.base[r][c]
+    # the collision scene's cells: the float32 bases and bounds of the full-grid build
+    w = World.build(grid, dem, canopy_height_m=1.7)
+    base_ref = np.where(grid.occupied, np.array(ref.base), np.nan).astype(np.float32)
+    np.testing.assert_array_equal(w.geometry.rows.base, base_ref)
+    edt = ndimage.distance_transform_edt(~grid.occupied)
+    b = (np.maximum(edt - math.sqrt(2.0), 0.0) * grid.resolution_m).astype(np.float32)
+    np.testing.assert_array_equal(w.geometry.rows._bound,
+                                  np.maximum(np.nextafter(b, np.float32(-np.inf)), np.float32(0.0)))
+
+
+def test_clearance_sq_cells_is_the_square_of_the_distance_transform():
+    from companion.geometry import clearance_sq_cells
+
+    for field in random_fields():
+        d2 = clearance_sq_cells(~field)
+        edt = ndimage.distance_transform_edt(field)
+        assert d2.dtype == np.int32
+        np.testing.assert_array_equal(np.sqrt(d2.astype(np.float64)), edt)     # bit for bit
+        r, c = np.nonzero(~field)
+        for i, j in zip(*np.nonzero(field[::7, ::5])):      # brute force at some cells
+            i, j = 7 * i, 5 * j
+            assert d2[i, j] == int(np.min((r - i) ** 2 + (c - j) ** 2))
