@@ -484,3 +484,21 @@ def test_clearance_sq_cells_is_the_square_of_the_distance_transform():
         for i, j in zip(*np.nonzero(field[::7, ::5])):      # brute force at some cells
             i, j = 7 * i, 5 * j
             assert d2[i, j] == int(np.min((r - i) ** 2 + (c - j) ** 2))
+
+
+@pytest.mark.parametrize("chunk", [ogm._LOOKUP_CELLS, 1, 37])
+def test_table_lookup_of_any_table_matches_fancy_indexing(monkeypatch, chunk):
+    """``_lookup``: a table True on one run of keys (compared), on several runs, all
+    False or all True (looked up), for uint8, uint16 and int64 keys, flipped views."""
+    monkeypatch.setattr(ogm, "_LOOKUP_CELLS", chunk)
+    rng = np.random.default_rng(5)
+    for n, dtype in ((256, np.uint8), (65536, np.uint16), (766, np.int64)):
+        key = rng.integers(0, n, size=(31, 17)).astype(dtype)
+        tables = [np.zeros(n, bool), np.ones(n, bool), rng.random(n) < 0.5]
+        for a, b in ((0, 0), (0, n // 3), (n // 4, n // 2), (n - 1, n - 1), (5, n - 1)):
+            t = np.zeros(n, bool)
+            t[a:b + 1] = True
+            tables.append(t)
+        for lut in tables:
+            for k in (key, key[::-1], key[:, ::-1]):
+                np.testing.assert_array_equal(ogm._lookup(lut, k), lut[k])

@@ -233,6 +233,17 @@ def _lookup(lut: np.ndarray, key: np.ndarray) -> np.ndarray:
         out[...] = lut[key]
         return out
     step = max(1, _LOOKUP_CELLS // max(1, key.shape[1]))
+    true = np.flatnonzero(lut) if lut.dtype == bool else None
+    if true is not None and len(true) and true[-1] - true[0] + 1 == len(true):
+        # a bool table True on one run of keys a..b (what thresholds give): two
+        # comparisons per cell, the same values as the lookup, about twice as fast
+        a, b = (np.asarray(x, dtype=key.dtype) for x in (true[0], true[-1]))
+        for r0 in range(0, key.shape[0], step):
+            k = key[r0:r0 + step]
+            o = out[r0:r0 + step]
+            np.greater_equal(k, a, out=o)
+            o &= k <= b
+        return out
     for r0 in range(0, key.shape[0], step):
         np.take(lut, key[r0:r0 + step], out=out[r0:r0 + step])
     return out
