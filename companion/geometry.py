@@ -181,9 +181,16 @@ class ExtrudedCells:
         self.occ = occ
         self.any = bool(occ.any())
         # float32 first, then NaN off the cells: the same values as rounding the
-        # masked float64 array, without a float64 copy of the grid
-        base = np.array(base_z_m, dtype=np.float32)
-        base[~occ] = np.nan
+        # masked float64 array, without a float64 copy of the grid. A float32
+        # array that already has NaN off the cells (``cell_centre_heights(...,
+        # np.float32)``, the SITL's ``row_base_heights``) is kept, not copied.
+        base = np.asarray(base_z_m, dtype=np.float32)
+        done = np.isnan(base)
+        done |= occ
+        if base is not base_z_m or not done.all():
+            base = np.array(base, dtype=np.float32)
+            base[~occ] = np.nan
+        del done
         self.base = base
         self.top_max_m = float(np.nanmax(base)) + self.canopy_height_m if self.any else -math.inf
         # Horizontal distance (m) from any point of a cell to the nearest

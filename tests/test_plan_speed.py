@@ -502,3 +502,19 @@ def test_table_lookup_of_any_table_matches_fancy_indexing(monkeypatch, chunk):
         for lut in tables:
             for k in (key, key[::-1], key[:, ::-1]):
                 np.testing.assert_array_equal(ogm._lookup(lut, k), lut[k])
+
+
+def test_collision_cells_keep_a_ready_float32_base_and_copy_any_other():
+    from companion.geometry import ExtrudedCells
+    from companion.maps.grid import OccupancyGrid
+
+    occ = random_fields()[0]
+    grid = OccupancyGrid(occ, ~occ, 0.1)
+    heights = np.random.default_rng(2).random(occ.shape)
+    ready = np.where(occ, heights, np.nan).astype(np.float32)
+    assert ExtrudedCells(grid, ready, 1.0).base is ready                 # kept: already float32, NaN off
+    raw32 = heights.astype(np.float32)
+    cells = ExtrudedCells(grid, raw32, 1.0)
+    assert cells.base is not raw32 and not np.isnan(raw32).any()         # copied, the caller's untouched
+    np.testing.assert_array_equal(cells.base, ready)
+    np.testing.assert_array_equal(ExtrudedCells(grid, heights, 1.0).base, ready)    # float64 in
