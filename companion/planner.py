@@ -269,14 +269,18 @@ def plan_mission(mission: Mission) -> Plan:
     waypoints = extract_waypoints(coverage, dem, mission.flight)
     t_covered = time.perf_counter()
 
-    target = pointing_target(mission, grid, np.asarray(waypoints.p_enu_m))
-    trajectory = generate_trajectory(waypoints.t_s, waypoints.p_enu_m, waypoints.v_enu_m_s,
-                                     waypoints.a_enu_m_s2, mission.trajectory, target_enu_m=target)
-    max_v, max_a, residual = trajectory_stats(trajectory)
+    # the sorties first (they do not depend on the trajectory): the transit search's
+    # peak and the LQR solve's then do not stack, nor the solve on the transit caches
     energy = mission.energy if launch is None else dataclasses.replace(
         mission.energy, launch_xy_m=(float(launch[0]), float(launch[1])))
     sorties = plan_sorties(coverage, waypoints, dem, mission.flight, mission.vehicle, energy, grid, mission.source,
                            launch_key=launch_key(mission))
+    if hasattr(coverage, "free_space") and coverage.free_space is not None:
+        coverage.free_space.drop_caches()
+    target = pointing_target(mission, grid, np.asarray(waypoints.p_enu_m))
+    trajectory = generate_trajectory(waypoints.t_s, waypoints.p_enu_m, waypoints.v_enu_m_s,
+                                     waypoints.a_enu_m_s2, mission.trajectory, target_enu_m=target)
+    max_v, max_a, residual = trajectory_stats(trajectory)
     t_done = time.perf_counter()
 
     stats = PlanStats(
