@@ -45,7 +45,7 @@ class Field:
     cum: np.ndarray
 
 
-def mission_ref(name: str, base_dir: str) -> str:
+def mission_ref(name: str, base_dir: str, source: str = "<spec>") -> str:
     """A bundled mission name stays a name; anything else is a path made absolute."""
     from ..commands.demo import missions_dir
 
@@ -56,7 +56,7 @@ def mission_ref(name: str, base_dir: str) -> str:
     if p.is_dir():
         p = p / "mission.yaml"
     if not p.is_file():
-        raise CampaignError(f"{base_dir}: key 'missions'", f"{name}: no such bundled mission or mission file")
+        raise CampaignError(f"{source}: key 'missions'", f"{name}: no such bundled mission or mission file")
     return str(p.resolve())
 
 
@@ -74,7 +74,7 @@ def load_fields(spec: CampaignSpec) -> dict[str, Field]:
 
     fields = {}
     for name in spec.missions:
-        ref = mission_ref(name, spec.base_dir)
+        ref = mission_ref(name, spec.base_dir, spec.source)
         if ref in fields:
             continue
         if spec.obstacles is None:
@@ -158,7 +158,7 @@ def scenario(spec: CampaignSpec, fields: dict[str, Field], index: int,
             try:
                 obstacles = [random_obstacle(rng, f.grid, f.path, f.cum, p) for _ in range(n)]
             except ValueError as exc:
-                raise CampaignError(f"{spec.base_dir}: key 'obstacles'", f"{ref}: {exc}") from None
+                raise CampaignError(f"{spec.source}: key 'obstacles'", f"{ref}: {exc}") from None
         else:
             obstacles = []
             for k in range(o.count[1]):

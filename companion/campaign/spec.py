@@ -143,7 +143,8 @@ class CampaignSpec:
     obstacles: ObstacleSpec | None = None
     sensors: SensorSpec | None = None
     wind: WindSpec | None = None
-    base_dir: str = dataclasses.field(default=".", init=False, compare=False)
+    base_dir: str = dataclasses.field(default=".", init=False, compare=False)   # set by load_spec
+    source: str = dataclasses.field(default="<spec>", init=False, compare=False)  # set by load_spec
 
     def __post_init__(self) -> None:
         if not self.missions:
@@ -172,5 +173,11 @@ def load_spec(path: str | Path) -> CampaignSpec:
     if not isinstance(data, dict):
         raise CampaignError(str(p), "expected a mapping of campaign keys at the top level")
     spec = spec_from_dict(data, str(p))
-    object.__setattr__(spec, "base_dir", str(p.resolve().parent))
+    return with_source(spec, p)
+
+
+def with_source(spec: CampaignSpec, path: str | Path) -> CampaignSpec:
+    """``spec`` remembering its file (mission paths resolve against its directory)."""
+    object.__setattr__(spec, "base_dir", str(Path(path).resolve().parent))
+    object.__setattr__(spec, "source", str(path))
     return spec
