@@ -9,8 +9,11 @@ resumes without re-flying what finished.
 
 A worker that dies (its process exits or is killed) loses only its flight:
 the scheduler runs it again once (``distributed.scheduler.allowed-failures``
-= 1, set here for the default ``LocalCluster``; an existing cluster uses its
-own setting); a second death, or an exception escaping the flight after
+= 1, and ``worker-saturation`` = 1.0 so that a worker holds only the task it
+runs (the batch is one graph, queued on the scheduler), both set here for
+the default ``LocalCluster``; an existing cluster uses its own settings).
+Dask queues only batches of more than twice the worker threads: in a smaller
+one a worker may hold a second flight, which its death counts against too; a second death, or an exception escaping the flight after
 ``retries=1``, makes the row ``failed``.
 """
 
@@ -24,6 +27,7 @@ import shutil
 import sys
 import tempfile
 import time
+import uuid
 from pathlib import Path
 from typing import Callable, TextIO
 
@@ -128,7 +132,10 @@ def make_client(scheduler: str | None = None, workers: int | None = None):
     import dask
     from dask.distributed import Client, LocalCluster
 
-    dask.config.set({"distributed.scheduler.allowed-failures": RETRIES})
+    # A dying worker counts against every task it holds: with saturation 1.0 it
+    # holds only the one it runs (threads_per_worker=1), so only that flight is retried.
+    dask.config.set({"distributed.scheduler.allowed-failures": RETRIES,
+                     "distributed.scheduler.worker-saturation": 1.0})
     if scheduler is not None:
         return Client(scheduler)
     n = workers or os.cpu_count() or 1
@@ -194,18 +201,21 @@ def run_flights(client, scenarios: list[dict], out: Path, *, keep_completed_frac
 
     done = dict(done or {})
     todo = [s for s in scenarios if scenario_hash(s) not in done]
-    futures = {}
-    for s in todo:
-        h = scenario_hash(s)
-        f = client.submit(fly, s, str(out), keep_completed(h, keep_completed_fraction), transport,
-                          key=f"flight-{s['scenario']:04d}-{h}", pure=False, retries=RETRIES)
-        futures[f] = s
+    # One graph for the whole batch: the scheduler then queues the flights (a worker
+    # holds only the flight it runs, worker-saturation 1.0) instead of handing
+    # each worker several at once, which a death would all count against.
+    hashes = [scenario_hash(s) for s in todo]
+    fs = client.map(fly, todo, [str(out)] * len(todo), [keep_completed(h, keep_completed_fraction) for h in hashes],
+                    [transport] * len(todo), key=[f"flight-{uuid.uuid4().hex}" for _ in todo], pure=False,
+                    retries=RETRIES) if todo else []
+    futures = dict(zip(fs, todo))
     for f in as_completed(futures):
         s = futures[f]
         try:
             row = f.result()
         except Exception as exc:  # KilledWorker (died twice) or an exception that escaped twice
             row = failed_row(s, f"{type(exc).__name__}: {str(exc)[:200]}")
+        f.release()
         write_result(out / "results", row)
         done[row["hash"]] = row
         if progress is not None:
