@@ -48,9 +48,23 @@ def test_scenario_is_the_documented_draws():
 
 @pytest.fixture(scope="module")
 def obstacle_spec_and_fields():
+    """A synthetic field (no planning): 30 m x 12 m free, a vine row along y = 6 m from x = 5 to 25 m;
+    the path flies east along y = 3 m, turns north at x = 28 m, and back west along y = 9 m."""
+    from companion.campaign.placement import cumulative
+    from companion.campaign.scenarios import Field
+    from companion.maps.grid import OccupancyGrid
+
+    res = 0.1
+    occ = np.zeros((120, 300), dtype=bool)
+    occ[58:62, 50:250] = True
+    grid = OccupancyGrid(occupied=occ, free=~occ, resolution_m=res, origin_xy_m=(0.0, 0.0))
+    t = np.linspace(0.0, 1.0, 200)
+    path = np.concatenate([np.stack([2 + 26 * t, 3 + 0 * t, 1.5 + 0 * t], 1),
+                           np.stack([28 + 0 * t, 3 + 6 * t, 1.5 + 0 * t], 1)[1:],
+                           np.stack([28 - 26 * t, 9 + 0 * t, 1.5 + 0 * t], 1)[1:]])
     spec = spec_from_dict({"name": "o", "missions": ["obstacle-low"], "flights": 50, "seed": 3, "cut_s": 30.0,
                            "obstacles": {"count": [0, 3]}, "wind": {"speed_m_s": [0, 1]}}, "o.yaml")
-    return spec, load_fields(spec)
+    return spec, {"obstacle-low": Field(grid, path, cumulative(path))}
 
 
 def test_scenario_i_alone_equals_scenario_i_in_a_batch(obstacle_spec_and_fields):
@@ -80,6 +94,7 @@ def test_obstacles_respect_the_placement_rules(obstacle_spec_and_fields):
             assert footprint_free(f.grid, o)
             # within offset + 0.001 (rounding) of the flown path
             assert np.min(np.hypot(f.path[:, 0] - o["x"], f.path[:, 1] - o["y"])) <= 0.8 + 0.05
+            assert not (5.0 - 0.45 < o["x"] < 25.0 + 0.45 and 6.0 - 0.45 < o["y"] < 6.0 + 0.45)   # off the row
     assert 40 <= n <= 110    # 0-3 per flight, mean 1.5
 
 

@@ -68,6 +68,9 @@ def run(args) -> int:
         raise InputError(f"--scheduler {args.scheduler}", "expected an address like tcp://HOST:8786")
     out = Path(args.out)
     _check_out(out)
+    from ..campaign.scenarios import load_fields, scenario, scenario_yaml
+
+    fields = load_fields(spec)   # plans each base mission once (bad missions fail here, before any output)
     try:
         import dask.distributed  # noqa: F401
         import pyarrow  # noqa: F401
@@ -75,9 +78,6 @@ def run(args) -> int:
         raise InputError("companion campaign", f"needs the campaign extra (pip install -e '.[campaign]'): {exc}") \
             from None
 
-    from ..campaign.scenarios import load_fields, scenario, scenario_yaml
-
-    fields = load_fields(spec)   # plans each base mission once (bad missions fail here, before any output)
     if args.search is not None:
         from ..campaign.search import run_search
 
