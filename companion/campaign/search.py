@@ -42,12 +42,15 @@ def score(row: dict, figure: str, tracking_bound_m: float = 0.1) -> float:
     return MISSING_SCORE if v is None else float(tracking_bound_m - v)
 
 
-def run_search(spec, fields, out: Path, args) -> int:
+def run_search(spec, fields, out: Path, args, client=None, fly=None) -> int:
+    """The search (``args``: the campaign command's). ``client``: an existing Dask client
+    (default: ``make_client(args.scheduler, args.workers)``, closed at the end);
+    ``fly``: the flight function (default ``run.fly_scenario``)."""
     import cma
 
     from ..errors import InputError
     from .results import read_results, write_table
-    from .run import CampaignProgress, make_client, run_flights
+    from .run import CampaignProgress, fly_scenario, make_client, run_flights
     from .scenarios import continuous_dims, scenario, scenario_yaml
     from .summary import reproduce_command, write_summary
 
@@ -58,7 +61,9 @@ def run_search(spec, fields, out: Path, args) -> int:
     (sdir / "scenarios").mkdir(parents=True, exist_ok=True)
     done = read_results(sdir / "results")
     t0 = time.monotonic()
-    client = make_client(args.scheduler, args.workers)
+    own = client is None
+    client = make_client(args.scheduler, args.workers) if own else client
+    fly = fly or fly_scenario
     rows: list[dict] = []
     try:
         workers = max(1, sum(client.nthreads().values()))
@@ -82,7 +87,7 @@ def run_search(spec, fields, out: Path, args) -> int:
                 batch.append(s)
                 k += 1
             got = run_flights(client, batch, sdir, keep_completed_fraction=1.0, transport=args.transport,
-                              done=done, progress=progress)
+                              done=done, progress=progress, fly=fly)
             for r in got:
                 done[r["hash"]] = r
             rows += got
@@ -90,10 +95,11 @@ def run_search(spec, fields, out: Path, args) -> int:
                 es.tell(X, [score(r, args.search, args.tracking_bound) for r in got])
         progress.close()
     finally:
-        cluster = getattr(client, "cluster", None)
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        if own:
+            cluster = getattr(client, "cluster", None)
+            client.close()
+            if cluster is not None:
+                cluster.close()
     write_table(rows, sdir)
     write_summary(f"{spec.name} (search: {args.search})", rows, sdir, time.monotonic() - t0, None)
     ranked = sorted(rows, key=lambda r: score(r, args.search, args.tracking_bound))[:5]

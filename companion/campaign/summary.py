@@ -152,7 +152,8 @@ def write_figures(rows: list[dict], out: Path, field=None) -> list[Path]:
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
     ax.set_title("where flights did not complete")
-    ax.legend(loc="best", fontsize=8)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
     p = out / "map_failures.png"
     fig.savefig(p, dpi=100)
