@@ -13,8 +13,9 @@ the scheduler runs it again once (``distributed.scheduler.allowed-failures``
 runs (the batch is one graph, queued on the scheduler), both set here for
 the default ``LocalCluster``; an existing cluster uses its own settings).
 Dask queues only batches of more than twice the worker threads: in a smaller
-one a worker may hold a second flight, which its death counts against too; a second death, or an exception escaping the flight after
-``retries=1``, makes the row ``failed``.
+one a worker may hold a second flight, which its death counts against too.
+A second death, or an exception escaping the flight after ``retries=1``,
+makes the row ``failed``.
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ def _position_at(tlog: Path, t_s: float | None) -> tuple[float, float] | None:
     try:
         for r in read_tlog(tlog):
             m = r.msg
-            if m.get_type() == "ODOMETRY" and m.get_srcComponent() == 1:
+            if m.get_type() == "ODOMETRY" and m.get_srcSystem() == 1 and m.get_srcComponent() == 1:
                 if t_s is not None and m.time_usec * 1e-6 > t_s:
                     break
                 last = (float(m.y), float(m.x))   # NED -> ENU

@@ -104,7 +104,8 @@ def run_search(spec, fields, out: Path, args, client=None, fly=None) -> int:
     write_summary(f"{spec.name} (search: {args.search})", rows, sdir, time.monotonic() - t0, None)
     ranked = sorted(rows, key=lambda r: score(r, args.search, args.tracking_bound))[:5]
     lines = [f"# Worst scenarios found: {spec.name}, minimising {args.search}", "",
-             "| scenario | score (m) | outcome | clearance (m) | tracking max (mm) | reproduce |", "|---|---|---|---|---|---|"]
+             "| scenario | score (m) | outcome | clearance (m) | tracking max (mm) | reproduce |",
+             "|---|---|---|---|---|---|"]
     for r in ranked:
         c = "n/a" if r.get("min_clearance_m") is None else f"{r['min_clearance_m']:.3f}"
         t = "n/a" if r.get("tracking_max_error_m") is None else f"{r['tracking_max_error_m'] * 1e3:.1f}"

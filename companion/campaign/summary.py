@@ -184,7 +184,8 @@ def html_page(name: str, rows: list[dict], out: Path, wall_s: float | None, figu
     for r in worst(rows):
         c = "n/a" if r.get("min_clearance_m") is None else f"{r['min_clearance_m']:.3f}"
         parts.append(f"<tr><td>{r['scenario']}</td><td>{r['outcome']}</td><td>{c}</td>"
-                     f"<td>{e((r.get('reason') or '')[:120])}</td><td><code>{e(reproduce_command(r, out))}</code></td></tr>")
+                     f"<td>{e((r.get('reason') or '')[:120])}</td>"
+                     f"<td><code>{e(reproduce_command(r, out))}</code></td></tr>")
     parts.append("</table>")
     for f in figures:
         data = base64.b64encode(f.read_bytes()).decode("ascii")
