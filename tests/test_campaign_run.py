@@ -137,3 +137,22 @@ def test_small_real_campaign_end_to_end(tmp_path, capsys):
             (out / "scenarios" / f"{r['scenario']:04d}.yaml").read_text()))
     assert "data:image/png;base64," in (out / "summary.html").read_text()
     assert (out / "summary.md").exists() and (out / "results.csv").exists()
+
+
+def test_progress_line_counts_failures_and_eta():
+    import io
+
+    from companion.campaign.run import CampaignProgress
+
+    buf = io.StringIO()
+    p = CampaignProgress(total=10, skipped=2, stream=buf)
+    p.t0 -= 60.0                    # 60 s elapsed for the 2 flights flown in this run
+    p.update({"outcome": "completed"})
+    p.update({"outcome": "crashed"})
+    last = buf.getvalue().splitlines()[-1]
+    assert "4/10 flights (2 from earlier runs)" in last and "crashed 1" in last
+    assert "ETA 3m00s" in last      # 30 s per flight flown here, 6 left
+    quiet = io.StringIO()
+    q = CampaignProgress(total=3, skipped=0, stream=quiet, enabled=False)
+    q.update({"outcome": "failed"})
+    assert quiet.getvalue() == ""
