@@ -15,7 +15,7 @@ from typing import Any, Literal
 
 from ..config import from_dict
 from ..errors import CampaignError, MissionError
-from ..textfile import parse_yaml, read_text
+from ..inputs import parse_yaml, read_text
 
 #: mission keys holding a path relative to the mission file
 PATH_KEYS = (("map",), ("dem",), ("field", "file"))

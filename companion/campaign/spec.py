@@ -18,7 +18,7 @@ from typing import Literal
 
 from ..config import from_dict
 from ..errors import CampaignError
-from ..textfile import parse_yaml, read_text
+from ..inputs import parse_yaml, read_text
 
 #: a fixed number, or [lo, hi]: uniform in it
 Dim = float | tuple[float, float]
