@@ -1,0 +1,514 @@
+"""Mutation testing of the safety modules (issue 19, deliverable 6).
+
+A small AST mutation tool, written here rather than mutmut 3 because mutmut 3
+mutates only function bodies (its trampolines), so module constants and
+dataclass defaults - ``RTL_ACCEPT_RADIUS_M``, ``MonitorConfig.max_nav_age_s``,
+the two mutants the audit found surviving - would never be generated; and
+because each module must be tested by its own fast unit tests only (the
+machine is small and shared).
+
+Operators (each mutant is one change):
+
+``cmp``    a comparison operator flipped: ``<`` -> ``<=`` and ``>=``, ``>`` -> ``>=``
+           and ``<=``, ``==`` <-> ``!=``, ``is`` <-> ``is not``, ``in`` <-> ``not in``;
+``num``    a float constant x100 and /100 (0.0 -> 1.0), an int constant +1 and -1
+           (0 -> 1);
+``bool``   ``not x`` -> ``x``, ``and`` <-> ``or``, ``True`` <-> ``False``;
+``arith``  ``+`` <-> ``-``, ``*`` <-> ``/`` (also in ``+=``/``-=``), unary minus dropped;
+``stmt``   an assignment, expression statement, ``raise``, ``del`` or ``return x``
+           removed (``pass`` / ``return None``).
+
+Strings, f-strings, docstrings, annotations and imports are not mutated.
+
+How a mutant is run: the parent process imports the third-party libraries
+once, then forks one child per mutant; the child installs an import hook that
+serves the mutated source for the target module (the working tree is never
+written) and runs ``pytest -x -q -p no:cacheprovider -m "not slow"`` on the
+module's test selection. A non-zero exit, or a timeout, kills the mutant.
+
+Usage::
+
+    python benchmarks/mutation.py                    # all five modules
+    python benchmarks/mutation.py --only monitor     # one of them
+    python benchmarks/mutation.py --list             # the mutants, not run
+    python benchmarks/mutation.py --json out.json
+
+Equivalent mutants (no behavioural change possible) are listed in
+``EQUIVALENT`` below with the reason; the score is given both over all
+mutants and over the non-equivalent ones.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import copy
+import importlib.abc
+import importlib.util
+import json
+import os
+import signal
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+_FS_FAILSAFE = ("RTL_ACCEPT_RADIUS_M", "ARM_MAX_TILT_RAD", "PARAM_SPECS[COM_*].default",
+                "FlightStack.system_status", "FlightStack._limits", "FlightStack.offboard_fresh",
+                "FlightStack.actuators_fresh", "FlightStack.crash", "FlightStack.arm",
+                "FlightStack._prearm_failure", "FlightStack.disarm", "FlightStack.update",
+                "FlightStack._rtl_setpoint")
+
+
+@dataclass(frozen=True)
+class Target:
+    name: str
+    path: str                    # relative to the repository root
+    tests: tuple[str, ...]       # pytest arguments (files, -k selections)
+    scope: tuple[str, ...] | None = None   # qualified names to mutate (None: the whole module)
+
+
+TARGETS = (
+    Target("monitor", "companion/flight/monitor.py",
+           ("tests/test_flight_monitor.py", "tests/test_flight_units.py", "-k", "monitor")),
+    Target("health", "companion/flight/health.py",
+           ("tests/test_flight_health.py", "tests/test_flight_units.py", "-k", "health")),
+    Target("flightstack", "sitl/flightstack.py",
+           ("tests/test_sitl_flightstack.py", "tests/test_sitl_failsafes.py"), _FS_FAILSAFE),
+    Target("link_auth", "companion/link/auth.py", ("tests/test_link_auth.py",)),
+    Target("sitl_auth", "sitl/auth.py", ("tests/test_sitl_auth.py",)),
+)
+
+#: Mutant id -> why it cannot change behaviour. Ids are printed by --list.
+EQUIVALENT: dict[str, str] = {}
+
+
+# ----------------------------------------------------------------------------- generation
+@dataclass
+class Mutant:
+    target: str
+    qualname: str
+    op: str
+    line: int
+    orig: str
+    new: str
+    source: str = field(repr=False)
+    id: str = ""
+
+
+_CMP_FLIPS = {ast.Lt: (ast.LtE, ast.GtE), ast.LtE: (ast.Lt, ast.Gt), ast.Gt: (ast.GtE, ast.LtE),
+              ast.GtE: (ast.Gt, ast.Lt), ast.Eq: (ast.NotEq,), ast.NotEq: (ast.Eq,),
+              ast.Is: (ast.IsNot,), ast.IsNot: (ast.Is,), ast.In: (ast.NotIn,), ast.NotIn: (ast.In,)}
+_ARITH = {ast.Add: ast.Sub, ast.Sub: ast.Add, ast.Mult: ast.Div, ast.Div: ast.Mult}
+
+
+def _num_variants(v):
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return ()
+    if isinstance(v, float):
+        return (1.0,) if v == 0.0 else (v * 100.0, v / 100.0)
+    return (1,) if v == 0 else (v + 1, v - 1)
+
+
+class _Collector(ast.NodeVisitor):
+    """Walks the module and records (node, qualname, op, replacement node) candidates."""
+
+    def __init__(self, scope) -> None:
+        self.scope = scope
+        self.stack: list[str] = []
+        self.out: list[tuple] = []
+        self.in_scope_depth = 0
+
+    # --- scope bookkeeping
+    def _qual(self) -> str:
+        return ".".join(self.stack) or "<module>"
+
+    def _enter(self, name, node):
+        self.stack.append(name)
+        q = self._qual()
+        inside = self.scope is None or any(q == s or q.startswith(s + ".") for s in self.scope)
+        self.in_scope_depth += inside
+        self._body(node)
+        self.in_scope_depth -= inside
+        self.stack.pop()
+
+    def _active(self) -> bool:
+        return self.scope is None or self.in_scope_depth > 0
+
+    def _body(self, node):
+        body = list(getattr(node, "body", []))
+        if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+                and isinstance(body[0].value.value, str):
+            body = body[1:]      # docstring
+        for st in body:
+            self.visit(st)
+        for extra in ("orelse", "finalbody", "handlers"):
+            for st in getattr(node, extra, []) or []:
+                self.visit(st)
+
+    def visit_Module(self, node):
+        self._body(node)
+
+    def visit_ClassDef(self, node):
+        self._enter(node.name, node)
+
+    def visit_FunctionDef(self, node):
+        # default values belong to the function's scope
+        self.stack.append(node.name)
+        q = self._qual()
+        inside = self.scope is None or any(q == s or q.startswith(s + ".") for s in self.scope)
+        self.in_scope_depth += inside
+        for d in list(node.args.defaults) + [d for d in node.args.kw_defaults if d is not None]:
+            self._expr(d)
+        self.stack.pop()
+        self.in_scope_depth -= inside
+        self._enter(node.name, node)
+
+    visit_AsyncFunctionDef = visit_FunctionDef
+
+    def visit_Import(self, node):
+        pass
+
+    visit_ImportFrom = visit_Import
+
+    # --- statements
+    def _stmt_removal(self, node, replacement: str):
+        if self._active():
+            self.out.append((node, self._qual(), "stmt", replacement))
+
+    def visit_Assign(self, node):
+        names = [t.id for t in node.targets if isinstance(t, ast.Name)]
+        if not self.stack and self.scope is not None:
+            # module level: only the selected constants (and the PARAM_SPECS defaults)
+            for n in names:
+                if n in self.scope:
+                    self.in_scope_depth += 1
+                    self._expr(node.value)
+                    self.in_scope_depth -= 1
+                if n == "PARAM_SPECS" and "PARAM_SPECS[COM_*].default" in self.scope:
+                    for call in node.value.elts:
+                        if call.args and isinstance(call.args[0], ast.Constant) \
+                                and str(call.args[0].value).startswith("COM_"):
+                            self.stack.append(f"PARAM_SPECS[{call.args[0].value}]")
+                            self.in_scope_depth += 1
+                            self._expr(call.args[2])
+                            self.in_scope_depth -= 1
+                            self.stack.pop()
+            return
+        if self.stack:
+            self._stmt_removal(node, "pass")
+        self._expr(node.value)
+
+    def visit_AnnAssign(self, node):
+        if node.value is None:
+            return
+        if not self.stack and self.scope is not None and isinstance(node.target, ast.Name):
+            self.visit_Assign(ast.Assign(targets=[node.target], value=node.value))
+            return
+        self._expr(node.value)
+
+    def visit_AugAssign(self, node):
+        self._stmt_removal(node, "pass")
+        if type(node.op) in _ARITH and self._active():
+            new = copy.deepcopy(node)
+            new.op = _ARITH[type(node.op)]()
+            self.out.append((node, self._qual(), "arith", ast.unparse(new)))
+        self._expr(node.value)
+
+    def visit_Expr(self, node):
+        if isinstance(node.value, ast.Constant):
+            return
+        self._stmt_removal(node, "pass")
+        self._expr(node.value)
+
+    def visit_Return(self, node):
+        if node.value is not None and not (isinstance(node.value, ast.Constant) and node.value.value is None):
+            self._stmt_removal(node, "return None")
+            self._expr(node.value)
+
+    def visit_Raise(self, node):
+        self._stmt_removal(node, "pass")
+
+    def visit_Delete(self, node):
+        self._stmt_removal(node, "pass")
+
+    def visit_If(self, node):
+        self._expr(node.test)
+        self._body(node)
+
+    def visit_While(self, node):
+        self._expr(node.test)
+        self._body(node)
+
+    def visit_For(self, node):
+        self._expr(node.iter)
+        self._body(node)
+
+    def visit_With(self, node):
+        self._body(node)
+
+    def visit_Try(self, node):
+        self._body(node)
+
+    def visit_ExceptHandler(self, node):
+        self._body(node)
+
+    # --- expressions
+    def _expr(self, node):
+        if node is None or not self._active():
+            return
+        todo = [node]
+        while todo:        # ast.walk, but not into f-strings (their inner positions are not usable)
+            sub = todo.pop()
+            if isinstance(sub, ast.JoinedStr):
+                continue
+            self._expr_node(sub)
+            todo.extend(ast.iter_child_nodes(sub))
+
+    def _expr_node(self, n):
+        q = self._qual()
+        if isinstance(n, ast.Compare):
+            for i, op in enumerate(n.ops):
+                for alt in _CMP_FLIPS.get(type(op), ()):
+                    new = copy.deepcopy(n)
+                    new.ops[i] = alt()
+                    self.out.append((n, q, "cmp", "(" + ast.unparse(new) + ")"))
+        elif isinstance(n, ast.Constant):
+            if isinstance(n.value, bool):
+                self.out.append((n, q, "bool", str(not n.value)))
+            for v in _num_variants(n.value):
+                self.out.append((n, q, "num", "(" + repr(v) + ")"))
+        elif isinstance(n, ast.UnaryOp):
+            if isinstance(n.op, ast.Not):
+                self.out.append((n, q, "bool", "(" + ast.unparse(n.operand) + ")"))
+            elif isinstance(n.op, ast.USub) and not isinstance(n.operand, ast.Constant):
+                self.out.append((n, q, "arith", "(" + ast.unparse(n.operand) + ")"))
+            elif isinstance(n.op, ast.USub) and isinstance(n.operand, ast.Constant):
+                self.out.append((n, q, "arith", "(" + ast.unparse(n.operand) + ")"))
+        elif isinstance(n, ast.BoolOp):
+            new = copy.deepcopy(n)
+            new.op = ast.Or() if isinstance(n.op, ast.And) else ast.And()
+            self.out.append((n, q, "bool", "(" + ast.unparse(new) + ")"))
+        elif isinstance(n, ast.BinOp) and type(n.op) in _ARITH:
+            new = copy.deepcopy(n)
+            new.op = _ARITH[type(n.op)]()
+            self.out.append((n, q, "arith", "(" + ast.unparse(new) + ")"))
+
+    def generic_visit(self, node):   # other statements: nothing to mutate
+        pass
+
+
+def _class_aware(tree):
+    """Mark assignments directly in a class body (those are fields, not removable statements)."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ClassDef):
+            for st in node.body:
+                st._in_class = True
+
+
+def mutants_of(target: Target) -> list[Mutant]:
+    path = ROOT / target.path
+    src = path.read_text()
+    data = src.encode()
+    lines = data.splitlines(keepends=True)
+    offsets = [0]
+    for ln in lines:
+        offsets.append(offsets[-1] + len(ln))
+    tree = ast.parse(src)
+    _class_aware(tree)
+    col = _Collector(target.scope)
+    orig_visit_assign = col.visit_Assign
+
+    def visit_assign(node):
+        if getattr(node, "_in_class", False):
+            col._expr(node.value)
+            return
+        orig_visit_assign(node)
+
+    col.visit_Assign = visit_assign
+    col.visit(tree)
+    base_dump = ast.dump(tree)
+    out: list[Mutant] = []
+    seen: dict[tuple, int] = {}
+    for node, qual, op, repl in col.out:
+        a = offsets[node.lineno - 1] + node.col_offset
+        b = offsets[node.end_lineno - 1] + node.end_col_offset
+        orig = data[a:b].decode()
+        new_src = (data[:a] + repl.encode() + data[b:]).decode()
+        try:
+            new_tree = ast.parse(new_src)
+        except SyntaxError:
+            continue
+        if ast.dump(new_tree) == base_dump:
+            continue
+        key = (qual, op, " ".join(orig.split()), repl)
+        k = seen.get(key, 0)
+        seen[key] = k + 1
+        mid = f"{target.name}:{qual}:{op}:{' '.join(orig.split())} -> {repl}" + (f" #{k}" if k else "")
+        out.append(Mutant(target.name, qual, op, node.lineno, " ".join(orig.split()), repl, new_src, mid))
+    return out
+
+
+# ----------------------------------------------------------------------------- running
+class _Hook(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    def __init__(self, modname: str, path: str, source: str) -> None:
+        self.modname, self.path, self.source = modname, path, source
+
+    def find_spec(self, fullname, path=None, target=None):
+        if fullname != self.modname:
+            return None
+        return importlib.util.spec_from_file_location(fullname, self.path, loader=self)
+
+    def create_module(self, spec):
+        return None
+
+    def exec_module(self, module):
+        exec(compile(self.source, self.path, "exec"), module.__dict__)
+
+
+def _run_child(target: Target, source: str, timeout_s: float) -> tuple[int, float]:
+    """Fork; the child runs the target's tests against ``source``. (exit code, seconds)."""
+    t0 = time.monotonic()
+    pid = os.fork()
+    if pid == 0:   # child
+        try:
+            fd = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(fd, 1)
+            os.dup2(fd, 2)
+            sys.dont_write_bytecode = True
+            modname = target.path[:-3].replace("/", ".")
+            sys.meta_path.insert(0, _Hook(modname, str(ROOT / target.path), source))
+            import pytest
+            os.chdir(ROOT)
+            tests = [a for a in target.tests if not a.endswith(".py") or (ROOT / a).exists()]
+            rc = pytest.main(["-x", "-q", "-p", "no:cacheprovider", "-m", "not slow", *tests])
+            os._exit(int(rc))
+        except BaseException:
+            os._exit(99)
+    deadline = t0 + timeout_s
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return os.waitstatus_to_exitcode(status), time.monotonic() - t0
+        if time.monotonic() > deadline:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            return -9, time.monotonic() - t0
+        time.sleep(0.01)
+
+
+_PROJECT = ("companion", "sitl", "tests", "conftest")
+
+
+def _third_party_of(tests) -> list[str]:
+    """Names of the non-project modules that importing the test files loads (found in a
+    throwaway child, so that the parent can import them once for every mutant)."""
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            os.close(r)
+            sys.path.insert(0, str(ROOT))
+            for i, a in enumerate(tests):
+                p = ROOT / a
+                if a.endswith(".py") and p.exists():
+                    spec = importlib.util.spec_from_file_location(f"_mutation_probe_{i}", p)
+                    spec.loader.exec_module(importlib.util.module_from_spec(spec))
+            names = [m for m in list(sys.modules)
+                     if m.split(".")[0] not in _PROJECT and not m.startswith("_mutation_probe")]
+            os.write(w, "\n".join(names).encode())
+        finally:
+            os._exit(0)
+    os.close(w)
+    chunks = []
+    while True:
+        b = os.read(r, 1 << 16)
+        if not b:
+            break
+        chunks.append(b)
+    os.close(r)
+    os.waitpid(pid, 0)
+    return b"".join(chunks).decode().split("\n")
+
+
+def _preimport(targets) -> None:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ["PYTEST_DISABLE_PLUGIN_AUTOLOAD"] = "1"
+    import pytest  # noqa: F401
+    for t in targets:
+        for name in _third_party_of(t.tests):
+            if name and name not in sys.modules:
+                try:
+                    importlib.import_module(name)
+                except Exception:   # noqa: BLE001 - best effort: the child imports what is missing
+                    pass
+    leaked = [m for m in sys.modules if m.split(".")[0] in _PROJECT]
+    assert not leaked, f"project modules imported in the parent: {leaked[:5]}"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--only", action="append", choices=[t.name for t in TARGETS])
+    ap.add_argument("--list", action="store_true", help="print the mutants and exit")
+    ap.add_argument("--json", type=Path, help="write every mutant's result here")
+    ap.add_argument("--verbose", action="store_true", help="print each mutant as it finishes")
+    args = ap.parse_args(argv)
+    targets = [t for t in TARGETS if not args.only or t.name in args.only]
+    all_mutants = {t.name: mutants_of(t) for t in targets}
+    if args.list:
+        for t in targets:
+            for m in all_mutants[t.name]:
+                print(f"{t.path}:{m.line}  {m.id}")
+        return 0
+    _preimport(targets)
+    results = []
+    summary = []
+    for t in targets:
+        base_src = (ROOT / t.path).read_text()
+        rc, base_s = _run_child(t, base_src, 300.0)
+        if rc != 0:
+            print(f"{t.name}: the unmutated tests fail (exit {rc}); fix them first", file=sys.stderr)
+            return 1
+        timeout = max(20.0, 5.0 * base_s)
+        killed = survived = equiv_survived = equiv_killed = 0
+        t0 = time.monotonic()
+        for m in all_mutants[t.name]:
+            rc, s = _run_child(t, m.source, timeout)
+            dead = rc != 0
+            eq = m.id in EQUIVALENT
+            killed += dead
+            survived += not dead
+            equiv_survived += eq and not dead
+            equiv_killed += eq and dead
+            results.append({"target": t.name, "path": t.path, "line": m.line, "id": m.id, "op": m.op,
+                            "orig": m.orig, "new": m.new, "exit": rc, "killed": dead,
+                            "equivalent": EQUIVALENT.get(m.id)})
+            if args.verbose or not dead:
+                print(f"{'killed  ' if dead else 'SURVIVED'} {t.path}:{m.line} {m.id}"
+                      + (f"  [equivalent: {EQUIVALENT[m.id]}]" if eq and not dead else ""), flush=True)
+        n = len(all_mutants[t.name])
+        n_eff = n - equiv_survived - equiv_killed
+        row = {"target": t.name, "path": t.path, "mutants": n, "killed": killed, "survived": survived,
+               "equivalent": equiv_survived + equiv_killed,
+               "score": killed / n if n else 1.0,
+               "score_excl_equivalent": (killed - equiv_killed) / n_eff if n_eff else 1.0,
+               "seconds": round(time.monotonic() - t0, 1), "baseline_test_s": round(base_s, 2)}
+        summary.append(row)
+        print(f"== {t.name}: {killed}/{n} killed ({row['score']:.1%}); "
+              f"excluding {row['equivalent']} equivalent: {row['score_excl_equivalent']:.1%}; "
+              f"{row['seconds']} s", flush=True)
+    print("\n| module | mutants | killed | survived | equivalent | score | score excl. equivalent |")
+    print("|---|---|---|---|---|---|---|")
+    for r in summary:
+        print(f"| {r['path']} | {r['mutants']} | {r['killed']} | {r['survived']} | {r['equivalent']} | "
+              f"{r['score']:.1%} | {r['score_excl_equivalent']:.1%} |")
+    if args.json:
+        args.json.write_text(json.dumps({"summary": summary, "mutants": results}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
