@@ -368,18 +368,49 @@ class _Hook(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         exec(compile(self.source, self.path, "exec"), module.__dict__)
 
 
-def _run_child(target: Target, source: str, timeout_s: float) -> tuple[int, float]:
-    """Fork; the child runs the target's tests against ``source``. (exit code, seconds)."""
-    t0 = time.monotonic()
+def _install(target: Target, source: str) -> None:
+    """Make ``source`` the target module's code in this (child) process.
+
+    Not imported yet: an import hook serves it. Already imported by the parent
+    (the fast path): it is executed again in the module's own namespace, and
+    every other project module's global that was bound to one of the module's
+    old objects by name (``from .flightstack import FlightStack``) is rebound to
+    the new one. ``main`` runs the unmutated source through the same path first
+    and requires its tests to pass, which checks this patching.
+    """
+    modname = target.path[:-3].replace("/", ".")
+    path = str(ROOT / target.path)
+    mod = sys.modules.get(modname)
+    if mod is None:
+        sys.meta_path.insert(0, _Hook(modname, path, source))
+        return
+    old = dict(mod.__dict__)
+    exec(compile(source, path, "exec"), mod.__dict__)
+    new = mod.__dict__
+    changed = [(k, v) for k, v in old.items() if not k.startswith("__") and new.get(k) is not v]
+    for name, m in list(sys.modules.items()):
+        if m is mod or name.split(".")[0] not in _PROJECT:
+            continue
+        d = getattr(m, "__dict__", None)
+        if d is None:
+            continue
+        for k, v in changed:
+            if d.get(k, _MISSING) is v:
+                d[k] = new[k]
+
+
+_MISSING = object()
+
+
+def _start_child(target: Target, source: str) -> int:
+    """Fork a child that runs the target's tests against ``source``; its pid."""
     pid = os.fork()
     if pid == 0:   # child
         try:
             fd = os.open(os.devnull, os.O_WRONLY)
             os.dup2(fd, 1)
             os.dup2(fd, 2)
-            sys.dont_write_bytecode = True
-            modname = target.path[:-3].replace("/", ".")
-            sys.meta_path.insert(0, _Hook(modname, str(ROOT / target.path), source))
+            _install(target, source)
             import pytest
             os.chdir(ROOT)
             tests = [a for a in target.tests if not a.endswith(".py") or (ROOT / a).exists()]
@@ -387,16 +418,35 @@ def _run_child(target: Target, source: str, timeout_s: float) -> tuple[int, floa
             os._exit(int(rc))
         except BaseException:
             os._exit(99)
-    deadline = t0 + timeout_s
-    while True:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            return os.waitstatus_to_exitcode(status), time.monotonic() - t0
-        if time.monotonic() > deadline:
-            os.kill(pid, signal.SIGKILL)
-            os.waitpid(pid, 0)
-            return -9, time.monotonic() - t0
-        time.sleep(0.01)
+    return pid
+
+
+def _run_all(target: Target, sources: list[str], timeout_s: float, jobs: int, done=None) -> list[tuple[int, float]]:
+    """Run every source (at most ``jobs`` children at once); [(exit code, seconds)] in order.
+    A child past ``timeout_s`` is killed (exit -9: the mutant made the tests hang)."""
+    results: list = [None] * len(sources)
+    running: dict[int, tuple[int, float]] = {}
+    nxt = 0
+    while nxt < len(sources) or running:
+        while nxt < len(sources) and len(running) < jobs:
+            running[_start_child(target, sources[nxt])] = (nxt, time.monotonic())
+            nxt += 1
+        time.sleep(0.005)
+        for pid, (i, t0) in list(running.items()):
+            got, status = os.waitpid(pid, os.WNOHANG)
+            if got:
+                rc = os.waitstatus_to_exitcode(status)
+            elif time.monotonic() - t0 > timeout_s:
+                os.kill(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+                rc = -9
+            else:
+                continue
+            del running[pid]
+            results[i] = (rc, time.monotonic() - t0)
+            if done is not None:
+                done(i, *results[i])
+    return results
 
 
 _PROJECT = ("companion", "sitl", "tests", "conftest")
@@ -417,7 +467,7 @@ def _third_party_of(tests) -> list[str]:
                     spec = importlib.util.spec_from_file_location(f"_mutation_probe_{i}", p)
                     spec.loader.exec_module(importlib.util.module_from_spec(spec))
             names = [m for m in list(sys.modules)
-                     if m.split(".")[0] not in _PROJECT and not m.startswith("_mutation_probe")]
+                     if m.split(".")[0] not in ("tests", "conftest") and not m.startswith("_mutation_probe")]
             os.write(w, "\n".join(names).encode())
         finally:
             os._exit(0)
@@ -438,6 +488,7 @@ def _preimport(targets) -> None:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ["PYTEST_DISABLE_PLUGIN_AUTOLOAD"] = "1"
     import pytest  # noqa: F401
+    sys.path.insert(0, str(ROOT))
     for t in targets:
         for name in _third_party_of(t.tests):
             if name and name not in sys.modules:
@@ -445,8 +496,8 @@ def _preimport(targets) -> None:
                     importlib.import_module(name)
                 except Exception:   # noqa: BLE001 - best effort: the child imports what is missing
                     pass
-    leaked = [m for m in sys.modules if m.split(".")[0] in _PROJECT]
-    assert not leaked, f"project modules imported in the parent: {leaked[:5]}"
+    leaked = [m for m in sys.modules if m.split(".")[0] in ("tests", "conftest")]
+    assert not leaked, f"test modules imported in the parent: {leaked[:5]}"
 
 
 def main(argv=None) -> int:
@@ -455,6 +506,7 @@ def main(argv=None) -> int:
     ap.add_argument("--list", action="store_true", help="print the mutants and exit")
     ap.add_argument("--json", type=Path, help="write every mutant's result here")
     ap.add_argument("--verbose", action="store_true", help="print each mutant as it finishes")
+    ap.add_argument("-j", "--jobs", type=int, default=2, help="mutants run at once (default 2)")
     args = ap.parse_args(argv)
     targets = [t for t in TARGETS if not args.only or t.name in args.only]
     all_mutants = {t.name: mutants_of(t) for t in targets}
@@ -468,15 +520,24 @@ def main(argv=None) -> int:
     summary = []
     for t in targets:
         base_src = (ROOT / t.path).read_text()
-        rc, base_s = _run_child(t, base_src, 300.0)
+        [(rc, base_s)] = _run_all(t, [base_src], 600.0, 1)
         if rc != 0:
             print(f"{t.name}: the unmutated tests fail (exit {rc}); fix them first", file=sys.stderr)
             return 1
-        timeout = max(20.0, 5.0 * base_s)
-        killed = survived = equiv_survived = equiv_killed = 0
+        timeout = max(30.0, 10.0 * base_s)
+        ms = all_mutants[t.name]
         t0 = time.monotonic()
-        for m in all_mutants[t.name]:
-            rc, s = _run_child(t, m.source, timeout)
+
+        def report(i, rc, s, ms=ms, t=t):
+            m = ms[i]
+            if args.verbose or rc == 0:
+                eq = EQUIVALENT.get(m.id)
+                print(f"{'killed  ' if rc else 'SURVIVED'} {t.path}:{m.line} {m.id}"
+                      + (f"  [equivalent: {eq}]" if eq and rc == 0 else ""), flush=True)
+
+        runs = _run_all(t, [m.source for m in ms], timeout, args.jobs, report)
+        killed = survived = equiv_survived = equiv_killed = 0
+        for m, (rc, s) in zip(ms, runs):
             dead = rc != 0
             eq = m.id in EQUIVALENT
             killed += dead
@@ -484,12 +545,9 @@ def main(argv=None) -> int:
             equiv_survived += eq and not dead
             equiv_killed += eq and dead
             results.append({"target": t.name, "path": t.path, "line": m.line, "id": m.id, "op": m.op,
-                            "orig": m.orig, "new": m.new, "exit": rc, "killed": dead,
+                            "orig": m.orig, "new": m.new, "exit": rc, "seconds": round(s, 2), "killed": dead,
                             "equivalent": EQUIVALENT.get(m.id)})
-            if args.verbose or not dead:
-                print(f"{'killed  ' if dead else 'SURVIVED'} {t.path}:{m.line} {m.id}"
-                      + (f"  [equivalent: {EQUIVALENT[m.id]}]" if eq and not dead else ""), flush=True)
-        n = len(all_mutants[t.name])
+        n = len(ms)
         n_eff = n - equiv_survived - equiv_killed
         row = {"target": t.name, "path": t.path, "mutants": n, "killed": killed, "survived": survived,
                "equivalent": equiv_survived + equiv_killed,
