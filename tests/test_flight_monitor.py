@@ -163,6 +163,16 @@ def test_emergency_ends_the_flight_once_critical_does_not():
     assert m.first is v
 
 
+def test_an_emergency_before_arming_does_not_hide_one_in_flight():
+    """Regression (found by mutation testing): the flag that reports EMERGENCY once was set by
+    a heartbeat before our arming, so an EMERGENCY during the flight went unreported."""
+    m = FlightMonitor()
+    assert m.on_heartbeat(1.0, False, OFFBOARD, mavlink.MAV_STATE_EMERGENCY) is None
+    m.armed(10.0, OFFBOARD)
+    v = m.on_heartbeat(11.0, True, OFFBOARD, mavlink.MAV_STATE_EMERGENCY)
+    assert v is not None and (v.kind, v.action) == ("emergency", "end")
+
+
 def test_emergency_after_a_crash_is_reported_even_before_arming():
     m = FlightMonitor()
     assert m.on_heartbeat(1.0, False, OFFBOARD, mavlink.MAV_STATE_EMERGENCY) is None   # nothing of ours
