@@ -82,7 +82,12 @@ TARGETS = (
 )
 
 #: Mutant id -> why it cannot change behaviour. Ids are printed by --list.
-EQUIVALENT: dict[str, str] = {}
+EQUIVALENT: dict[str, str] = {
+    "monitor:FlightMonitor.on_heartbeat:stmt:self._emergency_seen = True -> pass":
+        "the flag is set only as the emergency becomes the first violation; a later EMERGENCY reaches "
+        "_violate, which returns None once `first` is set, so nothing observable depends on it",
+    "monitor:FlightMonitor.on_heartbeat:bool:True -> False": "same as the line above (the flag never set)",
+}
 
 
 # ----------------------------------------------------------------------------- generation

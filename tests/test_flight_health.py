@@ -173,3 +173,12 @@ def test_lockstep_trusts_the_vehicle_until_its_frames_skip():
     assert feed(h, 1000, delay=lambda k: 0.05 if k % 2 else 0.0) == []
     h = LinkHealth(DT, lockstep=True)
     assert feed(h, 1000, delay=lambda k: 0.05 if k % 2 else 0.0, keep=lambda k: k % 7 != 3) != []
+
+
+def test_before_any_verdict_the_reported_values_are_empty():
+    """report.json reads jitter_p95_s and ratio: a fresh watch (or one that has not yet
+    filled half a window) reports no jitter and no clock ratio, never a made-up one."""
+    h = LinkHealth(DT)
+    assert h.jitter_p95_s == 0.0 and h.ratio is None and h.n_lost == 0
+    feed(h, 100, delay=lambda k: 0.05 if k % 2 else 0.0)    # 0.4 s: under half a window
+    assert h.jitter_p95_s == 0.0 and h.ratio is None
