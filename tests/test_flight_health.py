@@ -182,3 +182,12 @@ def test_before_any_verdict_the_reported_values_are_empty():
     assert h.jitter_p95_s == 0.0 and h.ratio is None and h.n_lost == 0
     feed(h, 100, delay=lambda k: 0.05 if k % 2 else 0.0)    # 0.4 s: under half a window
     assert h.jitter_p95_s == 0.0 and h.ratio is None
+
+
+def test_a_frame_exactly_window_s_old_stays_in_the_window():
+    """With a 1/256 s period every time is exact in binary: the window (wall_k >= now - 1 s)
+    holds 257 frames, the one exactly 1 s old included."""
+    h = LinkHealth(1 / 256)
+    for k in range(600):
+        h.observe(k / 256, k / 256)
+    assert len(h._w) == 257
