@@ -87,6 +87,10 @@ EQUIVALENT: dict[str, str] = {
         "the flag is set only as the emergency becomes the first violation; a later EMERGENCY reaches "
         "_violate, which returns None once `first` is set, so nothing observable depends on it",
     "monitor:FlightMonitor.on_heartbeat:bool:True -> False": "same as the line above (the flag never set)",
+    "health:LinkHealth.observe:arith:self._n += 1 -> self._n -= 1":
+        "_n is only used as `_n % 25`, which is zero for -n exactly when for n",
+    "health:LinkHealth.observe:num:1 -> (2) #1":
+        "_n is only used as `_n % 25`; 2k is a multiple of 25 exactly when k is (gcd(2, 25) = 1)",
 }
 
 

@@ -189,5 +189,29 @@ def test_a_frame_exactly_window_s_old_stays_in_the_window():
     holds 257 frames, the one exactly 1 s old included."""
     h = LinkHealth(1 / 256)
     for k in range(600):
-        h.observe(k / 256, k / 256)
+        h.observe(1000.0 + k / 256, k / 256)     # wall clock 1000 s ahead: still exact
     assert len(h._w) == 257
+
+
+def test_a_loss_exactly_window_s_old_still_counts():
+    """Period 1/256 s (exact times), every odd frame lost: each loss is stamped with the wall
+    time of the frame that revealed it (even k >= 2). At the last frame k = 598 the losses of
+    k in [342, 598] are within 1 s (the one exactly 1 s old included): 129."""
+    h = LinkHealth(1 / 256)
+    for k in range(0, 600, 2):
+        h.observe(1000.0 + k / 256, k / 256)
+    assert len(h._lost) == 129
+
+
+def test_half_a_window_is_measured_from_the_oldest_frame_inclusive():
+    """Exact binary times (period 1/256 s, wall = 1000 s + t, late frames 1/32 s late) and a
+    window of 2 x 149/256 s: after 150 frames the window spans exactly 149/256 s, half the
+    window, which is enough for the first verdict (not before: frame 125 spans 124/256 s)."""
+    h = LinkHealth(1 / 256, HealthConfig(window_s=2 * 149 / 256))
+    first = None
+    for k in range(200):
+        t = k / 256
+        v = h.observe(1000.0 + t + (1 / 32 if k % 2 == 0 and k > 0 else 0.0), t)
+        if v is not None and first is None:
+            first = k + 1
+    assert first == 150
