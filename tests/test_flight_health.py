@@ -215,3 +215,22 @@ def test_half_a_window_is_measured_from_the_oldest_frame_inclusive():
         if v is not None and first is None:
             first = k + 1
     assert first == 150
+
+
+@pytest.mark.parametrize("limit,flag", [(1.25, True), (1.2, False)])
+def test_a_clock_ratio_equal_to_the_limit_is_still_judged(limit, flag):
+    """Vehicle time at exactly 1.25x wall time (binary-exact times), every other frame lost:
+    the ratio 1.25 is not above a 1.25 limit, so the link is judged (and found bad); above
+    a 1.2 limit it is trusted."""
+    h = LinkHealth(5 / 1024, HealthConfig(lockstep_ratio=limit))
+    out = [h.observe(k / 256, 5 * k / 1024) for k in range(0, 600, 2)]
+    assert h.ratio == 1.25
+    assert any(v is not None for v in out) is flag
+
+
+def test_jitter_is_measured_from_the_fastest_frame():
+    """All frames 250 ms late but one that is 240 ms late: the 95th percentile is 10 ms
+    above the fastest one (a constant delay cancels, the one early frame does not)."""
+    h = LinkHealth(DT)
+    feed(h, 600, delay=lambda k: 0.24 if k == 500 else 0.25)
+    assert h.jitter_p95_s == pytest.approx(0.010, abs=1e-9)
