@@ -91,6 +91,8 @@ EQUIVALENT: dict[str, str] = {
         "_n is only used as `_n % 25`, which is zero for -n exactly when for n",
     "health:LinkHealth.observe:num:1 -> (2) #1":
         "_n is only used as `_n % 25`; 2k is a multiple of 25 exactly when k is (gcd(2, 25) = 1)",
+    "flightstack:FlightStack._limits:stmt:self._params_version = p.version -> pass":
+        "a cache key only: without it the limits are recomputed from the same parameters on every call",
 }
 
 

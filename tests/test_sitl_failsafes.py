@@ -384,3 +384,20 @@ def test_offboard_mode_needs_a_stream_and_rtl_a_flying_vehicle(stack):
     stack.arm(0, ground())
     assert stack.set_mode(0, ground(), FlightMode.RTL).result == RESULT_DENIED   # landed
     assert stack.return_to_launch(0, air()).accepted
+
+
+def test_a_plain_hold_is_no_failsafe_and_never_lands_by_itself(stack):
+    """AUTO.LOITER entered by the user (no offboard loss): holds indefinitely."""
+    stack.arm(0, air(), force=True)
+    for k in range(1, 13):
+        stack.update(k * 5 * S, air())
+    assert stack.mode is FlightMode.LOITER and stack.failsafe is None
+    assert "Failsafe: landing" not in texts(stack)
+
+
+def test_a_crash_ends_an_active_failsafe(stack):
+    _offboard_flying(stack)
+    stack.update(S + 1, air())
+    assert stack.failsafe == "offboard"
+    stack.crash(S + 2, _crash_event())
+    assert stack.failsafe is None and stack.system_status == mavlink.MAV_STATE_EMERGENCY
