@@ -93,6 +93,15 @@ EQUIVALENT: dict[str, str] = {
         "_n is only used as `_n % 25`; 2k is a multiple of 25 exactly when k is (gcd(2, 25) = 1)",
     "flightstack:FlightStack._limits:stmt:self._params_version = p.version -> pass":
         "a cache key only: without it the limits are recomputed from the same parameters on every call",
+    "flightstack:FlightStack.arm:stmt:self._armed_t_us = int(now_us) -> pass":
+        "_armed_t_us is written, never read (a dead store)",
+    "flightstack:FlightStack.arm:stmt:self._land_announced = False -> pass":
+        "arm calls _enter two lines later, which resets _land_announced too",
+    "flightstack:FlightStack.arm:bool:False -> True #1": "same as the line above (_enter resets it)",
+    "flightstack:FlightStack.arm:bool:False -> True #2":
+        "_enter(self.mode, announce=True) announces only a mode change, and arming keeps the mode",
+    "flightstack:FlightStack._prearm_failure:stmt:return \"\" -> return None":
+        "the only caller tests the reason's truth value; '' and None are both false",
 }
 
 

@@ -401,3 +401,31 @@ def test_a_crash_ends_an_active_failsafe(stack):
     assert stack.failsafe == "offboard"
     stack.crash(S + 2, _crash_event())
     assert stack.failsafe is None and stack.system_status == mavlink.MAV_STATE_EMERGENCY
+
+
+def test_the_preflight_timer_starts_at_arming(stack):
+    """Armed at 5 s, first tick at 10 s: still disarmed at 5 + 10 s (COM_DISARM_PRFLT), not 20 s."""
+    assert stack.arm(5 * S, ground()).accepted
+    assert stack.update(10 * S, ground()).armed
+    assert not stack.update(15 * S, ground()).armed
+
+
+def test_re_arming_restarts_the_preflight_timer(stack):
+    assert stack.arm(0, ground()).accepted
+    stack.update(0, ground())
+    assert not stack.update(10 * S, ground()).armed          # preflight auto-disarm
+    assert stack.arm(20 * S, ground()).accepted
+    assert stack.update(20 * S, ground()).armed               # a fresh 10 s
+    assert stack.update(30 * S - 1, ground()).armed
+    assert not stack.update(30 * S, ground()).armed
+
+
+def test_landed_state_follows_the_arming_state_before_the_first_tick(stack):
+    assert stack.landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND
+    assert stack.arm(0, air(), force=True).accepted
+    assert stack.landed_state == mavlink.MAV_LANDED_STATE_IN_AIR
+
+
+def test_exactly_30_degrees_of_tilt_may_arm(stack):
+    """ARM_MAX_TILT_RAD = 30 deg is the largest tilt that arms (refused only above it)."""
+    assert stack.arm(0, ground(tilt_deg=30.0)).accepted
