@@ -102,6 +102,10 @@ EQUIVALENT: dict[str, str] = {
         "_enter(self.mode, announce=True) announces only a mode change, and arming keeps the mode",
     "flightstack:FlightStack._prearm_failure:stmt:return \"\" -> return None":
         "the only caller tests the reason's truth value; '' and None are both false",
+    "flightstack:FlightStack.update:stmt:self._now_us = now_us -> pass":
+        "_now_us is written, never read (a dead store)",
+    "flightstack:FlightStack.update:stmt:self._override_active = False -> pass":
+        "disarm(), the only place that clears `armed`, clears the override with it",
 }
 
 

@@ -429,3 +429,9 @@ def test_landed_state_follows_the_arming_state_before_the_first_tick(stack):
 def test_exactly_30_degrees_of_tilt_may_arm(stack):
     """ARM_MAX_TILT_RAD = 30 deg is the largest tilt that arms (refused only above it)."""
     assert stack.arm(0, ground(tilt_deg=30.0)).accepted
+
+
+def test_disarmed_a_fresh_actuator_stream_is_no_override(stack):
+    stack.actuator_controls(0, (0.9, 0.9, 0.9, 0.9))
+    out = stack.update(0, ground())
+    assert not stack.override_active and not out.armed and out.motor_override is None
