@@ -104,6 +104,11 @@ EQUIVALENT: dict[str, str] = {
         "the only caller tests the reason's truth value; '' and None are both false",
     "flightstack:FlightStack.update:stmt:self._now_us = now_us -> pass":
         "_now_us is written, never read (a dead store)",
+    "flightstack:FlightStack.update:stmt:now_us = int(now_us) -> pass":
+        "every caller (sitl.server, the tests) passes integer microseconds: int() is the identity there",
+    "flightstack:FlightStack.update:bool:True -> False":
+        "disarm(force=False) of a crashed vehicle is accepted too (crash_event set), with the same "
+        "'Disarmed (crashed)' text (the reason wins over 'forced')",
     "flightstack:FlightStack.update:stmt:self._override_active = False -> pass":
         "disarm(), the only place that clears `armed`, clears the override with it",
 }
