@@ -435,3 +435,16 @@ def test_disarmed_a_fresh_actuator_stream_is_no_override(stack):
     stack.actuator_controls(0, (0.9, 0.9, 0.9, 0.9))
     out = stack.update(0, ground())
     assert not stack.override_active and not out.armed and out.motor_override is None
+
+
+@pytest.mark.parametrize("airborne", [True, False])
+def test_the_auto_disarm_tick_outputs_nothing(stack, airborne):
+    """The tick that auto-disarms (after landing, or without a take-off) drives nothing: not
+    armed, no override, no idle, no setpoint, no controller reset."""
+    stack.arm(0, air() if airborne else ground(), force=airborne)
+    stack.update(0, air() if airborne else ground())
+    stack.update(S, ground())
+    t = S + 2 * S if airborne else 10 * S
+    out = stack.update(t, ground())
+    assert (out.armed, out.motor_override, out.idle, out.setpoint, out.reset_controller) == \
+        (False, None, False, None, False)
