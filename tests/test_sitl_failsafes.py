@@ -448,3 +448,16 @@ def test_the_auto_disarm_tick_outputs_nothing(stack, airborne):
     out = stack.update(t, ground())
     assert (out.armed, out.motor_override, out.idle, out.setpoint, out.reset_controller) == \
         (False, None, False, None, False)
+
+
+@pytest.mark.parametrize("name", ["COM_DISARM_LAND", "COM_DISARM_PRFLT"])
+def test_auto_disarm_times_under_a_second_work(stack, name):
+    """Any time > 0 enables the auto-disarm: 0.5 s disarms 0.5 s after touchdown / arming."""
+    assert stack.params.set(name, 0.5).ok
+    airborne = name == "COM_DISARM_LAND"
+    stack.arm(0, air() if airborne else ground(), force=airborne)
+    stack.update(0, air() if airborne else ground())
+    t0 = S if airborne else 0                      # touchdown, or arming on the ground
+    stack.update(t0, ground())
+    assert stack.update(t0 + S // 2 - 1, ground()).armed
+    assert not stack.update(t0 + S // 2, ground()).armed
