@@ -461,3 +461,14 @@ def test_auto_disarm_times_under_a_second_work(stack, name):
     stack.update(t0, ground())
     assert stack.update(t0 + S // 2 - 1, ground()).armed
     assert not stack.update(t0 + S // 2, ground()).armed
+
+
+@pytest.mark.parametrize("action,text", [(0, "Failsafe: landing"), (2, "Failsafe: returning")])
+def test_failsafe_mode_changes_are_announced_once_by_the_failsafe_text(stack, action, text):
+    """The failsafe's own STATUSTEXT names each step; no separate "Mode ..." line."""
+    assert stack.params.set("COM_OBL_ACT", action).ok
+    _offboard_flying(stack)
+    stack.update(S + 1, air())
+    assert texts(stack) == ["Failsafe: offboard setpoints lost, holding"]
+    stack.update(S + 1 + 5 * S, air(HOME[0] + 4.0))
+    assert texts(stack) == [text]
