@@ -529,6 +529,37 @@ def _preimport(targets) -> None:
     assert not leaked, f"test modules imported in the parent: {leaked[:5]}"
 
 
+def _table(rows) -> None:
+    print("| module | mutants | killed | survived | equivalent | score | score excl. equivalent |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['path']} | {r['mutants']} | {r['killed']} | {r['survived']} | {r['equivalent']} | "
+              f"{r['score']:.1%} | {r['score_excl_equivalent']:.1%} |")
+
+
+def _score(path: str, results: list[dict]) -> dict:
+    n = len(results)
+    killed = sum(r["killed"] for r in results)
+    eq = [r for r in results if r["id"] in EQUIVALENT]
+    eq_killed = sum(r["killed"] for r in eq)
+    n_eff = n - len(eq)
+    return {"path": path, "mutants": n, "killed": killed, "survived": n - killed, "equivalent": len(eq),
+            "score": killed / n if n else 1.0,
+            "score_excl_equivalent": (killed - eq_killed) / n_eff if n_eff else 1.0}
+
+
+def _rescore(data: dict) -> int:
+    by_path: dict[str, list] = {}
+    for r in data["mutants"]:
+        by_path.setdefault(r["path"], []).append(r)
+    _table([_score(p, rs) for p, rs in by_path.items()])
+    for r in data["mutants"]:
+        if not r["killed"]:
+            eq = EQUIVALENT.get(r["id"])
+            print(f"{'equivalent' if eq else 'SURVIVED  '} {r['path']}:{r['line']} {r['id']}")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", action="append", choices=[t.name for t in TARGETS])
@@ -536,7 +567,11 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, help="write every mutant's result here")
     ap.add_argument("--verbose", action="store_true", help="print each mutant as it finishes")
     ap.add_argument("-j", "--jobs", type=int, default=2, help="mutants run at once (default 2)")
+    ap.add_argument("--rescore", type=Path, metavar="JSON",
+                    help="print the table of an earlier --json run, with the current EQUIVALENT list")
     args = ap.parse_args(argv)
+    if args.rescore:
+        return _rescore(json.loads(args.rescore.read_text()))
     targets = [t for t in TARGETS if not args.only or t.name in args.only]
     all_mutants = {t.name: mutants_of(t) for t in targets}
     if args.list:
@@ -587,11 +622,8 @@ def main(argv=None) -> int:
         print(f"== {t.name}: {killed}/{n} killed ({row['score']:.1%}); "
               f"excluding {row['equivalent']} equivalent: {row['score_excl_equivalent']:.1%}; "
               f"{row['seconds']} s", flush=True)
-    print("\n| module | mutants | killed | survived | equivalent | score | score excl. equivalent |")
-    print("|---|---|---|---|---|---|---|")
-    for r in summary:
-        print(f"| {r['path']} | {r['mutants']} | {r['killed']} | {r['survived']} | {r['equivalent']} | "
-              f"{r['score']:.1%} | {r['score_excl_equivalent']:.1%} |")
+    print()
+    _table(summary)
     if args.json:
         args.json.write_text(json.dumps({"summary": summary, "mutants": results}, indent=1))
     return 0
