@@ -234,3 +234,51 @@ def test_jitter_is_measured_from_the_fastest_frame():
     h = LinkHealth(DT)
     feed(h, 600, delay=lambda k: 0.24 if k == 500 else 0.25)
     assert h.jitter_p95_s == pytest.approx(0.010, abs=1e-9)
+
+
+def _exact(n=600, delay=lambda k: 0.0, keep=lambda k: True, **cfg):
+    """Period 1/256 s, wall = 1000 s + t + delay: every time exact in binary. Verdicts."""
+    h = LinkHealth(1 / 256, HealthConfig(**cfg))
+    out = [h.observe(1000.0 + k / 256 + delay(k), k / 256) for k in range(n) if keep(k)]
+    return h, [v for v in out if v is not None]
+
+
+@pytest.mark.parametrize("late,p95", [(13, 0.0), (14, 1 / 64)])
+def test_the_95th_percentile_is_the_sorted_offset_at_int_0_95_n_minus_1(late, p95):
+    """257 frames in the window: index int(0.95 x 256) = 243 of the sorted offsets. With 14
+    frames 1/64 s late, index 243 is the first late one; with 13 it is on time."""
+    h, _ = _exact(delay=lambda k: 1 / 64 if 400 <= k < 400 + late else 0.0)
+    assert len(h._w) == 257 and h.jitter_p95_s == p95
+
+
+def test_jitter_equal_to_the_limit_is_not_flagged():
+    late = lambda k: 1 / 64 if k % 5 == 0 else 0.0          # noqa: E731
+    h, verdicts = _exact(delay=late, max_jitter_s=1 / 64)
+    assert h.jitter_p95_s == 1 / 64 and verdicts == []
+    assert _exact(delay=late, max_jitter_s=1 / 64 - 1e-9)[1] != []
+
+
+def test_loss_equal_to_the_limit_is_not_flagged():
+    """Every odd frame lost: 129 losses in the 256 periods of the window, 129/256 exactly."""
+    odd_lost = lambda k: k % 2 == 0                           # noqa: E731
+    assert _exact(keep=odd_lost, max_loss_fraction=129 / 256)[1] == []
+    assert _exact(keep=odd_lost, max_loss_fraction=129 / 256 - 1e-9)[1] != []
+
+
+def test_loss_with_a_few_frames_per_window_uses_the_true_expected_count():
+    """10 Hz frames, every other one lost, a 2.5 s window: 12 losses (13 with the one at the
+    window's edge) against 24 expected frames is 50-54 % (flagged); the expected count is
+    floored at 1 frame only, not at some larger number."""
+    h = LinkHealth(0.1, HealthConfig(window_s=2.5))
+    out = [h.observe(0.1 * k, 0.1 * k) for k in range(0, 100, 2)]
+    verdicts = [v for v in out if v is not None]
+    pct = int(re.fullmatch(r"(\d+)% of the sensor frames lost", verdicts[-1]).group(1))
+    assert 50 <= pct <= 55
+
+
+def test_the_expected_frame_count_is_floored_at_one():
+    """One vehicle second per frame but 20 ms of wall clock (ratio limit lifted): the window
+    spans under one period; one lost frame is then 1 of at least 1 expected, 100 %."""
+    h = LinkHealth(1.0, HealthConfig(lockstep_ratio=1e9, max_jitter_s=1e9))
+    out = [h.observe(0.02 * k, float(k)) for k in range(120) if k != 90]
+    assert [v for v in out if v is not None][-1] == "100% of the sensor frames lost"
