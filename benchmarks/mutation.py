@@ -16,7 +16,8 @@ Operators (each mutant is one change):
 ``bool``   ``not x`` -> ``x``, ``and`` <-> ``or``, ``True`` <-> ``False``;
 ``arith``  ``+`` <-> ``-``, ``*`` <-> ``/`` (also in ``+=``/``-=``), unary minus dropped;
 ``stmt``   an assignment, expression statement, ``raise``, ``del`` or ``return x``
-           removed (``pass`` / ``return None``).
+           removed (``pass`` / ``return None``);
+``audit``  the two mutants issue 19's audit found surviving (``AUDIT``).
 
 Strings, f-strings, docstrings, annotations and imports are not mutated.
 
@@ -112,6 +113,14 @@ EQUIVALENT: dict[str, str] = {
     "flightstack:FlightStack.update:stmt:self._override_active = False -> pass":
         "disarm(), the only place that clears `armed`, clears the override with it",
 }
+
+
+#: Hand-written mutants (op ``audit``): the ones issue 19's audit found surviving the whole
+#: non-slow suite, where the operators above do not produce them verbatim.
+AUDIT: tuple[tuple[str, str, str], ...] = (
+    ("monitor", "if age > self.cfg.max_nav_age_s:", "if age > self.cfg.max_nav_age_s * 100:"),
+    ("flightstack", "RTL_ACCEPT_RADIUS_M = 0.5", "RTL_ACCEPT_RADIUS_M = 50.0"),
+)
 
 
 # ----------------------------------------------------------------------------- generation
@@ -377,6 +386,12 @@ def mutants_of(target: Target) -> list[Mutant]:
         seen[key] = k + 1
         mid = f"{target.name}:{qual}:{op}:{' '.join(orig.split())} -> {repl}" + (f" #{k}" if k else "")
         out.append(Mutant(target.name, qual, op, node.lineno, " ".join(orig.split()), repl, new_src, mid))
+    for name, old, new in AUDIT:
+        if name == target.name:
+            assert src.count(old) == 1, f"audit mutant not found once in {target.path}: {old!r}"
+            line = src[:src.index(old)].count("\n") + 1
+            out.append(Mutant(name, "audit", "audit", line, old, new, src.replace(old, new),
+                              f"{name}:audit:{old} -> {new}"))
     return out
 
 
