@@ -472,3 +472,17 @@ def test_failsafe_mode_changes_are_announced_once_by_the_failsafe_text(stack, ac
     assert texts(stack) == ["Failsafe: offboard setpoints lost, holding"]
     stack.update(S + 1 + 5 * S, air(HOME[0] + 4.0))
     assert texts(stack) == [text]
+
+
+def test_each_new_actuator_command_is_output_and_a_repeated_one_too(stack):
+    stack.arm(0, air(), force=True)
+    c1, c2 = (0.5, 0.5, 0.5, 0.5), (0.6, 0.4, 0.6, 0.4)
+    stack.actuator_controls(0, c1)
+    out = stack.update(0, air())
+    assert (out.armed, out.motor_override, out.idle, out.reset_controller) == (True, c1, False, False)
+    assert out.setpoint is not None                      # the onboard setpoint, kept for a hand-back
+    again = stack.update(1000, air())
+    assert again is not None and again.motor_override == c1 and again.armed
+    stack.actuator_controls(2000, c2)
+    out = stack.update(2000, air())
+    assert out.motor_override == c2 and out.armed and not out.idle and not out.reset_controller
