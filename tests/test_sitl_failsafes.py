@@ -104,7 +104,7 @@ def test_return_flies_towards_home_along_the_line_at_cruise(stack):
     assert out.setpoint.vel_enu_m_s == pytest.approx((-3.0, -4.0, 0.0))
 
 
-@pytest.mark.parametrize("below,climbed", [(0.4, True), (0.6, False)])
+@pytest.mark.parametrize("below,climbed", [(0.4, True), (0.5, False), (0.6, False)])
 def test_return_leaves_the_climb_within_half_a_metre_of_the_return_altitude(stack, below, climbed):
     """Phase 0 ends once the climb reference is at the return altitude and the vehicle within
     0.5 m of it; until then the setpoint stays above the start point."""
