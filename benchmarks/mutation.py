@@ -110,6 +110,12 @@ EQUIVALENT: dict[str, str] = {
     "flightstack:FlightStack.update:bool:True -> False":
         "disarm(force=False) of a crashed vehicle is accepted too (crash_event set), with the same "
         "'Disarmed (crashed)' text (the reason wins over 'forced')",
+    "flightstack:FlightStack.update:cmp:o.idle is idle -> (o.idle is not idle)":
+        "reuse test of the last output: flipped, an equal StackOutput is built anew (a tick never changes "
+        "idle while keeping the same setpoint object), so the outputs are equal",
+    "flightstack:FlightStack.update:cmp:o.motor_override is None -> (o.motor_override is not None)":
+        "reuse test of the last output: the override's last output is never reused after the hand-back "
+        "(that tick has reset_controller set), otherwise an equal StackOutput is built anew",
     "flightstack:FlightStack.update:stmt:self._override_active = False -> pass":
         "disarm(), the only place that clears `armed`, clears the override with it",
 }
