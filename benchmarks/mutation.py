@@ -116,6 +116,8 @@ EQUIVALENT: dict[str, str] = {
     "flightstack:FlightStack.update:cmp:o.motor_override is None -> (o.motor_override is not None)":
         "reuse test of the last output: the override's last output is never reused after the hand-back "
         "(that tick has reset_controller set), otherwise an equal StackOutput is built anew",
+    "flightstack:FlightStack._rtl_setpoint:num:1 -> (2)":
+        "the return phase is only ever compared with 0; any non-zero value means 'flying home'",
     "flightstack:FlightStack.update:stmt:self._override_active = False -> pass":
         "disarm(), the only place that clears `armed`, clears the override with it",
 }
