@@ -78,8 +78,8 @@ TARGETS = (
            ("tests/test_flight_health.py", "tests/test_flight_units.py", "-k", "health")),
     Target("flightstack", "sitl/flightstack.py",
            ("tests/test_sitl_flightstack.py", "tests/test_sitl_failsafes.py"), _FS_FAILSAFE),
-    Target("link_auth", "companion/link/auth.py", ("tests/test_link_auth.py", "tests/test_link_auth_rules.py")),
-    Target("sitl_auth", "sitl/auth.py", ("tests/test_sitl_auth.py", "tests/test_sitl_auth_rules.py")),
+    Target("link_auth", "companion/link/auth.py", ("tests/test_link_auth_rules.py", "tests/test_link_auth.py")),
+    Target("sitl_auth", "sitl/auth.py", ("tests/test_sitl_auth_rules.py", "tests/test_sitl_auth.py")),
 )
 
 #: Mutant id -> why it cannot change behaviour. Ids are printed by --list.
