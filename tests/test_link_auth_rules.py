@@ -228,3 +228,10 @@ def test_signature_verdicts_are_counted_by_kind():
     assert [f.accept(HB, VEH) for _ in range(7)] == [False] * 6 + [True]
     s = f.stats()
     assert (s.unsigned, s.bad_signature, s.replayed, s.accepted) == (1, 3, 2, 1)
+
+
+def test_empty_link_stats_count_nothing():
+    """A report written before any message (or with no link) shows zero counts, not made-up ones."""
+    d = LinkStats().to_dict()
+    assert d.pop("vehicle_address") is None
+    assert set(d.values()) == {0} and len(d) == 12
