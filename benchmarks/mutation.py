@@ -590,6 +590,10 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, help="write every mutant's result here")
     ap.add_argument("--verbose", action="store_true", help="print each mutant as it finishes")
     ap.add_argument("-j", "--jobs", type=int, default=2, help="mutants run at once (default 2)")
+    ap.add_argument("--ids", type=Path, metavar="FILE",
+                    help="run only the mutants whose ids are listed in FILE (one a line), e.g. the "
+                         "survivors of an earlier run: tests are only ever added, so a mutant killed "
+                         "then is killed now")
     ap.add_argument("--rescore", type=Path, metavar="JSON",
                     help="print the table of an earlier --json run, with the current EQUIVALENT list")
     args = ap.parse_args(argv)
@@ -597,6 +601,9 @@ def main(argv=None) -> int:
         return _rescore(json.loads(args.rescore.read_text()))
     targets = [t for t in TARGETS if not args.only or t.name in args.only]
     all_mutants = {t.name: mutants_of(t) for t in targets}
+    if args.ids:
+        wanted = {ln.strip() for ln in args.ids.read_text().splitlines() if ln.strip()}
+        all_mutants = {k: [m for m in v if m.id in wanted] for k, v in all_mutants.items()}
     if args.list:
         for t in targets:
             for m in all_mutants[t.name]:
