@@ -277,8 +277,9 @@ def test_loss_with_a_few_frames_per_window_uses_the_true_expected_count():
 
 
 def test_the_expected_frame_count_is_floored_at_one():
-    """One vehicle second per frame but 20 ms of wall clock (ratio limit lifted): the window
-    spans under one period; one lost frame is then 1 of at least 1 expected, 100 %."""
-    h = LinkHealth(1.0, HealthConfig(lockstep_ratio=1e9, max_jitter_s=1e9))
+    """One vehicle second per frame but 20 ms of wall clock (ratio limit lifted), a 0.5 s
+    window: it spans half a period, 0.5 frames expected; one lost frame is then 1 of at
+    least 1 expected, 100 % (not 200 %)."""
+    h = LinkHealth(1.0, HealthConfig(window_s=0.5, lockstep_ratio=1e9, max_jitter_s=1e9))
     out = [h.observe(0.02 * k, float(k)) for k in range(120) if k != 90]
     assert [v for v in out if v is not None][-1] == "100% of the sensor frames lost"
