@@ -116,6 +116,23 @@ EQUIVALENT: dict[str, str] = {
     "flightstack:FlightStack.update:cmp:o.motor_override is None -> (o.motor_override is not None)":
         "reuse test of the last output: the override's last output is never reused after the hand-back "
         "(that tick has reset_controller set), otherwise an equal StackOutput is built anew",
+    "link_auth:VehicleFilter.accept:stmt:return False -> return None":
+        "accept's callers (filter, the runner) use its truth value only; None and False are both false",
+    "link_auth:VehicleFilter.accept:stmt:return False -> return None #2": "as above",
+    "link_auth:VehicleFilter.accept:stmt:return False -> return None #3": "as above",
+    "link_auth:VehicleFilter._time_ok:stmt:return False -> return None":
+        "its one caller tests `not self._time_ok(...)`; None and False are both false",
+    "link_auth:VehicleFilter.__init__:stmt:self._cand_n = 0 -> pass":
+        "_cand_n is assigned (= 1) before it is ever read: the first jumped frame has no candidate",
+    "link_auth:VehicleFilter.__init__:num:0 -> (1) #1": "as above",
+    "link_auth:VehicleFilter._time_ok:cmp:t_s > clock -> (t_s >= clock)":
+        "at t_s == clock the clock is assigned its own value",
+    "link_auth:VehicleFilter._time_ok:num:0 -> (1)":
+        "_cand_s is set to None with it, and a None candidate sets the count to 1 at the next jumped frame",
+    "link_auth:VehicleFilter._time_ok:stmt:self._cand_s, self._cand_n = None, 0 -> pass #1":
+        "after re-anchoring, the candidate equals the clock: a later frame within its tolerance is "
+        "accepted by the first branch, any other one restarts the count at 1",
+    "link_auth:VehicleFilter._time_ok:num:0 -> (1) #1": "as above (the count is restarted at 1 anyway)",
     "flightstack:FlightStack._rtl_setpoint:num:1 -> (2)":
         "the return phase is only ever compared with 0; any non-zero value means 'flying home'",
     "flightstack:FlightStack.update:stmt:self._override_active = False -> pass":

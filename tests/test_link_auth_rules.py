@@ -235,3 +235,7 @@ def test_empty_link_stats_count_nothing():
     d = LinkStats().to_dict()
     assert d.pop("vehicle_address") is None
     assert set(d.values()) == {0} and len(d) == 12
+
+
+def test_stats_without_a_count_of_bad_packets_say_zero():
+    assert VehicleFilter().stats().bad_packets == 0

@@ -299,3 +299,14 @@ def test_intake_settings(kw):
         IntakeBudget(**kw)
     b = IntakeBudget(max_bytes=280, rate_hz=1e-3, burst=1)
     assert (b.max_bytes, b.burst) == (280, 1.0)
+
+
+def test_vehicle_time_defaults_to_zero():
+    """authorize/observe without a vehicle time count it as 0 s (a caller with no vehicle clock)."""
+    p = policy(rebind_after_s=0.5)
+    assert p.authorize(LISTEN, A, "SET_MODE", None, 1, 191, None, 0.0, 0.0).accepted
+    assert not p.authorize(LISTEN, B, "SET_MODE", None, 1, 191, None, 10.0).accepted   # vehicle 0 - 0
+    q = policy(rebind_after_s=3.0)
+    assert q.authorize(LISTEN, A, "SET_MODE", None, 1, 191, None, 0.0, 5.0).accepted
+    q.observe(LISTEN, A, 1, 191, 10.0)                   # vehicle time 0
+    assert q.authorize(LISTEN, B, "SET_MODE", None, 1, 191, None, 20.0, 3.2).accepted
