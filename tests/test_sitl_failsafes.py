@@ -486,3 +486,17 @@ def test_each_new_actuator_command_is_output_and_a_repeated_one_too(stack):
     stack.actuator_controls(2000, c2)
     out = stack.update(2000, air())
     assert out.motor_override == c2 and out.armed and not out.idle and not out.reset_controller
+
+
+def test_under_override_the_output_carries_the_current_modes_setpoint(stack):
+    """The override's output keeps the onboard setpoint for the hand-back: after LAND it is
+    the landing descent, not the old hold."""
+    stack.arm(0, air(), force=True)
+    cmd = (0.5, 0.5, 0.5, 0.5)
+    stack.actuator_controls(0, cmd)
+    stack.update(0, air())
+    assert stack.land(1000, air()).accepted
+    stack.actuator_controls(1000, cmd)
+    out = stack.update(1000, air())
+    assert out.motor_override == cmd
+    assert out.setpoint.vel_enu_m_s[2] == pytest.approx(-stack.params["MPC_LAND_SPEED"])
