@@ -64,7 +64,7 @@ def _returning(stack, x, y, z):
     texts(stack)
 
 
-@pytest.mark.parametrize("dx,dy,lands", [(0.4, 0.0, True), (0.6, 0.0, False), (0.0, -0.45, True),
+@pytest.mark.parametrize("dx,dy,lands", [(0.4, 0.0, True), (0.6, 0.0, False), (0.5, 0.0, False), (0.0, -0.45, True),
                                          (0.3, 0.3, True), (0.4, 0.4, False), (-0.6, 0.0, False)])
 def test_return_lands_only_within_half_a_metre_of_home(stack, dx, dy, lands):
     """RTL_ACCEPT_RADIUS_M = 0.5 m horizontally: 0.4 m (and 0.3 x sqrt 2 = 0.42 m) lands,
@@ -73,7 +73,7 @@ def test_return_lands_only_within_half_a_metre_of_home(stack, dx, dy, lands):
     _returning(stack, HOME[0] + 3.0, HOME[1], z)
     stack.update(S // 10 + 2 * S, air(HOME[0] + dx, HOME[1] + dy, z))   # 2 s at 5 m/s: carrot home
     assert (stack.mode is FlightMode.LAND) is lands
-    assert ("Return: home reached, landing" in texts(stack)) is lands
+    assert texts(stack) == (["Return: home reached, landing"] if lands else [])
 
 
 def test_return_does_not_land_before_the_carrot_is_home(stack):
@@ -500,3 +500,11 @@ def test_under_override_the_output_carries_the_current_modes_setpoint(stack):
     out = stack.update(1000, air())
     assert out.motor_override == cmd
     assert out.setpoint.vel_enu_m_s[2] == pytest.approx(-stack.params["MPC_LAND_SPEED"])
+
+
+def test_return_lands_in_the_tick_the_carrot_reaches_home_exactly(stack):
+    """10 m out, 2 s at 5 m/s: the step equals the distance; the vehicle within 0.5 m lands."""
+    z = HOME[2] + Parameters()["RTL_RETURN_ALT"]
+    _returning(stack, HOME[0] + 10.0, HOME[1], z)
+    stack.update(S // 10 + 2 * S, air(HOME[0] + 0.1, HOME[1], z))
+    assert stack.mode is FlightMode.LAND
