@@ -310,3 +310,18 @@ def test_vehicle_time_defaults_to_zero():
     assert q.authorize(LISTEN, A, "SET_MODE", None, 1, 191, None, 0.0, 5.0).accepted
     q.observe(LISTEN, A, 1, 191, 10.0)                   # vehicle time 0
     assert q.authorize(LISTEN, B, "SET_MODE", None, 1, 191, None, 20.0, 3.2).accepted
+
+
+@pytest.mark.parametrize("wall,vehicle", [(3.0, 10.0), (10.0, 3.0)])
+def test_silence_of_exactly_rebind_after_s_in_one_clock_keeps_the_binding(wall, vehicle):
+    p = policy(rebind_after_s=3.0)
+    assert ctl(p, A, 0.0, 0.0).accepted
+    assert not ctl(p, B, wall, vehicle).accepted
+
+
+def test_signed_control_is_counted_as_accepted():
+    p = policy(verifier=SignatureVerifier(KEY, 10**9))
+    ctl(p, A, 0.0, 0.0, packet=_signed(10**9 + 1))
+    ctl(p, A, 0.1, 0.1, packet=_signed(10**9 + 2))
+    s = p.summary()
+    assert s["accepted"] == 2 and s["accepted_from"][0]["messages"] == 2
