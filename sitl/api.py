@@ -85,6 +85,22 @@ class _SitlOptions:
         self.physics_hz = physics_hz
         self.sensor_hz = sensor_hz
 
+    def _server_inputs(self):
+        """What an in-process server is built from: the mission, the signing key (or
+        None) and the allowed controllers (or None), read from the options' files."""
+        from companion.mission import load_mission
+
+        mission = load_mission(self.mission_path)
+        key = None
+        if self.signing_key_file is not None:
+            from companion.link.signing import load_signing_key
+            key = load_signing_key(self.signing_key_file)
+        controllers = None
+        if self.controllers is not None:
+            from .auth import parse_controller
+            controllers = tuple(parse_controller(c) for c in self.controllers)
+        return mission, key, controllers
+
     @property
     def url(self) -> str:
         """Connection string for a client."""
@@ -129,19 +145,9 @@ class SitlThread(_SitlOptions):
         self.error: BaseException | None = None
 
     def start(self) -> "SitlThread":
-        from companion.mission import load_mission
-
         from .server import ServerConfig, SitlServer
 
-        mission = load_mission(self.mission_path)
-        key = None
-        if self.signing_key_file is not None:
-            from companion.link.signing import load_signing_key
-            key = load_signing_key(self.signing_key_file)
-        controllers = None
-        if self.controllers is not None:
-            from .auth import parse_controller
-            controllers = tuple(parse_controller(c) for c in self.controllers)
+        mission, key, controllers = self._server_inputs()
         cfg = ServerConfig(listen=self.listen, outs=self.outs, lockstep=self.lockstep, speed=self.speed,
                            seed=self.seed, physics_hz=self.physics_hz, sensor_hz=self.sensor_hz,
                            start=self.start_pose, spin=False, control_outs=self.control_outs, signing_key=key,
@@ -218,21 +224,11 @@ class SitlInProcess(_SitlOptions):
 
     def wait_ready(self) -> "SitlInProcess":
         """Build the server and register its link (no thread, no socket)."""
-        from companion.mission import load_mission
-
         from .server import ServerConfig, SitlServer
 
         if self.server is not None:
             return self
-        mission = load_mission(self.mission_path)
-        key = None
-        if self.signing_key_file is not None:
-            from companion.link.signing import load_signing_key
-            key = load_signing_key(self.signing_key_file)
-        controllers = None
-        if self.controllers is not None:
-            from .auth import parse_controller
-            controllers = tuple(parse_controller(c) for c in self.controllers)
+        mission, key, controllers = self._server_inputs()
         cfg = ServerConfig(listen=self.listen, lockstep=True, speed=0.0, seed=self.seed,
                            physics_hz=self.physics_hz, sensor_hz=self.sensor_hz, start=self.start_pose,
                            spin=False, signing_key=key, controllers=controllers)
