@@ -73,14 +73,16 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE_MISSION = ROOT / "missions" / "obstacle-low" / "mission.yaml"
-#: centres at least this far from the launch point and from the end of the cut trajectory (m)
-KEEP_OUT_M = 2.5
-#: largest offset of a centre across the direction of travel (m)
-OFFSET_M = 0.8
-#: the footprint grown by this much must lie in free cells (m)
-FOOTPRINT_MARGIN_M = 0.05
 #: wall-clock limit of one flight (s)
 FLIGHT_TIMEOUT_S = 900.0
+
+sys.path.insert(0, str(ROOT))
+# The placement logic lives in the campaign package (``companion campaign``).
+from companion.campaign.placement import (  # noqa: E402
+    KEEP_OUT_M, OFFSET_M, FOOTPRINT_MARGIN_M, climbable, footprint_free, horizontal_distance,
+    random_obstacle)
+
+__all__ = ["KEEP_OUT_M", "OFFSET_M", "FOOTPRINT_MARGIN_M", "footprint_free", "random_obstacle"]
 
 
 # --- placements ----------------------------------------------------------------------------------
@@ -103,65 +105,6 @@ def setup(base: Path, cut_s: float):
     path = np.asarray(tr.sample(t).p, dtype=float)
     rc = mission_replan_config(m)
     return m, plan.grid, path, float(tr.duration_s), rc
-
-
-def _footprint_points(o) -> np.ndarray:
-    """Points covering the obstacle's footprint grown by FOOTPRINT_MARGIN_M (ENU x, y)."""
-    g = FOOTPRINT_MARGIN_M
-    if o["type"] == "cylinder":
-        r = o["radius"] + g
-        pts = [(0.0, 0.0)]
-        for rr in np.linspace(r / 4, r, 4):
-            n = max(8, int(math.ceil(2 * math.pi * rr / 0.04)))
-            a = np.linspace(0, 2 * math.pi, n, endpoint=False)
-            pts += list(zip(rr * np.cos(a), rr * np.sin(a)))
-        pts = np.array(pts)
-    else:
-        hx, hy = o["size_x"] / 2 + g, o["size_y"] / 2 + g
-        u = np.linspace(-hx, hx, max(2, int(math.ceil(2 * hx / 0.04)) + 1))
-        v = np.linspace(-hy, hy, max(2, int(math.ceil(2 * hy / 0.04)) + 1))
-        uu, vv = np.meshgrid(u, v)
-        c, s = math.cos(math.radians(o["yaw_deg"])), math.sin(math.radians(o["yaw_deg"]))
-        pts = np.stack([c * uu.ravel() - s * vv.ravel(), s * uu.ravel() + c * vv.ravel()], axis=1)
-    return pts + (o["x"], o["y"])
-
-
-def footprint_free(grid, o) -> bool:
-    """The grown footprint lies in free cells of the map (no row, nothing unknown, inside the map)."""
-    pts = _footprint_points(o)
-    r, c = grid.world_to_cell(pts[:, 0], pts[:, 1])
-    r, c = np.rint(r).astype(int), np.rint(c).astype(int)
-    rows, cols = grid.shape
-    if np.any((r < 0) | (r >= rows) | (c < 0) | (c >= cols)):
-        return False
-    return bool(np.all(grid.free[r, c]))
-
-
-def random_obstacle(rng, grid, path: np.ndarray, cum: np.ndarray) -> dict:
-    """One obstacle on or near the flown path (see the module docstring)."""
-    start, end = path[0, :2], path[-1, :2]
-    while True:
-        s = rng.uniform(0.0, cum[-1])
-        i = int(min(np.searchsorted(cum, s, side="right") - 1, len(path) - 2))
-        d = path[i + 1, :2] - path[i, :2]
-        n = float(np.hypot(*d))
-        if n < 1e-9:
-            continue
-        f = (s - cum[i]) / max(cum[i + 1] - cum[i], 1e-12)
-        q = path[i, :2] + f * d + rng.uniform(-OFFSET_M, OFFSET_M) * np.array([-d[1], d[0]]) / n
-        h = float(rng.uniform(0.8, 4.0))
-        if rng.uniform() < 0.5:
-            o = {"type": "cylinder", "x": float(q[0]), "y": float(q[1]), "height": h,
-                 "radius": float(rng.uniform(0.15, 0.4))}
-        else:
-            o = {"type": "box", "x": float(q[0]), "y": float(q[1]), "height": h,
-                 "size_x": float(rng.uniform(0.3, 1.0)), "size_y": float(rng.uniform(0.3, 1.0)),
-                 "yaw_deg": float(rng.uniform(0.0, 90.0))}
-        if np.hypot(*(q - start)) < KEEP_OUT_M or np.hypot(*(q - end)) < KEEP_OUT_M:
-            continue
-        if not footprint_free(grid, o):
-            continue
-        return {k: (round(v, 3) if isinstance(v, float) else v) for k, v in o.items()}
 
 
 def placements(n_flights: int, seed: int, grid, path: np.ndarray) -> list[list[dict]]:
@@ -196,21 +139,6 @@ def mission_text(base: Path, obstacles: list[dict]) -> str:
 
 
 # --- one flight ----------------------------------------------------------------------------------
-
-def climbable(o: dict, rc) -> bool:
-    """The obstacle's top plus the clearance and the body radius is under the replan ceiling (flat field)."""
-    return o["height"] + rc.clearance_m + rc.body_radius_m <= rc.ceiling_agl_m
-
-
-def horizontal_distance(o: dict, x: float, y: float) -> float:
-    """From (x, y) to the obstacle's footprint (m, 0 inside)."""
-    dx, dy = x - o["x"], y - o["y"]
-    if o["type"] == "cylinder":
-        return max(math.hypot(dx, dy) - o["radius"], 0.0)
-    c, s = math.cos(math.radians(o["yaw_deg"])), math.sin(math.radians(o["yaw_deg"]))
-    lx, ly = c * dx + s * dy, -s * dx + c * dy
-    return math.hypot(max(abs(lx) - o["size_x"] / 2, 0.0), max(abs(ly) - o["size_y"] / 2, 0.0))
-
 
 def _kill_group(proc: subprocess.Popen) -> None:
     try:

@@ -433,7 +433,7 @@ def run_flight_campaign(n_datagrams: int, signing: bool, cut_s: float | None, ra
     conn = None
     try:
         conn = open_link(sitl.url, str(workdir / "flight.tlog"), key)
-        companion = "%s:%d" % conn._sock.getsockname()
+        companion = "%s:%d" % conn._pipe.sock.getsockname()
         poll = conn.poll
         from sitl.auth import is_control
 

@@ -1,4 +1,4 @@
-"""``companion`` command line: ``plan``, ``fly``, ``demo``, ``replay``.
+"""``companion`` command line: ``plan``, ``fly``, ``demo``, ``replay``, ``campaign``.
 
 Each subcommand lives in ``companion.commands.<name>`` with
 ``add_arguments(parser)`` and ``run(args) -> int``. Bad input of any kind
@@ -19,6 +19,7 @@ COMMANDS = {
     "fly": "fly a planned mission over MAVLink against a vehicle (the bundled SITL or a flight stack)",
     "demo": "start the bundled SITL, plan and fly a bundled mission, write out/",
     "replay": "replay a recorded flight (.tlog): its metrics; with --mission, re-run the companion and compare",
+    "campaign": "fly many varied scenarios (Monte Carlo or a falsification search) on Dask, summarise them",
 }
 
 

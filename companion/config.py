@@ -18,6 +18,7 @@ import typing
 from typing import Any, Literal, Union
 
 from .errors import MissionError
+from .inputs import brief
 
 _NONE = type(None)
 _YAML11_FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
@@ -29,9 +30,9 @@ def _kind(value: Any) -> str:
     if isinstance(value, bool):
         return f"a boolean ({value})"
     if isinstance(value, (int, float)):
-        return f"a number ({value})"
+        return f"a number ({brief(value)})"
     if isinstance(value, str):
-        return f"a string ({value!r})"
+        return f"a string ({brief(value)})"
     if isinstance(value, list):
         return "a list"
     if isinstance(value, dict):
@@ -131,7 +132,7 @@ def from_dict(cls: type, data: Any, source: str, prefix: str = "", error: type[E
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     for k in data:
         if k not in fields:
-            raise error(f"{source}: key '{prefix + '.' if prefix else ''}{k}'",
+            raise error(f"{source}: key '{prefix + '.' if prefix else ''}{brief(k, 40).strip(chr(39))}'",
                         f"unknown key (known: {', '.join(sorted(fields))})")
     kwargs = {}
     for name, f in fields.items():

@@ -75,3 +75,7 @@ class UnsafeMessage(ValueError):
         super().__init__(f"refused to send {msg_type}: {problem}")
         self.msg_type = msg_type
         self.problem = problem
+
+
+class CampaignError(InputError):
+    """A campaign spec or scenario file is missing, malformed or inconsistent."""

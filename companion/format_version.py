@@ -12,6 +12,9 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from .inputs import brief
+
+
 _VERSION = re.compile(r"(0|[1-9][0-9]*)\.(0|[1-9][0-9]*)")
 
 #: Read as the version of a file that has no ``format_version`` key.
@@ -60,7 +63,7 @@ def check_format_version(doc: dict, supported_major: int | tuple[int, ...], sour
     where = f"{source}: key 'format_version'"
     match = _VERSION.fullmatch(value) if isinstance(value, str) else None
     if match is None:
-        raise error(where, f'expected a string "MAJOR.MINOR" such as "{majors[0]}.0", got {value!r}')
+        raise error(where, f'expected a string "MAJOR.MINOR" such as "{majors[0]}.0", got {brief(value)}')
     version = FormatVersion(int(match.group(1)), int(match.group(2)))
     if version.major not in majors:
         reads = " and ".join(f"{m}.x" for m in majors)

@@ -14,8 +14,8 @@ Conventions
   The equivalent NED/FRD rotation is ``R_ned_frd = T_ne @ R_enu_flu @ T_fb``
   with the two constant permutation/reflection matrices below.
 - Quaternions on the wire are [w, x, y, z] (Hamilton, body FRD -> world NED).
-- Geodetic: a local tangent plane at the mission home (flat-earth, WGS-84
-  radii of curvature), adequate for fields of a few km.
+- Geodetic: the local tangent plane at the mission home (geodetic -> ECEF ->
+  ENU on the WGS-84 ellipsoid, through pyproj: ``companion.geodesy``).
 """
 
 from __future__ import annotations
@@ -24,13 +24,11 @@ import math
 
 import numpy as np
 
+from . import geodesy as _geodesy
+
 # Constant frame maps (each is its own inverse).
 T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 T_FLU_FRD = np.diag([1.0, -1.0, -1.0])
-
-WGS84_A_M = 6378137.0
-WGS84_F = 1.0 / 298.257223563
-WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 
 
 def enu2ned(v_enu):
@@ -149,30 +147,15 @@ def wrap_pi(a):
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def _radii_m(lat_rad):
-    s = math.sin(lat_rad)
-    den = math.sqrt(1.0 - WGS84_E2 * s * s)
-    r_n = WGS84_A_M / den  # prime vertical
-    r_m = WGS84_A_M * (1.0 - WGS84_E2) / den ** 3  # meridian
-    return r_m, r_n
-
-
 def enu2geodetic(x_east_m, y_north_m, z_up_m, lat0_deg, lon0_deg, alt0_m):
     """Local ENU (m) about a home point -> (lat_deg, lon_deg, alt_m).
 
-    Flat-earth tangent-plane map; the inverse of ``geodetic2enu``.
+    The local tangent plane at the home on the WGS-84 ellipsoid, through
+    pyproj (``companion.geodesy``); the inverse of ``geodetic2enu``.
     """
-    lat0 = math.radians(lat0_deg)
-    r_m, r_n = _radii_m(lat0)
-    lat = lat0_deg + math.degrees(y_north_m / r_m)
-    lon = lon0_deg + math.degrees(x_east_m / (r_n * math.cos(lat0)))
-    return lat, lon, alt0_m + z_up_m
+    return _geodesy.enu2geodetic(x_east_m, y_north_m, z_up_m, lat0_deg, lon0_deg, alt0_m)
 
 
 def geodetic2enu(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m):
-    """(lat_deg, lon_deg, alt_m) -> local ENU (m) about a home point."""
-    lat0 = math.radians(lat0_deg)
-    r_m, r_n = _radii_m(lat0)
-    y = math.radians(lat_deg - lat0_deg) * r_m
-    x = math.radians(lon_deg - lon0_deg) * r_n * math.cos(lat0)
-    return x, y, alt_m - alt0_m
+    """(lat_deg, lon_deg, alt_m) -> local ENU (m) about a home point (``companion.geodesy``)."""
+    return _geodesy.geodetic2enu(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m)

@@ -8,15 +8,19 @@ MISSION_INT upload (``companion.link.codec.encode_mission_item``). Order:
 #   command                  what
 ==  =======================  ================================================
 0   NAV_TAKEOFF (22)         at the launch point, to the first way-point's
-                             altitude (ArduCopter refuses AUTO without it)
+                             altitude (ArduCopter refuses AUTO without it);
+                             param4 = yaw toward S_p
 1   DO_CHANGE_SPEED (178)    param1 = 1 (ground speed), param2 = the plan's
                              speed, param3 = -1 (throttle unchanged): PX4
                              would otherwise fly at MPC_XY_CRUISE (5 m/s)
 2   DO_SET_ROI_LOCATION      the pointing target S_p of eq. (21), AMSL: both
     (195)                    stacks then yaw the nose (or a gimbal) at it
-3.. NAV_WAYPOINT (16)        the way-points; param4 = yaw (deg, from north,
-                             clockwise) toward S_p, the same in all three
-                             exports and consistent with the ROI
+3.. NAV_WAYPOINT (16)        the way-points; param2 = the acceptance radius
+                             (``companion.margins``: at most a third of the
+                             corridor, so the stack does not turn across a
+                             row); param4 = yaw (deg, from north, clockwise)
+                             toward S_p, the same in all three exports and
+                             consistent with the ROI
 end RETURN_TO_LAUNCH (20)    back to where the vehicle armed, and land
 ==  =======================  ================================================
 
@@ -30,17 +34,21 @@ frame (MAV_FRAME_GLOBAL_TERRAIN_ALT, 10) was not chosen: PX4 does not fly
 it in missions, and ArduPilot resolves it against SRTM terrain tiles
 (30-100 m posts) that cannot hold 1.5 m above ground between vine rows.
 
+Unused params are 0, as QGroundControl writes them; no param is NaN (the
+yaws of the take-off and the landing are the heading toward S_p, not
+"unchanged").
+
 Geofence: one inclusion polygon (MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
 5001, mission type FENCE; param1 = vertex count, param2 = group 0) around
-the field (``coverage.boundary``): the flown path keeps the safety margin
-inside it. PX4 and ArduPilot 4.x both take fence polygons through the
+the field (``coverage.boundary``), grown so that the flown path keeps the
+fence margin inside it (``companion.margins``: navigation accuracy +
+tracking allowance, stated in plan.json ``margins``). PX4 and ArduPilot 4.x both take fence polygons through the
 mission protocol with MAV_MISSION_TYPE_FENCE; the QGC ``.plan`` carries it
 in ``geoFence.polygons``; the WPL format has no fence.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,7 +71,7 @@ SPEED_TYPE_GROUND = 1
 class MissionItem:
     """One mission item in geodetic coordinates (WGS-84 degrees, metres AMSL).
 
-    ``params`` are param1..param4 (NaN = unset); ``lat_deg``, ``lon_deg``,
+    ``params`` are param1..param4 (0 = unused); ``lat_deg``, ``lon_deg``,
     ``alt_m`` are 0 for items without a position (frame MAV_FRAME_MISSION).
     """
 
@@ -107,7 +115,7 @@ def build_flight_items(waypoints_p_enu_m: np.ndarray, target_enu_m: np.ndarray,
                        home: tuple[float, float, float], speed_m_s: float,
                        launch_enu_m: np.ndarray | None = None,
                        fence_enu_m: np.ndarray | None = None, end: str = "rtl",
-                       speed_changes=None) -> FlightItems:
+                       speed_changes=None, acceptance_radius_m: float = 0.0) -> FlightItems:
     """The mission of the module table from ENU way-points (map frame, m).
 
     Parameters
@@ -128,6 +136,9 @@ def build_flight_items(waypoints_p_enu_m: np.ndarray, target_enu_m: np.ndarray,
     speed_changes : sequence of (way-point index, speed m/s), optional
         A DO_CHANGE_SPEED before each of those way-points (a sortie's transit
         and coverage speeds); default one, ``speed_m_s``, before the first.
+    acceptance_radius_m : float
+        NAV_WAYPOINT param2 (m); 0 leaves it to the stack's default (PX4
+        NAV_ACC_RAD, ArduCopter WPNAV_RADIUS).
     """
     lat0, lon0, alt0 = (float(v) for v in home)
     wp = np.asarray(waypoints_p_enu_m, float)
@@ -137,23 +148,24 @@ def build_flight_items(waypoints_p_enu_m: np.ndarray, target_enu_m: np.ndarray,
         return lat, lon, alt
 
     launch = wp[0, :2] if launch_enu_m is None else np.asarray(launch_enu_m, float)[:2]
-    nan = math.nan
+    yaw_launch = float(yaw_to_target_deg(np.array([[launch[0], launch[1], 0.0]]), target_enu_m)[0])
+    acc = float(acceptance_radius_m)
     changes = dict((int(i), float(v)) for i, v in (speed_changes or ((0, speed_m_s),)))
 
     def speed_item(v: float) -> MissionItem:
         return MissionItem(MAV_CMD_DO_CHANGE_SPEED, MAV_FRAME_MISSION, (SPEED_TYPE_GROUND, v, -1.0, 0.0))
 
-    items = [MissionItem(MAV_CMD_NAV_TAKEOFF, MAV_FRAME_GLOBAL, (0.0, nan, nan, nan),
+    items = [MissionItem(MAV_CMD_NAV_TAKEOFF, MAV_FRAME_GLOBAL, (0.0, 0.0, 0.0, yaw_launch),
                          *geo(launch[0], launch[1], wp[0, 2])),
              speed_item(changes.pop(0, float(speed_m_s))),
-             MissionItem(MAV_CMD_DO_SET_ROI_LOCATION, MAV_FRAME_GLOBAL, (0.0, nan, nan, nan), *geo(*target_enu_m))]
+             MissionItem(MAV_CMD_DO_SET_ROI_LOCATION, MAV_FRAME_GLOBAL, (0.0, 0.0, 0.0, 0.0), *geo(*target_enu_m))]
     yaw = yaw_to_target_deg(wp, target_enu_m)
     for i, (p, psi) in enumerate(zip(wp, yaw)):
         if i in changes:
             items.append(speed_item(changes[i]))
-        items.append(MissionItem(MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL, (0.0, 0.0, 0.0, float(psi)), *geo(*p)))
+        items.append(MissionItem(MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL, (0.0, acc, 0.0, float(psi)), *geo(*p)))
     if end == "land":
-        items.append(MissionItem(MAV_CMD_NAV_LAND, MAV_FRAME_GLOBAL, (0.0, 0.0, 0.0, nan),
+        items.append(MissionItem(MAV_CMD_NAV_LAND, MAV_FRAME_GLOBAL, (0.0, 0.0, 0.0, yaw_launch),
                                  *geo(launch[0], launch[1], wp[0, 2])))
     else:
         items.append(MissionItem(MAV_CMD_NAV_RETURN_TO_LAUNCH, MAV_FRAME_MISSION, (0.0, 0.0, 0.0, 0.0)))

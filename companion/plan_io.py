@@ -39,7 +39,7 @@ import numpy as np
 from .config import to_dict
 from .errors import PlanError
 from .format_version import check_format_version
-from .textfile import read_text
+from .inputs import brief, parse_json, read_text
 from .mission import Mission
 
 MAV_CMD_NAV_WAYPOINT = 16
@@ -53,7 +53,8 @@ MAV_TYPE_QUADROTOR = 2
 #: plan.json format written here ("MAJOR.MINOR", docs/README.md "Versions");
 #: ``load_plan`` reads every file of this major version and of ``LEGACY_PLAN_MAJOR``.
 #: 2.0: ``trajectory`` holds the polynomial pieces instead of samples; the samples,
-#: now optional, moved to ``samples``; ``timings_s`` gained ``write`` and ``wall``.
+#: now optional, moved to ``samples``; ``timings_s`` gained ``write`` and ``wall``;
+#: ``margins`` (clearances from the airframe surface, acceptance radius, fence margin) added.
 PLAN_FORMAT_VERSION = "2.0"
 PLAN_FORMAT_MAJOR = int(PLAN_FORMAT_VERSION.split(".")[0])
 #: The previous major version, still read (its ``trajectory`` is samples only:
@@ -155,10 +156,17 @@ def plan_to_json_dict(plan, mission: Mission, sample_hz: float | None = None) ->
         "timings_s": {k: getattr(plan.timings_s, k) for k in TIMING_KEYS},
         "warnings": list(plan.warnings),
         **sorties_json(plan, mission),
+        **margins_json(plan),
     }
     if samples is not None:
         doc["samples"] = samples
     return doc
+
+
+def margins_json(plan) -> dict:
+    """plan.json's ``margins`` (``companion.margins.PlanMargins``), when the plan has them."""
+    m = getattr(plan, "margins", None)
+    return {} if m is None else {"margins": {k: float(v) for k, v in dataclasses.asdict(m).items()}}
 
 
 def _waypoints_json(w) -> list:
@@ -386,16 +394,12 @@ def load_plan(path: str | Path) -> PlanFile:
     """
     p = Path(path)
     src = str(p)
-    text = read_text(p, PlanError, "plan.json")
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise PlanError(f"{src}: line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
+    data = parse_json(read_text(p, PlanError, "plan.json", cap="plan_bytes"), src, PlanError)
     if not isinstance(data, dict):
         raise PlanError(src, "expected a JSON object")
     major = check_format_version(data, (PLAN_FORMAT_MAJOR, LEGACY_PLAN_MAJOR), src, PlanError).major
     if _get(data, "frame", src) != "ENU":
-        raise PlanError(f"{src}: key 'frame'", f"expected 'ENU', got {data['frame']!r}")
+        raise PlanError(f"{src}: key 'frame'", f"expected 'ENU', got {brief(data['frame'])}")
     origin = _get(data, "origin", src)
     o = tuple(float(_num_array([_get(origin, k, src, "origin")], (), src, f"origin.{k}")[0])
               for k in ("lat", "lon", "alt_m"))
@@ -444,28 +448,43 @@ def load_plan(path: str | Path) -> PlanFile:
 
 # --- QGroundControl exports ------------------------------------------------------
 
+def _plan_margins(plan, mission: Mission):
+    from .margins import plan_margins
+
+    m = getattr(plan, "margins", None)
+    return m if m is not None else plan_margins(mission, plan.grid, plan.coverage)
+
+
 def flight_items(plan, mission: Mission, sortie=None, fence_enu_m: np.ndarray | None = None):
     """The flight-ready items (``companion.mission_items``) of one sortie of a plan
     (``plan.sorties.sorties[i]``; default: the whole route, launched under its first
-    way-point), with the inclusion fence around the field (simplified to half the
-    safety margin, so the path keeps at least half the margin from the fence)."""
+    way-point), with the inclusion fence around the field (:func:`field_fence`) and
+    the way-points' acceptance radius (``companion.margins``)."""
     from .mission_items import build_flight_items
 
     h = mission.home
     fence = field_fence(plan, mission) if fence_enu_m is None else fence_enu_m
+    acc = _plan_margins(plan, mission).acceptance_radius_m
     if sortie is None:
         return build_flight_items(plan.waypoints.p_enu_m, plan.target_enu_m, (h.lat, h.lon, h.alt_m),
-                                  mission.flight.speed_m_s, fence_enu_m=fence)
+                                  mission.flight.speed_m_s, fence_enu_m=fence, acceptance_radius_m=acc)
     return build_flight_items(sortie.waypoints.p_enu_m, plan.target_enu_m, (h.lat, h.lon, h.alt_m),
                               mission.flight.speed_m_s, launch_enu_m=plan.sorties.launch_xy_m,
-                              fence_enu_m=fence, speed_changes=sortie.speed_changes)
+                              fence_enu_m=fence, speed_changes=sortie.speed_changes, acceptance_radius_m=acc)
 
 
 def field_fence(plan, mission: Mission) -> np.ndarray:
-    """(K, 2) ENU inclusion fence around the field (``coverage.boundary``)."""
+    """(K, 2) ENU inclusion fence around the field (``coverage.boundary``), grown so
+    that the path keeps the fence margin (``companion.margins``) inside it: the path
+    keeps the planning clearance (less half a cell) from the field's edge, so the
+    field is grown by the rest, plus two cells for the raster's slack
+    (``field_boundary`` keeps ``grow - h`` from the field's cells)."""
     from .coverage.boundary import field_boundary
 
-    return field_boundary(plan.grid, max(0.5 * mission.coverage.safety_margin_m, plan.grid.resolution_m))
+    m = _plan_margins(plan, mission)
+    h = plan.grid.resolution_m
+    grow = max(0.0, m.fence_margin_m - m.clearance_m) + 2.0 * h
+    return field_boundary(plan.grid, h, grow_m=grow)
 
 
 def sortie_file(path: str, index: int, count: int) -> str:

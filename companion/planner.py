@@ -17,8 +17,10 @@ import numpy as np
 from .coverage import extract_waypoints, plan_coverage
 from .errors import PlanError
 from .maps import ElevationModel, OccupancyGrid
-from .maps.field import load_mission_maps
+from .launch import launch_enu_xy, launch_key
+from .maps.field import flat_field_warning, load_mission_maps
 from .maps.grid import mask_centroid_rc
+from .margins import PlanMargins, margin_warning, mission_airframe_radius_m, plan_margins, planning_clearance_m
 from .mission import Mission
 from .sorties import plan_sorties
 from .trajectory import Trajectory, generate_trajectory
@@ -100,6 +102,8 @@ class Plan:
         that cannot be reached and are not flown, ...), one line each.
     sorties : SortiePlan or None
         The plan split into battery-sized sorties (``companion.sorties``).
+    margins : PlanMargins or None
+        Clearances kept and the exports' tolerances (``companion.margins``).
     """
 
     grid: OccupancyGrid
@@ -112,6 +116,7 @@ class Plan:
     timings_s: PlanTimings
     warnings: tuple[str, ...] = ()
     sorties: object = None
+    margins: PlanMargins | None = None
 
 
 def free_centroid_xy(grid: OccupancyGrid) -> np.ndarray:
@@ -186,9 +191,10 @@ def check_sizes(mission: Mission, grid: OccupancyGrid) -> None:
     is built), and lines closer than one cell cannot be told apart on the grid.
     """
     cov = mission.coverage
-    if cov.safety_margin_m / grid.resolution_m > max(grid.shape):
-        raise PlanError(grid.source, f"no free space left after eroding by the safety margin "
-                        f"{cov.safety_margin_m} m (wider than the map)")
+    clearance = planning_clearance_m(mission)
+    if clearance / grid.resolution_m > max(grid.shape):
+        raise PlanError(grid.source, f"no free space left after eroding by the airframe radius + the safety "
+                        f"margin {clearance:g} m (wider than the map)")
     if cov.line_spacing_m is not None and cov.line_spacing_m < grid.resolution_m:
         raise PlanError(f"{mission.source}: key 'coverage.line_spacing_m'",
                         f"{cov.line_spacing_m:g} m is below the map resolution {grid.resolution_m:g} m")
@@ -244,12 +250,13 @@ def plan_mission(mission: Mission) -> Plan:
         coverage/flight settings do not fit the map (``check_sizes``, ``MAX_WAYPOINTS``).
     """
     t_start = time.perf_counter()
+    launch = launch_enu_xy(mission)          # a bad launch file fails before any work
     grid, dem = load_mission_maps(mission)
     t_loaded = time.perf_counter()
 
     check_sizes(mission, grid)
     check_dem_overlaps(dem, grid)
-    coverage = plan_coverage(grid, mission.coverage)
+    coverage = plan_coverage(grid, mission.coverage, mission_airframe_radius_m(mission))
     path = np.asarray(coverage.path_xy_m, dtype=float)
     if path.ndim != 2 or path.shape[0] < 2:
         raise PlanError(grid.source, "the coverage planner found no path in the free space")
@@ -262,11 +269,18 @@ def plan_mission(mission: Mission) -> Plan:
     waypoints = extract_waypoints(coverage, dem, mission.flight)
     t_covered = time.perf_counter()
 
+    # the sorties first (they do not depend on the trajectory): the transit search's
+    # peak and the LQR solve's then do not stack, nor the solve on the transit caches
+    energy = mission.energy if launch is None else dataclasses.replace(
+        mission.energy, launch_xy_m=(float(launch[0]), float(launch[1])))
+    sorties = plan_sorties(coverage, waypoints, dem, mission.flight, mission.vehicle, energy, grid, mission.source,
+                           launch_key=launch_key(mission))
+    if hasattr(coverage, "free_space") and coverage.free_space is not None:
+        coverage.free_space.drop_caches()
     target = pointing_target(mission, grid, np.asarray(waypoints.p_enu_m))
     trajectory = generate_trajectory(waypoints.t_s, waypoints.p_enu_m, waypoints.v_enu_m_s,
                                      waypoints.a_enu_m_s2, mission.trajectory, target_enu_m=target)
     max_v, max_a, residual = trajectory_stats(trajectory)
-    sorties = plan_sorties(coverage, waypoints, dem, mission.flight, mission.vehicle, mission.energy, grid, mission.source)
     t_done = time.perf_counter()
 
     stats = PlanStats(
@@ -283,4 +297,6 @@ def plan_mission(mission: Mission) -> Plan:
                           trajectory=t_done - t_covered, total=t_done - t_start)
     return Plan(grid=grid, dem=dem, coverage=coverage, waypoints=waypoints, trajectory=trajectory,
                 target_enu_m=target, stats=stats, timings_s=timings,
-                warnings=tuple(grid.warnings) + tuple(coverage.warnings), sorties=sorties)
+                warnings=tuple(w for w in (flat_field_warning(mission), margin_warning(mission)) if w)
+                + tuple(grid.warnings)
+                + tuple(coverage.warnings), sorties=sorties, margins=plan_margins(mission, grid, coverage))

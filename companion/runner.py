@@ -26,6 +26,7 @@ to a ``Connection``:
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import signal
@@ -128,6 +129,10 @@ class MissionRunner:
         conn.spin_s = cfg.spin_us * 1e-6 if (os.cpu_count() or 1) >= 2 else 0.0
         conn.clock = self._stamp_us
         old = self._install_signals()
+        # Everything built so far (modules, plan, trajectory, maps) lives for
+        # the whole flight: out of the collector's sight, a full collection
+        # only walks what the flight allocates (3-4 % of a frame's CPU otherwise).
+        gc.freeze()
         health = None
         last_msg = last_clock = time.monotonic()
         last_t = None
@@ -185,6 +190,7 @@ class MissionRunner:
         except LinkError as exc:
             core.link_lost(str(exc))
         finally:
+            gc.unfreeze()
             if old is not None:
                 for s, h in old.items():
                     signal.signal(s, h)

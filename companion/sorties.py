@@ -116,19 +116,41 @@ def _polyline_items(path: np.ndarray, flight) -> int:
     return int(np.sum(run_waypoints(seg, flight)))
 
 
+def transit_room(free) -> np.ndarray:
+    """(rows, cols) bool: eroded cells whose pooled transit cell is wholly eroded
+    (``coverage.transit``: the blocks of ``POOL_M`` the transit tree is built on,
+    aligned on the eroded space's bounding box), so a transit can start there."""
+    from .coverage.freespace import min_pool
+    from .coverage.transit import POOL_M
+
+    h = free.resolution_m
+    p = max(1, int(round(POOL_M / h)))
+    r0, r1, c0, c1 = free.bbox_cells
+    room = np.zeros(free.eroded.shape, dtype=bool)
+    if r1 > r0:
+        pooled = min_pool(free.eroded[r0:r1, c0:c1], p)
+        up = np.repeat(np.repeat(pooled, p, axis=0), p, axis=1)[: r1 - r0, : c1 - c0]
+        room[r0:r1, c0:c1] = up
+    return room
+
+
 def central_launch_xy(grid, free, bg, route_start_g: np.ndarray) -> np.ndarray:
     """Default launch point (ENU, m): the centre of the eroded cell nearest to the
     centroid of the free cells, in the component of the route (so every corridor
-    is at most about half the field away)."""
+    is at most about half the field away), among the cells a transit can start
+    from (:func:`transit_room`; any eroded cell when none has room)."""
     h = free.resolution_m
     rc = np.array(mask_centroid_rc(grid.free))
     comp = bg.components_of(np.array([int(route_start_g[1] // h)]), np.array([int(route_start_g[0] // h)]))[0]
-    rows, cols = free.eroded.shape
+    room = transit_room(free)
+    if not room.any():
+        room = free.eroded
+    rows, cols = room.shape
     rad = 16
     while True:
         r0, r1 = max(0, int(rc[0]) - rad), min(rows, int(rc[0]) + rad + 1)
         c0, c1 = max(0, int(rc[1]) - rad), min(cols, int(rc[1]) + rad + 1)
-        er, ec = np.nonzero(free.eroded[r0:r1, c0:c1])
+        er, ec = np.nonzero(room[r0:r1, c0:c1])
         er, ec = er + r0, ec + c0
         ok = bg.components_of(er, ec) == comp
         if ok.any():
@@ -176,7 +198,7 @@ def _corner_indices(w: Waypoints, points_xy: np.ndarray) -> np.ndarray:
 
 
 def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleConfig, cfg: EnergyConfig,
-                 grid, source: str = "<mission>") -> SortiePlan:
+                 grid, source: str = "<mission>", launch_key: str = "energy.launch_xy_m") -> SortiePlan:
     """Split a coverage plan into sorties (module doc).
 
     Parameters
@@ -189,6 +211,8 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
         Terrain, flight settings, vehicle, energy settings, occupancy grid.
     source : str
         The mission file (messages name its keys).
+    launch_key : str
+        The mission key that gave ``cfg.launch_xy_m`` (``launch`` or ``energy.launch_xy_m``).
 
     Raises
     ------
@@ -207,11 +231,11 @@ def plan_sorties(coverage, waypoints: Waypoints, dem, flight, vehicle: VehicleCo
         launch = central_launch_xy(grid, free, bg, world_to_grid(grid, mains[0][0]))
     else:
         launch = np.asarray(cfg.launch_xy_m, dtype=float)
-    key = f"{source}: key 'energy.launch_xy_m'"
+    key = f"{source}: key '{launch_key}'"
     lg = world_to_grid(grid, launch)
     if bg.sub_at(int(lg[1] // h), int(lg[0] // h)) == 0:
         raise PlanError(key, f"({launch[0]:.2f}, {launch[1]:.2f}) m is not in the free space "
-                             f"eroded by the safety margin")
+                             f"eroded by the airframe radius + the safety margin")
     tree = build_transit_tree(free, lg, source)
     if tree.distance_m(lg) == np.inf:
         raise PlanError(key, f"({launch[0]:.2f}, {launch[1]:.2f}) m has no room around it in the eroded "

@@ -46,7 +46,21 @@ NOTES: dict[str, tuple[str, str, str]] = {
                        "raster."),
     "dem": ("", "", "Elevation model: an ESRI/GDAL ASCII grid in the map's local frame, or a "
             "georeferenced raster (GeoTIFF, or any raster with a .prj, or with dem_crs; the gis extra), "
-            "relative to the mission file."),
+            "relative to the mission file; null: a flat field at `elevation_m` (or at `home.alt_m`, with a "
+            "warning)."),
+    "elevation_m": ("m AMSL", "[-1e5, 1e5], only without dem", "Ground elevation of a flat field (no `dem`); "
+                    "null: `home.alt_m`."),
+    "launch": ("", "at most one of launch, energy.launch_xy_m", "Launch point of every sortie in one of three "
+               "forms (exactly one): `enu_m`, `lat` + `lon`, or a GeoJSON Point (`type` + `coordinates`, or "
+               "`file`); null: `energy.launch_xy_m` or the planner's choice."),
+    "launch.enu_m": ("m", "", "ENU [x, y] on the map frame."),
+    "launch.lat": ("deg", "[-90, 90], with lon", "WGS-84 latitude."),
+    "launch.lon": ("deg", "[-180, 180], with lat", "WGS-84 longitude."),
+    "launch.type": ("", "Point, with coordinates", "An inline GeoJSON Point geometry: `Point`."),
+    "launch.coordinates": ("deg", "[lon, lat] or [lon, lat, alt], with type", "The Point's WGS-84 "
+                           "longitude and latitude (GeoJSON order; an altitude is ignored)."),
+    "launch.file": ("", "", "A GeoJSON file (relative to the mission file) holding one Point, or a Point "
+                    "feature with `role: launch` (the field's file may hold it)."),
     "dem_crs": ("", "", "CRS of a DEM file that has none (`EPSG:32631`, WKT); null: local or the "
                 "file's own."),
     "description": ("", "", "Free text."),
@@ -78,11 +92,16 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "energy.split": ("", "", "`auto`: battery-sized sorties; `none`: the whole route as one sortie."),
     "coverage.line_spacing_m": ("m", "(0, 1000] or null",
                                 "Distance between coverage lines; null: the detected row spacing."),
-    "coverage.safety_margin_m": ("m", "[0, 1000]", "Free space eroded around obstacles before planning."),
+    "coverage.safety_margin_m": ("m", "[0, 1000]", "Clearance kept between the airframe's surface and every "
+                                 "non-free cell: the free space is eroded by the airframe radius plus this "
+                                 "(see Margins); below the airframe radius: a warning naming both."),
     "coverage.orientation_step_deg": ("deg", "(0, 1]", "Step of the ISOA orientation sweep."),
     "coverage.orientation_deg": ("deg", "", "Force the beam orientation (ENU, counter-clockwise from east); "
                                  "null: rows or the ISOA sweep choose."),
     "coverage.min_segment_m": ("m", "> 0", "Main segments shorter than this are not flown."),
+    "navigation.accuracy": ("m", "rtk, gnss or (0, 100]", "95 % horizontal position error of the flight "
+                            "stack's navigation: `rtk` (0.1 m), `gnss` (3.0 m) or metres; sizes the inclusion "
+                            "fence's margin (see Margins)."),
     "pointing.target": ("m", "", "Pointing target S_p of eq. (21): `centroid` (of the map's free cells, "
                         "at the mean way-point altitude) or an ENU point [x, y, z]."),
     "trajectory.s_position": ("1/m^2", ">= 0", "Way-point weight S on the position, eq. (4)."),

@@ -87,7 +87,7 @@ class FieldSpec:
     height_agl_m: float = 1.5
     speed_m_s: float = 1.0
     waypoint_interval_s: float = 4.0
-    safety_margin_m: float = 0.5
+    safety_margin_m: float = 0.45   # from the airframe surface (companion.margins); 0.5 leaves no corridor on the 30 deg rows
     sim_yaml: str = "  obstacles: []\n  noise: {vector_variance: 5.0e-4, gyro_variance: 5.0e-4}\n  seed: 1\n"
 
 
@@ -341,6 +341,11 @@ def large_field(hectares: float = 10.0, resolution_m: float = 0.1) -> FieldSpec:
         polygon_m=tuple(map(tuple, base * scale)), row_angle_deg=20.0, resolution_m=resolution_m,
         border_m=2.0, dem_cellsize_m=5.0, dem_margin_m=10.0, slope_x=0.03, slope_y=0.02,
         undulation_m=0.5, undulation_wavelength_m=60.0, home=(44.9, -0.5, 40.0), seed=3,
+        # from the airframe's surface: at 0.45 m the 20 deg rows leave corridors one or two
+        # cells wide, too thin for the sorties' pooled transit search (a corner 210 m from the
+        # launch point then needs a whole battery); 0.3 m leaves five (companion plan warns
+        # that it is below the 0.442 m airframe radius)
+        safety_margin_m=0.3,
     )
 
 

@@ -4,6 +4,6 @@
 Python, ``SitlThread`` / ``SitlProcess`` start it for tests and the demo.
 """
 
-from .api import SitlProcess, SitlThread, free_udp_port, peer_url
+from .api import SitlInProcess, SitlProcess, SitlThread, free_udp_port, peer_url
 
-__all__ = ["SitlProcess", "SitlThread", "free_udp_port", "peer_url"]
+__all__ = ["SitlInProcess", "SitlProcess", "SitlThread", "free_udp_port", "peer_url"]

@@ -2,8 +2,11 @@
 
 ``SitlThread`` runs the server loop in a background thread of this process
 (cheap, shares the GIL with the caller); ``SitlProcess`` runs ``python -m
-sitl`` as a subprocess (its own interpreter: what the demo uses for speed).
-Both are context managers with ``start()``/``stop()``; ``start()`` returns
+sitl`` as a subprocess (its own interpreter: ``companion demo --transport
+udp``); ``SitlInProcess`` runs no loop of its own: its one link is the
+in-process transport (``inproc:NAME``, ``sitl.pipe.MemoryPipe``) and the
+companion's waits step it (``companion demo --transport inproc``, campaigns).
+All are context managers with ``start()``/``stop()``; ``start()`` returns
 once the links are open (readiness), so a client may connect at once.
 
 Example
@@ -82,6 +85,22 @@ class _SitlOptions:
         self.physics_hz = physics_hz
         self.sensor_hz = sensor_hz
 
+    def _server_inputs(self):
+        """What an in-process server is built from: the mission, the signing key (or
+        None) and the allowed controllers (or None), read from the options' files."""
+        from companion.mission import load_mission
+
+        mission = load_mission(self.mission_path)
+        key = None
+        if self.signing_key_file is not None:
+            from companion.link.signing import load_signing_key
+            key = load_signing_key(self.signing_key_file)
+        controllers = None
+        if self.controllers is not None:
+            from .auth import parse_controller
+            controllers = tuple(parse_controller(c) for c in self.controllers)
+        return mission, key, controllers
+
     @property
     def url(self) -> str:
         """Connection string for a client."""
@@ -126,19 +145,9 @@ class SitlThread(_SitlOptions):
         self.error: BaseException | None = None
 
     def start(self) -> "SitlThread":
-        from companion.mission import load_mission
-
         from .server import ServerConfig, SitlServer
 
-        mission = load_mission(self.mission_path)
-        key = None
-        if self.signing_key_file is not None:
-            from companion.link.signing import load_signing_key
-            key = load_signing_key(self.signing_key_file)
-        controllers = None
-        if self.controllers is not None:
-            from .auth import parse_controller
-            controllers = tuple(parse_controller(c) for c in self.controllers)
+        mission, key, controllers = self._server_inputs()
         cfg = ServerConfig(listen=self.listen, outs=self.outs, lockstep=self.lockstep, speed=self.speed,
                            seed=self.seed, physics_hz=self.physics_hz, sensor_hz=self.sensor_hz,
                            start=self.start_pose, spin=False, control_outs=self.control_outs, signing_key=key,
@@ -170,6 +179,75 @@ class SitlThread(_SitlOptions):
             raise RuntimeError("the SITL thread failed") from err
 
     def __enter__(self) -> "SitlThread":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+class SitlInProcess(_SitlOptions):
+    """The SITL in this process, stepped by its peer (``SitlServer.service``):
+    the same server, codec, framing, signing and lockstep as ``SitlProcess``,
+    with the datagrams passed through memory (``sitl.pipe``) instead of UDP.
+    Always lockstep; one link, ``inproc:NAME`` (``url``), for one peer in
+    this process (``companion.link.Connection``), whose waits run the vehicle.
+
+    Same parameters as ``SitlThread`` except the links (``listen``, ``outs``,
+    ``control_outs``, ``max_clients``, ``client_timeout_s``) and ``lockstep``.
+    ``start="later"``, ``launch()``, ``set_start()``, ``wait_ready()`` as
+    ``SitlProcess``'s, so a caller can use either.
+    """
+
+    _count = 0
+    _count_lock = threading.Lock()
+
+    def __init__(self, mission_path, *, start=None, **options) -> None:
+        for k in ("listen", "outs", "control_outs", "lockstep", "max_clients", "client_timeout_s"):
+            if k in options:
+                raise TypeError(f"SitlInProcess has no {k!r}: its one link is inproc:NAME, lockstep")
+        with SitlInProcess._count_lock:
+            SitlInProcess._count += 1
+            name = f"sitl-{os.getpid()}-{SitlInProcess._count}"
+        super().__init__(mission_path, listen="inproc:" + name, lockstep=True, **options)
+        self.deferred = isinstance(start, str) and start == "later"
+        self.start_pose = None if self.deferred else _check_start(start)
+        self.server = None
+
+    def launch(self) -> "SitlInProcess":
+        return self
+
+    def set_start(self, start) -> None:
+        self.start_pose = _check_start(start)
+
+    def start(self) -> "SitlInProcess":
+        return self.wait_ready()
+
+    def wait_ready(self) -> "SitlInProcess":
+        """Build the server and register its link (no thread, no socket)."""
+        from .server import ServerConfig, SitlServer
+
+        if self.server is not None:
+            return self
+        mission, key, controllers = self._server_inputs()
+        cfg = ServerConfig(listen=self.listen, lockstep=True, speed=0.0, seed=self.seed,
+                           physics_hz=self.physics_hz, sensor_hz=self.sensor_hz, start=self.start_pose,
+                           spin=False, signing_key=key, controllers=controllers)
+        server = SitlServer(mission, cfg)
+        server.open()
+        self.server = server
+        return self
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        server, self.server = self.server, None
+        if server is not None:
+            server.stop()
+            if self.stats_file is not None:
+                import json
+                Path(self.stats_file).write_text(json.dumps(server.link_report(), indent=2) + "\n",
+                                                 encoding="utf-8")
+            server.close()
+
+    def __enter__(self) -> "SitlInProcess":
         return self.start()
 
     def __exit__(self, *exc) -> None:

@@ -20,7 +20,10 @@ FILE`` (32 raw bytes, or a passphrase as MAVProxy's ``signing setup``)
 signs everything sent and requires signed control. A ``udpin`` link serves
 at most ``--max-clients`` peers, dropping those silent for
 ``--client-timeout`` seconds (wall clock). ``--stats FILE`` writes, on
-exit, who controlled the vehicle and what was ignored (JSON).
+exit, who controlled the vehicle and what was ignored (JSON; per UDP link
+also ``lockstep_spins``, the lockstep waits that busy-polled, and
+``lockstep_spin_hits``, those whose answer came within the spin:
+``sitl.pipe.AdaptiveSpin``).
 
 Loopback addresses by default (a ``udpout`` link is connected to its
 peer, so nobody else can write to it). Bad input (mission file, maps,

@@ -3,7 +3,9 @@ pymavlink connections (docs/mavlink.md).
 
 The vehicle is system 1, component 1, MAVLink 2, common dialect. Connection
 strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
-``tcp:...``, ``tcpin:...``). Telemetry goes to every link; replies
+``tcp:...``, ``tcpin:...``), or ``inproc:NAME``: the in-process transport
+(``sitl.pipe``), where the peer's waits run the vehicle (``service``) instead
+of ``run``. Telemetry goes to every link; replies
 (COMMAND_ACK, PARAM_VALUE on read, MISSION_*) go to the link the request
 came from, addressed to the requester.
 
@@ -90,13 +92,11 @@ import errno
 import math
 import select
 import socket
-import struct
 from struct import error as struct_error
 import threading
 import os
 import time
 from dataclasses import dataclass
-from time import perf_counter
 
 import numpy as np
 from pymavlink import mavutil
@@ -109,7 +109,9 @@ from companion.link.signing import (
     SignatureVerifier, disable_outgoing_signing, enable_outgoing_signing, signing_timestamp,
 )
 from companion.link import command_rules as rules
-from companion.link.sockets import is_udp_url, open_udp
+from companion.link.sockets import is_datagram_url, open_pipe
+
+from .pipe import MEMORY_SCHEME
 
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .battery import Battery
@@ -236,6 +238,9 @@ class ServerConfig:
             raise ValueError("client_timeout_s must be in [0.1, 3600] s")
         if not (self.speed >= 0 and math.isfinite(self.speed)):
             raise ValueError("speed must be >= 0 (0: as fast as possible)")
+        if self.listen.startswith(MEMORY_SCHEME) and not (self.lockstep and not self.outs
+                                                           and not self.control_outs):
+            raise ValueError("an in-process link (inproc:NAME) needs lockstep and no other links")
         if self.start is not None:
             st = tuple(float(v) for v in self.start)
             if len(st) == 2:
@@ -268,17 +273,21 @@ class _Link:
                  client_timeout_s: float = 10.0, option: str = "--listen") -> None:
         self.url = url
         self.control = control
-        self.udp = is_udp_url(url)
+        #: A datagram link (UDP or in-process, ``sitl.pipe``): read datagram by datagram.
+        self.udp = is_datagram_url(url)
         self.conn = None
+        self.pipe = None
         self.clients = ClientTable(max_clients, client_timeout_s)
         if self.udp:
-            us = open_udp(url, option)
-            self.sock = us.sock
-            self.server = us.server
-            self.peer = us.peer
-            self.fd = self.sock.fileno()
+            self.pipe = open_pipe(url, option, listen=True)
+            self.memory = self.pipe.memory
+            self.sock = None if self.memory else self.pipe.sock
+            self.server = self.pipe.server
+            self.peer = self.pipe.peer
+            self.fd = None if self.memory else self.sock.fileno()
             self.mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         else:
+            self.memory = False
             self.conn = mavutil.mavlink_connection(url, source_system=SYSTEM_ID,
                                                    source_component=COMPONENT_ID, retries=0)
             # Replace the module-global-dialect encoder by our own (common, v2):
@@ -304,12 +313,6 @@ class _Link:
                 pass
         self.parser = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         self.parser.robust_parsing = True
-        self._rcvtimeo = None
-        if self.udp:
-            # Blocking socket with a kernel receive timeout: waiting for the
-            # lockstep answer is one recvfrom() (``recv_datagram(wait=True)``)
-            # instead of select() + recvfrom(); MSG_DONTWAIT reads without waiting.
-            self._set_rcvtimeo(0.05)
         self.last_addr = None
         self._batch: list | None = None
         self._batch_len = 0
@@ -351,8 +354,8 @@ class _Link:
                 self._sendto(buf, addr)
             return
         try:
-            if self.sock is not None:
-                self.sock.send(buf)
+            if self.pipe is not None:
+                self.pipe.send(buf)
             else:
                 self.conn.write(buf)
         except OSError:
@@ -417,46 +420,22 @@ class _Link:
             return
         self.transmit(buf)
 
-    def _set_rcvtimeo(self, timeout_s: float) -> None:
-        sec = int(timeout_s)
-        usec = max(int((timeout_s - sec) * 1e6), 1 if sec == 0 else 0)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("@ll", sec, usec))
-        self._rcvtimeo = timeout_s
+    def recv_datagram(self, wait_s: float = 0.0, spin: bool = False) -> bytes | None:
+        """Next datagram, waiting up to ``wait_s`` seconds (0: only what is
+        queued now), or None (datagram links only).
 
-    def recv_datagram(self, wait_s: float = 0.0, spin_s: float = 0.0) -> bytes | None:
-        """Next UDP datagram, waiting up to ``wait_s`` seconds (0: only what is
-        queued now), or None (UDP links only).
-
-        ``spin_s`` > 0: poll without sleeping for up to that long before
-        sleeping in the kernel. A lockstep answer usually comes back within
-        tens of microseconds, less than a process wake-up costs, so spinning
-        nearly halves the round trip (SIM_LS_SPIN)."""
-        try:
-            if spin_s > 0 and wait_s > 0:
-                sock = self.sock
-                t_end = perf_counter() + spin_s
-                while True:
-                    try:
-                        data, addr = sock.recvfrom(65535, socket.MSG_DONTWAIT)
-                    except BlockingIOError:
-                        if perf_counter() < t_end:
-                            continue
-                    else:
-                        if self.server:
-                            self.clients.admit(addr, time.monotonic())
-                        self.last_addr = addr
-                        return data
-                    break
-            if wait_s > 0:
-                if wait_s != self._rcvtimeo:
-                    self._set_rcvtimeo(wait_s)
-                data, addr = self.sock.recvfrom(65535)
-            else:
-                data, addr = self.sock.recvfrom(65535, socket.MSG_DONTWAIT)
-        except OSError as exc:   # timeout/EAGAIN, ECONNREFUSED after an ICMP error, EINTR, ...
-            if exc.errno == errno.ECONNREFUSED:
+        ``spin``: busy-poll before sleeping in the kernel, for the pipe's
+        adaptive budget (``sitl.pipe.AdaptiveSpin``, at most SIM_LS_SPIN). A
+        lockstep answer from a peer on another core comes back within tens of
+        microseconds, less than a process wake-up costs; on a loaded machine
+        it comes late and the spin backs off."""
+        got = self.pipe.recv(wait_s, spin)
+        if got is None:
+            if self.pipe.error == errno.ECONNREFUSED:
+                self.pipe.error = 0
                 self.collect_unreachable()
             return None
+        data, addr = got
         if self.server:
             self.clients.admit(addr, time.monotonic())
         self.last_addr = addr
@@ -500,8 +479,8 @@ class _Link:
 
     def close(self) -> None:
         try:
-            if self.sock is not None:
-                self.sock.close()
+            if self.pipe is not None:
+                self.pipe.close()
             else:
                 self.conn.close()
         except OSError:
@@ -673,6 +652,9 @@ class SitlServer:
         # Spinning for the lockstep answer only pays when the peer runs on
         # another core; on one core it would only delay the peer.
         self._spin_s = p["SIM_LS_SPIN"] * 1e-6 if self.config.spin and (os.cpu_count() or 1) >= 2 else 0.0
+        for link in self.links:
+            if link.pipe is not None and not link.memory:
+                link.pipe.spin.max_s = self._spin_s
 
     # ------------------------------------------------------------------ lifecycle
     def open(self) -> None:
@@ -686,6 +668,10 @@ class SitlServer:
         except BaseException:
             self.close()
             raise
+        self._apply_params()   # the links' spin budget
+        for link in self.links:
+            if link.memory:
+                link.pipe.driver = self.service
         if cfg.signing_key is not None:
             ts = signing_timestamp(time.time())
             self.auth.verifier.timestamp = ts
@@ -716,7 +702,9 @@ class SitlServer:
             "unsupported_commands": {str(k): v for k, v in self.stats["unsupported"].items()},
             "refused": dict(self.stats["refused"]),
             "links": [{"url": l.url, "control": l.control, "clients": len(l.clients),
-                       "clients_evicted": l.clients.n_evicted, "clients_expired": l.clients.n_expired}
+                       "clients_evicted": l.clients.n_evicted, "clients_expired": l.clients.n_expired,
+                       **({"lockstep_spins": l.pipe.spin.n_spins, "lockstep_spin_hits": l.pipe.spin.n_hits}
+                          if l.pipe is not None and not l.memory else {})}
                       for l in self.links],
         }
 
@@ -741,6 +729,59 @@ class SitlServer:
                 self._wait_for_answer()
             else:
                 self._pace()
+
+    def service(self) -> None:
+        """One cooperative turn of ``run`` (the in-process transport,
+        ``sitl.pipe.MemoryPipe``): the peer's pipe calls it in the peer's
+        thread whenever the peer waits for a datagram and none is queued.
+
+        It does what ``run`` does between two waits, without waiting: the
+        first call steps frame 0 and sends its telemetry; then each call
+        handles the queued input up to the lockstep answer and, once that
+        answer has released the frame, steps one frame and sends its
+        telemetry (the peer's next datagram). So the same frames, the same
+        bytes in the same order as over UDP. While the clock is held the
+        wall-clock duties of ``run`` remain: frame 0 re-sent four times a
+        second until lockstep engages, a HEARTBEAT once a second. A peer that
+        stops asking stops the vehicle (it cannot fall silent while asking),
+        so lockstep never disengages here. Needs ``lockstep``.
+        """
+        if self._stop.is_set():
+            return
+        if self._frame is None:
+            # As run() over UDP: frame 0's telemetry reaches nobody (the peer's
+            # address is not known yet, so no stream's schedule advances) and
+            # the peer gets the frame re-sent (``_wait_for_first_peer``).
+            self._frame = self.sim.step_frame(_ZERO4)
+            self._awaited_us = self._frame.time_us
+            self._released = False
+            self._coop_clock_runs = False
+            self._coop_resent = time.monotonic()
+            self._resend_frame()
+            return
+        if not self._released:
+            self._poll(0.0, until_released=True)
+        if not self._coop_clock_runs:     # run(): _wait_for_first_peer
+            if self.lockstep_engaged and self._released:
+                self._coop_clock_runs = True
+                self._pace_reset()
+            else:
+                now = time.monotonic()
+                if now - self._coop_resent >= 0.25:
+                    self._coop_resent = now
+                    self._resend_frame()
+                return
+        if self._released:
+            self.step_once()
+            if self.missions.uploading:
+                self.mission_tick()
+            return
+        now = time.monotonic()             # run(): _wait_for_answer, the clock stalled
+        if now - self._last_hb_wall >= 1.0:
+            self._last_hb_wall = now
+            self._broadcast(self._enc_heartbeat())
+        if self.missions.uploading:
+            self.mission_tick()
 
     # ------------------------------------------------------------------ one frame
     def step_once(self) -> None:
@@ -1003,7 +1044,7 @@ class SitlServer:
         if len(links) == 1 and links[0].udp and links[0].has_peer:
             # The usual frame: one read brings the answer (no heartbeat check:
             # the telemetry carried this frame's heartbeat if one was due).
-            self._poll_one(links[0], 0.05, True, self._spin_s)
+            self._poll_one(links[0], 0.05, True, True)
             if self._released:
                 return
         if not any(l.has_peer for l in self.links):
@@ -1099,15 +1140,15 @@ class SitlServer:
                 if self._dispatch(link, ans, msgs, until_released):
                     return
 
-    def _poll_one(self, link: _Link, timeout_s: float, until_released: bool, spin_s: float = 0.0) -> None:
-        """``_poll`` for a single UDP link: the first read blocks in the kernel
-        (SO_RCVTIMEO) instead of in select(), after spinning ``spin_s``; later
-        reads do not wait."""
+    def _poll_one(self, link: _Link, timeout_s: float, until_released: bool, spin: bool = False) -> None:
+        """``_poll`` for a single datagram link: the first read blocks in the
+        kernel (SO_RCVTIMEO) instead of in select(), after the adaptive spin
+        (``spin``, ``sitl.pipe.AdaptiveSpin``); later reads do not wait."""
         # A steady timeout value avoids a setsockopt() per frame.
         wait = 0.05 if timeout_s >= 0.05 else timeout_s
         for k in range(1000):
             try:
-                data = link.recv_datagram(wait if k == 0 else 0.0, spin_s if k == 0 else 0.0)
+                data = link.recv_datagram(wait if k == 0 else 0.0, spin and k == 0)
                 if data is None:
                     if link.gone:
                         self._forget_gone(link)

@@ -65,6 +65,65 @@ def test_flight_energy_of_a_level_leg_and_a_climb():
     assert e.duration_s == pytest.approx(110.0)
 
 
+def independent_flight_energy_wh(t_s, p_enu_m, height_agl_m, vehicle, cfg, dt_s=0.01):
+    """Energy (Wh) of flying the way-points plus the take-off and landing, computed apart from
+    ``companion.energy``, and the bound (Wh) of its quadrature error.
+
+    Momentum theory per rotor at T = m g / 4 on a disk A = pi r^2: hover induced velocity
+    v_h = sqrt(T / (2 rho A)); in level flight at V, v_i is the root in [0, v_h] of
+    v_i^4 + V^2 v_i^2 - v_h^4 (found by bisection, not the closed form); rotor power
+    4 T v_i / (FM eta); parasite drag 1/2 rho CdA V^3 / eta; climbing at w > 0 adds m g w / eta.
+    The trajectory (piecewise linear in time between way-points) is sampled on a uniform
+    grid of ``dt_s``; each cell's velocity is its mean velocity, and the power is integrated
+    by the midpoint rule. Cells inside a leg are exact; a cell that straddles a way-point
+    mixes two legs, so the error is at most (P_max - P_min) dt per straddling cell.
+    Take-off and landing: h / w_climb each at hover power, plus m g h / eta for the climb.
+    """
+    from scipy.optimize import brentq
+
+    t = np.asarray(t_s, float)
+    p = np.asarray(p_enu_m, float)
+    assert np.all(np.diff(t) > 0), "the way-point times must increase (a zero-length leg has no power)"
+    g = GRAVITY_M_S2
+    thrust = vehicle.mass_kg * g / 4.0
+    area = math.pi * cfg.rotor_radius_m ** 2
+    rho, fm, eta = cfg.air_density_kg_m3, cfg.figure_of_merit, cfg.drive_efficiency
+    v_h = math.sqrt(thrust / (2.0 * rho * area))
+
+    def power_w(v_xy, w):
+        v_i = brentq(lambda x: x ** 4 + v_xy ** 2 * x ** 2 - v_h ** 4, 0.0, v_h, xtol=1e-14, rtol=1e-15) \
+            if v_xy > 0 else v_h
+        return (4.0 * thrust * v_i / (fm * eta) + 0.5 * rho * cfg.drag_area_m2 * v_xy ** 3 / eta
+                + cfg.avionics_power_w + vehicle.mass_kg * g * max(w, 0.0) / eta)
+
+    n = int(math.ceil((t[-1] - t[0]) / dt_s))
+    edges = np.linspace(t[0], t[-1], n + 1)
+    h = edges[1] - edges[0]
+    pos = np.stack([np.interp(edges, t, p[:, k]) for k in range(3)], axis=1)
+    vel = np.diff(pos, axis=0) / h
+    keys = np.round(np.column_stack([np.hypot(vel[:, 0], vel[:, 1]), vel[:, 2]]), 12)
+    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+    powers = np.array([power_w(float(v), float(w)) for v, w in uniq])[inverse.ravel()]
+    legs_j = float(np.sum(powers) * h)
+    straddling = int(np.count_nonzero(np.diff(np.searchsorted(t, edges, side="right")) > 0))
+    bound_j = straddling * h * (powers.max() - powers.min()) + 1e-9 * legs_j
+    p_hover = 4.0 * thrust * v_h / (fm * eta) + cfg.avionics_power_w
+    vertical_j = p_hover * 2.0 * height_agl_m / cfg.climb_speed_m_s + vehicle.mass_kg * g * height_agl_m / eta
+    return (legs_j + vertical_j) / 3600.0, bound_j / 3600.0
+
+
+def test_independent_energy_of_a_hover_and_a_level_leg_by_hand():
+    """Check the independent helper itself: 100 s hovering in place costs 100 s x 564.0 W
+    (test_hover_power_by_hand) plus the 1.5 m take-off and landing: 6 s at 564.0 W and
+    4.34 x 9.81 x 1.5 / 0.8 = 79.83 J."""
+    t = np.array([0.0, 100.0])
+    p = np.array([[0, 0, 1.5], [0, 0, 1.5]])
+    e_wh, bound = independent_flight_energy_wh(t, p, 1.5, VEH, CFG)
+    assert e_wh * 3600 == pytest.approx(564.0 * 106 + 79.83, abs=0.1 * 106 + 0.01)
+    assert bound < 1e-6
+    assert flight_energy(t, p, 1.5, VEH, CFG).energy_wh == pytest.approx(e_wh, rel=1e-9)
+
+
 def test_battery_drains_by_the_power_drawn():
     """Hovering thrusts for 2 minutes at 250 Hz: each step's terminal power V I equals the
     rotor model's power (the quadratic's root), the charge drawn is the sum of I dt, and
@@ -107,9 +166,12 @@ def test_sorties_of_a_small_battery_cover_every_corridor_once():
         assert s.energy.energy_wh <= small.energy.usable_wh
         assert s.n_items <= 40
         assert np.allclose(s.path_xy_m[0], sp.launch_xy_m) and np.allclose(s.path_xy_m[-1], sp.launch_xy_m)
-        # independent energy: the same legs recomputed from the way-points
-        e = flight_energy(s.waypoints.t_s, s.waypoints.p_enu_m, m.flight.height_agl_m, m.vehicle, m.energy)
-        assert e.energy_wh == pytest.approx(s.energy.energy_wh)
+        # independent energy: momentum theory from the vehicle's parameters, integrated over
+        # the way-point trajectory in time (not leg by leg), within its quadrature bound
+        e_wh, bound_wh = independent_flight_energy_wh(s.waypoints.t_s, s.waypoints.p_enu_m,
+                                                      m.flight.height_agl_m, m.vehicle, m.energy)
+        assert abs(s.energy.energy_wh - e_wh) <= bound_wh
+        assert bound_wh < 2e-3 * e_wh
         # each main segment of the sortie is flown along: both its ends are path vertices
         for i in range(s.segments[0], s.segments[1] + 1):
             a, b = np.asarray(plan.coverage.main_segments[i])

@@ -87,7 +87,7 @@ def test_geodetic_round_trip_and_scale():
     # 1 m north is about 1/111 km of latitude (1 deg of latitude ~ 111.1 km at 45 deg).
     lat, lon, alt = F.enu2geodetic(0.0, 1.0, 0.0, lat0, lon0, alt0)
     assert lat - lat0 == pytest.approx(1.0 / 111_100.0, rel=3e-3)
-    assert lon == lon0 and alt == alt0
+    assert lon == pytest.approx(lon0, abs=1e-12) and alt == pytest.approx(alt0, abs=1e-6)
     # 1 m east is 1/(111.3 km * cos(lat)) degrees of longitude.
     _, lon, _ = F.enu2geodetic(1.0, 0.0, 0.0, lat0, lon0, alt0)
     assert lon - lon0 == pytest.approx(1.0 / (111_320.0 * math.cos(math.radians(lat0))), rel=3e-3)

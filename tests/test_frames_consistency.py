@@ -176,7 +176,9 @@ def test_global_position_int(mav):
     m_per_deg_lon = 111412.84 * math.cos(phi) - 93.5 * math.cos(3 * phi) + 0.118 * math.cos(5 * phi)
     assert m.lat == pytest.approx((45.0 + 200.0 / m_per_deg_lat) * 1e7, abs=3)   # 3e-7 deg ~ 3 cm
     assert m.lon == pytest.approx((7.0 + 100.0 / m_per_deg_lon) * 1e7, abs=3)
-    assert m.alt == 265000                 # mm AMSL
+    # mm AMSL: 250 + 15 m, plus the tangent plane's rise over the ellipsoid 224 m out,
+    # e^2 / 2(N + h) + n^2 / 2(M + h) = 100^2 / 12777.6 km + 200^2 / 12734.8 km = 3.9 mm
+    assert m.alt == 265004
     assert m.relative_alt == 12000         # mm above home (15 - 3 m)
     assert (m.vx, m.vy, m.vz) == (400, 300, 50)     # cm/s NED: north 4, east 3, down 0.5
     assert m.hdg == 3000                   # NED yaw 30 deg in cdeg
@@ -196,7 +198,7 @@ def test_gps_raw_int_course_over_ground(mav):
     assert m.cog == round(math.degrees(math.atan2(3.0, 4.0)) * 100)   # from north, clockwise: 36.87 deg
     m = wire(mav, scodec.gps_raw_int(mav, 1, origin, POS_ENU, (-1.0, 0.0, 0.0)))
     assert m.cog == 27000                                    # moving west
-    assert m.alt == 265000
+    assert m.alt == 265004                                   # as GLOBAL_POSITION_INT's
 
 
 def test_home_position_local_ned(mav):

@@ -142,6 +142,27 @@ def test_nav_gains_equal_the_iterated_riccati_recursion():
     assert np.allclose(np.array(nav_gains(dt, sp, sv, qa, qc).K), K, rtol=1e-6, atol=1e-9)
 
 
+def test_dare3_solves_the_riccati_equation_like_scipy():
+    """The doubling solve (plain floats: the same bits on every machine) against scipy's
+    QZ-based solver and against the equation itself (its residual)."""
+    from scipy.linalg import solve_discrete_are
+
+    from companion.control.observer import dare3
+
+    rng = np.random.default_rng(7)
+    for dt, sp, sv in ((0.1, 0.01, 0.02), (0.004, 0.003, 0.01), (0.02, 0.5, 0.05)):
+        a = np.array([[1, dt, dt * dt / 2], [0, 1, dt], [0, 0, 1]]).T
+        b = np.array([[1.0, 0], [0, 1.0], [0, 0]])
+        r = np.diag([sp ** 2, sv ** 2])
+        M = rng.normal(size=(3, 3))
+        q = 1e-4 * (M @ M.T) + 1e-6 * np.eye(3)
+        G = b @ np.linalg.inv(r) @ b.T
+        X = np.array(dare3(tuple(map(tuple, a)), tuple(map(tuple, G)), tuple(map(tuple, q))))
+        assert np.allclose(X, solve_discrete_are(a, b, q, r), rtol=1e-9, atol=0.0)
+        residual = a.T @ X @ np.linalg.inv(np.eye(3) + G @ X) @ a + q - X
+        assert np.max(np.abs(residual)) <= 1e-12 * np.max(np.abs(X))
+
+
 def test_tilt_gain_falls_with_velocity_noise_and_is_capped():
     ks = [tilt_gain(0.1, 0.3, s, 1.4e-3, G, 100.0) for s in (0.0, 0.001, 0.01, 0.05)]
     assert ks[0] == pytest.approx(1.0 / 0.1, rel=1e-5)     # exact fixes: one fix interval (k dt -> 1)
@@ -406,3 +427,94 @@ def test_fix_noise_is_estimated_online_per_horizontal_and_vertical_axis():
     assert sp_h == pytest.approx(0.01, rel=0.2) and sv_h == pytest.approx(0.02, rel=0.2)
     assert sp_z == pytest.approx(0.02, rel=0.2) and sv_z == pytest.approx(0.02, rel=0.2)
     assert obs.window(sv_h) == pytest.approx(0.3)          # noisy fixes: the longest window
+
+
+# --- degraded measurements: never an exception in the flight loop (issue 19) ----------------
+
+
+def _settled(R0, n=100, **kw):
+    """An observer initialised and run at rest (exact fixes every frame) with attitude R0."""
+    obs = _observer(**kw)
+    for t, gyro, acc, mag, p, v in _hover_frames(R0, n):
+        obs.update(t, gyro, acc, mag, p, v, t)
+    return obs
+
+
+def test_free_fall_propagates_the_attitude_on_the_gyro_and_falls_at_g():
+    """Motors stopped in flight: the accelerometer reads a zero specific force. Derived:
+    the attitude is the gyro's (the previous frame's rate was 0, so the trapezoid turns
+    the first frame by w dt/2 and each later one by w dt: exp(S(w (n - 1/2) dt)) in all),
+    and the vehicle falls at g: v = -g T, p = -g T^2/2."""
+    R0 = _R_enu(30.0, 5.0, -3.0)
+    obs = _settled(R0, mag_gain_rad_s=0.0)
+    t0 = 99 * DT
+    R_start = _mat(obs.R)
+    w = np.array([0.3, -0.2, 0.5])
+    n = 50
+    for k in range(1, n + 1):
+        t = t0 + k * DT
+        T = k * DT
+        R_true = R0 @ Rotation.from_rotvec(w * T).as_matrix()
+        v, p = (0.0, 0.0, -G * T), (0.0, 0.0, -0.5 * G * T * T)
+        obs.update(t, tuple(w), (0.0, 0.0, 0.0), tuple(R_true.T @ MAG_ENU), p, v, t)
+    expected = R_start @ Rotation.from_rotvec(w * (n - 0.5) * DT).as_matrix()
+    assert np.allclose(_mat(obs.R), expected, atol=1e-9)
+    assert obs.faults["free_fall"] == n and sum(obs.faults.values()) == n
+    # the filter integrates the zero specific force (the trapezoid's first half step, which
+    # still sees the hover's g, is corrected by the exact fixes within a few frames)
+    assert obs.v == pytest.approx((0.0, 0.0, -G * n * DT), abs=1e-4)
+    assert obs.p == pytest.approx((0.0, 0.0, -0.5 * G * (n * DT) ** 2), abs=1e-4)
+    # a specific force just below a tenth of g has no direction either; just above it is used
+    obs.update(t0 + (n + 1) * DT, tuple(w), (0.0, 0.0, 0.099 * G), tuple(R0.T @ MAG_ENU), p, v, None)
+    assert obs.faults["free_fall"] == n + 1
+
+
+@pytest.mark.parametrize("kind", ["accel", "gyro", "mag_zero", "mag_nan", "fix", "time", "inf_accel"])
+def test_a_non_finite_or_missing_sample_is_skipped_not_raised(kind):
+    """Derived: at rest with zero rates, whatever single sample is unusable, the attitude
+    stays the settled one (the gyro says no rotation, and held values are the last good ones)."""
+    R0 = _R_enu(-60.0, 10.0, 4.0)
+    obs = _settled(R0)
+    R_before, p_before = _mat(obs.R), obs.p
+    nan = float("nan")
+    t = 100 * DT
+    acc, mag = tuple(R0.T @ np.array([0.0, 0.0, G])), tuple(R0.T @ MAG_ENU)
+    gyro, pos, vel = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    nav_t = t
+    if kind == "accel":
+        acc = (nan, 0.0, G)
+    elif kind == "inf_accel":
+        acc = (0.0, float("inf"), G)
+    elif kind == "gyro":
+        gyro = (nan, nan, nan)
+    elif kind == "mag_zero":
+        mag = (0.0, 0.0, 0.0)
+    elif kind == "mag_nan":
+        mag = (nan, 0.1, 0.2)
+    elif kind == "fix":
+        pos, nav_t = (nan, 0.0, 0.0), nan
+    elif kind == "time":
+        t = nan
+    obs.update(t, gyro, acc, mag, pos, vel, nav_t)
+    fault = {"inf_accel": "accel", "mag_zero": "mag", "mag_nan": "mag"}.get(kind, kind)
+    assert obs.faults[fault] == 1 and sum(obs.faults.values()) == 1
+    R = _mat(obs.R)
+    assert np.all(np.isfinite(R)) and np.allclose(R.T @ R, np.eye(3), atol=1e-12)
+    assert _angle(R, R_before) < 1e-9
+    assert np.all(np.isfinite(obs.p)) and np.allclose(obs.p, p_before, atol=1e-9)
+    # and the next good frame is used as usual
+    obs.update(101 * DT, (0.0, 0.0, 0.0), tuple(R0.T @ np.array([0.0, 0.0, G])), tuple(R0.T @ MAG_ENU),
+               (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 101 * DT)
+    assert obs.t == pytest.approx(101 * DT) and _angle(_mat(obs.R), R0) < 1e-6
+
+
+def test_initialisation_waits_for_a_vertical_and_does_without_a_magnetometer():
+    R0 = _R_enu(0.0, 12.0, -7.0)
+    acc = tuple(R0.T @ np.array([0.0, 0.0, G]))
+    obs = _observer()
+    obs.update(0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), tuple(R0.T @ MAG_ENU), (0, 0, 0), (0, 0, 0), 0.0)
+    assert not obs.initialised and obs.faults["free_fall"] == 1
+    # no magnetometer (zero): initialised, the tilt from the accelerometer exactly (R^T e3 = a/|a|)
+    obs.update(DT, (0.0, 0.0, 0.0), acc, (0.0, 0.0, 0.0), (0, 0, 0), (0, 0, 0), DT)
+    assert obs.initialised and obs.faults["mag"] == 1
+    assert np.allclose(_mat(obs.R)[2], np.asarray(acc) / G, atol=1e-12)

@@ -318,7 +318,10 @@ def test_lossy_real_time_link_errors_are_measured_at_matching_times(tmp_path):
     odo = [(m.time_usec // 1000, (m.y, m.x, -m.z)) for m in msgs
            if m.get_type() == "ODOMETRY" and m.get_srcSystem() == 1]
     err = np.array([np.linalg.norm(np.subtract(p, sp[ms])) for ms, p in odo if ms in sp and sp[ms][2] > 1.0])
-    assert len(err) > 100
+    # enough pairs for the two comparisons below to cover the flight: an idle machine
+    # gives over 100; a loaded one, whose real-time SITL and companion both run late,
+    # fewer (77 and 87 seen with the suite running beside it), so the floor is 50
+    assert len(err) > 50
     # the report's samples are every frame's, these the setpoints' (every 5th, from take-off
     # on): the same error, sampled a little differently
     assert rep["tracking"]["max_error_m"] <= err.max() + 0.005

@@ -4,7 +4,7 @@
   in-memory trajectory within 1e-9 m at the same times (p, v, a, jerk, the
   pointing direction), in both stored forms (knot states for Q = 0, the
   coefficients for Q != 0);
-- the stored 1.0 plan of the replay corpus still loads, and ``companion fly``
+- a stored 1.0 plan (``tests/data/plan-1.0``, the replay corpus's plan before 2.0) still loads, and ``companion fly``
   flies the trajectory its own samples describe;
 - a 2.x plan is flown from its pieces, without solving the LQR again;
 - broken pieces are one-line errors naming the key;
@@ -32,7 +32,7 @@ from companion.trajectory import TrajectoryConfig, generate_trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSION = ROOT / "missions" / "flat-rectangle" / "mission.yaml"
-OLD_PLAN = ROOT / "tests" / "data" / "replay" / "plan-flat-rectangle.json"
+OLD_PLAN = ROOT / "tests" / "data" / "plan-1.0" / "flat-rectangle.json"
 TOL_M = 1e-9
 
 

@@ -38,12 +38,16 @@ def planned_path():
 
 def test_flat_rectangle_plan_keeps_the_vehicle_off_the_rows(planned_path):
     """No false positive: mid-corridor the row faces are 1.25 - 0.2 = 1.05 m
-    away, so the 0.442 m sphere keeps 0.608 m; the flight is 1.5 m up."""
+    away, so the 0.442 m sphere keeps 0.608 m; the flight is 1.5 m up. The
+    turns into the corridors lie 0.892 m + a cell beyond the row ends (the
+    margin is kept from the airframe's surface, docs/mission.md "Margins"),
+    so the trajectory's entry (it settles onto the lane within a few mm)
+    is still beside the row: 5 mm allowed."""
     m, scene, r = _scene("flat-rectangle")
     assert r == pytest.approx(0.315 + 0.127)
     cl = [scene.clearance(p, r) for p in planned_path]
     rows = min(c.rows_m for c in cl)
-    assert rows == pytest.approx(1.05 - r, abs=2e-3)
+    assert rows == pytest.approx(1.05 - r, abs=5e-3)
     assert min(c.terrain_m for c in cl) == pytest.approx(1.5 - r, abs=1e-3)
     assert all(c.obstacle_index is None for c in cl)
 
@@ -54,7 +58,7 @@ def test_scenario_obstacle_is_on_the_planned_path(planned_path, name):
     assert m.map_path.resolve() == (missions_dir() / "flat-rectangle" / "map.yaml").resolve()
     cl = [scene.clearance(p, r) for p in planned_path]
     assert min(c.obstacle_m for c in cl) < -0.1            # flown as planned, the vehicle hits it
-    assert min(c.rows_m for c in cl) == pytest.approx(1.05 - r, abs=2e-3)
+    assert min(c.rows_m for c in cl) == pytest.approx(1.05 - r, abs=5e-3)   # as flat-rectangle's
 
 
 def test_low_obstacle_can_be_climbed_over_inside_the_corridor():

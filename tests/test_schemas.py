@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 BUNDLED = sorted(d.name for d in missions_dir().iterdir() if (d / "mission.yaml").is_file())
 #: A plan.json of format 1.0 as ``companion plan`` wrote it before 2.0 (the replay corpus's).
-OLD_PLAN = ROOT / "tests" / "data" / "replay" / "plan-flat-rectangle.json"
+OLD_PLAN = ROOT / "tests" / "data" / "plan-1.0" / "flat-rectangle.json"
 #: Top-level keys the plan schema does not require (``--samples``).
 PLAN_OPTIONAL = {"samples"}
 
@@ -126,7 +126,7 @@ def test_schemas_are_draft_2020_12_and_describe_version_1():
     for schema in (PLAN_SCHEMA, REPORT_SCHEMA):
         assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
         Draft202012Validator.check_schema(schema)
-    assert PLAN_FORMAT_VERSION == "2.0" and REPORT_FORMAT_VERSION == "3.1"
+    assert PLAN_FORMAT_VERSION == "2.0" and REPORT_FORMAT_VERSION == "3.0"
     # the writers' version is one the schemas accept, the next major is not
     for validator, doc_version in ((PLAN, PLAN_FORMAT_VERSION), (REPORT, REPORT_FORMAT_VERSION)):
         version_schema = validator.schema["properties"]["format_version"]
@@ -138,7 +138,14 @@ def test_schemas_are_draft_2020_12_and_describe_version_1():
 
 # --- every file the project writes validates ----------------------------------------
 
-@pytest.mark.parametrize("mission", BUNDLED)
+#: Bundled missions whose plan.json takes long to write and validate: the 1 ha vineyard's
+#: 79 min of trajectory sampled at 10 Hz (~40 s here, until plan.json stores the polynomial
+#: pieces, issue 18); tests/test_fields.py plans it in-process.
+SLOW_PLANS = ("vineyard-1ha",)
+
+
+@pytest.mark.parametrize("mission", [pytest.param(m, marks=pytest.mark.slow) if m in SLOW_PLANS else m
+                                     for m in BUNDLED])
 def test_plan_of_every_bundled_mission_validates_and_loads(mission, tmp_path_factory):
     planned = _plan_doc(mission, tmp_path_factory)
     doc = planned["doc"]

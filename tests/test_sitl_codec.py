@@ -144,10 +144,10 @@ def test_global_position_and_heading(mav):
     assert m.hdg == 9000                                       # facing east
     m = codec.global_position_int(mav, 0, origin, home, (0, 0, 0), (0, 0, 0), math.pi / 2)
     assert m.hdg == 0                                          # facing north
-    # 1 km north: latitude grows by 1000 m over the meridian radius of curvature
+    # 1 km north: latitude grows by 1000 m over the meridian radius of curvature (WGS-84)
     lat0 = math.radians(44.8)
-    e2 = frames.WGS84_E2
-    r_m = frames.WGS84_A_M * (1 - e2) / (1 - e2 * math.sin(lat0) ** 2) ** 1.5
+    e2 = (1 / 298.257223563) * (2 - 1 / 298.257223563)
+    r_m = 6378137.0 * (1 - e2) / (1 - e2 * math.sin(lat0) ** 2) ** 1.5
     m = codec.global_position_int(mav, 0, origin, home, (0.0, 1000.0, 0.0), (0, 0, 0), 0.0)
     assert m.lat == round((44.8 + math.degrees(1000.0 / r_m)) * 1e7)
 

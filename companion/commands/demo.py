@@ -1,12 +1,18 @@
-"""``companion demo [--mission NAME|PATH] [--control companion|vehicle] [--out out/] [--seed N]``.
+"""``companion demo [--mission NAME|PATH | --scenario FILE] [--control companion|vehicle] [--out out/] [--seed N]``.
 
 No arguments needed: starts the bundled SITL (``python -m sitl``, a separate
-process, lockstep, loopback UDP on a free port), plans the bundled
+process, lockstep, loopback UDP on a free port; ``--transport inproc``: in
+this process, the same MAVLink bytes through memory, ``sitl.pipe``), plans the bundled
 ``flat-rectangle`` mission, flies it with the geometric controller, prints a
 summary table and writes ``out/``: ``plan.json``, ``flight.tlog``,
 ``report.json``, ``map.html`` (the plan and the flown track on a
 self-contained map, ``companion.html_map``) and, with matplotlib (the
 ``plot`` extra), the paper's Figs. 14-18 style figures (``companion.flight_plot``).
+
+``--scenario FILE`` flies one scenario of a campaign (docs/campaign.md): its
+base mission with its overrides merged in (written to ``out/mission.yaml``,
+which the SITL loads), its seed, cut and control; ``--seed``, ``--cut`` and
+``--control`` given on the command line win.
 """
 
 from __future__ import annotations
@@ -19,6 +25,8 @@ from pathlib import Path
 from ..errors import InputError
 
 DEFAULT_MISSION = "flat-rectangle"
+#: How the companion reaches the bundled SITL (``--transport``).
+TRANSPORTS = ("udp", "inproc")
 
 
 def missions_dir() -> Path:
@@ -43,10 +51,12 @@ def resolve_mission(name_or_path: str) -> Path:
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--mission", default=DEFAULT_MISSION, metavar="NAME|PATH",
-                        help="bundled mission name or mission YAML (default %(default)s)")
-    parser.add_argument("--control", choices=("companion", "vehicle"), default="companion",
-                        help="who tracks the trajectory (default %(default)s: the geometric controller)")
+    parser.add_argument("--mission", default=None, metavar="NAME|PATH",
+                        help=f"bundled mission name or mission YAML (default {DEFAULT_MISSION})")
+    parser.add_argument("--scenario", default=None, metavar="FILE",
+                        help="a campaign's scenario file: base mission + overrides + seed + cut + control")
+    parser.add_argument("--control", choices=("companion", "vehicle"), default=None,
+                        help="who tracks the trajectory (default companion: the geometric controller)")
     parser.add_argument("--out", default="out", metavar="DIR", help="output directory (default %(default)s)")
     parser.add_argument("--cut", type=float, default=None, metavar="S",
                         help="fly only the first S seconds of the trajectory")
@@ -56,6 +66,9 @@ def add_arguments(parser) -> None:
                         help="MAVLink 2 signing key file for both the SITL and the companion "
                              "(32 raw bytes, or a passphrase as MAVProxy's signing setup)")
     parser.add_argument("--no-plots", action="store_true", help="skip the figures")
+    parser.add_argument("--transport", choices=TRANSPORTS, default="udp",
+                        help="udp (default): the SITL in its own process over loopback UDP; inproc: in this "
+                             "process, the same MAVLink bytes through memory (same flight, faster)")
     from .fly import add_safety_arguments
 
     add_safety_arguments(parser)
@@ -108,11 +121,36 @@ def _table(rows: list[tuple[str, str]]) -> str:
     return "\n".join(out)
 
 
+def start_sitl(transport: str, mission_path, seed, signing_key_file):
+    """The bundled SITL for ``--transport``, launched with its launch pose to
+    come (``set_start``, then ``wait_ready``): ``SitlProcess`` (a subprocess,
+    loopback UDP; it imports and loads its world while we plan) or
+    ``SitlInProcess`` (this process, ``inproc:``). Lockstep either way."""
+    from sitl.api import SitlInProcess, SitlProcess
+
+    if transport == "inproc":
+        return SitlInProcess(mission_path, seed=seed, start="later", signing_key_file=signing_key_file).launch()
+    return SitlProcess(mission_path, lockstep=True, speed=1.0, seed=seed, start="later",
+                       signing_key_file=signing_key_file).launch()
+
+
 def run(args) -> int:
-    from sitl.api import SitlProcess
 
     t_start = time.monotonic()
-    mission_path = resolve_mission(args.mission)
+    scenario = None
+    if getattr(args, "scenario", None) is not None:
+        if args.mission is not None:
+            raise InputError(f"--scenario {args.scenario}", "give either --mission or --scenario, not both")
+        from ..campaign.scenario_file import load_scenario
+
+        scenario = load_scenario(args.scenario)
+        args.seed = scenario.seed if args.seed is None else args.seed
+        args.cut = scenario.cut_s if args.cut is None else args.cut
+        args.control = args.control or scenario.control
+        mission_path = None
+    else:
+        mission_path = resolve_mission(args.mission or DEFAULT_MISSION)
+    args.control = args.control or "companion"
     if args.cut is not None and not (math.isfinite(args.cut) and args.cut > 0):
         raise InputError(f"--cut {args.cut}", "must be a finite number of seconds > 0")
     out = Path(args.out)
@@ -122,7 +160,8 @@ def run(args) -> int:
         raise InputError(f"--out {out}", f"directory {out.parent} does not exist")
     if out.is_dir():
         from .fly import check_output_paths
-        check_output_paths([("--out", out / n) for n in ("plan.json", "flight.tlog", "report.json", "map.html")])
+        check_output_paths([("--out", out / n) for n in ("plan.json", "flight.tlog", "report.json", "map.html")
+                            + (("mission.yaml",) if scenario is not None else ())])
     key = None
     if args.signing_key is not None:
         from ..link.signing import load_signing_key
@@ -131,11 +170,23 @@ def run(args) -> int:
     from .fly import safety_overrides
 
     overrides = safety_overrides(args)
-    mission = load_mission(mission_path)     # bad input fails here, before the SITL starts
+    if scenario is not None:
+        import yaml
+
+        from ..campaign.scenario_file import scenario_mission
+
+        data, mission = scenario_mission(scenario, args.scenario)   # bad input fails here
+        out.mkdir(parents=True, exist_ok=True)
+        mission_path = out / "mission.yaml"
+        mission_path.write_text(f"# {args.scenario}: mission {scenario.mission} + the scenario's overrides\n"
+                                + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120),
+                                encoding="utf-8")
+        mission = load_mission(mission_path)
+    else:
+        mission = load_mission(mission_path)     # bad input fails here, before the SITL starts
     # The SITL process starts now (it imports and loads its world while we
     # plan) and gets its launch pose once the plan exists.
-    sitl = SitlProcess(mission_path, lockstep=True, speed=1.0, seed=args.seed, start="later",
-                       signing_key_file=args.signing_key).launch()
+    sitl = start_sitl(getattr(args, "transport", "udp"), mission_path, args.seed, args.signing_key)
     try:
         return _plan_and_fly(args, mission, out, sitl, t_start, key, overrides)
     finally:

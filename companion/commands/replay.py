@@ -1,5 +1,5 @@
 """``companion replay FLIGHT.tlog [--mission MISSION.yaml] [--plan plan.json]
-[--report replay.json] [--plot DIR] [--tolerance ABS] [--withhold TYPE,...]``.
+[--report replay.json] [--plot DIR] [--tolerance ABS | --exact] [--withhold TYPE,...]``.
 
 Without ``--mission``: the flight's metrics from the recording alone (any
 MAVLink .tlog, a foreign one included; see ``companion.replay.metrics``).
@@ -8,8 +8,10 @@ record in the .tlog, the mission (and ``--plan`` when the flight flew one),
 fed the recorded vehicle messages in order, and every output it queues is
 compared with the recorded one (``companion.replay.session``).
 
-Exit codes: 0 metrics only, or every output identical within the tolerance
-(float32 fields bit for bit by default); 4 the outputs diverged (the first
+Exit codes: 0 metrics only, or every output identical: float32 fields bit
+for bit when this environment is the recording's (``--exact``: always),
+within float64 drift when it differs or is unknown (discrete fields exact;
+``companion.replay.compare``), within ``--tolerance`` when given; 4 the outputs diverged (the first
 divergence is named: vehicle time, message, field, recorded and computed
 values); 2 bad input (one line, nothing written). A damaged .tlog is replayed
 as far as it is valid: what was skipped, and where, is printed and reported.
@@ -25,6 +27,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
+from ..inputs import Limits, check, clip, limits, name, open_regular
 
 #: Exit code of a replay whose outputs differ from the recording.
 EXIT_DIVERGED = 4
@@ -41,7 +44,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--report", metavar="FILE", help="write the replay report (JSON)")
     parser.add_argument("--plot", metavar="DIR", help="write the flight figures into DIR (needs the plot extra)")
     parser.add_argument("--tolerance", type=float, default=0.0, metavar="ABS",
-                        help="absolute tolerance on float fields (default 0: float32 fields bit for bit)")
+                        help="absolute tolerance on float fields (default 0: bit for bit in the recording's "
+                             "environment, float64 drift in another)")
+    parser.add_argument("--exact", action="store_true",
+                        help="compare float32 fields bit for bit even when this environment is not the recording's")
     parser.add_argument("--withhold", default="", metavar="TYPE,...",
                         help="vehicle message types not fed to the re-run (e.g. ODOMETRY: outputs must not change)")
     parser.add_argument("--settle", type=float, default=5.0, metavar="S",
@@ -49,14 +55,9 @@ def add_arguments(parser) -> None:
 
 
 def open_tlog(path: str):
-    """The .tlog's bytes as a binary stream (xz and gzip decompressed on the fly)."""
-    p = Path(path)
-    try:
-        f = open(p, "rb")
-    except IsADirectoryError:
-        raise InputError(path, "is a directory, not a .tlog") from None
-    except OSError as exc:
-        raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
+    """The .tlog's bytes as a binary stream (xz and gzip decompressed on the fly): a
+    regular file within the ``tlog_bytes`` limit (docs/limits.md)."""
+    f = open_regular(path, InputError, ".tlog", cap="tlog_bytes")
     head = f.read(6)
     f.seek(0)
     if head.startswith(b"\xfd7zXZ\x00"):
@@ -67,19 +68,30 @@ def open_tlog(path: str):
 
 
 def read_chunks(path: str):
-    """Generator of the file's bytes in chunks; InputError when it cannot be read or decompressed."""
+    """Generator of the file's bytes in chunks; InputError when it cannot be read or
+    decompressed, or decompresses to more than the ``tlog_bytes`` limit."""
+    cap = limits().tlog_bytes
+    total = 0
     f = open_tlog(path)
     try:
         while True:
             try:
                 chunk = f.read(CHUNK_BYTES)
             except (OSError, EOFError, lzma.LZMAError) as exc:
-                raise InputError(path, f"cannot read: {exc}") from None
+                raise InputError(name(path), f"cannot read: {clip(exc)}") from None
             if not chunk:
                 return
+            total += len(chunk)
+            check(name(path), "the decompressed size", total, "tlog_bytes")
             yield chunk
     finally:
         f.close()
+
+
+def _garbage(path: str, exc) -> InputError:
+    cap = limits().tlog_garbage_bytes
+    return InputError(name(path), f"{exc}: above the limit {cap:,} ({Limits.env_name('tlog_garbage_bytes')}); "
+                                  "not a .tlog, or one too damaged to replay")
 
 
 def _withheld_ids(spec: str) -> tuple:
@@ -97,6 +109,8 @@ def _withheld_ids(spec: str) -> tuple:
 def _check_args(args) -> tuple:
     if not (math.isfinite(args.tolerance) and args.tolerance >= 0):
         raise InputError(f"--tolerance {args.tolerance}", "must be a finite number >= 0")
+    if getattr(args, "exact", False) and args.tolerance > 0:
+        raise InputError("--exact", "cannot be combined with --tolerance")
     if not (math.isfinite(args.settle) and args.settle >= 0):
         raise InputError(f"--settle {args.settle}", "must be a finite number >= 0")
     if args.plan and not args.mission:
@@ -104,11 +118,7 @@ def _check_args(args) -> tuple:
     withhold = _withheld_ids(args.withhold)
     if withhold and not args.mission:
         raise InputError("--withhold", "needs --mission (it changes what the re-run is fed)")
-    p = Path(args.tlog)
-    if not p.exists():
-        raise InputError(args.tlog, "no such file")
-    if p.is_dir():
-        raise InputError(args.tlog, "is a directory, not a .tlog")
+    open_tlog(args.tlog).close()          # a regular file within the size limit, before anything else
     if args.report:
         from .fly import check_output_paths
 
@@ -127,12 +137,15 @@ def _check_args(args) -> tuple:
 
 def _rebuild(args):
     """(core, flight plan, warnings) of the recorded flight, from its setup and the given files."""
+    from ..link.tlog_scan import TlogGarbage
     from ..mission import load_mission
     from ..replay import build_core, find_setup, setup_mismatches
     from .fly import flight_setup, prepare
 
     try:
-        setup = find_setup(read_chunks(args.tlog))
+        setup = find_setup(read_chunks(args.tlog), limits().tlog_garbage_bytes)
+    except TlogGarbage as exc:
+        raise _garbage(args.tlog, exc) from None
     except ValueError as exc:
         raise InputError(args.tlog, f"setup record unreadable: {exc}") from None
     if setup is None:
@@ -150,6 +163,13 @@ def _rebuild(args):
     except ValueError as exc:
         raise InputError(args.tlog, f"setup record: {exc}") from None
     return core, fp, warnings, setup
+
+
+def _environment(setup) -> list | None:
+    """How this environment differs from the recording's (``["unknown"]``: no fingerprint recorded)."""
+    from ..flight.environment import differences, fingerprint
+
+    return differences((setup or {}).get("environment"), fingerprint())
 
 
 def _report_doc(args, result, setup, warnings) -> dict:
@@ -202,7 +222,7 @@ def _print_summary(args, result, warnings) -> None:
         print(f"  warning: {w}")
     c = result.comparison
     if c is not None:
-        tol = "float32 fields bit for bit" if c.tolerance == 0 else f"tolerance {c.tolerance:g}"
+        tol = _mode_text(c)
         if c.identical:
             extra = f", {c.n_within_tolerance} within tolerance" if c.n_within_tolerance else ""
             inj = f"; re-injected: {', '.join(c.injected)}" if c.injected else ""
@@ -211,15 +231,36 @@ def _print_summary(args, result, warnings) -> None:
             print(f"  replay: DIVERGED ({tol}): {c.n_differing} of {c.n_compared} outputs differ")
 
 
+def _mode_text(c) -> str:
+    """Which comparison was used, and why."""
+    if c.mode == "absolute":
+        return f"tolerance {c.tolerance:g}"
+    if c.mode == "bitwise":
+        why = "" if c.environment is None else ": same environment as the recording"
+        return f"float32 fields bit for bit{why}"
+    env = list(c.environment or ())
+    why = ("the recording has no environment fingerprint" if env == ["unknown"]
+           else "environment differs from the recording's: " + ", ".join(env[:6]) + (", ..." if len(env) > 6 else ""))
+    return f"within float64 drift ({why}); discrete fields exact"
+
+
 def run(args) -> int:
     withhold = _check_args(args)
     core, fp, warnings, setup = (None, None, [], None)
     if args.mission:
         core, fp, warnings, setup = _rebuild(args)
+    from ..link.tlog_scan import TlogGarbage
     from ..replay import replay_chunks
 
-    result = replay_chunks(read_chunks(args.tlog), core, args.tolerance, withhold, args.settle,
-                           with_log=bool(args.plot))
+    env = _environment(setup) if core is not None else None
+    if getattr(args, "exact", False):
+        env = None                  # bit for bit, whatever the environment
+    try:
+        result = replay_chunks(read_chunks(args.tlog), core, args.tolerance, withhold, args.settle,
+                               with_log=bool(args.plot), environment=env,
+                               max_garbage_bytes=limits().tlog_garbage_bytes)
+    except TlogGarbage as exc:
+        raise _garbage(args.tlog, exc) from None
     if result.scan.n_records == 0:
         raise InputError(args.tlog, "no MAVLink records (not a .tlog?)")
     if setup is None:

@@ -812,6 +812,8 @@ class GeometricController:
         if obs is not None:
             # the observer (companion.control.observer): bias-corrected rate, filtered p, v at t_s
             obs.update(t_s, gyro, accel, mag, pos, vel, nav_t, self._thrust_prev)
+            if obs.t is None:        # no vertical yet (free fall at start-up): no estimate to act on
+                raise ValueError("the observer has no attitude estimate yet")
             bx_, by_, bz_ = obs.b
             gyro = (gyro[0] - bx_, gyro[1] - by_, gyro[2] - bz_)
             pos, vel, nav_t = obs.p, obs.v, t_s
@@ -1159,6 +1161,8 @@ class GeometricController:
         if obs is not None:
             obs.update(t_s, Omega, meas.accel_flu_m_s2, meas.mag_flu_gauss, p, v, meas.nav_time_s,
                        self._thrust_prev)
+            if obs.t is None:
+                raise ValueError("the observer has no attitude estimate yet")
             Omega = (Omega[0] - obs.b[0], Omega[1] - obs.b[1], Omega[2] - obs.b[2])
             p, v, t_nav = obs.p, obs.v, t_s
             fi = obs.fix_interval_s

@@ -114,8 +114,11 @@ f/m`` from the commanded rotor thrusts and the motors' time constant).
 Propagated every IMU frame; each fix ``(p_y, v_y)`` at time ``tau`` is
 compared with the state interpolated from the history at ``tau``, and the
 steady-state Kalman correction ``K (y - H x(tau))`` (``K`` from the
-discrete algebraic Riccati equation, ``scipy.linalg.solve_discrete_are``,
-for the fix interval) is carried forward to now exactly through the
+discrete algebraic Riccati equation for the fix interval, solved by the
+structure-preserving doubling algorithm in plain float arithmetic,
+:func:`dare3`: the same bits on every machine, where LAPACK's QZ solve of
+these 3x3 blocks depends on the BLAS build and, at the exact-fix corner,
+is itself only good to ~1e-7) is carried forward to now exactly through the
 kinematics (``dp + dv T + dc T^2/2``). Noise model: white acceleration
 ``accel_noise`` (m/s^2/sqrt(Hz)), bias walk ``accel_bias_walk``
 (m/s^3/sqrt(Hz)), fix noise ``pos_std``, ``vel_std`` (floored at 1e-4:
@@ -124,6 +127,33 @@ filter returns the fix itself (the paper's mocap assumption); with a 10 Hz,
 100 ms-late RTK fix it gives the current position between fixes.
 
 All state is bounded: the history keeps ``history_s`` of frames.
+
+Degraded measurements
+---------------------
+A value physics allows never raises here; the observer skips what it cannot
+use and counts it in ``faults`` (kind: number of frames):
+
+- ``free_fall``: specific force below ``FREE_FALL_FRACTION`` g (a falling
+  vehicle: its accelerometer reads ~0). The specific force itself is right
+  (the translational filter integrates ``v_dot = -g e3``); only its direction
+  is undefined: no gravity innovation, the tilt vector keeps its last value,
+  the attitude propagates on the gyro (the velocity-aided tilt already skips
+  windows near free fall);
+- ``accel``: a non-finite accelerometer sample: the last valid specific
+  force is used, no gravity innovation;
+- ``gyro``: a non-finite rate: the last valid rate propagates the attitude;
+- ``mag``: a zero, non-finite or vertical (along the estimated up) field:
+  no heading innovation (a saturated but finite one is used: the heading
+  innovation cannot tilt the estimate);
+- ``fix``: a non-finite position, velocity or fix time: the fix is skipped;
+- ``time``: a non-finite frame time: the frame is skipped.
+
+Initialisation waits for an accelerometer with a direction and a finite fix
+(the controller raises ValueError until then: the flight core lets the
+vehicle fly those frames); without a usable
+magnetometer it takes the heading of the body x axis as the world x axis
+(TRIAD with that pair) and the heading innovation corrects it once the field
+is usable.
 """
 
 from __future__ import annotations
@@ -132,12 +162,8 @@ import math
 from bisect import bisect_right
 from collections import deque
 from dataclasses import dataclass
-from functools import lru_cache
 from operator import itemgetter
 
-import numpy as np
-from scipy.linalg import solve_discrete_are
-from threadpoolctl import ThreadpoolController
 
 from .vectors import BodyVectorFilter
 
@@ -150,6 +176,15 @@ _VEL_STD_FLOOR_M_S = 1e-6
 _N_NOISE_MIN = 10        # fixes seen before the velocity-aided tilt starts (noise estimate settled)
 _BIAS_GATE_RAD = 0.1     # the bias integrates only innovations smaller than this (no wind-up on transients)
 _TIME = itemgetter(0)    # the time of a history or fix entry (both deques are sorted by it)
+#: Below this fraction of g the specific force has no usable direction (free fall, a falling
+#: vehicle with its motors stopped): its vector is skipped, the attitude propagates on the gyro.
+FREE_FALL_FRACTION = 0.1
+#: Kinds of degraded frames counted in ``VelocityAidedObserver.faults`` (docs: module docstring).
+FAULT_KINDS = ("free_fall", "accel", "gyro", "mag", "fix", "time")
+
+
+def _finite3(x: float, y: float, z: float) -> bool:
+    return math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
 
 
 # --- small SO(3) helpers on float tuples ----------------------------------------------
@@ -317,32 +352,91 @@ def nav_gains(dt_s: float, pos_std_m: float, vel_std_m_s: float, accel_noise: fl
     density ``accel_bias_walk`` m/s^3/sqrt(Hz)), discretised exactly over
     ``dt_s``; measurement ``(p, v)`` with white noise ``pos_std_m``,
     ``vel_std_m_s`` (each floored at 1e-4). The a-priori covariance solves
-    the discrete algebraic Riccati equation (``scipy.linalg.solve_discrete_are``);
-    ``K = P H^T (H P H^T + R)^-1``.
+    the discrete algebraic Riccati equation (:func:`dare3`);
+    ``K = P H^T (H P H^T + R)^-1`` (a 2x2 inverse, written out).
 
     Returns
     -------
     NavGains
     """
     T = float(dt_s)
-    A = np.array([[1.0, T, 0.5 * T * T], [0.0, 1.0, T], [0.0, 0.0, 1.0]])
+    A = ((1.0, T, 0.5 * T * T), (0.0, 1.0, T), (0.0, 0.0, 1.0))
     qa, qc = float(accel_noise) ** 2, float(accel_bias_walk) ** 2
-    Q = qa * np.array([[T ** 3 / 3, T ** 2 / 2, 0.0], [T ** 2 / 2, T, 0.0], [0.0, 0.0, 0.0]]) + qc * np.array(
-        [[T ** 5 / 20, T ** 4 / 8, T ** 3 / 6], [T ** 4 / 8, T ** 3 / 3, T ** 2 / 2], [T ** 3 / 6, T ** 2 / 2, T]])
-    H = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    Rm = np.diag([max(pos_std_m, _POS_STD_FLOOR_M) ** 2, max(vel_std_m_s, _VEL_STD_FLOOR_M_S) ** 2])
-    # One BLAS thread: on a loaded machine OpenBLAS's threaded triangular solves of
-    # these 3x3 blocks took 10-20 ms instead of 0.8 ms (the same numbers, bit for bit).
-    with _blas_threads().limit(limits=1, user_api="blas"):
-        P = solve_discrete_are(A.T, H.T, Q, Rm)
-    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + Rm)
-    return NavGains(tuple(tuple(float(x) for x in row) for row in K))
+    T2, T3, T4, T5 = T * T, T ** 3, T ** 4, T ** 5
+    Q = ((qa * T3 / 3 + qc * T5 / 20, qa * T2 / 2 + qc * T4 / 8, qc * T3 / 6),
+         (qa * T2 / 2 + qc * T4 / 8, qa * T + qc * T3 / 3, qc * T2 / 2),
+         (qc * T3 / 6, qc * T2 / 2, qc * T))
+    rp = max(pos_std_m, _POS_STD_FLOOR_M) ** 2
+    rv = max(vel_std_m_s, _VEL_STD_FLOOR_M_S) ** 2
+    # the filter's equation in the control form of dare3: a = A^T, G = H^T R^-1 H
+    P = dare3(_t3(A), ((1.0 / rp, 0.0, 0.0), (0.0, 1.0 / rv, 0.0), (0.0, 0.0, 0.0)), Q)
+    s00, s01, s10, s11 = P[0][0] + rp, P[0][1], P[1][0], P[1][1] + rv
+    det = s00 * s11 - s01 * s10
+    i00, i01, i10, i11 = s11 / det, -s01 / det, -s10 / det, s00 / det
+    return NavGains(tuple((P[r][0] * i00 + P[r][1] * i10, P[r][0] * i01 + P[r][1] * i11) for r in range(3)))
 
 
-@lru_cache(maxsize=1)
-def _blas_threads() -> ThreadpoolController:
-    """The process's BLAS thread pools (found once: the search scans the loaded libraries)."""
-    return ThreadpoolController()
+def _t3(X):
+    return tuple(tuple(X[c][r] for c in range(3)) for r in range(3))
+
+
+def _mm3(X, Y):
+    return tuple(tuple(X[r][0] * Y[0][c] + X[r][1] * Y[1][c] + X[r][2] * Y[2][c] for c in range(3))
+                 for r in range(3))
+
+
+def _add3(X, Y):
+    return tuple(tuple(X[r][c] + Y[r][c] for c in range(3)) for r in range(3))
+
+
+def _inv3(M):
+    """Inverse of a 3x3 matrix by its cofactors (ValueError when singular)."""
+    (a, b, c), (d, e, f), (g, h, i) = M
+    A, B, C = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * A + b * B + c * C
+    if not (det != 0.0 and math.isfinite(det)):
+        raise ValueError("singular matrix")
+    return ((A / det, (c * h - b * i) / det, (b * f - c * e) / det),
+            (B / det, (a * i - c * g) / det, (c * d - a * f) / det),
+            (C / det, (b * g - a * h) / det, (a * e - b * d) / det))
+
+
+_I3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+def dare3(a, G, Q, max_iter: int = 64):
+    """Stabilising solution ``X`` of ``X = a^T X (I + G X)^-1 a + Q`` (3x3, tuples of rows).
+
+    With ``G = b r^-1 b^T`` this is the discrete algebraic Riccati equation
+    ``X = a^T X a - a^T X b (r + b^T X b)^-1 b^T X a + Q`` (scipy's
+    ``solve_discrete_are(a, b, Q, r)``, which the tests compare). Solved by
+    the structure-preserving doubling algorithm (Chu, Fan, Lin & Wang,
+    J. Phys. A 37, 2004): ``W = I + G_k H_k``, ``A_k+1 = A_k W^-1 A_k``,
+    ``G_k+1 = G_k + A_k W^-1 G_k A_k^T``, ``H_k+1 = H_k + A_k^T H_k W^-1 A_k``
+    from ``(a, G, Q)``; ``H_k`` converges quadratically to ``X`` (8-25
+    iterations for the observer's gains). Plain float arithmetic in a fixed
+    order: the result is the same bits on every IEEE-754 machine.
+
+    Raises
+    ------
+    ValueError
+        No convergence in ``max_iter`` doublings (or a singular step).
+    """
+    A, Gk, Hk = a, G, Q
+    for _ in range(max_iter):
+        Wi = _inv3(_add3(_I3, _mm3(Gk, Hk)))
+        AW = _mm3(A, Wi)
+        G1 = _add3(Gk, _mm3(_mm3(AW, Gk), _t3(A)))
+        H1 = _add3(Hk, _mm3(_mm3(_t3(A), Hk), _mm3(Wi, A)))
+        A = _mm3(AW, A)
+        step = max(abs(H1[r][c] - Hk[r][c]) for r in range(3) for c in range(3))
+        size = max(abs(H1[r][c]) for r in range(3) for c in range(3))
+        Gk, Hk = G1, H1
+        if step <= 1e-15 * size:
+            return Hk
+        if not math.isfinite(step):
+            break
+    raise ValueError("Riccati doubling did not converge")
 
 
 def tilt_gain(dt_s: float, window_s: float, vel_std_m_s: float, gyro_noise: float, gravity_m_s2: float,
@@ -484,6 +578,10 @@ class VelocityAidedObserver:
         self._n = 0
         self.n_late_fixes = 0
         self.n_tilt_updates = 0
+        #: Degraded frames per kind (module docstring, "Degraded measurements").
+        self.faults = dict.fromkeys(FAULT_KINDS, 0)
+        self._sb: Vec3 = (0.0, 0.0, 0.0)     # last valid body specific force
+        self._ub: Vec3 = _E3                 # last tilt body vector (unit)
 
     # -- outputs ------------------------------------------------------------------------
 
@@ -550,17 +648,39 @@ class VelocityAidedObserver:
         -------
         None (read :attr:`R`, :attr:`b`, :attr:`p`, :attr:`v` or :meth:`estimate`).
         """
+        faults = self.faults
+        if not math.isfinite(t_s):
+            faults["time"] += 1
+            return
         wx, wy, wz = float(gyro[0]), float(gyro[1]), float(gyro[2])
         ax, ay, az = float(accel[0]), float(accel[1]), float(accel[2])
-        tau = t_s if nav_t is None else min(float(nav_t), t_s)
+        if not _finite3(wx, wy, wz):
+            faults["gyro"] += 1
+            wx, wy, wz = self._w
+        a_ok = _finite3(ax, ay, az)
+        if not a_ok:
+            faults["accel"] += 1
+            ax, ay, az = self._sb
+        a_dir = a_ok and ax * ax + ay * ay + az * az >= (FREE_FALL_FRACTION * self.g) ** 2
+        if a_ok and not a_dir:
+            faults["free_fall"] += 1
+        fix_ok = (nav_t is None or math.isfinite(nav_t)) and _finite3(*(float(x) for x in pos)) \
+            and _finite3(*(float(x) for x in vel))
+        if not fix_ok:
+            faults["fix"] += 1
         if self.t is None:
+            if not (a_dir and fix_ok):
+                return                       # no vertical (or no position) yet: wait for one
             if thrust_n is not None:
                 self._f_model = float(thrust_n)
-            self._initialise(t_s, (wx, wy, wz), (ax, ay, az), mag, pos, vel, tau)
+            self._initialise(t_s, (wx, wy, wz), (ax, ay, az), mag, pos, vel, t_s if nav_t is None else
+                             min(float(nav_t), t_s))
             return
+        tau = (t_s if nav_t is None else min(float(nav_t), t_s)) if fix_ok else self._tau
         dt = t_s - self.t
         if not dt > 0.0:
             return
+        self._sb = (ax, ay, az)
         g = self.g
         # --- thrust model (paper's vectors) -------------------------------------------
         if self.paper and thrust_n is not None:
@@ -574,7 +694,7 @@ class VelocityAidedObserver:
         R = _mul(self.R, so3_exp(h * (pw[0] + wx) - dt * bx, h * (pw[1] + wy) - dt * by, h * (pw[2] + wz) - dt * bz))
         # --- frame innovations: gravity, heading ---------------------------------------
         sx = sy = sz = 0.0
-        if self.k_g > 0.0:
+        if self.k_g > 0.0 and a_dir:
             ux, uy, uz = _unit(ax, ay, az)
             zx, zy, zz = R[6], R[7], R[8]                       # R^T e3
             k = self.k_g
@@ -585,7 +705,9 @@ class VelocityAidedObserver:
             c = mx * zx + my * zy + mz * zz
             px, py, pz = mx - c * zx, my - c * zy, mz - c * zz
             n = math.sqrt(px * px + py * py + pz * pz)
-            if n > 0.0:
+            if not n > 0.0:                 # zero, non-finite or vertical: no heading this frame
+                faults["mag"] += 1
+            else:
                 px, py, pz = px / n, py / n, pz / n
                 hx, hy, hz = _apply_t(R, *self.h)               # R^T h (normal to R^T e3)
                 k = self.k_m * ((py * hz - pz * hy) * zx + (pz * hx - px * hz) * zy + (px * hy - py * hx) * zz)
@@ -604,7 +726,9 @@ class VelocityAidedObserver:
             ubx, uby, ubz = _E3
         else:
             sbx, sby, sbz = ax, ay, az
-            ubx, uby, ubz = self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+            if a_dir:
+                self._ub = self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+            ubx, uby, ubz = self._ub
         r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
         fw = (r0 * sbx + r1 * sby + r2 * sbz, r3 * sbx + r4 * sby + r5 * sbz, r6 * sbx + r7 * sby + r8 * sbz)
         uw = (r0 * ubx + r1 * uby + r2 * ubz, r3 * ubx + r4 * uby + r5 * ubz, r6 * ubx + r7 * uby + r8 * ubz)
@@ -631,11 +755,24 @@ class VelocityAidedObserver:
         """(s_b, u_b): the body specific force of the translational filter and the tilt vector."""
         if self.paper:
             return (0.0, 0.0, self._f_model / self.m), _E3
-        return (ax, ay, az), self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+        self._ub = self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+        return (ax, ay, az), self._ub
 
     def _initialise(self, t_s, w, a, mag, pos, vel, tau) -> None:
-        """At rest: R from TRIAD (accelerometer as the vertical, magnetometer), zero bias."""
-        self.R = triad_rotation(a, mag, _E3, self.field)
+        """At rest: R from TRIAD (accelerometer as the vertical, magnetometer), zero bias.
+        ``a`` has a direction (the caller checks); a magnetometer without a usable direction
+        (zero, non-finite, along ``a``) gives the heading of the body x axis as world x."""
+        mx, my, mz = float(mag[0]), float(mag[1]), float(mag[2])
+        a0, a1, a2 = a
+        cx, cy, cz = a1 * mz - a2 * my, a2 * mx - a0 * mz, a0 * my - a1 * mx
+        if _finite3(mx, my, mz) and cx * cx + cy * cy + cz * cz > 1e-12 * (a0 * a0 + a1 * a1 + a2 * a2) * (
+                mx * mx + my * my + mz * mz):
+            self.R = triad_rotation(a, (mx, my, mz), _E3, self.field)
+        else:
+            self.faults["mag"] += 1
+            ex = (1.0, 0.0, 0.0) if abs(a0) < 0.9 * math.sqrt(a0 * a0 + a1 * a1 + a2 * a2) else (0.0, 1.0, 0.0)
+            self.R = triad_rotation(a, ex, _E3, ex)
+        self._sb = (float(a0), float(a1), float(a2))
         self.t = t_s
         self._w = w
         self.p = (float(pos[0]), float(pos[1]), float(pos[2]))

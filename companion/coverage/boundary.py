@@ -97,16 +97,27 @@ def douglas_peucker(pts: np.ndarray, tol: float) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
-def field_boundary(grid: OccupancyGrid, tol_m: float) -> np.ndarray:
+def field_boundary(grid: OccupancyGrid, tol_m: float, grow_m: float = 0.0) -> np.ndarray:
     """(K, 2) ENU polygon (m, counter-clockwise, not closed) around the field (module doc).
 
-    Returns an empty (0, 2) array when the map has no free cell.
+    ``grow_m``: the field is first grown by this distance (every cell whose
+    centre is closer than ``grow_m`` to a field cell's centre joins it; the
+    grid is padded so that growth is not cut at the map's edge), so the
+    polygon keeps at least ``grow_m - h`` (h: the cell size) outside every
+    field cell. Returns an empty (0, 2) array when the map has no free cell.
     """
+    from .freespace import dilate_runs, disk_half_widths
+
     mask = field_mask(grid)
     if not mask.any():
         return np.zeros((0, 2))
     h = grid.resolution_m
-    loop = _outer_loop(mask)                       # (row, col) corners
+    pad = 0
+    if grow_m > 0:
+        widths = disk_half_widths(grow_m / h)
+        pad = len(widths) // 2 + 1
+        mask = dilate_runs(np.pad(mask, pad), widths, outside=False)
+    loop = _outer_loop(mask) - pad                 # (row, col) corners, in the unpadded grid
     g = np.column_stack([loop[:, 1] * h, loop[:, 0] * h])      # G frame (x, y)
     # split the closed loop at its farthest point from the start, simplify both halves
     far = int(np.argmax(np.hypot(*(g - g[0]).T)))

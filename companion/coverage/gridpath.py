@@ -219,6 +219,7 @@ def mask_graph(mask: np.ndarray, neighbours=None, edge_cells: int | None = None)
     nb = np.empty((n, len(neighbours)), dtype=np.int32 if n < 2**31 else np.int64)
     for k, (dr, dc, _) in enumerate(neighbours):
         nb[:, k] = ids.take(lin + (dr * width + dc))
+    del ids, lin
     return _graph_of(nb, neighbours, edge_cells), rows, cols
 
 
@@ -227,21 +228,24 @@ def _graph_of(nb: np.ndarray, neighbours, edge_cells: int | None) -> csr_matrix:
     edge_cells = _EDGE_CELLS if edge_cells is None else edge_cells
     n, k = nb.shape
     ok = nb >= 0
+    step = np.array([s for _, _, s in neighbours])
+    to = nb[ok]
+    w = np.broadcast_to(step, (n, k))[ok]
     if edge_cells > 0:
         inner = _rows_all(ok)
         for _ in range(edge_cells - 1):
             inner = inner & _rows_all(np.where(ok, inner[np.where(ok, nb, 0)], False))
-        cost = np.where(inner, 1.0, _EDGE_COST)
-    else:
-        cost = np.ones(n)
-    step = np.array([s for _, _, s in neighbours])
-    to = nb[ok]
-    w = np.broadcast_to(step, (n, k))[ok] * cost[to]
-    per_row = ok[:, 0].astype(np.int64)
+        w = w * np.where(inner, 1.0, _EDGE_COST)[to]
+    # else every cell costs 1: the steps themselves (x * 1.0 is x; no (n k) float temporaries)
+    # int32 offsets when they fit, like the indices: scipy would otherwise copy the
+    # indices to int64 to match (8 bytes an edge, 28 MB for a 10 ha transit graph)
+    idx = np.int32 if n * k < 2**31 - 1 else np.int64
+    per_row = ok[:, 0].astype(idx)
     for j in range(1, k):
         per_row += ok[:, j]
-    indptr = np.concatenate([[0], np.cumsum(per_row)])
-    return csr_matrix((w, to, indptr), shape=(n, n))
+    indptr = np.zeros(n + 1, dtype=idx)
+    np.cumsum(per_row, out=indptr[1:])
+    return csr_matrix((w, to.astype(idx, copy=False), indptr), shape=(n, n))
 
 
 def _rows_all(b: np.ndarray) -> np.ndarray:

@@ -139,7 +139,7 @@ def _enu_deg(alpha_g_rad: float, yaw_rad: float) -> float:
     return 0.0 if deg >= 180.0 - WRAP_TOL_DEG else deg
 
 
-def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig) -> CoveragePlan:
+def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig, airframe_radius_m: float = 0.0) -> CoveragePlan:
     """Plan the ISOA coverage path of ``grid`` (module doc).
 
     Parameters
@@ -149,6 +149,11 @@ def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig) -> CoveragePlan:
         Line spacing (None: the detected row spacing), safety margin,
         orientation step (<= 1 deg), optional forced orientation, minimum
         main-segment length.
+    airframe_radius_m : float
+        Radius of the vehicle (m): the free space is eroded by it plus the
+        safety margin, so the margin is kept from the airframe's surface
+        (``companion.margins``; the mission planner passes it, 0 keeps the
+        margin from the centre).
 
     Raises
     ------
@@ -157,10 +162,11 @@ def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig) -> CoveragePlan:
         row spacing can be detected while none is configured, or a main
         segment cannot be reached.
     """
-    free = erode_free_space(grid, cfg.safety_margin_m)
+    clearance = float(airframe_radius_m) + cfg.safety_margin_m
+    free = erode_free_space(grid, clearance)
     if not free.eroded.any():
-        raise PlanError(grid.source, f"no free space left after eroding by the safety margin "
-                                     f"{cfg.safety_margin_m} m")
+        raise PlanError(grid.source, f"no free space left after eroding by the airframe radius "
+                                     f"{airframe_radius_m:g} m + the safety margin {cfg.safety_margin_m:g} m")
     rows = detect_rows(grid)
     has_rows = rows is not None and len(rows.offsets_m) >= 2
     if cfg.line_spacing_m is not None:
@@ -192,7 +198,7 @@ def plan_coverage(grid: OccupancyGrid, cfg: CoverageConfig) -> CoveragePlan:
         raise PlanError(grid.source, f"no main segment of at least {cfg.min_segment_m} m fits "
                                      "in the eroded free space")
     starts, ends = seg.endpoints_g(alpha)
-    keep, warnings = reachable_segments(grid, free, starts, ends, cfg.safety_margin_m)
+    keep, warnings = reachable_segments(grid, free, starts, ends, clearance)
     dropped = [(tuple(map(float, p)), tuple(map(float, q)))
                for p, q in zip(grid_to_world(grid, starts[~keep]), grid_to_world(grid, ends[~keep]))]
     starts, ends = starts[keep], ends[keep]
@@ -257,5 +263,5 @@ def reachable_segments(grid: OccupancyGrid, free, starts_g: np.ndarray, ends_g: 
     n_seg = int(np.count_nonzero(~keep))
     warnings = [f"{grid.source}: {n_seg} main segment(s), {float(length[~keep].sum()):.1f} m, around "
                 f"{', '.join(where)} m{more} cannot be reached from the rest of the field in the free "
-                f"space eroded by the safety margin {margin_m:g} m: not flown"]
+                f"space eroded by {margin_m:g} m (airframe radius + safety margin): not flown"]
     return keep, tuple(warnings)

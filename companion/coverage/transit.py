@@ -22,6 +22,7 @@ Pooled distances are also the sorties' transit estimates.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -120,20 +121,18 @@ class TransitTree:
         (``gridpath.simplify_many``): the same paths, far fewer vectorised calls."""
         out: list = [None] * len(qs_g)
         who, chains, ends = [], [], []
-        pred = self.__dict__.get("_pred_list")
+        pred = self.pred.item       # Python ints per step, without a list of all n nodes
         off = np.array([self.c0, self.r0]) * self.free.resolution_m
         qs_g = np.asarray(qs_g, float).reshape(-1, 2)
         for k, (q_g, node) in enumerate(zip(qs_g, self._attach(qs_g))):
             if node is None:
                 out[k] = aux_path(self.free, self.root_g, q_g, self.source)
                 continue
-            if pred is None:        # walked in Python ints: a numpy scalar per step costs more
-                pred = self.__dict__.setdefault("_pred_list", self.pred.tolist())
             chain = [node]
-            p = pred[node]
+            p = pred(node)
             while p >= 0:
                 chain.append(p)
-                p = pred[p]
+                p = pred(p)
             chain = np.array(chain[::-1])
             who.append(k)
             ends.append(q_g)
@@ -162,8 +161,11 @@ def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>
                            np.zeros(0), empty, source)
     graph, rows, cols = mask_graph(pooled, neighbours=NEIGHBOURS_4, edge_cells=0)
     lin = rows * width + cols
+    if pooled.size < 2**31:     # int32 node cells: the same centres, half the memory held
+        rows, cols = rows.astype(np.int32), cols.astype(np.int32)
+    # a tree without distances yet: only its cell centres are used to attach the root
     tree = TransitTree(free, np.asarray(root_g, float), p, r0, c0, lin, width, rows, cols,
-                       np.full(len(rows), np.inf), np.full(len(rows), -9999), source)
+                       np.zeros(0), np.zeros(0, dtype=np.int64), source)
     start = None
     # the root attaches to the nearest pooled cell it sees (distances not known yet)
     cell = p * h
@@ -177,8 +179,9 @@ def build_transit_tree(free: FreeSpace, root_g: np.ndarray, source: str = "<map>
     if len(nodes):
         vis = visible_from(free, np.asarray(root_g, float), tree._centre_g(rows[nodes], cols[nodes]))
         start = int(nodes[vis][0]) if vis.any() else None
-    if start is None:
-        return tree
+    if start is None:           # no node reachable from the root
+        return dataclasses.replace(tree, dist=np.full(len(lin), np.inf), pred=np.full(len(lin), -9999))
+    del tree
     dist, pred = dijkstra(graph, directed=True, indices=start, return_predecessors=True)
     pooled_fs = FreeSpace(eroded=pooled, free=pooled, resolution_m=p * h, threshold_m=free.threshold_m)
     return TransitTree(free, np.asarray(root_g, float), p, r0, c0, lin, width, rows, cols, dist, pred, source,

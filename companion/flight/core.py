@@ -124,6 +124,12 @@ OUTPUT_FAULT_PREFIX = "companion: output fault: "
 #: Phases before arming: an output fault there ends the flight on the ground.
 BEFORE_ARMING = ("connect", "setup", "upload", "preflight")
 
+#: STATUSTEXT (NOTICE) once per kind of measurement the observer had to skip.
+OBSERVER_PREFIX = "companion: observer: "
+OBSERVER_FAULT_TEXT = {"free_fall": "free fall, tilt on the gyro", "accel": "accel not finite, skipped",
+                       "gyro": "gyro not finite, last rate held", "mag": "no usable mag, heading on gyro",
+                       "fix": "position fix not finite, skipped", "time": "frame time not finite, skipped"}
+
 
 @dataclass(frozen=True)
 class FlightInputs:
@@ -291,6 +297,8 @@ class FlightCore:
         self._traj_deadline = math.inf
         self.statustext: list[str] = []
         self.n_control_faults = 0
+        #: The observer's degraded frames per kind (``VelocityAidedObserver.faults``), as last seen.
+        self.observer_faults: dict = {}
         self.n_stale_frames = 0
         self._last_err = None
         self._controlling = False
@@ -949,10 +957,25 @@ class FlightCore:
         if cmd is None and self.ctrl is not None and self._pos is not None and self.degraded is None:
             # Not flying the inner loop (yet): the observer still learns the gyro
             # bias and the fixes' noise, so control starts from a settled estimate.
-            self.ctrl.observe(t, gyro, acc, mag, self._pos, self._vel, self._nav_t)
+            try:
+                self.ctrl.observe(t, gyro, acc, mag, self._pos, self._vel, self._nav_t)
+            except (ValueError, ZeroDivisionError, OverflowError):
+                self.n_control_faults += 1      # never out of the flight loop (the observer degrades itself)
+        obs = self.ctrl.observer if self.ctrl is not None else None
+        if obs is not None and obs.faults != self.observer_faults:
+            self._observer_faults(obs.faults)
         self.outbox.append(ActuatorOut(t_us, cmd, self.armed))
         if ref is not None:
             self._record(t, ref, out)
+
+    def _observer_faults(self, faults: dict) -> None:
+        """Say on the wire, once per kind, that the observer skipped a measurement it could not use
+        (``companion.control.observer``, "Degraded measurements"); keep the counts."""
+        for kind, n in faults.items():
+            if n and not self.observer_faults.get(kind):
+                self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_NOTICE,
+                                                      f"{OBSERVER_PREFIX}{OBSERVER_FAULT_TEXT[kind]}"[:50].encode()))
+        self.observer_faults = dict(faults)
 
     def _matched_ref(self, t_us: int | None, by_ms: bool):
         """(frame time s, reference position, phase) of the frame at ``t_us`` (or its

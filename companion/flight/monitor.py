@@ -158,8 +158,9 @@ class FlightMonitor:
     # --- the vehicle's messages ---------------------------------------------
     def on_heartbeat(self, t_s: float | None, armed: bool, custom_mode: int, system_status: int) -> Violation | None:
         if system_status == MAV_STATE_EMERGENCY and not self._emergency_seen:
-            self._emergency_seen = True
             if self.watching or self.crash is not None:
+                # seen only once reported: an EMERGENCY before our arming must not hide one in flight
+                self._emergency_seen = True
                 return self._violate(t_s, "emergency", "vehicle reports MAV_STATE_EMERGENCY", "end",
                                      system_status=system_status)
         if not self.watching or self._landing:

@@ -28,8 +28,6 @@ from __future__ import annotations
 
 import os
 import select
-import socket
-import struct
 import time
 from typing import Callable, Iterable
 
@@ -40,13 +38,14 @@ from . import codec
 from .command_rules import actuator_problem, outgoing_problem
 from .auth import LinkStats, VehicleFilter
 from .signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
-from .sockets import is_udp_url, open_udp
+from .sockets import is_datagram_url, open_pipe
 from .tlog import TlogWriter
 
 COMPANION_SYSTEM_ID = 1
 COMPANION_COMPONENT_ID = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
 
 _SCHEMES = ("udpin:", "udpout:", "udp:", "udpbcast:", "tcp:", "tcpin:")
+_MEMORY = "inproc:"
 
 
 def check_connection_string(url: str) -> None:
@@ -55,7 +54,8 @@ def check_connection_string(url: str) -> None:
     Raises
     ------
     InputError
-        Not ``udpin:/udpout:/udp:/udpbcast:/tcp:/tcpin:HOST:PORT`` nor a serial device.
+        Not ``udpin:/udpout:/udp:/udpbcast:/tcp:/tcpin:HOST:PORT``, ``inproc:NAME``
+        (an in-process SITL, ``sitl.api.SitlInProcess``) nor a serial device.
     """
     if url.startswith(_SCHEMES):
         rest = url.split(":", 1)[1]
@@ -64,6 +64,8 @@ def check_connection_string(url: str) -> None:
             raise InputError(f"--connect {url}", "expected SCHEME:HOST:PORT, e.g. udpout:127.0.0.1:14540")
         return
     if url.startswith(("/dev/", "COM")):
+        return
+    if url.startswith(_MEMORY) and len(url) > len(_MEMORY):
         return
     raise InputError(f"--connect {url}", "unknown connection string (use udpout:HOST:PORT, udpin:HOST:PORT, "
                      "tcp:HOST:PORT, tcpin:HOST:PORT or a serial device)")
@@ -110,11 +112,10 @@ class Connection:
         self._conn = None
         self._mav = None
         self._fd = None
-        self._is_udp = url.startswith(("udp",))
+        self._is_udp = url.startswith(("udp", _MEMORY))   # datagrams carry whole packets
         self._last_heartbeat_s: float | None = None
-        self._sock = None          # UDP socket read/written directly (see ``open``)
+        self._pipe = None          # datagram pipe (UDP socket or in-process, ``sitl.pipe``), see ``open``
         self._dest = None          # udpout: the vehicle's resolved address
-        self._rcvtimeo = None      # the socket's current SO_RCVTIMEO (s)
         self._rx_log = None        # packets received, not yet in the tlog (see ``_record_answer``)
         self._rx_frames = None     # [(index in _rx_log, HIGHRES_IMU time_usec)] of that batch
         self._tx_log = []          # packets sent while a received batch waits, in order
@@ -124,14 +125,30 @@ class Connection:
         #: whatever the caller does in reaction always follows the same frame
         #: whatever the arrival timing (UDP): same seed, same flight.
         self.frame_sync = False
-        #: Lockstep (set by the runner): busy-poll this long (s) for the next
-        #: datagram before sleeping in the kernel. The vehicle's next frame
-        #: usually arrives within tens of microseconds, less than a process
-        #: wake-up costs. Only worth it with the vehicle on another core.
-        self.spin_s = 0.0
+        self._spin_s = 0.0
         #: Time stamp (us) for the .tlog records: the runner maps the vehicle's
         #: clock onto the wall clock (``MissionRunner._stamp_us``); None: wall clock.
         self.clock: Callable[[], int] | None = None
+
+    @property
+    def spin_s(self) -> float:
+        """Lockstep (set by the runner): busy-poll up to this long (s) for the
+        next datagram before sleeping in the kernel (UDP; adaptive, see
+        ``sitl.pipe.AdaptiveSpin``). The vehicle's next frame usually arrives
+        within tens of microseconds, less than a process wake-up costs. Only
+        worth it with the vehicle on another core and that core free."""
+        return self._spin_s
+
+    @spin_s.setter
+    def spin_s(self, value: float) -> None:
+        self._spin_s = float(value)
+        if self._pipe is not None and not self._pipe.memory:
+            self._pipe.spin.max_s = self._spin_s
+
+    @property
+    def in_process(self) -> bool:
+        """The vehicle is an in-process SITL (``inproc:NAME``)."""
+        return self._pipe is not None and self._pipe.memory
 
     def _stamp(self) -> int:
         c = self.clock
@@ -147,17 +164,20 @@ class Connection:
         InputError
             Unknown host, port in use, connection refused: one line naming ``--connect``.
         """
-        if is_udp_url(self.url):
-            # Read and write the UDP socket directly: a blocking socket with a
-            # kernel receive timeout (SO_RCVTIMEO) waits for the next frame in
-            # one recvfrom() instead of select() + recvfrom() + a failing
-            # recvfrom(); MSG_DONTWAIT polls without waiting.
-            us = open_udp(self.url, "--connect")
-            self._sock = us.sock
-            self._dest = us.peer
-            self._fd = self._sock.fileno()
+        if is_datagram_url(self.url):
+            # Read and write datagrams directly (``sitl.pipe``): on UDP a
+            # blocking socket with a kernel receive timeout (SO_RCVTIMEO) waits
+            # for the next frame in one recvfrom() instead of select() +
+            # recvfrom() + a failing recvfrom(); MSG_DONTWAIT polls without
+            # waiting. In process (``inproc:``) a wait runs the SITL instead.
+            pipe = open_pipe(self.url, "--connect")
+            self._pipe = pipe
+            self._dest = pipe.peer
+            self._fd = None if pipe.memory else pipe.fileno()
+            if not pipe.memory:
+                pipe.spin.max_s = self._spin_s
             self._mav = mavlink.MAVLink(None, srcSystem=COMPANION_SYSTEM_ID, srcComponent=COMPANION_COMPONENT_ID)
-            self._conn = us
+            self._conn = pipe
         else:
             from pymavlink import mavutil  # deferred: importing mavutil is slow and sets a global dialect
 
@@ -184,11 +204,11 @@ class Connection:
 
     def close(self) -> None:
         self._flush_rx()
-        sock, self._sock = self._sock, None
+        pipe, self._pipe = self._pipe, None
         if self._conn is not None:
             try:
-                if sock is not None:
-                    sock.close()
+                if pipe is not None:
+                    pipe.close()
                 else:
                     self._conn.close()
             except OSError:
@@ -231,7 +251,7 @@ class Connection:
         why = outgoing_problem(msg)
         if why is not None:
             raise UnsafeMessage(msg.get_type(), why)
-        if self._sock is None:
+        if self._pipe is None:
             self._mav.send(msg)
         else:
             mav = self._mav
@@ -288,12 +308,13 @@ class Connection:
         self._rx_frames = [(j - i, t) for j, t in self._rx_frames[cut + 1:]]
 
     def _write(self, buf: bytes) -> None:
-        if self._sock is not None:
+        pipe = self._pipe
+        if pipe is not None:
             try:
                 if self._dest is not None:
-                    self._sock.send(buf)                       # connected to the vehicle
+                    pipe.send(buf)                            # connected to the vehicle
                 elif self.filter.vehicle_addr is not None:    # udpin: the vehicle's bound address
-                    self._sock.sendto(buf, self.filter.vehicle_addr)
+                    pipe.sendto(buf, self.filter.vehicle_addr)
             except OSError:   # e.g. ECONNREFUSED left by an ICMP error: UDP is lossy anyway
                 pass
         else:
@@ -309,7 +330,7 @@ class Connection:
             why = actuator_problem(*motor_cmd)
             if why is not None:
                 raise UnsafeMessage("HIL_ACTUATOR_CONTROLS", why)
-        if self._sock is None or mav.signing.sign_outgoing:
+        if self._pipe is None or mav.signing.sign_outgoing:
             self.send(codec.encode_hil_actuator_controls(mav, time_usec, motor_cmd, armed))
             if self.tlog is not None:
                 self._record_answer(time_usec)
@@ -385,48 +406,29 @@ class Connection:
                 out.append(part)
         return out
 
-    def _set_rcvtimeo(self, timeout_s: float) -> None:
-        sec = int(timeout_s)
-        usec = max(int((timeout_s - sec) * 1e6), 1 if sec == 0 else 0)
-        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("@ll", sec, usec))
-        self._rcvtimeo = timeout_s
-
-    @staticmethod
-    def _recv_spin(sock, spin_s: float):
-        """recvfrom() that polls for ``spin_s`` before blocking (socket timeout)."""
-        t_end = time.perf_counter() + spin_s
-        while True:
-            try:
-                return sock.recvfrom(65536, socket.MSG_DONTWAIT)
-            except BlockingIOError:
-                if time.perf_counter() >= t_end:
-                    return sock.recvfrom(65536)
-
     def _poll_udp(self, timeout_s: float) -> list:
-        """``poll`` on the raw UDP socket: the next datagram, waiting up to
+        """``poll`` on the datagram pipe: the next datagram, waiting up to
         ``timeout_s``, then whatever else is already queued (with
         ``frame_sync``: up to the end of the next sensor frame, each read
         waiting up to ``timeout_s``)."""
         self._flush_rx()
-        sock = self._sock
+        pipe = self._pipe
         vfilter = self.filter
         out: list = []
         wait = timeout_s > 0
-        if wait and timeout_s != self._rcvtimeo:
-            self._set_rcvtimeo(timeout_s)
         sync = wait and self.frame_sync
         sync_until = None
-        spin = self.spin_s if wait else 0.0
+        spin = wait and self._spin_s > 0
         for k in range(256):  # bound the drain so a flood cannot starve the caller
             if sync and k == 1:
                 sync_until = time.monotonic() + timeout_s
-            try:
-                if wait and (k == 0 or (sync and time.monotonic() < sync_until)):
-                    data, addr = self._recv_spin(sock, spin) if spin > 0 else sock.recvfrom(65536)
-                else:
-                    data, addr = sock.recvfrom(65536, socket.MSG_DONTWAIT)
-            except OSError:   # timeout / nothing queued (EAGAIN), ECONNREFUSED, EINTR
+            if wait and (k == 0 or (sync and time.monotonic() < sync_until)):
+                got = pipe.recv(timeout_s, spin)
+            else:
+                got = pipe.recv(0.0)
+            if got is None:   # timeout / nothing queued (EAGAIN), ECONNREFUSED, EINTR
                 break
+            data, addr = got
             if data:
                 out += vfilter.filter(self._parse_datagram(data), addr)
             # In lockstep the vehicle sends one datagram per frame, ending with
@@ -455,7 +457,7 @@ class Connection:
             raise LinkError("connection is not open")
         if self.tlog is not None:
             self.tlog.tick()   # flushed at least once a flush interval, even while the link is silent
-        if self._sock is not None:
+        if self._pipe is not None:
             return self._poll_udp(timeout_s)
         if timeout_s > 0 and self._fd is not None:
             try:

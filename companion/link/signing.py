@@ -83,12 +83,15 @@ def load_signing_key(path: str | Path, option: str = "--signing-key") -> bytes:
     InputError
         Missing, unreadable, or not a key (one line naming the option and file).
     """
-    source = f"{option} {path}"
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(source, "is a directory, not a key file")
+    from ..inputs import name, open_regular
+
+    source = f"{option} {name(path)}"
     try:
-        with open(p, "rb") as f:
+        f = open_regular(path, InputError, "key file")
+    except InputError as exc:
+        raise InputError(source, exc.problem) from None
+    try:
+        with f:
             data = f.read(4097)
     except OSError as exc:
         raise InputError(source, f"cannot read: {exc.strerror or exc}") from None

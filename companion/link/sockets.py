@@ -13,6 +13,10 @@ can then send to them. Here:
   (loopback for a loopback peer) and drops datagrams from any other source.
 
 No address is ever widened: loopback unless the user gives another one.
+
+``open_pipe`` is the one place where a connection string becomes a datagram
+pipe (``sitl.pipe``), for the SITL's links and the companion's alike: a UDP
+socket as above, or ``inproc:NAME``, the in-process transport.
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from __future__ import annotations
 import errno
 import socket
 from dataclasses import dataclass
+
+from sitl.pipe import UdpPipe, connect_memory, is_memory_url, listen_memory
 
 from ..errors import InputError
 
@@ -56,6 +62,30 @@ def split_url(url: str) -> tuple[str, str, int]:
 
 def is_udp_url(url: str) -> bool:
     return url.startswith(UDP_SCHEMES)
+
+
+def is_datagram_url(url: str) -> bool:
+    """A link read datagram by datagram through a ``sitl.pipe`` pipe (UDP or in-process)."""
+    return url.startswith(UDP_SCHEMES) or is_memory_url(url)
+
+
+def open_pipe(url: str, option: str, listen: bool = False):
+    """The datagram pipe of ``url``: ``sitl.pipe.UdpPipe`` for ``udpin:``/``udp:``/
+    ``udpout:`` (``open_udp``), ``sitl.pipe.MemoryPipe`` for ``inproc:NAME``
+    (``listen``: the vehicle end, registered under NAME; else the peer's end).
+
+    Raises
+    ------
+    InputError
+        As ``open_udp``; for ``inproc:``, a name in use or nobody listening.
+    """
+    if is_memory_url(url):
+        try:
+            return listen_memory(url) if listen else connect_memory(url)
+        except ValueError as exc:
+            raise InputError(f"{option} {url}", str(exc)) from None
+    us = open_udp(url, option)
+    return UdpPipe(us.sock, us.server, us.peer)
 
 
 def open_udp(url: str, option: str) -> UdpSocket:

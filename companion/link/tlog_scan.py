@@ -33,10 +33,12 @@ jumps (the totals count them all).
 
 from __future__ import annotations
 
+import bisect
 import struct
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from .codec import FAST_DECODERS, x25_crc
@@ -195,6 +197,23 @@ class ScanSummary:
                 "time_jumps": [j.to_dict() for j in self.time_jumps]}
 
 
+class TlogGarbage(ValueError):
+    """More bytes that frame no valid record than the scanner's cap (``max_garbage_bytes``).
+
+    Attributes
+    ----------
+    n_bytes : int
+        Such bytes so far (all runs together).
+    n_records : int
+        Valid records so far.
+    """
+
+    def __init__(self, n_bytes: int, n_records: int) -> None:
+        found = "no valid record" if n_records == 0 else f"{n_records:,} valid records"
+        super().__init__(f"{n_bytes:,} bytes that are no MAVLink record ({found})")
+        self.n_bytes, self.n_records = n_bytes, n_records
+
+
 class TlogScanner:
     """Incremental .tlog framing (see the module docstring).
 
@@ -203,7 +222,8 @@ class TlogScanner:
     totals. Pure: bytes in, records out.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, max_garbage_bytes: int | None = None) -> None:
+        self.max_garbage_bytes = max_garbage_bytes
         self.summary = ScanSummary()
         self._buf = b""
         self._base = 0            # file offset of self._buf[0]
@@ -225,6 +245,7 @@ class TlogScanner:
         out, used = self._scan(buf, final=False)
         self._buf = buf[used:]
         self._base += used
+        self._check_garbage(self._base + len(self._buf))
         return out
 
     def close(self) -> list:
@@ -242,6 +263,18 @@ class TlogScanner:
         self._buf = b""
         return out
 
+    def _check_garbage(self, end_offset: int) -> None:
+        """``TlogGarbage`` once more bytes than ``max_garbage_bytes`` were skipped in all."""
+        cap = self.max_garbage_bytes
+        if cap is None:
+            return
+        start = self._bad_start
+        if start is None and self.summary.n_records == 0:
+            start = 0
+        run = 0 if start is None else end_offset - start
+        if self.summary.n_skipped_bytes + run > cap:
+            raise TlogGarbage(self.summary.n_skipped_bytes + run, self.summary.n_records)
+
     # --- framing -----------------------------------------------------------------
 
     def _scan(self, buf: bytes, final: bool):
@@ -256,11 +289,15 @@ class TlogScanner:
         summary = self.summary
         append = out.append
         new_record = tuple.__new__          # RawRecord without its Python-level __new__ (per record)
+        cand = _candidates(buf).tolist()
+        n_cand = len(cand)
+        search = bisect.bisect_right
         while i + 16 <= n:   # stamp (8) + the shortest packet (v1, empty payload: 8)
-            h = _header(buf, i)
-            if h is None:                      # not a packet start
+            h = _header(buf, i) if buf[i] <= _STAMP_TOP else None
+            if h is None:                      # no record starts here: on to the next candidate
                 self._mark_framed(i, None, 0)
-                i += 1
+                k = search(cand, i)
+                i = min(cand[k] if k < n_cand else n, max(n - 15, i + 1))
                 continue
             if h is _MORE:
                 break
@@ -268,7 +305,8 @@ class TlogScanner:
             if end > n:
                 if final:
                     self._mark_framed(i, "truncated", end)
-                    i += 1
+                    k = search(cand, i)          # the bytes up to the next candidate start no record
+                    i = min(cand[k] if k < n_cand else n, max(n - 15, i + 1))
                     continue
                 break
             extra = extras.get(msgid)
@@ -280,14 +318,16 @@ class TlogScanner:
                 continue
             if crc(buf[i + 9:crc_end - 2] + extra, 0xFFFF) != (buf[crc_end - 2] | buf[crc_end - 1] << 8):
                 self._mark_framed(i, "bad_crc", end)
-                i += 1
+                k = search(cand, i)
+                i = min(cand[k] if k < n_cand else n, max(n - 15, i + 1))
                 continue
             (stamp,) = unpack(buf, i)
             if not STAMP_MIN_US <= stamp <= STAMP_MAX_US:
                 # A 16-bit CRC passes on one random frame in 65536: a packet-looking
                 # run of garbage is also told by a time stamp no log can carry.
                 self._mark_framed(i, None, 0)
-                i += 1
+                k = search(cand, i)
+                i = min(cand[k] if k < n_cand else n, max(n - 15, i + 1))
                 continue
             sysid, compid = buf[ids], buf[ids + 1]
             # a valid record
@@ -369,6 +409,20 @@ class TlogScanner:
             s.regions.append(SkippedRegion(start, n, kind, n_packets, self._last_stamp))
         self._bad_start = None
         self._bad_kind = None
+
+
+#: Largest first byte of a plausible stamp (big-endian, <= STAMP_MAX_US).
+_STAMP_TOP = STAMP_MAX_US >> 56
+
+
+def _candidates(buf: bytes) -> np.ndarray:
+    """Offsets where a record could start: a magic byte 8 bytes on and a plausible
+    first stamp byte (vectorised, so garbage costs no Python step per byte)."""
+    a = np.frombuffer(buf, dtype=np.uint8)
+    if a.size < 9:
+        return np.zeros(0, dtype=np.intp)
+    magic = a[8:]
+    return np.flatnonzero(((magic == _V2) | (magic == _V1)) & (a[:-8] <= _STAMP_TOP))
 
 
 #: ``_header``'s answer when the buffer ends inside the header.

@@ -17,12 +17,13 @@ Coordinates are the map's local metric ENU frame.
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import MapError
-from ..textfile import read_text
+from ..inputs import brief, check, count_tokens, limits, name, read_bytes
 from .grid import ElevationModel
 
 #: Largest coordinate (m, +-) and height (m, +-) accepted: beyond them the grid is a
@@ -54,35 +55,44 @@ def load_dem(path: str | Path) -> ElevationModel:
         non-numeric data, non-positive cell size (message names the file).
     """
     p = Path(path)
-    src = str(p)
-    text = read_text(p, MapError, "elevation model", encoding="ascii", unreadable="cannot read as an ASCII grid")
+    src = name(p)
+    lim = limits()
+    raw = read_bytes(p, MapError, "elevation model", cap="dem_bytes", lim=lim)
+    if not raw.isascii():
+        bad = next(i for i, c in enumerate(raw) if c >= 128)
+        raise MapError(src, f"cannot read as an ASCII grid: byte 0x{raw[bad]:02x} at offset {bad} is not ASCII")
 
-    lines = text.splitlines()
     header: dict[str, float] = {}
-    i = 0
-    while i < len(lines):
-        parts = lines[i].split()
+    pos, line_no, n = 0, 0, len(raw)
+    while pos < n:
+        end = raw.find(b"\n", pos)
+        end = n if end < 0 else end
+        parts = raw[pos:min(end, pos + 200)].decode("ascii").split()
+        line_no += 1
         if not parts:
-            i += 1
+            pos = end + 1
             continue
         key = parts[0].lower()
         if key[0].isdigit() or key[0] in "+-.":
             break  # first data row
+        if end - pos > 200:
+            raise MapError(f"{src}: line {line_no}", f"header line of {end - pos} characters (expected 'key number')")
         if key not in _KEYS:
-            raise MapError(f"{src}: line {i + 1}", f"unknown header key {parts[0]!r} "
+            raise MapError(f"{src}: line {line_no}", f"unknown header key {brief(parts[0], 30)} "
                            "(expected ncols, nrows, xllcorner|xllcenter, yllcorner|yllcenter, cellsize or dx and dy, "
                            "NODATA_value)")
         if len(parts) != 2:
-            raise MapError(f"{src}: line {i + 1}", f"expected '{parts[0]} <number>'")
+            raise MapError(f"{src}: line {line_no}", f"expected '{parts[0]} <number>'")
         if key in header:
-            raise MapError(f"{src}: line {i + 1}", f"duplicate header key {parts[0]!r}")
+            raise MapError(f"{src}: line {line_no}", f"duplicate header key {parts[0]!r}")
         try:
             header[key] = float(parts[1])
         except ValueError:
-            raise MapError(f"{src}: line {i + 1}", f"{parts[0]} value {parts[1]!r} is not a number") from None
+            raise MapError(f"{src}: line {line_no}",
+                           f"{parts[0]} value {brief(parts[1], 30)} is not a number") from None
         if not math.isfinite(header[key]):
-            raise MapError(f"{src}: line {i + 1}", f"{parts[0]} value must be finite")
-        i += 1
+            raise MapError(f"{src}: line {line_no}", f"{parts[0]} value must be finite")
+        pos = end + 1
 
     for key in ("ncols", "nrows"):
         if key not in header:
@@ -101,6 +111,7 @@ def load_dem(path: str | Path) -> ElevationModel:
         if v != int(v) or v < 1:
             raise MapError(src, f"header {key} must be a positive integer, got {v:g}")
     ncols, nrows = int(ncols), int(nrows)
+    check(src, f"the grid's cell count ({ncols} x {nrows})", ncols * nrows, "dem_cells", MapError, lim)
     cell_x = header.get("cellsize", header.get("dx"))
     cell_y = header.get("cellsize", header.get("dy"))
     for key, v in (("cellsize" if "cellsize" in header else "dx", cell_x), ("cellsize" if "cellsize" in header else "dy", cell_y)):
@@ -110,20 +121,29 @@ def load_dem(path: str | Path) -> ElevationModel:
     x0 = header["xllcenter"] if "xllcenter" in header else header["xllcorner"] + 0.5 * cell_x
     y0 = header["yllcenter"] if "yllcenter" in header else header["yllcorner"] + 0.5 * cell_y
 
-    reach = max(abs(x0), abs(y0)) + math.hypot(nrows, ncols) * cell
+    reach = max(abs(x0), abs(y0)) + math.hypot(nrows * cell_y, ncols * cell_x)
     if reach > MAX_COORD_M:
         raise MapError(src, f"the grid reaches {reach:.3g} m from the frame origin (more than {MAX_COORD_M:g} m; "
                        "check xll*/yll*, cellsize)")
+    if cell_x != cell_y:
+        nx, ny = square_shape(nrows, ncols, cell_x, cell_y)
+        check(src, f"the grid resampled to square {cell:g} m cells ({nx} x {ny})", nx * ny, "dem_cells", MapError, lim)
 
-    tokens = " ".join(lines[i:]).split()
-    if len(tokens) != nrows * ncols:
+    body = raw[pos:]
+    found = count_tokens(body)
+    if found != nrows * ncols:
         raise MapError(src, f"expected {nrows} x {ncols} = {nrows * ncols} values after the header, "
-                       f"found {len(tokens)}")
-    try:
-        z = np.array(tokens, dtype=float).reshape(nrows, ncols)
-    except ValueError:
-        bad = next(t for t in tokens if not _is_float(t))
-        raise MapError(src, f"non-numeric height value {bad[:20]!r}") from None
+                       f"found {found}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            z = np.fromstring(body, dtype=float, sep=" ")
+        except (ValueError, DeprecationWarning):
+            z = None
+    if z is None or z.size != nrows * ncols:
+        bad = next((t for t in body.split(None, nrows * ncols) if not _is_float(t)), b"?")
+        raise MapError(src, f"non-numeric height value {brief(bad.decode('ascii'), 30)}")
+    z = z.reshape(nrows, ncols)
     if not np.all(np.isfinite(z)):
         raise MapError(src, "height values must be finite (use NODATA_value for holes)")
     if "nodata_value" in header:
@@ -152,21 +172,26 @@ def bilinear(z: np.ndarray, fr: np.ndarray, fc: np.ndarray) -> np.ndarray:
     return out
 
 
+def square_shape(rows: int, cols: int, dx_m: float, dy_m: float) -> tuple[int, int]:
+    """(columns, rows) of ``resample_square``'s grid, without building it."""
+    cell = min(dx_m, dy_m)
+    return (int(np.floor((cols - 1) * dx_m / cell + 1e-9)) + 1, int(np.floor((rows - 1) * dy_m / cell + 1e-9)) + 1)
+
+
 def resample_square(z: np.ndarray, x0_m: float, y0_m: float, dx_m: float, dy_m: float):
     """A grid of ``dx x dy`` cells (row 0 south, centre of [0, 0] at (x0, y0)) resampled
     bilinearly onto square cells of ``min(dx, dy)`` over the same centres' extent.
     Returns (heights, x0, y0)."""
     cell = min(dx_m, dy_m)
     rows, cols = z.shape
-    nx = int(np.floor((cols - 1) * dx_m / cell + 1e-9)) + 1
-    ny = int(np.floor((rows - 1) * dy_m / cell + 1e-9)) + 1
+    nx, ny = square_shape(rows, cols, dx_m, dy_m)
     fc = np.arange(nx) * cell / dx_m
     fr = np.arange(ny) * cell / dy_m
     FR, FC = np.meshgrid(fr, fc, indexing="ij")
     return bilinear(z, FR, FC), x0_m, y0_m
 
 
-def _is_float(token: str) -> bool:
+def _is_float(token) -> bool:
     try:
         float(token)
     except ValueError:

@@ -16,7 +16,9 @@ Occupancy grid
 Elevation model
     * a local ESRI/GDAL ASCII grid (:mod:`dem`), or
     * a georeferenced raster (:mod:`gis`, the ``gis`` extra): a GeoTIFF, or any
-      raster with a ``.prj`` beside it or the mission key ``dem_crs``.
+      raster with a ``.prj`` beside it or the mission key ``dem_crs``, or
+    * none: a flat field at ``elevation_m`` (m AMSL), or at ``home.alt_m``
+      with a warning (:func:`flat_dem`).
 Heading
     ``home.heading_deg`` is the compass bearing of the local map files' x
     axis (90 = east, the default). Local files are rotated into ENU: the
@@ -27,7 +29,6 @@ Heading
 
 from __future__ import annotations
 
-import json
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import replace
@@ -36,18 +37,24 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MapError
-from ..textfile import read_text
+from ..inputs import check, clip, count_tokens, limits, name, open_regular, parse_json, read_text
 from .dem import bilinear, load_dem
 from .gis import lonlat_to_enu
 from .grid import ElevationModel, OccupancyGrid
 from .ogm import MAX_COORD_M, load_ogm
 
-#: Most cells a rasterised field may have (a 10 ha field at 0.05 m is 4e7).
-MAX_FIELD_CELLS = 60_000_000
 _TIFF_MAGIC = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
 
 
 # --- vector fields -------------------------------------------------------------
+
+def _points(coords) -> np.ndarray:
+    """(k, 2) lon/lat of a GeoJSON position list; ValueError unless it is one."""
+    a = np.asarray(coords, dtype=float)
+    if a.ndim != 2 or a.shape[1] < 2:
+        raise ValueError("not a list of positions")
+    return a[:, :2]
+
 
 def _rings_geojson(doc, src: str):
     """(polygons, lines): polygons as (name, [outer, holes...]) lon/lat rings, lines as lon/lat arrays."""
@@ -60,14 +67,14 @@ def _rings_geojson(doc, src: str):
         c = g.get("coordinates")
         try:
             if t == "Polygon":
-                polys.append((name, [np.asarray(r, float)[:, :2] for r in c]))
+                polys.append((name, [_points(r) for r in c]))
             elif t == "MultiPolygon":
                 for p in c:
-                    polys.append((name, [np.asarray(r, float)[:, :2] for r in p]))
+                    polys.append((name, [_points(r) for r in p]))
             elif t == "LineString":
-                lines.append(np.asarray(c, float)[:, :2])
+                lines.append(_points(c))
             elif t == "MultiLineString":
-                lines.extend(np.asarray(x, float)[:, :2] for x in c)
+                lines.extend(_points(x) for x in c)
             elif t == "GeometryCollection":
                 for x in g.get("geometries", []):
                     geom(x, name)
@@ -92,7 +99,15 @@ def _rings_geojson(doc, src: str):
     return polys, lines
 
 
-def _kml_coords(text: str | None, src: str) -> np.ndarray:
+def _kml_coords(text: str | None, src: str, budget: list) -> np.ndarray:
+    """(k, 2) lon/lat of a KML ``coordinates`` text; ``budget[0]``: vertices still allowed
+    (counted before the points are built, so a huge ring costs no memory)."""
+    n = count_tokens((text or "").encode("utf-8"))
+    budget[0] -= n
+    if budget[0] < 0:
+        lim = limits()
+        check(src, "the number of polygon and line vertices", lim.polygon_vertices - budget[0],
+              "polygon_vertices", MapError, lim)
     pts = []
     for tok in (text or "").split():
         parts = tok.split(",")
@@ -104,10 +119,11 @@ def _kml_coords(text: str | None, src: str) -> np.ndarray:
 
 
 def _rings_kml(text: str, src: str):
+    budget = [limits().polygon_vertices]
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
-        raise MapError(src, f"not valid KML/XML: {exc}") from None
+        raise MapError(src, f"not valid KML/XML: {clip(exc)}") from None
     polys, lines = [], []
     for pm in root.iter():
         if not pm.tag.endswith("Placemark"):
@@ -123,14 +139,14 @@ def _rings_kml(text: str, src: str):
                     if part.tag.endswith("outerBoundaryIs") or part.tag.endswith("innerBoundaryIs"):
                         for c in part.iter():
                             if c.tag.endswith("coordinates"):
-                                ring = _kml_coords(c.text, src)
+                                ring = _kml_coords(c.text, src, budget)
                                 rings.insert(0, ring) if part.tag.endswith("outerBoundaryIs") else rings.append(ring)
                 if rings:
                     polys.append((name, rings))
             elif el.tag.endswith("LineString"):
                 for c in el:
                     if c.tag.endswith("coordinates"):
-                        lines.append(_kml_coords(c.text, src))
+                        lines.append(_kml_coords(c.text, src, budget))
     return polys, lines
 
 
@@ -154,14 +170,91 @@ def _polygon_area(ring: np.ndarray) -> float:
     return abs(float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))) / 2.0
 
 
+def polygon_mask(ring: np.ndarray, xc: np.ndarray, yc: np.ndarray, max_crossings: int | None = None,
+                 source: str = "", lim=None) -> np.ndarray:
+    """Even-odd inside test of the grid of cell centres ``xc`` (cols, increasing) x
+    ``yc`` (rows, increasing) against ``ring`` (K, 2): a (rows, cols) bool mask. Pure.
+
+    The same rule as :func:`points_in_polygon` (an edge counts where
+    ``(y1 > y) != (y2 > y)`` and the point lies left of its crossing
+    ``x1 + (y - y1) (x2 - x1) / (y2 - y1)``), by scanlines: each edge
+    crosses a contiguous run of rows (found by ``searchsorted``), each
+    crossing toggles the cells left of it, and a reversed cumulative sum of
+    the toggles per row gives the parity. Work: O(K log R + crossings + cells).
+    """
+    rows, cols = yc.size, xc.size
+    a = np.asarray(ring, dtype=float)
+    b = np.roll(a, -1, axis=0)
+    keep = a[:, 1] != b[:, 1]
+    x1, y1, x2, y2 = a[keep, 0], a[keep, 1], b[keep, 0], b[keep, 1]
+    lo = np.searchsorted(yc, np.minimum(y1, y2), side="left")      # first row with y >= min(y1, y2)
+    hi = np.searchsorted(yc, np.maximum(y1, y2), side="left")      # first row with y >= max(y1, y2)
+    span = hi - lo
+    total = int(span.sum())
+    if max_crossings is not None:
+        check(source, "the row crossings of the field's polygon edges", total, "raster_crossings", MapError, lim)
+    toggles = np.zeros(rows * (cols + 1), dtype=np.uint8)     # counts mod 256: parity is all that matters
+    done = 0
+    edges = np.flatnonzero(span)
+    cum = np.cumsum(span[edges])
+    batch = 4_000_000
+    while done < edges.size:
+        stop = int(np.searchsorted(cum, (cum[done - 1] if done else 0) + batch, side="right"))
+        stop = max(stop, done + 1)
+        e = edges[done:stop]
+        n = span[e]
+        k = np.repeat(e, n)
+        first = np.repeat(np.cumsum(n) - n, n)
+        r = np.repeat(lo[e], n) + (np.arange(k.size) - first)
+        y = yc[r]
+        xcross = x1[k] + (y - y1[k]) * (x2[k] - x1[k]) / (y2[k] - y1[k])
+        # cells j with xc[j] < xcross are toggled: j < searchsorted(xc, xcross, 'left')
+        j = np.searchsorted(xc, xcross, side="left")
+        np.add.at(toggles, r * (cols + 1) + j, 1)
+        done = stop
+    t = toggles.reshape(rows, cols + 1)
+    # toggles of cell j: the crossings with j < their index; parity of the reversed cumulative sum
+    suffix = np.cumsum(t[:, ::-1], axis=1, dtype=np.uint8)[:, ::-1]
+    return (suffix[:, 1:] & 1).astype(bool)
+
+
+def _near_polyline(line: np.ndarray, xc: np.ndarray, yc: np.ndarray, half_width_m: float,
+                   out: np.ndarray) -> None:
+    """Mark in ``out`` (rows, cols) the cells whose centre is within ``half_width_m`` of
+    ``line``; each segment is tested on the cells of its bounding box only."""
+    res = (xc[1] - xc[0]) if xc.size > 1 else (yc[1] - yc[0]) if yc.size > 1 else 1.0
+    pad = half_width_m + abs(res)
+    for (ax, ay), (bx, by) in zip(line[:-1], line[1:]):
+        c0 = np.searchsorted(xc, min(ax, bx) - pad, side="left")
+        c1 = np.searchsorted(xc, max(ax, bx) + pad, side="right")
+        r0 = np.searchsorted(yc, min(ay, by) - pad, side="left")
+        r1 = np.searchsorted(yc, max(ay, by) + pad, side="right")
+        if c0 >= c1 or r0 >= r1:
+            continue
+        X, Y = np.meshgrid(xc[c0:c1], yc[r0:r1])
+        dx, dy = bx - ax, by - ay
+        L2 = dx * dx + dy * dy
+        t = np.clip(((X - ax) * dx + (Y - ay) * dy) / L2, 0.0, 1.0) if L2 > 0 else 0.0
+        out[r0:r1, c0:c1] |= np.hypot(X - ax - t * dx, Y - ay - t * dy) <= half_width_m
+
+
 def rasterize_field(boundary: list[np.ndarray], exclusions: list[np.ndarray], rows_xy: list[np.ndarray],
-                    resolution_m: float, row_width_m: float, border_m: float, source: str) -> OccupancyGrid:
+                    resolution_m: float, row_width_m: float, border_m: float, source: str,
+                    lim=None) -> OccupancyGrid:
     """Occupancy grid of a vector field in ENU metres (module doc). Pure.
 
     ``boundary``: outer ring then holes, (k, 2) each; ``exclusions`` and
-    ``rows_xy``: rings and polylines. Cells are classified at their centres;
-    a row occupies the cells within ``row_width_m / 2`` of its polyline.
+    ``rows_xy``: rings and polylines. Cells are classified at their centres
+    (even-odd rule, :func:`polygon_mask`); a row occupies the cells within
+    ``row_width_m / 2`` of its polyline.
+
+    Raises
+    ------
+    MapError
+        More cells than the ``field_cells`` limit, or more edge crossings
+        than ``raster_crossings`` (docs/limits.md).
     """
+    lim = lim or limits()
     outer = boundary[0]
     x_lo, y_lo = outer.min(axis=0) - border_m
     x_hi, y_hi = outer.max(axis=0) + border_m
@@ -171,31 +264,22 @@ def rasterize_field(boundary: list[np.ndarray], exclusions: list[np.ndarray], ro
     y_lo = math.floor(round(y_lo / resolution_m, 4)) * resolution_m
     cols = int(math.ceil(round((x_hi - x_lo) / resolution_m, 4)))
     rows = int(math.ceil(round((y_hi - y_lo) / resolution_m, 4)))
-    if rows * cols > MAX_FIELD_CELLS:
-        raise MapError(source, f"the field rasterised at {resolution_m:g} m is {cols} x {rows} cells "
-                               f"(more than {MAX_FIELD_CELLS}); use a coarser field.resolution_m")
-    free = np.zeros((rows, cols), dtype=bool)
-    occ = np.zeros((rows, cols), dtype=bool)
+    check(source, f"the field rasterised at {resolution_m:g} m ({cols} x {rows} cells)", rows * cols, "field_cells",
+          MapError, lim)
     xc = x_lo + (np.arange(cols) + 0.5) * resolution_m
-    chunk = max(1, 2_000_000 // max(cols, 1))
-    for r0 in range(0, rows, chunk):
-        yc = y_lo + (np.arange(r0, min(rows, r0 + chunk)) + 0.5) * resolution_m
-        X, Y = np.meshgrid(xc, yc)
-        inside = points_in_polygon(X, Y, outer)
-        for hole in boundary[1:]:
-            inside &= ~points_in_polygon(X, Y, hole)
-        blocked = ~inside
-        for ex in exclusions:
-            blocked |= points_in_polygon(X, Y, ex)
-        vine = np.zeros(X.shape, dtype=bool)
-        for line in rows_xy:
-            for (ax, ay), (bx, by) in zip(line[:-1], line[1:]):
-                dx, dy = bx - ax, by - ay
-                L2 = dx * dx + dy * dy
-                t = np.clip(((X - ax) * dx + (Y - ay) * dy) / L2, 0.0, 1.0) if L2 > 0 else 0.0
-                vine |= np.hypot(X - ax - t * dx, Y - ay - t * dy) <= row_width_m / 2
-        free[r0: r0 + X.shape[0]] = inside & ~blocked & ~vine
-        occ[r0: r0 + X.shape[0]] = inside & (blocked | vine)
+    yc = y_lo + (np.arange(rows) + 0.5) * resolution_m
+    budget = dict(max_crossings=lim.raster_crossings, source=source, lim=lim)
+    inside = polygon_mask(outer, xc, yc, **budget)
+    for hole in boundary[1:]:
+        inside &= ~polygon_mask(hole, xc, yc, **budget)
+    blocked = ~inside
+    for ex in exclusions:
+        blocked |= polygon_mask(ex, xc, yc, **budget)
+    vine = np.zeros((rows, cols), dtype=bool)
+    for line in rows_xy:
+        _near_polyline(line, xc, yc, row_width_m / 2, vine)
+    free = inside & ~blocked & ~vine
+    occ = inside & (blocked | vine)
     return OccupancyGrid(occupied=occ, free=free, resolution_m=resolution_m, origin_xy_m=(x_lo, y_lo),
                          source=source)
 
@@ -210,24 +294,22 @@ def load_field(path: str | Path, home: tuple[float, float, float], resolution_m:
         Missing or malformed file, no polygon, a degenerate boundary.
     """
     p = Path(path)
-    src = str(p)
-    text = read_text(p, MapError, "field")
+    src = name(p)
+    lim = limits()
+    text = read_text(p, MapError, "field", lim=lim)
     if p.suffix.lower() == ".kml" or text.lstrip().startswith("<"):
         polys, lines = _rings_kml(text, src)
     else:
-        try:
-            doc = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise MapError(f"{src}: line {exc.lineno}", f"not valid JSON: {exc.msg}") from None
-        polys, lines = _rings_geojson(doc, src)
+        polys, lines = _rings_geojson(parse_json(text, src, MapError, lim), src)
+    n_vertices = sum(len(r) for _, rings in polys for r in rings) + sum(len(line) for line in lines)
+    check(src, "the number of polygon and line vertices", n_vertices, "polygon_vertices", MapError, lim)
+    for r in [r for _, rings in polys for r in rings] + lines:
+        if not (np.all(np.abs(r[:, 0]) <= 180) and np.all(np.abs(r[:, 1]) <= 90)):
+            raise MapError(src, "coordinates are not WGS-84 longitude/latitude (GeoJSON and KML are)")
     polys = [(n, [r for r in rings if len(r) >= 3]) for n, rings in polys]
     polys = [(n, rings) for n, rings in polys if rings and _polygon_area(rings[0]) > 0]
     if not polys:
         raise MapError(src, "no polygon (with an area) to use as the field boundary")
-    for _, rings in polys:
-        for r in rings:
-            if not (np.all(np.abs(r[:, 0]) <= 180) and np.all(np.abs(r[:, 1]) <= 90)):
-                raise MapError(src, "coordinates are not WGS-84 longitude/latitude (GeoJSON and KML are)")
     named = [i for i, (n, _) in enumerate(polys) if n == "boundary"]
     b = named[0] if named else int(np.argmax([_polygon_area(r[0]) for _, r in polys]))
 
@@ -240,7 +322,7 @@ def load_field(path: str | Path, home: tuple[float, float, float], resolution_m:
         raise MapError(src, "the field is implausibly far from home")
     exclusions = [enu(rings[0]) for i, (_, rings) in enumerate(polys) if i != b]
     rows_xy = [enu(line) for line in lines if len(line) >= 2]
-    return rasterize_field(boundary, exclusions, rows_xy, resolution_m, row_width_m, border_m, src)
+    return rasterize_field(boundary, exclusions, rows_xy, resolution_m, row_width_m, border_m, src, lim)
 
 
 # --- rotation of local files ---------------------------------------------------------
@@ -268,6 +350,8 @@ def rotate_dem(dem: ElevationModel, yaw_rad: float) -> ElevationModel:
     x0, y0 = rx.min() + 0.5 * cell, ry.min() + 0.5 * cell
     nx = int(math.floor((rx.max() - rx.min()) / cell))
     ny = int(math.floor((ry.max() - ry.min()) / cell))
+    check(dem.source, f"the DEM rotated by home.heading_deg ({max(nx, 1)} x {max(ny, 1)} cells)",
+          max(nx, 1) * max(ny, 1), "dem_cells", MapError)
     X, Y = np.meshgrid(x0 + cell * np.arange(max(nx, 1)), y0 + cell * np.arange(max(ny, 1)))
     # back into the file's frame, then fractional cell-centre indices
     fx, fy = c * X + s * Y, -s * X + c * Y
@@ -277,15 +361,23 @@ def rotate_dem(dem: ElevationModel, yaw_rad: float) -> ElevationModel:
 
 # --- the mission's maps --------------------------------------------------------------
 
+def flat_field_warning(mission) -> str | None:
+    """One line when the mission has neither ``dem`` nor ``elevation_m``, else None."""
+    if mission.dem is not None or mission.elevation_m is not None:
+        return None
+    return (f"{mission.source}: no 'dem' and no 'elevation_m': the field is taken as flat at "
+            f"home.alt_m = {mission.home.alt_m:g} m AMSL")
+
+
 def is_georeferenced(path: Path, crs: str | None) -> bool:
     """A DEM for :mod:`gis`: a TIFF, a ``.prj`` beside it, or a CRS given by the mission."""
     if crs is not None or path.with_suffix(".prj").exists():
         return True
     try:
-        with open(path, "rb") as fh:
+        with open_regular(path, MapError, cap="dem_bytes") as fh:
             return fh.read(4) in _TIFF_MAGIC
-    except OSError:
-        return False
+    except MapError:
+        return False        # load_dem says why
 
 
 def load_mission_maps(mission) -> tuple[OccupancyGrid, ElevationModel]:
@@ -307,10 +399,29 @@ def load_mission_maps(mission) -> tuple[OccupancyGrid, ElevationModel]:
     return grid, load_mission_dem(mission)
 
 
+#: Half-size (m) of the flat elevation model of a mission without a DEM: any field.
+FLAT_DEM_HALF_SIZE_M = 10_000.0
+
+
+def flat_dem(height_m: float, source: str) -> ElevationModel:
+    """A flat elevation model at map height ``height_m`` covering +-``FLAT_DEM_HALF_SIZE_M``
+    about the map origin (2 x 2 cells: the bilinear patch of a constant is that constant)."""
+    cell = FLAT_DEM_HALF_SIZE_M
+    return ElevationModel(heights_m=np.full((2, 2), float(height_m)), x0_m=-0.5 * cell, y0_m=-0.5 * cell,
+                          cellsize_m=cell, source=source)
+
+
 def load_mission_dem(mission) -> ElevationModel:
-    """The mission's elevation model in ENU about ``home`` (``load_mission_maps``'s second half)."""
+    """The mission's elevation model in ENU about ``home`` (``load_mission_maps``'s second half).
+
+    Without ``dem`` the field is flat: at ``elevation_m`` (m AMSL) when given,
+    else at ``home.alt_m`` (the planner warns: ``flat_field_warning``).
+    """
     home = mission.home
     dem_path = mission.dem_path
+    if dem_path is None:
+        z = 0.0 if mission.elevation_m is None else float(mission.elevation_m) - home.alt_m
+        return flat_dem(z, f"{mission.source}: flat field at {home.alt_m + z:g} m AMSL")
     if is_georeferenced(dem_path, mission.dem_crs):
         from .gis import load_geo_dem
 

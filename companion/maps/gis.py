@@ -4,10 +4,10 @@ Needs the optional ``gis`` extra (rasterio, pyproj; wheels on PyPI, no system
 libraries): ``pip install "vineyard-gnc[gis]"``. The bundled missions do not.
 
 Reprojection (:func:`reproject_to_enu`, pure given the two transforms)
-    The mission's map frame is ENU about ``home`` (``companion.frames``: a
-    flat-earth tangent plane, the same one the exports use to turn ENU back
-    into latitude/longitude, so a height read here is put back at the same
-    place). A square ENU grid is laid over the DEM's footprint at the DEM's
+    The mission's map frame is ENU about ``home`` (``companion.geodesy``: the
+    local tangent plane through pyproj, the same one the exports use to turn
+    ENU back into latitude/longitude, so a height read here is put back at
+    the same place). A square ENU grid is laid over the DEM's footprint at the DEM's
     own resolution (its smaller pixel size, in metres); every grid centre is
     taken ENU -> WGS-84 (``enu2geodetic``) -> the DEM's CRS (pyproj, always
     x = easting/longitude first) -> fractional pixel (the inverse of the
@@ -28,12 +28,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MapError
-from ..frames import _radii_m
+from .. import geodesy
+from ..inputs import check, limits, name, open_regular
 from .dem import MAX_HEIGHT_M, bilinear
 from .grid import ElevationModel
 
-#: Largest reprojected grid (cells): a DEM of a whole county is not a field.
-MAX_CELLS = 40_000_000
 
 
 def _need_gis(src: str, what: str):
@@ -45,20 +44,14 @@ def _need_gis(src: str, what: str):
 
 
 def enu_to_lonlat(x_m: np.ndarray, y_m: np.ndarray, home: tuple[float, float, float]):
-    """Vectorised ``frames.enu2geodetic`` (flat earth about ``home``): (lon_deg, lat_deg) arrays."""
-    lat0, lon0 = home[0], home[1]
-    r_m, r_n = _radii_m(math.radians(lat0))
-    lat = lat0 + np.degrees(np.asarray(y_m, float) / r_m)
-    lon = lon0 + np.degrees(np.asarray(x_m, float) / (r_n * math.cos(math.radians(lat0))))
+    """ENU (m, z = 0) about ``home`` -> (lon_deg, lat_deg) arrays (``companion.geodesy``)."""
+    lat, lon, _ = geodesy.enu2geodetic(np.asarray(x_m, float), np.asarray(y_m, float), 0.0, *home)
     return lon, lat
 
 
 def lonlat_to_enu(lon_deg, lat_deg, home: tuple[float, float, float]):
-    """Vectorised ``frames.geodetic2enu`` (horizontal part): (x_m, y_m) arrays."""
-    lat0, lon0 = home[0], home[1]
-    r_m, r_n = _radii_m(math.radians(lat0))
-    y = np.radians(np.asarray(lat_deg, float) - lat0) * r_m
-    x = np.radians(np.asarray(lon_deg, float) - lon0) * r_n * math.cos(math.radians(lat0))
+    """(lon_deg, lat_deg) at the home's altitude -> ENU (x_m, y_m) arrays (``companion.geodesy``)."""
+    x, y, _ = geodesy.geodetic2enu(np.asarray(lat_deg, float), np.asarray(lon_deg, float), home[2], *home)
     return x, y
 
 
@@ -84,9 +77,8 @@ def reproject_to_enu(z: np.ndarray, inv_affine, to_crs, footprint_lonlat: np.nda
     y_lo, y_hi = float(np.min(fy)), float(np.max(fy))
     nx = int(math.floor((x_hi - x_lo) / cell_m)) + 1
     ny = int(math.floor((y_hi - y_lo) / cell_m)) + 1
-    if nx * ny > MAX_CELLS:
-        raise MapError(source, f"the DEM covers {nx * cell_m:.0f} m x {ny * cell_m:.0f} m at {cell_m:g} m: "
-                               f"more than {MAX_CELLS} cells (crop it to the field)")
+    check(source, f"the DEM reprojected to {cell_m:g} m cells ({nx} x {ny}, {nx * cell_m:.0f} m x "
+                  f"{ny * cell_m:.0f} m; crop it to the field)", nx * ny, "dem_cells", MapError)
     x0 = x_lo + 0.5 * cell_m
     y0 = y_lo + 0.5 * cell_m
     X, Y = np.meshgrid(x0 + cell_m * np.arange(nx), y0 + cell_m * np.arange(ny))
@@ -118,16 +110,18 @@ def load_geo_dem(path: str | Path, home: tuple[float, float, float], crs: str | 
         Missing extra, unreadable or corrupt file, no CRS, a CRS pyproj cannot
         transform to WGS-84, heights beyond any terrain.
     """
-    src = str(path)
+    src = name(path)
     _need_gis(src, "a georeferenced DEM")
     import pyproj
     import rasterio
     from rasterio.errors import RasterioIOError
 
-    if not Path(path).exists():
-        raise MapError(src, "no such file (elevation model)")
+    lim = limits()
+    open_regular(path, MapError, "elevation model", cap="dem_bytes", lim=lim).close()
     try:
         with rasterio.open(path) as ds:
+            check(src, f"the raster's cell count ({ds.width} x {ds.height})", ds.width * ds.height, "dem_cells",
+                  MapError, lim)
             band = ds.read(1, masked=True).astype(float)
             transform = ds.transform
             file_crs = ds.crs
@@ -168,9 +162,9 @@ def load_geo_dem(path: str | Path, home: tuple[float, float, float], crs: str | 
     cx, cy = transform @ (width / 2, height / 2)
     qx, qy = transform @ (width / 2 + 1, height / 2 + 1)
     (lo0, la0), (lo1, la1) = zip(*to_wgs.transform(np.array([cx, qx]), np.array([cy, qy])))
-    r_m, r_n = _radii_m(math.radians(la0))
-    px_m = abs(math.radians(lo1 - lo0) * r_n * math.cos(math.radians(la0)))
-    py_m = abs(math.radians(la1 - la0) * r_m)
+    gx, gy = lonlat_to_enu(np.array([lo0, lo1, lo0]), np.array([la0, la0, la1]), home)
+    px_m = abs(float(gx[1] - gx[0]))
+    py_m = abs(float(gy[2] - gy[0]))
     cell = max(min(px_m, py_m), 1e-3)
     inv = ~transform
 

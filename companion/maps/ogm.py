@@ -41,13 +41,15 @@ from __future__ import annotations
 
 import math
 import re
+import struct
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import MapError
-from ..textfile import parse_yaml, read_text
+from ..inputs import brief, check, clip, count_tokens, limits, name, open_regular, parse_yaml, read_bytes, read_text
 from .grid import OccupancyGrid
 
 _REQUIRED = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
@@ -56,12 +58,14 @@ _MODES = ("trinary", "scale", "raw")
 #: Largest map coordinate (m, +-): a local metric frame wider than the Earth is a
 #: typo in ``origin`` or ``resolution``, and the planner's grid arithmetic would overflow.
 MAX_COORD_M = 1.0e7
+#: ``classify`` looks its tables up this many cells at a time (bounded temporaries)
+_LOOKUP_CELLS = 1 << 20
 
 
 def _number(data: dict, key: str, src: str) -> float:
     value = data[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise MapError(f"{src}: key '{key}'", f"expected a finite number, got {value!r}")
+        raise MapError(f"{src}: key '{key}'", f"expected a finite number, got {brief(value)}")
     return float(value)
 
 
@@ -113,13 +117,9 @@ def read_pgm(path: str | Path) -> ImageData:
     MapError
         Missing file, bad magic/header, truncated or out-of-range data.
     """
-    src = str(path)
-    try:
-        raw = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise MapError(src, "no such file (image of the occupancy grid)") from None
-    except OSError as exc:
-        raise MapError(src, f"cannot read: {exc.strerror or exc}") from None
+    src = name(path)
+    lim = limits()
+    raw = read_bytes(path, MapError, "image of the occupancy grid", cap="image_bytes", lim=lim)
     magic = raw[:2]
     if magic not in (b"P2", b"P5"):
         raise MapError(src, f"not a PGM image (magic {magic!r}; expected P2 or P5)")
@@ -141,6 +141,8 @@ def read_pgm(path: str | Path) -> ImageData:
         if start == pos:
             raise MapError(src, "truncated PGM header (expected width, height and maxval)")
         tok = raw[start:pos]
+        if len(tok) > 9 and tok.isdigit():
+            raise MapError(src, f"bad PGM header: a number of {len(tok)} digits (at most 9)")
         if not tok.isdigit():
             raise MapError(src, f"bad PGM header: {tok[:20].decode('latin-1')!r} is not a positive integer")
         tokens.append(int(tok))
@@ -150,6 +152,7 @@ def read_pgm(path: str | Path) -> ImageData:
     if not 0 < maxval < 65536:
         raise MapError(src, f"bad PGM header: maxval {maxval} not in 1..65535")
     count = width * height
+    check(src, f"the image's pixel count ({width} x {height})", count, "image_pixels", MapError, lim)
 
     if magic == b"P5":
         if pos >= n or not raw[pos:pos + 1].isspace():
@@ -162,19 +165,42 @@ def read_pgm(path: str | Path) -> ImageData:
         values = np.frombuffer(raw, dtype=dtype, count=count, offset=pos)
     else:
         body = re.sub(rb"#[^\r\n]*", b" ", raw[pos:])
-        parts = body.split()
-        if len(parts) < count:
-            raise MapError(src, f"truncated PGM data: {len(parts)} values for {width} x {height} pixels")
-        try:
-            values = np.array([int(t) for t in parts[:count]], dtype=np.int64)
-        except ValueError:
-            raise MapError(src, "bad PGM data: non-integer pixel value") from None
+        values = _plain_values(body, count, src, f"{width} x {height} pixels")
     if values.size and values.dtype.kind == "i" and int(values.min()) < 0:
         raise MapError(src, f"bad PGM data: negative pixel value {int(values.min())}")
     if values.size and int(values.max()) > maxval:
         raise MapError(src, f"bad PGM data: pixel value {int(values.max())} above maxval {maxval}")
     values = values.astype(np.uint16 if maxval > 255 else np.uint8, copy=False)
     return ImageData(values.reshape(height, width), maxval)
+
+
+_NOT_DIGIT_OR_SPACE = re.compile(rb"[^\s0-9]")
+_LONG_NUMBER = re.compile(rb"[0-9]{10}")
+
+
+def _plain_values(body: bytes, count: int, src: str, what: str) -> np.ndarray:
+    """The first ``count`` whitespace-separated decimal integers of a P2 raster.
+
+    Parsed by numpy (int32, no Python object per pixel); what follows the
+    ``count``-th value is ignored, as before, unless it comes first."""
+    bad = _NOT_DIGIT_OR_SPACE.search(body)
+    if bad is not None:
+        start = body.rfind(b" ", 0, bad.start()) + 1   # the token holding the bad byte starts after a space
+        start = max(start, max(body.rfind(c, 0, bad.start()) for c in (b"\n", b"\r", b"\t", b"\v", b"\f")) + 1)
+        if count_tokens(body[:start]) < count:
+            raise MapError(src, "bad PGM data: non-integer pixel value")
+        body = body[:start]
+    if _LONG_NUMBER.search(body) is not None:
+        raise MapError(src, "bad PGM data: a pixel value of 10 or more digits")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            values = np.fromstring(body, dtype=np.int32, sep=" ") if body.strip() else np.zeros(0, np.int32)
+        except (ValueError, DeprecationWarning):   # pragma: no cover - only digits and spaces are left
+            raise MapError(src, "bad PGM data: non-integer pixel value") from None
+    if values.size < count:
+        raise MapError(src, f"truncated PGM data: {values.size} values for {what}")
+    return values[:count]
 
 
 def classify(img: Shades, negate: bool, occupied_thresh: float, free_thresh: float,
@@ -199,7 +225,7 @@ def classify(img: Shades, negate: bool, occupied_thresh: float, free_thresh: flo
     with_alpha = img.alpha is not None and mode == "trinary"
     if with_alpha:
         # trinary averages the opacity in as one more channel
-        key = key.astype(np.int64) + img.alpha
+        key = key.astype(np.int32) + img.alpha
         n += 1
     # one entry per possible channel sum: thresholds in double precision
     shade = np.arange(n * m + 1, dtype=float) / (n * m)
@@ -211,12 +237,40 @@ def classify(img: Shades, negate: bool, occupied_thresh: float, free_thresh: flo
         occ = shade if negate else 1.0 - shade
         occ_lut = occ > occupied_thresh
         free_lut = (occ < free_thresh) & ~occ_lut
-    occupied, free = occ_lut[key], free_lut[key]
+    occupied, free = _lookup(occ_lut, key), _lookup(free_lut, key)
     if mode == "scale" and img.alpha is not None:
         opaque = img.alpha == m
         occupied &= opaque
         free &= opaque
     return occupied, free
+
+
+def _lookup(lut: np.ndarray, key: np.ndarray) -> np.ndarray:
+    """``lut[key]`` as a new C-contiguous array, ``_LOOKUP_CELLS`` cells at a time.
+
+    The same values as the fancy index, which converts the whole (h, w) key
+    to a machine-integer index first (8 bytes a cell: 180 MB for a 10 ha map
+    at 5 cm); ``key`` may be a view in any order (the flipped image).
+    """
+    out = np.empty(key.shape, dtype=lut.dtype)
+    if key.ndim != 2 or key.size == 0:
+        out[...] = lut[key]
+        return out
+    step = max(1, _LOOKUP_CELLS // max(1, key.shape[1]))
+    true = np.flatnonzero(lut) if lut.dtype == bool else None
+    if true is not None and len(true) and true[-1] - true[0] + 1 == len(true):
+        # a bool table True on one run of keys a..b (what thresholds give): two
+        # comparisons per cell, the same values as the lookup, about twice as fast
+        a, b = (np.asarray(x, dtype=key.dtype) for x in (true[0], true[-1]))
+        for r0 in range(0, key.shape[0], step):
+            k = key[r0:r0 + step]
+            o = out[r0:r0 + step]
+            np.greater_equal(k, a, out=o)
+            o &= k <= b
+        return out
+    for r0 in range(0, key.shape[0], step):
+        np.take(lut, key[r0:r0 + step], out=out[r0:r0 + step])
+    return out
 
 
 def read_image(path: str | Path) -> Shades:
@@ -228,28 +282,34 @@ def read_image(path: str | Path) -> Shades:
         Missing, unreadable, corrupt or truncated file, or a format Pillow does not know.
     """
     p = Path(path)
-    src = str(p)
-    try:
-        with open(p, "rb") as fh:
-            magic = fh.read(2)
-    except FileNotFoundError:
-        raise MapError(src, "no such file (image of the occupancy grid)") from None
-    except OSError as exc:
-        raise MapError(src, f"cannot read: {exc.strerror or exc}") from None
-    if magic in (b"P2", b"P5"):
-        pgm = read_pgm(p)
-        return Shades(pgm.values, 1, pgm.maxval)
-    return _read_with_pillow(p)
+    lim = limits()
+    with open_regular(p, MapError, "image of the occupancy grid", cap="image_bytes", lim=lim) as fh:
+        magic = fh.read(2)
+        if magic not in (b"P2", b"P5"):
+            fh.seek(0)
+            return _read_with_pillow(p, fh, lim)
+    pgm = read_pgm(p)
+    return Shades(pgm.values, 1, pgm.maxval)
 
 
-def _read_with_pillow(p: Path) -> Shades:
+def _read_with_pillow(p: Path, fh, lim) -> Shades:
     src = str(p)
     try:
         from PIL import Image, UnidentifiedImageError
     except ImportError:   # pragma: no cover - Pillow is a dependency
         raise MapError(src, "not a PGM image, and Pillow (needed for other formats) is not installed") from None
+    bomb_cap = Image.MAX_IMAGE_PIXELS
     try:
-        with Image.open(p) as im:
+        Image.MAX_IMAGE_PIXELS = None    # our own cap below, without Pillow's warning on stderr
+        try:
+            opened = Image.open(fh)
+        finally:
+            Image.MAX_IMAGE_PIXELS = bomb_cap
+        with opened as im:
+            w, h = im.size      # from the header: nothing is decoded yet
+            check(src, f"the image's pixel count ({w} x {h})", w * h, "image_pixels", MapError, lim)
+            if w * h == 0:
+                raise MapError(src, f"the image has no pixels ({w} x {h})")
             im.load()
             mode = im.mode
             if mode == "P":
@@ -262,12 +322,14 @@ def _read_with_pillow(p: Path) -> Shades:
                 im = im.convert("RGB")
             mode = im.mode
             arr = np.asarray(im)
+    except MapError:
+        raise
     except UnidentifiedImageError:
         raise MapError(src, "not an image Pillow can read (expected PGM, PNG, BMP, TIFF, ...)") from None
     except Image.DecompressionBombError as exc:
-        raise MapError(src, f"image too large: {exc}") from None
-    except (OSError, ValueError, SyntaxError) as exc:
-        raise MapError(src, f"corrupt or truncated image: {exc}") from None
+        raise MapError(src, f"image too large: {clip(exc)}") from None
+    except (OSError, ValueError, SyntaxError, EOFError, struct.error, MemoryError) as exc:
+        raise MapError(src, f"corrupt or truncated image: {clip(exc)}") from None
     if arr.ndim == 2:
         if mode.startswith("I"):
             vmax = int(arr.max()) if arr.size else 0
@@ -276,12 +338,12 @@ def _read_with_pillow(p: Path) -> Shades:
             maxval = 65535 if vmax <= 65535 else None
             if maxval is None:
                 raise MapError(src, f"pixel value {vmax} above 65535 (32-bit images are not maps)")
-            return Shades(arr.astype(np.int64), 1, maxval)
+            return Shades(arr.astype(np.int32), 1, maxval)
         return Shades(arr, 1, 255)
     if arr.shape[2] == 2:                   # LA
-        return Shades(arr[..., 0], 1, 255, arr[..., 1].astype(np.int64))
-    rgb = arr[..., :3].astype(np.int64).sum(axis=2)
-    alpha = arr[..., 3].astype(np.int64) if arr.shape[2] == 4 else None
+        return Shades(arr[..., 0], 1, 255, arr[..., 1].astype(np.int32))
+    rgb = arr[..., :3].sum(axis=2, dtype=np.int32)
+    alpha = arr[..., 3].astype(np.int32) if arr.shape[2] == 4 else None
     return Shades(rgb, 3, 255, alpha)
 
 
@@ -318,7 +380,7 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
 
     image = data["image"]
     if not isinstance(image, str) or not image:
-        raise MapError(f"{src}: key 'image'", f"expected a file name, got {image!r}")
+        raise MapError(f"{src}: key 'image'", f"expected a file name, got {brief(image)}")
     resolution = _number(data, "resolution", src)
     if resolution <= 0:
         raise MapError(f"{src}: key 'resolution'", f"must be > 0 m per cell, got {resolution}")
@@ -326,10 +388,10 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
     if (not isinstance(origin, (list, tuple)) or len(origin) != 3
             or any(isinstance(o, bool) or not isinstance(o, (int, float)) or not math.isfinite(o)
                    for o in origin)):
-        raise MapError(f"{src}: key 'origin'", f"expected [x, y, yaw] numbers, got {origin!r}")
+        raise MapError(f"{src}: key 'origin'", f"expected [x, y, yaw] numbers, got {brief(origin)}")
     negate = data["negate"]
     if negate not in (0, 1) or (not isinstance(negate, (bool, int))):
-        raise MapError(f"{src}: key 'negate'", f"expected 0 or 1, got {negate!r}")
+        raise MapError(f"{src}: key 'negate'", f"expected 0 or 1, got {brief(negate)}")
     occ_t = _number(data, "occupied_thresh", src)
     free_t = _number(data, "free_thresh", src)
     if not 0.0 <= free_t <= 1.0:
@@ -340,7 +402,7 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
         raise MapError(f"{src}: key 'free_thresh'", f"{free_t} is above occupied_thresh {occ_t}")
     mode = data.get("mode", "trinary")
     if mode not in _MODES:
-        raise MapError(f"{src}: key 'mode'", f"expected one of {', '.join(_MODES)}, got {mode!r}")
+        raise MapError(f"{src}: key 'mode'", f"expected one of {', '.join(_MODES)}, got {brief(mode)}")
 
     img_path = Path(image)
     if not img_path.is_absolute():
@@ -352,11 +414,14 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
         raise MapError(f"{src}: keys 'origin', 'resolution'",
                        f"the {w} x {h} grid reaches {reach:.3g} m from the frame origin "
                        f"(more than {MAX_COORD_M:g} m)")
+    # Image row 0 is north; grid row 0 is south: classified in flipped order, so the
+    # masks come out in grid order without a flipped copy of each.
+    img = Shades(img.channel_sum[::-1], img.n_channels, img.maxval,
+                 None if img.alpha is None else img.alpha[::-1])
     occupied, free = classify(img, bool(negate), occ_t, free_t, mode)
-    # Image row 0 is north; grid row 0 is south.
     return OccupancyGrid(
-        occupied=np.ascontiguousarray(occupied[::-1]),
-        free=np.ascontiguousarray(free[::-1]),
+        occupied=np.ascontiguousarray(occupied),
+        free=np.ascontiguousarray(free),
         resolution_m=resolution,
         origin_xy_m=(float(origin[0]), float(origin[1])),
         origin_yaw_rad=float(origin[2]),

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..config import from_dict
 from ..errors import MissionError
-from ..textfile import parse_yaml, read_text
+from ..inputs import parse_yaml, read_text
 from .schema import Mission
 
 #: Fields of ``Mission`` that the loader sets; a mission file may not hold them.

@@ -120,6 +120,56 @@ class FieldConfig:
 
 
 @dataclass(frozen=True)
+class NavigationConfig:
+    """The flight stack's navigation: ``accuracy`` is its 95 % horizontal position
+    error, ``rtk`` (0.1 m), ``gnss`` (3.0 m) or metres (``companion.margins``);
+    it sizes the inclusion fence's margin."""
+
+    accuracy: Literal["rtk", "gnss"] | float = "rtk"
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.accuracy, str) and not 0 < self.accuracy <= 100.0:
+            raise ValueError("navigation.accuracy must be rtk, gnss or a number in (0, 100] m")
+
+
+@dataclass(frozen=True)
+class LaunchConfig:
+    """Where every sortie takes off and lands, in one of three forms (exactly one):
+
+    - ``enu_m: [x, y]``: ENU metres on the map frame;
+    - ``lat``, ``lon``: WGS-84 degrees;
+    - a GeoJSON Point, inline (``type: Point``, ``coordinates: [lon, lat]``)
+      or ``file``: a GeoJSON file (relative to the mission file) holding one
+      Point, or a Point feature whose ``role`` is ``launch``.
+
+    Resolved to ENU by ``companion.launch``.
+    """
+
+    enu_m: tuple[float, float] | None = None
+    lat: float | None = None
+    lon: float | None = None
+    type: Literal["Point"] | None = None
+    coordinates: tuple[float, float] | tuple[float, float, float] | None = None
+    file: str | None = None
+
+    def __post_init__(self) -> None:
+        forms = [self.enu_m is not None, self.lat is not None or self.lon is not None,
+                 self.type is not None or self.coordinates is not None, self.file is not None]
+        if sum(forms) != 1:
+            raise ValueError("launch: give exactly one of enu_m, lat/lon, a GeoJSON Point "
+                             "(type, coordinates) or file")
+        if (self.lat is None) != (self.lon is None):
+            raise ValueError("launch: give both lat and lon")
+        if self.lat is not None and not (-90.0 <= self.lat <= 90.0 and -180.0 <= self.lon <= 180.0):
+            raise ValueError(f"launch: lat {self.lat}, lon {self.lon} are not WGS-84 degrees")
+        if (self.type is None) != (self.coordinates is None):
+            raise ValueError("launch: a GeoJSON Point needs both type: Point and coordinates: [lon, lat]")
+        if self.coordinates is not None and not (-180.0 <= self.coordinates[0] <= 180.0
+                                                 and -90.0 <= self.coordinates[1] <= 90.0):
+            raise ValueError(f"launch: coordinates {list(self.coordinates)} are not [lon, lat] in WGS-84 degrees")
+
+
+@dataclass(frozen=True)
 class PointingConfig:
     """Pointing target S_p of eq. (21): the field's centroid or an ENU point (m)."""
 
@@ -131,13 +181,16 @@ class Mission:
     """A whole mission, paths resolved relative to the mission file."""
 
     name: str
-    dem: str
     home: HomeConfig
+    dem: str | None = None
+    elevation_m: float | None = None
     map: str | None = None
     field: FieldConfig | None = None
     dem_crs: str | None = None
+    launch: LaunchConfig | None = None
     flight: FlightConfig = _field(default_factory=FlightConfig)
     coverage: CoverageConfig = _field(default_factory=CoverageConfig)
+    navigation: NavigationConfig = _field(default_factory=NavigationConfig)
     pointing: PointingConfig = _field(default_factory=PointingConfig)
     trajectory: TrajectoryConfig = _field(default_factory=TrajectoryConfig)
     control: ControlConfig = _field(default_factory=ControlConfig)
@@ -152,6 +205,12 @@ class Mission:
     def __post_init__(self) -> None:
         if (self.map is None) == (self.field is None):
             raise ValueError("give exactly one of 'map' (a map YAML) and 'field' (a GeoJSON or KML field)")
+        if self.dem is not None and self.elevation_m is not None:
+            raise ValueError("give at most one of 'dem' (an elevation model) and 'elevation_m' (a flat field)")
+        if self.elevation_m is not None and not -MAX_ALTITUDE_M <= self.elevation_m <= MAX_ALTITUDE_M:
+            raise ValueError(f"elevation_m {self.elevation_m} is outside [-{MAX_ALTITUDE_M:g}, {MAX_ALTITUDE_M:g}] m")
+        if self.launch is not None and self.energy.launch_xy_m is not None:
+            raise ValueError("give at most one of 'launch' and 'energy.launch_xy_m'")
 
     @property
     def map_path(self) -> Path:
@@ -162,5 +221,6 @@ class Mission:
         return Path(self.base_dir) / self.field.file
 
     @property
-    def dem_path(self) -> Path:
-        return Path(self.base_dir) / self.dem
+    def dem_path(self) -> Path | None:
+        """The DEM file, None for a flat field (no ``dem``)."""
+        return None if self.dem is None else Path(self.base_dir) / self.dem

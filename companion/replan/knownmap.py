@@ -103,9 +103,12 @@ class KnownMap:
     def from_mission(cls, mission, grid: OccupancyGrid, dem: ElevationModel,
                      free_eroded: np.ndarray | None = None) -> "KnownMap":
         """The map of a mission: its ``replan`` canopy height and tolerance, the free
-        space eroded by its coverage safety margin (``free_eroded``: the plan's
-        ``coverage.free_eroded`` when at hand, else computed here)."""
-        margin = mission.coverage.safety_margin_m
+        space eroded by its planning clearance, airframe radius + coverage safety margin
+        (``companion.margins``; ``free_eroded``: the plan's ``coverage.free_eroded`` when
+        at hand, else computed here)."""
+        from ..margins import planning_clearance_m
+
+        margin = planning_clearance_m(mission)
         if free_eroded is None:
             free = erode_free_space(grid, margin)
         else:

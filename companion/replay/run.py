@@ -51,7 +51,7 @@ class ReplayResult:
     setup: dict | None = None
 
 
-def find_setup(chunks) -> dict | None:
+def find_setup(chunks, max_garbage_bytes: int | None = None) -> dict | None:
     """The setup record of a companion .tlog (None when it has none).
 
     Raises
@@ -59,7 +59,7 @@ def find_setup(chunks) -> dict | None:
     ValueError
         Setup chunks were found but the record is incomplete or malformed.
     """
-    scanner = TlogScanner()
+    scanner = TlogScanner(max_garbage_bytes)
     dec = new_decoder()
     col = SetupCollector()
 
@@ -81,7 +81,7 @@ def find_setup(chunks) -> dict | None:
 
 
 def replay_chunks(chunks, core=None, tolerance: float = 0.0, withhold=(), settle_s: float = 5.0,
-                  with_log: bool = False) -> ReplayResult:
+                  with_log: bool = False, environment=None, max_garbage_bytes: int | None = None) -> ReplayResult:
     """Replay a .tlog given as byte chunks (see ``ReplaySession``).
 
     Parameters
@@ -91,18 +91,27 @@ def replay_chunks(chunks, core=None, tolerance: float = 0.0, withhold=(), settle
     core : FlightCore or None
         A fresh core built like the recorded flight's; None: metrics only.
     tolerance : float
-        0: float32 fields bit for bit; > 0: absolute tolerance on float fields.
+        0: see ``environment``; > 0: absolute tolerance on float fields.
     withhold : iterable of int
         Vehicle message ids not fed to the core.
     settle_s : float
         The metrics' tracking window starts this long after lift-off.
     with_log : bool
         Metrics only: build a ``FlightLog`` from the recording (for figures).
+    environment : sequence of str or None
+        How the replaying environment differs from the recording's
+        (``companion.flight.environment.differences``: ``["unknown"]`` for a
+        recording without a fingerprint): empty compares bit for bit, anything
+        else in drift mode (``companion.replay.compare``); None: bit for bit
+        (the caller decided). A ``tolerance`` > 0 overrides both.
+    max_garbage_bytes : int or None
+        ``TlogScanner``'s cap: ``TlogGarbage`` (a ValueError) once more bytes
+        than this frame no valid record.
     """
     log = FlightLog() if (with_log and core is None) else None
     metrics = MetricsAccumulator(settle_s, log)
-    session = ReplaySession(metrics, core, tolerance, withhold)
-    scanner = TlogScanner()
+    session = ReplaySession(metrics, core, tolerance, withhold, drift=bool(environment), environment=environment)
+    scanner = TlogScanner(max_garbage_bytes)
     for chunk in chunks:
         session.feed(scanner.feed(chunk))
     session.feed(scanner.close())

@@ -68,6 +68,10 @@ class Divergence:
     field : str or None
         First differing field (None when the types differ or one side is missing).
     recorded_value, computed_value : object
+    kind : str
+        ``value``: one output differs; ``drift`` (drift mode, at the end): a field's
+        differences add up to more than float64 drift explains (``recorded_value`` is then
+        the mean |difference| per output, ``computed_value`` its bound).
     """
 
     t_s: float | None
@@ -78,10 +82,15 @@ class Divergence:
     field: str | None = None
     recorded_value: object = None
     computed_value: object = None
+    kind: str = "value"
 
     def describe(self) -> str:
         """One line: when, where, what."""
         t = "before the vehicle clock" if self.t_s is None else f"t={self.t_s:.6f} s"
+        if self.kind == "drift":
+            return (f"{t} (end of the recording, {self.index} outputs of the message): {self.recorded}.{self.field} "
+                    f"mean |difference| {_fmt(self.recorded_value)} per output, more than float64 drift between "
+                    f"machines explains (bound {_fmt(self.computed_value)})")
         at = "after the end of the recording" if self.offset is None else f"record at byte {self.offset}"
         head = f"{t} ({at}, output #{self.index})"
         if self.recorded is None:
@@ -99,7 +108,7 @@ class Divergence:
 
         return {"t_s": self.t_s, "offset": self.offset, "index": self.index, "recorded": self.recorded,
                 "computed": self.computed, "field": self.field, "recorded_value": plain(self.recorded_value),
-                "computed_value": plain(self.computed_value), "description": self.describe()}
+                "computed_value": plain(self.computed_value), "kind": self.kind, "description": self.describe()}
 
 
 def _fmt(v) -> str:
@@ -115,9 +124,13 @@ class Comparison:
     Attributes
     ----------
     identical : bool
-        Every recorded output matched (``tolerance``) and nothing was left over.
+        Every recorded output matched (``mode``) and nothing was left over.
+    mode : str
+        ``bitwise`` (float32 fields bit for bit), ``drift`` (the environment differs
+        from the recording's, or is unknown: continuous outputs within float64
+        drift, ``companion.replay.compare``) or ``absolute`` (``tolerance``).
     tolerance : float
-        0: float32 fields bit for bit; else the absolute tolerance on float fields.
+        0, or the absolute tolerance on float fields (mode ``absolute``).
     n_compared, n_bitwise, n_within_tolerance, n_differing : int
         Outputs compared; identical byte for byte; different but within
         tolerance; different beyond it (after the first divergence the count
@@ -131,6 +144,13 @@ class Comparison:
         The outside events re-injected (STATUSTEXT texts).
     withheld : tuple of str
         Message types not fed to the core.
+    environment : tuple of str or None
+        Why the mode is ``drift``: the fingerprint keys that differ from the
+        recording's (``("unknown",)``: the recording has none); None when not
+        known to the caller.
+    drift : dict
+        Drift mode: per ``MESSAGE.field`` that differed, [mean |difference| per
+        output, its bound].
     """
 
     identical: bool
@@ -144,9 +164,14 @@ class Comparison:
     n_runner_heartbeats: int
     injected: tuple
     withheld: tuple
+    mode: str = "bitwise"
+    environment: tuple | None = None
+    drift: dict | None = None
 
     def to_dict(self) -> dict:
-        return {"identical": self.identical, "tolerance": self.tolerance, "n_compared": self.n_compared,
+        return {"identical": self.identical, "mode": self.mode,
+                "environment": None if self.environment is None else list(self.environment),
+                "drift": dict(self.drift or {}), "tolerance": self.tolerance, "n_compared": self.n_compared,
                 "n_bitwise": self.n_bitwise, "n_within_tolerance": self.n_within_tolerance,
                 "n_differing": self.n_differing,
                 "first_divergence": None if self.first_divergence is None else self.first_divergence.to_dict(),
@@ -168,13 +193,18 @@ class ReplaySession:
     withhold : iterable of int
         Vehicle message ids not fed to the core.
     vehicle_system : int
+    drift : bool
+        Compare in drift mode (``Comparison.mode``; a tolerance > 0 wins).
+    environment : sequence of str or None
+        Reported as ``Comparison.environment``.
     """
 
     def __init__(self, metrics: MetricsAccumulator, core=None, tolerance: float = 0.0, withhold=(),
-                 vehicle_system: int = 1) -> None:
+                 vehicle_system: int = 1, drift: bool = False, environment=None) -> None:
         self.metrics = metrics
         self.core = core
-        self.comparer = OutputComparer(tolerance) if core is not None else None
+        self.comparer = OutputComparer(tolerance, drift) if core is not None else None
+        self.environment = None if environment is None else tuple(environment)
         self.withhold = frozenset(int(w) for w in withhold)
         self.vsys = int(vehicle_system)
         self.pending: deque = deque()
@@ -299,6 +329,10 @@ class ReplaySession:
                 out = self.pending[0]
                 msgid, _ = computed_payload(out, self.comparer.mav)
                 self._diverged(Divergence(core.t_s, None, self.comparer.n_compared, None, message_name(msgid)))
+            for ex in self.comparer.drift_excess():
+                name, field = ex["field"].split(".", 1)
+                self._diverged(Divergence(core.t_s, None, ex["n_outputs"], name, name, field, ex["mean_abs_diff"],
+                                          ex["bound"], kind="drift"))
         c = self.comparer
         return Comparison(
             identical=self.first is None,
@@ -312,4 +346,7 @@ class ReplaySession:
             n_runner_heartbeats=self.n_runner_heartbeats,
             injected=tuple(self.injected),
             withheld=tuple(message_name(w) for w in sorted(self.withhold)),
+            mode=c.mode,
+            environment=self.environment,
+            drift=c.drift_summary(),
         )

@@ -1,0 +1,1 @@
+"""Campaigns: many simulated flights (Monte Carlo and falsification) on Dask (docs/campaign.md)."""
