@@ -34,11 +34,19 @@ Pure (arrays in, a named result out). Along the trajectory, sampled at
 
 A sample is covered when its planned speed is at most the allowed speed;
 horizontal speeds below ``MIN_SPEED_M_S`` (hovering, turning on the spot,
-climbing or descending on the spot) are not checked. Consecutive uncovered samples form a gap: "blind" when no beam sees
-the direction at some sample of it, "short" when beams see it but not far
-enough for the planned speed. ``time_scale`` is the factor by which slowing
-the whole trajectory uniformly (t -> k t: speeds / k, accelerations / k^2)
-covers every short gap; a blind gap cannot be flown at any speed.
+climbing or descending on the spot) are not checked. Between two samples
+the speed can exceed both ends': given the exact largest speed of each
+interval between samples (``companion.trajectory.extrema``, from the
+trajectory's polynomial pieces), an interval is covered when that speed is
+at most the smaller allowed speed of its ends, and otherwise its two
+samples are uncovered. Consecutive uncovered samples form a gap: "blind"
+when no beam sees the direction at some sample of it, "short" when beams
+see it but not far enough for the planned speed. ``time_scale`` is the
+factor by which slowing the whole trajectory uniformly (t -> k t: speeds /
+k, accelerations / k^2) covers every short gap: the largest ratio of the
+(exact interval) speed to the allowed speed, so the slowed speed is under
+the allowed one on every interval; a blind gap cannot be flown at any
+speed.
 """
 
 from __future__ import annotations
@@ -186,7 +194,7 @@ def level_body_axes(p_enu_m: np.ndarray, target_enu_m) -> np.ndarray:
 
 
 def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...], accel_m_s2: float,
-                   clearance_m: float) -> SensorCoverage:
+                   clearance_m: float, interval_max_speed_m_s=None) -> SensorCoverage:
     """Where the direction of travel is covered, and at what speed.
 
     Parameters
@@ -202,6 +210,12 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
         Braking acceleration (m/s^2), > 0.
     clearance_m : float
         Distance (m) from the beam's origin to the obstacle when stopped.
+    interval_max_speed_m_s : (n - 1,) array, optional
+        The largest speed (m/s) on each [t_i, t_{i+1}]
+        (``companion.trajectory.extrema.max_speed_on_intervals``). Given,
+        an interval is held to the smaller allowed speed of its two ends
+        (the directions between two samples are those of the samples), so
+        ``time_scale`` bounds the speed everywhere, not only at the samples.
 
     Returns
     -------
@@ -230,6 +244,21 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
         best[better] = beam.sensor_id
     allowed = np.where(moving, allowed, np.inf)
     uncovered = moving & (speed > allowed * (1.0 + 1e-9))
+    peak = speed.copy()                          # the largest speed at or next to a sample
+    ratio = np.where(uncovered, math.inf, 0.0)  # a blind sample: no speed is allowed
+    ok = uncovered & (allowed > 0.0)
+    ratio[ok] = speed[ok] / allowed[ok]
+    if interval_max_speed_m_s is not None and t.size > 1:
+        vmax = np.asarray(interval_max_speed_m_s, dtype=float).reshape(-1)
+        a_int = np.minimum(allowed[:-1], allowed[1:])
+        over = vmax > a_int * (1.0 + 1e-9)
+        r_int = np.where(over, math.inf, 0.0)
+        ok = over & (a_int > 0.0)
+        r_int[ok] = vmax[ok] / a_int[ok]
+        for side in (slice(None, -1), slice(1, None)):
+            uncovered[side] |= over
+            peak[side] = np.maximum(peak[side], np.where(over, vmax, 0.0))
+            ratio[side] = np.maximum(ratio[side], r_int)
     gaps = []
     idx = np.flatnonzero(uncovered)
     if idx.size:
@@ -238,12 +267,12 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
             i0, i1 = int(run[0]), int(run[-1])
             blind = bool(np.any(best[run] < 0))
             gaps.append(CoverageGap(float(t[i0]), float(t[i1]), tuple(float(c) for c in p[i0]),
-                                    "blind" if blind else "short", float(speed[run].max()),
-                                    float(allowed[run].min())))
+                                    "blind" if blind else "short", float(peak[run].max()),
+                                    float(np.min(np.where(np.isfinite(allowed[run]), allowed[run], np.inf)))))
     if any(g.kind == "blind" for g in gaps):
         scale = math.inf
     elif gaps:
-        scale = float(np.max(speed[uncovered] / allowed[uncovered]))
+        scale = float(np.max(ratio))
     else:
         scale = 1.0
     return SensorCoverage(t, speed, allowed, best, tuple(gaps), max(1.0, scale))
@@ -283,6 +312,7 @@ def mission_coverage(mission, trajectory, body_radius_m: float) -> SensorCoverag
     ``replan.accel_m_s2`` and stopping ``replan.clearance_m + body_radius_m``
     from what they see."""
     from ..mission.sim import default_rangefinders
+    from ..trajectory.extrema import max_speed_on_intervals
 
     sim = mission.sim
     cfgs = default_rangefinders() if sim is None else sim.rangefinders_or_default
@@ -291,4 +321,5 @@ def mission_coverage(mission, trajectory, body_radius_m: float) -> SensorCoverag
     s = trajectory.sample(t)
     target = trajectory.target_enu_m if trajectory.target_enu_m is not None else s.p[0] + np.array([0.0, 1.0, 0.0])
     rp = mission.replan
-    return check_coverage(t, s.p, s.v, target, beams, rp.accel_m_s2, rp.clearance_m + body_radius_m)
+    vmax = max_speed_on_intervals(trajectory, t)
+    return check_coverage(t, s.p, s.v, target, beams, rp.accel_m_s2, rp.clearance_m + body_radius_m, vmax)

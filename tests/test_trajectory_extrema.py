@@ -1,0 +1,53 @@
+"""Exact largest speed between times (companion/trajectory/extrema.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.trajectory import Trajectory, TrajectoryConfig
+from companion.trajectory.extrema import max_speed_on_intervals
+
+
+def _one_piece(duration_s: float, cy: float) -> Trajectory:
+    # x(s) = 2 s^2 - 4/3 s^3: dx/ds = 4 s (1 - s), largest 1 at s = 1/2, 0 at both ends;
+    # y(s) = cy s: dy/ds = cy. Speeds are d/ds divided by the duration.
+    pos = np.zeros((1, 8, 3))
+    pos[0, 2, 0], pos[0, 3, 0] = 2.0, -4.0 / 3.0
+    pos[0, 1, 1] = cy
+    pos[0, 0, 2] = 1.5
+    return Trajectory.from_pieces(np.array([0.0, duration_s]), pos, np.array([0, 1]), np.zeros((2, 3, 3)),
+                                  TrajectoryConfig())
+
+
+def test_hand_worked_piece_whose_samples_miss_the_peak():
+    tr = _one_piece(2.0, 0.3)
+    # [0, 2] sampled only at its ends: 0.15 m/s there, sqrt(0.5^2 + 0.15^2) at t = 1 s
+    assert max_speed_on_intervals(tr, [0.0, 2.0])[0] == pytest.approx(math.hypot(0.5, 0.15), abs=1e-12)
+    # [0, 0.7] rises all the way (s = 0.35: 4 0.35 0.65 / 2 = 0.455); [0.7, 2] holds the peak
+    v = max_speed_on_intervals(tr, [0.0, 0.7, 2.0])
+    assert v[0] == pytest.approx(math.hypot(0.455, 0.15), abs=1e-12)
+    assert v[1] == pytest.approx(math.hypot(0.5, 0.15), abs=1e-12)
+
+
+def test_every_piece_of_a_planned_trajectory_against_dense_samples_and_a_lipschitz_bound():
+    from companion.mission import load_mission
+    from companion.planner import plan_mission
+    from pathlib import Path
+
+    m = load_mission(Path(__file__).resolve().parents[1] / "missions" / "flat-rectangle" / "mission.yaml")
+    tr = plan_mission(m).trajectory
+    knots = tr.knot_times_s
+    exact = max_speed_on_intervals(tr, knots)
+    n = 400
+    for k in range(knots.size - 1):
+        t = np.linspace(knots[k], knots[k + 1], n)
+        s = tr.sample(t)
+        dense = np.linalg.norm(s.v, axis=1).max()
+        # |d|v|/dt| <= |a|, so between dense samples |v| exceeds them by at most max|a| h / 2
+        # (max|a| itself bounded the same way by the jerk)
+        h = t[1] - t[0]
+        a_max = np.linalg.norm(s.a, axis=1).max() + np.linalg.norm(s.jerk, axis=1).max() * h / 2
+        assert dense - 1e-12 <= exact[k] <= dense + a_max * h / 2 + 1e-12
