@@ -142,6 +142,17 @@ def yaw_ned2enu(yaw_ned_rad):
     return wrap_pi(math.pi / 2.0 - yaw_ned_rad)
 
 
+def azimuth_flu2frd_deg(azimuth_flu_rad):
+    """Body-horizontal direction: FLU azimuth (rad, from body x toward body y = left)
+    -> FRD angle (deg, from forward, clockwise: OBSTACLE_DISTANCE's sectors)."""
+    return -np.degrees(azimuth_flu_rad)
+
+
+def angle_frd_deg2azimuth_flu(angle_frd_deg):
+    """Inverse of ``azimuth_flu2frd_deg``: FRD angle (deg, clockwise) -> FLU azimuth (rad)."""
+    return -np.radians(angle_frd_deg)
+
+
 def wrap_pi(a):
     """Wrap an angle (rad) to [-pi, pi)."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi

@@ -306,6 +306,55 @@ def _answer(t: int, c0: float, c1: float, c2: float, c3: float, lockstep: bool) 
     return ActuatorAnswer(t, None, lockstep, actuator_problem(c0, c1, c2, c3))
 
 
+@dataclass(frozen=True)
+class ObstacleSectors:
+    """OBSTACLE_DISTANCE decoded (``decode_obstacle_distance``), body FLU, SI.
+
+    Attributes
+    ----------
+    azimuth_flu_rad : (n,) array
+        Centre of each used sector, from body x toward body y (left).
+    half_width_rad : float
+        Half a sector's width.
+    distance_m : (n,) array
+        Horizontal distance to the obstacle (m); inf: no obstacle within
+        ``max_distance``; NaN: unknown (no sensor looks there).
+    """
+
+    azimuth_flu_rad: np.ndarray
+    half_width_rad: float
+    distance_m: np.ndarray
+
+
+#: MAV_FRAME_BODY_FRD (OBSTACLE_DISTANCE.frame for body-mounted sensors).
+FRAME_BODY_FRD = 12
+
+
+def decode_obstacle_distance(msg) -> ObstacleSectors | None:
+    """OBSTACLE_DISTANCE (cm, sectors clockwise from forward, body FRD) -> ``ObstacleSectors``.
+
+    Only ``MAV_FRAME_BODY_FRD`` is read (None otherwise, and for an increment
+    that is not a positive finite angle of at most 360 deg). ``increment_f``
+    wins over ``increment`` when non-zero (MAVLink); a negative one runs
+    counter-clockwise. Sectors beyond one full turn are unused. Values:
+    ``UINT16_MAX`` unknown, above ``max_distance`` no obstacle, anything else
+    a distance (below ``min_distance``: as close as ``min_distance``).
+    """
+    if int(msg.frame) != FRAME_BODY_FRD:
+        return None
+    inc = float(msg.increment_f) if float(msg.increment_f) != 0.0 else float(msg.increment)
+    offset = float(msg.angle_offset)
+    if not (math.isfinite(inc) and 0.0 < abs(inc) <= 360.0 and math.isfinite(offset)):
+        return None
+    n = min(len(msg.distances), int(math.floor(360.0 / abs(inc) + 1e-9)))
+    d_cm = np.asarray(msg.distances[:n], dtype=float)
+    lo, hi = float(msg.min_distance), float(msg.max_distance)
+    dist = np.where(d_cm == 65535.0, math.nan, np.where(d_cm > hi, math.inf, np.maximum(d_cm, lo) / 100.0))
+    angles_frd_deg = offset + inc * np.arange(n)
+    az = frames.wrap_pi(frames.angle_frd_deg2azimuth_flu(angles_frd_deg))
+    return ObstacleSectors(np.asarray(az, dtype=float), math.radians(abs(inc)) / 2.0, dist)
+
+
 def decode_takeoff_altitude(param7: float, origin_alt_amsl_m: float) -> float | None:
     """NAV_TAKEOFF param7 (altitude AMSL, m, as PX4) -> ENU z (m), None = default.
 

@@ -25,6 +25,11 @@ angular-acceleration gain, so it is independent of J), attitude 8 /s (yaw
 3 /s), velocity 4 /s with a small integral, position 1.5 /s. Each loop is
 at least three times slower than the one inside it.
 
+Collision prevention (``velocity_limit``, ``sitl.collision_prevention``, PX4's
+CP_DIST/CP_DELAY/CP_GO_NO_DATA from OBSTACLE_DISTANCE) scales the horizontal
+velocity setpoint after the speed limits and drops the horizontal
+acceleration feed-forward while it limits.
+
 The setpoint follows MAVLink's type_mask semantics: a ``None`` group (or a
 NaN component) is not controlled. Position absent: the velocity loop runs on
 the velocity setpoint alone; velocity and position absent: acceleration
@@ -101,6 +106,9 @@ class CascadedController:
         self.m = float(vehicle.mass_kg)
         self.J = tuple(float(j) for j in vehicle.inertia_kg_m2)
         self.fmax = float(vehicle.max_thrust_per_rotor_n)
+        #: Collision prevention (``sitl.collision_prevention.CollisionPrevention.limit``)
+        #: applied to the horizontal velocity setpoint; None: none.
+        self.velocity_limit = None
         Ainv = np.linalg.pinv(allocation_matrix(vehicle))
         self._Ainv = tuple(tuple(float(x) for x in row) for row in Ainv)   # rows: rotors
         self.reset()
@@ -195,6 +203,11 @@ class CascadedController:
             vsy *= k
         vsz = -vdn_max if vsz < -vdn_max else vsz
         vsz = vup_max if vsz > vup_max else vsz
+        cp = self.velocity_limit
+        if cp is not None:
+            vsx, vsy, limited = cp(vsx, vsy, math.atan2(r10, r00), dt)
+            if limited:       # no feed-forward into what it stops for
+                accx = accy = 0.0
         evx = vsx - vx if cx_on else 0.0
         evy = vsy - vy if cy_on else 0.0
         evz = vsz - vz if cz_on else 0.0

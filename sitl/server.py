@@ -115,6 +115,7 @@ from .pipe import MEMORY_SCHEME
 
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .battery import Battery
+from .collision_prevention import CollisionPrevention, CollisionPreventionConfig
 from .flightstack import (
     IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
     Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
@@ -528,6 +529,7 @@ class SitlServer:
         self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
         self.missions = MissionProtocol(mission.energy.max_mission_items)
         self.battery = Battery(mission.energy)
+        self.collision_prevention = CollisionPrevention()     # fed by OBSTACLE_DISTANCE, CP_* params
         self._mission_peer = None
         self._apply_params()
         self._frame = None
@@ -583,6 +585,7 @@ class SitlServer:
             "PARAM_REQUEST_LIST": self._on_param_list,
             "PARAM_REQUEST_READ": self._on_param_read,
             "PARAM_SET": self._on_param_set,
+            "OBSTACLE_DISTANCE": self._on_obstacle_distance,
             "MISSION_COUNT": self._on_mission_count,
             "MISSION_ITEM_INT": self._on_mission_item_int,
             "MISSION_ITEM": self._on_mission_item,
@@ -638,6 +641,10 @@ class SitlServer:
         ctl.gains = dataclasses.replace(
             ctl.gains, max_speed_xy_m_s=p["MPC_XY_VEL_MAX"], max_speed_up_m_s=p["MPC_Z_VEL_MAX_UP"],
             max_speed_down_m_s=p["MPC_Z_VEL_MAX_DN"], max_tilt_rad=math.radians(p["MPC_TILTMAX_AIR"]))
+        cp = self.collision_prevention
+        cp.configure(CollisionPreventionConfig(p["CP_DIST"], p["CP_DELAY"], bool(p["CP_GO_NO_DATA"]),
+                                               p["MPC_ACC_HOR"]))
+        ctl.velocity_limit = cp.limit if cp.cfg.enabled else None
         s = self.sim.sensors
         s.acc_rel_std = math.sqrt(p["SIM_VEC_VAR"])
         s.mag_std = math.sqrt(p["SIM_VEC_VAR"]) * float(np.linalg.norm(s.mag_earth))
@@ -1436,6 +1443,11 @@ class SitlServer:
         target = codec.decode_position_target(msg, nav.yaw_enu_rad, nav.pos_enu_m)
         if target is not None:
             self.stack.offboard_setpoint(self.sim.time_us, target)
+
+    def _on_obstacle_distance(self, link, msg) -> None:
+        sectors = codec.decode_obstacle_distance(msg)
+        if sectors is not None:
+            self.collision_prevention.on_sectors(sectors)
 
     def _on_actuators(self, link, msg) -> None:
         self._on_answer(codec.decode_actuator_controls(msg))

@@ -63,6 +63,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from ..control.observer import heading_from_accel_mag
 from ..errors import CommandRejected, LinkError
 from ..link import codec
+from ..link.obstacle_distance import ObstacleDistancePublisher, encode_obstacle_distance
 from ..report import FlightReport, ReplanningStats, TrackingStats
 from ..replan.perception import propagated_pose
 from ..vehicle import VehicleConfig
@@ -286,6 +287,9 @@ class FlightCore:
         self._odom = None
         self.truth_source = "estimate"
         self.min_range_m = None         # smallest non-downward rangefinder reading
+        #: What the rangefinders see, sent on as OBSTACLE_DISTANCE for the vehicle's own
+        #: collision prevention (``companion.link.obstacle_distance``).
+        self.obstacles_out = ObstacleDistancePublisher()
         # replanning (issue 8): the replanner flies the trajectory phase
         self.replanner = inputs.replanner
         self._R_est = None              # the vehicle's attitude estimate (ATTITUDE): poses of readings
@@ -873,12 +877,17 @@ class FlightCore:
                 self._react(v)
 
     def _on_distance(self, m) -> None:
-        if self.phase not in ("trajectory", "hover", "hold") or self.t_s is None:
+        if self.t_s is None:
             return
         try:
             r = codec.decode_distance_sensor(m)
         except (ValueError, ZeroDivisionError, OverflowError):
             return          # a malformed reading (e.g. a zero CUSTOM quaternion) is no evidence
+        sectors = self.obstacles_out.on_range(self.t_s, r)
+        if sectors is not None:
+            self._emit(encode_obstacle_distance(self.enc, self.t_us, sectors))
+        if self.phase not in ("trajectory", "hover", "hold"):
+            return
         if (m.orientation != _SENSOR_DOWN and math.isfinite(r.distance_m)
                 and (self.min_range_m is None or r.distance_m < self.min_range_m)):
             self.min_range_m = r.distance_m
