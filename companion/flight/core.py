@@ -39,6 +39,10 @@ setpoints (SET_POSITION_TARGET_LOCAL_NED) are queued at ``setpoint_hz``; with
 frame (HIL_ACTUATOR_CONTROLS, lockstep flag, ``time_usec`` echoed), else a
 tick with four NaN (the vehicle's own controller flies).
 
+What the rangefinders see (every DISTANCE_SENSOR, any phase) is sent on as
+OBSTACLE_DISTANCE at most 10 Hz (``companion.link.obstacle_distance``) for
+the vehicle's own collision prevention.
+
 Outcome: a ``FlightMonitor`` (``companion.flight.monitor``) watches from our
 arming to our landing command; its first violation stops the flight with the
 reaction it names (``end``, ``release``, ``land``/hold) and the flight is not
