@@ -1,8 +1,10 @@
 """The onboard controller's collision prevention, as PX4's (``CP_DIST``,
 ``CP_DELAY``, ``CP_GO_NO_DATA``), fed by OBSTACLE_DISTANCE.
 
-Pure and stateful; timed by the ``dt_s`` of the controller steps that call
-it (vehicle time). Horizontal only, world ENU / body FLU:
+Pure and stateful; timed by the vehicle clock its owner hands it (the time
+a message arrived, ``on_sectors``, and the time now, ``set_time``), so data
+that aged while another controller flew is not taken for fresh. Horizontal
+only, world ENU / body FLU:
 
 - a sector (centre azimuth a_i in body FLU, horizontal distance d_i) allows
   the speed toward it from which the vehicle stops ``CP_DIST`` short of the
@@ -68,7 +70,8 @@ class CollisionPrevention:
 
     def __init__(self, cfg: CollisionPreventionConfig = CollisionPreventionConfig()) -> None:
         self.cfg = cfg
-        self._age_s = math.inf
+        self._msg_us: int | None = None
+        self._now_us = 0
         self._sectors = None
         self._obstacles: list[tuple[float, float]] = []   # (azimuth FLU rad, allowed speed m/s)
         self._unknown: list[float] = []                   # azimuths of unknown sectors
@@ -81,8 +84,18 @@ class CollisionPrevention:
         if self._sectors is not None:
             self.on_sectors(self._sectors, keep_age=True)
 
-    def on_sectors(self, sectors, keep_age: bool = False) -> None:
-        """A decoded OBSTACLE_DISTANCE (``sitl.codec.ObstacleSectors``): the new picture."""
+    @property
+    def age_s(self) -> float:
+        """Vehicle time (s) since the last OBSTACLE_DISTANCE; inf before the first."""
+        return math.inf if self._msg_us is None else (self._now_us - self._msg_us) * 1e-6
+
+    def set_time(self, now_us: int) -> None:
+        """The vehicle clock now (us)."""
+        self._now_us = int(now_us)
+
+    def on_sectors(self, sectors, now_us: int | None = None, keep_age: bool = False) -> None:
+        """A decoded OBSTACLE_DISTANCE (``sitl.codec.ObstacleSectors``) received at
+        ``now_us`` (vehicle clock; default: the time last set): the new picture."""
         self._sectors = sectors
         d = np.asarray(sectors.distance_m, dtype=float)
         az = np.asarray(sectors.azimuth_flu_rad, dtype=float)
@@ -92,11 +105,13 @@ class CollisionPrevention:
         self._unknown = [float(a) for a in az[np.isnan(d)]]
         self._covered = (az, sectors.half_width_rad)
         if not keep_age:
-            self._age_s = 0.0
+            if now_us is not None:
+                self._now_us = int(now_us)
+            self._msg_us = self._now_us
             self.n_messages += 1
 
     def _no_data(self, az: float) -> bool:
-        if self._sectors is None or self._age_s > self.cfg.max_age_s:
+        if self._sectors is None or self.age_s > self.cfg.max_age_s:
             return True
         centres, half = self._covered
         off = np.abs((centres - az + math.pi) % (2.0 * math.pi) - math.pi)
@@ -105,13 +120,12 @@ class CollisionPrevention:
             return True
         return bool(np.all(np.isnan(np.asarray(self._sectors.distance_m)[inside])))
 
-    def limit(self, vx: float, vy: float, yaw_enu_rad: float, dt_s: float) -> tuple[float, float, bool]:
+    def limit(self, vx: float, vy: float, yaw_enu_rad: float, dt_s: float = 0.0) -> tuple[float, float, bool]:
         """The velocity setpoint (ENU m/s, horizontal) allowed now, and whether it was limited.
 
         ``yaw_enu_rad``: the vehicle's heading (body x from east, CCW);
-        ``dt_s``: vehicle time since the previous call (ages the data).
+        ``dt_s``: the controller's step (unused: the data's age comes from ``set_time``).
         """
-        self._age_s += dt_s
         cfg = self.cfg
         speed = math.hypot(vx, vy)
         if not cfg.enabled or speed <= 1e-9:
@@ -120,7 +134,7 @@ class CollisionPrevention:
         if not cfg.go_no_data and self._no_data(az):
             self.n_limited += 1
             return 0.0, 0.0, True
-        if self._sectors is None or self._age_s > cfg.max_age_s:
+        if self._sectors is None or self.age_s > cfg.max_age_s:
             return vx, vy, False                               # no data, allowed to go
         vmax = speed
         for a_i, v_i in self._obstacles:

@@ -811,6 +811,7 @@ class SitlServer:
             if out.reset_controller or not self._onboard_flying:
                 sim.onboard.reset()
             self._onboard_flying = True
+            self.collision_prevention.set_time(now)
             frame = sim.step_onboard(out.setpoint)
         self._frame = frame
         self.battery.drain(sim.plant.f, sim.dt_frame_s)
@@ -1447,7 +1448,7 @@ class SitlServer:
     def _on_obstacle_distance(self, link, msg) -> None:
         sectors = codec.decode_obstacle_distance(msg)
         if sectors is not None:
-            self.collision_prevention.on_sectors(sectors)
+            self.collision_prevention.on_sectors(sectors, self.sim.time_us)
 
     def _on_actuators(self, link, msg) -> None:
         self._on_answer(codec.decode_actuator_controls(msg))

@@ -62,10 +62,12 @@ def test_no_data_blocks_unless_cp_go_no_data_and_off_when_cp_dist_negative():
     d[18] = math.nan                              # 90 deg right of forward: no sensor there
     cp = CollisionPrevention(CFG)
     assert cp.limit(1.0, 0.0, 0.0, 0.004) == (0.0, 0.0, True)          # nothing received yet
-    cp.on_sectors(_sectors(d))
+    cp.on_sectors(_sectors(d), 0)
     assert cp.limit(1.0, 0.0, 0.0, 0.004) == (1.0, 0.0, False)
     assert cp.limit(0.0, -1.0, 0.0, 0.004) == (0.0, 0.0, True)         # toward the unknown sector (right)
-    cp.limit(0.0, 0.0, 0.0, 0.5)                                        # the data ages past 0.5 s
+    cp.set_time(500_000)                                                # 0.5 s later: still fresh
+    assert cp.limit(1.0, 0.0, 0.0, 0.004) == (1.0, 0.0, False)
+    cp.set_time(500_001)                                                # older than 0.5 s: no data
     assert cp.limit(1.0, 0.0, 0.0, 0.004) == (0.0, 0.0, True)
     cp.configure(CollisionPreventionConfig(1.0, 0.4, True, 3.0))
     assert cp.limit(0.0, -1.0, 0.0, 0.004) == (0.0, -1.0, False)
