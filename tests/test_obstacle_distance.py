@@ -118,3 +118,22 @@ def test_publisher_runs_at_10_hz_on_the_vehicle_clock_and_drops_stale_readings()
     assert s.distances_cm[0] == 300 and s.distances_cm[54] == UNKNOWN_CM
     s = pub.on_range(1.7, left)
     assert s.distances_cm[54] == 200
+
+
+def test_sitl_decoder_survives_any_field_values():
+    rng = np.random.default_rng(15)
+    enc = mavlink.MAVLink(None)
+    specials = [0.0, -0.0, math.nan, math.inf, -math.inf, 1e-30, 1e30, -5.0, 361.0, 360.0]
+    for _ in range(300):
+        d = [int(x) for x in rng.integers(0, 65536, 72)]
+        inc_f = float(rng.choice(specials + [float(rng.uniform(-400, 400))]))
+        off = float(rng.choice(specials + [float(rng.uniform(-1e4, 1e4))]))
+        m = enc.obstacle_distance_encode(0, int(rng.integers(0, 256)), d, int(rng.integers(0, 256)),
+                                         int(rng.integers(0, 65536)), int(rng.integers(0, 65536)), inc_f, off,
+                                         int(rng.choice([0, 1, 12, 255])))
+        dec = decode_obstacle_distance(mavlink.MAVLink(None).parse_char(m.pack(enc)))
+        if dec is not None:
+            n = dec.distance_m.shape[0]
+            assert 1 <= n <= 72 and dec.azimuth_flu_rad.shape == (n,)
+            assert np.all(np.abs(dec.azimuth_flu_rad) <= math.pi) and dec.half_width_rad > 0.0
+            assert not np.any(dec.distance_m < 0.0)
