@@ -115,6 +115,7 @@ from .pipe import MEMORY_SCHEME
 
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .battery import Battery
+from . import mission_store
 from .flightstack import (
     IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
     Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
@@ -144,6 +145,7 @@ _SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSO
             | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY | mavlink.MAV_SYS_STATUS_AHRS
             | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY)
 _PREARM = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+_GEOFENCE = mavlink.MAV_SYS_STATUS_GEOFENCE
 
 # Message ids used for scheduling.
 ID = mavlink
@@ -526,7 +528,10 @@ class SitlServer:
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
         self.stack = FlightStack(self.params, self.home_enu_m)
         self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
-        self.missions = MissionProtocol(mission.energy.max_mission_items)
+        self.missions = MissionProtocol(mission.energy.max_mission_items,
+                                        validate=mission_store.validator(self.origin, self.home_enu_m))
+        self._store_version = self.missions.version
+        self._mission_current_due_us = 0
         self.battery = Battery(mission.energy)
         self._mission_peer = None
         self._apply_params()
@@ -607,6 +612,7 @@ class SitlServer:
             mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_capabilities,
             mavlink.MAV_CMD_GET_HOME_POSITION: self._cmd_home,
             mavlink.MAV_CMD_MISSION_START: self._cmd_mission_start,
+            mavlink.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
         }
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
@@ -621,6 +627,7 @@ class SitlServer:
             None if config.signing_key is None else SignatureVerifier(config.signing_key),
             key_locked=config.signing_key is not None)
         self._intake = IntakeBudget()
+        self._command_frame: int | None = None   # COMMAND_INT frame of the command being handled
 
     # ------------------------------------------------------------------ params
     @staticmethod
@@ -806,6 +813,8 @@ class SitlServer:
             self._onboard_flying = True
             frame = sim.step_onboard(out.setpoint)
         self._frame = frame
+        if self.stack.mission is not None:
+            self._mission_progress()
         self.battery.drain(sim.plant.f, sim.dt_frame_s)
         self.frames += 1
         if sim.crash is not None and not self.stack.crashed:
@@ -935,8 +944,12 @@ class SitlServer:
         s = self._nav_state(self._frame)
         if s.landed and s.tilt_rad < math.radians(30.0):
             health |= _PREARM
+        # geofence: always present (PX4), enabled with a stored fence, healthy unless breached
+        enabled = _SENSORS | _PREARM | (_GEOFENCE if self.stack.fence is not None else 0)
+        if not self.stack.fence_breached:
+            health |= _GEOFENCE
         b = self.battery
-        return codec.sys_status(self._mav(), _SENSORS | _PREARM, _SENSORS | _PREARM, health, b.voltage_v,
+        return codec.sys_status(self._mav(), _SENSORS | _PREARM | _GEOFENCE, enabled, health, b.voltage_v,
                                 b.current_a, b.remaining)
 
     def _enc_battery(self):
@@ -1298,6 +1311,7 @@ class SitlServer:
             result = mavlink.MAV_RESULT_DENIED
             self._refuse(rules.command_name(command), why)
         else:
+            self._command_frame = int_frame
             try:
                 result, after = handler(params)
             except (ValueError, OverflowError, TypeError):   # unusable parameters
@@ -1406,8 +1420,28 @@ class SitlServer:
         return mavlink.MAV_RESULT_ACCEPTED, [self._enc_home()]
 
     def _cmd_mission_start(self, p):
-        self._say(SEVERITY_WARNING, "Mission start refused: mission stored only")
-        return mavlink.MAV_RESULT_DENIED, None
+        seq = None if math.isnan(p[0]) else int(p[0])
+        return self.stack.start_mission(self.sim.time_us, self._state(), seq).result, None
+
+    def _cmd_reposition(self, p):
+        """DO_REPOSITION (MAVSDK ``goto_location``): param1 speed, param4 yaw
+        (rad from north, as PX4 reads it and MAVSDK sends it; NaN: keep),
+        x/y lat/lon (NaN or INT32_MAX: here), z altitude (NaN: keep)."""
+        nav = self._state()
+        frame = mavlink.MAV_FRAME_GLOBAL if self._command_frame is None else self._command_frame
+        scale = 1.0 if self._command_frame is None else 1e-7
+        lat, lon = p[4] * scale, p[5] * scale
+        here = codec.enu_to_global(self.origin, nav.pos_enu_m)
+        if self._command_frame is not None and p[4] == rules.INT32_MAX:
+            lat = lon = math.nan
+        if math.isnan(lat) or math.isnan(lon):
+            lat, lon = here[0], here[1]
+        rel = frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+        alt = here[2] if math.isnan(p[6]) else p[6] + (self.origin.alt_m + self.home_enu_m[2] if rel else 0.0)
+        target = codec.global_to_enu(self.origin, lat, lon, alt)
+        yaw = None if math.isnan(p[3]) else codec.yaw_ned2enu(p[3])
+        speed = p[0] if math.isfinite(p[0]) else -1.0
+        return self.stack.reposition(self.sim.time_us, nav, target, speed, yaw).result, None
 
     def _on_set_mode(self, link, msg) -> None:
         if msg.target_system != SYSTEM_ID:
@@ -1531,6 +1565,7 @@ class SitlServer:
         replies = self.missions.handle_count(int(msg.count), int(getattr(msg, "mission_type", 0)),
                                              time.monotonic())
         self._send_mission_replies(link, self._peer(msg), replies)
+        self._sync_store()
 
     def _on_mission_item_int(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
@@ -1552,8 +1587,11 @@ class SitlServer:
         if self.missions.refused is not None:
             self._refuse(msg.get_type(), self.missions.refused)
         self._send_mission_replies(link, self._peer(msg), replies)
-        if was and not self.missions.uploading and self.missions.items:
-            self._say(SEVERITY_INFO, f"Mission stored: {len(self.missions.items)} items")
+        if was and not self.missions.uploading and self.missions.version != self._store_version:
+            n = len(self.missions.stored[item.mission_type])
+            what = {mavlink.MAV_MISSION_TYPE_FENCE: "Geofence", mavlink.MAV_MISSION_TYPE_RALLY: "Rally points"}
+            self._say(SEVERITY_INFO, f"{what.get(item.mission_type, 'Mission')} stored: {n} items")
+        self._sync_store()
 
     def _on_mission_request_list(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
@@ -1572,13 +1610,47 @@ class SitlServer:
             return
         replies = self.missions.handle_clear_all(int(getattr(msg, "mission_type", 0)))
         self._send_mission_replies(link, self._peer(msg), replies)
+        self._sync_store()
 
     def _on_mission_set_current(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
         if self.missions.handle_set_current(int(msg.seq)):
-            self._broadcast(link.mav.mission_current_encode(self.missions.current_seq,
-                                                            len(self.missions.items)))
+            m = self.stack.mission
+            if m is not None:
+                m.set_current(int(msg.seq))
+            self._send_mission_current()
+
+    def _sync_store(self) -> None:
+        """A stored list changed: hand the flight stack its new mission, fence and rally points."""
+        if self.missions.version == self._store_version:
+            return
+        self._store_version = self.missions.version
+        objs = mission_store.flight_objects(self.missions.stored, self.origin, self.home_enu_m, self.params)
+        self.stack.fence = objs.fence
+        self.stack.rally_points = objs.rally_points
+        if objs.fence is None:
+            self.stack.fence_breached = False
+        self.stack.set_mission(objs.mission, self._state() if self._frame is not None else None)
+        self._send_mission_current()
+
+    def _send_mission_current(self) -> None:
+        m = self.stack.mission
+        seq = m.current if m is not None else self.missions.current_seq
+        state = mission_store.mission_state(m, self.stack.mode is FlightMode.MISSION)
+        self._broadcast(self._mav().mission_current_encode(seq, len(self.missions.items), state))
+        self._mission_current_due_us = self.sim.time_us + 1_000_000
+
+    def _mission_progress(self) -> None:
+        """MISSION_ITEM_REACHED for each item completed; MISSION_CURRENT on a
+        change and once a second of vehicle time while a mission is stored (PX4)."""
+        m = self.stack.mission
+        if m.events:
+            for seq in m.pop_events():
+                self._broadcast(self._mav().mission_item_reached_encode(seq))
+        if m.current_changed or self.sim.time_us >= self._mission_current_due_us:
+            m.current_changed = False
+            self._send_mission_current()
 
     def mission_tick(self) -> None:
         """Resend or abandon a stalled upload (wall-clock timeouts)."""
