@@ -1564,8 +1564,8 @@ class SitlServer:
         self._mission_peer = (link, self._peer(msg), link.last_addr)
         replies = self.missions.handle_count(int(msg.count), int(getattr(msg, "mission_type", 0)),
                                              time.monotonic())
-        self._send_mission_replies(link, self._peer(msg), replies)
         self._sync_store()
+        self._send_mission_replies(link, self._peer(msg), replies)
 
     def _on_mission_item_int(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
@@ -1586,12 +1586,13 @@ class SitlServer:
         replies = self.missions.handle_item(item, time.monotonic())
         if self.missions.refused is not None:
             self._refuse(msg.get_type(), self.missions.refused)
+        stored = was and not self.missions.uploading and self.missions.version != self._store_version
+        self._sync_store()      # the flight stack has the new list before the peer has the ACK
         self._send_mission_replies(link, self._peer(msg), replies)
-        if was and not self.missions.uploading and self.missions.version != self._store_version:
+        if stored:
             n = len(self.missions.stored[item.mission_type])
             what = {mavlink.MAV_MISSION_TYPE_FENCE: "Geofence", mavlink.MAV_MISSION_TYPE_RALLY: "Rally points"}
             self._say(SEVERITY_INFO, f"{what.get(item.mission_type, 'Mission')} stored: {n} items")
-        self._sync_store()
 
     def _on_mission_request_list(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
@@ -1609,8 +1610,8 @@ class SitlServer:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
         replies = self.missions.handle_clear_all(int(getattr(msg, "mission_type", 0)))
-        self._send_mission_replies(link, self._peer(msg), replies)
         self._sync_store()
+        self._send_mission_replies(link, self._peer(msg), replies)
 
     def _on_mission_set_current(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):

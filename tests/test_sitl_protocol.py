@@ -247,12 +247,30 @@ def test_mission_count_zero_fence_and_clear(gcs):
     gcs.mav.mission_request_list_send(1, 1, 0)
     assert gcs.recv("MISSION_COUNT", 3.0).count == 0
     fence = mavlink.MAV_MISSION_TYPE_FENCE
-    gcs.mav.mission_count_send(1, 1, 3, fence)
-    a = gcs.recv("MISSION_ACK", 3.0)
-    assert (a.type, a.mission_type) == (mavlink.MAV_MISSION_UNSUPPORTED, fence)
+
+    def upload_fence(vertex_count):
+        gcs.mav.mission_count_send(1, 1, 3, fence)
+        for i in range(3):
+            r = gcs.recv("MISSION_REQUEST_INT", 3.0)
+            assert (r.seq, r.mission_type) == (i, fence)
+            gcs.mav.mission_item_int_send(1, 1, i, mavlink.MAV_FRAME_GLOBAL_INT, 5001, 0, 1, vertex_count, 0, 0, 0,
+                                          448000000 + 1000 * (i == 1), -6000000 + 1000 * (i == 2), 0.0, fence)
+        return gcs.recv("MISSION_ACK", 3.0)
+
+    a = upload_fence(4)                         # a polygon of 4 vertices in 3 items: refused, nothing stored
+    assert (a.type, a.mission_type) == (mavlink.MAV_MISSION_ERROR, fence)
     gcs.mav.mission_request_list_send(1, 1, fence)
     c = gcs.recv("MISSION_COUNT", 3.0)
     assert (c.count, c.mission_type) == (0, fence)
+    a = upload_fence(3)
+    assert (a.type, a.mission_type) == (mavlink.MAV_MISSION_ACCEPTED, fence)
+    gcs.mav.mission_request_list_send(1, 1, fence)
+    c = gcs.recv("MISSION_COUNT", 3.0)
+    assert (c.count, c.mission_type) == (3, fence)
+    # a stored fence: the SYS_STATUS geofence bit is present, enabled and healthy (MAVProxy's fence module)
+    bit = mavlink.MAV_SYS_STATUS_GEOFENCE
+    st = gcs.recv("SYS_STATUS", 3.0, lambda m: m.onboard_control_sensors_enabled & bit)
+    assert st.onboard_control_sensors_present & bit and st.onboard_control_sensors_health & bit
     gcs.mav.mission_clear_all_send(1, 1, mavlink.MAV_MISSION_TYPE_ALL)
     assert gcs.recv("MISSION_ACK", 3.0).type == mavlink.MAV_MISSION_ACCEPTED
 
