@@ -401,7 +401,8 @@ class MissionExecutor:
                 target = (float(state.pos_enu_m[0]), float(state.pos_enu_m[1]), float(self._carrot[2]))
             target = (target[0], target[1], float(self._carrot[2]))   # at the current height first
             sp, inside = self._fly_to(it, target, state, dt)
-            if not inside:
+            arrived = self._carrot[0] == target[0] and self._carrot[1] == target[1]
+            if not (inside and arrived):   # descend on the land point itself, as PX4
                 return MissionStep(sp)
             self._landing = True
         if state.landed:
