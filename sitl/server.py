@@ -528,12 +528,8 @@ class SitlServer:
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
         self.stack = FlightStack(self.params, self.home_enu_m)
         self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
-        self.missions = MissionProtocol(mission.energy.max_mission_items,
-                                        validate=mission_store.validator(self.origin, self.home_enu_m))
-        self._store_version = self.missions.version
-        self._mission_current_due_us = 0
+        self._init_mission_store(mission.energy.max_mission_items)
         self.battery = Battery(mission.energy)
-        self._mission_peer = None
         self._apply_params()
         self._frame = None
         self._setpoint = None
@@ -627,7 +623,17 @@ class SitlServer:
             None if config.signing_key is None else SignatureVerifier(config.signing_key),
             key_locked=config.signing_key is not None)
         self._intake = IntakeBudget()
-        self._command_frame: int | None = None   # COMMAND_INT frame of the command being handled
+
+    #: COMMAND_INT frame of the command being handled (None: COMMAND_LONG).
+    _command_frame: int | None = None
+
+    def _init_mission_store(self, max_items: int) -> None:
+        """The mission, fence and rally storage (``MissionProtocol``) and what
+        the transport keeps about it."""
+        self.missions = MissionProtocol(max_items, validate=mission_store.validator(self.origin, self.home_enu_m))
+        self._store_version = self.missions.version
+        self._mission_current_due_us = 0
+        self._mission_peer = None
 
     # ------------------------------------------------------------------ params
     @staticmethod

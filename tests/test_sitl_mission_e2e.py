@@ -115,7 +115,7 @@ def test_mavsdk_flies_the_exported_plan_in_auto_mission(exported):
                 time.sleep(0.002)
             path.append(tuple(srv.sim.plant.p))
             assert done(), "the mission did not complete"
-            assert wait_until(lambda: len(reached) >= len(items), 3.0), f"{reached} {len(items)} {srv.stack.mission.current} {srv.stack.mission.finished}"
+            assert wait_until(lambda: len(reached) >= len(items), 3.0), f"MISSION_ITEM_REACHED: {reached}"
         finally:
             drone.destroy()
 

@@ -107,8 +107,9 @@ def test_command_results(gcs):
     # not a message id (24 bits) nor an interval (int32 us): bad parameters (companion/link/command_rules.py)
     assert gcs.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 1e30, 1e30) == mavlink.MAV_RESULT_DENIED
     assert gcs.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 4242, 1000) == mavlink.MAV_RESULT_UNSUPPORTED
-    assert gcs.command(mavlink.MAV_CMD_DO_REPOSITION, -1, 0, 0, 0, 44.8, -0.6, 40) == \
-        mavlink.MAV_RESULT_UNSUPPORTED
+    assert gcs.command(mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST, 5, 0, 1) == mavlink.MAV_RESULT_UNSUPPORTED
+    # DO_REPOSITION: supported, but not on the ground (PX4 Hold needs a flying vehicle)
+    assert gcs.command(mavlink.MAV_CMD_DO_REPOSITION, -1, 0, 0, 0, 44.8, -0.6, 40) == mavlink.MAV_RESULT_DENIED
     assert gcs.recv("HEARTBEAT", 3.0) is not None               # still alive
 
 
