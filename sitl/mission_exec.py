@@ -178,6 +178,7 @@ class MissionExecutor:
         self._roi = None
         self._carrot = np.zeros(3)
         self._leg_start = np.zeros(3)
+        self._leg_end_v = 0.0
         self._yaw = 0.0
         self._hold_s = 0.0
         self._landing = False
@@ -367,12 +368,12 @@ class MissionExecutor:
 
     def _fly_to(self, it: NavItem, target, state, dt: float) -> tuple[Setpoint, bool]:
         """One frame toward ``target``; (setpoint, vehicle within acceptance)."""
-        if not self._entered:
+        if not self._entered:   # a new leg: its start and corner speed, once
             self._entered = True
             self._leg_start = self._carrot.copy()
             self._hold_s = 0.0
-        end_v = self._end_speed(it, target)
-        self._carrot, vel, _ = carrot_step(self._carrot, target, self._speed_m_s(), end_v, dt)
+            self._leg_end_v = self._end_speed(it, target)
+        self._carrot, vel, _ = carrot_step(self._carrot, target, self._speed_m_s(), self._leg_end_v, dt)
         leg = np.asarray(target, dtype=float) - self._leg_start
         yaw = self._yaw_toward(state.pos_enu_m, it, leg)
         p = state.pos_enu_m
