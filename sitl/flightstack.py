@@ -1081,7 +1081,8 @@ class FlightStack:
         """DO_REPOSITION: the hold point moves toward the target."""
         a = self._anchor
         target, v, yaw = self._goto
-        a.pos, vel, arrived = carrot_step(a.pos, target, v, 0.0, dt)
+        pos, vel, arrived = carrot_step(a.pos, target, v, 0.0, dt)
+        a.pos = np.array(pos)
         a.yaw = yaw
         if arrived:
             self._goto = None

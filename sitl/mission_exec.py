@@ -139,17 +139,19 @@ def carrot_step(carrot, target, speed_m_s: float, end_speed_m_s: float, dt: floa
 
     Speed: ``speed_m_s``, reduced near the end so that it arrives at
     ``end_speed_m_s`` with CORNER_DECEL_M_S2 (v^2 = v_end^2 + 2 a d).
-    Returns (new point (3,) array, velocity (3,) tuple, arrived bool).
+    Returns (new point [x, y, z] list, velocity (3,) tuple, arrived bool).
+    Floats, not arrays: it runs every sensor frame.
     """
-    c = np.asarray(carrot, dtype=float)
-    d = np.asarray(target, dtype=float) - c
-    dist = float(math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))
+    cx, cy, cz = float(carrot[0]), float(carrot[1]), float(carrot[2])
+    tx, ty, tz = float(target[0]), float(target[1]), float(target[2])
+    dx, dy, dz = tx - cx, ty - cy, tz - cz
+    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
     v = min(speed_m_s, math.sqrt(end_speed_m_s * end_speed_m_s + 2.0 * CORNER_DECEL_M_S2 * dist))
     step = v * dt
     if dist <= max(step, 1e-9):
-        return np.array(target, dtype=float), (0.0, 0.0, 0.0), True
-    u = d / dist
-    return c + u * step, (u[0] * v, u[1] * v, u[2] * v), False
+        return [tx, ty, tz], (0.0, 0.0, 0.0), True
+    k, kv = step / dist, v / dist
+    return [cx + dx * k, cy + dy * k, cz + dz * k], (dx * kv, dy * kv, dz * kv), False
 
 
 class MissionExecutor:
@@ -176,8 +178,9 @@ class MissionExecutor:
         self._jumps = [0] * len(self.items)
         self._speed = None
         self._roi = None
-        self._carrot = np.zeros(3)
-        self._leg_start = np.zeros(3)
+        self._carrot = [0.0, 0.0, 0.0]        # the moving target point (ENU, m)
+        self._leg_start = (0.0, 0.0, 0.0)
+        self._leg_dir = (0.0, 0.0)
         self._leg_end_v = 0.0
         self._yaw = 0.0
         self._hold_s = 0.0
@@ -210,7 +213,7 @@ class MissionExecutor:
 
     def resume(self, state) -> None:
         """Re-anchor at the vehicle (mode entered again, controller taking over)."""
-        self._carrot = np.array(state.pos_enu_m, dtype=float)
+        self._carrot = [float(v) for v in state.pos_enu_m]
         self._yaw = float(state.yaw_enu_rad)
         self._entered = False
         self._landing = False
@@ -254,7 +257,7 @@ class MissionExecutor:
     def _finished_step(self, state) -> MissionStep:
         if state.landed and self._landing:
             return MissionStep(None, idle=True)
-        return MissionStep(Setpoint(self._carrot.copy(), np.zeros(3), None, self._yaw, None))
+        return MissionStep(self._hold_setpoint())
 
     def _item_step(self, it: NavItem, state, dt: float) -> MissionStep | None:
         """The step of the current item, or None when it completed at once."""
@@ -266,7 +269,7 @@ class MissionExecutor:
             elif v == -2:
                 self._speed = None
         elif c == DO_SET_ROI_LOCATION:
-            self._roi = None if it.pos_enu_m is None else np.array(it.pos_enu_m, dtype=float)
+            self._roi = None if it.pos_enu_m is None else tuple(float(v) for v in it.pos_enu_m)
         elif c == DO_SET_ROI_NONE:
             self._roi = None
         elif c == NAV_RETURN_TO_LAUNCH:
@@ -324,9 +327,9 @@ class MissionExecutor:
 
     def _yaw_toward(self, pos, it: NavItem | None, leg) -> float:
         if self._roi is not None:
-            d = self._roi[:2] - np.asarray(pos[:2], dtype=float)
-            if math.hypot(d[0], d[1]) > 0.1:
-                self._yaw = math.atan2(d[1], d[0])
+            dx, dy = self._roi[0] - pos[0], self._roi[1] - pos[1]
+            if math.hypot(dx, dy) > 0.1:
+                self._yaw = math.atan2(dy, dx)
             return self._yaw
         if it is not None and math.isfinite(it.params[3]):
             self._yaw = heading_deg_to_yaw_enu(it.params[3])
@@ -335,7 +338,7 @@ class MissionExecutor:
         return self._yaw
 
     def _hold_setpoint(self) -> Setpoint:
-        return Setpoint(self._carrot.copy(), np.zeros(3), None, self._yaw, None)
+        return Setpoint(tuple(self._carrot), (0.0, 0.0, 0.0), None, self._yaw, None)
 
     def _climb(self, state, dt: float, z_target: float) -> Setpoint | None:
         """Vertical climb where the vehicle is; None once at ``z_target``."""
@@ -349,7 +352,7 @@ class MissionExecutor:
         climbing = c[2] < z_target
         c[2] = min(c[2] + v * dt, z_target) if climbing else z_target
         yaw = self._yaw_toward(c, None, None) if self._roi is not None else self._yaw
-        return Setpoint(c.copy(), (0.0, 0.0, v if climbing else 0.0), None, yaw, None)
+        return Setpoint(tuple(c), (0.0, 0.0, v if climbing else 0.0), None, yaw, None)
 
     def _end_speed(self, it: NavItem, target) -> float:
         """Speed at which the target point may pass ``target``: the cosine of
@@ -359,7 +362,7 @@ class MissionExecutor:
         nxt = next((j for j in self.items[self.current + 1:] if j.command in NAV_COMMANDS), None)
         if nxt is None or nxt.command != NAV_WAYPOINT or nxt.pos_enu_m is None:
             return 0.0
-        a = np.asarray(target, dtype=float) - self._leg_start
+        a = np.asarray(target, dtype=float) - np.asarray(self._leg_start)
         b = np.asarray(nxt.pos_enu_m, dtype=float) - np.asarray(target, dtype=float)
         na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
         if na < 1e-6 or nb < 1e-6:
@@ -370,17 +373,17 @@ class MissionExecutor:
         """One frame toward ``target``; (setpoint, vehicle within acceptance)."""
         if not self._entered:   # a new leg: its start and corner speed, once
             self._entered = True
-            self._leg_start = self._carrot.copy()
+            self._leg_start = tuple(self._carrot)
+            self._leg_dir = (target[0] - self._carrot[0], target[1] - self._carrot[1])
             self._hold_s = 0.0
             self._leg_end_v = self._end_speed(it, target)
         self._carrot, vel, _ = carrot_step(self._carrot, target, self._speed_m_s(), self._leg_end_v, dt)
-        leg = np.asarray(target, dtype=float) - self._leg_start
-        yaw = self._yaw_toward(state.pos_enu_m, it, leg)
+        yaw = self._yaw_toward(state.pos_enu_m, it, self._leg_dir)
         p = state.pos_enu_m
         acc = it.params[1] if it.command == NAV_WAYPOINT and it.params[1] > 0 else self.params["NAV_ACC_RAD"]
         inside = (math.hypot(p[0] - target[0], p[1] - target[1]) <= acc
                   and abs(p[2] - target[2]) <= self.params["NAV_MC_ALT_RAD"])
-        return Setpoint(self._carrot.copy(), vel, None, yaw, None), inside
+        return Setpoint(tuple(self._carrot), vel, None, yaw, None), inside
 
     def _waypoint_step(self, it: NavItem, state, dt: float) -> MissionStep | None:
         sp, inside = self._fly_to(it, it.pos_enu_m, state, dt)

@@ -175,6 +175,6 @@ def test_mission_problems_are_named():
 
 def test_carrot_step_moves_at_speed_and_stops_on_the_target():
     c, vel, arrived = carrot_step((0, 0, 0), (10, 0, 0), 2.0, 2.0, 0.5)
-    assert c.tolist() == [1.0, 0.0, 0.0] and vel == (2.0, 0.0, 0.0) and not arrived
+    assert c == [1.0, 0.0, 0.0] and vel == (2.0, 0.0, 0.0) and not arrived
     c, vel, arrived = carrot_step((9.9, 0, 0), (10, 0, 0), 2.0, 0.0, 0.5)
-    assert c.tolist() == [10.0, 0.0, 0.0] and arrived
+    assert c == [10.0, 0.0, 0.0] and arrived
