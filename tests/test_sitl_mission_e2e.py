@@ -147,3 +147,38 @@ def test_mavsdk_flies_the_exported_plan_in_auto_mission(exported):
     flown = path[t_closest[0]:t_closest[-1] + 1]
     dev = max(min(point_segment_distance(p[:2], a, b) for a, b in legs) for p in flown)
     assert dev <= bound, f"lateral deviation {dev:.3f} m > {bound:.3f} m"
+
+
+def test_mavsdk_goto_location_is_do_reposition_in_hold():
+    """MAVSDK's ``goto_location`` (DO_REPOSITION, yaw sent in radians as PX4 reads it):
+    the vehicle flies to the point 6 m north-east of its start, holds there in HOLD and
+    turns to the asked compass heading (135 deg: south-east, ENU yaw -45 deg)."""
+    from companion.frames import enu2geodetic
+    from mavsdk.plugins.telemetry import FlightMode as MavsdkMode, Telemetry
+
+    home = load_mission(MISSION).home
+    with SitlThread(MISSION, speed=3.0, sensor_hz=100) as sitl:
+        srv = sitl.server
+        port = sitl.listen.rsplit(":", 1)[1]
+        drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+        try:
+            drone.add_any_connection(f"udpout://127.0.0.1:{port}")
+            system = drone.first_autopilot(10.0)
+            assert system is not None
+            action, tel = Action(system), Telemetry(system)
+            s = srv.home_enu_m
+            target = (s[0] + 6.0, s[1] + 6.0, s[2] + 3.0)
+            lat, lon, alt = enu2geodetic(*target, home.lat, home.lon, home.alt_m)
+            action.arm()
+            action.takeoff()
+            assert wait_until(lambda: srv.stack.mode is FlightMode.LOITER and srv.sim.plant.p[2] > s[2] + 2.0,
+                              10.0)
+            action.goto_location(lat, lon, alt, 135.0)
+            near = lambda: math.dist(srv.sim.plant.p, target) < 0.2   # noqa: E731
+            assert wait_until(near, 15.0), f"at {tuple(srv.sim.plant.p)}, target {target}"
+            assert wait_until(lambda: tel.flight_mode() == MavsdkMode.HOLD, 3.0)
+            yaw_deg = lambda: math.degrees(math.atan2(srv.sim.plant.R[3], srv.sim.plant.R[0]))   # noqa: E731
+            assert wait_until(lambda: abs(yaw_deg() + 45.0) < 3.0, 10.0), f"yaw {yaw_deg():.1f} deg"
+            assert near() and srv.stack.mode is FlightMode.LOITER
+        finally:
+            drone.destroy()
