@@ -11,7 +11,9 @@ temporary directory; its mission and geofence items are stored in a
 vehicle time from take-off: once holding with nothing stored (take-off,
 then AUTO.LOITER: the SITL's per-frame work before missions), once in
 AUTO.MISSION with the fence enforced. Printed: microseconds of
-``step_once`` per sensor frame (``time.process_time``), median of ``--runs``.
+``step_once`` per sensor frame (``time.process_time``), median of ``--runs``;
+then the mission state machine and the fence check alone (an ideal vehicle),
+which is the part the mission adds to a frame.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ sys.path.insert(0, str(ROOT))
 
 from companion.cli import main as companion_main   # noqa: E402
 from companion.mission import load_mission   # noqa: E402
-from sitl.flightstack import FlightMode, MissionItem   # noqa: E402
+from sitl.flightstack import FlightMode, MissionItem, NavState   # noqa: E402
 from sitl.server import ServerConfig, SitlServer   # noqa: E402
 
 
@@ -76,6 +78,30 @@ def fly(mission_path: Path, items: tuple, mode: str, seconds: float) -> float:
     return dt / n * 1e6
 
 
+def executor_alone(mission_path: Path, items: tuple, seconds: float) -> float:
+    """Microseconds per frame of ``MissionExecutor.update`` + ``Fence.breached``
+    alone, on an ideal vehicle that is where the last setpoint was."""
+    srv = SitlServer(load_mission(mission_path), ServerConfig())
+    srv.missions.stored[0], srv.missions.stored[1] = tuple(items[0]), tuple(items[1])
+    srv.missions.version += 1
+    srv.step_once()
+    srv._sync_store()
+    ex, fence = srv.stack.mission, srv.stack.fence
+    st = srv._state()
+    ex.start(st, None)
+    dt = srv.sim.sensor_period_us * 1e-6
+    n = int(seconds / dt)
+    p = list(st.pos_enu_m)
+    t0 = time.process_time()
+    for _ in range(n):
+        s = NavState(p, (0.0, 0.0, 0.0), 0.0, 0.0, False)
+        sp = ex.update(s, dt).setpoint
+        fence.breached(p[0], p[1])
+        if sp is not None and sp.pos_enu_m is not None and sp.pos_enu_m[2] == sp.pos_enu_m[2]:
+            p = list(sp.pos_enu_m)
+    return (time.process_time() - t0) / n * 1e6
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mission", default=str(ROOT / "missions" / "flat-rectangle" / "mission.yaml"))
@@ -91,6 +117,9 @@ def main() -> int:
         fly(Path(args.mission), items, mode, 2.0)   # warm-up
         us = [fly(Path(args.mission), items, mode, args.seconds) for _ in range(args.runs)]
         print(f"{mode:8s} {statistics.median(us):7.1f} us/frame (runs: {', '.join(f'{u:.1f}' for u in us)})")
+    us = [executor_alone(Path(args.mission), items, args.seconds) for _ in range(args.runs)]
+    print(f"executor + fence check alone {statistics.median(us):5.1f} us/frame "
+          f"(runs: {', '.join(f'{u:.1f}' for u in us)})")
     return 0
 
 

@@ -81,7 +81,7 @@ def exported(tmp_path_factory):
     return out / "p.plan"
 
 
-def test_mavsdk_flies_the_exported_plan_in_auto_mission(exported):
+def test_mavsdk_flies_the_exported_plan_in_auto_mission(exported, record_property):
     home = load_mission(MISSION).home
     with SitlThread(MISSION, speed=3.0, sensor_hz=100) as sitl:
         srv = sitl.server
@@ -129,12 +129,13 @@ def test_mavsdk_flies_the_exported_plan_in_auto_mission(exported):
     # every way-point within its acceptance radius (horizontal), in order: the SITL judges it on
     # its position estimate, as PX4 on its EKF's, so the truth is within R + the estimate's error
     assert nav_err < 0.1
-    t_closest = []
+    t_closest, worst = [], -math.inf
     for m, w in wps:
         d = [point_segment_distance(w[:2], a[:2], b[:2]) for a, b in segs]
         k = int(np.argmin(d))
         assert d[k] <= m.param2 + nav_err + 1e-3, f"way-point {m.seq} missed by {d[k]:.3f} m (radius {m.param2} m)"
         t_closest.append(k)
+        worst = max(worst, d[k] - m.param2)
     assert t_closest == sorted(t_closest)
     # lateral deviation from the planned legs, between the first and the last way-point: the
     # leg target moves on once the vehicle is inside the acceptance radius R (a corner is cut by
@@ -146,6 +147,9 @@ def test_mavsdk_flies_the_exported_plan_in_auto_mission(exported):
     legs = [(a[:2], b[:2]) for (_, a), (_, b) in zip(wps[:-1], wps[1:])]
     flown = path[t_closest[0]:t_closest[-1] + 1]
     dev = max(min(point_segment_distance(p[:2], a, b) for a, b in legs) for p in flown)
+    for name, v in (("nav_err_m", nav_err), ("worst_waypoint_miss_minus_radius_m", worst),
+                    ("lateral_deviation_m", dev), ("lateral_bound_m", bound)):
+        record_property(name, round(float(v), 4))   # figures, in the junit XML (--junitxml)
     assert dev <= bound, f"lateral deviation {dev:.3f} m > {bound:.3f} m"
 
 
