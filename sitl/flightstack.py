@@ -658,7 +658,8 @@ class FlightStack:
             return mavlink.MAV_LANDED_STATE_IN_AIR   # falling
         if self.mode is FlightMode.TAKEOFF:
             return mavlink.MAV_LANDED_STATE_TAKEOFF
-        if self.mode is FlightMode.LAND:
+        if self.mode is FlightMode.LAND or (self.mode is FlightMode.MISSION and self.mission is not None
+                                            and self.mission.landing):
             return mavlink.MAV_LANDED_STATE_LANDING
         return mavlink.MAV_LANDED_STATE_IN_AIR
 
@@ -918,6 +919,8 @@ class FlightStack:
         self._now_us = now_us
         self._state = state
         p = self.params
+        if self.fence is not None:   # also disarmed: SYS_STATUS reports the fence's health
+            self._check_fence(state)
 
         if not self.armed:
             self._override_active = False
@@ -978,8 +981,6 @@ class FlightStack:
                     self._say(SEVERITY_CRITICAL, "Failsafe: returning")
                 else:
                     self._failsafe = "offboard-hold"
-        if self.fence is not None:
-            self._check_fence(state)
 
         sp, idle = self._mode_setpoint(now_us, state, dt)
         o = self._out
@@ -1101,7 +1102,7 @@ class FlightStack:
             self._say(SEVERITY_INFO, "Geofence: back inside")
             return
         action = int(self.params["GF_ACTION"])
-        if state.landed or action == 0:
+        if state.landed or action == 0 or not self.armed or self.crash_event is not None:
             return
         what = {1: "", 2: ", holding", 3: ", returning", 4: ", landing", 5: ", landing"}[action]
         self._say(SEVERITY_CRITICAL, f"Geofence breached{what}")

@@ -233,6 +233,11 @@ class MissionExecutor:
         self.current = seq
         self._entered = False
 
+    @property
+    def landing(self) -> bool:
+        """Descending on a NAV_LAND item (EXTENDED_SYS_STATE: LANDING)."""
+        return self._landing
+
     def pop_events(self) -> list[int]:
         ev, self.events = self.events, []
         return ev
@@ -255,7 +260,7 @@ class MissionExecutor:
         return self._finished_step(state)
 
     def _finished_step(self, state) -> MissionStep:
-        if state.landed and self._landing:
+        if state.landed:   # after a NAV_LAND (or re-armed on the ground after one): stay down
             return MissionStep(None, idle=True)
         return MissionStep(self._hold_setpoint())
 

@@ -147,3 +147,12 @@ def test_fence_return_goes_to_the_closest_rally_point_and_lands_there():
     assert st.mode is FlightMode.LAND
     assert math.hypot(p[0] - 14.0, p[1] - 5.0) < 0.5
     assert any("rally point reached" in e.text for e in st.pop_events())
+
+
+def test_disarmed_outside_the_fence_is_unhealthy_but_takes_no_action():
+    st = FlightStack(Parameters(initial={"GF_ACTION": 3}), (0.0, 0.0, 0.0))
+    st.fence = SQUARE
+    st.update(0, nav((10.5, 5, 0), landed=True))
+    assert st.fence_breached and st.mode is FlightMode.LOITER and not st.pop_events()
+    st.update(10_000, nav((9.5, 5, 0), landed=True))
+    assert not st.fence_breached

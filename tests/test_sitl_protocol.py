@@ -254,8 +254,10 @@ def test_mission_count_zero_fence_and_clear(gcs):
         for i in range(3):
             r = gcs.recv("MISSION_REQUEST_INT", 3.0)
             assert (r.seq, r.mission_type) == (i, fence)
+            # a triangle of about 2 km around the vehicle (it starts within metres of 44.8 N 0.6 W)
+            lat, lon = ((447900000, -6100000), (448100000, -6100000), (448000000, -5900000))[i]
             gcs.mav.mission_item_int_send(1, 1, i, mavlink.MAV_FRAME_GLOBAL_INT, 5001, 0, 1, vertex_count, 0, 0, 0,
-                                          448000000 + 1000 * (i == 1), -6000000 + 1000 * (i == 2), 0.0, fence)
+                                          lat, lon, 0.0, fence)
         return gcs.recv("MISSION_ACK", 3.0)
 
     a = upload_fence(4)                         # a polygon of 4 vertices in 3 items: refused, nothing stored
