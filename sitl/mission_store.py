@@ -5,12 +5,14 @@ The transport (``sitl.server``) stores three lists with
 the end of its upload (``validator``), turns the stored lists into the
 flight stack's ``MissionExecutor``, ``Fence`` and rally points
 (``flight_objects``), and says what MISSION_CURRENT reports
-(``mission_state``). Geodetic positions go through ``sitl.codec``
+(``mission_state``), and where a DO_REPOSITION goes
+(``reposition_target``). Geodetic positions go through ``sitl.codec``
 (``mission_item_enu``), the SITL's one way in from WGS-84.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import partial
 
@@ -72,3 +74,34 @@ def mission_state(mission: MissionExecutor | None, flying_it: bool) -> int:
     if mission.finished:
         return mavlink.MISSION_STATE_COMPLETE
     return mavlink.MISSION_STATE_ACTIVE if flying_it else mavlink.MISSION_STATE_NOT_STARTED
+
+
+INT32_MAX = 2 ** 31 - 1
+_RELATIVE = (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+
+
+def reposition_target(origin: codec.GeoOrigin, home_enu_m, here_enu_m, params, int_frame: int | None):
+    """MAV_CMD_DO_REPOSITION's parameters -> (target ENU (3,), speed m/s, yaw ENU rad or None).
+
+    ``params``: param1..7 as received (COMMAND_INT, ``int_frame`` given: x, y in
+    1e-7 deg, INT32_MAX "here"; COMMAND_LONG: degrees, frame GLOBAL). param1
+    speed (not finite: -1, the default); param4 yaw in rad from north, as PX4
+    reads it and MAVSDK's ``goto_location`` sends it (NaN: keep); NaN
+    latitude/longitude: here; altitude AMSL, or above home in the
+    RELATIVE_ALT frames (NaN: the current one).
+    """
+    frame = mavlink.MAV_FRAME_GLOBAL if int_frame is None else int(int_frame)
+    here = codec.enu_to_global(origin, here_enu_m)
+    lat, lon = float(params[4]), float(params[5])
+    if int_frame is not None:
+        lat, lon = (math.nan, math.nan) if params[4] == INT32_MAX else (lat * 1e-7, lon * 1e-7)
+    if math.isnan(lat) or math.isnan(lon):
+        lat, lon = here[0], here[1]
+    alt = float(params[6])
+    if math.isnan(alt):
+        alt = here[2]
+    elif frame in _RELATIVE:
+        alt += origin.alt_m + float(home_enu_m[2])
+    yaw = None if math.isnan(params[3]) else codec.yaw_ned2enu(params[3])
+    speed = float(params[0]) if math.isfinite(params[0]) else -1.0
+    return codec.global_to_enu(origin, lat, lon, alt), speed, yaw

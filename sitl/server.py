@@ -1430,23 +1430,10 @@ class SitlServer:
         return self.stack.start_mission(self.sim.time_us, self._state(), seq).result, None
 
     def _cmd_reposition(self, p):
-        """DO_REPOSITION (MAVSDK ``goto_location``): param1 speed, param4 yaw
-        (rad from north, as PX4 reads it and MAVSDK sends it; NaN: keep),
-        x/y lat/lon (NaN or INT32_MAX: here), z altitude (NaN: keep)."""
+        """DO_REPOSITION (MAVSDK ``goto_location``): ``mission_store.reposition_target``."""
         nav = self._state()
-        frame = mavlink.MAV_FRAME_GLOBAL if self._command_frame is None else self._command_frame
-        scale = 1.0 if self._command_frame is None else 1e-7
-        lat, lon = p[4] * scale, p[5] * scale
-        here = codec.enu_to_global(self.origin, nav.pos_enu_m)
-        if self._command_frame is not None and p[4] == rules.INT32_MAX:
-            lat = lon = math.nan
-        if math.isnan(lat) or math.isnan(lon):
-            lat, lon = here[0], here[1]
-        rel = frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
-        alt = here[2] if math.isnan(p[6]) else p[6] + (self.origin.alt_m + self.home_enu_m[2] if rel else 0.0)
-        target = codec.global_to_enu(self.origin, lat, lon, alt)
-        yaw = None if math.isnan(p[3]) else codec.yaw_ned2enu(p[3])
-        speed = p[0] if math.isfinite(p[0]) else -1.0
+        target, speed, yaw = mission_store.reposition_target(self.origin, self.home_enu_m, nav.pos_enu_m, p,
+                                                             self._command_frame)
         return self.stack.reposition(self.sim.time_us, nav, target, speed, yaw).result, None
 
     def _on_set_mode(self, link, msg) -> None:
