@@ -632,6 +632,7 @@ class SitlServer:
         the transport keeps about it."""
         self.missions = MissionProtocol(max_items, validate=mission_store.validator(self.origin, self.home_enu_m))
         self._store_version = self.missions.version
+        self._flown_items = self.missions.items       # the mission list the flight stack has
         self._mission_current_due_us = 0
         self._mission_peer = None
 
@@ -1625,8 +1626,10 @@ class SitlServer:
         self.stack.rally_points = objs.rally_points
         if objs.fence is None:
             self.stack.fence_breached = False
-        self.stack.set_mission(objs.mission, self._state() if self._frame is not None else None)
-        self._send_mission_current()
+        if self.missions.items is not self._flown_items:   # a fence or rally upload leaves the mission flying
+            self._flown_items = self.missions.items
+            self.stack.set_mission(objs.mission, self._state() if self._frame is not None else None)
+            self._send_mission_current()
 
     def _send_mission_current(self) -> None:
         m = self.stack.mission

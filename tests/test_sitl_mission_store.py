@@ -57,3 +57,37 @@ def test_stored_items_in_amsl_relative_and_local_frames():
         pytest.approx((10.0, 2.0, 1.5))                        # x north 2 m, y east 10 m, z down
     assert mission_item_enu(ORIGIN, HOME, item(mavlink.MAV_FRAME_GLOBAL, 0, 0, 10.0)) is None
     assert mission_item_enu(ORIGIN, HOME, item(mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT, 1, 1, 10.0)) is None
+
+
+def test_a_fence_upload_during_a_mission_leaves_it_flying_a_new_mission_stops_it():
+    from companion.mission import load_mission
+    from sitl.flightstack import FlightMode
+    from sitl.server import SitlServer
+    from test_sitl_mavlink import MISSION
+
+    srv = SitlServer(load_mission(MISSION))          # no links: the protocol is driven directly
+    srv.step_once()
+
+    def upload(mission_type, items):
+        srv.missions.handle_count(len(items), mission_type, 0.0)
+        for it in items:
+            srv.missions.handle_item(it, 0.0)
+        srv._sync_store()                              # what the server does before its MISSION_ACK
+
+    h = srv.home_enu_m
+    lat, lon, _ = ll(h[0] + 5.0, h[1])
+    wp = MissionItem(0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 16, 1, 1, 0.0, 0.0, 0.0, math.nan,
+                     round(lat * 1e7), round(lon * 1e7), 2.0)
+    upload(0, [wp])
+    assert srv.stack.start_mission(srv.sim.time_us, srv._state(), None).accepted
+    assert srv.stack.arm(srv.sim.time_us, srv._state()).accepted
+    for _ in range(100):
+        srv.step_once()
+    flying = srv.stack.mission
+    fence = [MissionItem(i, mavlink.MAV_FRAME_GLOBAL_INT, 5001, 0, 1, 3.0, 0.0, 0.0, 0.0, x, y, 0.0, 1)
+             for i, (x, y) in enumerate(((447900000, -6100000), (448100000, -6100000), (448000000, -5900000)))]
+    upload(1, fence)
+    assert srv.stack.fence is not None
+    assert srv.stack.mode is FlightMode.MISSION and srv.stack.mission is flying
+    upload(0, [wp])
+    assert srv.stack.mode is FlightMode.LOITER and srv.stack.mission is not flying
