@@ -17,7 +17,6 @@ import contextlib
 import io
 import json
 import math
-import threading
 import time
 from pathlib import Path
 
