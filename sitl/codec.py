@@ -710,6 +710,51 @@ def mission_item_from_float(msg):
                        int(getattr(msg, "mission_type", 0)))
 
 
+_RELATIVE_FRAMES = frozenset((mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT))
+_AMSL_FRAMES = frozenset((mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT))
+
+
+def global_to_enu(origin: GeoOrigin, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> tuple:
+    """WGS-84 (deg, deg, m AMSL) -> world ENU (m) about ``origin``: the SITL's
+    one way in from geodetic coordinates (missions, fences, rally points,
+    DO_REPOSITION), through the project's pyproj tangent plane."""
+    x, y, z = frames.geodetic2enu(float(lat_deg), float(lon_deg), float(alt_amsl_m),
+                                  origin.lat_deg, origin.lon_deg, origin.alt_m)
+    return float(x), float(y), float(z)
+
+
+def enu_to_global(origin: GeoOrigin, pos_enu_m) -> tuple:
+    """World ENU (m) -> (lat_deg, lon_deg, alt_m AMSL): ``global_to_enu``'s inverse."""
+    lat, lon, alt = frames.enu2geodetic(float(pos_enu_m[0]), float(pos_enu_m[1]), float(pos_enu_m[2]),
+                                        origin.lat_deg, origin.lon_deg, origin.alt_m)
+    return float(lat), float(lon), float(alt)
+
+
+def yaw_ned2enu(yaw_ned_rad: float) -> float:
+    """Heading from north, clockwise (rad) -> ENU yaw from east, CCW (rad)."""
+    return float(frames.yaw_ned2enu(yaw_ned_rad))
+
+
+def mission_item_enu(origin: GeoOrigin, home_enu_m, item) -> tuple | None:
+    """Position of a stored ``MissionItem`` in world ENU (m), or None when the
+    item has no position the SITL flies: MAV_FRAME_MISSION, a terrain frame,
+    or latitude = longitude = 0 (QGC's "here"/unset). Global frames: x, y in
+    1e7 deg; z AMSL (GLOBAL, GLOBAL_INT) or above home (the RELATIVE_ALT
+    frames, as PX4 reads them). Local frames: x, y in 1e4 m, LOCAL_NED or
+    LOCAL_ENU about the ENU origin."""
+    f = int(item.frame)
+    if f in _AMSL_FRAMES or f in _RELATIVE_FRAMES:
+        if item.x == 0 and item.y == 0:
+            return None
+        alt = float(item.z) + (origin.alt_m + float(home_enu_m[2]) if f in _RELATIVE_FRAMES else 0.0)
+        return global_to_enu(origin, item.x * 1e-7, item.y * 1e-7, alt)
+    if f == mavlink.MAV_FRAME_LOCAL_ENU:
+        return item.x * 1e-4, item.y * 1e-4, float(item.z)
+    if f == mavlink.MAV_FRAME_LOCAL_NED:
+        return item.y * 1e-4, item.x * 1e-4, -float(item.z)
+    return None
+
+
 def mission_item_int(mav, target_system: int, target_component: int, item):
     """``MissionItem`` -> MISSION_ITEM_INT for a download."""
     return mav.mission_item_int_encode(

@@ -17,10 +17,12 @@ POSCTL         3/0         holds the position where it was entered
 AUTO.TAKEOFF   4/2         climbs at MPC_TKO_SPEED to the takeoff altitude,
                            then AUTO.LOITER at that point
 AUTO.LOITER    4/3         holds a point (Hold); the boot mode
-AUTO.MISSION   4/4         refused (DENIED): missions are stored and reported
-                           only, never flown by this SITL
+AUTO.MISSION   4/4         flies the stored mission (``sitl.mission_exec``);
+                           entered by the mode change or MAV_CMD_MISSION_START;
+                           DENIED without a flyable mission
 AUTO.RTL       4/5         climbs to RTL_RETURN_ALT above home if lower, flies
-                           home at MPC_XY_CRUISE, then AUTO.LAND
+                           at MPC_XY_CRUISE to the closest of home and the rally
+                           points (``sitl.rally``), then AUTO.LAND
 AUTO.LAND      4/6         descends at MPC_LAND_SPEED holding x, y
 OFFBOARD       6/0         tracks SET_POSITION_TARGET_LOCAL_NED; entry needs a
                            setpoint stream already present (PX4 rule)
@@ -38,6 +40,11 @@ Failsafes (announced by STATUSTEXT)
 - Offboard loss: in OFFBOARD, no setpoint for COM_OF_LOSS_T -> AUTO.LOITER
   (hold where it is) for COM_FAIL_ACT_T, then COM_OBL_ACT (0 land, 1 keep
   holding, 2 return). A mode change by the user ends the failsafe.
+- Geofence (``sitl.fence``, uploaded as MAV_MISSION_TYPE_FENCE): armed and
+  in the air, leaving the allowed area triggers GF_ACTION once per breach
+  (0 none, 1 warning, 2 AUTO.LOITER where it is, 3 AUTO.RTL, 4 flight
+  termination is not simulated: AUTO.LAND, 5 AUTO.LAND); arming outside it
+  is refused.
 - Landing: landed for COM_DISARM_LAND after having flown -> disarm; armed on
   the ground without taking off for COM_DISARM_PRFLT -> disarm (PX4).
 
@@ -64,7 +71,10 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.link.command_rules import mission_item_problem
 
 from .collision import CrashEvent, landing_intended
+from .fence import Fence
+from .mission_exec import MissionExecutor, carrot_step
 from .onboard import Setpoint
+from .rally import return_destination
 
 # MAVLink enum values used by the stack (named once, from the common dialect).
 RESULT_ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
@@ -171,7 +181,11 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
               "collision prevention: distance kept from OBSTACLE_DISTANCE's obstacles (m; < 0 off, PX4's default)"),
     ParamSpec("CP_DELAY", _R, 0.4, 0.0, 1.0, "collision prevention: sensing and control delay (s)"),
     ParamSpec("CP_GO_NO_DATA", _I, 0, 0, 1, "collision prevention: 1 allows moving where no sensor data is"),
-    ParamSpec("NAV_MC_ALT_RAD", _R, 0.8, 0.05, 10.0, "takeoff altitude acceptance (m)"),
+    ParamSpec("NAV_MC_ALT_RAD", _R, 0.8, 0.05, 10.0, "takeoff and mission altitude acceptance (m)"),
+    ParamSpec("NAV_ACC_RAD", _R, 2.0, 0.05, 200.0,
+              "mission way-point acceptance radius where the item's param2 is 0 (m; PX4's default is 10)"),
+    ParamSpec("GF_ACTION", _I, 2, 0, 5,
+              "geofence breach action: 0 none, 1 warning, 2 hold, 3 return, 4 (termination) and 5 land"),
     ParamSpec("RTL_RETURN_ALT", _R, 5.0, 0.0, 150.0, "return altitude above home (m; PX4's default is 60)"),
     ParamSpec("SIM_LOCKSTEP", _I, 0, 0, 1,
               "1: lockstep with the actuator peer (the --lockstep option; read-only): the vehicle waits for "
@@ -323,13 +337,17 @@ class SendAck:
 
 
 class MissionProtocol:
-    """Mission storage with the MISSION_INT upload/download handshakes.
+    """Mission, fence and rally storage with the MISSION_INT upload/download
+    handshakes.
 
-    Only ``mission_type`` 0 (MAV_MISSION_TYPE_MISSION) is stored; fence and
-    rally lists read back empty and uploads of them are refused
-    (MAV_MISSION_UNSUPPORTED). Upload timeouts are timed by the caller's
-    clock (``tick(now_s)``): the server passes wall-clock seconds, because
-    the ground station answers in wall time whatever the simulation speed.
+    The three lists (``mission_type`` MISSION 0, FENCE 1, RALLY 2) are
+    stored apart; one upload at a time. ``validate(mission_type, items)``,
+    when given, is asked at the end of an upload and may refuse the list
+    (``(MAV_MISSION_RESULT, why)``: the stored list stays as it was), e.g. a
+    fence polygon with a missing vertex. ``version`` counts every change
+    of a stored list. Upload timeouts are timed by the caller's clock
+    (``tick(now_s)``): the server passes wall-clock seconds, because the
+    ground station answers in wall time whatever the simulation speed.
     An out-of-sequence item is answered by requesting the awaited one again;
     the last item re-sent after the upload's ACCEPTED (the peer lost the ACK)
     is acknowledged again, as PX4 does.
@@ -339,12 +357,16 @@ class MissionProtocol:
 
     RETRY_S = 0.5
     MAX_RETRIES = 5
+    TYPES = (mavlink.MAV_MISSION_TYPE_MISSION, mavlink.MAV_MISSION_TYPE_FENCE, mavlink.MAV_MISSION_TYPE_RALLY)
 
-    def __init__(self, max_items: int = MAX_MISSION_ITEMS) -> None:
+    def __init__(self, max_items: int = MAX_MISSION_ITEMS, validate=None) -> None:
         self.max_items = int(max_items)
-        self.items: tuple[MissionItem, ...] = ()
+        self.stored: dict[int, tuple[MissionItem, ...]] = {t: () for t in self.TYPES}
         self.current_seq = 0
+        self.version = 0
+        self.validate = validate
         self._upload: list[MissionItem] | None = None
+        self._upload_type = mavlink.MAV_MISSION_TYPE_MISSION
         self._upload_count = 0
         #: Item count of the upload just completed (None after any other
         #: transfer): a re-sent last item means the peer lost our ACK.
@@ -355,24 +377,33 @@ class MissionProtocol:
         self.refused: str | None = None
 
     @property
+    def items(self) -> tuple[MissionItem, ...]:
+        """The stored mission (type MISSION)."""
+        return self.stored[mavlink.MAV_MISSION_TYPE_MISSION]
+
+    @property
     def uploading(self) -> bool:
         return self._upload is not None
 
+    def _store(self, mission_type: int, items: tuple) -> None:
+        self.stored[mission_type] = items
+        if mission_type == mavlink.MAV_MISSION_TYPE_MISSION:
+            self.current_seq = 0
+        self.version += 1
+
     def handle_count(self, count: int, mission_type: int, now_s: float) -> list:
         self._acked_count = None
-        if mission_type != mavlink.MAV_MISSION_TYPE_MISSION:
-            if count == 0:
-                return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mission_type)]
+        if mission_type not in self.stored:
             return [SendAck(mavlink.MAV_MISSION_UNSUPPORTED, mission_type)]
         if count < 0 or count > self.max_items:
             self._upload = None
             return [SendAck(mavlink.MAV_MISSION_NO_SPACE, mission_type)]
         if count == 0:
             self._upload = None
-            self.items = ()
-            self.current_seq = 0
+            self._store(mission_type, ())
             return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mission_type)]
         self._upload = []
+        self._upload_type = mission_type
         self._upload_count = count
         self._last_s = now_s
         self._retries = 0
@@ -381,12 +412,12 @@ class MissionProtocol:
     def handle_item(self, item: MissionItem, now_s: float) -> list:
         mt = item.mission_type
         self.refused = None
-        if (self._upload is None and mt == mavlink.MAV_MISSION_TYPE_MISSION
+        if (self._upload is None and mt == self._upload_type
                 and self._acked_count is not None and item.seq == self._acked_count - 1):
             # The last item again after our ACCEPTED: the peer lost the ACK
             # and retries; acknowledge again, as PX4 does (PX4 PR #9547).
             return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mt)]
-        if self._upload is None or mt != mavlink.MAV_MISSION_TYPE_MISSION:
+        if self._upload is None or mt != self._upload_type:
             # An item nobody asked for: tell the peer the sequence is wrong.
             return [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, mt)]
         expected = len(self._upload)
@@ -406,27 +437,32 @@ class MissionProtocol:
         self._retries = 0
         if len(self._upload) < self._upload_count:
             return [SendRequest(expected + 1, mt)]
-        self.items = tuple(self._upload)
-        self.current_seq = 0
+        items = tuple(self._upload)
         self._upload = None
-        self._acked_count = len(self.items)
+        bad = self.validate(mt, items) if self.validate is not None else None
+        if bad is not None:
+            self.refused = bad[1]
+            return [SendAck(bad[0], mt)]
+        self._store(mt, items)
+        self._acked_count = len(items)
         return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mt)]
 
     def handle_request_list(self, mission_type: int) -> list:
         self._acked_count = None
-        if mission_type != mavlink.MAV_MISSION_TYPE_MISSION:
-            return [SendCount(0, mission_type)]
-        return [SendCount(len(self.items), mission_type)]
+        return [SendCount(len(self.stored.get(mission_type, ())), mission_type)]
 
     def handle_request(self, seq: int, mission_type: int) -> list:
-        if mission_type != mavlink.MAV_MISSION_TYPE_MISSION or not 0 <= seq < len(self.items):
+        items = self.stored.get(mission_type, ())
+        if not 0 <= seq < len(items):
             return [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, mission_type)]
-        return [SendItem(self.items[seq])]
+        return [SendItem(items[seq])]
 
     def handle_clear_all(self, mission_type: int) -> list:
-        if mission_type in (mavlink.MAV_MISSION_TYPE_MISSION, mavlink.MAV_MISSION_TYPE_ALL):
-            self.items = ()
-            self.current_seq = 0
+        cleared = self.TYPES if mission_type == mavlink.MAV_MISSION_TYPE_ALL else (
+            (mission_type,) if mission_type in self.stored else ())
+        for t in cleared:
+            self._store(t, ())
+        if cleared:
             self._upload = None
             self._acked_count = None
         return [SendAck(mavlink.MAV_MISSION_ACCEPTED, mission_type)]
@@ -446,8 +482,8 @@ class MissionProtocol:
         self._retries += 1
         if self._retries > self.MAX_RETRIES:
             self._upload = None
-            return [SendAck(mavlink.MAV_MISSION_OPERATION_CANCELLED, mavlink.MAV_MISSION_TYPE_MISSION)]
-        return [SendRequest(len(self._upload), mavlink.MAV_MISSION_TYPE_MISSION)]
+            return [SendAck(mavlink.MAV_MISSION_OPERATION_CANCELLED, self._upload_type)]
+        return [SendRequest(len(self._upload), self._upload_type)]
 
 
 # --- the flight stack ----------------------------------------------------------
@@ -551,6 +587,8 @@ class _Anchor:
     z_ref: float = 0.0
     target_z: float = 0.0
     phase: int = 0
+    dest: np.ndarray = field(default_factory=lambda: np.zeros(3))   # where AUTO.RTL goes
+    dest_rally: bool = False
 
 
 class FlightStack:
@@ -590,6 +628,14 @@ class FlightStack:
         self._hil_tmo_us = self._of_loss_us = 0.0
         self._out: StackOutput | None = None   # last output, reused while unchanged
         self.crash_event: CrashEvent | None = None
+        #: What the transport stored (``sitl.server``): the mission to fly in
+        #: AUTO.MISSION, the geofence and the rally points (ENU).
+        self.mission: MissionExecutor | None = None
+        self.fence: Fence | None = None
+        self.rally_points: tuple = ()
+        #: The vehicle is outside the geofence now (SYS_STATUS geofence health).
+        self.fence_breached = False
+        self._goto: tuple | None = None          # DO_REPOSITION: (target (3,), speed m/s, yaw)
 
     # ------------------------------------------------------------------ info
     @property
@@ -617,7 +663,8 @@ class FlightStack:
             return mavlink.MAV_LANDED_STATE_IN_AIR   # falling
         if self.mode is FlightMode.TAKEOFF:
             return mavlink.MAV_LANDED_STATE_TAKEOFF
-        if self.mode is FlightMode.LAND:
+        if self.mode is FlightMode.LAND or (self.mode is FlightMode.MISSION and self.mission is not None
+                                            and self.mission.landing):
             return mavlink.MAV_LANDED_STATE_LANDING
         return mavlink.MAV_LANDED_STATE_IN_AIR
 
@@ -719,6 +766,10 @@ class FlightStack:
             return f"not armable in {self.mode.label}"
         if self.mode is FlightMode.OFFBOARD and not self.offboard_fresh(now_us):
             return "no offboard setpoint stream"
+        if self.mode is FlightMode.MISSION and self.mission is None:
+            return "no mission"
+        if self.fence is not None and self.fence.breached(state.pos_enu_m[0], state.pos_enu_m[1]):
+            return "vehicle outside geofence"
         return ""
 
     def disarm(self, now_us: int, state: NavState, force: bool = False, why: str = "") -> CommandResult:
@@ -741,8 +792,7 @@ class FlightStack:
         if self.crash_event is not None:
             return self._denied_crashed("Mode change")
         if mode is FlightMode.MISSION:
-            self._say(SEVERITY_WARNING, "Mission mode not available: mission stored only")
-            return CommandResult(RESULT_DENIED, "missions are stored, not flown")
+            return self.start_mission(now_us, state, None)
         if mode is FlightMode.OFFBOARD and not self.offboard_fresh(now_us):
             self._say(SEVERITY_WARNING, "Offboard denied: no setpoint stream")
             return CommandResult(RESULT_TEMPORARILY_REJECTED, "no offboard setpoint stream")
@@ -799,18 +849,58 @@ class FlightStack:
         """MAV_CMD_NAV_RETURN_TO_LAUNCH."""
         return self.set_mode(now_us, state, FlightMode.RTL)
 
+    def start_mission(self, now_us: int, state: NavState, seq: int | None) -> CommandResult:
+        """AUTO.MISSION from item ``seq`` (None: the current one): the mode
+        change and MAV_CMD_MISSION_START. The one entry point a personality
+        calls to fly the stored mission (``MissionExecutor.start``)."""
+        if self.crash_event is not None:
+            return self._denied_crashed("Mission")
+        why = "no mission stored" if self.mission is None else self.mission.start(state, seq)
+        if why:
+            self._say(SEVERITY_WARNING, f"Mission denied: {why}")
+            return CommandResult(RESULT_DENIED, why)
+        self._failsafe = None
+        self._enter(FlightMode.MISSION, state, resume=False)
+        return CommandResult(RESULT_ACCEPTED)
+
+    def set_mission(self, mission: MissionExecutor | None, state: NavState | None) -> None:
+        """A new stored mission (None: none). Flying the old one, the vehicle
+        holds where it is (AUTO.LOITER), as after any mission change."""
+        self.mission = mission
+        if self.mode is FlightMode.MISSION and state is not None:
+            self._enter(FlightMode.LOITER, state)
+            self._say(SEVERITY_WARNING, "Mission changed: holding")
+
+    def reposition(self, now_us: int, state: NavState, target_enu_m, speed_m_s: float,
+                   yaw_enu_rad: float | None) -> CommandResult:
+        """MAV_CMD_DO_REPOSITION: AUTO.LOITER, flying to ``target_enu_m`` at
+        ``speed_m_s`` (<= 0: MPC_XY_CRUISE) and holding there (PX4's Hold)."""
+        if self.crash_event is not None:
+            return self._denied_crashed("Reposition")
+        if not self.armed or state.landed:
+            return CommandResult(RESULT_DENIED, "reposition needs a flying vehicle")
+        self._failsafe = None
+        self._enter(FlightMode.LOITER, state)
+        v = speed_m_s if speed_m_s > 0 else self.params["MPC_XY_CRUISE"]
+        yaw = self._anchor.yaw if yaw_enu_rad is None else float(yaw_enu_rad)
+        self._goto = (np.array(target_enu_m, dtype=float), min(v, self.params["MPC_XY_VEL_MAX"]), yaw)
+        return CommandResult(RESULT_ACCEPTED)
+
     # ------------------------------------------------------------------ modes
-    def _enter(self, mode: FlightMode, state: NavState, announce: bool = True) -> None:
+    def _enter(self, mode: FlightMode, state: NavState, announce: bool = True, resume: bool = True) -> None:
         changed = mode is not self.mode
         self.mode = mode
-        self._anchor_at(state)
+        self._anchor_at(state, resume=resume)
         self._land_announced = False
         if announce and changed:
             self._say(SEVERITY_INFO, f"Mode {mode.label}")
 
-    def _anchor_at(self, state: NavState, hold_pos=None) -> None:
+    def _anchor_at(self, state: NavState, hold_pos=None, resume: bool = True) -> None:
         """Anchor the mode's setpoint at the vehicle (or at ``hold_pos``)."""
         a = self._anchor
+        self._goto = None
+        if resume and self.mode is FlightMode.MISSION and self.mission is not None:
+            self.mission.resume(state)
         a.pos = np.array(state.pos_enu_m if hold_pos is None else hold_pos, dtype=float)
         a.yaw = float(state.yaw_enu_rad)
         a.z_ref = float(state.pos_enu_m[2])
@@ -821,6 +911,8 @@ class FlightStack:
         elif self.mode is FlightMode.RTL:
             a.target_z = max(float(state.pos_enu_m[2]),
                              float(self.home_enu_m[2]) + self.params["RTL_RETURN_ALT"])
+            dest, a.dest_rally = return_destination(state.pos_enu_m, self.home_enu_m, self.rally_points)
+            a.dest = np.array(dest, dtype=float)
         self._hold_sp = Setpoint(a.pos.copy(), np.zeros(3), None, a.yaw, None)
 
     # ------------------------------------------------------------------ the tick
@@ -832,6 +924,8 @@ class FlightStack:
         self._now_us = now_us
         self._state = state
         p = self.params
+        if self.fence is not None:   # also disarmed: SYS_STATUS reports the fence's health
+            self._check_fence(state)
 
         if not self.armed:
             self._override_active = False
@@ -940,6 +1034,10 @@ class FlightStack:
                             None, a.yaw, None), False
         if mode is FlightMode.RTL:
             return self._rtl_setpoint(state, dt), False
+        if mode is FlightMode.MISSION:
+            return self._mission_setpoint(state, dt)
+        if self._goto is not None:
+            return self._goto_setpoint(dt), False
         # LOITER, POSCTL, MANUAL: hold; on the ground stay on the ground.
         if state.landed and self._hold_sp is not None and self._hold_sp.pos_enu_m[2] <= state.pos_enu_m[2] + 0.05:
             return None, True
@@ -953,19 +1051,70 @@ class FlightStack:
             if a.z_ref >= a.target_z and abs(float(state.pos_enu_m[2]) - a.target_z) < 0.5:
                 a.phase = 1
             return Setpoint((a.pos[0], a.pos[1], a.z_ref), None, None, a.yaw, None)
-        # fly home: a carrot moving at MPC_XY_CRUISE
-        d = self.home_enu_m[:2] - a.pos[:2]
+        # fly to the destination (home or a rally point): a carrot moving at MPC_XY_CRUISE
+        dest = a.dest
+        d = dest[:2] - a.pos[:2]
         dist = float(math.hypot(d[0], d[1]))
         v = p["MPC_XY_CRUISE"]
         step = v * dt
         if dist <= step:
-            a.pos[0], a.pos[1] = self.home_enu_m[0], self.home_enu_m[1]
+            a.pos[0], a.pos[1] = dest[0], dest[1]
             vel = (0.0, 0.0, 0.0)
         else:
             a.pos[:2] += d / dist * step
             vel = (d[0] / dist * v, d[1] / dist * v, 0.0)
-        here = float(math.hypot(*(self.home_enu_m[:2] - np.asarray(state.pos_enu_m[:2]))))
+        here = float(math.hypot(*(dest[:2] - np.asarray(state.pos_enu_m[:2]))))
         if dist <= step and here < RTL_ACCEPT_RADIUS_M:
+            where = "rally point" if a.dest_rally else "home"
             self._enter(FlightMode.LAND, state, announce=False)
-            self._say(SEVERITY_INFO, "Return: home reached, landing")
+            self._say(SEVERITY_INFO, f"Return: {where} reached, landing")
         return Setpoint((a.pos[0], a.pos[1], a.target_z), vel, None, a.yaw, None)
+
+    def _mission_setpoint(self, state: NavState, dt: float) -> tuple[Setpoint | None, bool]:
+        if self.mission is None:   # pragma: no cover - set_mission leaves the mode first
+            self._enter(FlightMode.LOITER, state)
+            return self._hold_sp, False
+        step = self.mission.update(state, dt)
+        if step.action == "rtl":
+            if state.landed:
+                self._enter(FlightMode.LAND, state)
+                return None, True
+            self._enter(FlightMode.RTL, state)
+            return self._rtl_setpoint(state, dt), False
+        return step.setpoint, step.idle
+
+    def _goto_setpoint(self, dt: float) -> Setpoint:
+        """DO_REPOSITION: the hold point moves toward the target."""
+        a = self._anchor
+        target, v, yaw = self._goto
+        pos, vel, arrived = carrot_step(a.pos, target, v, 0.0, dt)
+        a.pos = np.array(pos)
+        a.yaw = yaw
+        if arrived:
+            self._goto = None
+        self._hold_sp = Setpoint(a.pos.copy(), vel, None, yaw, None)
+        return self._hold_sp
+
+    def _check_fence(self, state: NavState) -> None:
+        """Geofence failsafe: GF_ACTION once when the vehicle leaves the
+        allowed area in the air (``fence_breached`` follows it always)."""
+        p = state.pos_enu_m
+        out = self.fence.breached(p[0], p[1])
+        if out == self.fence_breached:
+            return
+        self.fence_breached = out
+        if not out:
+            self._say(SEVERITY_INFO, "Geofence: back inside")
+            return
+        action = int(self.params["GF_ACTION"])
+        if state.landed or action == 0 or not self.armed or self.crash_event is not None:
+            return
+        what = {1: "", 2: ", holding", 3: ", returning", 4: ", landing", 5: ", landing"}[action]
+        self._say(SEVERITY_CRITICAL, f"Geofence breached{what}")
+        if action == 2:
+            self._enter(FlightMode.LOITER, state, announce=False)
+            self._failsafe = "geofence"
+        elif action == 3:
+            self._enter(FlightMode.RTL, state, announce=False)
+        elif action in (4, 5):
+            self._enter(FlightMode.LAND, state, announce=False)

@@ -116,6 +116,7 @@ from .pipe import MEMORY_SCHEME
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .battery import Battery
 from .collision_prevention import CollisionPrevention, CollisionPreventionConfig
+from . import mission_store
 from .flightstack import (
     IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
     Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
@@ -145,6 +146,7 @@ _SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSO
             | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY | mavlink.MAV_SYS_STATUS_AHRS
             | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY)
 _PREARM = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+_GEOFENCE = mavlink.MAV_SYS_STATUS_GEOFENCE
 
 # Message ids used for scheduling.
 ID = mavlink
@@ -527,10 +529,9 @@ class SitlServer:
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
         self.stack = FlightStack(self.params, self.home_enu_m)
         self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
-        self.missions = MissionProtocol(mission.energy.max_mission_items)
+        self._init_mission_store(mission.energy.max_mission_items)
         self.battery = Battery(mission.energy)
         self.collision_prevention = CollisionPrevention()     # fed by OBSTACLE_DISTANCE, CP_* params
-        self._mission_peer = None
         self._apply_params()
         self._frame = None
         self._setpoint = None
@@ -610,6 +611,7 @@ class SitlServer:
             mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_capabilities,
             mavlink.MAV_CMD_GET_HOME_POSITION: self._cmd_home,
             mavlink.MAV_CMD_MISSION_START: self._cmd_mission_start,
+            mavlink.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
         }
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
@@ -624,6 +626,18 @@ class SitlServer:
             None if config.signing_key is None else SignatureVerifier(config.signing_key),
             key_locked=config.signing_key is not None)
         self._intake = IntakeBudget()
+
+    #: COMMAND_INT frame of the command being handled (None: COMMAND_LONG).
+    _command_frame: int | None = None
+
+    def _init_mission_store(self, max_items: int) -> None:
+        """The mission, fence and rally storage (``MissionProtocol``) and what
+        the transport keeps about it."""
+        self.missions = MissionProtocol(max_items, validate=mission_store.validator(self.origin, self.home_enu_m))
+        self._store_version = self.missions.version
+        self._flown_items = self.missions.items       # the mission list the flight stack has
+        self._mission_current_due_us = 0
+        self._mission_peer = None
 
     # ------------------------------------------------------------------ params
     @staticmethod
@@ -814,6 +828,8 @@ class SitlServer:
             self.collision_prevention.set_time(now)
             frame = sim.step_onboard(out.setpoint)
         self._frame = frame
+        if self.stack.mission is not None:
+            self._mission_progress()
         self.battery.drain(sim.plant.f, sim.dt_frame_s)
         self.frames += 1
         if sim.crash is not None and not self.stack.crashed:
@@ -943,8 +959,12 @@ class SitlServer:
         s = self._nav_state(self._frame)
         if s.landed and s.tilt_rad < math.radians(30.0):
             health |= _PREARM
+        # geofence: always present (PX4), enabled with a stored fence, healthy unless breached
+        enabled = _SENSORS | _PREARM | (_GEOFENCE if self.stack.fence is not None else 0)
+        if not self.stack.fence_breached:
+            health |= _GEOFENCE
         b = self.battery
-        return codec.sys_status(self._mav(), _SENSORS | _PREARM, _SENSORS | _PREARM, health, b.voltage_v,
+        return codec.sys_status(self._mav(), _SENSORS | _PREARM | _GEOFENCE, enabled, health, b.voltage_v,
                                 b.current_a, b.remaining)
 
     def _enc_battery(self):
@@ -1306,6 +1326,7 @@ class SitlServer:
             result = mavlink.MAV_RESULT_DENIED
             self._refuse(rules.command_name(command), why)
         else:
+            self._command_frame = int_frame
             try:
                 result, after = handler(params)
             except (ValueError, OverflowError, TypeError):   # unusable parameters
@@ -1414,8 +1435,15 @@ class SitlServer:
         return mavlink.MAV_RESULT_ACCEPTED, [self._enc_home()]
 
     def _cmd_mission_start(self, p):
-        self._say(SEVERITY_WARNING, "Mission start refused: mission stored only")
-        return mavlink.MAV_RESULT_DENIED, None
+        seq = None if math.isnan(p[0]) else int(p[0])
+        return self.stack.start_mission(self.sim.time_us, self._state(), seq).result, None
+
+    def _cmd_reposition(self, p):
+        """DO_REPOSITION (MAVSDK ``goto_location``): ``mission_store.reposition_target``."""
+        nav = self._state()
+        target, speed, yaw = mission_store.reposition_target(self.origin, self.home_enu_m, nav.pos_enu_m, p,
+                                                             self._command_frame)
+        return self.stack.reposition(self.sim.time_us, nav, target, speed, yaw).result, None
 
     def _on_set_mode(self, link, msg) -> None:
         if msg.target_system != SYSTEM_ID:
@@ -1543,6 +1571,7 @@ class SitlServer:
         self._mission_peer = (link, self._peer(msg), link.last_addr)
         replies = self.missions.handle_count(int(msg.count), int(getattr(msg, "mission_type", 0)),
                                              time.monotonic())
+        self._sync_store()
         self._send_mission_replies(link, self._peer(msg), replies)
 
     def _on_mission_item_int(self, link, msg) -> None:
@@ -1564,9 +1593,13 @@ class SitlServer:
         replies = self.missions.handle_item(item, time.monotonic())
         if self.missions.refused is not None:
             self._refuse(msg.get_type(), self.missions.refused)
+        stored = was and not self.missions.uploading and self.missions.version != self._store_version
+        self._sync_store()      # the flight stack has the new list before the peer has the ACK
         self._send_mission_replies(link, self._peer(msg), replies)
-        if was and not self.missions.uploading and self.missions.items:
-            self._say(SEVERITY_INFO, f"Mission stored: {len(self.missions.items)} items")
+        if stored:
+            n = len(self.missions.stored[item.mission_type])
+            what = {mavlink.MAV_MISSION_TYPE_FENCE: "Geofence", mavlink.MAV_MISSION_TYPE_RALLY: "Rally points"}
+            self._say(SEVERITY_INFO, f"{what.get(item.mission_type, 'Mission')} stored: {n} items")
 
     def _on_mission_request_list(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
@@ -1584,14 +1617,50 @@ class SitlServer:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
         replies = self.missions.handle_clear_all(int(getattr(msg, "mission_type", 0)))
+        self._sync_store()
         self._send_mission_replies(link, self._peer(msg), replies)
 
     def _on_mission_set_current(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
         if self.missions.handle_set_current(int(msg.seq)):
-            self._broadcast(link.mav.mission_current_encode(self.missions.current_seq,
-                                                            len(self.missions.items)))
+            m = self.stack.mission
+            if m is not None:
+                m.set_current(int(msg.seq))
+            self._send_mission_current()
+
+    def _sync_store(self) -> None:
+        """A stored list changed: hand the flight stack its new mission, fence and rally points."""
+        if self.missions.version == self._store_version:
+            return
+        self._store_version = self.missions.version
+        objs = mission_store.flight_objects(self.missions.stored, self.origin, self.home_enu_m, self.params)
+        self.stack.fence = objs.fence
+        self.stack.rally_points = objs.rally_points
+        if objs.fence is None:
+            self.stack.fence_breached = False
+        if self.missions.items is not self._flown_items:   # a fence or rally upload leaves the mission flying
+            self._flown_items = self.missions.items
+            self.stack.set_mission(objs.mission, self._state() if self._frame is not None else None)
+            self._send_mission_current()
+
+    def _send_mission_current(self) -> None:
+        m = self.stack.mission
+        seq = m.current if m is not None else self.missions.current_seq
+        state = mission_store.mission_state(m, self.stack.mode is FlightMode.MISSION)
+        self._broadcast(self._mav().mission_current_encode(seq, len(self.missions.items), state))
+        self._mission_current_due_us = self.sim.time_us + 1_000_000
+
+    def _mission_progress(self) -> None:
+        """MISSION_ITEM_REACHED for each item completed; MISSION_CURRENT on a
+        change and once a second of vehicle time while a mission is stored (PX4)."""
+        m = self.stack.mission
+        if m.events:
+            for seq in m.pop_events():
+                self._broadcast(self._mav().mission_item_reached_encode(seq))
+        if m.current_changed or self.sim.time_us >= self._mission_current_due_us:
+            m.current_changed = False
+            self._send_mission_current()
 
     def mission_tick(self) -> None:
         """Resend or abandon a stalled upload (wall-clock timeouts)."""

@@ -48,6 +48,7 @@ def attack_packets(mav) -> list[tuple[str, bytes]]:
         (mavlink.MAV_CMD_DO_SET_MODE, (CUSTOM, 4, 6, 0, 0, 0, 0)),            # AUTO.LAND
         (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (HB, -1, 0, 0, 0, 0, 0)),       # silence the heartbeat
         (mavlink.MAV_CMD_MISSION_START, (0,) * 7),
+        (mavlink.MAV_CMD_DO_REPOSITION, (-1, 1, 0, NAN, NAN, NAN, NAN)),        # go elsewhere, in Hold
         (31010, (1,) * 7),                                                      # unknown: deny by default
     ]
     out = []

@@ -40,7 +40,7 @@ def test_every_handled_message_is_classified():
     assert {t for t in handled if not is_control(t, -1)} == read_only
     writes = {mavlink.MAV_CMD_COMPONENT_ARM_DISARM, mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_NAV_LAND,
               mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, mavlink.MAV_CMD_DO_SET_MODE,
-              mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_MISSION_START}
+              mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_MISSION_START, mavlink.MAV_CMD_DO_REPOSITION}
     reads = {mavlink.MAV_CMD_GET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE,
              mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, mavlink.MAV_CMD_GET_HOME_POSITION}
     assert set(server._commands) == writes | reads

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 
 import numpy as np
@@ -270,9 +272,20 @@ def test_mission_upload_download_clear():
     assert mp.handle_request(1, 0) == [SendItem(item(1))]
     assert mp.handle_request(3, 0) == [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, 0)]
     assert mp.handle_request_list(1) == [SendCount(0, 1)]               # fence: empty
-    assert mp.handle_count(2, 1, 0.0) == [SendAck(mavlink.MAV_MISSION_UNSUPPORTED, 1)]
+    # the fence list is stored apart from the mission (issue 17); unknown types are refused
+    fence = [dataclasses.replace(item(i), command=5001, param1=3.0, mission_type=1) for i in range(3)]
+    assert mp.handle_count(3, 1, 0.0) == [SendRequest(0, 1)]
+    assert mp.handle_item(item(0), 0.1) == [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, 0)]  # wrong type
+    for f in fence[:2]:
+        mp.handle_item(f, 0.1)
+    assert mp.handle_item(fence[2], 0.1) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 1)]
+    assert mp.stored[1] == tuple(fence) and mp.items == (item(0), item(1), item(2))
+    assert mp.handle_request_list(1) == [SendCount(3, 1)]
+    assert mp.handle_count(2, 7, 0.0) == [SendAck(mavlink.MAV_MISSION_UNSUPPORTED, 7)]
     assert mp.handle_clear_all(0) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 0)]
-    assert mp.items == ()
+    assert mp.items == () and mp.stored[1] == tuple(fence)
+    assert mp.handle_clear_all(mavlink.MAV_MISSION_TYPE_ALL) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 255)]
+    assert mp.stored[1] == ()
 
 
 def test_mission_lost_ack_duplicate_last_item_is_acked_again():

@@ -173,7 +173,7 @@ def test_every_command_is_acked(gcs):
     assert ver.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
     assert gcs.command(mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, 1) == mavlink.MAV_RESULT_ACCEPTED
     assert gcs.recv("AUTOPILOT_VERSION", 3.0) is not None
-    # AUTO.MISSION is refused (missions are stored only); OFFBOARD needs a setpoint stream.
+    # AUTO.MISSION is refused without a stored mission; OFFBOARD needs a setpoint stream.
     assert gcs.command(mavlink.MAV_CMD_DO_SET_MODE, 1, 4, 4) == mavlink.MAV_RESULT_DENIED
     assert gcs.command(mavlink.MAV_CMD_DO_SET_MODE, 1, 6, 0) == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
     assert gcs.command(mavlink.MAV_CMD_DO_SET_MODE, 1, 3, 0) == mavlink.MAV_RESULT_ACCEPTED

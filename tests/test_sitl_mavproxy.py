@@ -1,6 +1,6 @@
 """MAVProxy (from PyPI, installed with --no-deps, unmodified) headless against
 the SITL: connect, read the mode, list the parameters, download a mission that
-was uploaded with pymavlink. Driven through its stdin; real time (speed 1)."""
+was uploaded with pymavlink, see the geofence status without a breach. Driven through its stdin; real time (speed 1)."""
 
 from __future__ import annotations
 
@@ -54,7 +54,7 @@ class MavProxy:
 
     def __init__(self, master: str, workdir: Path) -> None:
         cmd = [sys.executable, "-m", "MAVProxy.mavproxy", f"--master={master}", "--no-state", "--mav20",
-               "--default-modules=param,wp,mode,cmdlong"]
+               "--default-modules=param,wp,mode,cmdlong,fence"]
         self.p = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                   text=True, bufsize=1, cwd=workdir, env=dict(os.environ, TERM="dumb"))
         self.q: queue.Queue = queue.Queue()
@@ -116,5 +116,9 @@ def test_mavproxy_mode_params_mission(tmp_path):
                 m = mp.expect(r"^16 6 (\S+) (\S+) (\S+)")
                 assert (float(m.group(1)), float(m.group(2)), float(m.group(3))) == \
                     pytest.approx((lat * 1e-7, lon * 1e-7, alt), abs=1e-7)
+            # SYS_STATUS carries the geofence bit (present, healthy): MAVProxy's fence module
+            # reports the fence and no breach (issue 17: a spurious "fence breach" at connect)
+            assert any("fence present" in line for line in mp.out)
+            assert not any("fence breach" in line for line in mp.out)
         finally:
             mp.close()

@@ -107,8 +107,9 @@ def test_command_results(gcs):
     # not a message id (24 bits) nor an interval (int32 us): bad parameters (companion/link/command_rules.py)
     assert gcs.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 1e30, 1e30) == mavlink.MAV_RESULT_DENIED
     assert gcs.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 4242, 1000) == mavlink.MAV_RESULT_UNSUPPORTED
-    assert gcs.command(mavlink.MAV_CMD_DO_REPOSITION, -1, 0, 0, 0, 44.8, -0.6, 40) == \
-        mavlink.MAV_RESULT_UNSUPPORTED
+    assert gcs.command(mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST, 5, 0, 1) == mavlink.MAV_RESULT_UNSUPPORTED
+    # DO_REPOSITION: supported, but not on the ground (PX4 Hold needs a flying vehicle)
+    assert gcs.command(mavlink.MAV_CMD_DO_REPOSITION, -1, 0, 0, 0, 44.8, -0.6, 40) == mavlink.MAV_RESULT_DENIED
     assert gcs.recv("HEARTBEAT", 3.0) is not None               # still alive
 
 
@@ -247,12 +248,32 @@ def test_mission_count_zero_fence_and_clear(gcs):
     gcs.mav.mission_request_list_send(1, 1, 0)
     assert gcs.recv("MISSION_COUNT", 3.0).count == 0
     fence = mavlink.MAV_MISSION_TYPE_FENCE
-    gcs.mav.mission_count_send(1, 1, 3, fence)
-    a = gcs.recv("MISSION_ACK", 3.0)
-    assert (a.type, a.mission_type) == (mavlink.MAV_MISSION_UNSUPPORTED, fence)
+
+    def upload_fence(vertex_count):
+        gcs.mav.mission_count_send(1, 1, 3, fence)
+        for i in range(3):
+            r = gcs.recv("MISSION_REQUEST_INT", 3.0)
+            assert (r.seq, r.mission_type) == (i, fence)
+            # a triangle of about 2 km around the vehicle (it starts within metres of 44.8 N 0.6 W)
+            lat, lon = ((447900000, -6100000), (448100000, -6100000), (448000000, -5900000))[i]
+            gcs.mav.mission_item_int_send(1, 1, i, mavlink.MAV_FRAME_GLOBAL_INT, 5001, 0, 1, vertex_count, 0, 0, 0,
+                                          lat, lon, 0.0, fence)
+        return gcs.recv("MISSION_ACK", 3.0)
+
+    a = upload_fence(4)                         # a polygon of 4 vertices in 3 items: refused, nothing stored
+    assert (a.type, a.mission_type) == (mavlink.MAV_MISSION_ERROR, fence)
     gcs.mav.mission_request_list_send(1, 1, fence)
     c = gcs.recv("MISSION_COUNT", 3.0)
     assert (c.count, c.mission_type) == (0, fence)
+    a = upload_fence(3)
+    assert (a.type, a.mission_type) == (mavlink.MAV_MISSION_ACCEPTED, fence)
+    gcs.mav.mission_request_list_send(1, 1, fence)
+    c = gcs.recv("MISSION_COUNT", 3.0)
+    assert (c.count, c.mission_type) == (3, fence)
+    # a stored fence: the SYS_STATUS geofence bit is present, enabled and healthy (MAVProxy's fence module)
+    bit = mavlink.MAV_SYS_STATUS_GEOFENCE
+    st = gcs.recv("SYS_STATUS", 3.0, lambda m: m.onboard_control_sensors_enabled & bit)
+    assert st.onboard_control_sensors_present & bit and st.onboard_control_sensors_health & bit
     gcs.mav.mission_clear_all_send(1, 1, mavlink.MAV_MISSION_TYPE_ALL)
     assert gcs.recv("MISSION_ACK", 3.0).type == mavlink.MAV_MISSION_ACCEPTED
 

@@ -132,12 +132,21 @@ COMMAND_RULES: dict[int, tuple[Param, ...]] = {
     mavlink.MAV_CMD_MISSION_START: (
         Param("first item", 0.0, 65535.0, nan="yes", integer=True),
         Param("last item", 0.0, 65535.0, nan="yes", integer=True), *(EMPTY,) * 5),
+    # MAVSDK goto_location: param1 -1, param2 CHANGE_MODE, param4 yaw in rad (PX4's reading)
+    mavlink.MAV_CMD_DO_REPOSITION: (
+        Param("ground speed (m/s)", 0.0, MAX_SETPOINT_VEL_M_S, nan="yes", values=(-1.0,)),
+        Param("reposition flags", 0.0, 1.0, nan="yes", integer=True), EMPTY,
+        Param("yaw (rad)", -MAX_SETPOINT_YAW_RAD, MAX_SETPOINT_YAW_RAD, nan="yes"), LAT, LON,
+        Param("altitude (m)", -MAX_ALTITUDE_M, MAX_ALTITUDE_M, nan="yes")),
 }
 
 #: COMMAND_INT frames in which a command's z is understood (others: DENIED).
 #: The SITL reads NAV_TAKEOFF's altitude as AMSL, as PX4 does.
 COMMAND_INT_FRAMES: dict[int, tuple[int, ...]] = {
     mavlink.MAV_CMD_NAV_TAKEOFF: (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT),
+    mavlink.MAV_CMD_DO_REPOSITION: (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT,
+                                    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                                    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT),
 }
 
 _NAMES = {v: k[len("MAV_CMD_"):] for k, v in vars(mavlink).items() if k.startswith("MAV_CMD_") and isinstance(v, int)}
