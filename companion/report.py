@@ -167,6 +167,9 @@ class FlightReport:
     report_fallback : dict or None
         ``{path, wanted, reason}`` when this report was written to ``path``
         because ``wanted`` could not be written.
+    guard : dict or None
+        What the guard checked and refused (``companion.safety.gate``,
+        docs/report-json.md ``guard``); None when no guard flew.
     """
 
     completed: bool
@@ -197,6 +200,7 @@ class FlightReport:
     control_mode_changes: tuple = ()
     faults: tuple = ()
     report_fallback: dict | None = None
+    guard: dict | None = None
 
     def __post_init__(self) -> None:
         # Unset: the flight ended where it stopped, flown as configured.
