@@ -27,8 +27,9 @@ shrinks along ``v`` (a finite difference of ``d`` over ``STEP_M``):
 
 A whole candidate trajectory is sampled every ``SAMPLE_DT_S`` from its start
 to its end (not its first seconds) and every sample must pass both rules; in
-addition, once a sample has kept the clearance of a surface, no later sample
-may come within it (only a candidate that starts inside may move out).
+addition, once a sample has kept the clearance of a surface, or ``ESCAPE_S``
+after the candidate's start, no sample may be within it (a candidate that
+starts inside may move out, or along the surface, for that long).
 A landing is checked as the column under the vehicle's braking footprint
 (from where it is to where it stops), from its height down to the ground:
 every point keeps the clearance of the rows and obstacles (``check_landing``).
@@ -50,6 +51,8 @@ DELAY_S = 0.2
 SPEED_TOLERANCE_M_S = 0.05
 #: Length (m) of the finite-difference step along the velocity.
 STEP_M = 0.02
+#: A candidate that starts within a clearance must be out of it this soon (s).
+ESCAPE_S = 2.0
 #: Candidate trajectories are sampled this often (s): 5 cm at 1 m/s.
 SAMPLE_DT_S = 0.05
 #: Samples per chunk of a long trajectory (bounded memory).
@@ -251,6 +254,7 @@ class Guard:
         n = int(math.floor(max(tf - t0, 0.0) / SAMPLE_DT_S)) + 1
         req = self._req
         kept = {k: False for k in KINDS}
+        k_escape = int(math.ceil(ESCAPE_S / SAMPLE_DT_S))
         for k0 in range(0, n, CHUNK):
             t = t0 + SAMPLE_DT_S * np.arange(k0, min(k0 + CHUNK, n))
             if k0 + CHUNK >= n and tf - t[-1] > 1e-9:
@@ -261,7 +265,8 @@ class Guard:
             strict = {}
             for kind in KINDS:
                 ok = d[kind] >= req[kind]
-                strict[kind] = 0 if kept[kind] else (int(np.argmax(ok)) if ok.any() else len(p))
+                first_ok = 0 if kept[kind] else (int(np.argmax(ok)) if ok.any() else len(p))
+                strict[kind] = min(first_ok, max(k_escape - k0, 0))
                 kept[kind] = kept[kind] or bool(ok.any())
             verdict = self._judge(p, v, t, terrain, strict)
             if not verdict.ok:
@@ -308,7 +313,7 @@ class Guard:
         for kind in ("row", "obstacle"):
             bad = d[kind] < self._req[kind]
             if bad.any():
-                k = int(np.argmax(bad))
+                k = int(np.argmin(d[kind]))
                 q = tuple(float(c) for c in pts[k])
                 return Verdict(False, "landing", kind,
                                f"landing refused: {kind} {d[kind][k]:.2f} m from the descent at z={q[2]:.2f} m "
