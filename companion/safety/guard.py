@@ -142,7 +142,7 @@ class Verdict:
         """Plain JSON types (report.json ``guard.refusals``)."""
         def num(x):
             return None if x is None or not math.isfinite(x) else float(x)
-        return {"rule": self.rule, "surface": self.surface, "detail": self.detail, "t_s": num(self.t_s),
+        return {"rule": self.rule, "surface": self.surface, "detail": self.detail, "candidate_t_s": num(self.t_s),
                 "point_enu_m": None if self.point_enu_m is None else [float(c) for c in self.point_enu_m],
                 "distance_m": num(self.distance_m), "required_m": num(self.required_m),
                 "approach_m_s": num(self.approach_m_s), "allowed_m_s": num(self.allowed_m_s)}
