@@ -233,3 +233,43 @@ def test_hold_with_an_empty_memory_still_sees_the_added_obstacle():
     v = g.check_landing((3.2, 7.5, 1.5), (0.0, 0.0, 0.0))
     assert not v.ok and v.surface == "obstacle" and v.distance_m == pytest.approx(0.2, abs=1e-9)
     assert g.check_landing((4.0, 7.5, 1.5), (0.0, 0.0, 0.0)).ok      # 1.0 m > 0.9 m
+
+
+# --- the fallback: a braked hover that stops within the stopping law ----------------------
+
+def test_default_law_hand_value():
+    # defaults a = 1 m/s^2, tau = 0.5 s, room 1 m: v = sqrt(2 + 0.25) - 0.5 = 1.0 m/s,
+    # stopping in 1.0 * 0.5 + 1.0^2 / 2 = 1.0 m
+    from companion.safety.guard import DELAY_S
+
+    assert stopping_speed_m_s(1.0, 1.0, DELAY_S) == pytest.approx(1.0, abs=1e-12)
+    assert stopping_distance_m(1.0, 1.0, DELAY_S) == pytest.approx(1.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("speed", [0.5, 1.0, 1.5])
+def test_gate_brakes_to_rest_within_the_stopping_distance(speed):
+    from companion.flight.reference import RefSample
+    from companion.safety.gate import GuardGate
+    from companion.safety.guard import DELAY_S
+
+    cfg = GuardConfig(R, C, C, C, accel_m_s2=1.0, delay_s=DELAY_S)
+    # an obstacle 1 m beyond what the law allows at `speed` - 0.1: the first sample passes,
+    # the next one, faster than the law, is refused
+    room = stopping_distance_m(speed - 0.1, 1.0, DELAY_S) + 0.02
+    g = GuardGate(Guard(cfg, _scene(), _box((8.0 + REQ + room, 6.0, 0.0), (9.0 + REQ + room, 10.0, 3.0))), 2.0)
+    z = (0.0, 0.0, 0.0)
+    ok = RefSample((8.0, 8.0, 1.5), (speed - 0.1, 0.0, 0.0), z, z, z, (0.0, 1.0, 0.0))
+    assert g.dispose(0.0, ok)[1] is None
+    bad = RefSample((8.0, 8.0, 1.5), (speed + 0.2, 0.0, 0.0), z, z, z, (0.0, 1.0, 0.0))
+    ref, verdict = g.dispose(0.004, bad)
+    assert verdict is not None and verdict.rule == "speed" and g.engaged
+    t, x = 0.004, []
+    while not g.at_rest and t < 20.0:
+        t += 0.004
+        ref = g.dispose(t, bad)[0]          # the mode's proposals are no longer flown
+        x.append(ref.p[0])
+    assert g.at_rest
+    travel = max(x) - 8.0
+    # braked from the last accepted state (speed - 0.1): within its stopping distance
+    assert travel <= stopping_distance_m(speed - 0.1, 1.0, DELAY_S) + 1e-9
+    assert g.dispose(t + 1.0, bad)[0].v == z

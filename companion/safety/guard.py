@@ -44,9 +44,11 @@ import numpy as np
 
 from .stopping import stopping_distance_m, stopping_speed_m_s
 
-#: Sensing and control delay (s) of the stopping law (PX4 CP_DELAY): a DISTANCE_SENSOR
-#: period (0.05-0.1 s) plus the reference shaper's and controller's lag.
-DELAY_S = 0.2
+#: Sensing and control delay (s) of the stopping law (PX4 CP_DELAY). The fallback's
+#: brake (the reference shaper at 1 m/s^2 and 2 m/s^3) stops from 1 m/s in 0.97 m and
+#: from 0.5 m/s in 0.37 m; v tau + v^2 / (2 a) with tau = 0.5 s gives 1.0 m and 0.375 m,
+#: so a reference the law passed can always be braked before the clearance.
+DELAY_S = 0.5
 #: Approach speeds within this (m/s) of the allowed one pass (the finite difference's noise).
 SPEED_TOLERANCE_M_S = 0.05
 #: Length (m) of the finite-difference step along the velocity.
