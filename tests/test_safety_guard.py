@@ -273,3 +273,48 @@ def test_gate_brakes_to_rest_within_the_stopping_distance(speed):
     # braked from the last accepted state (speed - 0.1): within its stopping distance
     assert travel <= stopping_distance_m(speed - 0.1, 1.0, DELAY_S) + 1e-9
     assert g.dispose(t + 1.0, bad)[0].v == z
+
+
+# --- the flight core: a hold never comes down onto a known obstacle -----------------------
+
+def _core_beside(obstacle_distance, pos):
+    """A FlightCore in the air at ``pos`` (at rest) in the trajectory phase, its guard on the
+    test scene with ``obstacle_distance``."""
+    from companion.flight.config import RunnerConfig
+    from companion.flight.core import FlightCore, FlightInputs
+    from companion.safety.gate import GuardGate
+    from companion.vehicle import VehicleConfig
+
+    gate = GuardGate(_guard(obstacle_distance), 2.0)
+    inputs = FlightInputs(None, np.zeros((1, 3)), (44.8, -0.6, 30.0), (0.0, 0.0, 0.0), guard=gate)
+    core = FlightCore(inputs, RunnerConfig(control="vehicle"), VehicleConfig())
+    core.armed, core.phase, core.t_s = True, "trajectory", 100.0
+    core._pos, core._vel, core._proc = pos, (0.0, 0.0, 0.0), None
+    return core, gate
+
+
+def _commands(core) -> list:
+    """The COMMAND_LONG ids the core queued."""
+    return [m.command for m in core.take_outbox() if getattr(m, "get_type", lambda: "")() == "COMMAND_LONG"]
+
+
+def test_core_no_route_hold_beside_a_low_obstacle_hovers_instead_of_landing():
+    # the issue's flight: stopped 0.2 m beside a 0.8 m crate; no_route -> --on-failure land
+    core, gate = _core_beside(_box((7.0, 7.0, 0.0), (8.0, 8.0, 0.8)), (8.2, 7.5, 1.5))
+    from pymavlink.dialects.v20 import common as mavlink
+
+    core._react(core.monitor.fail(100.0, "no_route", "no route", "land"))
+    cmds = _commands(core)
+    assert mavlink.MAV_CMD_NAV_LAND not in cmds
+    assert cmds == [mavlink.MAV_CMD_DO_SET_MODE]              # AUTO.LOITER: hover where it is
+    assert core.phase == "holding" and gate.n_landings_refused == 1
+    assert gate.to_dict()["refusal_list"][0]["candidate"] == "landing"
+
+
+def test_core_lands_where_the_column_is_clear():
+    core, gate = _core_beside(_box((7.0, 7.0, 0.0), (8.0, 8.0, 0.8)), (10.0, 7.5, 1.5))
+    from pymavlink.dialects.v20 import common as mavlink
+
+    core._react(core.monitor.fail(100.0, "no_route", "no route", "land"))
+    assert _commands(core) == [mavlink.MAV_CMD_NAV_LAND] and core.phase == "landing"
+    assert gate.n_landings == 1 and gate.n_landings_refused == 0
