@@ -250,29 +250,50 @@ def test_default_law_hand_value():
 def test_gate_brakes_to_rest_within_the_stopping_distance(speed):
     from companion.flight.reference import RefSample
     from companion.safety.gate import GuardGate
-    from companion.safety.guard import DELAY_S
+    from companion.safety.guard import DELAY_S, GRACE_S
 
     cfg = GuardConfig(R, C, C, C, accel_m_s2=1.0, delay_s=DELAY_S)
-    # an obstacle 1 m beyond what the law allows at `speed` - 0.1: the first sample passes,
-    # the next one, faster than the law, is refused
+    # an obstacle just beyond what the law allows at `speed` - 0.1: that sample passes,
+    # one at `speed` + 0.2 that does not brake is flown for GRACE_S, then refused
     room = stopping_distance_m(speed - 0.1, 1.0, DELAY_S) + 0.02
     g = GuardGate(Guard(cfg, _scene(), _box((8.0 + REQ + room, 6.0, 0.0), (9.0 + REQ + room, 10.0, 3.0))), 2.0)
     z = (0.0, 0.0, 0.0)
     ok = RefSample((8.0, 8.0, 1.5), (speed - 0.1, 0.0, 0.0), z, z, z, (0.0, 1.0, 0.0))
     assert g.dispose(0.0, ok)[1] is None
     bad = RefSample((8.0, 8.0, 1.5), (speed + 0.2, 0.0, 0.0), z, z, z, (0.0, 1.0, 0.0))
-    ref, verdict = g.dispose(0.004, bad)
-    assert verdict is not None and verdict.rule == "speed" and g.engaged
-    t, x = 0.004, []
+    t = 0.0
+    while True:
+        t += 0.004
+        ref, verdict = g.dispose(t, bad)
+        if verdict is not None:
+            break
+        assert ref is bad and t <= GRACE_S + 0.004 + 1e-9
+    assert verdict.rule == "speed" and g.engaged and t > GRACE_S
+    x = []
     while not g.at_rest and t < 20.0:
         t += 0.004
         ref = g.dispose(t, bad)[0]          # the mode's proposals are no longer flown
         x.append(ref.p[0])
     assert g.at_rest
-    travel = max(x) - 8.0
-    # braked from the last accepted state (speed - 0.1): within its stopping distance
-    assert travel <= stopping_distance_m(speed - 0.1, 1.0, DELAY_S) + 1e-9
+    # braked from the last state flown (speed + 0.2): within its stopping distance
+    assert max(x) - 8.0 <= stopping_distance_m(speed + 0.2, 1.0, DELAY_S) + 1e-9
     assert g.dispose(t + 1.0, bad)[0].v == z
+
+
+def test_gate_lets_a_braking_mode_brake():
+    from companion.flight.reference import RefSample
+    from companion.safety.gate import GuardGate
+
+    g = GuardGate(_guard(_box((1.9, 6.0, 0.0), (3.0, 10.0, 3.0))), 2.0)
+    z = (0.0, 0.0, 0.0)
+    # 1.29 m/s with 1 m of room breaks the law (test above); decelerating at 0.5 m/s^2
+    # (> 0.3 of the 1 m/s^2 limit) it is braking: flown, for as long as it brakes
+    braking = RefSample((0.0, 8.0, 1.5), (1.29, 0.0, 0.0), (-0.5, 0.0, 0.0), z, z, (0.0, 1.0, 0.0))
+    for k in range(200):
+        assert g.dispose(0.004 * k, braking) == (braking, None)
+    coasting = RefSample((0.0, 8.0, 1.5), (1.29, 0.0, 0.0), (-0.2, 0.0, 0.0), z, z, (0.0, 1.0, 0.0))
+    verdicts = [g.dispose(0.8 + 0.004 * k, coasting)[1] for k in range(100)]
+    assert any(v is not None for v in verdicts) and g.engaged
 
 
 # --- the flight core: a hold never comes down onto a known obstacle -----------------------

@@ -3,8 +3,12 @@ before it is sent; a refused one is replaced by the checked fallback, a braked
 hover (pure state machine, no I/O; docs/replan.md "The guard").
 
 ``GuardGate.dispose`` takes the reference a mode proposed for this frame. If
-the guard passes it, it is flown and remembered as the last accepted state. If
-not, the gate *engages*: from then on it flies its own reference, the last
+the guard passes it, it is flown and remembered as the last accepted state.
+A sample that fails is still flown while the mode brakes toward that surface
+(``Verdict.braking``), or for ``GRACE_S`` (0.25 s) from the first failing
+sample: a late detection gives the mode that long to start braking (the
+replanner's governor does at once; its shaper reaches the braking rate in
+0.15 s). Otherwise the gate *engages*: from then on it flies its own reference, the last
 accepted state braked to rest by a ``ReferenceShaper`` at the guard's
 acceleration limit (zero velocity command), then held there. The stopping law
 already held on the last accepted sample, so that braking ends before the
@@ -18,7 +22,7 @@ import math
 
 from ..flight.reference import RefSample
 from ..replan.shaper import ReferenceShaper
-from .guard import Guard, Verdict
+from .guard import GRACE_S, Guard, Verdict
 
 #: Refusals kept for the report (the count goes on).
 MAX_REFUSALS_KEPT = 20
@@ -49,6 +53,8 @@ class GuardGate:
         self.n_landings = 0
         self.n_landings_refused = 0
         self.n_refusals = 0
+        self.n_braking = 0
+        self._since: float | None = None
         self.refusals: list[dict] = []
 
     def refuse(self, t_s: float, verdict: Verdict, what: str) -> None:
@@ -91,8 +97,16 @@ class GuardGate:
         if ref is None:
             return None, None
         self.n_samples += 1
-        v = self.guard.check_sample(ref.p, ref.v, terrain)
+        v = self.guard.check_sample(ref.p, ref.v, terrain, ref.a)
         if v.ok:
+            self._since = None
+            self._last = ref
+            return ref, None
+        if self._since is None:
+            self._since = t_s
+        if v.braking or t_s - self._since <= GRACE_S:
+            # the mode brakes toward it, or has GRACE_S to start braking
+            self.n_braking += 1
             self._last = ref
             return ref, None
         self.refuse(t_s, v, "sample")
@@ -128,7 +142,7 @@ class GuardGate:
 
     def to_dict(self) -> dict:
         """report.json ``guard`` (docs/report-json.md)."""
-        return {"engaged": self.engaged, "samples_checked": self.n_samples,
+        return {"engaged": self.engaged, "samples_checked": self.n_samples, "samples_braking": self.n_braking,
                 "trajectories_checked": self.n_trajectories, "landings_checked": self.n_landings,
                 "landings_refused": self.n_landings_refused, "refusals": self.n_refusals,
                 "refusal_list": list(self.refusals)}

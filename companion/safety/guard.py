@@ -39,7 +39,7 @@ every point keeps the clearance of the rows and obstacles (``check_landing``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -62,6 +62,13 @@ SAMPLE_DT_S = 0.05
 CHUNK = 20000
 #: Vertical spacing (m) of the points of a landing column.
 COLUMN_STEP_M = 0.05
+#: A reference brakes toward a surface when its approach speed falls at this fraction of
+#: the acceleration limit or faster (the shaper's brake reaches it in 0.15 s at 2 m/s^3).
+BRAKING_FRACTION = 0.3
+#: A frame sample that fails is flown for this long (s) before it is refused, unless the
+#: mode brakes (``GuardGate``): the time the reference shaper takes to reach
+#: ``BRAKING_FRACTION`` of 1 m/s^2 at 2 m/s^3 (0.15 s), with room to spare.
+GRACE_S = 0.25
 #: Speeds (m/s) below this are at rest (no approach).
 REST_M_S = 1e-3
 KINDS = ("terrain", "row", "obstacle")
@@ -128,6 +135,9 @@ class Verdict:
         Its centre's distance to the surface and the distance it must keep (m).
     approach_m_s, allowed_m_s : float or None
         Its approach speed and the stopping law's limit (m/s).
+    braking : bool
+        A failing frame sample whose reference already brakes toward that surface
+        (``Guard.check_sample``; the gate lets it brake).
     """
 
     ok: bool
@@ -140,6 +150,7 @@ class Verdict:
     required_m: float | None = None
     approach_m_s: float | None = None
     allowed_m_s: float | None = None
+    braking: bool = False
 
     def to_dict(self) -> dict:
         """Plain JSON types (report.json ``guard.refusals``)."""
@@ -234,10 +245,24 @@ class Guard:
         where = f" at t={tk:.2f} s" if tk is not None else ""
         return Verdict(False, rule, kind, f"{kind} {rule}: {what}{where}", tk, q, d, req, app, allow)
 
-    def check_sample(self, p_enu_m, v_enu_m_s, terrain: bool = True) -> Verdict:
+    def check_sample(self, p_enu_m, v_enu_m_s, terrain: bool = True, a_enu_m_s2=None) -> Verdict:
         """One reference sample (position ENU m, velocity ENU m/s): both rules (module doc).
-        ``terrain`` False: the terrain is not checked (take-off from the ground)."""
-        return self._judge(p_enu_m, v_enu_m_s, None, terrain)
+        ``terrain`` False: the terrain is not checked (take-off from the ground).
+        ``a_enu_m_s2``: the sample's acceleration; a failing verdict then says whether
+        the reference is braking toward that surface (``Verdict.braking``: its approach
+        speed falls at ``BRAKING_FRACTION`` of the acceleration limit or faster)."""
+        v = self._judge(p_enu_m, v_enu_m_s, None, terrain)
+        if v.ok or a_enu_m_s2 is None:
+            return v
+        a = np.asarray(a_enu_m_s2, float).reshape(3)
+        an = float(np.sqrt(a @ a))
+        if an <= REST_M_S:
+            return v
+        h = STEP_M / an
+        p = np.asarray(p_enu_m, float).reshape(3)
+        d = self.distances(np.vstack([p, p + a * h]), v.surface == "terrain")[v.surface]
+        decel = (d[1] - d[0]) / h           # the rate at which the approach speed falls
+        return replace(v, braking=bool(decel >= BRAKING_FRACTION * self.cfg.accel_m_s2))
 
     def check_points(self, p_enu_m, v_enu_m_s, t_s=None, terrain: bool = True) -> Verdict:
         """The samples of a candidate (K, 3) positions and velocities at times ``t_s`` (K,):
