@@ -339,3 +339,16 @@ def test_core_lands_where_the_column_is_clear():
     core._react(core.monitor.fail(100.0, "no_route", "no route", "land"))
     assert _commands(core) == [mavlink.MAV_CMD_NAV_LAND] and core.phase == "landing"
     assert gate.n_landings == 1 and gate.n_landings_refused == 0
+
+
+def test_the_per_frame_path_judges_as_the_array_path():
+    # the scalar per-frame check and the vectorised candidate check agree sample by sample
+    rng = np.random.default_rng(7)
+    g = _guard(_box((4.0, 6.0, 0.0), (5.0, 7.0, 3.0)))
+    p = rng.uniform((0.0, 0.0, 0.0), (10.0, 10.0, 3.5), (400, 3))
+    v = rng.uniform(-1.5, 1.5, (400, 3))
+    for pk, vk in zip(p, v):
+        a, b = g.check_sample(pk, vk), g._judge(pk, vk)
+        assert (a.ok, a.rule, a.surface) == (b.ok, b.rule, b.surface)
+        if not a.ok:
+            assert a.distance_m == pytest.approx(b.distance_m, abs=1e-9)

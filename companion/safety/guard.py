@@ -251,7 +251,7 @@ class Guard:
         ``a_enu_m_s2``: the sample's acceleration; a failing verdict then says whether
         the reference is braking toward that surface (``Verdict.braking``: its approach
         speed falls at ``BRAKING_FRACTION`` of the acceleration limit or faster)."""
-        v = self._judge(p_enu_m, v_enu_m_s, None, terrain)
+        v = self._judge_one(p_enu_m, v_enu_m_s, terrain)
         if v.ok or a_enu_m_s2 is None:
             return v
         a = np.asarray(a_enu_m_s2, float).reshape(3)
@@ -263,6 +263,48 @@ class Guard:
         d = self.distances(np.vstack([p, p + a * h]), v.surface == "terrain")[v.surface]
         decel = (d[1] - d[0]) / h           # the rate at which the approach speed falls
         return replace(v, braking=bool(decel >= BRAKING_FRACTION * self.cfg.accel_m_s2))
+
+    def _judge_one(self, p, v, terrain: bool) -> Verdict:
+        """``_judge`` of one sample in plain floats (the per-frame path: about a third
+        of the array version's cost); the same rules, the same verdicts."""
+        vx, vy, vz = float(v[0]), float(v[1]), float(v[2])
+        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+        if speed <= REST_M_S:
+            return PASS                  # at rest: no approach, neither rule can fail
+        x, y, z = float(p[0]), float(p[1]), float(p[2])
+        h = STEP_M / speed
+        x1, y1, z1 = x + vx * h, y + vy * h, z + vz * h
+        rows, ter = self.scene.rows, self.scene.terrain.scalar
+        pairs = {"row": (rows.distance_one(x, y, z), rows.distance_one(x1, y1, z1))}
+        if terrain:
+            pairs["terrain"] = (z - ter(x, y), z1 - ter(x1, y1))
+        od = self.obstacle_distance
+        if od is not None:
+            d = od(np.array([[x, y, z], [x1, y1, z1]]))
+            pairs["obstacle"] = (float(d[0]), float(d[1]))
+        cfg = self.cfg
+        at = cfg.accel_m_s2 * cfg.delay_s
+        for kind in KINDS:
+            if kind not in pairs:
+                continue
+            d0, d1 = pairs[kind]
+            if not math.isfinite(d0):
+                continue
+            req = self._req[kind]
+            approach = (d0 - d1) / h
+            allowed = math.inf
+            if kind != "row":
+                allowed = math.sqrt(2.0 * cfg.accel_m_s2 * max(d0 - req, 0.0) + at * at) - at
+            if d0 < req and approach > SPEED_TOLERANCE_M_S:
+                rule = "clearance"
+            elif approach > allowed + SPEED_TOLERANCE_M_S:
+                rule = "speed"
+            else:
+                continue
+            what = (f"{d0 - req:+.2f} m from its clearance" if rule == "clearance"
+                    else f"approach {approach:.2f} m/s > {allowed:.2f} m/s")
+            return Verdict(False, rule, kind, f"{kind} {rule}: {what}", None, (x, y, z), d0, req, approach, allowed)
+        return PASS
 
     def check_points(self, p_enu_m, v_enu_m_s, t_s=None, terrain: bool = True) -> Verdict:
         """The samples of a candidate (K, 3) positions and velocities at times ``t_s`` (K,):

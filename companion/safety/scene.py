@@ -101,6 +101,24 @@ class RowField:
         ey = np.maximum(np.maximum(rr * h - gy, gy - (rr + 1) * h), 0.0)
         return np.hypot(ex, ey)
 
+    def distance_one(self, x: float, y: float, z: float) -> float:
+        """``distance`` of one point, in plain floats (the per-frame path)."""
+        if self.empty:
+            return math.inf
+        dx, dy = x - self._ox, y - self._oy
+        gx = self._c * dx + self._s * dy
+        gy = -self._s * dx + self._c * dy
+        h = self.res_m
+        rows, cols = self._idx.shape[1:]
+        r = min(max(int(math.floor(gy / h)), 0), rows - 1)
+        c = min(max(int(math.floor(gx / h)), 0), cols - 1)
+        rr, cc = int(self._idx[0, r, c]), int(self._idx[1, r, c])
+        ex = max(cc * h - gx, gx - (cc + 1) * h, 0.0)
+        ey = max(rr * h - gy, gy - (rr + 1) * h, 0.0)
+        d = math.hypot(ex, ey)
+        above = z - (self.terrain.scalar(x, y) + self.canopy_height_m)
+        return math.hypot(d, above) if above > 0.0 else d
+
     def distance(self, points_enu_m: np.ndarray) -> np.ndarray:
         """(M,) distance (m) from (M, 3) ENU points to the rows' boxes (inf without rows)."""
         p = np.asarray(points_enu_m, float).reshape(-1, 3)
