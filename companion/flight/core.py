@@ -1215,7 +1215,7 @@ class FlightCore:
         rp = self.replanner
         if rp is not None:
             self._guard_plan = rp.plan
-            self._guard_tau0 = float(rp.plan.trajectory.t0) if t_from_s is None else float(t_from_s)
+            self._guard_tau0 = float(rp.plan.trajectory.t0)      # the replanner's clock (``Replanner.start``)
         if v.ok:
             return True
         self._guard_say(v)
