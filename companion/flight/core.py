@@ -1198,8 +1198,13 @@ class FlightCore:
         return ref
 
     def _guard_say(self, v) -> None:
+        """Say a refusal on the wire, and give the mode its reason (a replanner with
+        ``on_guard_refusal(verdict)`` gets the typed ``Verdict``)."""
         self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_WARNING,
                                               f"{GUARD_PREFIX}{v.detail}"[:50].encode()))
+        hook = getattr(self.replanner, "on_guard_refusal", None)
+        if hook is not None:
+            hook(v)
 
     def _guard_before_flight(self, trajectory, t_from_s: float | None) -> bool:
         """The plan (from ``t_from_s``) and the take-off from here, checked before arming;
