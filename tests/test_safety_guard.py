@@ -352,3 +352,56 @@ def test_the_per_frame_path_judges_as_the_array_path():
         assert (a.ok, a.rule, a.surface) == (b.ok, b.rule, b.surface)
         if not a.ok:
             assert a.distance_m == pytest.approx(b.distance_m, abs=1e-9)
+
+
+def test_core_refuses_a_new_trajectory_into_the_ground_and_flies_the_braked_hover():
+    # the rejoin into the ground: the mode's new trajectory dips to z = -0.11 m;
+    # the core checks it whole when it appears, flies the brake instead, then lands checked
+    from types import SimpleNamespace
+
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from companion.flight.reference import RefSample
+
+    z = (0.0, 0.0, 0.0)
+    level = _Line((2.0, 8.0, 1.5), (0.5, 0.0, 0.0), 10.0)
+    dive = _Segment((3.0, 8.0, 1.5), (5.0, 8.0, -0.11), 4.0)
+
+    class _Mode:
+        def __init__(self):
+            self.plan = SimpleNamespace(trajectory=level)
+            self.stepped = 0
+
+        def step(self, t, pos, vel):
+            self.stepped += 1
+            tr = self.plan.trajectory
+            s = tr.sample([t - 100.0])
+            p, v = tuple(s.p[0]), tuple(s.v[0])
+            return SimpleNamespace(ref=RefSample(p, v, z, z, z, (0.0, 1.0, 0.0)), mode="follow", events=(),
+                                   finished=False, hold=False)
+
+    core, gate = _core_beside(None, (2.0, 8.0, 1.5))
+    mode = core.replanner = _Mode()
+    core._t_traj, core._guard_tau0, core._guard_plan = 100.0, 0.0, mode.plan
+    core._traj_deadline = 1e9
+    for k in range(250):                                  # 1 s of the level plan: flown
+        ref = core._guarded(100.0 + 0.004 * k)
+        assert ref.p[0] == pytest.approx(2.0 + 0.5 * 0.004 * k)
+    last = ref
+    mode.plan = SimpleNamespace(trajectory=dive)          # the new candidate
+    ref = core._guarded(101.0)
+    assert gate.engaged and gate.refusals[0]["candidate"] == "trajectory"
+    assert gate.refusals[0]["surface"] == "terrain"
+    texts = [m.text for m in core.take_outbox() if getattr(m, "get_type", lambda: "")() == "STATUSTEXT"]
+    assert any(t.startswith("companion: guard: terrain") for t in texts)
+    n = mode.stepped
+    t = 101.0
+    while core.phase == "trajectory":
+        t += 0.004
+        ref = core._guarded(t)
+        assert ref.p[2] == pytest.approx(1.5, abs=1e-9)   # braked level, never down the dive
+        assert t < 105.0
+    assert mode.stepped == n                             # the mode is no longer flown
+    assert ref.p[0] - last.p[0] <= stopping_distance_m(0.5, 1.0, 0.5)
+    assert core.monitor.first.kind == "guard" and core.phase == "landing"
+    assert mavlink.MAV_CMD_NAV_LAND in _commands(core)    # the column below is clear
