@@ -170,6 +170,9 @@ class FlightReport:
     sensor_coverage : dict or None
         The pre-flight sensor coverage check (``--sensor-gap``): ``{mode,
         checked, gaps, time_scale}`` (docs/report-json.md).
+    guard : dict or None
+        What the guard checked and refused (``companion.safety.gate``,
+        docs/report-json.md ``guard``); None when no guard flew.
     """
 
     completed: bool
@@ -201,6 +204,7 @@ class FlightReport:
     faults: tuple = ()
     report_fallback: dict | None = None
     sensor_coverage: dict | None = None
+    guard: dict | None = None
 
     def __post_init__(self) -> None:
         # Unset: the flight ended where it stopped, flown as configured.

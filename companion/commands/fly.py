@@ -574,24 +574,39 @@ def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None,
     from ..control import GeometricController
     from ..runner import FlightCore, FlightInputs
 
-    from ..maps.field import load_mission_dem, load_mission_maps
+    from ..maps.field import load_mission_maps
 
     ctrl = None
     if cfg.control == "companion":
         ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
     # the maps are read once: the take-off floor, the replanner and the report's clearance share them
-    if mission.replan.enabled:
-        grid, dem = load_mission_maps(mission) if maps is None else maps
-        replanner = build_replanner(mission, flight_plan, grid, dem)
-    else:
-        dem, replanner = (load_mission_dem(mission) if maps is None else maps[1]), None
+    grid, dem = load_mission_maps(mission) if maps is None else maps
+    replanner = build_replanner(mission, flight_plan, grid, dem) if mission.replan.enabled else None
     inputs = FlightInputs(flight_plan.trajectory, flight_plan.waypoints_p_enu_m,
                           (mission.home.lat, mission.home.lon, mission.home.alt_m),
                           tuple(float(x) for x in flight_plan.target_enu_m),
                           tuple(float(x) for x in mission.control.mag_field_enu_gauss), mission.name,
                           flight_plan.coverage_fraction, flight_plan.path_xy_m, setup,
-                          transit_floor_z_m(mission, dem), replanner, obstacle_clearance_fn(mission, dem))
+                          transit_floor_z_m(mission, dem), replanner, obstacle_clearance_fn(mission, dem),
+                          build_guard(mission, replanner, grid, dem))
     return FlightCore(inputs, cfg, mission.vehicle, ctrl)
+
+
+def build_guard(mission, replanner, grid, dem):
+    """The guard every reference passes (``companion.safety``, docs/replan.md "The guard"):
+    the replanner's known map (rows, terrain) and what it knows of the obstacles
+    (its memory and the cells a re-route added); without a replanner, the mission's
+    maps and no obstacles."""
+    from ..safety import Guard, GuardConfig, SafetyScene, known_obstacle_distance
+    from ..safety.gate import GuardGate
+
+    cfg = GuardConfig.from_mission(mission)
+    if replanner is not None:
+        scene = SafetyScene.from_known_map(replanner.known)
+        od = known_obstacle_distance(replanner.memory, lambda: replanner.known)
+    else:
+        scene, od = SafetyScene.from_maps(grid, dem, mission.replan.canopy_height_m), None
+    return GuardGate(Guard(cfg, scene, od), mission.replan.jerk_m_s3)
 
 
 def build_replanner(mission, flight_plan: FlightPlan, grid, dem):

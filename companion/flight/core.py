@@ -111,6 +111,8 @@ REPLAN_TIME_FACTOR = 3.0
 REPLAN_TIME_EXTRA_S = 120.0
 #: STATUSTEXT prefix of the replanner's events (``companion.replay.metrics`` counts them).
 REPLAN_PREFIX = "companion: replan "
+#: STATUSTEXT prefix of the guard's refusals (docs/replan.md "The guard").
+GUARD_PREFIX = "companion: guard: "
 
 
 def replan_text(action: str, range_m: float | None, detail: str = "") -> str:
@@ -173,6 +175,10 @@ class FlightInputs:
     setup : dict or None
         How this flight was set up (``companion.flight.setup_record``): sent
         at connection so the .tlog describes its own flight.
+    guard : companion.safety.gate.GuardGate or None
+        Every reference passes it before it is sent (``_guarded``), the plan and
+        the take-off before arming, each new trajectory of the replanner, each
+        landing (docs/replan.md "The guard"); None: references go out unchecked.
     """
 
     trajectory: object
@@ -187,6 +193,7 @@ class FlightInputs:
     transit_floor_z_m: float | None = None
     replanner: object = None
     obstacle_clearance: object = None
+    guard: object = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -319,6 +326,11 @@ class FlightCore:
         #: The phase in which the first violation happened (report ``phase`` of a failed flight).
         self.failed_phase: str | None = None
         self.interrupted: str | None = None
+        # the guard (issue 15): every reference passes it (``_guarded``)
+        self.guard = inputs.guard
+        self._guard_plan = None         # the replanner's plan last checked whole
+        self._guard_tau0 = 0.0          # its clock at the start of the trajectory phase
+        self._guard_stopped = False
         self._next_sp_t = -math.inf
         self._sp_dt = 1.0 / cfg.setpoint_hz
         self._hb_t = None
@@ -649,6 +661,8 @@ class FlightCore:
         self._hold_last = at_rest(self._window.last())
         self._preflight_ref = self._static_ref(self._pos)
         self.phase = "preflight"
+        if not self._guard_before_flight(self.inputs.trajectory, None):
+            return
         t_ready = self.t_s + cfg.preflight_s
         yield lambda: self.t_s >= t_ready
         yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
@@ -690,6 +704,9 @@ class FlightCore:
     def _land(self):
         """NAV_LAND, then wait for the vehicle to land and disarm (disarm it if needed)."""
         cfg = self.cfg
+        if not self._guard_landing():
+            yield from self._abort_hold()
+            return
         self.phase = "landing"
         self._controlling = False
         self.monitor.landing(self.t_s)
@@ -809,6 +826,10 @@ class FlightCore:
         self._hold_last = at_rest(self._window.last())
         self._preflight_ref = self._static_ref(self._pos)
         self.phase = "preflight"
+        if not self._guard_before_flight(traj, t_resume):
+            self.phase = "hover"
+            yield from self._land()
+            return
         t_ready = self.t_s + self.cfg.preflight_s
         yield lambda: self.t_s >= t_ready
         yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
@@ -947,7 +968,7 @@ class FlightCore:
         self._advance_phase(t)
         if self.replanner is not None and self.phase in ("hold", "trajectory", "hover"):
             self._replan_pose(t)
-        ref = self._reference(t)
+        ref = self._reference(t) if self.guard is None else self._guarded(t)
         cmd = None
         out = None
         if ref is not None:
@@ -1156,6 +1177,86 @@ class FlightCore:
             self._react(v)
         return ref
 
+    # --- the guard (issue 15): one exit for every reference ---------------------------------
+
+    def _guarded(self, t: float) -> RefSample | None:
+        """This frame's reference through the guard (``companion.safety.gate``): a new
+        trajectory of the replanner is checked whole, every sample in flight per frame;
+        a refusal is answered by the gate's braked hover, then the flight stops
+        (violation ``guard``, ``--on-failure``: a checked landing, or a hover)."""
+        g = self.guard
+        ph = self.phase
+        if ph not in FLYING:
+            return self._reference(t)
+        if g.engaged:
+            ref = g.dispose(t, None)[0]
+            if g.at_rest and not self._guard_stopped:
+                self._guard_stopped = True
+                first = g.refusals[0] if g.refusals else {}
+                self._react(self.monitor.fail(t, "guard", f"guard refused the {first.get('candidate', 'reference')}"
+                                              f": {first.get('detail', '')}", "land"))
+            return ref
+        ref = self._reference(t)
+        rp = self.replanner
+        if rp is not None and self.phase == "trajectory" and rp.plan is not self._guard_plan:
+            self._guard_plan = rp.plan
+            v = g.check_trajectory(t, rp.plan.trajectory, t - self._t_traj + self._guard_tau0)
+            if not v.ok:
+                self._guard_say(v)
+                g.engage(t, ref)
+                return g.brake(t)
+        ref, v = g.dispose(t, ref, terrain=ph != "takeoff")
+        if v is not None:
+            self._guard_say(v)
+        return ref
+
+    def _guard_say(self, v) -> None:
+        """Say a refusal on the wire, and give the mode its reason (a replanner with
+        ``on_guard_refusal(verdict)`` gets the typed ``Verdict``)."""
+        self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_WARNING,
+                                              f"{GUARD_PREFIX}{v.detail}"[:50].encode()))
+        hook = getattr(self.replanner, "on_guard_refusal", None)
+        if hook is not None:
+            hook(v)
+
+    def _guard_before_flight(self, trajectory, t_from_s: float | None) -> bool:
+        """The plan (from ``t_from_s``) and the take-off from here, checked before arming;
+        False (the flight ends on the ground, violation ``guard``) when refused."""
+        g = self.guard
+        if g is None:
+            return True
+        v = g.check_trajectory(self.t_s, trajectory, t_from_s)
+        if v.ok:
+            first = self._hold_first.p
+            v = g.check_takeoff(self.t_s, takeoff_segments(tuple(self._pos), first, self.inputs.transit_floor_z_m,
+                                                           self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s))
+        rp = self.replanner
+        if rp is not None:
+            self._guard_plan = rp.plan
+            self._guard_tau0 = float(rp.plan.trajectory.t0)      # the replanner's clock (``Replanner.start``)
+        if v.ok:
+            return True
+        self._guard_say(v)
+        self.monitor.fail(self.t_s, "guard", f"guard refused the plan before arming: {v.detail}",
+                          "land" if self.armed else "end")
+        if not self.armed:
+            self._finish()
+        return False
+
+    def _guard_landing(self) -> bool:
+        """May the vehicle land where it is (``GuardGate.check_landing``)? False: the
+        landing is refused (said on the wire, counted in report ``guard``), the
+        vehicle hovers instead (AUTO.LOITER) and the flight is not completed."""
+        g = self.guard
+        if g is None or self._pos is None or not self.armed:
+            return True
+        v = g.check_landing(self.t_s, self._pos, self._vel if self._vel is not None else _Z3)
+        if v.ok:
+            return True
+        self._guard_say(v)
+        self.monitor.fail(self.t_s, "guard", v.detail, "hold")
+        return False
+
     def _takeoff_pointing(self, dt: float) -> tuple:
         s0 = self._hold_first.s
         T = self._takeoff_T
@@ -1212,6 +1313,7 @@ class FlightCore:
             control_in_use=self.control_mode,
             control_mode_changes=tuple(dict(c) for c in self.control_mode_changes),
             faults=tuple(dict(f) for f in self.faults),
+            guard=None if self.guard is None else self.guard.to_dict(),
         )
 
     def coverage_flown(self, completed: bool = False) -> float | None:

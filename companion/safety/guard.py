@@ -1,0 +1,394 @@
+"""The guard: one 3-D check of every reference before it reaches the link (pure).
+
+Modes propose, the guard disposes (docs/replan.md "The guard"). The vehicle is
+the sphere of the airframe radius ``R`` (``companion.margins``); it must keep
+
+- ``R + terrain_clearance_m`` between its centre and the terrain under it
+  (height above the DEM; the replanner's floor ``floor_agl_m``, at least R);
+- ``R + row_clearance_m`` from the vine rows extruded to the canopy (the
+  plan's own margin, ``coverage.safety_margin_m``), less half an OGM cell
+  (the planner's erosion is measured between cell centres);
+- ``R + obstacle_clearance_m`` from every obstacle the vehicle knows
+  (``replan.clearance_m``), read through ``obstacle_distance``
+  (``companion.safety.obstacles``).
+
+Rules, for a sample (p, v) of a reference; ``d`` its distance to a surface,
+``req`` the distance it must keep, ``approach`` the rate at which ``d``
+shrinks along ``v`` (a finite difference of ``d`` over ``STEP_M``):
+
+``clearance``  d < req and approach > ``SPEED_TOLERANCE_M_S``: the reference
+               closes on a surface it is already too near (moving away or
+               along it, a reference inside the clearance may get out);
+``speed``      (terrain and obstacles) approach > v_max(d - req) +
+               ``SPEED_TOLERANCE_M_S``, the stopping law of PX4's collision
+               prevention (``companion.safety.stopping``; ``accel_m_s2``,
+               ``delay_s`` as CP_DELAY, d - req as CP_DIST): the vehicle can
+               always stop before the clearance. Not for the rows: they are
+               known in advance, and a whole trajectory is checked against them.
+
+A whole candidate trajectory is sampled every ``SAMPLE_DT_S`` from its start
+to its end (not its first seconds) and every sample must pass both rules; in
+addition, once a sample has kept the clearance of a surface, or ``ESCAPE_S``
+after the candidate's start, no sample may be within it (a candidate that
+starts inside may move out, or along the surface, for that long).
+A landing is checked as the column under the vehicle's braking footprint
+(from where it is to where it stops), from its height down to the ground:
+every point keeps the clearance of the rows and obstacles (``check_landing``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .stopping import stopping_distance_m, stopping_speed_m_s
+
+#: Sensing and control delay (s) of the stopping law (PX4 CP_DELAY). The fallback's
+#: brake (the reference shaper at 1 m/s^2 and 2 m/s^3) stops from 1 m/s in 0.97 m and
+#: from 0.5 m/s in 0.37 m; v tau + v^2 / (2 a) with tau = 0.5 s gives 1.0 m and 0.375 m,
+#: so a reference the law passed can always be braked before the clearance.
+DELAY_S = 0.5
+#: Approach speeds within this (m/s) of the allowed one pass (the finite difference's noise).
+SPEED_TOLERANCE_M_S = 0.05
+#: Length (m) of the finite-difference step along the velocity.
+STEP_M = 0.02
+#: A candidate that starts within a clearance must be out of it this soon (s).
+ESCAPE_S = 2.0
+#: Candidate trajectories are sampled this often (s): 5 cm at 1 m/s.
+SAMPLE_DT_S = 0.05
+#: Samples per chunk of a long trajectory (bounded memory).
+CHUNK = 20000
+#: Vertical spacing (m) of the points of a landing column.
+COLUMN_STEP_M = 0.05
+#: A reference brakes toward a surface when its approach speed falls at this fraction of
+#: the acceleration limit or faster (the shaper's brake reaches it in 0.15 s at 2 m/s^3).
+BRAKING_FRACTION = 0.3
+#: A frame sample that fails is flown for this long (s) before it is refused, unless the
+#: mode brakes (``GuardGate``): the time the reference shaper takes to reach
+#: ``BRAKING_FRACTION`` of 1 m/s^2 at 2 m/s^3 (0.15 s), with room to spare.
+GRACE_S = 0.25
+#: Speeds (m/s) below this are at rest (no approach).
+REST_M_S = 1e-3
+KINDS = ("terrain", "row", "obstacle")
+
+
+@dataclass(frozen=True)
+class GuardConfig:
+    """The guard's numbers (module doc). Lengths m, speeds m/s.
+
+    Attributes
+    ----------
+    airframe_radius_m : float
+        R, the sphere holding the vehicle.
+    terrain_clearance_m, row_clearance_m, obstacle_clearance_m : float
+        Clearance from the airframe's surface to the terrain, the rows, the obstacles.
+    accel_m_s2 : float
+        Braking acceleration of the stopping law.
+    delay_s : float
+        Sensing and control delay of the stopping law (CP_DELAY).
+    """
+
+    airframe_radius_m: float
+    terrain_clearance_m: float
+    row_clearance_m: float
+    obstacle_clearance_m: float
+    accel_m_s2: float
+    delay_s: float = DELAY_S
+
+    def required_m(self, kind: str) -> float:
+        """Distance (m) the vehicle's centre keeps from a surface of ``kind``."""
+        return self.airframe_radius_m + getattr(self, f"{kind}_clearance_m")
+
+    @classmethod
+    def from_mission(cls, mission) -> "GuardConfig":
+        """A mission's guard: R from ``companion.margins``, the terrain clearance up to
+        ``replan.floor_agl_m`` (at least 0), the rows ``coverage.safety_margin_m``,
+        the obstacles ``replan.clearance_m``, braking at ``replan.accel_m_s2``."""
+        from ..margins import mission_airframe_radius_m
+
+        R = mission_airframe_radius_m(mission)
+        rp = mission.replan
+        return cls(R, max(0.0, float(rp.floor_agl_m) - R), float(mission.coverage.safety_margin_m),
+                   float(rp.clearance_m), float(rp.accel_m_s2))
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """The guard's answer on a candidate.
+
+    Attributes
+    ----------
+    ok : bool
+    rule : str or None
+        ``clearance``, ``speed`` or ``landing`` (None when ok).
+    surface : str or None
+        ``terrain``, ``row`` or ``obstacle``.
+    detail : str
+        One line: what and where.
+    t_s : float or None
+        Time of the first failing sample (the candidate's clock; None for a point).
+    point_enu_m : tuple or None
+        That sample's position (ENU m).
+    distance_m, required_m : float or None
+        Its centre's distance to the surface and the distance it must keep (m).
+    approach_m_s, allowed_m_s : float or None
+        Its approach speed and the stopping law's limit (m/s).
+    braking : bool
+        A failing frame sample whose reference already brakes toward that surface
+        (``Guard.check_sample``; the gate lets it brake).
+    """
+
+    ok: bool
+    rule: str | None = None
+    surface: str | None = None
+    detail: str = ""
+    t_s: float | None = None
+    point_enu_m: tuple | None = None
+    distance_m: float | None = None
+    required_m: float | None = None
+    approach_m_s: float | None = None
+    allowed_m_s: float | None = None
+    braking: bool = False
+
+    def to_dict(self) -> dict:
+        """Plain JSON types (report.json ``guard.refusals``)."""
+        def num(x):
+            return None if x is None or not math.isfinite(x) else float(x)
+        return {"rule": self.rule, "surface": self.surface, "detail": self.detail, "candidate_t_s": num(self.t_s),
+                "point_enu_m": None if self.point_enu_m is None else [float(c) for c in self.point_enu_m],
+                "distance_m": num(self.distance_m), "required_m": num(self.required_m),
+                "approach_m_s": num(self.approach_m_s), "allowed_m_s": num(self.allowed_m_s)}
+
+
+PASS = Verdict(True)
+
+
+class Guard:
+    """The guard (module doc).
+
+    Parameters
+    ----------
+    cfg : GuardConfig
+    scene : SafetyScene
+        Terrain and rows.
+    obstacle_distance : callable or None
+        ``f((M, 3) ENU points) -> (M,) distance (m) to the nearest known obstacle
+        surface, inf if none`` (``companion.safety.obstacles``); None: no obstacles.
+    """
+
+    def __init__(self, cfg: GuardConfig, scene, obstacle_distance=None) -> None:
+        self.cfg = cfg
+        self.scene = scene
+        self.obstacle_distance = obstacle_distance
+        self._req = {k: cfg.required_m(k) for k in KINDS}
+        # the rows are known to the cell: the planner erodes the free space between cell
+        # centres, so a plan keeps its margin to within half a cell (vineyard-1ha: 6 mm short)
+        self._req["row"] -= 0.5 * scene.rows.res_m
+
+    # --- distances -----------------------------------------------------------------------
+
+    def distances(self, points_enu_m: np.ndarray, terrain: bool = True) -> dict:
+        """{kind: (M,) distance (m)} of (M, 3) ENU points: height above the terrain, distance
+        to the rows, to the known obstacles (inf without; terrain inf when ``terrain`` is False)."""
+        p = np.asarray(points_enu_m, float).reshape(-1, 3)
+        inf = np.full(len(p), np.inf)
+        out = {"terrain": p[:, 2] - self.scene.terrain.z(p[:, 0], p[:, 1]) if terrain else inf,
+               "row": self.scene.rows.distance(p)}
+        od = self.obstacle_distance
+        out["obstacle"] = inf if od is None else np.asarray(od(p), float).reshape(-1)
+        return out
+
+    # --- rules ------------------------------------------------------------------------------
+
+    def _judge(self, p, v, t=None, terrain: bool = True, strict_after: dict | None = None) -> Verdict:
+        """The rules on (K, 3) samples p with velocities v (first failing sample, or PASS).
+        ``strict_after[kind]``: index from which a sample within the clearance fails
+        whatever its approach (a candidate trajectory's samples after it kept the clearance)."""
+        p = np.asarray(p, float).reshape(-1, 3)
+        v = np.asarray(v, float).reshape(-1, 3)
+        speed = np.sqrt(np.einsum("ki,ki->k", v, v))
+        moving = speed > REST_M_S
+        dt = np.where(moving, STEP_M / np.maximum(speed, REST_M_S), 0.0)
+        d_all = self.distances(np.vstack([p, p + v * dt[:, None]]), terrain)
+        cfg = self.cfg
+        first, worst = len(p), None
+        for kind in KINDS:
+            d0, d1 = d_all[kind][:len(p)], d_all[kind][len(p):]
+            if not np.isfinite(d0).any():
+                continue
+            req = self._req[kind]
+            with np.errstate(invalid="ignore"):
+                approach = np.where(moving & np.isfinite(d0), (d0 - d1) / np.where(moving, dt, 1.0), 0.0)
+            bad_c = (d0 < req) & (approach > SPEED_TOLERANCE_M_S)
+            if strict_after is not None:
+                bad_c |= (d0 < req) & (np.arange(len(p)) >= strict_after.get(kind, len(p)))
+            allowed = np.full(len(p), np.inf)
+            bad_s = np.zeros(len(p), bool)
+            if kind != "row":
+                allowed = stopping_speed_m_s(d0 - req, cfg.accel_m_s2, cfg.delay_s)
+                bad_s = approach > allowed + SPEED_TOLERANCE_M_S
+            bad = bad_c | bad_s
+            if bad.any():
+                k = int(np.argmax(bad))
+                if k < first:
+                    rule = "clearance" if bad_c[k] else "speed"
+                    first, worst = k, (rule, kind, float(d0[k]), req, float(approach[k]), float(allowed[k]))
+        if worst is None:
+            return PASS
+        rule, kind, d, req, app, allow = worst
+        q = tuple(float(c) for c in p[first])
+        tk = None if t is None else float(np.asarray(t, float).reshape(-1)[first])
+        what = (f"{d - req:+.2f} m from its clearance" if rule == "clearance"
+                else f"approach {app:.2f} m/s > {allow:.2f} m/s")
+        where = f" at t={tk:.2f} s" if tk is not None else ""
+        return Verdict(False, rule, kind, f"{kind} {rule}: {what}{where}", tk, q, d, req, app, allow)
+
+    def check_sample(self, p_enu_m, v_enu_m_s, terrain: bool = True, a_enu_m_s2=None) -> Verdict:
+        """One reference sample (position ENU m, velocity ENU m/s): both rules (module doc).
+        ``terrain`` False: the terrain is not checked (take-off from the ground).
+        ``a_enu_m_s2``: the sample's acceleration; a failing verdict then says whether
+        the reference is braking toward that surface (``Verdict.braking``: its approach
+        speed falls at ``BRAKING_FRACTION`` of the acceleration limit or faster)."""
+        v = self._judge_one(p_enu_m, v_enu_m_s, terrain)
+        if v.ok or a_enu_m_s2 is None:
+            return v
+        a = np.asarray(a_enu_m_s2, float).reshape(3)
+        an = float(np.sqrt(a @ a))
+        if an <= REST_M_S:
+            return v
+        h = STEP_M / an
+        p = np.asarray(p_enu_m, float).reshape(3)
+        d = self.distances(np.vstack([p, p + a * h]), v.surface == "terrain")[v.surface]
+        decel = (d[1] - d[0]) / h           # the rate at which the approach speed falls
+        return replace(v, braking=bool(decel >= BRAKING_FRACTION * self.cfg.accel_m_s2))
+
+    def _judge_one(self, p, v, terrain: bool) -> Verdict:
+        """``_judge`` of one sample in plain floats (the per-frame path: about a third
+        of the array version's cost); the same rules, the same verdicts."""
+        vx, vy, vz = float(v[0]), float(v[1]), float(v[2])
+        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+        if speed <= REST_M_S:
+            return PASS                  # at rest: no approach, neither rule can fail
+        x, y, z = float(p[0]), float(p[1]), float(p[2])
+        h = STEP_M / speed
+        x1, y1, z1 = x + vx * h, y + vy * h, z + vz * h
+        rows, ter = self.scene.rows, self.scene.terrain.scalar
+        pairs = {"row": (rows.distance_one(x, y, z), rows.distance_one(x1, y1, z1))}
+        if terrain:
+            pairs["terrain"] = (z - ter(x, y), z1 - ter(x1, y1))
+        od = self.obstacle_distance
+        if od is not None:
+            d = od(np.array([[x, y, z], [x1, y1, z1]]))
+            pairs["obstacle"] = (float(d[0]), float(d[1]))
+        cfg = self.cfg
+        at = cfg.accel_m_s2 * cfg.delay_s
+        for kind in KINDS:
+            if kind not in pairs:
+                continue
+            d0, d1 = pairs[kind]
+            if not math.isfinite(d0):
+                continue
+            req = self._req[kind]
+            approach = (d0 - d1) / h
+            allowed = math.inf
+            if kind != "row":
+                allowed = math.sqrt(2.0 * cfg.accel_m_s2 * max(d0 - req, 0.0) + at * at) - at
+            if d0 < req and approach > SPEED_TOLERANCE_M_S:
+                rule = "clearance"
+            elif approach > allowed + SPEED_TOLERANCE_M_S:
+                rule = "speed"
+            else:
+                continue
+            what = (f"{d0 - req:+.2f} m from its clearance" if rule == "clearance"
+                    else f"approach {approach:.2f} m/s > {allowed:.2f} m/s")
+            return Verdict(False, rule, kind, f"{kind} {rule}: {what}", None, (x, y, z), d0, req, approach, allowed)
+        return PASS
+
+    def check_points(self, p_enu_m, v_enu_m_s, t_s=None, terrain: bool = True) -> Verdict:
+        """The samples of a candidate (K, 3) positions and velocities at times ``t_s`` (K,):
+        the rules at every sample, and no return into a clearance once kept (module doc)."""
+        p = np.asarray(p_enu_m, float).reshape(-1, 3)
+        d = self.distances(p, terrain)
+        strict = {}
+        for kind in KINDS:
+            ok = d[kind] >= self._req[kind]
+            strict[kind] = int(np.argmax(ok)) if ok.any() else len(p)
+        return self._judge(p, v_enu_m_s, t_s, terrain, strict)
+
+    def check_trajectory(self, trajectory, t_from_s: float | None = None, t_to_s: float | None = None,
+                         terrain: bool = True) -> Verdict:
+        """A candidate trajectory (``sample(times)`` with ``.p``, ``.v``; ``t0``, ``tf``) from
+        ``t_from_s`` (default its start) to ``t_to_s`` (default its end), sampled every
+        ``SAMPLE_DT_S`` in chunks of ``CHUNK`` (module doc)."""
+        t0 = float(trajectory.t0 if t_from_s is None else max(t_from_s, trajectory.t0))
+        tf = float(trajectory.tf if t_to_s is None else min(t_to_s, trajectory.tf))
+        n = int(math.floor(max(tf - t0, 0.0) / SAMPLE_DT_S)) + 1
+        req = self._req
+        kept = {k: False for k in KINDS}
+        k_escape = int(math.ceil(ESCAPE_S / SAMPLE_DT_S))
+        for k0 in range(0, n, CHUNK):
+            t = t0 + SAMPLE_DT_S * np.arange(k0, min(k0 + CHUNK, n))
+            if k0 + CHUNK >= n and tf - t[-1] > 1e-9:
+                t = np.append(t, tf)
+            s = trajectory.sample(t)
+            p, v = np.asarray(s.p, float).reshape(-1, 3), np.asarray(s.v, float).reshape(-1, 3)
+            d = self.distances(p, terrain)
+            strict = {}
+            for kind in KINDS:
+                ok = d[kind] >= req[kind]
+                first_ok = 0 if kept[kind] else (int(np.argmax(ok)) if ok.any() else len(p))
+                strict[kind] = min(first_ok, max(k_escape - k0, 0))
+                kept[kind] = kept[kind] or bool(ok.any())
+            verdict = self._judge(p, v, t, terrain, strict)
+            if not verdict.ok:
+                return verdict
+        return PASS
+
+    def check_segments(self, segments, terrain_from: int = 0) -> Verdict:
+        """Straight segments ``[(p0, p1, duration_s), ...]`` (the take-off) flown back to back
+        at their mean speed, sampled every ``COLUMN_STEP_M``; the terrain is checked from
+        segment ``terrain_from`` on (the first climb leaves the ground)."""
+        for i, (p0, p1, T) in enumerate(segments):
+            a, b = np.asarray(p0, float), np.asarray(p1, float)
+            L = float(np.linalg.norm(b - a))
+            m = max(2, int(math.ceil(L / COLUMN_STEP_M)) + 1)
+            s = np.linspace(0.0, 1.0, m)[:, None]
+            v = np.broadcast_to((b - a) / max(float(T), 1e-9), (m, 3))
+            verdict = self.check_points(a + s * (b - a), v, None, terrain=i >= terrain_from)
+            if not verdict.ok:
+                return verdict
+        return PASS
+
+    def braking_footprint(self, p_enu_m, v_enu_m_s, n: int = 8) -> np.ndarray:
+        """(n, 2) points from ``p`` along the horizontal velocity to where the vehicle
+        stops (``stopping_distance_m``)."""
+        p = np.asarray(p_enu_m, float)
+        vh = np.asarray(v_enu_m_s, float)[:2]
+        sp = float(np.hypot(*vh))
+        s = stopping_distance_m(sp, self.cfg.accel_m_s2, self.cfg.delay_s)
+        u = vh / sp if sp > REST_M_S else np.zeros(2)
+        return p[:2] + np.linspace(0.0, s, n)[:, None] * u
+
+    def check_landing(self, p_enu_m, v_enu_m_s) -> Verdict:
+        """May the vehicle land from ``p`` (moving at ``v``)? Every point of the columns
+        under its braking footprint, from its height down to the ground (the sphere's
+        centre at R above it), keeps the clearance of the rows and the obstacles."""
+        p = np.asarray(p_enu_m, float)
+        xy = self.braking_footprint(p, v_enu_m_s)
+        ground = self.scene.terrain.z(xy[:, 0], xy[:, 1])
+        R = self.cfg.airframe_radius_m
+        top = max(float(p[2]), float(ground.max()) + R)
+        zs = np.arange(top, float(ground.min()) + R - 1e-9, -COLUMN_STEP_M)
+        pts = np.array([(x, y, z) for (x, y), g in zip(xy, ground) for z in zs if z >= g + R - 1e-9]).reshape(-1, 3)
+        d = self.distances(pts, terrain=False)
+        for kind in ("row", "obstacle"):
+            bad = d[kind] < self._req[kind]
+            if bad.any():
+                k = int(np.argmin(d[kind]))
+                q = tuple(float(c) for c in pts[k])
+                return Verdict(False, "landing", kind,
+                               f"landing refused: {kind} {d[kind][k]:.2f} m from the descent at z={q[2]:.2f} m "
+                               f"(keep {self._req[kind]:.2f} m)", None, q, float(d[kind][k]), self._req[kind])
+        return PASS

@@ -1,0 +1,82 @@
+"""The guard's one window on the obstacles the vehicle knows (pure).
+
+The guard reads obstacles only through ``obstacle_distance(points) ->
+distances``: ``(M, 3)`` ENU points (m) in, ``(M,)`` distances (m) from each
+point to the nearest known obstacle surface out, ``inf`` where none is
+known. Any map can stand behind it (a persistent voxel map plugs in the same
+way). This module adapts today's: the replanner's ``ObstacleMemory`` points
+(each a point on a surface) and the obstacle cells a re-route added to its
+``KnownMap`` (``added``: their top is unknown, so each is a column of any
+height over its cell's square).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+ObstacleDistance = Callable[[np.ndarray], np.ndarray]
+
+
+def points_distance(points_enu_m: np.ndarray, surface_pts_enu_m: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    """(M,) distance (m) from each of ``points_enu_m`` (M, 3) to the nearest of
+    ``surface_pts_enu_m`` (K, 3); inf when K = 0. Brute force in chunks (K is at
+    most the memory's capacity)."""
+    p = np.asarray(points_enu_m, float).reshape(-1, 3)
+    q = np.asarray(surface_pts_enu_m, float).reshape(-1, 3)
+    if len(q) == 0:
+        return np.full(len(p), np.inf)
+    if len(p) * len(q) <= 4 * chunk * 64:
+        d = p[:, None, :] - q[None, :, :]
+        return np.sqrt(np.einsum("mki,mki->mk", d, d).min(axis=1))
+    from scipy.spatial import cKDTree
+
+    return cKDTree(q).query(p)[0]
+
+
+class _AddedCells:
+    """Horizontal distance to the cells of ``known.added`` (columns of unknown height),
+    recomputed when the replanner's map object changes (a re-route replaces it)."""
+
+    def __init__(self) -> None:
+        self._known = None
+        self._sq = None          # (k, 4) cell squares in grid metres: x0, x1, y0, y1
+        self._frame = None
+
+    def distance(self, known, x, y) -> np.ndarray:
+        if known is not self._known:
+            self._known = known
+            added = np.asarray(known.added, dtype=bool)
+            rr, cc = np.nonzero(added) if added.any() else (np.zeros(0, int), np.zeros(0, int))
+            g = known.grid
+            h = float(g.resolution_m)
+            self._sq = np.stack([cc * h, (cc + 1) * h, rr * h, (rr + 1) * h], axis=1).astype(float)
+            self._frame = (float(g.origin_xy_m[0]), float(g.origin_xy_m[1]),
+                           np.cos(g.origin_yaw_rad), np.sin(g.origin_yaw_rad))
+        x = np.asarray(x, float)
+        if len(self._sq) == 0:
+            return np.full(x.shape, np.inf)
+        ox, oy, c, s = self._frame
+        dx, dy = x - ox, np.asarray(y, float) - oy
+        gx = (c * dx + s * dy)[:, None]
+        gy = (-s * dx + c * dy)[:, None]
+        sq = self._sq
+        ex = np.maximum(np.maximum(sq[:, 0] - gx, gx - sq[:, 1]), 0.0)
+        ey = np.maximum(np.maximum(sq[:, 2] - gy, gy - sq[:, 3]), 0.0)
+        return np.sqrt((ex * ex + ey * ey).min(axis=1))
+
+
+def known_obstacle_distance(memory, known_map: Callable[[], object] | None = None) -> ObstacleDistance:
+    """``obstacle_distance`` over an ``ObstacleMemory`` (read at every call: the points
+    it holds then) and, when ``known_map`` is given, the obstacle cells added to the
+    map it returns (``lambda: replanner.known``; module doc)."""
+    cells = _AddedCells()
+
+    def obstacle_distance(points_enu_m: np.ndarray) -> np.ndarray:
+        p = np.asarray(points_enu_m, float).reshape(-1, 3)
+        d = points_distance(p, memory.points()) if len(memory) else np.full(len(p), np.inf)
+        if known_map is not None:
+            d = np.minimum(d, cells.distance(known_map(), p[:, 0], p[:, 1]))
+        return d
+    return obstacle_distance
