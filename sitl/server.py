@@ -120,6 +120,7 @@ from .flightstack import (
     Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
     SEVERITY_INFO, SEVERITY_WARNING,
 )
+from .rate_control import hover_thrust
 from .sim import Simulation
 from .world import load_world
 
@@ -521,6 +522,7 @@ class SitlServer:
             "SIM_POS_STD": md.position_std_xy_m, "SIM_POSZ_STD": md.position_std_z_m,
             "SIM_VEL_STD": md.velocity_std_m_s, "SIM_RNG_STD": md.range_std_m,
             "SIM_LOCKSTEP": int(bool(config.lockstep)),
+            "MPC_THR_HOVER": hover_thrust(mission.vehicle),
             **self._controller_param_defaults()})
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
@@ -533,6 +535,7 @@ class SitlServer:
         self._frame = None
         self._setpoint = None
         self._onboard_flying = False
+        self._rates_flying = False
         self._awaited_us: int | None = None
         self._released = True
         self._wall_epoch_us = int(time.time() * 1e6)
@@ -580,6 +583,7 @@ class SitlServer:
             "SET_MODE": self._on_set_mode,
             "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
             "HIL_ACTUATOR_CONTROLS": self._on_actuators,
+            "SET_ATTITUDE_TARGET": self._on_attitude_target,
             "PARAM_REQUEST_LIST": self._on_param_list,
             "PARAM_REQUEST_READ": self._on_param_read,
             "PARAM_SET": self._on_param_set,
@@ -638,6 +642,7 @@ class SitlServer:
         ctl.gains = dataclasses.replace(
             ctl.gains, max_speed_xy_m_s=p["MPC_XY_VEL_MAX"], max_speed_up_m_s=p["MPC_Z_VEL_MAX_UP"],
             max_speed_down_m_s=p["MPC_Z_VEL_MAX_DN"], max_tilt_rad=math.radians(p["MPC_TILTMAX_AIR"]))
+        self.sim.thrust_model_factor = float(p["THR_MDL_FAC"])
         s = self.sim.sensors
         s.acc_rel_std = math.sqrt(p["SIM_VEC_VAR"])
         s.mag_std = math.sqrt(p["SIM_VEC_VAR"]) * float(np.linalg.norm(s.mag_earth))
@@ -797,6 +802,11 @@ class SitlServer:
         elif out.motor_override is not None:
             self._onboard_flying = False
             frame = sim.step_frame(out.motor_override)
+        elif out.rates is not None:
+            if not self._rates_flying:
+                sim.rates.reset()       # the inner rate loop takes over: a clean integrator
+            self._onboard_flying = False
+            frame = sim.step_rates(out.rates)
         elif out.idle or out.setpoint is None:
             self._onboard_flying = False
             frame = sim.step_frame(_IDLE4)
@@ -805,6 +815,7 @@ class SitlServer:
                 sim.onboard.reset()
             self._onboard_flying = True
             frame = sim.step_onboard(out.setpoint)
+        self._rates_flying = out.rates is not None
         self._frame = frame
         self.battery.drain(sim.plant.f, sim.dt_frame_s)
         self.frames += 1
@@ -1436,6 +1447,15 @@ class SitlServer:
         target = codec.decode_position_target(msg, nav.yaw_enu_rad, nav.pos_enu_m)
         if target is not None:
             self.stack.offboard_setpoint(self.sim.time_us, target)
+
+    def _on_attitude_target(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        sp, why = codec.decode_attitude_rates(msg)
+        if why is not None:
+            self._refuse("SET_ATTITUDE_TARGET", why)
+            return
+        self.stack.rate_setpoint(self.sim.time_us, sp)
 
     def _on_actuators(self, link, msg) -> None:
         self._on_answer(codec.decode_actuator_controls(msg))

@@ -131,6 +131,7 @@ from ..vehicle import GRAVITY_M_S2, VehicleConfig
 from .config import ControlConfig
 from .mixer import Mixer
 from .pointing import PointingGovernor
+from .rates import rate_command
 from .observer import AttitudeEstimate, VelocityAidedObserver, horizontal_field, triad_rotation, virtual_pairs
 from .vectors import AccelerationEstimator, BodyVectorFilter, Vec3, controller_vectors, unit3
 
@@ -266,6 +267,9 @@ class ControlOutput:
     V : float
         Lyapunov function (38) from the measurements, ``sum rho_i (1 - b_i .
         b_i^d) + |e_Omega1|^2 / 2``.
+    rate_cmd_flu_rad_s : tuple (3,)
+        Body-rate command of ``--control rates`` (rad/s, FLU):
+        ``Omega_d^b + z / alpha`` (``companion.control.rates``).
     """
 
     f_n: float
@@ -280,6 +284,7 @@ class ControlOutput:
     e_v: Vec3
     z_rho: Vec3
     V: float
+    rate_cmd_flu_rad_s: Vec3 = _ZERO
 
 
 # --- pure pieces --------------------------------------------------------------
@@ -634,6 +639,9 @@ class GeometricController:
             self.pointing = PointingGovernor(cfg.pointing_yaw_rate_max_rad_s, a_max)
         # Floats for update_fast (an int gain multiplies exactly as its float).
         self._kx, self._kv, self._alpha = float(cfg.kx), float(cfg.kv), float(cfg.alpha)
+        self._ialpha = 1.0 / self._alpha
+        #: Body-rate command of the last update (rad/s, FLU; ``ControlOutput.rate_cmd_flu_rad_s``).
+        self.last_rate_cmd: Vec3 = _ZERO
         self._r2u = unit3(self._r2)      # measurement_vectors normalises r_2 once more
         self._perp = bool(cfg.mag_perpendicular)
         self._ki = float(cfg.ki)
@@ -764,7 +772,7 @@ class GeometricController:
         R_d = ((b1x, b2x, b3x), (b1y, b2y, b3y), (b1z, b2z, b3z))
         cmd = (float(cmd[0]), float(cmd[1]), float(cmd[2]), float(cmd[3]))   # as Mixer.mix (numpy inputs)
         return ControlOutput(f, tau, cmd, saturated, (b3x, b3y, b3z), (b2x, b2y, b2z), R_d, Omega_d,
-                             e_x, e_v, z, V)
+                             e_x, e_v, z, V, self.last_rate_cmd)
 
     def update_fast(self, t_s, gyro, accel, mag, pos, vel, nav_t, xd, vd, ad, jd, sd, target=None):
         """:meth:`update` on plain float tuples, returning only the motor commands (the 250 Hz path).
@@ -1122,11 +1130,14 @@ class GeometricController:
             tz = (wx * Jw1 - wy * Jw0) + J2 * (oo2 - (wx * o1 - wy * o0) + z2 - alpha * e2)
             zV = (z0, z1, z2, dz, psi, (e0, e1, e2))
             V = None
+            ia = self._ialpha
+            self.last_rate_cmd = (o0 + ia * z0, o1 + ia * z1, o2 + ia * z2)
         else:
             (tx, ty, tz), zV, V = attitude_torque(self._J, gyro, (Od0, Od1, Od2), (Odd0, Odd1, Odd2),
                                                   ((m1x, m1y, m1z), (m2x, m2y, m2z)),
                                                   ((r1x, r1y, r1z), (r2x, r2y, r2z)), (b1x, b1y, b1z),
                                                   (b2x, b2y, b2z), (b3x, b3y, b3z), self._rho, self._alpha)
+            self.last_rate_cmd = rate_command((Od0, Od1, Od2), zV, self._alpha)
         # f = F . (R e3), R e3 = r1 b1_z + mr mb_z + nr nb_z (thrust_axis_estimate)
         f = (F0 * (r1x * m1z + mrx * mbz + nrx * nbz) + F1 * (r1y * m1z + mry * mbz + nry * nbz)
              + F2 * (r1z * m1z + mrz * mbz + nrz * nbz))
@@ -1216,11 +1227,14 @@ class GeometricController:
             res = attitude_torque_decoupled(self._J, Omega, des.Omega_d, des.Omega_d_dot, q[0], q[1], q[2],
                                             self._rho, self.cfg.alpha)
             tau, z, V = res.tau, res.z, res.V
+            Od_body = tuple(Omega[i] - res.e_Omega[i] for i in range(3))   # Q Omega_d
         else:
             tau, z, V = attitude_torque(self._J, Omega, des.Omega_d, des.Omega_d_dot, (b1, b2), (r1, r2),
                                         des.b1d, des.b2d, des.b3d, self._rho, self.cfg.alpha)
+            Od_body = des.Omega_d
+        rates = rate_command(Od_body, z, self.cfg.alpha)
         f = _dot(F, thrust_axis_estimate(b1, b2, r1, r2))
         mc = self.mixer.mix(f, tau)
         self._thrust_prev = (mc.cmd[0] + mc.cmd[1] + mc.cmd[2] + mc.cmd[3]) * self._fmax
         return ControlOutput(f, tau, mc.cmd, mc.saturated, des.b3d, des.b2d, des.R_d, des.Omega_d,
-                             e_x, e_v, z, V)
+                             e_x, e_v, z, V, rates)
