@@ -146,8 +146,8 @@ def thrust_curve_inverse(t: float, k: float) -> float:
     ``u = (-(1 - k) + sqrt((1 - k)^2 + 4 k t)) / (2 k)`` for k > 0 (the root
     in [0, 1]), ``u = t`` for k = 0.
     """
-    t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
-    if k <= 0.0:
+    t = 0.0 if not t > 0.0 else (1.0 if t > 1.0 else t)
+    if k <= 0.0 or t == 0.0:
         return t
     a = 1.0 - k
     # the same root written without the cancellation of -a + sqrt(...) at small k t
