@@ -1227,7 +1227,8 @@ class GeometricController:
             res = attitude_torque_decoupled(self._J, Omega, des.Omega_d, des.Omega_d_dot, q[0], q[1], q[2],
                                             self._rho, self.cfg.alpha)
             tau, z, V = res.tau, res.z, res.V
-            Od_body = tuple(Omega[i] - res.e_Omega[i] for i in range(3))   # Q Omega_d
+            Od = des.Omega_d
+            Od_body = tuple(Od[0] * q[0][i] + Od[1] * q[1][i] + Od[2] * q[2][i] for i in range(3))   # Q Omega_d
         else:
             tau, z, V = attitude_torque(self._J, Omega, des.Omega_d, des.Omega_d_dot, (b1, b2), (r1, r2),
                                         des.b1d, des.b2d, des.b3d, self._rho, self.cfg.alpha)
