@@ -12,7 +12,6 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.cli import main
-from companion.commands.demo import missions_dir
 from companion.control.rates import normalised_thrust, rate_command, vehicle_hover_thrust
 from companion.link import codec
 from companion.link.command_rules import attitude_target_problem, outgoing_problem

@@ -132,37 +132,15 @@ from .config import ControlConfig
 from .mixer import Mixer
 from .pointing import PointingGovernor
 from .rates import rate_command
-from .observer import AttitudeEstimate, VelocityAidedObserver, horizontal_field, triad_rotation, virtual_pairs
-from .vectors import AccelerationEstimator, BodyVectorFilter, Vec3, controller_vectors, unit3
+from .observer import AttitudeEstimate, VelocityAidedObserver, horizontal_field, virtual_pairs
+from .so3 import (Vec3, body_coordinates, cross, dot, thrust_axis_estimate, triad_rotation,  # noqa: F401
+                  unit3, unit_d2)
+from .vectors import AccelerationEstimator, BodyVectorFilter, controller_vectors
 
 # --- small float-tuple vector algebra (the hot path avoids numpy) ---------
 
 
 _ZERO = (0.0, 0.0, 0.0)
-
-
-def _cross(a, b) -> Vec3:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _dot(a, b) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _unit_d2(u, ud, udd):
-    """Unit vector n = u/|u| and its first two time derivatives.
-
-    Returns (n, n_dot, n_ddot), each (3,). See the module docstring.
-    """
-    r = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
-    n = (u[0] / r, u[1] / r, u[2] / r)
-    rd = n[0] * ud[0] + n[1] * ud[1] + n[2] * ud[2]
-    nd = ((ud[0] - n[0] * rd) / r, (ud[1] - n[1] * rd) / r, (ud[2] - n[2] * rd) / r)
-    rdd = nd[0] * ud[0] + nd[1] * ud[1] + nd[2] * ud[2] + n[0] * udd[0] + n[1] * udd[1] + n[2] * udd[2]
-    ndd = ((udd[0] - 2.0 * nd[0] * rd - n[0] * rdd) / r,
-           (udd[1] - 2.0 * nd[1] * rd - n[1] * rdd) / r,
-           (udd[2] - 2.0 * nd[2] * rd - n[2] * rdd) / r)
-    return n, nd, ndd
 
 
 # --- named inputs and outputs ----------------------------------------------
@@ -311,36 +289,36 @@ def desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, b2_fallback=(0.0,
     DesiredAttitude
         eqs. (21)-(26) and (31); Omega_d_dot analytic (module docstring).
     """
-    if _dot(F, F) < 1e-12:   # free fall demanded: no thrust direction, keep level
+    if dot(F, F) < 1e-12:   # free fall demanded: no thrust direction, keep level
         F, F_dot, F_ddot = (0.0, 0.0, 1e-6), _ZERO, _ZERO
-    b3, b3d, b3dd = _unit_d2(F, F_dot, F_ddot)
-    if _dot(u_s, u_s) > 1e-12:
-        s, sd, sdd = _unit_d2(u_s, u_s_dot, u_s_ddot)
+    b3, b3d, b3dd = unit_d2(F, F_dot, F_ddot)
+    if dot(u_s, u_s) > 1e-12:
+        s, sd, sdd = unit_d2(u_s, u_s_dot, u_s_ddot)
     else:
         s, sd, sdd = b2_fallback, _ZERO, _ZERO
     # w = s - (s.b3) b3 (eq. 22) and its derivatives.
-    c = _dot(s, b3)
-    cd = _dot(sd, b3) + _dot(s, b3d)
-    cdd = _dot(sdd, b3) + 2.0 * _dot(sd, b3d) + _dot(s, b3dd)
+    c = dot(s, b3)
+    cd = dot(sd, b3) + dot(s, b3d)
+    cdd = dot(sdd, b3) + 2.0 * dot(sd, b3d) + dot(s, b3dd)
     w = (s[0] - c * b3[0], s[1] - c * b3[1], s[2] - c * b3[2])
     wd = tuple(sd[i] - cd * b3[i] - c * b3d[i] for i in range(3))
     wdd = tuple(sdd[i] - cdd * b3[i] - 2.0 * cd * b3d[i] - c * b3dd[i] for i in range(3))
-    if _dot(w, w) < 1e-12:   # s along b3d: keep the previous pointing, frozen
-        c = _dot(b2_fallback, b3)
+    if dot(w, w) < 1e-12:   # s along b3d: keep the previous pointing, frozen
+        c = dot(b2_fallback, b3)
         w = tuple(b2_fallback[i] - c * b3[i] for i in range(3))
         wd = wdd = _ZERO
-        if _dot(w, w) < 1e-12:
-            w = _cross(b3, (1.0, 0.0, 0.0) if abs(b3[0]) < 0.9 else (0.0, 1.0, 0.0))
-    b2, b2d, b2dd = _unit_d2(w, wd, wdd)
-    b1 = _cross(b2, b3)
-    x1, x2 = _cross(b2d, b3), _cross(b2, b3d)
+        if dot(w, w) < 1e-12:
+            w = cross(b3, (1.0, 0.0, 0.0) if abs(b3[0]) < 0.9 else (0.0, 1.0, 0.0))
+    b2, b2d, b2dd = unit_d2(w, wd, wdd)
+    b1 = cross(b2, b3)
+    x1, x2 = cross(b2d, b3), cross(b2, b3d)
     b1d = (x1[0] + x2[0], x1[1] + x2[1], x1[2] + x2[2])
-    y1, y2, y3 = _cross(b2dd, b3), _cross(b2d, b3d), _cross(b2, b3dd)
+    y1, y2, y3 = cross(b2dd, b3), cross(b2d, b3d), cross(b2, b3dd)
     b1dd = tuple(y1[i] + 2.0 * y2[i] + y3[i] for i in range(3))
-    Omega_d = (_dot(b3, b2d), _dot(b1, b3d), _dot(b2, b1d))
-    Omega_d_dot = (_dot(b3d, b2d) + _dot(b3, b2dd),
-                   _dot(b1d, b3d) + _dot(b1, b3dd),
-                   _dot(b2d, b1d) + _dot(b2, b1dd))
+    Omega_d = (dot(b3, b2d), dot(b1, b3d), dot(b2, b1d))
+    Omega_d_dot = (dot(b3d, b2d) + dot(b3, b2dd),
+                   dot(b1d, b3d) + dot(b1, b3dd),
+                   dot(b2d, b1d) + dot(b2, b1dd))
     R_d = ((b1[0], b2[0], b3[0]), (b1[1], b2[1], b3[1]), (b1[2], b2[2], b3[2]))
     return DesiredAttitude(R_d, b1, b2, b3, Omega_d, Omega_d_dot)
 
@@ -378,11 +356,11 @@ def attitude_torque(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, b_meas, r_world,
     zx = zy = zz = 0.0
     V = 0.0
     for b, r, k in zip(b_meas, r_world, rho):
-        bd = (_dot(b1d, r), _dot(b2d, r), _dot(b3d, r))   # R_d^T r_i
+        bd = (dot(b1d, r), dot(b2d, r), dot(b3d, r))   # R_d^T r_i
         zx += k * (bd[1] * b[2] - bd[2] * b[1])
         zy += k * (bd[2] * b[0] - bd[0] * b[2])
         zz += k * (bd[0] * b[1] - bd[1] * b[0])
-        V += k * (1.0 - _dot(b, bd))
+        V += k * (1.0 - dot(b, bd))
     Jx, Jy, Jz = inertia_kg_m2
     wx, wy, wz = Omega
     dx, dy, dz = Omega_d
@@ -393,32 +371,8 @@ def attitude_torque(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, b_meas, r_world,
     z = (zx, zy, zz)
     tau = tuple(gyro[i] + inertia_kg_m2[i] * (Omega_d_dot[i] + z[i] - alpha * e1[i] - e2[i])
                 for i in range(3))
-    V += 0.5 * _dot(e1, e1)
+    V += 0.5 * dot(e1, e1)
     return tau, z, V
-
-
-def body_coordinates(w, b1, b2, r1, r2) -> Vec3:
-    """``R^T w``: a world vector's body coordinates from two vector pairs (TRIAD).
-
-    Parameters
-    ----------
-    w : sequence (3,)
-        World vector (ENU).
-    b1, b2 : sequence (3,)
-        Body unit vectors ``b_i = R^T r_i``; r1, r2 : their world directions.
-        Pair 1 is matched exactly, pair 2 completes the frame.
-
-    Returns
-    -------
-    tuple (3,)
-        ``R^T w`` (body FLU), exact when the pairs are.
-    """
-    mb = unit3(_cross(b1, b2))
-    mr = unit3(_cross(r1, r2))
-    nb = _cross(b1, mb)
-    nr = _cross(r1, mr)
-    c1, c2, c3 = _dot(w, r1), _dot(w, mr), _dot(w, nr)
-    return tuple(c1 * b1[i] + c2 * mb[i] + c3 * nb[i] for i in range(3))
 
 
 @dataclass(frozen=True, slots=True)
@@ -522,34 +476,13 @@ def attitude_torque_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2
     Odd = tuple(Omega_d_dot[0] * q1[i] + Omega_d_dot[1] * q2[i] + Omega_d_dot[2] * q3[i] for i in range(3))
     wx, wy, wz = Omega
     e = (wx - Od[0], wy - Od[1], wz - Od[2])
-    WxOd = _cross(Omega, Od)
+    WxOd = cross(Omega, Od)
     Jx, Jy, Jz = inertia_kg_m2
     Jw = (Jx * wx, Jy * wy, Jz * wz)
     gyro = (wy * Jw[2] - wz * Jw[1], wz * Jw[0] - wx * Jw[2], wx * Jw[1] - wy * Jw[0])
     tau = tuple(gyro[i] + inertia_kg_m2[i] * (Odd[i] - WxOd[i] + z[i] - alpha * e[i]) for i in range(3))
-    V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * _dot(e, e)
+    V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * dot(e, e)
     return DecoupledTorque(tau, z, e, tilt, psi, V)
-
-
-def thrust_axis_estimate(b1, b2, r1, r2) -> Vec3:
-    """``R e3`` (world) from two vector pairs by TRIAD (pair 1 exact, pair 2 completes).
-
-    Parameters
-    ----------
-    b1, b2 : sequence (3,)
-        Body unit vectors; r1, r2 : sequence (3,) their world directions.
-
-    Returns
-    -------
-    tuple (3,)
-        Estimate of the body z axis in the world frame (unit).
-    """
-    mb = unit3(_cross(b1, b2))
-    mr = unit3(_cross(r1, r2))
-    nb = _cross(b1, mb)
-    nr = _cross(r1, mr)
-    # R = [r1 mr nr] [b1 mb nb]^T, so R e3 = r1 b1_z + mr mb_z + nr nb_z.
-    return tuple(r1[i] * b1[2] + mr[i] * mb[2] + nr[i] * nb[2] for i in range(3))
 
 
 _INTEGRAL_DT_MAX_S = 0.1   # a gap in the frames longer than this integrates as 0.1 s
@@ -767,7 +700,7 @@ class GeometricController:
         if V is None:   # decoupled law: V from (d_z, psi_e, e_Omega), see attitude_torque_decoupled
             dz, psi, e = z[3], z[4], z[5]
             r1, r2 = self._rho
-            V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * _dot(e, e)
+            V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * dot(e, e)
             z = z[:3]
         R_d = ((b1x, b2x, b3x), (b1y, b2y, b3y), (b1z, b2z, b3z))
         cmd = (float(cmd[0]), float(cmd[1]), float(cmd[2]), float(cmd[3]))   # as Mixer.mix (numpy inputs)
@@ -991,7 +924,7 @@ class GeometricController:
         udd0, udd1, udd2 = -ad0, -ad1, -ad2
         uu = u0 * u0 + u1 * u1 + u2 * u2
         if self.pointing is not None and uu > 1e-12:
-            # _unit_d2(u_s, u_s_dot, u_s_ddot)
+            # unit_d2(u_s, u_s_dot, u_s_ddot)
             r = sqrt(uu)
             n0, n1, n2 = u0 / r, u1 / r, u2 / r
             rd = n0 * ud0 + n1 * ud1 + n2 * ud2
@@ -1010,7 +943,7 @@ class GeometricController:
         FF = F0 * F0 + F1 * F1 + F2 * F2
         fallback = not FF >= 1e-12 or not uu > 1e-12
         if not fallback:
-            # b3 = _unit_d2(F, F_dot, F_ddot)
+            # b3 = unit_d2(F, F_dot, F_ddot)
             r = sqrt(FF)
             b3x, b3y, b3z = F0 / r, F1 / r, F2 / r
             rd = b3x * Fd0 + b3y * Fd1 + b3z * Fd2
@@ -1019,7 +952,7 @@ class GeometricController:
             b3ddx = (Fdd0 - 2.0 * b3dx * rd - b3x * rdd) / r
             b3ddy = (Fdd1 - 2.0 * b3dy * rd - b3y * rdd) / r
             b3ddz = (Fdd2 - 2.0 * b3dz * rd - b3z * rdd) / r
-            # s = _unit_d2(u_s, ...)
+            # s = unit_d2(u_s, ...)
             r = sqrt(uu)
             s0, s1, s2 = u0 / r, u1 / r, u2 / r
             rd = s0 * ud0 + s1 * ud1 + s2 * ud2
@@ -1040,7 +973,7 @@ class GeometricController:
             wdd0 = sdd0 - cdd * b3x - 2.0 * cd * b3dx - c * b3ddx
             wdd1 = sdd1 - cdd * b3y - 2.0 * cd * b3dy - c * b3ddy
             wdd2 = sdd2 - cdd * b3z - 2.0 * cd * b3dz - c * b3ddz
-            # b2 = _unit_d2(w, w_dot, w_ddot)
+            # b2 = unit_d2(w, w_dot, w_ddot)
             r = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
             b2x, b2y, b2z = w0 / r, w1 / r, w2 / r
             rd = b2x * wd0 + b2y * wd1 + b2z * wd2
@@ -1215,10 +1148,10 @@ class GeometricController:
         Sp = self.target_enu_m if ref.target_enu_m is None else ref.target_enu_m
         u_s = (Sp[0] - xd[0], Sp[1] - xd[1], Sp[2] - xd[2])
         u_s_dot, u_s_ddot = (-vd[0], -vd[1], -vd[2]), (-ad[0], -ad[1], -ad[2])
-        if self.pointing is not None and _dot(u_s, u_s) > 1e-12:
+        if self.pointing is not None and dot(u_s, u_s) > 1e-12:
             # eq. (21) made flyable (companion.control.pointing): a unit vector
             # with consistent derivatives passes desired_attitude's _unit_d2 unchanged.
-            u_s, u_s_dot, u_s_ddot = self.pointing.update(t_s, *_unit_d2(u_s, u_s_dot, u_s_ddot))
+            u_s, u_s_dot, u_s_ddot = self.pointing.update(t_s, *unit_d2(u_s, u_s_dot, u_s_ddot))
         des = desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, self._b2_prev)
         self._b2_prev = des.b2d
 
@@ -1234,7 +1167,7 @@ class GeometricController:
                                         des.b1d, des.b2d, des.b3d, self._rho, self.cfg.alpha)
             Od_body = des.Omega_d
         rates = rate_command(Od_body, z, self.cfg.alpha)
-        f = _dot(F, thrust_axis_estimate(b1, b2, r1, r2))
+        f = dot(F, thrust_axis_estimate(b1, b2, r1, r2))
         mc = self.mixer.mix(f, tau)
         self._thrust_prev = (mc.cmd[0] + mc.cmd[1] + mc.cmd[2] + mc.cmd[3]) * self._fmax
         return ControlOutput(f, tau, mc.cmd, mc.saturated, des.b3d, des.b2d, des.R_d, des.Omega_d,
