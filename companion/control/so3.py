@@ -148,6 +148,49 @@ def triad_rotation(b1, b2, r1, r2) -> Mat3:
     return tuple(ru[i] * bu[j] + rm[i] * bm[j] + rn[i] * bn[j] for i in range(3) for j in range(3))
 
 
+def triad_frames(b1, b2, r1, r2) -> tuple:
+    """The TRIAD frames of two vector pairs: ``(m_b, n_b, m_r, n_r)`` with ``m = unit(1 x 2)``, ``n = 1 x m``.
+
+    ``b1``, ``r1`` must be unit vectors (pair 1 is matched exactly); then
+    ``R = [r1 m_r n_r] [b1 m_b n_b]^T``. Raises ValueError when a pair's
+    vectors are collinear (or not finite).
+    """
+    b1x, b1y, b1z = b1
+    b2x, b2y, b2z = b2
+    r1x, r1y, r1z = r1
+    r2x, r2y, r2z = r2
+    x, y, z = b1y * b2z - b1z * b2y, b1z * b2x - b1x * b2z, b1x * b2y - b1y * b2x
+    n = math.sqrt(x * x + y * y + z * z)
+    if not n > 0.0:
+        raise ValueError("cannot normalise a zero (or non-finite) vector")
+    mbx, mby, mbz = x / n, y / n, z / n
+    x, y, z = r1y * r2z - r1z * r2y, r1z * r2x - r1x * r2z, r1x * r2y - r1y * r2x
+    n = math.sqrt(x * x + y * y + z * z)
+    if not n > 0.0:
+        raise ValueError("cannot normalise a zero (or non-finite) vector")
+    mrx, mry, mrz = x / n, y / n, z / n
+    return ((mbx, mby, mbz), (b1y * mbz - b1z * mby, b1z * mbx - b1x * mbz, b1x * mby - b1y * mbx),
+            (mrx, mry, mrz), (r1y * mrz - r1z * mry, r1z * mrx - r1x * mrz, r1x * mry - r1y * mrx))
+
+
+def triad_to_body(w, b1, r1, frames) -> Vec3:
+    """``R^T w`` from pair 1 and its :func:`triad_frames`."""
+    mb, nb, mr, nr = frames
+    w0, w1, w2 = w
+    c1 = w0 * r1[0] + w1 * r1[1] + w2 * r1[2]
+    c2 = w0 * mr[0] + w1 * mr[1] + w2 * mr[2]
+    c3 = w0 * nr[0] + w1 * nr[1] + w2 * nr[2]
+    return (c1 * b1[0] + c2 * mb[0] + c3 * nb[0], c1 * b1[1] + c2 * mb[1] + c3 * nb[1],
+            c1 * b1[2] + c2 * mb[2] + c3 * nb[2])
+
+
+def triad_body_z(b1, r1, frames) -> Vec3:
+    """``R e3`` (the body z axis in the world) from pair 1 and its :func:`triad_frames`."""
+    mb, nb, mr, nr = frames
+    return (r1[0] * b1[2] + mr[0] * mb[2] + nr[0] * nb[2], r1[1] * b1[2] + mr[1] * mb[2] + nr[1] * nb[2],
+            r1[2] * b1[2] + mr[2] * mb[2] + nr[2] * nb[2])
+
+
 def body_coordinates(w, b1, b2, r1, r2) -> Vec3:
     """``R^T w``: a world vector's body coordinates from two vector pairs (TRIAD).
 
@@ -164,12 +207,7 @@ def body_coordinates(w, b1, b2, r1, r2) -> Vec3:
     tuple (3,)
         ``R^T w`` (body FLU), exact when the pairs are.
     """
-    mb = unit3(cross(b1, b2))
-    mr = unit3(cross(r1, r2))
-    nb = cross(b1, mb)
-    nr = cross(r1, mr)
-    c1, c2, c3 = dot(w, r1), dot(w, mr), dot(w, nr)
-    return tuple(c1 * b1[i] + c2 * mb[i] + c3 * nb[i] for i in range(3))
+    return triad_to_body(w, b1, r1, triad_frames(b1, b2, r1, r2))
 
 
 def thrust_axis_estimate(b1, b2, r1, r2) -> Vec3:
@@ -185,9 +223,4 @@ def thrust_axis_estimate(b1, b2, r1, r2) -> Vec3:
     tuple (3,)
         Estimate of the body z axis in the world frame (unit).
     """
-    mb = unit3(cross(b1, b2))
-    mr = unit3(cross(r1, r2))
-    nb = cross(b1, mb)
-    nr = cross(r1, mr)
-    # R = [r1 mr nr] [b1 mb nb]^T, so R e3 = r1 b1_z + mr mb_z + nr nb_z.
-    return tuple(r1[i] * b1[2] + mr[i] * mb[2] + nr[i] * nb[2] for i in range(3))
+    return triad_body_z(b1, r1, triad_frames(b1, b2, r1, r2))

@@ -64,6 +64,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from ..control.geometric import Measurements, Reference
 from ..control.observer import heading_from_accel_mag
 from ..control.rates import normalised_thrust, vehicle_hover_thrust
 from ..errors import CommandRejected, LinkError
@@ -961,8 +962,8 @@ class FlightCore:
                 if tap is not None:
                     tap(t, gyro, acc, mag, self._pos, self._vel, self._nav_t)
                 try:
-                    cmd = ctrl.update_fast(t, gyro, acc, mag, self._pos, self._vel, self._nav_t,
-                                           ref.p, ref.v, ref.a, ref.jerk, ref.snap, ref.target)
+                    cmd = ctrl.command(t, Measurements(gyro, acc, mag, self._pos, self._vel, self._nav_t),
+                                       Reference(ref.p, ref.v, ref.a, ref.jerk, ref.snap, ref.target))
                     out = ctrl.last_desired
                     if self._rates:
                         # body rates and thrust before this frame's tick (which then carries no override)
