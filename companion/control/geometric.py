@@ -137,7 +137,7 @@ from .pointing import PointingGovernor
 from .rates import rate_command
 from .observer import AttitudeEstimate, VelocityAidedObserver, horizontal_field, virtual_pairs
 from .so3 import (Vec3, body_coordinates, cross, dot, thrust_axis_estimate, triad_body_z,  # noqa: F401
-                  triad_frames, triad_rotation, triad_to_body, unit3, unit_d2)
+                  triad_frames, triad_rotation, triad_to_body3, unit3, unit_d2)
 from .vectors import AccelerationEstimator, BodyVectorFilter, controller_vectors
 
 # --- small float-tuple vector algebra (the hot path avoids numpy) ---------
@@ -789,13 +789,23 @@ class GeometricController:
         """
         gyro, accel, mag, pos, vel, nav_t = meas
         xd, vd, ad, jd, sd, target = ref
-        if self.observer is not None:
-            gyro, pos, vel, nav_t = self._observed(t_s, gyro, accel, mag, pos, vel, nav_t)
-        vel = (float(vel[0]), float(vel[1]), float(vel[2]))
+        obs = self.observer
+        if obs is not None:
+            # the observer (companion.control.observer): bias-corrected rate, filtered p, v at t_s
+            obs.update(t_s, gyro, accel, mag, pos, vel, nav_t, self._thrust_prev)
+            if obs.t is None:        # no vertical yet (free fall at start-up): no estimate to act on
+                raise ValueError("the observer has no attitude estimate yet")
+            bx, by, bz = obs.b
+            gyro = (gyro[0] - bx, gyro[1] - by, gyro[2] - bz)
+            pos, vel, nav_t = obs.p, obs.v, t_s
+            # a_hat from the filter's velocity, low-passed over one fix interval: a 10 Hz fix's
+            # correction step in v_hat must not reach F_dot as a one-frame spike
+            fi = obs.fix_interval_s
+            self.accel.tau_s = fi if fi > self._tau_a else self._tau_a
         a_hat = self.accel.update(t_s if nav_t is None else nav_t, vel, jd)
         b1, b2, r1, r2 = self._vector_pairs(t_s, gyro, accel, mag, a_hat)
         self._pairs = (b1, b2, r1, r2)
-        self._pv = (tuple(pos), vel)
+        self._pv = (tuple(pos), tuple(vel))
         self._t_last = t_s
         e_x = (pos[0] - xd[0], pos[1] - xd[1], pos[2] - xd[2])
         e_v = (vel[0] - vd[0], vel[1] - vd[1], vel[2] - vd[2])
@@ -806,8 +816,7 @@ class GeometricController:
         self._b2_prev = b2d
         frames = triad_frames(b1, b2, r1, r2)
         if self._decoupled:
-            q1, q2 = triad_to_body(b1d, b1, r1, frames), triad_to_body(b2d, b1, r1, frames)
-            q3 = triad_to_body(b3d, b1, r1, frames)                      # R^T b3d
+            q1, q2, q3 = triad_to_body3(b1d, b2d, b3d, b1, r1, frames)    # R^T b_jd
             tau, z, e, Od_b, psi = decoupled_law(self._J, gyro, Od, Odd, q1, q2, q3, self._rho, self._alpha)
             ia = self._ialpha
             self.last_rate_cmd = (Od_b[0] + ia * z[0], Od_b[1] + ia * z[1], Od_b[2] + ia * z[2])
@@ -823,20 +832,6 @@ class GeometricController:
         self.last_desired = (*b1d, *b2d, *b3d, f)
         self._last_detail = (tau, saturated, Od, e_x, e_v, zV, V)
         return cmd
-
-    def _observed(self, t_s, gyro, accel, mag, pos, vel, nav_t) -> tuple:
-        """Feed the observer (``companion.control.observer``); the bias-corrected rate and the
-        filtered position and velocity at ``t_s``: ``(gyro, pos, vel, nav_t)``."""
-        obs = self.observer
-        obs.update(t_s, gyro, accel, mag, pos, vel, nav_t, self._thrust_prev)
-        if obs.t is None:        # no vertical yet (free fall at start-up): no estimate to act on
-            raise ValueError("the observer has no attitude estimate yet")
-        bx, by, bz = obs.b
-        # a_hat from the filter's velocity, low-passed over one fix interval: a 10 Hz fix's
-        # correction step in v_hat must not reach F_dot as a one-frame spike
-        fi = obs.fix_interval_s
-        self.accel.tau_s = fi if fi > self._tau_a else self._tau_a
-        return (gyro[0] - bx, gyro[1] - by, gyro[2] - bz), obs.p, obs.v, t_s
 
     def _vector_pairs(self, t_s, gyro, accel, mag, a_hat) -> tuple:
         """``(b1, b2, r1, r2)``: the observer's virtual pairs, else the measured vectors

@@ -184,6 +184,24 @@ def triad_to_body(w, b1, r1, frames) -> Vec3:
             c1 * b1[2] + c2 * mb[2] + c3 * nb[2])
 
 
+def triad_to_body3(w1, w2, w3, b1, r1, frames) -> tuple:
+    """:func:`triad_to_body` of three world vectors at once: ``(R^T w1, R^T w2, R^T w3)``."""
+    mb, nb, mr, nr = frames
+    b10, b11, b12 = b1
+    r10, r11, r12 = r1
+    mb0, mb1, mb2 = mb
+    nb0, nb1, nb2 = nb
+    mr0, mr1, mr2 = mr
+    nr0, nr1, nr2 = nr
+    out = []
+    for w0, w1_, w2_ in (w1, w2, w3):
+        c1 = w0 * r10 + w1_ * r11 + w2_ * r12
+        c2 = w0 * mr0 + w1_ * mr1 + w2_ * mr2
+        c3 = w0 * nr0 + w1_ * nr1 + w2_ * nr2
+        out.append((c1 * b10 + c2 * mb0 + c3 * nb0, c1 * b11 + c2 * mb1 + c3 * nb1, c1 * b12 + c2 * mb2 + c3 * nb2))
+    return tuple(out)
+
+
 def triad_body_z(b1, r1, frames) -> Vec3:
     """``R e3`` (the body z axis in the world) from pair 1 and its :func:`triad_frames`."""
     mb, nb, mr, nr = frames
