@@ -57,7 +57,7 @@ COMPONENTS = (
     ("framing + CRC (TlogScanner._scan)", "link/tlog_scan.py", "_scan"),
     ("decoding (FastDecoder / pymavlink)", "link/tlog_scan.py", "decode_record"),
     ("flight core (FlightCore.handle, all)", "flight/core.py", "handle"),
-    ("  of which the controller (update_fast)", "control/geometric.py", "update_fast"),
+    ("  of which the controller (command)", "control/geometric.py", "command"),
     ("comparison (OutputComparer.compare)", "replay/compare.py", "compare"),
     ("metrics, vehicle messages", "replay/metrics.py", "vehicle"),
     ("metrics, companion messages", "replay/metrics.py", "companion"),

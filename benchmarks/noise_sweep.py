@@ -46,6 +46,8 @@ CONTROLLERS = {
     "geometric, observer (default)": ("companion", {}),
     "geometric, no observer (previous)": ("companion", {"observer": False}),
     "cascaded (SITL onboard)": ("vehicle", {}),
+    # --control rates: over MAVLink only (the in-process harness has no rate loop); not in the default list
+    "geometric, body rates (SITL rate loop)": ("rates", {}),
 }
 
 
@@ -81,7 +83,8 @@ def main(argv=None) -> int:
     ap.add_argument("--mode", choices=("inprocess", "mavlink"), default="inprocess")
     ap.add_argument("--cut", type=float, default=None, help="fly only the first S seconds of each trajectory")
     ap.add_argument("--seed", type=int, default=None)
-    ap.add_argument("--controllers", nargs="*", default=list(CONTROLLERS), choices=list(CONTROLLERS))
+    ap.add_argument("--controllers", nargs="*", default=[k for k, v in CONTROLLERS.items() if v[0] != "rates"],
+                    choices=list(CONTROLLERS))
     ap.add_argument("--realistic", action="store_true", help="the realistic profile instead of the grid")
     ap.add_argument("--profile", default="icm42688p-bmm150-zedf9p",
                     help="SITL sensor profile name (--mode mavlink --realistic)")

@@ -64,10 +64,12 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion import frames
+
+from .rate_control import RateSetpoint
 # Sanity limits on decoded setpoints (a message beyond them is ignored) and the
 # actuator rule: ``companion.link.command_rules``, the one table of both ends.
 from companion.link.command_rules import (MAX_SETPOINT_ACC_M_S2, MAX_SETPOINT_POS_M, MAX_SETPOINT_VEL_M_S,
-                                          actuator_problem)
+                                          actuator_problem, attitude_target_problem)
 
 # --- constants named once ---------------------------------------------------
 
@@ -284,6 +286,21 @@ def decode_position_target(msg, yaw_enu_rad: float = 0.0,
             # Body yaw is an offset from the current heading (clockwise in NED).
             yaw = frames.wrap_pi(yaw_enu_rad - float(msg.yaw))
     return PositionTarget(p, v, a, yaw, yaw_rate, mask)
+
+
+def decode_attitude_rates(msg):
+    """SET_ATTITUDE_TARGET (a body-rate setpoint) -> ``sitl.rate_control.RateSetpoint`` (FLU).
+
+    Returns (setpoint or None, problem or None): None with the reason of
+    ``command_rules.attitude_target_problem`` when the message is not a
+    usable rate setpoint (an attitude one, an ignored rate or thrust, a
+    value out of range). Rates FRD -> FLU: ``(p, -q, -r)``.
+    """
+    rates = (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate)
+    why = attitude_target_problem(msg.type_mask, rates, msg.thrust)
+    if why is not None:
+        return None, why
+    return RateSetpoint((float(rates[0]), -float(rates[1]), -float(rates[2])), float(msg.thrust)), None
 
 
 def decode_actuator_controls(msg) -> ActuatorAnswer | None:

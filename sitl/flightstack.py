@@ -24,8 +24,11 @@ AUTO.RTL       4/5         climbs to RTL_RETURN_ALT above home if lower, flies
                            at MPC_XY_CRUISE to the closest of home and the rally
                            points (``sitl.rally``), then AUTO.LAND
 AUTO.LAND      4/6         descends at MPC_LAND_SPEED holding x, y
-OFFBOARD       6/0         tracks SET_POSITION_TARGET_LOCAL_NED; entry needs a
-                           setpoint stream already present (PX4 rule)
+OFFBOARD       6/0         tracks SET_POSITION_TARGET_LOCAL_NED, or the body
+                           rates and thrust of SET_ATTITUDE_TARGET with its
+                           inner rate loop (``sitl.rate_control``) while they
+                           are the newer kind; entry needs a setpoint stream
+                           already present (PX4 rule)
 =============  ==========  ====================================================
 
 Other PX4 modes (ALTCTL, ACRO, STABILIZED, ...) are refused with DENIED.
@@ -75,6 +78,7 @@ from .fence import Fence
 from .mission_exec import MissionExecutor, carrot_step
 from .onboard import Setpoint
 from .rally import return_destination
+from .rate_control import RateSetpoint
 
 # MAVLink enum values used by the stack (named once, from the common dialect).
 RESULT_ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
@@ -186,7 +190,13 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
               "mission way-point acceptance radius where the item's param2 is 0 (m; PX4's default is 10)"),
     ParamSpec("GF_ACTION", _I, 2, 0, 5,
               "geofence breach action: 0 none, 1 warning, 2 hold, 3 return, 4 (termination) and 5 land"),
+    ParamSpec("MPC_THR_HOVER", _R, 0.5, 0.05, 1.0,
+              "hover thrust, normalised (the vehicle's m g / (4 f_max) at start; read by a companion that "
+              "sends attitude-rate setpoints)"),
     ParamSpec("RTL_RETURN_ALT", _R, 5.0, 0.0, 150.0, "return altitude above home (m; PX4's default is 60)"),
+    ParamSpec("THR_MDL_FAC", _R, 0.0, 0.0, 1.0,
+              "motor thrust curve factor k of the rate-setpoint path: thrust = (1 - k) u + k u^2 (0: the "
+              "simulated motors are linear)"),
     ParamSpec("SIM_LOCKSTEP", _I, 0, 0, 1,
               "1: lockstep with the actuator peer (the --lockstep option; read-only): the vehicle waits for "
               "every answer, so link delay costs wall time, not control"),
@@ -547,6 +557,9 @@ class StackOutput:
         Otherwise the onboard controller tracks this.
     reset_controller : bool
         The onboard controller takes over now: clear its integrators first.
+    rates : RateSetpoint or None
+        OFFBOARD on attitude-rate setpoints: the inner rate loop flies these
+        (``setpoint`` is then the mode's position setpoint, for telemetry).
     """
 
     armed: bool
@@ -554,6 +567,7 @@ class StackOutput:
     idle: bool
     setpoint: Setpoint | None
     reset_controller: bool
+    rates: RateSetpoint | None = None
 
 
 _DISARMED_OUTPUT = StackOutput(False, None, False, None, False)
@@ -613,6 +627,8 @@ class FlightStack:
         self._need_anchor = True
         self._hold_sp: Setpoint | None = None
         self._offboard: ReceivedTarget | None = None
+        self._rates: RateSetpoint | None = None
+        self._rates_time_us = -(1 << 62)
         self._act_cmd: tuple | None = None
         self._act_time_us = -(1 << 62)
         self._override_active = False
@@ -688,7 +704,17 @@ class FlightStack:
         r = self._offboard
         if self._params_version != self.params.version:
             self._limits()
-        return r is not None and now_us - r.time_us <= self._of_loss_us
+        return (r is not None and now_us - r.time_us <= self._of_loss_us
+                or now_us - self._rates_time_us <= self._of_loss_us)
+
+    def rates_active(self, now_us: int) -> bool:
+        """OFFBOARD flies the attitude-rate setpoint: one arrived within
+        COM_OF_LOSS_T and no position setpoint since (the newer kind wins, as
+        PX4's offboard control mode follows the last setpoint message)."""
+        r = self._offboard
+        return (self._rates is not None and self.offboard_fresh(now_us)
+                and now_us - self._rates_time_us <= self._of_loss_us
+                and (r is None or r.time_us <= self._rates_time_us))
 
     def actuators_fresh(self, now_us: int) -> bool:
         if self._params_version != self.params.version:
@@ -727,6 +753,11 @@ class FlightStack:
     def offboard_setpoint(self, now_us: int, target) -> None:
         """Record a decoded SET_POSITION_TARGET_LOCAL_NED (``codec.PositionTarget``)."""
         self._offboard = ReceivedTarget(setpoint_from_target(target), int(now_us))
+
+    def rate_setpoint(self, now_us: int, sp: RateSetpoint) -> None:
+        """Record a decoded SET_ATTITUDE_TARGET body-rate setpoint (``sitl.rate_control``)."""
+        self._rates = sp
+        self._rates_time_us = int(now_us)
 
     def actuator_controls(self, now_us: int, motor_cmd) -> None:
         """Record HIL_ACTUATOR_CONTROLS motor commands (4 floats in [0, 1]); None
@@ -995,8 +1026,11 @@ class FlightStack:
                 return o   # frozen: reusing the last output equals building a new one
             o = self._out = StackOutput(True, cmd, False, sp, False)
             return o
-        if (o is not None and o.motor_override is None and o.setpoint is sp and o.idle is idle
-                and o.reset_controller is reset):
+        if self.mode is FlightMode.OFFBOARD and self.rates_active(now_us):
+            o = self._out = StackOutput(True, None, False, sp, reset, self._rates)
+            return o
+        if (o is not None and o.motor_override is None and o.rates is None and o.setpoint is sp
+                and o.idle is idle and o.reset_controller is reset):
             return o
         o = self._out = StackOutput(True, None, idle, sp, reset)
         return o

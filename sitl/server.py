@@ -122,6 +122,7 @@ from .flightstack import (
     Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
     SEVERITY_INFO, SEVERITY_WARNING,
 )
+from .rate_control import hover_thrust
 from .sim import Simulation
 from .world import load_world
 
@@ -524,6 +525,7 @@ class SitlServer:
             "SIM_POS_STD": md.position_std_xy_m, "SIM_POSZ_STD": md.position_std_z_m,
             "SIM_VEL_STD": md.velocity_std_m_s, "SIM_RNG_STD": md.range_std_m,
             "SIM_LOCKSTEP": int(bool(config.lockstep)),
+            "MPC_THR_HOVER": hover_thrust(mission.vehicle),
             **self._controller_param_defaults()})
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
@@ -536,6 +538,7 @@ class SitlServer:
         self._frame = None
         self._setpoint = None
         self._onboard_flying = False
+        self._rates_flying = False
         self._awaited_us: int | None = None
         self._released = True
         self._wall_epoch_us = int(time.time() * 1e6)
@@ -583,6 +586,7 @@ class SitlServer:
             "SET_MODE": self._on_set_mode,
             "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
             "HIL_ACTUATOR_CONTROLS": self._on_actuators,
+            "SET_ATTITUDE_TARGET": self._on_attitude_target,
             "PARAM_REQUEST_LIST": self._on_param_list,
             "PARAM_REQUEST_READ": self._on_param_read,
             "PARAM_SET": self._on_param_set,
@@ -659,6 +663,7 @@ class SitlServer:
         cp.configure(CollisionPreventionConfig(p["CP_DIST"], p["CP_DELAY"], bool(p["CP_GO_NO_DATA"]),
                                                p["MPC_ACC_HOR"]))
         ctl.velocity_limit = cp.limit if cp.cfg.enabled else None
+        self.sim.thrust_model_factor = float(p["THR_MDL_FAC"])
         s = self.sim.sensors
         s.acc_rel_std = math.sqrt(p["SIM_VEC_VAR"])
         s.mag_std = math.sqrt(p["SIM_VEC_VAR"]) * float(np.linalg.norm(s.mag_earth))
@@ -818,6 +823,11 @@ class SitlServer:
         elif out.motor_override is not None:
             self._onboard_flying = False
             frame = sim.step_frame(out.motor_override)
+        elif out.rates is not None:
+            if not self._rates_flying:
+                sim.rates.reset()       # the inner rate loop takes over: a clean integrator
+            self._onboard_flying = False
+            frame = sim.step_rates(out.rates)
         elif out.idle or out.setpoint is None:
             self._onboard_flying = False
             frame = sim.step_frame(_IDLE4)
@@ -827,6 +837,7 @@ class SitlServer:
             self._onboard_flying = True
             self.collision_prevention.set_time(now)
             frame = sim.step_onboard(out.setpoint)
+        self._rates_flying = out.rates is not None
         self._frame = frame
         if self.stack.mission is not None:
             self._mission_progress()
@@ -1477,6 +1488,15 @@ class SitlServer:
         sectors = codec.decode_obstacle_distance(msg)
         if sectors is not None:
             self.collision_prevention.on_sectors(sectors, self.sim.time_us)
+
+    def _on_attitude_target(self, link, msg) -> None:
+        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
+            return
+        sp, why = codec.decode_attitude_rates(msg)
+        if why is not None:
+            self._refuse("SET_ATTITUDE_TARGET", why)
+            return
+        self.stack.rate_setpoint(self.sim.time_us, sp)
 
     def _on_actuators(self, link, msg) -> None:
         self._on_answer(codec.decode_actuator_controls(msg))

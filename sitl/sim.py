@@ -28,6 +28,7 @@ from companion.mission.sim import vehicle_radius_m
 
 from .collision import CollisionMonitor, CrashEvent
 from .onboard import CascadedController, OnboardGains, Setpoint  # noqa: F401  (re-export)
+from .rate_control import RateLoop, RateSetpoint, thrust_curve_inverse
 from .plant import Plant, PlantParams
 from .sensors import RangeReading, SensorSuite  # noqa: F401  (re-export)
 from .wind import WindModel
@@ -230,6 +231,10 @@ class Simulation:
         self.wind = WindModel(sim.wind, rng)
         self.sensors = SensorSuite(sim, self.world, rng, sensor_hz)
         self.onboard = CascadedController(mission.vehicle, gains, plant_params.gravity_m_s2)
+        #: The inner rate loop for attitude-rate setpoints (``sitl.rate_control``) and the motor
+        #: curve factor its thrust goes through (THR_MDL_FAC; 0 for the simulated linear motors).
+        self.rates = RateLoop(mission.vehicle.inertia_kg_m2)
+        self.thrust_model_factor = 0.0
         md = self.sensors.model
         #: Configuration of the onboard estimator (None: ``sim.onboard_state: truth``).
         self.estimator_config = None if sim.onboard_state == "truth" else EstimatorConfig(
@@ -270,6 +275,7 @@ class Simulation:
         else:
             self.plant.set_state(start, R=R, landed=False)
         self.onboard.reset()
+        self.rates.reset()
         self.crash = None
         self._truth = None
         pl = self.plant
@@ -345,6 +351,20 @@ class Simulation:
         else:
             cmd = self.onboard.update_floats(pl.p, pl.v, pl.R, pl.w, sp, self.dt_frame_s, pl.landed)
         return self.step_frame(cmd)
+
+    def step_rates(self, sp: RateSetpoint) -> SensorFrame:
+        """One frame flown by the inner rate loop on an attitude-rate setpoint
+        (``sitl.rate_control``): the rate loop's torques on the estimate's body
+        rates (or the true ones with ``sim.onboard_state: truth``), the collective
+        ``thrust * 4 f_max``, mixed with the cascade's priorities, each rotor's
+        relative thrust through the inverse motor curve."""
+        pl = self.plant
+        e = self.estimate
+        w = e.omega_flu_rad_s if self.estimator is not None and e is not None else pl.w
+        tx, ty, tz = self.rates.update(w, sp.rates_flu_rad_s, self.dt_frame_s, pl.landed)
+        rel = self.onboard.mix(sp.thrust * 4.0 * self.onboard.fmax, tx, ty, tz)
+        k = self.thrust_model_factor
+        return self.step_frame(rel if k == 0.0 else tuple(thrust_curve_inverse(t, k) for t in rel))
 
     def _sample(self) -> SensorFrame:
         pl = self.plant

@@ -403,8 +403,8 @@ def test_observe_before_take_off_estimates_the_bias_at_rest_and_update_uses_a_fr
     assert np.all(np.abs(np.array(a.observer.b) - b) < 0.1 * np.abs(b))
     t, w, acc, m, p, v = frames[-1]
     a.observe(t, w, acc, m, p, v, t)
-    a.update_fast(t, w, acc, m, p, v, t, p, v, (0, 0, 0), (0, 0, 0), (0, 0, 0))
-    c.update_fast(t, w, acc, m, p, v, t, p, v, (0, 0, 0), (0, 0, 0), (0, 0, 0))
+    a.command(t, Measurements(w, acc, m, p, v, t), Reference(p, v))
+    c.command(t, Measurements(w, acc, m, p, v, t), Reference(p, v))
     assert a.observer.R == c.observer.R and a.observer.b == c.observer.b
 
 

@@ -323,8 +323,8 @@ class TruthPeeker:
     def __getattr__(self, name):
         return getattr(self.ctrl, name)
 
-    def update_fast(self, *args):
-        cmd = self.ctrl.update_fast(*args)
+    def command(self, *args):
+        cmd = self.ctrl.command(*args)
         R = self.core._R
         if R is None:
             return cmd

@@ -332,6 +332,8 @@ def test_failsafes_actuator_stream_then_offboard_loss(gcs):
     assert hold is not None and hold.system_status == mavlink.MAV_STATE_CRITICAL
     assert "Failsafe: offboard setpoints lost, holding" in gcs.texts
     assert gcs.recv("HEARTBEAT", 3.0, lambda m: mavutil.mode_string_v10(m) == "LAND") is not None
+    if "Failsafe: landing" not in gcs.texts:      # the text may follow the HEARTBEAT that shows LAND
+        gcs.recv("STATUSTEXT", 1.0, lambda m: "Failsafe: landing" in m.text)
     assert "Failsafe: landing" in gcs.texts
     assert gcs.recv("HEARTBEAT", 5.0, lambda m: not m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED) is not None
     assert abs(gcs.recv("LOCAL_POSITION_NED", 3.0).z - p0.z) < 0.05

@@ -1,4 +1,4 @@
-"""``companion demo [--mission NAME|PATH | --scenario FILE] [--control companion|vehicle] [--out out/] [--seed N]``.
+"""``companion demo [--mission NAME|PATH | --scenario FILE] [--control companion|rates|vehicle] [--out out/] [--seed N]``.
 
 No arguments needed: starts the bundled SITL (``python -m sitl``, a separate
 process, lockstep, loopback UDP on a free port; ``--transport inproc``: in
@@ -55,8 +55,9 @@ def add_arguments(parser) -> None:
                         help=f"bundled mission name or mission YAML (default {DEFAULT_MISSION})")
     parser.add_argument("--scenario", default=None, metavar="FILE",
                         help="a campaign's scenario file: base mission + overrides + seed + cut + control")
-    parser.add_argument("--control", choices=("companion", "vehicle"), default=None,
-                        help="who tracks the trajectory (default companion: the geometric controller)")
+    parser.add_argument("--control", choices=("companion", "rates", "vehicle"), default=None,
+                        help="who tracks the trajectory (default companion: the geometric controller; rates: its "
+                             "outer part, through the vehicle's rate loop)")
     parser.add_argument("--out", default="out", metavar="DIR", help="output directory (default %(default)s)")
     parser.add_argument("--cut", type=float, default=None, metavar="S",
                         help="fly only the first S seconds of the trajectory")

@@ -1,5 +1,5 @@
 """``companion fly MISSION.yaml [--plan plan.json] [--connect udpout:127.0.0.1:14540]
-[--control companion|vehicle] [--tlog flight.tlog] [--report report.json]``.
+[--control companion|rates|vehicle] [--tlog flight.tlog] [--report report.json]``.
 
 Flies a planned mission against a MAVLink vehicle (the bundled SITL or a
 flight stack); see ``companion.runner`` for the sequence.
@@ -201,9 +201,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--connect", default=DEFAULT_CONNECT, metavar="URL",
                         help="pymavlink connection string, companion side (default %(default)s, "
                              "matching `sitl`'s default udpin:127.0.0.1:14540)")
-    parser.add_argument("--control", choices=("companion", "vehicle"), default="companion",
+    parser.add_argument("--control", choices=("companion", "rates", "vehicle"), default="companion",
                         help="companion: geometric controller answers every sensor frame with "
-                             "HIL_ACTUATOR_CONTROLS; vehicle: setpoints only (default %(default)s)")
+                             "HIL_ACTUATOR_CONTROLS; rates: with body rates and thrust (SET_ATTITUDE_TARGET, "
+                             "the vehicle's rate loop flies); vehicle: setpoints only (default %(default)s)")
     parser.add_argument("--tlog", default="flight.tlog", metavar="FILE", help="telemetry log (default %(default)s)")
     parser.add_argument("--report", default="report.json", metavar="FILE", help="flight report (default %(default)s)")
     parser.add_argument("--cut", type=float, default=None, metavar="S",
@@ -577,7 +578,7 @@ def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None,
     from ..maps.field import load_mission_maps
 
     ctrl = None
-    if cfg.control == "companion":
+    if cfg.control in ("companion", "rates"):
         ctrl = GeometricController(mission.vehicle, mission.control, flight_plan.target_enu_m)
     # the maps are read once: the take-off floor, the replanner and the report's clearance share them
     grid, dem = load_mission_maps(mission) if maps is None else maps

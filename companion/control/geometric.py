@@ -114,62 +114,46 @@ leaves its noise in ``r_1`` and in ``Omega_d``: the previous default
 diverged at 1 cm/s; the observer keeps millimetres (``tests/test_observer.py``).
 
 Everything here is pure: the controller object holds only filter state and
-takes the vehicle's time as an argument. The pure functions below are the
-specification (``GeometricController.update_reference`` composes them); the
-250 Hz path ``GeometricController.update_fast`` is the same arithmetic
-unrolled into float locals, in the same order, so it gives the same numbers
-to the last bit (``tests/test_control_fast.py``) in ~17 us instead of ~45 us
-(``python benchmarks/bench_control.py --timing``).
+takes the vehicle's time as an argument. One path: ``GeometricController.command``
+(the 250 Hz path, motor commands) composes the pieces below on float
+tuples (:func:`desired_frame`, :func:`decoupled_law`, the TRIAD helpers of
+``companion.control.so3``); ``update`` adds the named ``ControlOutput``.
+:func:`desired_attitude` and :func:`attitude_torque_decoupled` are the same
+pieces with named results. ``tests/test_control_fast.py`` checks the path
+against a plain composition of eqs. (21)-(31) written in the test
+(``python benchmarks/bench_control.py --timing`` times it).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from ..vehicle import GRAVITY_M_S2, VehicleConfig
 from .config import ControlConfig
 from .mixer import Mixer
 from .pointing import PointingGovernor
-from .observer import AttitudeEstimate, VelocityAidedObserver, horizontal_field, triad_rotation, virtual_pairs
-from .vectors import AccelerationEstimator, BodyVectorFilter, Vec3, controller_vectors, unit3
+from .rates import rate_command
+from .observer import AttitudeEstimate, VelocityAidedObserver, horizontal_field, virtual_pairs
+from .so3 import (Vec3, body_coordinates, cross, dot, thrust_axis_estimate, triad_body_z,  # noqa: F401
+                  triad_frames, triad_rotation, triad_to_body3, unit3, unit_d2)
+from .vectors import AccelerationEstimator, BodyVectorFilter, controller_vectors
 
 # --- small float-tuple vector algebra (the hot path avoids numpy) ---------
 
 
 _ZERO = (0.0, 0.0, 0.0)
-
-
-def _cross(a, b) -> Vec3:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _dot(a, b) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _unit_d2(u, ud, udd):
-    """Unit vector n = u/|u| and its first two time derivatives.
-
-    Returns (n, n_dot, n_ddot), each (3,). See the module docstring.
-    """
-    r = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
-    n = (u[0] / r, u[1] / r, u[2] / r)
-    rd = n[0] * ud[0] + n[1] * ud[1] + n[2] * ud[2]
-    nd = ((ud[0] - n[0] * rd) / r, (ud[1] - n[1] * rd) / r, (ud[2] - n[2] * rd) / r)
-    rdd = nd[0] * ud[0] + nd[1] * ud[1] + nd[2] * ud[2] + n[0] * udd[0] + n[1] * udd[1] + n[2] * udd[2]
-    ndd = ((udd[0] - 2.0 * nd[0] * rd - n[0] * rdd) / r,
-           (udd[1] - 2.0 * nd[1] * rd - n[1] * rdd) / r,
-           (udd[2] - 2.0 * nd[2] * rd - n[2] * rdd) / r)
-    return n, nd, ndd
+_E3 = (0.0, 0.0, 1.0)
 
 
 # --- named inputs and outputs ----------------------------------------------
 
 
-@dataclass(frozen=True, slots=True)
-class Measurements:
+class Measurements(NamedTuple):
     """What the vehicle sends (HIGHRES_IMU, LOCAL_POSITION_NED), converted to ENU/FLU.
+
+    A named tuple (built every frame: cheaper than a dataclass).
 
     Attributes
     ----------
@@ -197,9 +181,8 @@ class Measurements:
     nav_time_s: float | None = None
 
 
-@dataclass(frozen=True, slots=True)
-class Reference:
-    """One sample of the reference trajectory, world ENU.
+class Reference(NamedTuple):
+    """One sample of the reference trajectory, world ENU (a named tuple, as ``Measurements``).
 
     Attributes
     ----------
@@ -266,6 +249,9 @@ class ControlOutput:
     V : float
         Lyapunov function (38) from the measurements, ``sum rho_i (1 - b_i .
         b_i^d) + |e_Omega1|^2 / 2``.
+    rate_cmd_flu_rad_s : tuple (3,)
+        Body-rate command of ``--control rates`` (rad/s, FLU):
+        ``Omega_d^b + z / alpha`` (``companion.control.rates``).
     """
 
     f_n: float
@@ -280,6 +266,7 @@ class ControlOutput:
     e_v: Vec3
     z_rho: Vec3
     V: float
+    rate_cmd_flu_rad_s: Vec3 = _ZERO
 
 
 # --- pure pieces --------------------------------------------------------------
@@ -306,38 +293,93 @@ def desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, b2_fallback=(0.0,
     DesiredAttitude
         eqs. (21)-(26) and (31); Omega_d_dot analytic (module docstring).
     """
-    if _dot(F, F) < 1e-12:   # free fall demanded: no thrust direction, keep level
-        F, F_dot, F_ddot = (0.0, 0.0, 1e-6), _ZERO, _ZERO
-    b3, b3d, b3dd = _unit_d2(F, F_dot, F_ddot)
-    if _dot(u_s, u_s) > 1e-12:
-        s, sd, sdd = _unit_d2(u_s, u_s_dot, u_s_ddot)
-    else:
-        s, sd, sdd = b2_fallback, _ZERO, _ZERO
-    # w = s - (s.b3) b3 (eq. 22) and its derivatives.
-    c = _dot(s, b3)
-    cd = _dot(sd, b3) + _dot(s, b3d)
-    cdd = _dot(sdd, b3) + 2.0 * _dot(sd, b3d) + _dot(s, b3dd)
-    w = (s[0] - c * b3[0], s[1] - c * b3[1], s[2] - c * b3[2])
-    wd = tuple(sd[i] - cd * b3[i] - c * b3d[i] for i in range(3))
-    wdd = tuple(sdd[i] - cdd * b3[i] - 2.0 * cd * b3d[i] - c * b3dd[i] for i in range(3))
-    if _dot(w, w) < 1e-12:   # s along b3d: keep the previous pointing, frozen
-        c = _dot(b2_fallback, b3)
-        w = tuple(b2_fallback[i] - c * b3[i] for i in range(3))
-        wd = wdd = _ZERO
-        if _dot(w, w) < 1e-12:
-            w = _cross(b3, (1.0, 0.0, 0.0) if abs(b3[0]) < 0.9 else (0.0, 1.0, 0.0))
-    b2, b2d, b2dd = _unit_d2(w, wd, wdd)
-    b1 = _cross(b2, b3)
-    x1, x2 = _cross(b2d, b3), _cross(b2, b3d)
-    b1d = (x1[0] + x2[0], x1[1] + x2[1], x1[2] + x2[2])
-    y1, y2, y3 = _cross(b2dd, b3), _cross(b2d, b3d), _cross(b2, b3dd)
-    b1dd = tuple(y1[i] + 2.0 * y2[i] + y3[i] for i in range(3))
-    Omega_d = (_dot(b3, b2d), _dot(b1, b3d), _dot(b2, b1d))
-    Omega_d_dot = (_dot(b3d, b2d) + _dot(b3, b2dd),
-                   _dot(b1d, b3d) + _dot(b1, b3dd),
-                   _dot(b2d, b1d) + _dot(b2, b1dd))
+    b1, b2, b3, Od, Odd = desired_frame(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, b2_fallback)
     R_d = ((b1[0], b2[0], b3[0]), (b1[1], b2[1], b3[1]), (b1[2], b2[2], b3[2]))
-    return DesiredAttitude(R_d, b1, b2, b3, Omega_d, Omega_d_dot)
+    return DesiredAttitude(R_d, b1, b2, b3, Od, Odd)
+
+
+def desired_frame(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, b2_fallback) -> tuple:
+    """:func:`desired_attitude` as plain tuples: ``(b1d, b2d, b3d, Omega_d, Omega_d_dot)``.
+
+    The arithmetic of eqs. (21)-(26), (31) on float locals (``unit_d2``
+    written out for b3d, s and b2d, then ``b1d = b2d x b3d``): the
+    controller's per-frame path. Where eq. (21) or (22) is undefined it
+    continues with the fallbacks of :func:`desired_attitude`.
+    """
+    sqrt = math.sqrt
+    F0, F1, F2 = F
+    Fd0, Fd1, Fd2 = F_dot
+    Fdd0, Fdd1, Fdd2 = F_ddot
+    if F0 * F0 + F1 * F1 + F2 * F2 < 1e-12:   # free fall demanded: no thrust direction, keep level
+        F0, F1, F2, Fd0, Fd1, Fd2, Fdd0, Fdd1, Fdd2 = 0.0, 0.0, 1e-6, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    # b3 = unit_d2(F, F_dot, F_ddot)
+    r = sqrt(F0 * F0 + F1 * F1 + F2 * F2)
+    b3x, b3y, b3z = F0 / r, F1 / r, F2 / r
+    rd = b3x * Fd0 + b3y * Fd1 + b3z * Fd2
+    b3dx, b3dy, b3dz = (Fd0 - b3x * rd) / r, (Fd1 - b3y * rd) / r, (Fd2 - b3z * rd) / r
+    rdd = b3dx * Fd0 + b3dy * Fd1 + b3dz * Fd2 + b3x * Fdd0 + b3y * Fdd1 + b3z * Fdd2
+    b3ddx = (Fdd0 - 2.0 * b3dx * rd - b3x * rdd) / r
+    b3ddy = (Fdd1 - 2.0 * b3dy * rd - b3y * rdd) / r
+    b3ddz = (Fdd2 - 2.0 * b3dz * rd - b3z * rdd) / r
+    u0, u1, u2 = u_s
+    uu = u0 * u0 + u1 * u1 + u2 * u2
+    if uu > 1e-12:
+        # s = unit_d2(u_s, u_s_dot, u_s_ddot)
+        ud0, ud1, ud2 = u_s_dot
+        udd0, udd1, udd2 = u_s_ddot
+        r = sqrt(uu)
+        s0, s1, s2 = u0 / r, u1 / r, u2 / r
+        rd = s0 * ud0 + s1 * ud1 + s2 * ud2
+        sd0, sd1, sd2 = (ud0 - s0 * rd) / r, (ud1 - s1 * rd) / r, (ud2 - s2 * rd) / r
+        rdd = sd0 * ud0 + sd1 * ud1 + sd2 * ud2 + s0 * udd0 + s1 * udd1 + s2 * udd2
+        sdd0 = (udd0 - 2.0 * sd0 * rd - s0 * rdd) / r
+        sdd1 = (udd1 - 2.0 * sd1 * rd - s1 * rdd) / r
+        sdd2 = (udd2 - 2.0 * sd2 * rd - s2 * rdd) / r
+    else:
+        s0, s1, s2 = b2_fallback
+        sd0 = sd1 = sd2 = sdd0 = sdd1 = sdd2 = 0.0
+    # w = s - (s.b3) b3 (eq. 22) and its derivatives
+    c = s0 * b3x + s1 * b3y + s2 * b3z
+    cd = (sd0 * b3x + sd1 * b3y + sd2 * b3z) + (s0 * b3dx + s1 * b3dy + s2 * b3dz)
+    cdd = ((sdd0 * b3x + sdd1 * b3y + sdd2 * b3z) + 2.0 * (sd0 * b3dx + sd1 * b3dy + sd2 * b3dz)
+           + (s0 * b3ddx + s1 * b3ddy + s2 * b3ddz))
+    w0, w1, w2 = s0 - c * b3x, s1 - c * b3y, s2 - c * b3z
+    if w0 * w0 + w1 * w1 + w2 * w2 < 1e-12:   # s along b3d: keep the previous pointing, frozen
+        f0, f1, f2 = b2_fallback
+        c = f0 * b3x + f1 * b3y + f2 * b3z
+        w0, w1, w2 = f0 - c * b3x, f1 - c * b3y, f2 - c * b3z
+        wd0 = wd1 = wd2 = wdd0 = wdd1 = wdd2 = 0.0
+        if w0 * w0 + w1 * w1 + w2 * w2 < 1e-12:
+            w0, w1, w2 = cross((b3x, b3y, b3z), (1.0, 0.0, 0.0) if abs(b3x) < 0.9 else (0.0, 1.0, 0.0))
+    else:
+        wd0, wd1, wd2 = sd0 - cd * b3x - c * b3dx, sd1 - cd * b3y - c * b3dy, sd2 - cd * b3z - c * b3dz
+        wdd0 = sdd0 - cdd * b3x - 2.0 * cd * b3dx - c * b3ddx
+        wdd1 = sdd1 - cdd * b3y - 2.0 * cd * b3dy - c * b3ddy
+        wdd2 = sdd2 - cdd * b3z - 2.0 * cd * b3dz - c * b3ddz
+    # b2 = unit_d2(w, w_dot, w_ddot)
+    r = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    b2x, b2y, b2z = w0 / r, w1 / r, w2 / r
+    rd = b2x * wd0 + b2y * wd1 + b2z * wd2
+    b2dx, b2dy, b2dz = (wd0 - b2x * rd) / r, (wd1 - b2y * rd) / r, (wd2 - b2z * rd) / r
+    rdd = b2dx * wd0 + b2dy * wd1 + b2dz * wd2 + b2x * wdd0 + b2y * wdd1 + b2z * wdd2
+    b2ddx = (wdd0 - 2.0 * b2dx * rd - b2x * rdd) / r
+    b2ddy = (wdd1 - 2.0 * b2dy * rd - b2y * rdd) / r
+    b2ddz = (wdd2 - 2.0 * b2dz * rd - b2z * rdd) / r
+    # b1 = b2 x b3 and its derivatives
+    b1x, b1y, b1z = b2y * b3z - b2z * b3y, b2z * b3x - b2x * b3z, b2x * b3y - b2y * b3x
+    b1dx = (b2dy * b3z - b2dz * b3y) + (b2y * b3dz - b2z * b3dy)
+    b1dy = (b2dz * b3x - b2dx * b3z) + (b2z * b3dx - b2x * b3dz)
+    b1dz = (b2dx * b3y - b2dy * b3x) + (b2x * b3dy - b2y * b3dx)
+    b1ddx = (b2ddy * b3z - b2ddz * b3y) + 2.0 * (b2dy * b3dz - b2dz * b3dy) + (b2y * b3ddz - b2z * b3ddy)
+    b1ddy = (b2ddz * b3x - b2ddx * b3z) + 2.0 * (b2dz * b3dx - b2dx * b3dz) + (b2z * b3ddx - b2x * b3ddz)
+    b1ddz = (b2ddx * b3y - b2ddy * b3x) + 2.0 * (b2dx * b3dy - b2dy * b3dx) + (b2x * b3ddy - b2y * b3ddx)
+    # Omega_d = vee(R_d^T R_d_dot) and its derivative (eq. 31)
+    Od = (b3x * b2dx + b3y * b2dy + b3z * b2dz, b1x * b3dx + b1y * b3dy + b1z * b3dz,
+          b2x * b1dx + b2y * b1dy + b2z * b1dz)
+    Odd = ((b3dx * b2dx + b3dy * b2dy + b3dz * b2dz) + (b3x * b2ddx + b3y * b2ddy + b3z * b2ddz),
+           (b1dx * b3dx + b1dy * b3dy + b1dz * b3dz) + (b1x * b3ddx + b1y * b3ddy + b1z * b3ddz),
+           (b2dx * b1dx + b2dy * b1dy + b2dz * b1dz) + (b2x * b1ddx + b2y * b1ddy + b2z * b1ddz))
+    return (b1x, b1y, b1z), (b2x, b2y, b2z), (b3x, b3y, b3z), Od, Odd
 
 
 def attitude_torque(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, b_meas, r_world,
@@ -373,11 +415,11 @@ def attitude_torque(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, b_meas, r_world,
     zx = zy = zz = 0.0
     V = 0.0
     for b, r, k in zip(b_meas, r_world, rho):
-        bd = (_dot(b1d, r), _dot(b2d, r), _dot(b3d, r))   # R_d^T r_i
+        bd = (dot(b1d, r), dot(b2d, r), dot(b3d, r))   # R_d^T r_i
         zx += k * (bd[1] * b[2] - bd[2] * b[1])
         zy += k * (bd[2] * b[0] - bd[0] * b[2])
         zz += k * (bd[0] * b[1] - bd[1] * b[0])
-        V += k * (1.0 - _dot(b, bd))
+        V += k * (1.0 - dot(b, bd))
     Jx, Jy, Jz = inertia_kg_m2
     wx, wy, wz = Omega
     dx, dy, dz = Omega_d
@@ -388,32 +430,8 @@ def attitude_torque(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, b_meas, r_world,
     z = (zx, zy, zz)
     tau = tuple(gyro[i] + inertia_kg_m2[i] * (Omega_d_dot[i] + z[i] - alpha * e1[i] - e2[i])
                 for i in range(3))
-    V += 0.5 * _dot(e1, e1)
+    V += 0.5 * dot(e1, e1)
     return tau, z, V
-
-
-def body_coordinates(w, b1, b2, r1, r2) -> Vec3:
-    """``R^T w``: a world vector's body coordinates from two vector pairs (TRIAD).
-
-    Parameters
-    ----------
-    w : sequence (3,)
-        World vector (ENU).
-    b1, b2 : sequence (3,)
-        Body unit vectors ``b_i = R^T r_i``; r1, r2 : their world directions.
-        Pair 1 is matched exactly, pair 2 completes the frame.
-
-    Returns
-    -------
-    tuple (3,)
-        ``R^T w`` (body FLU), exact when the pairs are.
-    """
-    mb = unit3(_cross(b1, b2))
-    mr = unit3(_cross(r1, r2))
-    nb = _cross(b1, mb)
-    nr = _cross(r1, mr)
-    c1, c2, c3 = _dot(w, r1), _dot(w, mr), _dot(w, nr)
-    return tuple(c1 * b1[i] + c2 * mb[i] + c3 * nb[i] for i in range(3))
 
 
 @dataclass(frozen=True, slots=True)
@@ -497,54 +515,51 @@ def attitude_torque_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2
     alpha : float
         Damping (1/s).
     """
-    dx, dy, dz = q3
-    kx, ky = -dy, dx                       # k = e3 x d (k_z = 0)
-    s_t = math.sqrt(kx * kx + ky * ky)
-    tilt = math.atan2(s_t, dz)
-    # Q_xy^T q1 = q1 - k x q1 + k x (k x q1) / (1 + d_z): q1 with the tilt undone.
-    v = q1
-    if dz > -1.0 + 1e-9:
-        kv = (ky * v[2], -kx * v[2], kx * v[1] - ky * v[0])                   # k x v
-        kkv = (ky * kv[2], -kx * kv[2], kx * kv[1] - ky * kv[0])              # k x (k x v)
-        w = 1.0 / (1.0 + dz)
-        vx, vy = v[0] - kv[0] + w * kkv[0], v[1] - kv[1] + w * kkv[1]
-        psi = math.atan2(vy, vx)
-    else:                                  # upside down: tilt first, no yaw error
-        psi = 0.0
+    tau, z, e, _, psi = decoupled_law(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho, alpha)
+    kx, ky, dz = -q3[1], q3[0], q3[2]
+    tilt = math.atan2(math.sqrt(kx * kx + ky * ky), dz)
     r1, r2 = rho
-    z = (r1 * kx, r1 * ky, r2 * math.sin(psi))
-    Od = tuple(Omega_d[0] * q1[i] + Omega_d[1] * q2[i] + Omega_d[2] * q3[i] for i in range(3))
-    Odd = tuple(Omega_d_dot[0] * q1[i] + Omega_d_dot[1] * q2[i] + Omega_d_dot[2] * q3[i] for i in range(3))
-    wx, wy, wz = Omega
-    e = (wx - Od[0], wy - Od[1], wz - Od[2])
-    WxOd = _cross(Omega, Od)
-    Jx, Jy, Jz = inertia_kg_m2
-    Jw = (Jx * wx, Jy * wy, Jz * wz)
-    gyro = (wy * Jw[2] - wz * Jw[1], wz * Jw[0] - wx * Jw[2], wx * Jw[1] - wy * Jw[0])
-    tau = tuple(gyro[i] + inertia_kg_m2[i] * (Odd[i] - WxOd[i] + z[i] - alpha * e[i]) for i in range(3))
-    V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * _dot(e, e)
+    V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * dot(e, e)
     return DecoupledTorque(tau, z, e, tilt, psi, V)
 
 
-def thrust_axis_estimate(b1, b2, r1, r2) -> Vec3:
-    """``R e3`` (world) from two vector pairs by TRIAD (pair 1 exact, pair 2 completes).
+def decoupled_law(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho, alpha: float) -> tuple:
+    """:func:`attitude_torque_decoupled` as plain tuples: ``(tau, z, e_Omega, Q Omega_d, psi_e)``.
 
-    Parameters
-    ----------
-    b1, b2 : sequence (3,)
-        Body unit vectors; r1, r2 : sequence (3,) their world directions.
-
-    Returns
-    -------
-    tuple (3,)
-        Estimate of the body z axis in the world frame (unit).
+    The controller's per-frame path (no tilt angle, no V); ``Q Omega_d`` is
+    the desired rate in body axes, the rate command's feed-forward
+    (``companion.control.rates``).
     """
-    mb = unit3(_cross(b1, b2))
-    mr = unit3(_cross(r1, r2))
-    nb = _cross(b1, mb)
-    nr = _cross(r1, mr)
-    # R = [r1 mr nr] [b1 mb nb]^T, so R e3 = r1 b1_z + mr mb_z + nr nb_z.
-    return tuple(r1[i] * b1[2] + mr[i] * mb[2] + nr[i] * nb[2] for i in range(3))
+    dx, dy, dz = q3
+    q10, q11, q12 = q1
+    q20, q21, q22 = q2
+    kx, ky = -dy, dx                       # k = e3 x d (k_z = 0)
+    # Q_xy^T q1 = q1 - k x q1 + k x (k x q1) / (1 + d_z): q1 with the tilt undone; psi_e its heading
+    if dz > -1.0 + 1e-9:
+        kv0, kv1, kv2 = ky * q12, -kx * q12, kx * q11 - ky * q10                # k x q1
+        kkv0, kkv1 = ky * kv2, -kx * kv2                                         # k x (k x q1), x and y
+        w = 1.0 / (1.0 + dz)
+        psi = math.atan2(q11 - kv1 + w * kkv1, q10 - kv0 + w * kkv0)
+    else:                                  # upside down: tilt first, no yaw error
+        psi = 0.0
+    r1, r2 = rho
+    z0, z1, z2 = r1 * kx, r1 * ky, r2 * math.sin(psi)
+    O0, O1, O2 = Omega_d
+    o0 = O0 * q10 + O1 * q20 + O2 * dx
+    o1 = O0 * q11 + O1 * q21 + O2 * dy
+    o2 = O0 * q12 + O1 * q22 + O2 * dz
+    P0, P1, P2 = Omega_d_dot
+    oo0 = P0 * q10 + P1 * q20 + P2 * dx
+    oo1 = P0 * q11 + P1 * q21 + P2 * dy
+    oo2 = P0 * q12 + P1 * q22 + P2 * dz
+    wx, wy, wz = Omega
+    e0, e1, e2 = wx - o0, wy - o1, wz - o2
+    J0, J1, J2 = inertia_kg_m2
+    Jw0, Jw1, Jw2 = J0 * wx, J1 * wy, J2 * wz
+    tx = (wy * Jw2 - wz * Jw1) + J0 * (oo0 - (wy * o2 - wz * o1) + z0 - alpha * e0)
+    ty = (wz * Jw0 - wx * Jw2) + J1 * (oo1 - (wz * o0 - wx * o2) + z1 - alpha * e1)
+    tz = (wx * Jw1 - wy * Jw0) + J2 * (oo2 - (wx * o1 - wy * o0) + z2 - alpha * e2)
+    return (tx, ty, tz), (z0, z1, z2), (e0, e1, e2), (o0, o1, o2), psi
 
 
 _INTEGRAL_DT_MAX_S = 0.1   # a gap in the frames longer than this integrates as 0.1 s
@@ -632,9 +647,11 @@ class GeometricController:
         if cfg.pointing_limit:
             a_max = cfg.pointing_yaw_accel_fraction * self.mixer.yaw_torque_limit(self._m * self._g) / self._J[2]
             self.pointing = PointingGovernor(cfg.pointing_yaw_rate_max_rad_s, a_max)
-        # Floats for update_fast (an int gain multiplies exactly as its float).
+        # Floats for the per-frame path (an int gain multiplies exactly as its float).
         self._kx, self._kv, self._alpha = float(cfg.kx), float(cfg.kv), float(cfg.alpha)
-        self._r2u = unit3(self._r2)      # measurement_vectors normalises r_2 once more
+        self._ialpha = 1.0 / self._alpha
+        #: Body-rate command of the last update (rad/s, FLU; ``ControlOutput.rate_cmd_flu_rad_s``).
+        self.last_rate_cmd: Vec3 = _ZERO
         self._perp = bool(cfg.mag_perpendicular)
         self._ki = float(cfg.ki)
         if not self._ki * self._m < cfg.kv * cfg.kx:
@@ -648,7 +665,6 @@ class GeometricController:
         self._last_detail = None
         self._vectors = cfg.vectors
         self._aided = bool(cfg.velocity_aided)
-        self._today = cfg.vectors == "physical" and self._aided     # the unrolled pair branch
         self._fmax = float(vehicle.max_thrust_per_rotor_n)
         self._thrust_prev: float | None = None
         self._pairs = None
@@ -670,13 +686,13 @@ class GeometricController:
                 accel_direction_gain_rad_s=cfg.accel_vector_gain_rad_s, adaptive=cfg.nav_adaptive_noise)
 
     def observe(self, t_s: float, gyro, accel, mag, pos, vel, nav_t) -> None:
-        """Feed the observer one frame without computing a command (arguments as :meth:`update_fast`).
+        """Feed the observer one frame without computing a command (``Measurements``' fields, positional).
 
         For the frames before the controller takes over (on the ground
         before arming, or while the vehicle's own controller flies): the
         gyro bias and the fix noise are then estimated at rest, and the
-        first :meth:`update_fast` starts from a converged estimate. A frame
-        fed here and again to :meth:`update_fast` (same ``t_s``) is used
+        first :meth:`command` starts from a converged estimate. A frame
+        fed here and again to :meth:`command` (same ``t_s``) is used
         once. No-op without the observer.
         """
         if self.observer is not None:
@@ -727,7 +743,7 @@ class GeometricController:
         return e_i, active
 
     def update(self, t_s: float, meas: Measurements, ref: Reference) -> ControlOutput:
-        """One control step on one sensor frame.
+        """One control step on one sensor frame, with everything it computed.
 
         Parameters
         ----------
@@ -740,487 +756,134 @@ class GeometricController:
         Returns
         -------
         ControlOutput
-
-        Notes
-        -----
-        A wrapper of :meth:`update_fast` (the same numbers, bit for bit, as
-        :meth:`update_reference`, the composition of this module's pure
-        functions), plus the named output.
+            :meth:`command`'s motor commands with the named intermediate results.
         """
-        gy, ac, mg, v = meas.gyro_flu_rad_s, meas.accel_flu_m_s2, meas.mag_flu_gauss, meas.vel_enu_m_s
-        cmd = self.update_fast(t_s, (float(gy[0]), float(gy[1]), float(gy[2])),
-                               (float(ac[0]), float(ac[1]), float(ac[2])),
-                               (float(mg[0]), float(mg[1]), float(mg[2])), meas.pos_enu_m,
-                               (float(v[0]), float(v[1]), float(v[2])), meas.nav_time_s,
-                               ref.pos_enu_m, ref.vel_enu_m_s, ref.acc_enu_m_s2, ref.jerk_enu_m_s3,
-                               ref.snap_enu_m_s4, ref.target_enu_m)
+        cmd = self.command(t_s, meas, ref)
         b1x, b1y, b1z, b2x, b2y, b2z, b3x, b3y, b3z, f = self.last_desired
         tau, saturated, Omega_d, e_x, e_v, z, V = self._last_detail
-        if V is None:   # decoupled law: V from (d_z, psi_e, e_Omega), see attitude_torque_decoupled
+        if V is None:   # decoupled law: V from (d_z, psi_e, e_Omega), as attitude_torque_decoupled
             dz, psi, e = z[3], z[4], z[5]
             r1, r2 = self._rho
-            V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * _dot(e, e)
+            V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * dot(e, e)
             z = z[:3]
         R_d = ((b1x, b2x, b3x), (b1y, b2y, b3y), (b1z, b2z, b3z))
         cmd = (float(cmd[0]), float(cmd[1]), float(cmd[2]), float(cmd[3]))   # as Mixer.mix (numpy inputs)
         return ControlOutput(f, tau, cmd, saturated, (b3x, b3y, b3z), (b2x, b2y, b2z), R_d, Omega_d,
-                             e_x, e_v, z, V)
+                             e_x, e_v, z, V, self.last_rate_cmd)
 
-    def update_fast(self, t_s, gyro, accel, mag, pos, vel, nav_t, xd, vd, ad, jd, sd, target=None):
-        """:meth:`update` on plain float tuples, returning only the motor commands (the 250 Hz path).
+    def command(self, t_s: float, meas: Measurements, ref: Reference) -> tuple:
+        """One control step: the normalised motor commands (``ControlOutput.motor_cmd``), the 250 Hz path.
 
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time of the sensor frame (s).
-        gyro, accel, mag : tuple of 3 floats
-            Omega (rad/s), specific force (m/s^2), magnetic field (gauss), body FLU.
-        pos, vel : sequence (3,)
-            Position (m) and velocity (m/s of Python floats), world ENU.
-        nav_t : float or None
-            Time stamp of pos/vel (``Measurements.nav_time_s``).
-        xd, vd, ad, jd, sd : sequence (3,)
-            Reference position and its four derivatives (``Reference``), world ENU.
-        target : sequence (3,) or None
-            Pointing target S_p (None: the controller's).
+        The composition of this module's pieces: the observer (or the
+        measured vector pairs), the acceleration estimate, the thrust
+        vector of eq. (23) with the integral term, the governed pointing,
+        :func:`desired_frame` (eqs. 21-26, 31), the torque law
+        (:func:`decoupled_law` or :func:`attitude_torque`), the collective
+        thrust ``f = F_d . R e3`` and the mixer.
 
-        Returns
-        -------
-        tuple (4,)
-            Normalised motor commands (``ControlOutput.motor_cmd``).
-
-        Notes
-        -----
-        Side outputs: ``self.last_desired`` = (b1d, b2d, b3d, f) flattened
-        (10 floats: the columns of R_d, world ENU, and the collective
-        thrust, N), for logging. Raises ValueError where a measured or
-        derived direction is zero or not finite.
-
-        Every line is :meth:`update_reference` (the pure functions of this
-        module composed) with the 3-vectors unrolled into float locals, the
-        float operations kept in the same order so the result is identical
-        to the last bit (``tests/test_control_fast.py`` checks it); shared
-        sub-expressions (the TRIAD frames, computed three times by
-        ``body_coordinates`` and once more by ``thrust_axis_estimate``) are
-        computed once, and values only ``ControlOutput`` needs (V) are left
-        to :meth:`update`. Rare branches (free fall, pointing undefined or
-        along the thrust, the "paper" law) call the pure functions.
+        Side outputs: ``last_desired`` = (b1d, b2d, b3d, f) flattened (10
+        floats: R_d's columns, world ENU, and the collective thrust, N), for
+        logging; ``last_rate_cmd`` = the body-rate command of ``--control
+        rates`` (rad/s, FLU). Raises ValueError where a measured or derived
+        direction is zero or not finite.
         """
-        sqrt = math.sqrt
-        m, g, kx, kv = self._m, self._g, self._kx, self._kv
+        gyro, accel, mag, pos, vel, nav_t = meas
+        xd, vd, ad, jd, sd, target = ref
         obs = self.observer
         if obs is not None:
             # the observer (companion.control.observer): bias-corrected rate, filtered p, v at t_s
             obs.update(t_s, gyro, accel, mag, pos, vel, nav_t, self._thrust_prev)
             if obs.t is None:        # no vertical yet (free fall at start-up): no estimate to act on
                 raise ValueError("the observer has no attitude estimate yet")
-            bx_, by_, bz_ = obs.b
-            gyro = (gyro[0] - bx_, gyro[1] - by_, gyro[2] - bz_)
+            bx, by, bz = obs.b
+            gyro = (gyro[0] - bx, gyro[1] - by, gyro[2] - bz)
             pos, vel, nav_t = obs.p, obs.v, t_s
             # a_hat from the filter's velocity, low-passed over one fix interval: a 10 Hz fix's
             # correction step in v_hat must not reach F_dot as a one-frame spike
             fi = obs.fix_interval_s
             self.accel.tau_s = fi if fi > self._tau_a else self._tau_a
-        wx, wy, wz = gyro
-
-        # --- AccelerationEstimator.update (state kept in self.accel) -----------------
-        acc = self.accel
-        tn = t_s if nav_t is None else nav_t
-        vx, vy, vz = vel
-        t_prev = acc._t
-        if t_prev is None:
-            acc._t, acc._v = tn, (vx, vy, vz)
-            ahx, ahy, ahz = acc._a
-        else:
-            dt = tn - t_prev
-            if dt <= 0.0:
-                ahx, ahy, ahz = acc._a
-            else:
-                px, py, pz = acc._v
-                dx, dy, dz = (vx - px) / dt, (vy - py) / dt, (vz - pz) / dt
-                tau_a = acc.tau_s
-                if tau_a > 0.0:
-                    beta = 1.0 - math.exp(-dt / tau_a)
-                    ax, ay, az = acc._a
-                    ax, ay, az = ax + beta * (dx - ax), ay + beta * (dy - ay), az + beta * (dz - az)
-                else:
-                    ax, ay, az = dx, dy, dz
-                acc._a = (ax, ay, az)
-                acc._t, acc._v = tn, (vx, vy, vz)
-                lag = 0.5 * dt + tau_a
-                ahx, ahy, ahz = ax + lag * jd[0], ay + lag * jd[1], az + lag * jd[2]
-
-        # --- measurement_vectors(filtered accel, filtered mag, a_hat, ...) ------------
-        if obs is not None:
-            # virtual_pairs(R_hat, h): b_i = R_hat^T r_i, r_1 = e3, r_2 = h (horizontal field)
-            R = obs.R
-            hx, hy, hz = self._h
-            m1x, m1y, m1z = R[6], R[7], R[8]
-            r1x, r1y, r1z = 0.0, 0.0, 1.0
-            m2x, m2y, m2z = (R[0] * hx + R[3] * hy + R[6] * hz, R[1] * hx + R[4] * hy + R[7] * hz,
-                             R[2] * hx + R[5] * hy + R[8] * hz)
-            r2x, r2y, r2z = hx, hy, hz
-        else:
-            x, y, z = accel
-            n = sqrt(x * x + y * y + z * z)
-            if not n > 0.0:
-                raise ValueError("cannot normalise a zero (or non-finite) vector")
-            fa = self._f_acc.step(t_s, x / n, y / n, z / n, wx, wy, wz)
-            x, y, z = mag
-            n = sqrt(x * x + y * y + z * z)
-            if not n > 0.0:
-                raise ValueError("cannot normalise a zero (or non-finite) vector")
-            fm = self._f_mag.step(t_s, x / n, y / n, z / n, wx, wy, wz)
-            # both filters have stepped before anything below may raise (as in update_reference)
-            if not self._today:
-                # the other sensor models / tilt sources (controller_vectors)
-                pr = controller_vectors(fa, fm, (ahx, ahy, ahz), self._r2, g, self._perp, self._vectors, self._aided)
-                m1x, m1y, m1z = pr.b1
-                r1x, r1y, r1z = pr.r1
-                m2x, m2y, m2z = pr.b2
-                r2x, r2y, r2z = pr.r2
-            else:
-                x, y, z = fa
-                n = sqrt(x * x + y * y + z * z)
-                if not n > 0.0:
-                    raise ValueError("cannot normalise a zero (or non-finite) vector")
-                m1x, m1y, m1z = x / n, y / n, z / n                       # b_1 (body)
-                z = ahz + g
-                n = sqrt(ahx * ahx + ahy * ahy + z * z)
-                if not n > 0.0:
-                    raise ValueError("cannot normalise a zero (or non-finite) vector")
-                r1x, r1y, r1z = ahx / n, ahy / n, z / n                   # r_1 (world)
-                x, y, z = fm
-                n = sqrt(x * x + y * y + z * z)
-                if not n > 0.0:
-                    raise ValueError("cannot normalise a zero (or non-finite) vector")
-                m2x, m2y, m2z = x / n, y / n, z / n                       # b_2 (body)
-                r2x, r2y, r2z = self._r2u                                  # r_2 (world)
-                if self._perp:
-                    c = m2x * m1x + m2y * m1y + m2z * m1z
-                    x, y, z = m2x - c * m1x, m2y - c * m1y, m2z - c * m1z
-                    n = sqrt(x * x + y * y + z * z)
-                    if not n > 0.0:
-                        raise ValueError("cannot normalise a zero (or non-finite) vector")
-                    m2x, m2y, m2z = x / n, y / n, z / n
-                    c = r2x * r1x + r2y * r1y + r2z * r1z
-                    x, y, z = r2x - c * r1x, r2y - c * r1y, r2z - c * r1z
-                    n = sqrt(x * x + y * y + z * z)
-                    if not n > 0.0:
-                        raise ValueError("cannot normalise a zero (or non-finite) vector")
-                    r2x, r2y, r2z = x / n, y / n, z / n
-        self._pairs = ((m1x, m1y, m1z), (m2x, m2y, m2z), (r1x, r1y, r1z), (r2x, r2y, r2z))
-        self._pv = (tuple(pos), (vx, vy, vz))
+        a_hat = self.accel.update(t_s if nav_t is None else nav_t, vel, jd)
+        b1, b2, r1, r2 = self._vector_pairs(t_s, gyro, accel, mag, a_hat)
+        self._pairs = (b1, b2, r1, r2)
+        self._pv = (tuple(pos), tuple(vel))
         self._t_last = t_s
+        e_x = (pos[0] - xd[0], pos[1] - xd[1], pos[2] - xd[2])
+        e_v = (vel[0] - vd[0], vel[1] - vd[1], vel[2] - vd[2])
+        F, F_dot, F_ddot = self._thrust_vector(t_s, e_x, e_v, (a_hat[0] - ad[0], a_hat[1] - ad[1], a_hat[2] - ad[2]),
+                                               ad, jd, sd)
+        u, u_dot, u_ddot = self._pointing(t_s, self.target_enu_m if target is None else target, xd, vd, ad)
+        b1d, b2d, b3d, Od, Odd = desired_frame(F, F_dot, F_ddot, u, u_dot, u_ddot, self._b2_prev)
+        self._b2_prev = b2d
+        frames = triad_frames(b1, b2, r1, r2)
+        if self._decoupled:
+            q1, q2, q3 = triad_to_body3(b1d, b2d, b3d, b1, r1, frames)    # R^T b_jd
+            tau, z, e, Od_b, psi = decoupled_law(self._J, gyro, Od, Odd, q1, q2, q3, self._rho, self._alpha)
+            ia = self._ialpha
+            self.last_rate_cmd = (Od_b[0] + ia * z[0], Od_b[1] + ia * z[1], Od_b[2] + ia * z[2])
+            zV, V = (z[0], z[1], z[2], q3[2], psi, e), None
+        else:
+            tau, zV, V = attitude_torque(self._J, gyro, Od, Odd, (b1, b2), (r1, r2), b1d, b2d, b3d, self._rho,
+                                         self._alpha)
+            self.last_rate_cmd = rate_command(Od, zV, self._alpha)
+        ez = triad_body_z(b1, r1, frames)
+        f = F[0] * ez[0] + F[1] * ez[1] + F[2] * ez[2]
+        cmd, saturated = self.mixer.mix_fast(f, tau[0], tau[1], tau[2])
+        self._thrust_prev = (cmd[0] + cmd[1] + cmd[2] + cmd[3]) * self._fmax
+        self.last_desired = (*b1d, *b2d, *b3d, f)
+        self._last_detail = (tau, saturated, Od, e_x, e_v, zV, V)
+        return cmd
 
-        # --- errors and F_d with its derivatives (eq. 23) ------------------------------
-        xd0, xd1, xd2 = xd
-        vd0, vd1, vd2 = vd
-        ad0, ad1, ad2 = ad
-        p0, p1, p2 = pos
-        ex0, ex1, ex2 = p0 - xd0, p1 - xd1, p2 - xd2
-        ev0, ev1, ev2 = vx - vd0, vy - vd1, vz - vd2
-        ea0, ea1, ea2 = ahx - ad0, ahy - ad1, ahz - ad2            # e_v_dot
-        ki = self._ki
+    def _vector_pairs(self, t_s, gyro, accel, mag, a_hat) -> tuple:
+        """``(b1, b2, r1, r2)``: the observer's virtual pairs, else the measured vectors
+        (filtered, :func:`companion.control.vectors.controller_vectors`)."""
+        if self.observer is not None:
+            # virtual_pairs(R_hat, h): b_i = R_hat^T r_i, r_1 = e3, r_2 = h (horizontal field)
+            R = self.observer.R
+            hx, hy, hz = self._h
+            return ((R[6], R[7], R[8]), (R[0] * hx + R[3] * hy + R[6] * hz, R[1] * hx + R[4] * hy + R[7] * hz,
+                                         R[2] * hx + R[5] * hy + R[8] * hz), _E3, self._h)
+        wx, wy, wz = gyro
+        x, y, z = unit3(accel)
+        fa = self._f_acc.step(t_s, x, y, z, wx, wy, wz)
+        x, y, z = unit3(mag)
+        fm = self._f_mag.step(t_s, x, y, z, wx, wy, wz)
+        pr = controller_vectors(fa, fm, a_hat, self._r2, self._g, self._perp, self._vectors, self._aided)
+        return pr.b1, pr.b2, pr.r1, pr.r2
+
+    def _thrust_vector(self, t_s, e_x, e_v, ev_dot, ad, jd, sd) -> tuple:
+        """F_d of eq. (23) with the integral term, and its first two derivatives (module docstring)."""
+        m, g, kx, kv, ki = self._m, self._g, self._kx, self._kv, self._ki
+        ex0, ex1, ex2 = e_x
+        ev0, ev1, ev2 = e_v
+        ea0, ea1, ea2 = ev_dot
         if ki > 0.0:
-            # self._integrate / integral_step, inlined
-            i0, i1, i2 = self._e_i
-            active = False
-            t_prev = self._t_i
-            if t_prev is None:
-                self._t_i = t_s
-            else:
-                dt = t_s - t_prev
-                if dt > 0.0:
-                    self._t_i = t_s
-                    zone = self._i_zone
-                    if ex0 * ex0 + ex1 * ex1 + ex2 * ex2 < zone * zone:
-                        if dt > _INTEGRAL_DT_MAX_S:
-                            dt = _INTEGRAL_DT_MAX_S
-                        i0, i1, i2 = i0 + dt * ex0, i1 + dt * ex1, i2 + dt * ex2
-                        n = ki * sqrt(i0 * i0 + i1 * i1 + i2 * i2)
-                        lim = self._i_limit
-                        if n > lim:
-                            c = lim / n
-                            i0, i1, i2 = i0 * c, i1 * c, i2 * c
-                        else:
-                            active = True
-                        self._e_i = (i0, i1, i2)
+            (i0, i1, i2), active = self._integrate(t_s, e_x)
             if active:                                             # e_i_dot = e_x, e_i_ddot = e_v
                 id0, id1, id2, idd0, idd1, idd2 = ex0, ex1, ex2, ev0, ev1, ev2
             else:
                 id0 = id1 = id2 = idd0 = idd1 = idd2 = 0.0
-            ej0 = -(kx * ev0 + kv * ea0 + ki * id0) / m            # e_v_ddot
+            ej0 = -(kx * ev0 + kv * ea0 + ki * id0) / m            # e_v_ddot of the ideal closed loop
             ej1 = -(kx * ev1 + kv * ea1 + ki * id1) / m
             ej2 = -(kx * ev2 + kv * ea2 + ki * id2) / m
-            F0 = -kx * ex0 - kv * ev0 - ki * i0 + m * ad0
-            F1 = -kx * ex1 - kv * ev1 - ki * i1 + m * ad1
-            F2 = -kx * ex2 - kv * ev2 - ki * i2 + m * (g + ad2)
-            Fd0 = -kx * ev0 - kv * ea0 - ki * id0 + m * jd[0]
-            Fd1 = -kx * ev1 - kv * ea1 - ki * id1 + m * jd[1]
-            Fd2 = -kx * ev2 - kv * ea2 - ki * id2 + m * jd[2]
-            Fdd0 = -kx * ea0 - kv * ej0 - ki * idd0 + m * sd[0]
-            Fdd1 = -kx * ea1 - kv * ej1 - ki * idd1 + m * sd[1]
-            Fdd2 = -kx * ea2 - kv * ej2 - ki * idd2 + m * sd[2]
-        else:
-            ej0 = -(kx * ev0 + kv * ea0) / m                       # e_v_ddot
-            ej1 = -(kx * ev1 + kv * ea1) / m
-            ej2 = -(kx * ev2 + kv * ea2) / m
-            F0 = -kx * ex0 - kv * ev0 + m * ad0
-            F1 = -kx * ex1 - kv * ev1 + m * ad1
-            F2 = -kx * ex2 - kv * ev2 + m * (g + ad2)
-            Fd0 = -kx * ev0 - kv * ea0 + m * jd[0]
-            Fd1 = -kx * ev1 - kv * ea1 + m * jd[1]
-            Fd2 = -kx * ev2 - kv * ea2 + m * jd[2]
-            Fdd0 = -kx * ea0 - kv * ej0 + m * sd[0]
-            Fdd1 = -kx * ea1 - kv * ej1 + m * sd[1]
-            Fdd2 = -kx * ea2 - kv * ej2 + m * sd[2]
+            return ((-kx * ex0 - kv * ev0 - ki * i0 + m * ad[0], -kx * ex1 - kv * ev1 - ki * i1 + m * ad[1],
+                     -kx * ex2 - kv * ev2 - ki * i2 + m * (g + ad[2])),
+                    (-kx * ev0 - kv * ea0 - ki * id0 + m * jd[0], -kx * ev1 - kv * ea1 - ki * id1 + m * jd[1],
+                     -kx * ev2 - kv * ea2 - ki * id2 + m * jd[2]),
+                    (-kx * ea0 - kv * ej0 - ki * idd0 + m * sd[0], -kx * ea1 - kv * ej1 - ki * idd1 + m * sd[1],
+                     -kx * ea2 - kv * ej2 - ki * idd2 + m * sd[2]))
+        ej0 = -(kx * ev0 + kv * ea0) / m
+        ej1 = -(kx * ev1 + kv * ea1) / m
+        ej2 = -(kx * ev2 + kv * ea2) / m
+        return ((-kx * ex0 - kv * ev0 + m * ad[0], -kx * ex1 - kv * ev1 + m * ad[1], -kx * ex2 - kv * ev2 + m * (g + ad[2])),
+                (-kx * ev0 - kv * ea0 + m * jd[0], -kx * ev1 - kv * ea1 + m * jd[1], -kx * ev2 - kv * ea2 + m * jd[2]),
+                (-kx * ea0 - kv * ej0 + m * sd[0], -kx * ea1 - kv * ej1 + m * sd[1], -kx * ea2 - kv * ej2 + m * sd[2]))
 
-        # --- pointing u_s = S_p - x_d (eq. 21), governed ------------------------------
-        Sp = self.target_enu_m if target is None else target
-        u0, u1, u2 = Sp[0] - xd0, Sp[1] - xd1, Sp[2] - xd2
-        ud0, ud1, ud2 = -vd0, -vd1, -vd2
-        udd0, udd1, udd2 = -ad0, -ad1, -ad2
-        uu = u0 * u0 + u1 * u1 + u2 * u2
-        if self.pointing is not None and uu > 1e-12:
-            # _unit_d2(u_s, u_s_dot, u_s_ddot)
-            r = sqrt(uu)
-            n0, n1, n2 = u0 / r, u1 / r, u2 / r
-            rd = n0 * ud0 + n1 * ud1 + n2 * ud2
-            nd0, nd1, nd2 = (ud0 - n0 * rd) / r, (ud1 - n1 * rd) / r, (ud2 - n2 * rd) / r
-            rdd = nd0 * ud0 + nd1 * ud1 + nd2 * ud2 + n0 * udd0 + n1 * udd1 + n2 * udd2
-            s_, sd_, sdd_ = self.pointing.update(
-                t_s, (n0, n1, n2), (nd0, nd1, nd2),
-                ((udd0 - 2.0 * nd0 * rd - n0 * rdd) / r, (udd1 - 2.0 * nd1 * rd - n1 * rdd) / r,
-                 (udd2 - 2.0 * nd2 * rd - n2 * rdd) / r))
-            u0, u1, u2 = s_
-            ud0, ud1, ud2 = sd_
-            udd0, udd1, udd2 = sdd_
-            uu = u0 * u0 + u1 * u1 + u2 * u2
-
-        # --- desired_attitude (eqs. 21-26, 31) ---------------------------------------
-        FF = F0 * F0 + F1 * F1 + F2 * F2
-        fallback = not FF >= 1e-12 or not uu > 1e-12
-        if not fallback:
-            # b3 = _unit_d2(F, F_dot, F_ddot)
-            r = sqrt(FF)
-            b3x, b3y, b3z = F0 / r, F1 / r, F2 / r
-            rd = b3x * Fd0 + b3y * Fd1 + b3z * Fd2
-            b3dx, b3dy, b3dz = (Fd0 - b3x * rd) / r, (Fd1 - b3y * rd) / r, (Fd2 - b3z * rd) / r
-            rdd = b3dx * Fd0 + b3dy * Fd1 + b3dz * Fd2 + b3x * Fdd0 + b3y * Fdd1 + b3z * Fdd2
-            b3ddx = (Fdd0 - 2.0 * b3dx * rd - b3x * rdd) / r
-            b3ddy = (Fdd1 - 2.0 * b3dy * rd - b3y * rdd) / r
-            b3ddz = (Fdd2 - 2.0 * b3dz * rd - b3z * rdd) / r
-            # s = _unit_d2(u_s, ...)
-            r = sqrt(uu)
-            s0, s1, s2 = u0 / r, u1 / r, u2 / r
-            rd = s0 * ud0 + s1 * ud1 + s2 * ud2
-            sd0, sd1, sd2 = (ud0 - s0 * rd) / r, (ud1 - s1 * rd) / r, (ud2 - s2 * rd) / r
-            rdd = sd0 * ud0 + sd1 * ud1 + sd2 * ud2 + s0 * udd0 + s1 * udd1 + s2 * udd2
-            sdd0 = (udd0 - 2.0 * sd0 * rd - s0 * rdd) / r
-            sdd1 = (udd1 - 2.0 * sd1 * rd - s1 * rdd) / r
-            sdd2 = (udd2 - 2.0 * sd2 * rd - s2 * rdd) / r
-            # w = s - (s.b3) b3 (eq. 22) and its derivatives
-            c = s0 * b3x + s1 * b3y + s2 * b3z
-            cd = (sd0 * b3x + sd1 * b3y + sd2 * b3z) + (s0 * b3dx + s1 * b3dy + s2 * b3dz)
-            cdd = ((sdd0 * b3x + sdd1 * b3y + sdd2 * b3z) + 2.0 * (sd0 * b3dx + sd1 * b3dy + sd2 * b3dz)
-                   + (s0 * b3ddx + s1 * b3ddy + s2 * b3ddz))
-            w0, w1, w2 = s0 - c * b3x, s1 - c * b3y, s2 - c * b3z
-            fallback = w0 * w0 + w1 * w1 + w2 * w2 < 1e-12
-        if not fallback:
-            wd0, wd1, wd2 = sd0 - cd * b3x - c * b3dx, sd1 - cd * b3y - c * b3dy, sd2 - cd * b3z - c * b3dz
-            wdd0 = sdd0 - cdd * b3x - 2.0 * cd * b3dx - c * b3ddx
-            wdd1 = sdd1 - cdd * b3y - 2.0 * cd * b3dy - c * b3ddy
-            wdd2 = sdd2 - cdd * b3z - 2.0 * cd * b3dz - c * b3ddz
-            # b2 = _unit_d2(w, w_dot, w_ddot)
-            r = sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-            b2x, b2y, b2z = w0 / r, w1 / r, w2 / r
-            rd = b2x * wd0 + b2y * wd1 + b2z * wd2
-            b2dx, b2dy, b2dz = (wd0 - b2x * rd) / r, (wd1 - b2y * rd) / r, (wd2 - b2z * rd) / r
-            rdd = b2dx * wd0 + b2dy * wd1 + b2dz * wd2 + b2x * wdd0 + b2y * wdd1 + b2z * wdd2
-            b2ddx = (wdd0 - 2.0 * b2dx * rd - b2x * rdd) / r
-            b2ddy = (wdd1 - 2.0 * b2dy * rd - b2y * rdd) / r
-            b2ddz = (wdd2 - 2.0 * b2dz * rd - b2z * rdd) / r
-            # b1 = b2 x b3 and its derivatives
-            b1x, b1y, b1z = b2y * b3z - b2z * b3y, b2z * b3x - b2x * b3z, b2x * b3y - b2y * b3x
-            b1dx = (b2dy * b3z - b2dz * b3y) + (b2y * b3dz - b2z * b3dy)
-            b1dy = (b2dz * b3x - b2dx * b3z) + (b2z * b3dx - b2x * b3dz)
-            b1dz = (b2dx * b3y - b2dy * b3x) + (b2x * b3dy - b2y * b3dx)
-            b1ddx = (b2ddy * b3z - b2ddz * b3y) + 2.0 * (b2dy * b3dz - b2dz * b3dy) + (b2y * b3ddz - b2z * b3ddy)
-            b1ddy = (b2ddz * b3x - b2ddx * b3z) + 2.0 * (b2dz * b3dx - b2dx * b3dz) + (b2z * b3ddx - b2x * b3ddz)
-            b1ddz = (b2ddx * b3y - b2ddy * b3x) + 2.0 * (b2dx * b3dy - b2dy * b3dx) + (b2x * b3ddy - b2y * b3ddx)
-            Od0 = b3x * b2dx + b3y * b2dy + b3z * b2dz
-            Od1 = b1x * b3dx + b1y * b3dy + b1z * b3dz
-            Od2 = b2x * b1dx + b2y * b1dy + b2z * b1dz
-            Odd0 = (b3dx * b2dx + b3dy * b2dy + b3dz * b2dz) + (b3x * b2ddx + b3y * b2ddy + b3z * b2ddz)
-            Odd1 = (b1dx * b3dx + b1dy * b3dy + b1dz * b3dz) + (b1x * b3ddx + b1y * b3ddy + b1z * b3ddz)
-            Odd2 = (b2dx * b1dx + b2dy * b1dy + b2dz * b1dz) + (b2x * b1ddx + b2y * b1ddy + b2z * b1ddz)
-        else:
-            des = desired_attitude((F0, F1, F2), (Fd0, Fd1, Fd2), (Fdd0, Fdd1, Fdd2), (u0, u1, u2),
-                                   (ud0, ud1, ud2), (udd0, udd1, udd2), self._b2_prev)
-            b1x, b1y, b1z = des.b1d
-            b2x, b2y, b2z = des.b2d
-            b3x, b3y, b3z = des.b3d
-            Od0, Od1, Od2 = des.Omega_d
-            Odd0, Odd1, Odd2 = des.Omega_d_dot
-        self._b2_prev = (b2x, b2y, b2z)
-
-        # --- TRIAD frames of the two pairs (body_coordinates, thrust_axis_estimate) ---
-        x, y, z = m1y * m2z - m1z * m2y, m1z * m2x - m1x * m2z, m1x * m2y - m1y * m2x
-        n = sqrt(x * x + y * y + z * z)
-        if not n > 0.0:
-            raise ValueError("cannot normalise a zero (or non-finite) vector")
-        mbx, mby, mbz = x / n, y / n, z / n
-        x, y, z = r1y * r2z - r1z * r2y, r1z * r2x - r1x * r2z, r1x * r2y - r1y * r2x
-        n = sqrt(x * x + y * y + z * z)
-        if not n > 0.0:
-            raise ValueError("cannot normalise a zero (or non-finite) vector")
-        mrx, mry, mrz = x / n, y / n, z / n
-        nbx, nby, nbz = m1y * mbz - m1z * mby, m1z * mbx - m1x * mbz, m1x * mby - m1y * mbx
-        nrx, nry, nrz = r1y * mrz - r1z * mry, r1z * mrx - r1x * mrz, r1x * mry - r1y * mrx
-
-        J0, J1, J2 = self._J
-        if self._decoupled:
-            # q_j = R^T b_jd (body_coordinates)
-            c1 = b1x * r1x + b1y * r1y + b1z * r1z
-            c2 = b1x * mrx + b1y * mry + b1z * mrz
-            c3 = b1x * nrx + b1y * nry + b1z * nrz
-            q10, q11, q12 = (c1 * m1x + c2 * mbx + c3 * nbx, c1 * m1y + c2 * mby + c3 * nby,
-                             c1 * m1z + c2 * mbz + c3 * nbz)
-            c1 = b2x * r1x + b2y * r1y + b2z * r1z
-            c2 = b2x * mrx + b2y * mry + b2z * mrz
-            c3 = b2x * nrx + b2y * nry + b2z * nrz
-            q20, q21, q22 = (c1 * m1x + c2 * mbx + c3 * nbx, c1 * m1y + c2 * mby + c3 * nby,
-                             c1 * m1z + c2 * mbz + c3 * nbz)
-            c1 = b3x * r1x + b3y * r1y + b3z * r1z
-            c2 = b3x * mrx + b3y * mry + b3z * mrz
-            c3 = b3x * nrx + b3y * nry + b3z * nrz
-            dx, dy, dz = (c1 * m1x + c2 * mbx + c3 * nbx, c1 * m1y + c2 * mby + c3 * nby,
-                          c1 * m1z + c2 * mbz + c3 * nbz)   # q3 = R^T b3d
-            # attitude_torque_decoupled (tilt angle not needed here)
-            kx_, ky_ = -dy, dx
-            if dz > -1.0 + 1e-9:
-                kv0, kv1, kv2 = ky_ * q12, -kx_ * q12, kx_ * q11 - ky_ * q10
-                kkv0, kkv1 = ky_ * kv2, -kx_ * kv2
-                w = 1.0 / (1.0 + dz)
-                psi = math.atan2(q11 - kv1 + w * kkv1, q10 - kv0 + w * kkv0)
-            else:
-                psi = 0.0
-            rho1, rho2 = self._rho
-            z0, z1, z2 = rho1 * kx_, rho1 * ky_, rho2 * math.sin(psi)
-            o0 = Od0 * q10 + Od1 * q20 + Od2 * dx
-            o1 = Od0 * q11 + Od1 * q21 + Od2 * dy
-            o2 = Od0 * q12 + Od1 * q22 + Od2 * dz
-            oo0 = Odd0 * q10 + Odd1 * q20 + Odd2 * dx
-            oo1 = Odd0 * q11 + Odd1 * q21 + Odd2 * dy
-            oo2 = Odd0 * q12 + Odd1 * q22 + Odd2 * dz
-            e0, e1, e2 = wx - o0, wy - o1, wz - o2
-            Jw0, Jw1, Jw2 = J0 * wx, J1 * wy, J2 * wz
-            alpha = self._alpha
-            tx = (wy * Jw2 - wz * Jw1) + J0 * (oo0 - (wy * o2 - wz * o1) + z0 - alpha * e0)
-            ty = (wz * Jw0 - wx * Jw2) + J1 * (oo1 - (wz * o0 - wx * o2) + z1 - alpha * e1)
-            tz = (wx * Jw1 - wy * Jw0) + J2 * (oo2 - (wx * o1 - wy * o0) + z2 - alpha * e2)
-            zV = (z0, z1, z2, dz, psi, (e0, e1, e2))
-            V = None
-        else:
-            (tx, ty, tz), zV, V = attitude_torque(self._J, gyro, (Od0, Od1, Od2), (Odd0, Odd1, Odd2),
-                                                  ((m1x, m1y, m1z), (m2x, m2y, m2z)),
-                                                  ((r1x, r1y, r1z), (r2x, r2y, r2z)), (b1x, b1y, b1z),
-                                                  (b2x, b2y, b2z), (b3x, b3y, b3z), self._rho, self._alpha)
-        # f = F . (R e3), R e3 = r1 b1_z + mr mb_z + nr nb_z (thrust_axis_estimate)
-        f = (F0 * (r1x * m1z + mrx * mbz + nrx * nbz) + F1 * (r1y * m1z + mry * mbz + nry * nbz)
-             + F2 * (r1z * m1z + mrz * mbz + nrz * nbz))
-        cmd, saturated = self.mixer.mix_fast(f, tx, ty, tz)
-        self._thrust_prev = (cmd[0] + cmd[1] + cmd[2] + cmd[3]) * self._fmax
-        self.last_desired = (b1x, b1y, b1z, b2x, b2y, b2z, b3x, b3y, b3z, f)
-        self._last_detail = ((tx, ty, tz), saturated, (Od0, Od1, Od2), (ex0, ex1, ex2), (ev0, ev1, ev2), zV, V)
-        return cmd
-
-    def update_reference(self, t_s: float, meas: Measurements, ref: Reference) -> ControlOutput:
-        """:meth:`update` as the plain composition of this module's pure functions (slower; the specification).
-
-        Parameters
-        ----------
-        t_s : float
-            Vehicle time of the sensor frame (s).
-        meas : Measurements
-        ref : Reference
-            Reference sample at ``t_s``.
-
-        Returns
-        -------
-        ControlOutput
-        """
-        m, g = self._m, self._g
-        kx, kv = self.cfg.kx, self.cfg.kv
-        gyro = meas.gyro_flu_rad_s
-        Omega = (float(gyro[0]), float(gyro[1]), float(gyro[2]))
-        p, v = meas.pos_enu_m, meas.vel_enu_m_s
-        t_nav = t_s if meas.nav_time_s is None else meas.nav_time_s
-        obs = self.observer
-        if obs is not None:
-            obs.update(t_s, Omega, meas.accel_flu_m_s2, meas.mag_flu_gauss, p, v, meas.nav_time_s,
-                       self._thrust_prev)
-            if obs.t is None:
-                raise ValueError("the observer has no attitude estimate yet")
-            Omega = (Omega[0] - obs.b[0], Omega[1] - obs.b[1], Omega[2] - obs.b[2])
-            p, v, t_nav = obs.p, obs.v, t_s
-            fi = obs.fix_interval_s
-            self.accel.tau_s = fi if fi > self._tau_a else self._tau_a
-        a_hat = self.accel.update(t_nav, v, ref.jerk_enu_m_s3)
-        if obs is not None:
-            pairs = virtual_pairs(obs.R, self._h)
-        else:
-            pairs = controller_vectors(self._f_acc.update(t_s, unit3(meas.accel_flu_m_s2), Omega),
-                                       self._f_mag.update(t_s, unit3(meas.mag_flu_gauss), Omega),
-                                       a_hat, self._r2, g, self.cfg.mag_perpendicular, self._vectors, self._aided)
-        b1, b2, r1, r2 = pairs.b1, pairs.b2, pairs.r1, pairs.r2
-        self._pairs = (b1, b2, r1, r2)
-        self._pv = (tuple(p), tuple(v))
-        self._t_last = t_s
-
-        xd, vd, ad, jd, sd = ref.pos_enu_m, ref.vel_enu_m_s, ref.acc_enu_m_s2, ref.jerk_enu_m_s3, ref.snap_enu_m_s4
-        e_x = (p[0] - xd[0], p[1] - xd[1], p[2] - xd[2])
-        e_v = (v[0] - vd[0], v[1] - vd[1], v[2] - vd[2])
-        ev_dot = (a_hat[0] - ad[0], a_hat[1] - ad[1], a_hat[2] - ad[2])
-        ki = self._ki
-        if ki > 0.0:
-            # the integral term: F_d gains -ki e_i, F_d_dot -ki e_i_dot, F_d_ddot -ki e_i_ddot
-            e_i, active = self._integrate(t_s, e_x)
-            ei_dot, ei_ddot = (e_x, e_v) if active else (_ZERO, _ZERO)
-            ev_ddot = tuple(-(kx * e_v[i] + kv * ev_dot[i] + ki * ei_dot[i]) / m for i in range(3))
-            F = (-kx * e_x[0] - kv * e_v[0] - ki * e_i[0] + m * ad[0],
-                 -kx * e_x[1] - kv * e_v[1] - ki * e_i[1] + m * ad[1],
-                 -kx * e_x[2] - kv * e_v[2] - ki * e_i[2] + m * (g + ad[2]))
-            F_dot = tuple(-kx * e_v[i] - kv * ev_dot[i] - ki * ei_dot[i] + m * jd[i] for i in range(3))
-            F_ddot = tuple(-kx * ev_dot[i] - kv * ev_ddot[i] - ki * ei_ddot[i] + m * sd[i] for i in range(3))
-        else:
-            ev_ddot = tuple(-(kx * e_v[i] + kv * ev_dot[i]) / m for i in range(3))
-            F = (-kx * e_x[0] - kv * e_v[0] + m * ad[0],
-                 -kx * e_x[1] - kv * e_v[1] + m * ad[1],
-                 -kx * e_x[2] - kv * e_v[2] + m * (g + ad[2]))
-            F_dot = tuple(-kx * e_v[i] - kv * ev_dot[i] + m * jd[i] for i in range(3))
-            F_ddot = tuple(-kx * ev_dot[i] - kv * ev_ddot[i] + m * sd[i] for i in range(3))
-        Sp = self.target_enu_m if ref.target_enu_m is None else ref.target_enu_m
-        u_s = (Sp[0] - xd[0], Sp[1] - xd[1], Sp[2] - xd[2])
-        u_s_dot, u_s_ddot = (-vd[0], -vd[1], -vd[2]), (-ad[0], -ad[1], -ad[2])
-        if self.pointing is not None and _dot(u_s, u_s) > 1e-12:
-            # eq. (21) made flyable (companion.control.pointing): a unit vector
-            # with consistent derivatives passes desired_attitude's _unit_d2 unchanged.
-            u_s, u_s_dot, u_s_ddot = self.pointing.update(t_s, *_unit_d2(u_s, u_s_dot, u_s_ddot))
-        des = desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, self._b2_prev)
-        self._b2_prev = des.b2d
-
-        if self._decoupled:
-            q = [body_coordinates(bd, b1, b2, r1, r2) for bd in (des.b1d, des.b2d, des.b3d)]
-            res = attitude_torque_decoupled(self._J, Omega, des.Omega_d, des.Omega_d_dot, q[0], q[1], q[2],
-                                            self._rho, self.cfg.alpha)
-            tau, z, V = res.tau, res.z, res.V
-        else:
-            tau, z, V = attitude_torque(self._J, Omega, des.Omega_d, des.Omega_d_dot, (b1, b2), (r1, r2),
-                                        des.b1d, des.b2d, des.b3d, self._rho, self.cfg.alpha)
-        f = _dot(F, thrust_axis_estimate(b1, b2, r1, r2))
-        mc = self.mixer.mix(f, tau)
-        self._thrust_prev = (mc.cmd[0] + mc.cmd[1] + mc.cmd[2] + mc.cmd[3]) * self._fmax
-        return ControlOutput(f, tau, mc.cmd, mc.saturated, des.b3d, des.b2d, des.R_d, des.Omega_d,
-                             e_x, e_v, z, V)
+    def _pointing(self, t_s, Sp, xd, vd, ad) -> tuple:
+        """The pointing vector ``u_s = S_p - x_d`` (eq. 21) and its derivatives, governed
+        (``companion.control.pointing``: a unit vector with consistent derivatives passes
+        :func:`desired_frame`'s normalisation unchanged)."""
+        u = (Sp[0] - xd[0], Sp[1] - xd[1], Sp[2] - xd[2])
+        ud, udd = (-vd[0], -vd[1], -vd[2]), (-ad[0], -ad[1], -ad[2])
+        if self.pointing is not None and u[0] * u[0] + u[1] * u[1] + u[2] * u[2] > 1e-12:
+            return self.pointing.update(t_s, *unit_d2(u, ud, udd))
+        return u, ud, udd

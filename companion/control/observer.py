@@ -165,10 +165,9 @@ from dataclasses import dataclass
 from operator import itemgetter
 
 
+from .so3 import (Mat3, Vec3, mat_apply, mat_apply_t, mat_mul, orthonormalise, so3_exp,  # noqa: F401
+                  triad_rotation, unit)
 from .vectors import BodyVectorFilter
-
-Vec3 = tuple[float, float, float]
-Mat3 = tuple[float, float, float, float, float, float, float, float, float]   # row-major
 
 _E3 = (0.0, 0.0, 1.0)
 _POS_STD_FLOOR_M = 1e-6
@@ -187,86 +186,9 @@ def _finite3(x: float, y: float, z: float) -> bool:
     return math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
 
 
-# --- small SO(3) helpers on float tuples ----------------------------------------------
-
-
-def _unit(x: float, y: float, z: float) -> Vec3:
-    n = math.sqrt(x * x + y * y + z * z)
-    if not n > 0.0:
-        raise ValueError("cannot normalise a zero (or non-finite) vector")
-    return (x / n, y / n, z / n)
-
-
-def so3_exp(wx: float, wy: float, wz: float) -> Mat3:
-    """``exp(S(w))`` (Rodrigues), row-major 9-tuple, for a rotation vector w (rad)."""
-    th2 = wx * wx + wy * wy + wz * wz
-    if th2 < 1e-16:
-        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
-    else:
-        th = math.sqrt(th2)
-        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
-    xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
-    return (1.0 - b * (yy + zz), -a * wz + b * xy, a * wy + b * xz,
-            a * wz + b * xy, 1.0 - b * (xx + zz), -a * wx + b * yz,
-            -a * wy + b * xz, a * wx + b * yz, 1.0 - b * (xx + yy))
-
-
-def _mul(A: Mat3, B: Mat3) -> Mat3:
-    a0, a1, a2, a3, a4, a5, a6, a7, a8 = A
-    b0, b1, b2, b3, b4, b5, b6, b7, b8 = B
-    return (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7, a0 * b2 + a1 * b5 + a2 * b8,
-            a3 * b0 + a4 * b3 + a5 * b6, a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
-            a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8)
-
-
-def _apply(A: Mat3, x: float, y: float, z: float) -> Vec3:
-    return (A[0] * x + A[1] * y + A[2] * z, A[3] * x + A[4] * y + A[5] * z, A[6] * x + A[7] * y + A[8] * z)
-
-
-def _apply_t(A: Mat3, x: float, y: float, z: float) -> Vec3:
-    return (A[0] * x + A[3] * y + A[6] * z, A[1] * x + A[4] * y + A[7] * z, A[2] * x + A[5] * y + A[8] * z)
-
-
-def _orthonormalise(R: Mat3) -> Mat3:
-    """The nearest-by-construction rotation: Gram-Schmidt on the columns x, y; z = x cross y."""
-    x = _unit(R[0], R[3], R[6])
-    c = x[0] * R[1] + x[1] * R[4] + x[2] * R[7]
-    y = _unit(R[1] - c * x[0], R[4] - c * x[1], R[7] - c * x[2])
-    z = (x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0])
-    return (x[0], y[0], z[0], x[1], y[1], z[1], x[2], y[2], z[2])
-
-
-def triad_rotation(b1, b2, r1, r2) -> Mat3:
-    """``R`` (body -> world, row-major 9-tuple) from two vector pairs ``b_i = R^T r_i`` (TRIAD).
-
-    Pair 1 is matched exactly, pair 2 only fixes the rotation about it.
-
-    Parameters
-    ----------
-    b1, b2 : sequence (3,)
-        Body-frame directions (any length > 0, not collinear).
-    r1, r2 : sequence (3,)
-        Their world directions.
-
-    Returns
-    -------
-    tuple (9,)
-        ``R = [r1 m_r n_r] [b1 m_b n_b]^T`` with ``m = unit(1 x 2)``, ``n = 1 x m``.
-    """
-    def frame(u, w):
-        u = _unit(float(u[0]), float(u[1]), float(u[2]))
-        m = _unit(u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0])
-        n = (u[1] * m[2] - u[2] * m[1], u[2] * m[0] - u[0] * m[2], u[0] * m[1] - u[1] * m[0])
-        return u, m, n
-
-    bu, bm, bn = frame(b1, b2)
-    ru, rm, rn = frame(r1, r2)
-    return tuple(ru[i] * bu[j] + rm[i] * bm[j] + rn[i] * bn[j] for i in range(3) for j in range(3))
-
-
 def horizontal_field(mag_field_enu) -> Vec3:
     """The unit horizontal direction of the Earth field (ENU); ValueError if the field is vertical."""
-    return _unit(float(mag_field_enu[0]), float(mag_field_enu[1]), 0.0)
+    return unit(float(mag_field_enu[0]), float(mag_field_enu[1]), 0.0)
 
 
 def heading_from_accel_mag(accel_flu, mag_flu, mag_field_enu_gauss) -> float:
@@ -691,11 +613,11 @@ class VelocityAidedObserver:
         bx, by, bz = self.b
         pw = self._w
         h = 0.5 * dt
-        R = _mul(self.R, so3_exp(h * (pw[0] + wx) - dt * bx, h * (pw[1] + wy) - dt * by, h * (pw[2] + wz) - dt * bz))
+        R = mat_mul(self.R, so3_exp(h * (pw[0] + wx) - dt * bx, h * (pw[1] + wy) - dt * by, h * (pw[2] + wz) - dt * bz))
         # --- frame innovations: gravity, heading ---------------------------------------
         sx = sy = sz = 0.0
         if self.k_g > 0.0 and a_dir:
-            ux, uy, uz = _unit(ax, ay, az)
+            ux, uy, uz = unit(ax, ay, az)
             zx, zy, zz = R[6], R[7], R[8]                       # R^T e3
             k = self.k_g
             sx, sy, sz = k * (uy * zz - uz * zy), k * (uz * zx - ux * zz), k * (ux * zy - uy * zx)
@@ -709,16 +631,16 @@ class VelocityAidedObserver:
                 faults["mag"] += 1
             else:
                 px, py, pz = px / n, py / n, pz / n
-                hx, hy, hz = _apply_t(R, *self.h)               # R^T h (normal to R^T e3)
+                hx, hy, hz = mat_apply_t(R, *self.h)               # R^T h (normal to R^T e3)
                 k = self.k_m * ((py * hz - pz * hy) * zx + (pz * hx - px * hz) * zy + (px * hy - py * hx) * zz)
                 sx, sy, sz = sx + k * zx, sy + k * zy, sz + k * zz
         if sx != 0.0 or sy != 0.0 or sz != 0.0:
-            R = _mul(R, so3_exp(sx * dt, sy * dt, sz * dt))
+            R = mat_mul(R, so3_exp(sx * dt, sy * dt, sz * dt))
             if sx * sx + sy * sy + sz * sz < (_BIAS_GATE_RAD * (self.k_g + self.k_m)) ** 2:
                 self._bias_step(sx * dt, sy * dt, sz * dt)
         self._n += 1
         if self._n % 64 == 0:
-            R = _orthonormalise(R)
+            R = orthonormalise(R)
         self.R = R
         # --- translational propagation and the tilt integral ---------------------------
         if self.paper:
@@ -727,7 +649,7 @@ class VelocityAidedObserver:
         else:
             sbx, sby, sbz = ax, ay, az
             if a_dir:
-                self._ub = self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+                self._ub = self._ub_filter.step(t_s, *unit(ax, ay, az), 0.0, 0.0, 0.0)
             ubx, uby, ubz = self._ub
         r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
         fw = (r0 * sbx + r1 * sby + r2 * sbz, r3 * sbx + r4 * sby + r5 * sbz, r6 * sbx + r7 * sby + r8 * sbz)
@@ -755,7 +677,7 @@ class VelocityAidedObserver:
         """(s_b, u_b): the body specific force of the translational filter and the tilt vector."""
         if self.paper:
             return (0.0, 0.0, self._f_model / self.m), _E3
-        self._ub = self._ub_filter.step(t_s, *_unit(ax, ay, az), 0.0, 0.0, 0.0)
+        self._ub = self._ub_filter.step(t_s, *unit(ax, ay, az), 0.0, 0.0, 0.0)
         return (ax, ay, az), self._ub
 
     def _initialise(self, t_s, w, a, mag, pos, vel, tau) -> None:
@@ -780,8 +702,8 @@ class VelocityAidedObserver:
         if self._f_model is None:
             self._f_model = self.m * self.g          # hover until a command says otherwise
         sb, ub = self._body_vectors(t_s, *a)
-        self._fw = _apply(self.R, *sb)
-        self._uw = _apply(self.R, *ub)
+        self._fw = mat_apply(self.R, *sb)
+        self._uw = mat_apply(self.R, *ub)
         self._push(t_s)
         self._tau = tau
         self._fixes.append((tau, self.p, self.v, self._A))
@@ -800,7 +722,7 @@ class VelocityAidedObserver:
 
     def _push(self, t_s: float) -> None:
         hist = self._hist
-        hist.append((t_s, _apply_t(self._C, *self._S), self.p, self.v, self._A))
+        hist.append((t_s, mat_apply_t(self._C, *self._S), self.p, self.v, self._A))
         t_old = t_s - self.history_s
         while len(hist) > 2 and hist[1][0] <= t_old:
             hist.popleft()
@@ -927,8 +849,8 @@ class VelocityAidedObserver:
         if not um[0] * um[0] + um[1] * um[1] + um[2] * um[2] > (0.5 * g * span) ** 2:
             return                            # near free fall: no direction
         C = self._C
-        S1 = _apply(C, *self._interp(i, w, 1))
-        S0 = _apply(C, *self._interp(at0[0], at0[1], 1))
+        S1 = mat_apply(C, *self._interp(i, w, 1))
+        S0 = mat_apply(C, *self._interp(at0[0], at0[1], 1))
         up = (S1[0] - S0[0], S1[1] - S0[1], S1[2] - S0[2])
         cr = (up[1] * um[2] - up[2] * um[1], up[2] * um[0] - up[0] * um[2], up[0] * um[1] - up[1] * um[0])
         s = math.sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2])
@@ -939,15 +861,15 @@ class VelocityAidedObserver:
         phi = math.atan2(s, d)
         a = k * dtau * phi / s
         E = so3_exp(a * cr[0], a * cr[1], a * cr[2])
-        self.R = _mul(E, self.R)
-        self._C = _mul(E, C)
+        self.R = mat_mul(E, self.R)
+        self._C = mat_mul(E, C)
         if self.n_tilt_updates % 64 == 63:
-            self._C = _orthonormalise(self._C)
-        self._S = _apply(E, *self._S)
-        self._fw = _apply(E, *self._fw)
-        self._uw = _apply(E, *self._uw)
+            self._C = orthonormalise(self._C)
+        self._S = mat_apply(E, *self._S)
+        self._fw = mat_apply(E, *self._fw)
+        self._uw = mat_apply(E, *self._uw)
         if phi < _BIAS_GATE_RAD:
-            self._bias_step(*_apply_t(self.R, a * cr[0], a * cr[1], a * cr[2]))
+            self._bias_step(*mat_apply_t(self.R, a * cr[0], a * cr[1], a * cr[2]))
         self.n_tilt_updates += 1
 
     def _nav_gains(self, dtau: float, sp: float, sv: float):

@@ -50,16 +50,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-Vec3 = tuple[float, float, float]
-
-
-def unit3(v) -> Vec3:
-    """``v / |v|`` as a float tuple (3,). Raises ValueError on a zero vector."""
-    x, y, z = float(v[0]), float(v[1]), float(v[2])
-    n = math.sqrt(x * x + y * y + z * z)
-    if not n > 0.0:
-        raise ValueError("cannot normalise a zero (or non-finite) vector")
-    return (x / n, y / n, z / n)
+from .so3 import Vec3, reject, unit3
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,12 +74,6 @@ class VectorPairs:
 def specific_force_direction_enu(accel_enu_m_s2, gravity_m_s2: float) -> Vec3:
     """World direction ``(a + g e3)/|a + g e3|`` of the specific force (ENU, unit)."""
     return unit3((accel_enu_m_s2[0], accel_enu_m_s2[1], accel_enu_m_s2[2] + gravity_m_s2))
-
-
-def _reject(v: Vec3, n: Vec3) -> Vec3:
-    """unit(v - (v.n) n): the direction of v normal to the unit vector n."""
-    c = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
-    return unit3((v[0] - c * n[0], v[1] - c * n[1], v[2] - c * n[2]))
 
 
 def measurement_vectors(accel_flu_m_s2, mag_flu_gauss, accel_est_enu_m_s2,
@@ -156,7 +141,7 @@ def controller_vectors(accel_flu_m_s2, mag_flu_gauss, accel_est_enu_m_s2, mag_fi
     r1 = specific_force_direction_enu(accel_est_enu_m_s2, gravity_m_s2) if velocity_aided else _E3
     b2, r2 = unit3(mag_flu_gauss), unit3(mag_field_enu_gauss)
     if mag_perpendicular:
-        b2, r2 = _reject(b2, b1), _reject(r2, r1)
+        b2, r2 = reject(b2, b1), reject(r2, r1)
     return VectorPairs(b1=b1, b2=b2, r1=r1, r2=r2)
 
 

@@ -11,6 +11,10 @@ FAILURE_ACTIONS = ("land", "hold")
 ATTACH_ACTIONS = ("refuse", "resume", "land")
 
 
+#: The ``--control`` modes: who flies the inner loop.
+CONTROL_MODES = ("companion", "rates", "vehicle")
+
+
 @dataclass(frozen=True)
 class RunnerConfig:
     """How the runner flies (vehicle-clock seconds unless said otherwise).
@@ -18,7 +22,10 @@ class RunnerConfig:
     Attributes
     ----------
     control : str
-        "companion" (geometric controller answers each frame) or "vehicle".
+        "companion" (geometric controller answers each frame with motor
+        commands), "rates" (its outer part answers each frame with body rates
+        and thrust, SET_ATTITUDE_TARGET; the vehicle's rate loop flies) or
+        "vehicle".
     setpoint_hz : float
         SET_POSITION_TARGET_LOCAL_NED rate (>= 20 Hz as PX4 requires).
     preflight_s : float
@@ -90,8 +97,8 @@ class RunnerConfig:
     max_nav_age_s: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.control not in ("companion", "vehicle"):
-            raise ValueError("control must be 'companion' or 'vehicle'")
+        if self.control not in CONTROL_MODES:
+            raise ValueError("control must be 'companion', 'rates' or 'vehicle'")
         if not self.setpoint_hz >= 20.0 or not math.isfinite(self.setpoint_hz):
             raise ValueError("setpoint_hz must be >= 20 (PX4 offboard)")
         if not self.spin_us >= 0.0:

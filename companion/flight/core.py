@@ -37,7 +37,11 @@ retried after 0.5 s). Per sensor frame (``_on_imu``), in both control modes,
 setpoints (SET_POSITION_TARGET_LOCAL_NED) are queued at ``setpoint_hz``; with
 ``control="companion"`` the geometric controller's motor commands answer every
 frame (HIL_ACTUATOR_CONTROLS, lockstep flag, ``time_usec`` echoed), else a
-tick with four NaN (the vehicle's own controller flies).
+tick with four NaN (the vehicle's own controller flies). With
+``control="rates"`` the controller's body rates and normalised thrust
+(SET_ATTITUDE_TARGET, ``companion.control.rates``) precede the NaN tick of
+every frame from arming to landing, in place of the position setpoints (the
+vehicle's rate loop flies; PX4 follows the last kind of offboard setpoint).
 
 What the rangefinders see (every DISTANCE_SENSOR, any phase) is sent on as
 OBSTACLE_DISTANCE at most 10 Hz (``companion.link.obstacle_distance``) for
@@ -64,7 +68,9 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from ..control.geometric import Measurements, Reference
 from ..control.observer import heading_from_accel_mag
+from ..control.rates import normalised_thrust, vehicle_hover_thrust
 from ..errors import CommandRejected, LinkError
 from ..link import codec
 from ..link.obstacle_distance import ObstacleDistancePublisher, encode_obstacle_distance
@@ -247,8 +253,8 @@ class FlightCore:
 
     def __init__(self, inputs: FlightInputs, cfg: RunnerConfig, vehicle: VehicleConfig, controller=None,
                  target_system: int = 1, target_component: int = 1) -> None:
-        if cfg.control == "companion" and controller is None:
-            raise ValueError("control='companion' needs a controller")
+        if cfg.control in ("companion", "rates") and controller is None:
+            raise ValueError(f"control={cfg.control!r} needs a controller")
         import numpy as np
 
         self.inputs = inputs
@@ -321,6 +327,9 @@ class FlightCore:
         #: Who flies the inner loop, and each change: {t_s, from, to, reason}.
         self.control_mode = cfg.control
         self.control_mode_changes: list[dict] = []
+        self._rates = cfg.control == "rates"
+        #: Normalised hover thrust of ``--control rates``: MPC_THR_HOVER as read at setup, else the model's.
+        self.hover_thrust = vehicle_hover_thrust(vehicle)
         #: Output faults (the .tlog, the report): {t_s, kind, detail, phase}.
         self.faults: list[dict] = []
         #: The phase in which the first violation happened (report ``phase`` of a failed flight).
@@ -645,6 +654,11 @@ class FlightCore:
             yield from self._set_interval(mid, 1e6 / hz, optional=True)
         pv = yield from self._param_read("SIM_LOCKSTEP")
         self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv) == 1
+        if self._rates:
+            pv = yield from self._param_read("MPC_THR_HOVER")
+            hover = None if pv is None else float(codec.decode_param_value(pv))
+            if hover is not None and 0.0 < hover <= 1.0:
+                self.hover_thrust = hover
         yield lambda: self._pos is not None
         if self.armed:
             yield from self._attach()
@@ -699,7 +713,7 @@ class FlightCore:
         self._t_hover = self._t_traj + self._window.duration_s
         self._t_land = self._t_hover + cfg.hover_s
         self.errors.start(self._t_traj)
-        self._controlling = cfg.control == "companion" and self.degraded is None
+        self._controlling = cfg.control in ("companion", "rates") and self.degraded is None
 
     def _land(self):
         """NAV_LAND, then wait for the vehicle to land and disarm (disarm it if needed)."""
@@ -972,7 +986,7 @@ class FlightCore:
         cmd = None
         out = None
         if ref is not None:
-            if t >= self._next_sp_t:
+            if t >= self._next_sp_t and not (self._rates and self._controlling):
                 self._next_sp_t = t + self._sp_dt - 1e-9
                 self._emit(codec.encode_set_position_target(
                     self.enc, t_us // 1000, ref.p, ref.v, ref.a, setpoint_yaw_enu(ref.s, ref.a), self.ts, self.tc))
@@ -982,9 +996,14 @@ class FlightCore:
                 if tap is not None:
                     tap(t, gyro, acc, mag, self._pos, self._vel, self._nav_t)
                 try:
-                    cmd = ctrl.update_fast(t, gyro, acc, mag, self._pos, self._vel, self._nav_t,
-                                           ref.p, ref.v, ref.a, ref.jerk, ref.snap, ref.target)
+                    cmd = ctrl.command(t, Measurements(gyro, acc, mag, self._pos, self._vel, self._nav_t),
+                                       Reference(ref.p, ref.v, ref.a, ref.jerk, ref.snap, ref.target))
                     out = ctrl.last_desired
+                    if self._rates:
+                        # body rates and thrust before this frame's tick (which then carries no override)
+                        self._emit(codec.encode_set_attitude_rates(
+                            self.enc, t_us // 1000, ctrl.last_rate_cmd,
+                            normalised_thrust(out[9], self.vehicle.mass_kg, self.hover_thrust), self.ts, self.tc))
                 except (ValueError, ZeroDivisionError, OverflowError):
                     # a non-finite or degenerate measurement: let the vehicle fly this frame
                     self.n_control_faults += 1
@@ -998,7 +1017,7 @@ class FlightCore:
         obs = self.ctrl.observer if self.ctrl is not None else None
         if obs is not None and obs.faults != self.observer_faults:
             self._observer_faults(obs.faults)
-        self.outbox.append(ActuatorOut(t_us, cmd, self.armed))
+        self.outbox.append(ActuatorOut(t_us, None if self._rates else cmd, self.armed))
         if ref is not None:
             self._record(t, ref, out)
 

@@ -24,6 +24,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from .. import frames
+from .command_rules import ATTITUDE_TARGET_RATES_ONLY
 
 # --- MAVLink constants used by the companion (named here once) --------------
 
@@ -359,6 +360,31 @@ def encode_odometry_truth(mav, time_usec: int, pos_enu_m, vel_enu_m_s, R_enu_flu
 
 
 # --- encoders ---------------------------------------------------------------
+
+
+def encode_set_attitude_rates(mav, time_boot_ms: int, rates_flu_rad_s, thrust: float,
+                              target_system: int = 1, target_component: int = 1):
+    """SET_ATTITUDE_TARGET as a body-rate setpoint: rates and collective thrust, attitude ignored.
+
+    Parameters
+    ----------
+    mav : pymavlink MAVLink
+    time_boot_ms : int
+        Vehicle time of the setpoint (ms).
+    rates_flu_rad_s : sequence (3,)
+        Body rates (rad/s), FLU; sent FRD: ``(p, -q, -r)`` (``frames.flu2frd``).
+    thrust : float
+        Collective thrust normalised to [0, 1] (``companion.control.rates.normalised_thrust``).
+
+    Returns
+    -------
+    MAVLink_set_attitude_target_message
+        ``type_mask`` = ATTITUDE_IGNORE, ``q`` = (1, 0, 0, 0) (ignored).
+    """
+    w = rates_flu_rad_s
+    return mav.set_attitude_target_encode(
+        int(time_boot_ms) & 0xFFFFFFFF, target_system, target_component, ATTITUDE_TARGET_RATES_ONLY,
+        (1.0, 0.0, 0.0, 0.0), float(w[0]), -float(w[1]), -float(w[2]), float(thrust))
 
 
 def encode_set_position_target(mav, time_boot_ms: int, pos_enu_m, vel_enu_m_s, acc_enu_m_s2,

@@ -23,6 +23,10 @@ to send one (``UnsafeMessage``). The rules follow MAVLink's common.xml:
 - Setpoints: a field not masked out by ``type_mask`` is NaN ("not given",
   PX4's convention) or finite within ``MAX_SETPOINT_*``; only
   ``MAV_FRAME_LOCAL_NED`` and ``MAV_FRAME_BODY_NED``.
+- SET_ATTITUDE_TARGET: body rates and thrust only (``type_mask`` has
+  ATTITUDE_IGNORE and none of the rate or THROTTLE ignore bits), each rate
+  finite within ``MAX_SETPOINT_BODY_RATE_RAD_S``, thrust finite in [0, 1]
+  (MAVLink: "Collective thrust, normalized to 0 .. 1").
 - HIL_ACTUATOR_CONTROLS ``controls[0..3]``: all NaN (a lockstep tick
   without override) or all finite in [-1, 1] (MAVLink's range; motors use
   [0, 1], below 0 is off).
@@ -50,6 +54,13 @@ MAX_SETPOINT_VEL_M_S = 100.0
 MAX_SETPOINT_ACC_M_S2 = 100.0
 MAX_SETPOINT_YAW_RAD = 2.0 * math.pi
 MAX_SETPOINT_YAW_RATE_RAD_S = 100.0
+MAX_SETPOINT_BODY_RATE_RAD_S = 100.0
+#: SET_ATTITUDE_TARGET.type_mask of a body-rate setpoint: the attitude quaternion ignored.
+ATTITUDE_TARGET_RATES_ONLY = mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
+_ATTITUDE_TARGET_NEEDED = (mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
+                           | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
+                           | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
+                           | mavlink.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE)
 #: Altitudes (m AMSL) a command or mission item may name (the mission's ``home.alt_m`` bound).
 MAX_ALTITUDE_M = 1.0e5
 ARM_FORCE_MAGIC = 21196.0
@@ -261,6 +272,21 @@ def mission_item_problem(frame: int, params, x: int, y: int, z: float) -> tuple[
     return None
 
 
+def attitude_target_problem(type_mask: int, rates_frd_rad_s, thrust: float) -> str | None:
+    """Why a SET_ATTITUDE_TARGET is unusable as a body-rate setpoint, or None (module rules)."""
+    mask = int(type_mask)
+    if not mask & ATTITUDE_TARGET_RATES_ONLY:
+        return "attitude setpoints are not supported, body rates only (type_mask without ATTITUDE_IGNORE)"
+    if mask & _ATTITUDE_TARGET_NEEDED:
+        return f"type_mask {mask} ignores a body rate or the thrust"
+    for name, r in zip(("body_roll_rate", "body_pitch_rate", "body_yaw_rate"), rates_frd_rad_s):
+        if not abs(float(r)) <= MAX_SETPOINT_BODY_RATE_RAD_S:
+            return f"{name} {float(r):g} rad/s"
+    if not 0.0 <= float(thrust) <= 1.0:
+        return f"thrust {float(thrust):g} outside [0, 1]"
+    return None
+
+
 def outgoing_problem(msg) -> str | None:
     """Why the companion must not send ``msg`` (a pymavlink message), or None.
     Commands are judged as if the vehicle were flying (the stricter reading)."""
@@ -275,6 +301,9 @@ def outgoing_problem(msg) -> str | None:
         return position_target_problem(msg.coordinate_frame, msg.type_mask,
                                        (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, msg.afx, msg.afy, msg.afz),
                                        msg.yaw, msg.yaw_rate, nan_ok=False)
+    if t == "SET_ATTITUDE_TARGET":
+        return attitude_target_problem(msg.type_mask, (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate),
+                                       msg.thrust)
     if t == "HIL_ACTUATOR_CONTROLS":
         c = msg.controls
         return actuator_problem(c[0], c[1], c[2], c[3])
