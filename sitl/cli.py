@@ -73,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="drop a udpin peer silent for S wall-clock seconds (default %(default)s)")
     p.add_argument("--stats", default=None, metavar="FILE",
                    help="on exit, write link statistics as JSON (control accepted by source, ignored by reason)")
+    p.add_argument("--autopilot", choices=("px4", "ardupilot"), default=None,
+                   help="flight stack to speak as: modes, parameters, take-off and failsafe rules "
+                        "(default: the mission's sim.autopilot, else px4)")
     p.add_argument("--lockstep", action="store_true",
                    help="lockstep with the peer that answers HIGHRES_IMU with HIL_ACTUATOR_CONTROLS")
     p.add_argument("--speed", type=float, default=1.0,
@@ -216,7 +219,7 @@ def _run(args) -> int:
                           speed=args.speed, seed=args.seed, physics_hz=args.physics_hz,
                           sensor_hz=args.sensor_hz, start=start, control_outs=tuple(args.control_out),
                           controllers=controllers, signing_key=key, max_clients=args.max_clients,
-                          client_timeout_s=args.client_timeout)
+                          client_timeout_s=args.client_timeout, autopilot=args.autopilot)
     try:
         server = SitlServer(mission, config)
     except InputError:

@@ -320,9 +320,10 @@ def decode_takeoff_altitude(param7: float, origin_alt_amsl_m: float) -> float | 
 # --- encoders ----------------------------------------------------------------
 
 
-def heartbeat(mav, armed: bool, custom_mode: int, system_status: int):
-    """Vehicle HEARTBEAT: quadrotor, PX4 autopilot, PX4 custom mode."""
-    return mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4,
+def heartbeat(mav, armed: bool, custom_mode: int, system_status: int,
+              autopilot: int = mavlink.MAV_AUTOPILOT_PX4):
+    """Vehicle HEARTBEAT: quadrotor, the personality's MAV_AUTOPILOT and custom mode."""
+    return mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, autopilot,
                                 base_mode(armed), custom_mode, system_status)
 
 

@@ -112,6 +112,7 @@ from companion.link import command_rules as rules
 from companion.link.sockets import is_datagram_url, open_pipe
 
 from .pipe import MEMORY_SCHEME
+from mavcore import autopilot as autopilots
 
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .battery import Battery
@@ -212,6 +213,10 @@ class ServerConfig:
         Peers a ``udpin`` link serves at most (``sitl.auth.ClientTable``).
     client_timeout_s : float
         Wall-clock seconds of silence after which a ``udpin`` peer is dropped.
+    autopilot : str or None
+        The flight stack the SITL speaks as (``mavcore.autopilot``: "px4",
+        "ardupilot"): modes, parameters, take-off and failsafe rules. None:
+        the mission's ``sim.autopilot``.
     """
 
     listen: str = "udpin:127.0.0.1:14540"
@@ -228,8 +233,11 @@ class ServerConfig:
     signing_key: bytes | None = None
     max_clients: int = 8
     client_timeout_s: float = 10.0
+    autopilot: str | None = None
 
     def __post_init__(self) -> None:
+        if self.autopilot is not None:
+            autopilots.get(self.autopilot)     # ValueError naming the known ones
         if self.signing_key is not None and len(self.signing_key) != 32:
             raise ValueError("signing_key must be 32 bytes")
         if not (isinstance(self.max_clients, int) and 1 <= self.max_clients <= 1024):
@@ -516,7 +524,8 @@ class SitlServer:
                               sensor_hz=config.sensor_hz, world=world, start_enu_m=start_xy,
                               start_yaw_rad=start_yaw)
         md = self.sim.sensors.model
-        self.params = Parameters(initial={
+        self.autopilot = autopilots.get(mission.sim.autopilot if config.autopilot is None else config.autopilot)
+        self.params = Parameters.for_autopilot(self.autopilot, initial={
             "SIM_VEC_VAR": md.accel_rel_std ** 2, "SIM_GYRO_VAR": md.gyro_std_rad_s ** 2,
             "SIM_POS_STD": md.position_std_xy_m, "SIM_POSZ_STD": md.position_std_z_m,
             "SIM_VEL_STD": md.velocity_std_m_s, "SIM_RNG_STD": md.range_std_m,
@@ -524,7 +533,7 @@ class SitlServer:
             **self._controller_param_defaults()})
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
-        self.stack = FlightStack(self.params, self.home_enu_m)
+        self.stack = FlightStack(self.params, self.home_enu_m, self.autopilot)
         self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
         self.missions = MissionProtocol(mission.energy.max_mission_items)
         self.battery = Battery(mission.energy)
@@ -928,7 +937,7 @@ class SitlServer:
 
     def _enc_heartbeat(self):
         st = self.stack
-        return codec.heartbeat(self._mav(), st.armed, st.custom_mode, st.system_status)
+        return codec.heartbeat(self._mav(), st.armed, st.custom_mode, st.system_status, self.autopilot.mav_autopilot)
 
     def _enc_sys_status(self):
         health = _SENSORS
@@ -1014,8 +1023,12 @@ class SitlServer:
 
     def _enc_version(self):
         uid = (0x5A17 << 32) | (self.seed & 0xFFFFFFFF)
+        ap = self.autopilot
+        caps = CAPABILITIES if ap.param_bytewise else (
+            CAPABILITIES & ~mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+            | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
         return self._mav().autopilot_version_encode(
-            CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid)
+            caps, ap.flight_sw_version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid)
 
     # ------------------------------------------------------------------ pacing
     def _pace_reset(self) -> None:
@@ -1322,7 +1335,10 @@ class SitlServer:
         return r.result, None
 
     def _cmd_takeoff(self, p):
-        z = codec.decode_takeoff_altitude(p[6], self.origin.alt_m)
+        if self.autopilot.takeoff_alt_relative:     # ArduCopter: metres above home
+            z = float(self.home_enu_m[2]) + float(p[6]) if math.isfinite(p[6]) else None
+        else:
+            z = codec.decode_takeoff_altitude(p[6], self.origin.alt_m)
         return self.stack.takeoff(self.sim.time_us, self._state(), z).result, None
 
     def _cmd_land(self, p):
@@ -1336,7 +1352,7 @@ class SitlServer:
             return mavlink.MAV_RESULT_DENIED, None
         if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             return mavlink.MAV_RESULT_DENIED, None
-        mode = FlightMode.from_px4(int(p[1]), int(p[2]))
+        mode = self.stack.mode_of(self.autopilot.custom_mode_from_params(p[1], p[2]))
         return self.stack.set_mode(self.sim.time_us, self._state(), mode).result, None
 
     def _interval_target(self, mid: int):
@@ -1415,8 +1431,7 @@ class SitlServer:
         if not int(msg.base_mode) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             self._refuse("SET_MODE", f"base_mode {int(msg.base_mode)} without CUSTOM_MODE_ENABLED")
             return
-        main, sub = codec.px4_modes_from_custom(msg.custom_mode)
-        mode = FlightMode.from_px4(main, sub)
+        mode = self.stack.mode_of(msg.custom_mode)
         if mode is None:
             self._refuse("SET_MODE", f"unknown custom mode {int(msg.custom_mode)}")
             return
@@ -1456,8 +1471,8 @@ class SitlServer:
     # ------------------------------------------------------------------ params
     def _param_msg(self, mav, i: int):
         spec, value = self.params.by_index(i)
-        return mav.param_value_encode(spec.name.encode("ascii"), codec.param_to_wire(value, spec.param_type),
-                                      spec.param_type, len(self.params), i)
+        wire = codec.param_to_wire(value, spec.param_type) if self.autopilot.param_bytewise else float(value)
+        return mav.param_value_encode(spec.name.encode("ascii"), wire, spec.param_type, len(self.params), i)
 
     def _on_param_list(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
@@ -1491,7 +1506,8 @@ class SitlServer:
             link.send(self._param_msg(link.mav, i))
             return
         spec = self.params.spec(name)
-        if spec.param_type == PARAM_TYPE_INT32 and int(msg.param_type) == PARAM_TYPE_INT32:
+        if (spec.param_type == PARAM_TYPE_INT32 and int(msg.param_type) == PARAM_TYPE_INT32
+                and self.autopilot.param_bytewise):
             value = codec.param_from_wire(msg.param_value, PARAM_TYPE_INT32)
         else:
             value = float(msg.param_value)

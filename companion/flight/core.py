@@ -60,6 +60,8 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from mavcore import autopilot as autopilots
+
 from ..control.observer import heading_from_accel_mag
 from ..errors import CommandRejected, LinkError
 from ..link import codec
@@ -88,8 +90,8 @@ LAUNCH_TOLERANCE_M = 0.05
 UNUSED_STREAMS = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED)
 
 _SENSOR_DOWN = mavlink.MAV_SENSOR_ROTATION_PITCH_270
-_OFFBOARD = codec.px4_custom_mode(codec.PX4_MAIN_MODE_OFFBOARD)
-_LOITER = codec.px4_custom_mode(codec.PX4_MAIN_MODE_AUTO, 3)
+#: Height error (m) within which an ArduCopter take-off (MAV_CMD_NAV_TAKEOFF) counts as done.
+TAKEOFF_ALT_TOLERANCE_M = 0.3
 _NAN3 = (math.nan, math.nan, math.nan)
 _NAN9 = (math.nan,) * 9
 _NAN_CTRL = (math.nan,) * 10
@@ -269,6 +271,8 @@ class FlightCore:
         self.armed = False
         self.vstate = None
         self.custom_mode: int | None = None
+        #: The vehicle's flight stack (``mavcore.autopilot``), from its first HEARTBEAT.
+        self.autopilot: autopilots.Autopilot | None = None
         self.landed_state = mavlink.MAV_LANDED_STATE_UNDEFINED
         self._pos = None
         self._vel = None
@@ -624,7 +628,7 @@ class FlightCore:
         for mid, hz in cfg.low_rate_streams:
             yield from self._set_interval(mid, 1e6 / hz, optional=True)
         pv = yield from self._param_read("SIM_LOCKSTEP")
-        self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv) == 1
+        self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv, self.autopilot.param_bytewise) == 1
         yield lambda: self._pos is not None
         if self.armed:
             yield from self._attach()
@@ -643,16 +647,40 @@ class FlightCore:
         self.phase = "preflight"
         t_ready = self.t_s + cfg.preflight_s
         yield lambda: self.t_s >= t_ready
-        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
-                                 (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, codec.PX4_MAIN_MODE_OFFBOARD, 0),
-                                 "set OFFBOARD", temp_retries=10)
+        ap = self.autopilot
+        yield from self._set_offboard_mode()
         yield from self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1,), "arm", temp_retries=10)
         self.armed = True
+        self.monitor.armed(self.t_s, ap.custom_mode(ap.offboard_mode))
+        if ap.takeoff_by_command:
+            yield from self._guided_takeoff()
         self._schedule(self.t_s)
-        self.monitor.armed(self.t_s, _OFFBOARD)
         self.phase = "takeoff"
         yield lambda: self.phase == "landing"
         yield from self._land()
+
+    def _set_offboard_mode(self):
+        """DO_SET_MODE to the mode that tracks our setpoints (PX4 OFFBOARD, ArduCopter GUIDED)."""
+        ap = self.autopilot
+        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE, ap.set_mode_params(ap.offboard_mode),
+                                 f"set {ap.offboard_mode}", temp_retries=10)
+
+    def _guided_takeoff(self):
+        """ArduCopter: armed in GUIDED on the ground, setpoints do not lift the
+        vehicle; MAV_CMD_NAV_TAKEOFF (param7: metres above home) climbs it to
+        the take-off's first climb height, where our setpoints take over."""
+        x, y, z = self._pos
+        seg = takeoff_segments(tuple(self._pos), self._hold_first.p, self.inputs.transit_floor_z_m,
+                               self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s)[0]
+        top = float(seg[1][2])
+        # Stream the climb's top meanwhile: the vehicle holds there once its take-off is done.
+        self._preflight_ref = self._static_ref((x, y, top))
+        yield from self._command(mavlink.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, math.nan, math.nan, math.nan, top - z),
+                                 "takeoff", temp_retries=10)
+        t_limit = self.t_s + self.cfg.landing_timeout_s
+        yield lambda: abs(self._pos[2] - top) <= TAKEOFF_ALT_TOLERANCE_M or self.t_s >= t_limit
+        if abs(self._pos[2] - top) > TAKEOFF_ALT_TOLERANCE_M:
+            raise LinkError(f"vehicle did not climb to {top - z:.2f} m within {self.cfg.landing_timeout_s:g} s")
 
     def _schedule(self, t_arm: float) -> None:
         """The take-off/hold/trajectory/hover times, from arming at ``t_arm``."""
@@ -803,10 +831,8 @@ class FlightCore:
         self.phase = "preflight"
         t_ready = self.t_s + self.cfg.preflight_s
         yield lambda: self.t_s >= t_ready
-        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
-                                 (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, codec.PX4_MAIN_MODE_OFFBOARD, 0),
-                                 "set OFFBOARD", temp_retries=10)
-        self.monitor.expect_mode(_OFFBOARD)
+        yield from self._set_offboard_mode()
+        self.monitor.expect_mode(self.autopilot.custom_mode(self.autopilot.offboard_mode))
         self._schedule(self.t_s)
         if self.ctrl is not None:
             self.ctrl.reset()
@@ -858,6 +884,10 @@ class FlightCore:
         if m.get_srcComponent() != self.tc:
             return
         vs = codec.decode_heartbeat(m)
+        if self.autopilot is None:
+            # The vehicle's flight stack decides the dialect (an unknown one is spoken to as PX4).
+            self.autopilot = autopilots.from_heartbeat(m.autopilot) or autopilots.PX4_AUTOPILOT
+            self.monitor.mode_name = self.autopilot.mode_name
         self.vstate = vs
         self.armed = vs.armed
         self.custom_mode = int(m.custom_mode)
