@@ -52,9 +52,9 @@ def upload_with_pymavlink(url: str) -> None:
 class MavProxy:
     """MAVProxy in a subprocess, its console read line by line."""
 
-    def __init__(self, master: str, workdir: Path) -> None:
+    def __init__(self, master: str, workdir: Path, modules: str = "param,wp,mode,cmdlong") -> None:
         cmd = [sys.executable, "-m", "MAVProxy.mavproxy", f"--master={master}", "--no-state", "--mav20",
-               "--default-modules=param,wp,mode,cmdlong"]
+               f"--default-modules={modules}"]
         self.p = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                   text=True, bufsize=1, cwd=workdir, env=dict(os.environ, TERM="dumb"))
         self.q: queue.Queue = queue.Queue()
@@ -116,5 +116,34 @@ def test_mavproxy_mode_params_mission(tmp_path):
                 m = mp.expect(r"^16 6 (\S+) (\S+) (\S+)")
                 assert (float(m.group(1)), float(m.group(2)), float(m.group(3))) == \
                     pytest.approx((lat * 1e-7, lon * 1e-7, alt), abs=1e-7)
+        finally:
+            mp.close()
+
+
+def test_mavproxy_flies_the_ardupilot_personality(tmp_path):
+    """MAVProxy knows ArduCopter's mode names (mavutil.mode_mapping_acm): it
+    reads STABILIZE at boot, lists ArduPilot's parameters (integers as a C
+    cast), switches to GUIDED, arms, takes off with MAV_CMD_NAV_TAKEOFF and
+    lands with the LAND mode; no "fence breach" at connect."""
+    from mavcore.autopilot import ARDUCOPTER
+
+    with SitlThread(MISSION, speed=2.0, autopilot="ardupilot") as sitl:
+        mp = MavProxy(sitl.url, tmp_path, modules="param,mode,cmdlong,arm,fence")
+        try:
+            mp.expect(r"Detected vehicle 1:1")
+            mp.expect(r"Mode STABILIZE")
+            n = int(mp.expect(r"Received (\d+) parameters").group(1))
+            assert n == len(ARDUCOPTER.param_specs)
+            mp.send("param show DISARM_DELAY")                          # INT32, C cast as ArduPilot
+            assert float(mp.expect(r"DISARM_DELAY\s+(\S+)").group(1)) == 10.0     # byte-wise: 1.4e-44
+            mp.send("mode guided")
+            mp.expect(r"Mode GUIDED")
+            mp.send("arm throttle")
+            mp.expect(r"^GUIDED> ARMED|^ARMED")            # from HEARTBEAT; DISARM_DELAY (10 s) to take off
+            mp.send("takeoff 2")
+            mp.expect(r"Takeoff complete", timeout_s=20)
+            mp.send("mode land")
+            mp.expect(r"Landing detected", timeout_s=20)
+            assert not any("fence breach" in line for line in mp.out)
         finally:
             mp.close()
