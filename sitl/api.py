@@ -280,7 +280,7 @@ class SitlProcess(_SitlOptions):
         self._stderr = None
 
     def command(self) -> list[str]:
-        cmd = [self.python, "-m", "sitl", str(self.mission_path), "--listen", self.listen,
+        cmd = [self.python, "-m", "sitl", str(self.mission_path), "--listen", self.listen, "--gcs", "none",
                "--speed", repr(float(self.speed)), "--physics-hz", str(self.physics_hz),
                "--sensor-hz", str(self.sensor_hz)]
         for o in self.outs:

@@ -1,6 +1,6 @@
 """``sitl`` command line: run the bundled SITL on a mission.
 
-``sitl MISSION.yaml [--listen udpin:127.0.0.1:14540] [--out udpout:127.0.0.1:14550 ...]
+``sitl MISSION.yaml [--ports px4|legacy] [--listen URL] [--gcs URL|none] [--out udpout:127.0.0.1:14550 ...]
 [--control-out URL ...] [--controller SYSID/COMPID[@LINK] ...] [--signing-key FILE]
 [--max-clients 8] [--client-timeout 10] [--lockstep] [--speed 1] [--seed N]
 [--physics-hz 1000] [--sensor-hz 250] [--start X,Y[,YAW_DEG]]``
@@ -49,6 +49,8 @@ from pathlib import Path
 from companion.errors import InputError
 
 READY_MARKER = "sitl: ready"
+#: Port conventions (``--ports``): (main link, ground-station link or None).
+PORTS = {"px4": ("udpout:127.0.0.1:14540", "udpout:127.0.0.1:14550"), "legacy": ("udpin:127.0.0.1:14540", None)}
 #: Fastest real-time factor asked for (beyond it, "as fast as possible" is --speed 0).
 MAX_SPEED = 1000.0
 
@@ -56,8 +58,14 @@ MAX_SPEED = 1000.0
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sitl", description=__doc__.splitlines()[0])
     p.add_argument("mission", help="mission YAML (its maps give the terrain and the vine rows)")
-    p.add_argument("--listen", default="udpin:127.0.0.1:14540",
-                   help="main MAVLink link, pymavlink syntax (default %(default)s)")
+    p.add_argument("--ports", choices=("px4", "legacy"), default="px4",
+                   help="port convention: px4 (default): the vehicle sends to the companion on 14540 "
+                        f"({PORTS['px4'][0]}) and to a ground station on 14550 ({PORTS['px4'][1]}, control "
+                        f"allowed), as PX4's SITL; legacy: the SITL listens on {PORTS['legacy'][0]}, no GCS link")
+    p.add_argument("--listen", default=None,
+                   help="main MAVLink link, pymavlink syntax (default: the --ports convention's)")
+    p.add_argument("--gcs", default=None, metavar="URL|none",
+                   help="ground-station link, carries control (default: the --ports convention's; none: no link)")
     p.add_argument("--out", action="append", default=[], metavar="URL",
                    help="extra telemetry-only MAVLink link, e.g. udpout:127.0.0.1:14550 (repeatable)")
     p.add_argument("--control-out", action="append", default=[], metavar="URL",
@@ -88,6 +96,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: the mission's sim.start_enu_m, else a free mid-corridor cell); "
                         "'-': read it as one line from stdin")
     return p
+
+
+def port_links(ports: str, listen: str | None, gcs: str | None) -> tuple[str, str | None]:
+    """(main link, ground-station link or None) of a port convention
+    (``--ports``), with ``--listen``/``--gcs`` given (None: the convention's;
+    ``--gcs none``: no ground-station link)."""
+    listen_default, gcs_default = PORTS[ports]
+    gcs = gcs_default if gcs is None else (None if gcs == "none" else gcs)
+    return (listen_default if listen is None else listen), gcs
 
 
 def parse_start(text: str) -> tuple[float, float, float]:
@@ -181,6 +198,10 @@ def _run(args) -> int:
 
     from .server import ServerConfig, SitlServer
 
+    args.listen, gcs = port_links(args.ports, args.listen, args.gcs)
+    if gcs is not None:
+        _check_url(gcs, "--gcs")
+        args.control_out = [*args.control_out, gcs]
     _check_url(args.listen, "--listen")
     for u in args.out:
         _check_url(u, "--out")
