@@ -47,6 +47,7 @@ import sys
 from pathlib import Path
 
 from companion.errors import InputError
+from mavcore.logs import add_verbosity, configure
 
 READY_MARKER = "sitl: ready"
 #: Port conventions (``--ports``): (main link, ground-station link or None).
@@ -95,6 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="launch position, ENU metres on the map, and heading, ENU degrees from east "
                         "(default: the mission's sim.start_enu_m, else a free mid-corridor cell); "
                         "'-': read it as one line from stdin")
+    add_verbosity(p)
     return p
 
 
@@ -183,6 +185,7 @@ def parse_controllers(texts, control_links) -> tuple | None:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    configure(args.verbose, args.quiet)
     try:
         return _run(args)
     except InputError as exc:

@@ -89,6 +89,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import errno
+import logging
 import math
 import select
 import socket
@@ -126,6 +127,7 @@ from .world import load_world
 
 SYSTEM_ID = 1
 COMPONENT_ID = 1
+_log = logging.getLogger("sitl")
 
 #: PX4 v1.14.0 release, as PX4 encodes it (major, minor, patch, type 0xFF).
 FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 0xFF
@@ -1264,6 +1266,7 @@ class SitlServer:
     def _flush_events(self) -> None:
         if self.stack.events:
             for ev in self.stack.pop_events():
+                _log.info("t=%.3f s: %s", self.sim.time_us * 1e-6, ev.text)
                 if len(ev.text) <= codec.STATUSTEXT_CHUNK:
                     self._broadcast(codec.statustext(self._mav(), ev.severity, ev.text))
                 else:

@@ -21,12 +21,16 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.mark.parametrize("control", ["vehicle", "companion"])
-def test_demo_flies_the_ardupilot_personality(tmp_path, control):
+def test_demo_flies_the_ardupilot_personality(tmp_path, caplog, control):
     out = tmp_path / control
     rc = main(["demo", "--mission", "flat-rectangle", "--cut", "4", "--transport", "inproc", "--autopilot",
-               "ardupilot", "--control", control, "--out", str(out), "--no-plots", "--quiet"])
+               "ardupilot", "--control", control, "--out", str(out), "--no-plots", "-v"])
     rep = json.loads((out / "report.json").read_text())
     assert rc == 0 and rep["completed"]
+    # -v: the detection and the vehicle's own account, through Python logging
+    said = [(r.name, r.getMessage()) for r in caplog.records]
+    assert ("companion", "vehicle: ardupilot (from its HEARTBEAT)") in said
+    assert any(n == "sitl" and m.endswith("Armed in GUIDED") for n, m in said)
     log = mavutil.mavlink_connection(str(out / "flight.tlog"))
     set_modes, takeoffs, modes_armed, z0, z_done = [], [], set(), None, None
     landing = False

@@ -75,7 +75,7 @@ def add_arguments(parser) -> None:
     from .fly import add_safety_arguments
 
     add_safety_arguments(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress display")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress display")
 
 
 def launch_pose(trajectory, target_enu_m) -> tuple[float, float, float]:

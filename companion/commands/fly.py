@@ -224,7 +224,7 @@ def add_arguments(parser) -> None:
                         help="MAVLink 2 signing key file (32 raw bytes, or a passphrase hashed with SHA-256 as "
                              "MAVProxy's signing setup): sign everything, accept only signed vehicle messages")
     add_safety_arguments(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress display")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress display")
 
 
 def add_safety_arguments(parser) -> None:
