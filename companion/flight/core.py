@@ -738,10 +738,11 @@ class FlightCore:
         self._finish()
 
     def _landing_seen(self) -> bool:
-        """The vehicle reports AUTO.LAND (HEARTBEAT) or a landing (EXTENDED_SYS_STATE)."""
-        vs = self.vstate
-        return ((vs is not None and vs.main_mode == codec.PX4_MAIN_MODE_AUTO
-                 and vs.sub_mode == codec.PX4_SUB_MODE_AUTO_LAND)
+        """The vehicle reports its landing mode (HEARTBEAT: PX4 AUTO.LAND, ArduCopter
+        LAND) or a landing (EXTENDED_SYS_STATE)."""
+        ap = self.autopilot
+        return ((ap is not None and self.custom_mode is not None
+                 and ap.decode_mode(self.custom_mode) is ap.mode_for("LAND"))
                 or self.landed_state == mavlink.MAV_LANDED_STATE_LANDING)
 
     def _stop(self, action: str) -> None:
@@ -771,13 +772,14 @@ class FlightCore:
         yield from self._land()
 
     def _abort_hold(self):
-        """AUTO.LOITER: the vehicle holds where it is under its own control; we let go."""
+        """The stack's hold mode (PX4 AUTO.LOITER, ArduCopter LOITER): the vehicle holds
+        where it is under its own control; we let go."""
         self._controlling = False
         self.phase = "holding"
         self.monitor.landing(self.t_s)
-        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
-                                 (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, codec.PX4_MAIN_MODE_AUTO, 3),
-                                 "set AUTO.LOITER (hold)", temp_retries=4)
+        hold = self.autopilot.mode_for("LOITER").name
+        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE, self.autopilot.set_mode_params(hold),
+                                 f"set {hold} (hold)", temp_retries=4)
         self._finish()
 
     def _release(self):
