@@ -167,6 +167,8 @@ _DEFAULT_RATES_HZ = {
 }
 
 _HEARTBEAT_ID = ID.MAVLINK_MSG_ID_HEARTBEAT
+#: SCALED_IMU2 rate of the ArduCopter personality (Hz; its RAW_SENS stream group).
+SCALED_IMU2_HZ = 10.0
 #: Linux's IP_RECVERR (the socket module does not export it).
 _IP_RECVERR = getattr(socket, "IP_RECVERR", 11)
 
@@ -553,6 +555,15 @@ class SitlServer:
         self._last_ranges: dict = {}
         period = self.sim.sensor_period_us
         self._intervals = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
+        # The sensor-frame message (the lockstep frame marker) is the personality's:
+        # PX4 HIGHRES_IMU; ArduCopter RAW_IMU, with SCALED_IMU2 beside it.
+        if self.autopilot.imu_message == "RAW_IMU":
+            self._frame_imu_id = ID.MAVLINK_MSG_ID_RAW_IMU
+            self._frame_imu_pack, self._frame_imu_args = codec.PACK_RAW_IMU, self._raw_imu_args
+            self._intervals[ID.MAVLINK_MSG_ID_SCALED_IMU2] = int(round(1e6 / SCALED_IMU2_HZ))
+        else:
+            self._frame_imu_id = ID.MAVLINK_MSG_ID_HIGHRES_IMU
+            self._frame_imu_pack, self._frame_imu_args = codec.PACK_HIGHRES_IMU, self._imu_args
         # Ground truth for the companion's tracking statistics (ODOMETRY, float32
         # metres; SIM_STATE's 1e-7 degree lat/lon is ~1 cm): off unless requested.
         self._intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
@@ -574,6 +585,8 @@ class SitlServer:
             ID.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: self._enc_target,
             ID.MAVLINK_MSG_ID_HOME_POSITION: self._enc_home,
             ID.MAVLINK_MSG_ID_HIGHRES_IMU: self._enc_imu,
+            ID.MAVLINK_MSG_ID_RAW_IMU: self._enc_raw_imu,
+            ID.MAVLINK_MSG_ID_SCALED_IMU2: self._enc_scaled_imu2,
             ID.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._enc_version,
             ID.MAVLINK_MSG_ID_ODOMETRY: self._enc_truth,
         }
@@ -895,9 +908,10 @@ class SitlServer:
                 args = codec.distance_sensor_args(tb, r)
                 for l in links:
                     l.send_fast(codec.PACK_DISTANCE_SENSOR, args)
-        args = self._imu_args()
+        args = self._frame_imu_args()
+        pack = self._frame_imu_pack
         for l in links:
-            l.send_fast(codec.PACK_HIGHRES_IMU, args)
+            l.send_fast(pack, args)
             l.end_frame()
 
     def _send_due(self, now: int, links) -> None:
@@ -1002,6 +1016,17 @@ class SitlServer:
 
     def _enc_imu(self):
         return mavlink.MAVLink_highres_imu_message(*self._imu_args())
+
+    def _raw_imu_args(self):
+        f = self._frame
+        return codec.raw_imu_args(f.time_us, f._acc, f._gyro, f._mag)
+
+    def _enc_raw_imu(self):
+        return mavlink.MAVLink_raw_imu_message(*self._raw_imu_args())
+
+    def _enc_scaled_imu2(self):
+        f = self._frame
+        return codec.scaled_imu2(self._mav(), f.time_us // 1000, f._acc, f._gyro, f._mag)
 
     def _lpos_args(self):
         f = self._frame
@@ -1117,9 +1142,10 @@ class SitlServer:
             if msg is not None:
                 for l in links:
                     l.send(msg)
-        args = self._imu_args()
+        args = self._frame_imu_args()
+        pack = self._frame_imu_pack
         for l in links:
-            l.send_fast(codec.PACK_HIGHRES_IMU, args)
+            l.send_fast(pack, args)
             l.end_frame()
         self._last_hb_wall = time.monotonic()
 
@@ -1361,7 +1387,7 @@ class SitlServer:
         return self.stack.set_mode(self.sim.time_us, self._state(), mode).result, None
 
     def _interval_target(self, mid: int):
-        if mid in self._intervals or mid in (ID.MAVLINK_MSG_ID_HIGHRES_IMU, ID.MAVLINK_MSG_ID_DISTANCE_SENSOR):
+        if mid in self._intervals or mid in (self._frame_imu_id, ID.MAVLINK_MSG_ID_DISTANCE_SENSOR):
             return True
         return False
 
@@ -1370,7 +1396,7 @@ class SitlServer:
         if not math.isfinite(iv):
             return mavlink.MAV_RESULT_DENIED, None
         iv = int(iv)
-        if mid == ID.MAVLINK_MSG_ID_HIGHRES_IMU:
+        if mid == self._frame_imu_id:
             # Fixed: it is the lockstep frame marker.
             return (mavlink.MAV_RESULT_ACCEPTED if iv in (0, self._period_us) else mavlink.MAV_RESULT_DENIED), None
         if mid == ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
@@ -1394,7 +1420,7 @@ class SitlServer:
 
     def _cmd_get_interval(self, p):
         mid = int(p[0])
-        if mid == ID.MAVLINK_MSG_ID_HIGHRES_IMU:
+        if mid == self._frame_imu_id:
             iv = self._period_us
         elif mid in self._intervals:
             iv = self._intervals[mid]

@@ -154,3 +154,20 @@ def test_gcs_failsafe_acts_fs_gcs_timeout_after_the_last_setpoint(enable, mode):
     assert s.mode is FlightMode.OFFBOARD
     s.update(t_fs + 1000, air())
     assert s.mode is mode
+
+
+# --------------------------------------------------------------------------- RAW_IMU
+def test_raw_imu_units_by_hand_and_back():
+    """ArduPilot's RAW_IMU: milli-g (1 g = 9.80665 m/s^2), mrad/s, milligauss, body FRD
+    (FLU y, z negated), int16 saturating; the companion reads it back within a count."""
+    from types import SimpleNamespace
+
+    from companion.flight.core import _SiImu
+    from sitl.codec import raw_imu_args
+
+    a = raw_imu_args(123, (0.0, 0.0, 9.80665), (0.1, 0.2, -0.3), (0.2, 0.0, -0.4))
+    assert a == (123, 0, 0, -1000, 100, -200, 300, 200, 0, 400, 0, 0)
+    assert raw_imu_args(0, (40 * 9.80665, 0.0, 0.0), (0, 0, 0), (0, 0, 0))[1] == 32767
+    names = ("time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag")
+    back = _SiImu(SimpleNamespace(**dict(zip(names, a[:10]))))
+    assert (back.zacc, back.ygyro, back.zmag) == pytest.approx((-9.80665, -0.2, 0.4))

@@ -110,6 +110,21 @@ REPLAN_TIME_EXTRA_S = 120.0
 REPLAN_PREFIX = "companion: replan "
 
 
+class _SiImu:
+    """RAW_IMU's fields in HIGHRES_IMU's units (m/s^2, rad/s, gauss; body FRD),
+    ArduPilot's scaling: accel * 9.80665 / 1000, gyro / 1000, mag / 1000."""
+
+    __slots__ = ("time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag")
+    _KA = 9.80665e-3
+
+    def __init__(self, m) -> None:
+        ka = self._KA
+        self.time_usec = m.time_usec
+        self.xacc, self.yacc, self.zacc = m.xacc * ka, m.yacc * ka, m.zacc * ka
+        self.xgyro, self.ygyro, self.zgyro = m.xgyro * 1e-3, m.ygyro * 1e-3, m.zgyro * 1e-3
+        self.xmag, self.ymag, self.zmag = m.xmag * 1e-3, m.ymag * 1e-3, m.zmag * 1e-3
+
+
 def replan_text(action: str, range_m: float | None, detail: str = "") -> str:
     """The STATUSTEXT of one replanning event (at most 50 characters)."""
     rng = "" if range_m is None or not math.isfinite(range_m) else f" {range_m:.2f} m"
@@ -339,7 +354,8 @@ class FlightCore:
         self._proc = self._procedure()
         self._waiting = None
         self._dispatch = {
-            "HIGHRES_IMU": self._on_imu,
+            "HIGHRES_IMU": self._on_highres_imu,
+            "RAW_IMU": self._on_raw_imu,
             "LOCAL_POSITION_NED": self._on_local_position,
             "ODOMETRY": self._on_odometry,
             "ATTITUDE": self._on_attitude,
@@ -941,6 +957,17 @@ class FlightCore:
             self._stop(self.cfg.on_failure)
         else:
             self._stop(v.action)
+
+    def _on_highres_imu(self, m) -> None:
+        ap = self.autopilot
+        if ap is None or ap.imu_message == "HIGHRES_IMU":
+            self._on_imu(m)
+
+    def _on_raw_imu(self, m) -> None:
+        """ArduCopter's sensor frame: RAW_IMU in milli-g, mrad/s, milligauss -> SI."""
+        ap = self.autopilot
+        if ap is not None and ap.imu_message == "RAW_IMU":
+            self._on_imu(_SiImu(m))
 
     def _on_imu(self, m) -> None:
         # The per-frame path (250 Hz, lockstep: the vehicle waits for our answer).

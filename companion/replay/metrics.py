@@ -279,6 +279,7 @@ class MetricsAccumulator:
         M = mavlink
         self._handlers = {
             M.MAVLINK_MSG_ID_HIGHRES_IMU: self._imu,
+            M.MAVLINK_MSG_ID_RAW_IMU: self._imu,           # ArduCopter's sensor frame
             M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self._lpos,
             M.MAVLINK_MSG_ID_ODOMETRY: self._odometry,
             M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._gpos,
@@ -292,7 +293,8 @@ class MetricsAccumulator:
         }
 
     #: Vehicle message ids the metrics read (others need not be decoded).
-    MSG_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIGHRES_IMU, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+    MSG_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIGHRES_IMU, mavlink.MAVLINK_MSG_ID_RAW_IMU,
+                         mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
                          mavlink.MAVLINK_MSG_ID_ODOMETRY, mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
                          mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
                          mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR, mavlink.MAVLINK_MSG_ID_STATUSTEXT,

@@ -61,7 +61,9 @@ class ArduCopter(Autopilot):
     takeoff_by_command = True
     takeoff_alt_relative = True
     param_bytewise = False
-    imu_message = "HIGHRES_IMU"
+    #: ArduCopter sends no HIGHRES_IMU by default: RAW_IMU (int16: milli-g,
+    #: mrad/s, milligauss) and SCALED_IMU2 in its RAW_SENS stream group.
+    imu_message = "RAW_IMU"
     param_specs = (
         ParamSpec("GUID_TIMEOUT", _R, 3.0, 0.1, 5.0, "guided setpoint timeout: older setpoints stop the vehicle (s)"),
         ParamSpec("FS_GCS_ENABLE", _I, 0, 0, 7, "GCS failsafe: 0 off, 1 RTL, 3 SmartRTL/RTL, 4 SmartRTL/land, 5 land"),
