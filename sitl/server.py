@@ -528,7 +528,7 @@ class SitlServer:
                               sensor_hz=config.sensor_hz, world=world, start_enu_m=start_xy,
                               start_yaw_rad=start_yaw)
         md = self.sim.sensors.model
-        self.autopilot = autopilots.get(mission.sim.autopilot if config.autopilot is None else config.autopilot)
+        self.autopilot = autopilots.get(config.autopilot or mission.sim.autopilot)
         self.params = Parameters.for_autopilot(self.autopilot, initial={
             "SIM_VEC_VAR": md.accel_rel_std ** 2, "SIM_GYRO_VAR": md.gyro_std_rad_s ** 2,
             "SIM_POS_STD": md.position_std_xy_m, "SIM_POSZ_STD": md.position_std_z_m,
@@ -555,15 +555,6 @@ class SitlServer:
         self._last_ranges: dict = {}
         period = self.sim.sensor_period_us
         self._intervals = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
-        # The sensor-frame message (the lockstep frame marker) is the personality's:
-        # PX4 HIGHRES_IMU; ArduCopter RAW_IMU, with SCALED_IMU2 beside it.
-        if self.autopilot.imu_message == "RAW_IMU":
-            self._frame_imu_id = ID.MAVLINK_MSG_ID_RAW_IMU
-            self._frame_imu_pack, self._frame_imu_args = codec.PACK_RAW_IMU, self._raw_imu_args
-            self._intervals[ID.MAVLINK_MSG_ID_SCALED_IMU2] = int(round(1e6 / SCALED_IMU2_HZ))
-        else:
-            self._frame_imu_id = ID.MAVLINK_MSG_ID_HIGHRES_IMU
-            self._frame_imu_pack, self._frame_imu_args = codec.PACK_HIGHRES_IMU, self._imu_args
         # Ground truth for the companion's tracking statistics (ODOMETRY, float32
         # metres; SIM_STATE's 1e-7 degree lat/lon is ~1 cm): off unless requested.
         self._intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
@@ -585,11 +576,10 @@ class SitlServer:
             ID.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: self._enc_target,
             ID.MAVLINK_MSG_ID_HOME_POSITION: self._enc_home,
             ID.MAVLINK_MSG_ID_HIGHRES_IMU: self._enc_imu,
-            ID.MAVLINK_MSG_ID_RAW_IMU: self._enc_raw_imu,
-            ID.MAVLINK_MSG_ID_SCALED_IMU2: self._enc_scaled_imu2,
             ID.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._enc_version,
             ID.MAVLINK_MSG_ID_ODOMETRY: self._enc_truth,
         }
+        self._frame_imu_setup()
         self._schedule = [mid for mid in self._intervals]
         self._reschedule()
         self._fast = {
@@ -645,6 +635,20 @@ class SitlServer:
             None if config.signing_key is None else SignatureVerifier(config.signing_key),
             key_locked=config.signing_key is not None)
         self._intake = IntakeBudget()
+
+    def _frame_imu_setup(self) -> None:
+        """The sensor-frame message (the lockstep frame marker) is the personality's:
+        PX4 HIGHRES_IMU; ArduCopter RAW_IMU, with SCALED_IMU2 beside it."""
+        if self.autopilot.imu_message == "RAW_IMU":
+            self._frame_imu_id = ID.MAVLINK_MSG_ID_RAW_IMU
+            self._frame_imu_pack, self._frame_imu_args = codec.PACK_RAW_IMU, self._raw_imu_args
+            s2 = ID.MAVLINK_MSG_ID_SCALED_IMU2
+            self._intervals[s2], self._next_due[s2] = int(round(1e6 / SCALED_IMU2_HZ)), 0
+            self._encoders[s2] = self._enc_scaled_imu2
+            self._encoders[ID.MAVLINK_MSG_ID_RAW_IMU] = self._enc_raw_imu
+        else:
+            self._frame_imu_id = ID.MAVLINK_MSG_ID_HIGHRES_IMU
+            self._frame_imu_pack, self._frame_imu_args = codec.PACK_HIGHRES_IMU, self._imu_args
 
     # ------------------------------------------------------------------ params
     @staticmethod

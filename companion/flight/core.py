@@ -286,8 +286,7 @@ class FlightCore:
         self.armed = False
         self.vstate = None
         self.custom_mode: int | None = None
-        #: The vehicle's flight stack (``mavcore.autopilot``), from its first HEARTBEAT.
-        self.autopilot: autopilots.Autopilot | None = None
+        self.autopilot: autopilots.Autopilot | None = None   # the vehicle's stack, from its first HEARTBEAT
         self.landed_state = mavlink.MAV_LANDED_STATE_UNDEFINED
         self._pos = None
         self._vel = None

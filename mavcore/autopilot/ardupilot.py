@@ -54,6 +54,7 @@ class ArduCopter(Autopilot):
     modes = tuple(ModeDef(n, c, b) for c, (n, b) in COPTER_MODES.items())
     boot_mode = "STABILIZE"
     offboard_mode = "GUIDED"
+    attitude_mode = "GUIDED"
     after_takeoff = "GUIDED"
     #: The take-off climbs inside GUIDED: HEARTBEAT says GUIDED throughout.
     report_as = {"TAKEOFF": "GUIDED"}

@@ -99,6 +99,10 @@ class Autopilot:
     boot_mode: str = ""
     #: The mode that tracks the companion's setpoints.
     offboard_mode: str = ""
+    #: The mode attitude-rate setpoints (SET_ATTITUDE_TARGET, ``--control rates``,
+    #: branch h17-rates) are flown in: PX4 OFFBOARD, ArduCopter GUIDED (and
+    #: GUIDED_NOGPS without a position estimate). The hook for that control mode.
+    attitude_mode: str = ""
     #: The mode the vehicle is in after a commanded take-off.
     after_takeoff: str = ""
     #: Entering the offboard mode needs a setpoint stream already present.

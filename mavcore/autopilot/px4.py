@@ -74,6 +74,7 @@ class PX4(Autopilot):
            for s, n in AUTO_SUB_MODES.items()])
     boot_mode = "AUTO.LOITER"
     offboard_mode = "OFFBOARD"
+    attitude_mode = "OFFBOARD"
     after_takeoff = "AUTO.LOITER"
     offboard_needs_stream = True
     takeoff_by_command = False
