@@ -565,6 +565,10 @@ class FlightStack:
         self.home_enu_m = np.array(home_enu_m, dtype=float)
         #: HEARTBEAT custom_mode and name of each behaviour under this personality.
         self._wire = {m: autopilot.wire_mode(m.name) for m in FlightMode if _has_mode(autopilot, m)}
+        rule = autopilot.offboard_loss
+        #: The mode held after an offboard loss (PX4: Hold; ArduCopter: GUIDED itself).
+        self._loss_hold_mode = FlightMode[rule.leave_to] if rule.leave_to is not None else FlightMode.OFFBOARD
+        self._by_command = autopilot.takeoff_by_command
         self.mode = FlightMode[autopilot.mode(autopilot.boot_mode).behaviour]
         self.armed = False
         self.events: list[StatusEvent] = []
@@ -894,7 +898,8 @@ class FlightStack:
             self._anchor_at(state)
             self._say(SEVERITY_WARNING, "Actuator stream lost: onboard controller holds")
 
-        self._offboard_loss(now_us, state)
+        if self._failsafe is not None or (self.mode is FlightMode.OFFBOARD and not self.offboard_fresh(now_us)):
+            self._offboard_loss(now_us, state)
 
         sp, idle = self._mode_setpoint(now_us, state, dt)
         o = self._out
@@ -933,8 +938,7 @@ class FlightStack:
               and self.mode is FlightMode.OFFBOARD and self.offboard_fresh(now_us)):
             self._failsafe = None          # GUIDED: fresh setpoints are tracked again
             self._say(SEVERITY_INFO, "Offboard setpoints back")
-        hold_mode = FlightMode[rule.leave_to] if rule.leave_to is not None else FlightMode.OFFBOARD
-        if self._failsafe == "offboard" and self.mode is hold_mode:
+        if self._failsafe == "offboard" and self.mode is self._loss_hold_mode:
             if (now_us - self._failsafe_t0_us) * 1e-6 >= p[rule.act_after_param]:
                 action = self.autopilot.action_of(p[rule.action_param])
                 if action == "land":
@@ -954,11 +958,12 @@ class FlightStack:
         p = self.params
         mode = self.mode
         if mode is FlightMode.OFFBOARD:
-            if self.autopilot.takeoff_by_command and state.landed and not self._airborne_since_arm:
+            if self._by_command and state.landed and not self._airborne_since_arm:
                 return None, True      # ArduCopter GUIDED on the ground: idle until NAV_TAKEOFF
-            if self._failsafe is not None or not self._has_target():
+            r = self._offboard
+            if self._failsafe is not None or r is None or r.time_us < self._offboard_min_us:
                 return self._hold_sp, False
-            sp = self._offboard.setpoint
+            sp = r.setpoint
             if sp.pos_enu_m is None and sp.vel_enu_m_s is None and sp.acc_enu_m_s2 is None:
                 # Yaw-only setpoint: hold the position, turn as asked.
                 sp = Setpoint(a.pos, np.zeros(3), None, sp.yaw_enu_rad, sp.yaw_rate_rad_s)
