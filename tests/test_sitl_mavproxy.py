@@ -120,6 +120,7 @@ def test_mavproxy_mode_params_mission(tmp_path):
             mp.close()
 
 
+#: Generous waits: a loaded machine slows MAVProxy (a passing run takes about 20 s).
 def test_mavproxy_flies_the_ardupilot_personality(tmp_path):
     """MAVProxy knows ArduCopter's mode names (mavutil.mode_mapping_acm): it
     reads STABILIZE at boot, lists ArduPilot's parameters (integers as a C
@@ -130,20 +131,21 @@ def test_mavproxy_flies_the_ardupilot_personality(tmp_path):
     with SitlThread(MISSION, speed=2.0, autopilot="ardupilot") as sitl:
         mp = MavProxy(sitl.url, tmp_path, modules="param,mode,cmdlong,arm,fence")
         try:
-            mp.expect(r"Detected vehicle 1:1")
-            mp.expect(r"Mode STABILIZE")
-            n = int(mp.expect(r"Received (\d+) parameters").group(1))
+            mp.expect(r"Detected vehicle 1:1", timeout_s=30)
+            mp.expect(r"Mode STABILIZE", timeout_s=30)
+            n = int(mp.expect(r"Received (\d+) parameters", timeout_s=30).group(1))
             assert n == len(ARDUCOPTER.param_specs)
             mp.send("param show DISARM_DELAY")                          # INT32, C cast as ArduPilot
-            assert float(mp.expect(r"DISARM_DELAY\s+(\S+)").group(1)) == 10.0     # byte-wise: 1.4e-44
+            assert float(mp.expect(r"DISARM_DELAY\s+(\S+)", timeout_s=30).group(1)) == 10.0     # byte-wise: 1.4e-44
+            mp.send("param set DISARM_DELAY 0")     # no auto-disarm while a loaded machine is slow to take off
             mp.send("mode guided")
-            mp.expect(r"Mode GUIDED")
+            mp.expect(r"Mode GUIDED", timeout_s=30)
             mp.send("arm throttle")
-            mp.expect(r"^GUIDED> ARMED|^ARMED")            # from HEARTBEAT; DISARM_DELAY (10 s) to take off
+            mp.expect(r"^GUIDED> ARMED|^ARMED", timeout_s=30)            # from HEARTBEAT
             mp.send("takeoff 2")
-            mp.expect(r"Takeoff complete", timeout_s=20)
+            mp.expect(r"Takeoff complete", timeout_s=30)
             mp.send("mode land")
-            mp.expect(r"Landing detected", timeout_s=20)
+            mp.expect(r"Landing detected", timeout_s=30)
             assert not any("fence breach" in line for line in mp.out)
         finally:
             mp.close()
