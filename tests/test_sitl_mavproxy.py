@@ -120,7 +120,7 @@ def test_mavproxy_mode_params_mission(tmp_path):
             mp.close()
 
 
-#: Generous waits: a loaded machine slows MAVProxy (a passing run takes about 20 s).
+# Generous waits below: a loaded machine slows MAVProxy (a passing run takes about 20 s).
 def test_mavproxy_flies_the_ardupilot_personality(tmp_path):
     """MAVProxy knows ArduCopter's mode names (mavutil.mode_mapping_acm): it
     reads STABILIZE at boot, lists ArduPilot's parameters (integers as a C
