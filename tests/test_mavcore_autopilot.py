@@ -10,6 +10,7 @@ hand-worked PX4 words; the ArduCopter rules against their thresholds
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -171,3 +172,40 @@ def test_raw_imu_units_by_hand_and_back():
     names = ("time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag")
     back = _SiImu(SimpleNamespace(**dict(zip(names, a[:10]))))
     assert (back.zacc, back.ygyro, back.zmag) == pytest.approx((-9.80665, -0.2, 0.4))
+
+
+def test_guided_nogps_is_known_and_refused_for_now():
+    s = ap_stack()
+    assert ARDUCOPTER.mode_name(20) == "GUIDED_NOGPS"
+    assert s.mode_of(20) is None and s.mode_of(4) is FlightMode.OFFBOARD and s.mode_of(99) is None
+    assert not s.set_mode(0, ground(), s.mode_of(20)).accepted
+
+
+def test_mavcore_imports_neither_side():
+    """The shared core is imported by companion and sitl and imports neither."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "mavcore"
+    for path in root.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module or ""]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                continue
+            assert not any(n.split(".")[0] in ("companion", "sitl") for n in names), (path, names)
+
+
+def test_bad_sim_autopilot_names_the_key(tmp_path):
+    from companion.errors import InputError
+    from companion.mission import load_mission
+
+    src = Path(__file__).resolve().parents[1] / "missions" / "flat-rectangle" / "mission.yaml"
+    text = src.read_text().replace("\nsim:\n", "\nsim:\n  autopilot: betaflight\n", 1)
+    assert "betaflight" in text
+    bad = tmp_path / "m.yaml"
+    bad.write_text(text.replace("../", str(src.parent.parent) + "/"))
+    with pytest.raises(InputError, match="sim.autopilot"):
+        load_mission(bad)
