@@ -124,3 +124,21 @@ def test_mavsdk_takes_off_and_lands_the_ardupilot_personality():
             assert sitl.server.stack.custom_mode == 9          # LAND
         finally:
             drone.destroy()
+
+
+def test_mavsdk_listens_as_with_px4s_sitl():
+    """PX4's port convention (the SITL's default): the vehicle sends to the API's port,
+    so MAVSDK's usual ``udpin://`` finds it without sending first."""
+    from sitl.api import free_udp_port
+
+    port = free_udp_port()
+    drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    try:
+        drone.add_any_connection(f"udpin://127.0.0.1:{port}")
+        with SitlThread(MISSION, speed=1.0, listen=f"udpout:127.0.0.1:{port}"):
+            system = drone.first_autopilot(10.0)
+            assert system is not None, "MAVSDK did not discover the autopilot"
+            tel = Telemetry(system)
+            assert wait_until(lambda: tel.flight_mode() == FlightMode.HOLD, 5.0)
+    finally:
+        drone.destroy()
