@@ -960,9 +960,7 @@ class SitlServer:
         return codec.heartbeat(self._mav(), st.armed, st.custom_mode, st.system_status, self.autopilot.mav_autopilot)
 
     def _enc_sys_status(self):
-        # GEOFENCE healthy (no breach) though absent: a ground station reads a
-        # clear health bit as "fence breach" (MAVProxy said so at every connect).
-        health = _SENSORS | mavlink.MAV_SYS_STATUS_GEOFENCE
+        health = _SENSORS
         s = self._nav_state(self._frame)
         if s.landed and s.tilt_rad < math.radians(30.0):
             health |= _PREARM
