@@ -52,7 +52,8 @@ def test_arducopter_mode_numbers_are_pymavlinks():
     for m in ARDUCOPTER.modes:
         assert mavutil.mode_mapping_acm[m.custom_mode] == m.name
     assert ARDUCOPTER.custom_mode("GUIDED") == 4 and ARDUCOPTER.custom_mode("GUIDED_NOGPS") == 20
-    assert {"GUIDED", "AUTO", "LAND", "RTL", "LOITER", "STABILIZE", "GUIDED_NOGPS"} <= {m.name for m in ARDUCOPTER.modes}
+    names = {m.name for m in ARDUCOPTER.modes}
+    assert {"GUIDED", "AUTO", "LAND", "RTL", "LOITER", "STABILIZE", "GUIDED_NOGPS"} <= names
 
 
 def test_px4_mode_words_by_hand_and_pymavlink():
@@ -209,3 +210,12 @@ def test_bad_sim_autopilot_names_the_key(tmp_path):
     bad.write_text(text.replace("../", str(src.parent.parent) + "/"))
     with pytest.raises(InputError, match="sim.autopilot"):
         load_mission(bad)
+
+
+def test_every_internal_parameter_has_an_arducopter_value():
+    """The stack reads its parameters by PX4's names: each one must resolve under
+    the ArduCopter personality (a listed name, an alias or a fixed value)."""
+    p = Parameters.for_autopilot(ARDUCOPTER)
+    for spec in PX4_AUTOPILOT.param_specs:
+        assert math.isfinite(float(p[spec.name])), spec.name
+    assert p["NAV_ACC_RAD"] == pytest.approx(2.0)          # WPNAV_RADIUS 200 cm

@@ -78,6 +78,7 @@ class ArduCopter(Autopilot):
         ParamSpec("LAND_SPEED", _R, 50.0, 30.0, 200.0, "final landing descent speed (cm/s)"),
         ParamSpec("ANGLE_MAX", _I, 3000, 1000, 8000, "tilt limit (centidegrees)"),
         ParamSpec("RTL_ALT", _R, 500.0, 0.0, 15000.0, "return altitude above home (cm; ArduCopter's default is 1500)"),
+        ParamSpec("WPNAV_RADIUS", _R, 200.0, 5.0, 1000.0, "way-point acceptance radius (cm)"),
     ) + SIM_PARAM_SPECS
     param_aliases = (
         ParamAlias("COM_OF_LOSS_T", "GUID_TIMEOUT"),
@@ -92,9 +93,17 @@ class ArduCopter(Autopilot):
         ParamAlias("MPC_XY_VEL_MAX", "WPNAV_SPEED", 100.0),
         ParamAlias("MPC_TILTMAX_AIR", "ANGLE_MAX", 100.0),
         ParamAlias("RTL_RETURN_ALT", "RTL_ALT", 100.0),
+        ParamAlias("NAV_ACC_RAD", "WPNAV_RADIUS", 100.0),
     )
     #: Internal values with no ArduCopter parameter (not on the wire).
-    fixed_params = {"COM_HIL_TMO": 0.2, "NAV_MC_ALT_RAD": 0.8}
+    fixed_params = {
+        "COM_HIL_TMO": 0.2, "NAV_MC_ALT_RAD": 0.8,
+        # PX4's collision prevention is off (ArduCopter's AVOID_* is not simulated);
+        # a geofence breach returns (ArduCopter's FENCE_ACTION default 1: RTL, else land).
+        "CP_DIST": -1.0, "CP_DELAY": 0.4, "CP_GO_NO_DATA": 0, "GF_ACTION": 3, "MPC_ACC_HOR": 3.0,
+        # PX4's offboard-loss parameters, unused by ArduCopter's rules (FS_GCS_* below)
+        "COM_OBL_ACT": 1, "COM_FAIL_ACT_T": 5.0,
+    }
     #: Guided timeout: hold in GUIDED; FS_GCS_ENABLE's action FS_GCS_TIMEOUT
     #: after the last setpoint (the SITL counts the controlling link's
     #: setpoints; the companion sends its HEARTBEAT on the same link).

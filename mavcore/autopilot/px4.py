@@ -96,7 +96,17 @@ class PX4(Autopilot):
         ParamSpec("MPC_Z_VEL_MAX_UP", _R, 3.0, 0.1, 8.0, "onboard controller climb speed limit (m/s)"),
         ParamSpec("MPC_Z_VEL_MAX_DN", _R, 1.5, 0.1, 4.0, "onboard controller descent speed limit (m/s)"),
         ParamSpec("MPC_TILTMAX_AIR", _R, 35.0, 10.0, 85.0, "onboard controller tilt limit (deg)"),
-        ParamSpec("NAV_MC_ALT_RAD", _R, 0.8, 0.05, 10.0, "takeoff altitude acceptance (m)"),
+        # collision prevention, mission acceptance, geofence action (the mission-flying modules)
+        ParamSpec("MPC_ACC_HOR", _R, 3.0, 0.5, 15.0, "horizontal braking of collision prevention (m/s^2)"),
+        ParamSpec("CP_DIST", _R, -1.0, -1.0, 15.0, "collision prevention: distance kept from "
+                  "OBSTACLE_DISTANCE's obstacles (m; < 0 off, PX4's default)"),
+        ParamSpec("CP_DELAY", _R, 0.4, 0.0, 1.0, "collision prevention: sensing and control delay (s)"),
+        ParamSpec("CP_GO_NO_DATA", _I, 0, 0, 1, "collision prevention: 1 allows moving where no sensor data is"),
+        ParamSpec("NAV_MC_ALT_RAD", _R, 0.8, 0.05, 10.0, "takeoff and mission altitude acceptance (m)"),
+        ParamSpec("NAV_ACC_RAD", _R, 2.0, 0.05, 200.0,
+                  "mission way-point acceptance radius where the item's param2 is 0 (m; PX4's default is 10)"),
+        ParamSpec("GF_ACTION", _I, 2, 0, 5,
+                  "geofence breach action: 0 none, 1 warning, 2 hold, 3 return, 4 (termination) and 5 land"),
         ParamSpec("RTL_RETURN_ALT", _R, 5.0, 0.0, 150.0, "return altitude above home (m; PX4's default is 60)"),
     ) + SIM_PARAM_SPECS
     param_aliases = ()
