@@ -11,6 +11,8 @@ import argparse
 import importlib
 import sys
 
+from mavcore.logs import add_verbosity, configure
+
 from . import process_clock  # noqa: F401  (starts the fallback clock of timings_s.wall)
 from .errors import InputError
 
@@ -35,6 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
             continue  # subcommand not built yet
         p = sub.add_parser(name, help=help_text, description=help_text)
         module.add_arguments(p)
+        add_verbosity(p)
         p.set_defaults(_run=module.run)
     return parser
 
@@ -42,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    configure(args.verbose, args.quiet)
     try:
         return int(args._run(args) or 0)
     except InputError as exc:

@@ -27,6 +27,7 @@ to a ``Connection``:
 from __future__ import annotations
 
 import gc
+import logging
 import math
 import os
 import signal
@@ -35,6 +36,9 @@ import time
 from dataclasses import dataclass
 
 from .errors import LinkError, UnsafeMessage
+from .link.command_rules import command_name
+
+_log = logging.getLogger("companion")
 from .flight.config import RunnerConfig  # noqa: F401  (re-export)
 from .flight.core import (LAUNCH_TOLERANCE_M, PHASES, UNUSED_STREAMS, ActuatorOut,  # noqa: F401
                           FlightCore, FlightInputs)
@@ -74,6 +78,7 @@ class MissionRunner:
         self.progress = progress or Progress(enabled=False)
         self._signal: str | None = None
         self._signals_seen = 0
+        self._debug = False
         self._clock_offset_us: int | None = None
 
     # --- signals --------------------------------------------------------------------
@@ -102,6 +107,9 @@ class MissionRunner:
     def _send_outbox(self) -> None:
         conn = self.conn
         for out in self.core.take_outbox():
+            if self._debug and type(out) is not ActuatorOut and out.get_type() == "COMMAND_LONG":
+                _log.debug("t=%.3f s: command %s %s", self.core.t_s or 0.0, command_name(out.command),
+                           [out.param1, out.param2, out.param3, out.param4, out.param5, out.param6, out.param7])
             try:
                 if type(out) is ActuatorOut:
                     conn.send_actuators(out.time_usec, out.motor_cmd, out.armed)
@@ -138,6 +146,8 @@ class MissionRunner:
         last_t = None
         next_hb = 0.0
         next_show, shown = 0.0, None
+        self._debug = _log.isEnabledFor(logging.DEBUG)
+        n_texts, autopilot = 0, None
         tlog = conn.tlog
         next_check = time.monotonic() + TLOG_CHECK_INTERVAL_S
         try:
@@ -185,6 +195,14 @@ class MissionRunner:
                         core.output_fault("tlog", tlog.fault)
                         self._send_outbox()
                 if now >= next_show or core.phase != shown:   # 20 updates a second are enough
+                    if core.phase != shown:
+                        _log.info("t=%.3f s: phase %s", core.t_s or 0.0, core.phase)
+                    if core.autopilot is not autopilot:
+                        autopilot = core.autopilot
+                        _log.info("vehicle: %s (from its HEARTBEAT)", autopilot.key)
+                    while n_texts < len(core.statustext):
+                        _log.info("vehicle says: %s", core.statustext[n_texts])
+                        n_texts += 1
                     next_show, shown = now + 0.05, core.phase
                     self._show()
         except LinkError as exc:

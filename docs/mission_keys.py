@@ -250,6 +250,9 @@ NOTES: dict[str, tuple[str, str, str]] = {
                            "override its values."),
     "sim.onboard_state": ("", "estimate | truth", "What the SITL's own cascaded controller flies on: its onboard "
                           "estimator's output from the noisy sensors, or the true state (labelled so)."),
+    "sim.autopilot": ("", "px4 | ardupilot", "The flight stack the SITL speaks as: its modes, parameters, take-off "
+                      "and failsafe rules ([flying-a-real-vehicle.md](flying-a-real-vehicle.md#personalities)); "
+                      "`sitl --autopilot` overrides it."),
     "sim.seed": ("", ">= 0", "Seed of the SITL's noise and wind "
                  "(`--seed` overrides it)."),
     "sim.rangefinders": ("", "", "Body-fixed rangefinders (one DISTANCE_SENSOR id each); null: the default "

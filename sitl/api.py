@@ -69,7 +69,8 @@ class _SitlOptions:
     def __init__(self, mission_path, *, listen: str | None = None, outs=(), lockstep: bool = False,
                  speed: float = 1.0, seed: int | None = None, physics_hz: int = 1000,
                  sensor_hz: int = 250, control_outs=(), signing_key_file=None, max_clients: int = 8,
-                 client_timeout_s: float = 10.0, stats_file=None, controllers=None) -> None:
+                 client_timeout_s: float = 10.0, stats_file=None, controllers=None,
+                 autopilot: str | None = None) -> None:
         self.mission_path = Path(mission_path)
         self.listen = listen or f"udpin:127.0.0.1:{free_udp_port()}"
         self.outs = tuple(outs)
@@ -84,6 +85,7 @@ class _SitlOptions:
         self.seed = seed
         self.physics_hz = physics_hz
         self.sensor_hz = sensor_hz
+        self.autopilot = autopilot
 
     def _server_inputs(self):
         """What an in-process server is built from: the mission, the signing key (or
@@ -127,6 +129,8 @@ class SitlThread(_SitlOptions):
         ``sitl --stats`` (``SitlProcess`` only; a ``SitlThread``'s server is at hand).
     controllers : sequence of str, optional
         ``sitl --controller`` values (``SYSID/COMPID[@LINK]``); None: the defaults.
+    autopilot : str, optional
+        ``sitl --autopilot`` ("px4", "ardupilot"); None: the mission's ``sim.autopilot``.
     lockstep : bool
     speed : float
         Real-time factor when free-running (0: as fast as possible).
@@ -152,7 +156,7 @@ class SitlThread(_SitlOptions):
                            seed=self.seed, physics_hz=self.physics_hz, sensor_hz=self.sensor_hz,
                            start=self.start_pose, spin=False, control_outs=self.control_outs, signing_key=key,
                            max_clients=self.max_clients, client_timeout_s=self.client_timeout_s,
-                           controllers=controllers)
+                           controllers=controllers, autopilot=self.autopilot)
         self.server = SitlServer(mission, cfg)
         self.server.open()   # readiness: the sockets exist when start() returns
 
@@ -231,7 +235,7 @@ class SitlInProcess(_SitlOptions):
         mission, key, controllers = self._server_inputs()
         cfg = ServerConfig(listen=self.listen, lockstep=True, speed=0.0, seed=self.seed,
                            physics_hz=self.physics_hz, sensor_hz=self.sensor_hz, start=self.start_pose,
-                           spin=False, signing_key=key, controllers=controllers)
+                           spin=False, signing_key=key, controllers=controllers, autopilot=self.autopilot)
         server = SitlServer(mission, cfg)
         server.open()
         self.server = server
@@ -276,7 +280,7 @@ class SitlProcess(_SitlOptions):
         self._stderr = None
 
     def command(self) -> list[str]:
-        cmd = [self.python, "-m", "sitl", str(self.mission_path), "--listen", self.listen,
+        cmd = [self.python, "-m", "sitl", str(self.mission_path), "--listen", self.listen, "--gcs", "none",
                "--speed", repr(float(self.speed)), "--physics-hz", str(self.physics_hz),
                "--sensor-hz", str(self.sensor_hz)]
         for o in self.outs:
@@ -292,6 +296,8 @@ class SitlProcess(_SitlOptions):
             cmd += ["--controller", c]
         if self.lockstep:
             cmd.append("--lockstep")
+        if self.autopilot is not None:
+            cmd += ["--autopilot", self.autopilot]
         if self.seed is not None:
             cmd += ["--seed", str(int(self.seed))]
         if self.deferred:

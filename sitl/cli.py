@@ -1,6 +1,6 @@
 """``sitl`` command line: run the bundled SITL on a mission.
 
-``sitl MISSION.yaml [--listen udpin:127.0.0.1:14540] [--out udpout:127.0.0.1:14550 ...]
+``sitl MISSION.yaml [--ports px4|legacy] [--listen URL] [--gcs URL|none] [--out udpout:127.0.0.1:14550 ...]
 [--control-out URL ...] [--controller SYSID/COMPID[@LINK] ...] [--signing-key FILE]
 [--max-clients 8] [--client-timeout 10] [--lockstep] [--speed 1] [--seed N]
 [--physics-hz 1000] [--sensor-hz 250] [--start X,Y[,YAW_DEG]]``
@@ -47,8 +47,11 @@ import sys
 from pathlib import Path
 
 from companion.errors import InputError
+from mavcore.logs import add_verbosity, configure
 
 READY_MARKER = "sitl: ready"
+#: Port conventions (``--ports``): (main link, ground-station link or None).
+PORTS = {"px4": ("udpout:127.0.0.1:14540", "udpout:127.0.0.1:14550"), "legacy": ("udpin:127.0.0.1:14540", None)}
 #: Fastest real-time factor asked for (beyond it, "as fast as possible" is --speed 0).
 MAX_SPEED = 1000.0
 
@@ -56,8 +59,14 @@ MAX_SPEED = 1000.0
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sitl", description=__doc__.splitlines()[0])
     p.add_argument("mission", help="mission YAML (its maps give the terrain and the vine rows)")
-    p.add_argument("--listen", default="udpin:127.0.0.1:14540",
-                   help="main MAVLink link, pymavlink syntax (default %(default)s)")
+    p.add_argument("--ports", choices=("px4", "legacy"), default="px4",
+                   help="port convention: px4 (default): the vehicle sends to the companion on 14540 "
+                        f"({PORTS['px4'][0]}) and to a ground station on 14550 ({PORTS['px4'][1]}, control "
+                        f"allowed), as PX4's SITL; legacy: the SITL listens on {PORTS['legacy'][0]}, no GCS link")
+    p.add_argument("--listen", default=None,
+                   help="main MAVLink link, pymavlink syntax (default: the --ports convention's)")
+    p.add_argument("--gcs", default=None, metavar="URL|none",
+                   help="ground-station link, carries control (default: the --ports convention's; none: no link)")
     p.add_argument("--out", action="append", default=[], metavar="URL",
                    help="extra telemetry-only MAVLink link, e.g. udpout:127.0.0.1:14550 (repeatable)")
     p.add_argument("--control-out", action="append", default=[], metavar="URL",
@@ -73,6 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="drop a udpin peer silent for S wall-clock seconds (default %(default)s)")
     p.add_argument("--stats", default=None, metavar="FILE",
                    help="on exit, write link statistics as JSON (control accepted by source, ignored by reason)")
+    p.add_argument("--autopilot", choices=("px4", "ardupilot"), default=None,
+                   help="flight stack to speak as: modes, parameters, take-off and failsafe rules "
+                        "(default: the mission's sim.autopilot, else px4)")
     p.add_argument("--lockstep", action="store_true",
                    help="lockstep with the peer that answers HIGHRES_IMU with HIL_ACTUATOR_CONTROLS")
     p.add_argument("--speed", type=float, default=1.0,
@@ -84,7 +96,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help="launch position, ENU metres on the map, and heading, ENU degrees from east "
                         "(default: the mission's sim.start_enu_m, else a free mid-corridor cell); "
                         "'-': read it as one line from stdin")
+    add_verbosity(p)
     return p
+
+
+def port_links(ports: str, listen: str | None, gcs: str | None) -> tuple[str, str | None]:
+    """(main link, ground-station link or None) of a port convention
+    (``--ports``), with ``--listen``/``--gcs`` given (None: the convention's;
+    ``--gcs none``: no ground-station link)."""
+    listen_default, gcs_default = PORTS[ports]
+    gcs = gcs_default if gcs is None else (None if gcs == "none" else gcs)
+    return (listen_default if listen is None else listen), gcs
 
 
 def parse_start(text: str) -> tuple[float, float, float]:
@@ -163,6 +185,7 @@ def parse_controllers(texts, control_links) -> tuple | None:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    configure(args.verbose, args.quiet)
     try:
         return _run(args)
     except InputError as exc:
@@ -178,6 +201,10 @@ def _run(args) -> int:
 
     from .server import ServerConfig, SitlServer
 
+    args.listen, gcs = port_links(args.ports, args.listen, args.gcs)
+    if gcs is not None:
+        _check_url(gcs, "--gcs")
+        args.control_out = [*args.control_out, gcs]
     _check_url(args.listen, "--listen")
     for u in args.out:
         _check_url(u, "--out")
@@ -216,7 +243,7 @@ def _run(args) -> int:
                           speed=args.speed, seed=args.seed, physics_hz=args.physics_hz,
                           sensor_hz=args.sensor_hz, start=start, control_outs=tuple(args.control_out),
                           controllers=controllers, signing_key=key, max_clients=args.max_clients,
-                          client_timeout_s=args.client_timeout)
+                          client_timeout_s=args.client_timeout, autopilot=args.autopilot)
     try:
         server = SitlServer(mission, config)
     except InputError:

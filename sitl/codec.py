@@ -386,9 +386,10 @@ def decode_takeoff_altitude(param7: float, origin_alt_amsl_m: float) -> float | 
 # --- encoders ----------------------------------------------------------------
 
 
-def heartbeat(mav, armed: bool, custom_mode: int, system_status: int):
-    """Vehicle HEARTBEAT: quadrotor, PX4 autopilot, PX4 custom mode."""
-    return mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4,
+def heartbeat(mav, armed: bool, custom_mode: int, system_status: int,
+              autopilot: int = mavlink.MAV_AUTOPILOT_PX4):
+    """Vehicle HEARTBEAT: quadrotor, the personality's MAV_AUTOPILOT and custom mode."""
+    return mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, autopilot,
                                 base_mode(armed), custom_mode, system_status)
 
 
@@ -410,6 +411,34 @@ def highres_imu_args(time_us: int, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss
     return (int(time_us), float(ax), -float(ay), -float(az), float(gx), -float(gy), -float(gz),
             float(mx), -float(my), -float(mz), p_hpa, 0.0, float(alt_amsl_m), t_k - 273.15,
             HIGHRES_IMU_FIELDS, 0)
+
+
+#: Standard gravity (m/s^2): ArduPilot's GRAVITY_MSS, RAW_IMU/SCALED_IMU's milli-g.
+G0_M_S2 = 9.80665
+
+
+def _i16(v: float) -> int:
+    """Round to the nearest int16 (saturating, as the stack's int16 fields do)."""
+    x = round(v) if math.isfinite(v) else 0
+    return -32768 if x < -32768 else 32767 if x > 32767 else int(x)
+
+
+def raw_imu_args(time_us: int, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss) -> tuple:
+    """RAW_IMU fields (``raw_imu_encode`` order) in ArduPilot's units: accelerometer
+    milli-g (m/s^2 * 1000 / 9.80665), gyro mrad/s, magnetometer milligauss, body
+    FRD (FLU (x, -y, -z)), int16 each; ``time_usec`` vehicle time; id 0."""
+    ax, ay, az = accel_flu_m_s2
+    gx, gy, gz = gyro_flu_rad_s
+    mx, my, mz = mag_flu_gauss
+    ka = 1000.0 / G0_M_S2
+    return (int(time_us), _i16(ax * ka), _i16(-ay * ka), _i16(-az * ka), _i16(gx * 1e3), _i16(-gy * 1e3),
+            _i16(-gz * 1e3), _i16(mx * 1e3), _i16(-my * 1e3), _i16(-mz * 1e3), 0, 0)
+
+
+def scaled_imu2(mav, time_boot_ms: int, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss):
+    """SCALED_IMU2 (the second IMU as ArduPilot reports it): RAW_IMU's units, ``time_boot_ms``."""
+    a = raw_imu_args(0, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss)
+    return mav.scaled_imu2_encode(int(time_boot_ms), *a[1:10], 0)
 
 
 def highres_imu(mav, time_us: int, accel_flu_m_s2, gyro_flu_rad_s, mag_flu_gauss,
@@ -854,6 +883,7 @@ class FastPacker:
 
 
 PACK_HIGHRES_IMU = FastPacker(mavlink.MAVLink_highres_imu_message)
+PACK_RAW_IMU = FastPacker(mavlink.MAVLink_raw_imu_message)
 PACK_LOCAL_POSITION_NED = FastPacker(mavlink.MAVLink_local_position_ned_message)
 PACK_ATTITUDE = FastPacker(mavlink.MAVLink_attitude_message)
 PACK_ODOMETRY = FastPacker(mavlink.MAVLink_odometry_message)

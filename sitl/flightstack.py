@@ -72,6 +72,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.link.command_rules import mission_item_problem
+from mavcore.autopilot import PX4_AUTOPILOT, READ_ONLY_PARAMS, Autopilot, ParamSpec  # noqa: F401 (re-exported)
 
 from .collision import CrashEvent, landing_intended
 from .fence import Fence
@@ -140,78 +141,26 @@ class FlightMode(Enum):
 
     @property
     def label(self) -> str:
+        """PX4's name of the mode (``FlightStack.label`` names it for the stack flown)."""
         return {1: "MANUAL", 3: "POSCTL", 6: "OFFBOARD"}.get(self.main) or f"AUTO.{self.name}"
+
+
+def _has_mode(autopilot: Autopilot, mode: "FlightMode") -> bool:
+    try:
+        autopilot.wire_mode(mode.name)
+        return True
+    except KeyError:
+        return False
 
 
 # --- parameters ---------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class ParamSpec:
-    """One parameter: name (<= 16 chars), MAV_PARAM_TYPE, default, bounds, meaning."""
-
-    name: str
-    param_type: int
-    default: float
-    min: float
-    max: float
-    doc: str
-
-
-_R, _I = PARAM_TYPE_REAL32, PARAM_TYPE_INT32
-
-#: Parameters a PARAM_SET cannot change (they describe how the simulator was started).
-READ_ONLY_PARAMS = frozenset({"SIM_LOCKSTEP"})
-
-#: The parameter set. PX4 names where PX4 has the parameter; SIM_* are the
-#: simulator's own (noise and lockstep), applied by ``sitl.server``.
-PARAM_SPECS: tuple[ParamSpec, ...] = (
-    ParamSpec("COM_OF_LOSS_T", _R, 1.0, 0.0, 60.0, "offboard setpoint loss timeout (s)"),
-    ParamSpec("COM_OBL_ACT", _I, 0, 0, 2, "offboard loss action after the hold: 0 land, 1 hold, 2 return"),
-    ParamSpec("COM_FAIL_ACT_T", _R, 5.0, 0.0, 60.0, "hold time before a failsafe action (s)"),
-    ParamSpec("COM_HIL_TMO", _R, 0.2, 0.01, 10.0, "HIL_ACTUATOR_CONTROLS freshness timeout (s)"),
-    ParamSpec("COM_DISARM_LAND", _R, 2.0, -1.0, 20.0, "auto-disarm after landing (s, <= 0 off)"),
-    ParamSpec("COM_DISARM_PRFLT", _R, 10.0, -1.0, 60.0, "auto-disarm without takeoff (s, <= 0 off)"),
-    ParamSpec("MIS_TAKEOFF_ALT", _R, 2.5, 0.1, 100.0, "default takeoff height above home (m)"),
-    ParamSpec("MPC_TKO_SPEED", _R, 1.5, 0.1, 5.0, "takeoff climb speed (m/s)"),
-    ParamSpec("MPC_LAND_SPEED", _R, 0.7, 0.1, 3.0, "landing descent speed (m/s)"),
-    ParamSpec("MPC_XY_CRUISE", _R, 5.0, 0.1, 20.0, "horizontal speed of the return leg (m/s)"),
-    ParamSpec("MPC_XY_VEL_MAX", _R, 5.0, 0.1, 20.0, "onboard controller horizontal speed limit (m/s)"),
-    ParamSpec("MPC_Z_VEL_MAX_UP", _R, 3.0, 0.1, 8.0, "onboard controller climb speed limit (m/s)"),
-    ParamSpec("MPC_Z_VEL_MAX_DN", _R, 1.5, 0.1, 4.0, "onboard controller descent speed limit (m/s)"),
-    ParamSpec("MPC_TILTMAX_AIR", _R, 35.0, 10.0, 85.0, "onboard controller tilt limit (deg)"),
-    ParamSpec("MPC_ACC_HOR", _R, 3.0, 0.5, 15.0, "horizontal braking of collision prevention (m/s^2)"),
-    ParamSpec("CP_DIST", _R, -1.0, -1.0, 15.0,
-              "collision prevention: distance kept from OBSTACLE_DISTANCE's obstacles (m; < 0 off, PX4's default)"),
-    ParamSpec("CP_DELAY", _R, 0.4, 0.0, 1.0, "collision prevention: sensing and control delay (s)"),
-    ParamSpec("CP_GO_NO_DATA", _I, 0, 0, 1, "collision prevention: 1 allows moving where no sensor data is"),
-    ParamSpec("NAV_MC_ALT_RAD", _R, 0.8, 0.05, 10.0, "takeoff and mission altitude acceptance (m)"),
-    ParamSpec("NAV_ACC_RAD", _R, 2.0, 0.05, 200.0,
-              "mission way-point acceptance radius where the item's param2 is 0 (m; PX4's default is 10)"),
-    ParamSpec("GF_ACTION", _I, 2, 0, 5,
-              "geofence breach action: 0 none, 1 warning, 2 hold, 3 return, 4 (termination) and 5 land"),
-    ParamSpec("MPC_THR_HOVER", _R, 0.5, 0.05, 1.0,
-              "hover thrust, normalised (the vehicle's m g / (4 f_max) at start; read by a companion that "
-              "sends attitude-rate setpoints)"),
-    ParamSpec("RTL_RETURN_ALT", _R, 5.0, 0.0, 150.0, "return altitude above home (m; PX4's default is 60)"),
-    ParamSpec("THR_MDL_FAC", _R, 0.0, 0.0, 1.0,
-              "motor thrust curve factor k of the rate-setpoint path: thrust = (1 - k) u + k u^2 (0: the "
-              "simulated motors are linear)"),
-    ParamSpec("SIM_LOCKSTEP", _I, 0, 0, 1,
-              "1: lockstep with the actuator peer (the --lockstep option; read-only): the vehicle waits for "
-              "every answer, so link delay costs wall time, not control"),
-    ParamSpec("SIM_LS_TMO", _R, 2.0, 0.05, 60.0, "lockstep: wall-clock wait for the answer (s)"),
-    ParamSpec("SIM_LS_SPIN", _R, 300.0, 0.0, 5000.0,
-              "lockstep: busy-poll for the answer this long before sleeping (us; 0 off)"),
-    ParamSpec("SIM_VEC_VAR", _R, 5.0e-4, 0.0, 1.0, "accel/mag direction noise variance (-)"),
-    ParamSpec("SIM_GYRO_VAR", _R, 5.0e-4, 0.0, 1.0, "gyro noise variance ((rad/s)^2)"),
-    ParamSpec("SIM_POS_STD", _R, 0.0, 0.0, 100.0, "horizontal position measurement noise std (m)"),
-    ParamSpec("SIM_POSZ_STD", _R, 0.0, 0.0, 100.0, "vertical position measurement noise std (m)"),
-    ParamSpec("SIM_VEL_STD", _R, 0.0, 0.0, 100.0, "velocity measurement noise std (m/s)"),
-    ParamSpec("SIM_RNG_STD", _R, 0.0, 0.0, 100.0, "rangefinder noise std (m)"),
-    ParamSpec("SIM_RNG_HZ", _R, 0.0, 0.0, 1000.0,
-              "rangefinder sample and DISTANCE_SENSOR rate (Hz; 0: leave each sensor's rate as it is)"),
-)
+#: The PX4 parameter set (``mavcore.autopilot.px4``): PX4 names where PX4 has
+#: the parameter; SIM_* are the simulator's own (noise and lockstep), applied
+#: by ``sitl.server``. Inside the stack parameters are read by these names,
+#: in SI units, whatever the personality (``Parameters`` aliases).
+PARAM_SPECS: tuple[ParamSpec, ...] = PX4_AUTOPILOT.param_specs
 
 
 @dataclass(frozen=True, slots=True)
@@ -225,19 +174,32 @@ class ParamSetResult:
 
 
 class Parameters:
-    """Named, typed parameter values with PX4's list order (by index).
+    """Named, typed parameter values in the stack's list order (by index).
+
+    The list (``specs``) holds the stack's wire names and units. The flight
+    stack reads its values by internal name in SI units (PX4's names):
+    ``aliases`` (``mavcore.autopilot.ParamAlias``) map an internal name to a
+    listed one and its unit factor, ``fixed`` gives internal values the stack
+    has no parameter for. ``p[name]`` and ``set(name, v)`` take either kind
+    of name (an internal one in SI units).
 
     Parameters
     ----------
     specs : tuple of ParamSpec
     initial : dict, optional
         Start values overriding the defaults (e.g. the mission's noise).
+    aliases : tuple of ParamAlias, optional
+    fixed : dict, optional
     """
 
-    def __init__(self, specs: tuple[ParamSpec, ...] = PARAM_SPECS, initial: dict | None = None) -> None:
+    def __init__(self, specs: tuple[ParamSpec, ...] = PARAM_SPECS, initial: dict | None = None,
+                 aliases: tuple = (), fixed: dict | None = None) -> None:
         self.specs = tuple(specs)
         self._index = {s.name: i for i, s in enumerate(self.specs)}
         self._values = [self._typed(s, s.default) for s in self.specs]
+        #: internal name -> (index of the listed parameter, wire units per SI unit)
+        self._alias = {a.internal: (self._index[a.wire], float(a.wire_per_si)) for a in aliases}
+        self._fixed = dict(fixed or {})
         #: Incremented by every successful ``set``: lets a reader cache derived values.
         self.version = 0
         for k, v in (initial or {}).items():
@@ -252,11 +214,23 @@ class Parameters:
     def __len__(self) -> int:
         return len(self.specs)
 
+    @classmethod
+    def for_autopilot(cls, autopilot: Autopilot, initial: dict | None = None) -> "Parameters":
+        """The parameter set of a personality (``mavcore.autopilot``)."""
+        return cls(autopilot.param_specs, initial, autopilot.param_aliases, autopilot.fixed_params)
+
     def __contains__(self, name: str) -> bool:
+        """A listed (wire) name: what PARAM_* messages may name."""
         return name in self._index
 
     def __getitem__(self, name: str):
-        return self._values[self._index[name]]
+        i = self._index.get(name)
+        if i is not None:
+            return self._values[i]
+        a = self._alias.get(name)
+        if a is not None:
+            return self._values[a[0]] / a[1]
+        return self._fixed[name]
 
     def index(self, name: str) -> int:
         """Index of a parameter; KeyError if unknown."""
@@ -272,8 +246,20 @@ class Parameters:
         return self.specs[i], self._values[i]
 
     def set(self, name: str, value) -> ParamSetResult:
-        """Set a parameter (typed, bounds-checked)."""
+        """Set a parameter (typed, bounds-checked); an internal name's value is in SI units."""
         i = self._index.get(name)
+        if i is None and name in self._alias:
+            i, k = self._alias[name]
+            try:
+                value = round(float(value) * k, 6)
+            except (TypeError, ValueError):
+                pass
+            if self.specs[i].param_type == PARAM_TYPE_INT32:
+                try:
+                    value = round(float(value))
+                except (TypeError, ValueError, OverflowError):
+                    pass
+            name = self.specs[i].name
         if i is None:
             return ParamSetResult(False, math.nan, f"unknown parameter {name}")
         spec = self.specs[i]
@@ -615,10 +601,17 @@ class FlightStack:
         Home (takeoff and return point): the vehicle's start position.
     """
 
-    def __init__(self, params: Parameters, home_enu_m) -> None:
+    def __init__(self, params: Parameters, home_enu_m, autopilot: Autopilot = PX4_AUTOPILOT) -> None:
         self.params = params
+        self.autopilot = autopilot
         self.home_enu_m = np.array(home_enu_m, dtype=float)
-        self.mode = FlightMode.LOITER
+        #: HEARTBEAT custom_mode and name of each behaviour under this personality.
+        self._wire = {m: autopilot.wire_mode(m.name) for m in FlightMode if _has_mode(autopilot, m)}
+        rule = autopilot.offboard_loss
+        #: The mode held after an offboard loss (PX4: Hold; ArduCopter: GUIDED itself).
+        self._loss_hold_mode = FlightMode[rule.leave_to] if rule.leave_to is not None else FlightMode.OFFBOARD
+        self._by_command = autopilot.takeoff_by_command
+        self.mode = FlightMode[autopilot.mode(autopilot.boot_mode).behaviour]
         self.armed = False
         self.events: list[StatusEvent] = []
         self._now_us = 0
@@ -629,6 +622,9 @@ class FlightStack:
         self._offboard: ReceivedTarget | None = None
         self._rates: RateSetpoint | None = None
         self._rates_time_us = -(1 << 62)
+        #: Setpoints received before this vehicle time are not flown (ArduCopter
+        #: GUIDED drops its target on entry and at the end of a take-off).
+        self._offboard_min_us = -(1 << 62)
         self._act_cmd: tuple | None = None
         self._act_time_us = -(1 << 62)
         self._override_active = False
@@ -656,7 +652,16 @@ class FlightStack:
     # ------------------------------------------------------------------ info
     @property
     def custom_mode(self) -> int:
-        return self.mode.main << 16 | self.mode.sub << 24
+        return self._wire[self.mode].custom_mode
+
+    def label(self, mode: FlightMode) -> str:
+        """The mode's name as the stack's tools print it ("AUTO.LOITER", "GUIDED")."""
+        return self._wire[mode].name
+
+    def mode_of(self, custom_mode: int) -> "FlightMode | None":
+        """The behaviour of a SET_MODE/DO_SET_MODE ``custom_mode``; None: unknown or refused."""
+        m = self.autopilot.decode_mode(custom_mode)
+        return None if m is None or m.behaviour is None else FlightMode[m.behaviour]
 
     @property
     def crashed(self) -> bool:
@@ -785,7 +790,7 @@ class FlightStack:
         self._land_announced = False
         self._state = state
         self._enter(self.mode, state, announce=False)
-        self._say(SEVERITY_INFO, "Armed" + (" (forced)" if force else "") + f" in {self.mode.label}")
+        self._say(SEVERITY_INFO, "Armed" + (" (forced)" if force else "") + f" in {self.label(self.mode)}")
         return CommandResult(RESULT_ACCEPTED)
 
     def _prearm_failure(self, now_us: int, state: NavState) -> str:
@@ -794,8 +799,9 @@ class FlightStack:
         if state.tilt_rad > ARM_MAX_TILT_RAD:
             return "vehicle not level"
         if self.mode in (FlightMode.LAND, FlightMode.RTL):
-            return f"not armable in {self.mode.label}"
-        if self.mode is FlightMode.OFFBOARD and not self.offboard_fresh(now_us):
+            return f"not armable in {self.label(self.mode)}"
+        if (self.mode is FlightMode.OFFBOARD and self.autopilot.offboard_needs_stream
+                and not self.offboard_fresh(now_us)):
             return "no offboard setpoint stream"
         if self.mode is FlightMode.MISSION and self.mission is None:
             return "no mission"
@@ -824,7 +830,7 @@ class FlightStack:
             return self._denied_crashed("Mode change")
         if mode is FlightMode.MISSION:
             return self.start_mission(now_us, state, None)
-        if mode is FlightMode.OFFBOARD and not self.offboard_fresh(now_us):
+        if mode is FlightMode.OFFBOARD and self.autopilot.offboard_needs_stream and not self.offboard_fresh(now_us):
             self._say(SEVERITY_WARNING, "Offboard denied: no setpoint stream")
             return CommandResult(RESULT_TEMPORARILY_REJECTED, "no offboard setpoint stream")
         if mode is FlightMode.RTL and (not self.armed or state.landed):
@@ -847,6 +853,13 @@ class FlightStack:
         """
         if self.crash_event is not None:
             return self._denied_crashed("Takeoff")
+        if self.autopilot.takeoff_by_command and not (self.armed and state.landed
+                                                      and self.mode is FlightMode.OFFBOARD):
+            # ArduCopter: a take-off needs the motors armed, in GUIDED, on the ground.
+            why = "not armed" if not self.armed else "not landed" if not state.landed else \
+                f"not in {self.autopilot.offboard_mode}"
+            self._say(SEVERITY_WARNING, f"Takeoff refused: {why}")
+            return CommandResult(RESULT_FAILED, why)
         home_z = float(self.home_enu_m[2])
         z_min = home_z + self.params["MIS_TAKEOFF_ALT"]
         z = z_min if target_z_enu_m is None else float(target_z_enu_m)
@@ -919,12 +932,14 @@ class FlightStack:
 
     # ------------------------------------------------------------------ modes
     def _enter(self, mode: FlightMode, state: NavState, announce: bool = True, resume: bool = True) -> None:
-        changed = mode is not self.mode
+        changed = self._wire[mode] is not self._wire[self.mode]
+        if mode is FlightMode.OFFBOARD and changed and self.autopilot.offboard_loss.leave_to is None:
+            self._offboard_min_us = self._now_us   # GUIDED starts holding where it is
         self.mode = mode
         self._anchor_at(state, resume=resume)
         self._land_announced = False
         if announce and changed:
-            self._say(SEVERITY_INFO, f"Mode {mode.label}")
+            self._say(SEVERITY_INFO, f"Mode {self.label(mode)}")
 
     def _anchor_at(self, state: NavState, hold_pos=None, resume: bool = True) -> None:
         """Anchor the mode's setpoint at the vehicle (or at ``hold_pos``)."""
@@ -998,25 +1013,8 @@ class FlightStack:
             self._anchor_at(state)
             self._say(SEVERITY_WARNING, "Actuator stream lost: onboard controller holds")
 
-        # --- offboard loss failsafe
-        if self.mode is FlightMode.OFFBOARD and not self.offboard_fresh(now_us):
-            self._enter(FlightMode.LOITER, state, announce=False)
-            self._failsafe = "offboard"
-            self._failsafe_t0_us = now_us
-            self._say(SEVERITY_CRITICAL, "Failsafe: offboard setpoints lost, holding")
-        if self._failsafe == "offboard" and self.mode is FlightMode.LOITER:
-            if (now_us - self._failsafe_t0_us) * 1e-6 >= p["COM_FAIL_ACT_T"]:
-                action = int(p["COM_OBL_ACT"])
-                if action == 0:
-                    self._failsafe = None
-                    self._enter(FlightMode.LAND, state, announce=False)
-                    self._say(SEVERITY_CRITICAL, "Failsafe: landing")
-                elif action == 2 and not state.landed:
-                    self._failsafe = None
-                    self._enter(FlightMode.RTL, state, announce=False)
-                    self._say(SEVERITY_CRITICAL, "Failsafe: returning")
-                else:
-                    self._failsafe = "offboard-hold"
+        if self._failsafe is not None or (self.mode is FlightMode.OFFBOARD and not self.offboard_fresh(now_us)):
+            self._offboard_loss(now_us, state)
 
         sp, idle = self._mode_setpoint(now_us, state, dt)
         o = self._out
@@ -1035,13 +1033,55 @@ class FlightStack:
         o = self._out = StackOutput(True, None, idle, sp, reset)
         return o
 
+    def _has_target(self) -> bool:
+        r = self._offboard
+        return r is not None and r.time_us >= self._offboard_min_us
+
+    def _offboard_loss(self, now_us: int, state: NavState) -> None:
+        """The offboard/guided loss failsafe (``Autopilot.offboard_loss``)."""
+        rule = self.autopilot.offboard_loss
+        p = self.params
+        if self.mode is FlightMode.OFFBOARD and self._failsafe is None and not self.offboard_fresh(now_us):
+            if rule.leave_to is None and not self._has_target():
+                return        # GUIDED holding with no target of ours: nothing to lose
+            self._failsafe = "offboard"
+            if rule.leave_to is not None:
+                self._enter(FlightMode[rule.leave_to], state, announce=False)
+                self._failsafe_t0_us = now_us
+            else:             # kept in the mode, stopped where it is; timed from the last setpoint
+                self._anchor_at(state)
+                self._failsafe_t0_us = now_us if self._offboard is None else self._offboard.time_us
+            self._say(SEVERITY_CRITICAL, "Failsafe: offboard setpoints lost, holding")
+        elif (self._failsafe in ("offboard", "offboard-hold") and rule.leave_to is None
+              and self.mode is FlightMode.OFFBOARD and self.offboard_fresh(now_us)):
+            self._failsafe = None          # GUIDED: fresh setpoints are tracked again
+            self._say(SEVERITY_INFO, "Offboard setpoints back")
+        if self._failsafe == "offboard" and self.mode is self._loss_hold_mode:
+            if (now_us - self._failsafe_t0_us) * 1e-6 >= p[rule.act_after_param]:
+                action = self.autopilot.action_of(p[rule.action_param])
+                if action == "land":
+                    self._failsafe = None
+                    self._enter(FlightMode.LAND, state, announce=False)
+                    self._say(SEVERITY_CRITICAL, "Failsafe: landing")
+                elif action == "rtl" and not state.landed:
+                    self._failsafe = None
+                    self._enter(FlightMode.RTL, state, announce=False)
+                    self._say(SEVERITY_CRITICAL, "Failsafe: returning")
+                else:
+                    self._failsafe = "offboard-hold"
+
     def _mode_setpoint(self, now_us: int, state: NavState, dt: float) -> tuple[Setpoint | None, bool]:
         """Setpoint of the current mode and whether the motors should idle."""
         a = self._anchor
         p = self.params
         mode = self.mode
         if mode is FlightMode.OFFBOARD:
-            sp = self._offboard.setpoint if self._offboard is not None else self._hold_sp
+            if self._by_command and state.landed and not self._airborne_since_arm:
+                return None, True      # ArduCopter GUIDED on the ground: idle until NAV_TAKEOFF
+            r = self._offboard
+            if self._failsafe is not None or r is None or r.time_us < self._offboard_min_us:
+                return self._hold_sp, False
+            sp = r.setpoint
             if sp.pos_enu_m is None and sp.vel_enu_m_s is None and sp.acc_enu_m_s2 is None:
                 # Yaw-only setpoint: hold the position, turn as asked.
                 sp = Setpoint(a.pos, np.zeros(3), None, sp.yaw_enu_rad, sp.yaw_rate_rad_s)
@@ -1052,9 +1092,11 @@ class FlightStack:
             climbing = a.z_ref < a.target_z
             if not climbing and abs(float(state.pos_enu_m[2]) - a.target_z) <= p["NAV_MC_ALT_RAD"]:
                 hold = (a.pos[0], a.pos[1], a.target_z)
-                self.mode = FlightMode.LOITER
+                ap = self.autopilot
+                self.mode = FlightMode[ap.mode(ap.after_takeoff).behaviour]
                 self._anchor_at(state, hold_pos=hold)
-                self._say(SEVERITY_INFO, "Takeoff complete: Mode AUTO.LOITER")
+                self._offboard_min_us = self._now_us   # setpoints from before the take-off are not flown
+                self._say(SEVERITY_INFO, f"Takeoff complete: Mode {ap.after_takeoff}")
                 return self._hold_sp, False
             return Setpoint((a.pos[0], a.pos[1], a.z_ref), (0.0, 0.0, v if climbing else 0.0),
                             None, a.yaw, None), False

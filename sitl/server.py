@@ -89,6 +89,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import errno
+import logging
 import math
 import select
 import socket
@@ -112,6 +113,7 @@ from companion.link import command_rules as rules
 from companion.link.sockets import is_datagram_url, open_pipe
 
 from .pipe import MEMORY_SCHEME
+from mavcore import autopilot as autopilots
 
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .battery import Battery
@@ -128,6 +130,7 @@ from .world import load_world
 
 SYSTEM_ID = 1
 COMPONENT_ID = 1
+_log = logging.getLogger("sitl")
 
 #: PX4 v1.14.0 release, as PX4 encodes it (major, minor, patch, type 0xFF).
 FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 0xFF
@@ -168,6 +171,8 @@ _DEFAULT_RATES_HZ = {
 }
 
 _HEARTBEAT_ID = ID.MAVLINK_MSG_ID_HEARTBEAT
+#: SCALED_IMU2 rate of the ArduCopter personality (Hz; its RAW_SENS stream group).
+SCALED_IMU2_HZ = 10.0
 #: Linux's IP_RECVERR (the socket module does not export it).
 _IP_RECVERR = getattr(socket, "IP_RECVERR", 11)
 
@@ -216,6 +221,10 @@ class ServerConfig:
         Peers a ``udpin`` link serves at most (``sitl.auth.ClientTable``).
     client_timeout_s : float
         Wall-clock seconds of silence after which a ``udpin`` peer is dropped.
+    autopilot : str or None
+        The flight stack the SITL speaks as (``mavcore.autopilot``: "px4",
+        "ardupilot"): modes, parameters, take-off and failsafe rules. None:
+        the mission's ``sim.autopilot``.
     """
 
     listen: str = "udpin:127.0.0.1:14540"
@@ -232,8 +241,11 @@ class ServerConfig:
     signing_key: bytes | None = None
     max_clients: int = 8
     client_timeout_s: float = 10.0
+    autopilot: str | None = None
 
     def __post_init__(self) -> None:
+        if self.autopilot is not None:
+            autopilots.get(self.autopilot)     # ValueError naming the known ones
         if self.signing_key is not None and len(self.signing_key) != 32:
             raise ValueError("signing_key must be 32 bytes")
         if not (isinstance(self.max_clients, int) and 1 <= self.max_clients <= 1024):
@@ -520,7 +532,8 @@ class SitlServer:
                               sensor_hz=config.sensor_hz, world=world, start_enu_m=start_xy,
                               start_yaw_rad=start_yaw)
         md = self.sim.sensors.model
-        self.params = Parameters(initial={
+        self.autopilot = autopilots.get(config.autopilot or mission.sim.autopilot)
+        self.params = Parameters.for_autopilot(self.autopilot, initial={
             "SIM_VEC_VAR": md.accel_rel_std ** 2, "SIM_GYRO_VAR": md.gyro_std_rad_s ** 2,
             "SIM_POS_STD": md.position_std_xy_m, "SIM_POSZ_STD": md.position_std_z_m,
             "SIM_VEL_STD": md.velocity_std_m_s, "SIM_RNG_STD": md.range_std_m,
@@ -529,7 +542,7 @@ class SitlServer:
             **self._controller_param_defaults()})
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
-        self.stack = FlightStack(self.params, self.home_enu_m)
+        self.stack = FlightStack(self.params, self.home_enu_m, self.autopilot)
         self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
         self._init_mission_store(mission.energy.max_mission_items)
         self.battery = Battery(mission.energy)
@@ -572,6 +585,7 @@ class SitlServer:
             ID.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._enc_version,
             ID.MAVLINK_MSG_ID_ODOMETRY: self._enc_truth,
         }
+        self._frame_imu_setup()
         self._schedule = [mid for mid in self._intervals]
         self._reschedule()
         self._fast = {
@@ -642,6 +656,20 @@ class SitlServer:
         self._flown_items = self.missions.items       # the mission list the flight stack has
         self._mission_current_due_us = 0
         self._mission_peer = None
+
+    def _frame_imu_setup(self) -> None:
+        """The sensor-frame message (the lockstep frame marker) is the personality's:
+        PX4 HIGHRES_IMU; ArduCopter RAW_IMU, with SCALED_IMU2 beside it."""
+        if self.autopilot.imu_message == "RAW_IMU":
+            self._frame_imu_id = ID.MAVLINK_MSG_ID_RAW_IMU
+            self._frame_imu_pack, self._frame_imu_args = codec.PACK_RAW_IMU, self._raw_imu_args
+            s2 = ID.MAVLINK_MSG_ID_SCALED_IMU2
+            self._intervals[s2], self._next_due[s2] = int(round(1e6 / SCALED_IMU2_HZ)), 0
+            self._encoders[s2] = self._enc_scaled_imu2
+            self._encoders[ID.MAVLINK_MSG_ID_RAW_IMU] = self._enc_raw_imu
+        else:
+            self._frame_imu_id = ID.MAVLINK_MSG_ID_HIGHRES_IMU
+            self._frame_imu_pack, self._frame_imu_args = codec.PACK_HIGHRES_IMU, self._imu_args
 
     # ------------------------------------------------------------------ params
     @staticmethod
@@ -919,9 +947,10 @@ class SitlServer:
                 args = codec.distance_sensor_args(tb, r)
                 for l in links:
                     l.send_fast(codec.PACK_DISTANCE_SENSOR, args)
-        args = self._imu_args()
+        args = self._frame_imu_args()
+        pack = self._frame_imu_pack
         for l in links:
-            l.send_fast(codec.PACK_HIGHRES_IMU, args)
+            l.send_fast(pack, args)
             l.end_frame()
 
     def _send_due(self, now: int, links) -> None:
@@ -963,7 +992,7 @@ class SitlServer:
 
     def _enc_heartbeat(self):
         st = self.stack
-        return codec.heartbeat(self._mav(), st.armed, st.custom_mode, st.system_status)
+        return codec.heartbeat(self._mav(), st.armed, st.custom_mode, st.system_status, self.autopilot.mav_autopilot)
 
     def _enc_sys_status(self):
         health = _SENSORS
@@ -1029,6 +1058,17 @@ class SitlServer:
     def _enc_imu(self):
         return mavlink.MAVLink_highres_imu_message(*self._imu_args())
 
+    def _raw_imu_args(self):
+        f = self._frame
+        return codec.raw_imu_args(f.time_us, f._acc, f._gyro, f._mag)
+
+    def _enc_raw_imu(self):
+        return mavlink.MAVLink_raw_imu_message(*self._raw_imu_args())
+
+    def _enc_scaled_imu2(self):
+        f = self._frame
+        return codec.scaled_imu2(self._mav(), f.time_us // 1000, f._acc, f._gyro, f._mag)
+
     def _lpos_args(self):
         f = self._frame
         return codec.local_position_ned_args(f.pos_time_us // 1000, f._pos, f._vel)
@@ -1053,8 +1093,12 @@ class SitlServer:
 
     def _enc_version(self):
         uid = (0x5A17 << 32) | (self.seed & 0xFFFFFFFF)
+        ap = self.autopilot
+        caps = CAPABILITIES if ap.param_bytewise else (
+            CAPABILITIES & ~mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+            | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
         return self._mav().autopilot_version_encode(
-            CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid)
+            caps, ap.flight_sw_version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid)
 
     # ------------------------------------------------------------------ pacing
     def _pace_reset(self) -> None:
@@ -1139,9 +1183,10 @@ class SitlServer:
             if msg is not None:
                 for l in links:
                     l.send(msg)
-        args = self._imu_args()
+        args = self._frame_imu_args()
+        pack = self._frame_imu_pack
         for l in links:
-            l.send_fast(codec.PACK_HIGHRES_IMU, args)
+            l.send_fast(pack, args)
             l.end_frame()
         self._last_hb_wall = time.monotonic()
 
@@ -1288,6 +1333,7 @@ class SitlServer:
     def _flush_events(self) -> None:
         if self.stack.events:
             for ev in self.stack.pop_events():
+                _log.info("t=%.3f s: %s", self.sim.time_us * 1e-6, ev.text)
                 if len(ev.text) <= codec.STATUSTEXT_CHUNK:
                     self._broadcast(codec.statustext(self._mav(), ev.severity, ev.text))
                 else:
@@ -1362,7 +1408,10 @@ class SitlServer:
         return r.result, None
 
     def _cmd_takeoff(self, p):
-        z = codec.decode_takeoff_altitude(p[6], self.origin.alt_m)
+        if self.autopilot.takeoff_alt_relative:     # ArduCopter: metres above home
+            z = float(self.home_enu_m[2]) + float(p[6]) if math.isfinite(p[6]) else None
+        else:
+            z = codec.decode_takeoff_altitude(p[6], self.origin.alt_m)
         return self.stack.takeoff(self.sim.time_us, self._state(), z).result, None
 
     def _cmd_land(self, p):
@@ -1376,11 +1425,11 @@ class SitlServer:
             return mavlink.MAV_RESULT_DENIED, None
         if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             return mavlink.MAV_RESULT_DENIED, None
-        mode = FlightMode.from_px4(int(p[1]), int(p[2]))
+        mode = self.stack.mode_of(self.autopilot.custom_mode_from_params(p[1], p[2]))
         return self.stack.set_mode(self.sim.time_us, self._state(), mode).result, None
 
     def _interval_target(self, mid: int):
-        if mid in self._intervals or mid in (ID.MAVLINK_MSG_ID_HIGHRES_IMU, ID.MAVLINK_MSG_ID_DISTANCE_SENSOR):
+        if mid in self._intervals or mid in (self._frame_imu_id, ID.MAVLINK_MSG_ID_DISTANCE_SENSOR):
             return True
         return False
 
@@ -1389,7 +1438,7 @@ class SitlServer:
         if not math.isfinite(iv):
             return mavlink.MAV_RESULT_DENIED, None
         iv = int(iv)
-        if mid == ID.MAVLINK_MSG_ID_HIGHRES_IMU:
+        if mid == self._frame_imu_id:
             # Fixed: it is the lockstep frame marker.
             return (mavlink.MAV_RESULT_ACCEPTED if iv in (0, self._period_us) else mavlink.MAV_RESULT_DENIED), None
         if mid == ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
@@ -1413,7 +1462,7 @@ class SitlServer:
 
     def _cmd_get_interval(self, p):
         mid = int(p[0])
-        if mid == ID.MAVLINK_MSG_ID_HIGHRES_IMU:
+        if mid == self._frame_imu_id:
             iv = self._period_us
         elif mid in self._intervals:
             iv = self._intervals[mid]
@@ -1462,8 +1511,7 @@ class SitlServer:
         if not int(msg.base_mode) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             self._refuse("SET_MODE", f"base_mode {int(msg.base_mode)} without CUSTOM_MODE_ENABLED")
             return
-        main, sub = codec.px4_modes_from_custom(msg.custom_mode)
-        mode = FlightMode.from_px4(main, sub)
+        mode = self.stack.mode_of(msg.custom_mode)
         if mode is None:
             self._refuse("SET_MODE", f"unknown custom mode {int(msg.custom_mode)}")
             return
@@ -1517,8 +1565,8 @@ class SitlServer:
     # ------------------------------------------------------------------ params
     def _param_msg(self, mav, i: int):
         spec, value = self.params.by_index(i)
-        return mav.param_value_encode(spec.name.encode("ascii"), codec.param_to_wire(value, spec.param_type),
-                                      spec.param_type, len(self.params), i)
+        wire = codec.param_to_wire(value, spec.param_type) if self.autopilot.param_bytewise else float(value)
+        return mav.param_value_encode(spec.name.encode("ascii"), wire, spec.param_type, len(self.params), i)
 
     def _on_param_list(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
@@ -1552,7 +1600,8 @@ class SitlServer:
             link.send(self._param_msg(link.mav, i))
             return
         spec = self.params.spec(name)
-        if spec.param_type == PARAM_TYPE_INT32 and int(msg.param_type) == PARAM_TYPE_INT32:
+        if (spec.param_type == PARAM_TYPE_INT32 and int(msg.param_type) == PARAM_TYPE_INT32
+                and self.autopilot.param_bytewise):
             value = codec.param_from_wire(msg.param_value, PARAM_TYPE_INT32)
         else:
             value = float(msg.param_value)

@@ -45,7 +45,7 @@ def imu(t_s: float) -> Msg:
 
 def timed(mtype: str, t_s: float) -> Msg:
     """A message of ``mtype`` at vehicle time ``t_s``, in its own field and unit (MAVLink spec)."""
-    field, unit = {"HIGHRES_IMU": ("time_usec", 1e6), "ODOMETRY": ("time_usec", 1e6),
+    field, unit = {"HIGHRES_IMU": ("time_usec", 1e6), "RAW_IMU": ("time_usec", 1e6), "ODOMETRY": ("time_usec", 1e6),
                    "LOCAL_POSITION_NED": ("time_boot_ms", 1e3), "ATTITUDE": ("time_boot_ms", 1e3),
                    "ATTITUDE_QUATERNION": ("time_boot_ms", 1e3),
                    "DISTANCE_SENSOR": ("time_boot_ms", 1e3)}[mtype]
@@ -59,7 +59,8 @@ def bound(**kw) -> VehicleFilter:
 
 
 def test_timed_fields_are_the_mavlink_time_fields():
-    assert TIMED_FIELDS == {"HIGHRES_IMU": ("time_usec", 1e-6), "ODOMETRY": ("time_usec", 1e-6),
+    assert TIMED_FIELDS == {"HIGHRES_IMU": ("time_usec", 1e-6), "RAW_IMU": ("time_usec", 1e-6),
+                            "ODOMETRY": ("time_usec", 1e-6),
                             "LOCAL_POSITION_NED": ("time_boot_ms", 1e-3), "ATTITUDE": ("time_boot_ms", 1e-3),
                             "ATTITUDE_QUATERNION": ("time_boot_ms", 1e-3),
                             "DISTANCE_SENSOR": ("time_boot_ms", 1e-3)}

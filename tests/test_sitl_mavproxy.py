@@ -52,9 +52,9 @@ def upload_with_pymavlink(url: str) -> None:
 class MavProxy:
     """MAVProxy in a subprocess, its console read line by line."""
 
-    def __init__(self, master: str, workdir: Path) -> None:
+    def __init__(self, master: str, workdir: Path, modules: str = "param,wp,mode,cmdlong,fence") -> None:
         cmd = [sys.executable, "-m", "MAVProxy.mavproxy", f"--master={master}", "--no-state", "--mav20",
-               "--default-modules=param,wp,mode,cmdlong,fence"]
+               f"--default-modules={modules}"]
         self.p = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                   text=True, bufsize=1, cwd=workdir, env=dict(os.environ, TERM="dumb"))
         self.q: queue.Queue = queue.Queue()
@@ -120,5 +120,35 @@ def test_mavproxy_mode_params_mission(tmp_path):
             # reports the fence and no breach (issue 17: a spurious "fence breach" at connect)
             assert any("fence present" in line for line in mp.out)
             assert not any("fence breach" in line for line in mp.out)
+        finally:
+            mp.close()
+
+
+# Generous waits below: a loaded machine slows MAVProxy (a passing run takes about 20 s).
+def test_mavproxy_flies_the_ardupilot_personality(tmp_path):
+    """MAVProxy knows ArduCopter's mode names (mavutil.mode_mapping_acm): it
+    reads STABILIZE at boot, lists ArduPilot's parameters (integers as a C
+    cast), switches to GUIDED, arms, takes off with MAV_CMD_NAV_TAKEOFF and
+    lands with the LAND mode."""
+    from mavcore.autopilot import ARDUCOPTER
+
+    with SitlThread(MISSION, speed=2.0, autopilot="ardupilot") as sitl:
+        mp = MavProxy(sitl.url, tmp_path, modules="param,mode,cmdlong,arm")
+        try:
+            mp.expect(r"Detected vehicle 1:1", timeout_s=30)
+            mp.expect(r"Mode STABILIZE", timeout_s=30)
+            n = int(mp.expect(r"Received (\d+) parameters", timeout_s=30).group(1))
+            assert n == len(ARDUCOPTER.param_specs)
+            mp.send("param show DISARM_DELAY")                          # INT32, C cast as ArduPilot
+            assert float(mp.expect(r"DISARM_DELAY\s+(\S+)", timeout_s=30).group(1)) == 10.0     # byte-wise: 1.4e-44
+            mp.send("param set DISARM_DELAY 0")     # no auto-disarm while a loaded machine is slow to take off
+            mp.send("mode guided")
+            mp.expect(r"Mode GUIDED", timeout_s=30)
+            mp.send("arm throttle")
+            mp.expect(r"^GUIDED> ARMED|^ARMED", timeout_s=30)            # from HEARTBEAT
+            mp.send("takeoff 2")
+            mp.expect(r"Takeoff complete", timeout_s=30)
+            mp.send("mode land")
+            mp.expect(r"Landing detected", timeout_s=30)
         finally:
             mp.close()

@@ -96,3 +96,49 @@ def test_mavsdk_offboard_flight(vehicle):
     assert p.down_m == pytest.approx(p0.down_m, abs=0.05)
     assert wait_until(lambda: not tel.armed(), 5.0)            # auto-disarm after landing (COM_DISARM_LAND)
     assert sitl.server.stats["bad_packets"] == 0
+
+
+def test_mavsdk_takes_off_and_lands_the_ardupilot_personality():
+    """MAVSDK knows the stack from HEARTBEAT (MAV_AUTOPILOT_ARDUPILOTMEGA) and uses
+    ArduCopter's dialect: GUIDED by its number, MAV_CMD_NAV_TAKEOFF above home."""
+    with SitlThread(MISSION, speed=2.0, autopilot="ardupilot") as sitl:
+        port = sitl.listen.rsplit(":", 1)[1]
+        drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+        try:
+            drone.add_any_connection(f"udpout://127.0.0.1:{port}")
+            system = drone.first_autopilot(10.0)
+            assert system is not None, "MAVSDK did not discover the autopilot"
+            tel, action = Telemetry(system), Action(system)
+            assert wait_until(lambda: tel.flight_mode() == FlightMode.STABILIZED, 5.0)   # ArduCopter boots there
+            z0 = float(sitl.server.home_enu_m[2])
+            action.set_takeoff_altitude(2.0)
+            action.arm()
+            assert wait_until(tel.armed, 3.0)
+            action.takeoff()
+            # GUIDED (4) by ArduCopter's number, and the climb to 2 m above home
+            assert wait_until(lambda: sitl.server.stack.custom_mode == 4, 3.0)
+            assert wait_until(lambda: sitl.server.sim.truth.pos_enu_m[2] > z0 + 1.6, 10.0)
+            assert wait_until(tel.in_air, 3.0)
+            action.land()
+            assert wait_until(lambda: tel.landed_state() == LandedState.ON_GROUND, 15.0)
+            assert sitl.server.stack.custom_mode == 9          # LAND
+        finally:
+            drone.destroy()
+
+
+def test_mavsdk_listens_as_with_px4s_sitl():
+    """PX4's port convention (the SITL's default): the vehicle sends to the API's port,
+    so MAVSDK's usual ``udpin://`` finds it without sending first."""
+    from sitl.api import free_udp_port
+
+    port = free_udp_port()
+    drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    try:
+        drone.add_any_connection(f"udpin://127.0.0.1:{port}")
+        with SitlThread(MISSION, speed=1.0, listen=f"udpout:127.0.0.1:{port}"):
+            system = drone.first_autopilot(10.0)
+            assert system is not None, "MAVSDK did not discover the autopilot"
+            tel = Telemetry(system)
+            assert wait_until(lambda: tel.flight_mode() == FlightMode.HOLD, 5.0)
+    finally:
+        drone.destroy()

@@ -36,7 +36,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--budget", type=int, default=40, metavar="N", help="--search: flights (default %(default)s)")
     parser.add_argument("--tracking-bound", type=float, default=0.1, metavar="M",
                         help="--search tracking: the bound on the max tracking error (default %(default)s m)")
-    parser.add_argument("--quiet", action="store_true", help="no progress line")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress line")
 
 
 def _check_out(out: Path) -> None:

@@ -58,6 +58,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--control", choices=("companion", "rates", "vehicle"), default=None,
                         help="who tracks the trajectory (default companion: the geometric controller; rates: its "
                              "outer part, through the vehicle's rate loop)")
+    parser.add_argument("--autopilot", choices=("px4", "ardupilot"), default=None,
+                        help="flight stack the bundled SITL speaks as; the companion detects it from its "
+                             "HEARTBEAT (default: the mission's sim.autopilot, else px4)")
     parser.add_argument("--out", default="out", metavar="DIR", help="output directory (default %(default)s)")
     parser.add_argument("--cut", type=float, default=None, metavar="S",
                         help="fly only the first S seconds of the trajectory")
@@ -73,7 +76,7 @@ def add_arguments(parser) -> None:
     from .fly import add_safety_arguments
 
     add_safety_arguments(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress display")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress display")
 
 
 def launch_pose(trajectory, target_enu_m) -> tuple[float, float, float]:
@@ -122,17 +125,19 @@ def _table(rows: list[tuple[str, str]]) -> str:
     return "\n".join(out)
 
 
-def start_sitl(transport: str, mission_path, seed, signing_key_file):
+def start_sitl(transport: str, mission_path, seed, signing_key_file, autopilot: str | None = None):
     """The bundled SITL for ``--transport``, launched with its launch pose to
     come (``set_start``, then ``wait_ready``): ``SitlProcess`` (a subprocess,
     loopback UDP; it imports and loads its world while we plan) or
-    ``SitlInProcess`` (this process, ``inproc:``). Lockstep either way."""
+    ``SitlInProcess`` (this process, ``inproc:``). Lockstep either way.
+    ``autopilot``: the personality (None: the mission's ``sim.autopilot``)."""
     from sitl.api import SitlInProcess, SitlProcess
 
     if transport == "inproc":
-        return SitlInProcess(mission_path, seed=seed, start="later", signing_key_file=signing_key_file).launch()
+        return SitlInProcess(mission_path, seed=seed, start="later", signing_key_file=signing_key_file,
+                             autopilot=autopilot).launch()
     return SitlProcess(mission_path, lockstep=True, speed=1.0, seed=seed, start="later",
-                       signing_key_file=signing_key_file).launch()
+                       signing_key_file=signing_key_file, autopilot=autopilot).launch()
 
 
 def run(args) -> int:
@@ -187,7 +192,8 @@ def run(args) -> int:
         mission = load_mission(mission_path)     # bad input fails here, before the SITL starts
     # The SITL process starts now (it imports and loads its world while we
     # plan) and gets its launch pose once the plan exists.
-    sitl = start_sitl(getattr(args, "transport", "udp"), mission_path, args.seed, args.signing_key)
+    sitl = start_sitl(getattr(args, "transport", "udp"), mission_path, args.seed, args.signing_key,
+                      getattr(args, "autopilot", None))
     try:
         return _plan_and_fly(args, mission, out, sitl, t_start, key, overrides)
     finally:

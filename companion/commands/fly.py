@@ -1,14 +1,16 @@
-"""``companion fly MISSION.yaml [--plan plan.json] [--connect udpout:127.0.0.1:14540]
+"""``companion fly MISSION.yaml [--plan plan.json] [--connect udpin:127.0.0.1:14540]
 [--control companion|rates|vehicle] [--tlog flight.tlog] [--report report.json]``.
 
 Flies a planned mission against a MAVLink vehicle (the bundled SITL or a
 flight stack); see ``companion.runner`` for the sequence.
 
-The connection string is from the companion's point of view: the bundled
-SITL listens with ``udpin:127.0.0.1:14540`` (``sitl MISSION.yaml``'s
-default), so the companion's default is ``udpout:127.0.0.1:14540`` (it
-sends first). A vehicle that sends to a fixed port instead (PX4 SITL's
-onboard link, ``udpout`` on its side) needs ``--connect udpin:0.0.0.0:PORT``.
+The connection string is from the companion's point of view. PX4's port
+convention (``--ports px4``, the default, as ``sitl``'s): the vehicle sends
+to the companion's port 14540, so the companion listens,
+``udpin:127.0.0.1:14540`` (``udpin:0.0.0.0:14540`` for a vehicle on
+another machine). The legacy convention (``--ports legacy``, ``sitl --ports
+legacy``): the SITL listens on 14540 and the companion sends first,
+``udpout:127.0.0.1:14540``.
 
 Without ``--plan`` the mission is planned here (as ``companion plan``); with
 it, the trajectory is rebuilt from the plan's way-points with the mission's
@@ -42,7 +44,11 @@ from pathlib import Path
 
 from ..errors import InputError
 
-DEFAULT_CONNECT = "udpout:127.0.0.1:14540"
+#: The companion's side of each port convention (``--ports``; ``sitl --ports``):
+#: PX4's (the vehicle sends to the companion's port 14540) and the legacy one
+#: (the bundled SITL listened on 14540 and the companion sent first).
+CONNECT_BY_PORTS = {"px4": "udpin:127.0.0.1:14540", "legacy": "udpout:127.0.0.1:14540"}
+DEFAULT_CONNECT = CONNECT_BY_PORTS["px4"]
 
 
 #: Bytes a second of flight that a .tlog takes, rounded up from recordings of
@@ -198,9 +204,12 @@ def check_free_space(outputs, statvfs=os.statvfs) -> None:
 def add_arguments(parser) -> None:
     parser.add_argument("mission", help="mission YAML file")
     parser.add_argument("--plan", metavar="PLAN.json", help="plan.json from `companion plan` (default: plan now)")
-    parser.add_argument("--connect", default=DEFAULT_CONNECT, metavar="URL",
-                        help="pymavlink connection string, companion side (default %(default)s, "
-                             "matching `sitl`'s default udpin:127.0.0.1:14540)")
+    parser.add_argument("--connect", default=None, metavar="URL",
+                        help=f"pymavlink connection string, companion side (default: the --ports convention's, "
+                             f"{DEFAULT_CONNECT}: PX4's, where the vehicle sends to the companion)")
+    parser.add_argument("--ports", choices=tuple(CONNECT_BY_PORTS), default="px4",
+                        help="port convention of the default --connect: px4 (default) or legacy "
+                             f"({CONNECT_BY_PORTS['legacy']}, for `sitl --ports legacy`)")
     parser.add_argument("--control", choices=("companion", "rates", "vehicle"), default="companion",
                         help="companion: geometric controller answers every sensor frame with "
                              "HIL_ACTUATOR_CONTROLS; rates: with body rates and thrust (SET_ATTITUDE_TARGET, "
@@ -217,7 +226,7 @@ def add_arguments(parser) -> None:
                         help="MAVLink 2 signing key file (32 raw bytes, or a passphrase hashed with SHA-256 as "
                              "MAVProxy's signing setup): sign everything, accept only signed vehicle messages")
     add_safety_arguments(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress display")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress display")
 
 
 def add_safety_arguments(parser) -> None:
@@ -723,6 +732,8 @@ def run(args) -> int:
     from ..mission import load_mission
     from ..progress import Progress
 
+    if args.connect is None:
+        args.connect = CONNECT_BY_PORTS[args.ports]
     check_connection_string(args.connect)
     if args.cut is not None and not (math.isfinite(args.cut) and args.cut > 0):
         raise InputError(f"--cut {args.cut}", "must be a finite number of seconds > 0")

@@ -69,6 +69,8 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import common as mavlink
 
 from ..control.geometric import Measurements, Reference
+from mavcore import autopilot as autopilots
+
 from ..control.observer import heading_from_accel_mag
 from ..control.rates import normalised_thrust, vehicle_hover_thrust
 from ..errors import CommandRejected, LinkError
@@ -99,8 +101,8 @@ LAUNCH_TOLERANCE_M = 0.05
 UNUSED_STREAMS = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED)
 
 _SENSOR_DOWN = mavlink.MAV_SENSOR_ROTATION_PITCH_270
-_OFFBOARD = codec.px4_custom_mode(codec.PX4_MAIN_MODE_OFFBOARD)
-_LOITER = codec.px4_custom_mode(codec.PX4_MAIN_MODE_AUTO, 3)
+#: Height error (m) within which an ArduCopter take-off (MAV_CMD_NAV_TAKEOFF) counts as done.
+TAKEOFF_ALT_TOLERANCE_M = 0.3
 _NAN3 = (math.nan, math.nan, math.nan)
 _NAN9 = (math.nan,) * 9
 _NAN_CTRL = (math.nan,) * 10
@@ -119,6 +121,21 @@ REPLAN_TIME_EXTRA_S = 120.0
 REPLAN_PREFIX = "companion: replan "
 #: STATUSTEXT prefix of the guard's refusals (docs/replan.md "The guard").
 GUARD_PREFIX = "companion: guard: "
+
+
+class _SiImu:
+    """RAW_IMU's fields in HIGHRES_IMU's units (m/s^2, rad/s, gauss; body FRD),
+    ArduPilot's scaling: accel * 9.80665 / 1000, gyro / 1000, mag / 1000."""
+
+    __slots__ = ("time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag")
+    _KA = 9.80665e-3
+
+    def __init__(self, m) -> None:
+        ka = self._KA
+        self.time_usec = m.time_usec
+        self.xacc, self.yacc, self.zacc = m.xacc * ka, m.yacc * ka, m.zacc * ka
+        self.xgyro, self.ygyro, self.zgyro = m.xgyro * 1e-3, m.ygyro * 1e-3, m.zgyro * 1e-3
+        self.xmag, self.ymag, self.zmag = m.xmag * 1e-3, m.ymag * 1e-3, m.zmag * 1e-3
 
 
 def replan_text(action: str, range_m: float | None, detail: str = "") -> str:
@@ -287,6 +304,7 @@ class FlightCore:
         self.armed = False
         self.vstate = None
         self.custom_mode: int | None = None
+        self.autopilot: autopilots.Autopilot | None = None   # the vehicle's stack, from its first HEARTBEAT
         self.landed_state = mavlink.MAV_LANDED_STATE_UNDEFINED
         self._pos = None
         self._vel = None
@@ -364,7 +382,8 @@ class FlightCore:
         self._proc = self._procedure()
         self._waiting = None
         self._dispatch = {
-            "HIGHRES_IMU": self._on_imu,
+            "HIGHRES_IMU": self._on_highres_imu,
+            "RAW_IMU": self._on_raw_imu,
             "LOCAL_POSITION_NED": self._on_local_position,
             "ODOMETRY": self._on_odometry,
             "ATTITUDE": self._on_attitude,
@@ -653,10 +672,10 @@ class FlightCore:
         for mid, hz in cfg.low_rate_streams:
             yield from self._set_interval(mid, 1e6 / hz, optional=True)
         pv = yield from self._param_read("SIM_LOCKSTEP")
-        self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv) == 1
+        self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv, self.autopilot.param_bytewise) == 1
         if self._rates:
-            pv = yield from self._param_read("MPC_THR_HOVER")
-            hover = None if pv is None else float(codec.decode_param_value(pv))
+            pv = yield from self._param_read(self.autopilot.wire_name("MPC_THR_HOVER"))
+            hover = None if pv is None else float(codec.decode_param_value(pv, self.autopilot.param_bytewise))
             if hover is not None and 0.0 < hover <= 1.0:
                 self.hover_thrust = hover
         yield lambda: self._pos is not None
@@ -679,16 +698,40 @@ class FlightCore:
             return
         t_ready = self.t_s + cfg.preflight_s
         yield lambda: self.t_s >= t_ready
-        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
-                                 (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, codec.PX4_MAIN_MODE_OFFBOARD, 0),
-                                 "set OFFBOARD", temp_retries=10)
+        ap = self.autopilot
+        yield from self._set_offboard_mode()
         yield from self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1,), "arm", temp_retries=10)
         self.armed = True
+        self.monitor.armed(self.t_s, ap.custom_mode(ap.offboard_mode))
+        if ap.takeoff_by_command:
+            yield from self._guided_takeoff()
         self._schedule(self.t_s)
-        self.monitor.armed(self.t_s, _OFFBOARD)
         self.phase = "takeoff"
         yield lambda: self.phase == "landing"
         yield from self._land()
+
+    def _set_offboard_mode(self):
+        """DO_SET_MODE to the mode that tracks our setpoints (PX4 OFFBOARD, ArduCopter GUIDED)."""
+        ap = self.autopilot
+        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE, ap.set_mode_params(ap.offboard_mode),
+                                 f"set {ap.offboard_mode}", temp_retries=10)
+
+    def _guided_takeoff(self):
+        """ArduCopter: armed in GUIDED on the ground, setpoints do not lift the
+        vehicle; MAV_CMD_NAV_TAKEOFF (param7: metres above home) climbs it to
+        the take-off's first climb height, where our setpoints take over."""
+        x, y, z = self._pos
+        seg = takeoff_segments(tuple(self._pos), self._hold_first.p, self.inputs.transit_floor_z_m,
+                               self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s)[0]
+        top = float(seg[1][2])
+        # Stream the climb's top meanwhile: the vehicle holds there once its take-off is done.
+        self._preflight_ref = self._static_ref((x, y, top))
+        yield from self._command(mavlink.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, math.nan, math.nan, math.nan, top - z),
+                                 "takeoff", temp_retries=10)
+        t_limit = self.t_s + self.cfg.landing_timeout_s
+        yield lambda: abs(self._pos[2] - top) <= TAKEOFF_ALT_TOLERANCE_M or self.t_s >= t_limit
+        if abs(self._pos[2] - top) > TAKEOFF_ALT_TOLERANCE_M:
+            raise LinkError(f"vehicle did not climb to {top - z:.2f} m within {self.cfg.landing_timeout_s:g} s")
 
     def _schedule(self, t_arm: float) -> None:
         """The take-off/hold/trajectory/hover times, from arming at ``t_arm``."""
@@ -749,10 +792,11 @@ class FlightCore:
         self._finish()
 
     def _landing_seen(self) -> bool:
-        """The vehicle reports AUTO.LAND (HEARTBEAT) or a landing (EXTENDED_SYS_STATE)."""
-        vs = self.vstate
-        return ((vs is not None and vs.main_mode == codec.PX4_MAIN_MODE_AUTO
-                 and vs.sub_mode == codec.PX4_SUB_MODE_AUTO_LAND)
+        """The vehicle reports its landing mode (HEARTBEAT: PX4 AUTO.LAND, ArduCopter
+        LAND) or a landing (EXTENDED_SYS_STATE)."""
+        ap = self.autopilot
+        return ((ap is not None and self.custom_mode is not None
+                 and ap.decode_mode(self.custom_mode) is ap.mode_for("LAND"))
                 or self.landed_state == mavlink.MAV_LANDED_STATE_LANDING)
 
     def _stop(self, action: str) -> None:
@@ -782,13 +826,14 @@ class FlightCore:
         yield from self._land()
 
     def _abort_hold(self):
-        """AUTO.LOITER: the vehicle holds where it is under its own control; we let go."""
+        """The stack's hold mode (PX4 AUTO.LOITER, ArduCopter LOITER): the vehicle holds
+        where it is under its own control; we let go."""
         self._controlling = False
         self.phase = "holding"
         self.monitor.landing(self.t_s)
-        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
-                                 (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, codec.PX4_MAIN_MODE_AUTO, 3),
-                                 "set AUTO.LOITER (hold)", temp_retries=4)
+        hold = self.autopilot.mode_for("LOITER").name
+        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE, self.autopilot.set_mode_params(hold),
+                                 f"set {hold} (hold)", temp_retries=4)
         self._finish()
 
     def _release(self):
@@ -846,10 +891,8 @@ class FlightCore:
             return
         t_ready = self.t_s + self.cfg.preflight_s
         yield lambda: self.t_s >= t_ready
-        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE,
-                                 (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, codec.PX4_MAIN_MODE_OFFBOARD, 0),
-                                 "set OFFBOARD", temp_retries=10)
-        self.monitor.expect_mode(_OFFBOARD)
+        yield from self._set_offboard_mode()
+        self.monitor.expect_mode(self.autopilot.custom_mode(self.autopilot.offboard_mode))
         self._schedule(self.t_s)
         if self.ctrl is not None:
             self.ctrl.reset()
@@ -901,6 +944,10 @@ class FlightCore:
         if m.get_srcComponent() != self.tc:
             return
         vs = codec.decode_heartbeat(m)
+        if self.autopilot is None:
+            # The vehicle's flight stack decides the dialect (an unknown one is spoken to as PX4).
+            self.autopilot = autopilots.from_heartbeat(m.autopilot) or autopilots.PX4_AUTOPILOT
+            self.monitor.mode_name = self.autopilot.mode_name
         self.vstate = vs
         self.armed = vs.armed
         self.custom_mode = int(m.custom_mode)
@@ -957,6 +1004,17 @@ class FlightCore:
             self._stop(self.cfg.on_failure)
         else:
             self._stop(v.action)
+
+    def _on_highres_imu(self, m) -> None:
+        ap = self.autopilot
+        if ap is None or ap.imu_message == "HIGHRES_IMU":
+            self._on_imu(m)
+
+    def _on_raw_imu(self, m) -> None:
+        """ArduCopter's sensor frame: RAW_IMU in milli-g, mrad/s, milligauss -> SI."""
+        ap = self.autopilot
+        if ap is not None and ap.imu_message == "RAW_IMU":
+            self._on_imu(_SiImu(m))
 
     def _on_imu(self, m) -> None:
         # The per-frame path (250 Hz, lockstep: the vehicle waits for our answer).

@@ -23,27 +23,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-#: PX4 main modes (custom_mode >> 16 & 0xFF), for readable reports.
-PX4_MAIN_MODES = {1: "MANUAL", 2: "ALTCTL", 3: "POSCTL", 4: "AUTO", 5: "ACRO", 6: "OFFBOARD",
-                  7: "STABILIZED", 8: "RATTITUDE"}
-#: PX4 AUTO sub modes (custom_mode >> 24).
-PX4_AUTO_SUB_MODES = {1: "READY", 2: "TAKEOFF", 3: "LOITER", 4: "MISSION", 5: "RTL", 6: "LAND",
-                      8: "FOLLOW_TARGET", 9: "PRECLAND"}
+from mavcore.autopilot.px4 import AUTO_SUB_MODES as PX4_AUTO_SUB_MODES  # noqa: F401 (re-exported)
+from mavcore.autopilot.px4 import MAIN_MODES as PX4_MAIN_MODES  # noqa: F401 (re-exported)
+from mavcore.autopilot.px4 import mode_name as px4_mode_name
 
 MAV_STATE_CRITICAL = 5
 MAV_STATE_EMERGENCY = 6
 MAV_SEVERITY_CRITICAL = 2
 MAV_LANDED_STATE_ON_GROUND = 1
-
-
-def px4_mode_name(custom_mode: int) -> str:
-    """'OFFBOARD', 'AUTO.LAND', ... from a PX4 HEARTBEAT custom_mode."""
-    main = (int(custom_mode) >> 16) & 0xFF
-    sub = (int(custom_mode) >> 24) & 0xFF
-    name = PX4_MAIN_MODES.get(main, f"MODE{main}")
-    if main == 4:
-        name += "." + PX4_AUTO_SUB_MODES.get(sub, str(sub))
-    return name
 
 
 @dataclass(frozen=True)
@@ -114,8 +101,8 @@ class Violation:
 class FlightMonitor:
     """Watches the vehicle between our arming and our landing command.
 
-    Call ``armed(t, mode)`` when our arming is accepted (``mode``: the PX4
-    custom_mode we set), ``climbed(t)`` once the vehicle is meant to be
+    Call ``armed(t, mode)`` when our arming is accepted (``mode``: the
+    custom_mode we set; ``mode_name`` names it, the autopilot's personality), ``climbed(t)`` once the vehicle is meant to be
     airborne, ``landing(t)`` when we command the landing (from then on the
     vehicle may change mode, touch down and disarm), and feed it the
     vehicle's messages through the ``on_*`` methods.
@@ -130,6 +117,8 @@ class FlightMonitor:
         self._mode: int | None = None
         self._landing = False
         self._emergency_seen = False
+        #: custom_mode -> readable name (``companion.flight.core`` sets the vehicle's personality's).
+        self.mode_name = px4_mode_name
 
     # --- our own steps -----------------------------------------------------
     def armed(self, t_s: float, custom_mode: int | None) -> None:
@@ -169,9 +158,9 @@ class FlightMonitor:
             return self._violate(t_s, "disarmed", "vehicle disarmed in flight (not by us)", "end")
         if self._mode is not None and custom_mode != self._mode:
             return self._violate(t_s, "mode_change",
-                                 f"vehicle left {px4_mode_name(self._mode)} for {px4_mode_name(custom_mode)} "
+                                 f"vehicle left {self.mode_name(self._mode)} for {self.mode_name(custom_mode)} "
                                  f"(not asked by us)", "release",
-                                 expected=px4_mode_name(self._mode), got=px4_mode_name(custom_mode))
+                                 expected=self.mode_name(self._mode), got=self.mode_name(custom_mode))
         return None
 
     def on_statustext(self, t_s: float | None, severity: int, text: str) -> Violation | None:

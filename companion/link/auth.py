@@ -27,9 +27,14 @@ from dataclasses import asdict, dataclass
 
 from .signing import SignatureVerifier
 
+#: The sensor-frame messages that carry the vehicle's clock (PX4: HIGHRES_IMU,
+#: ArduCopter: RAW_IMU; ``mavcore.autopilot``).
+FRAME_TYPES = frozenset({"HIGHRES_IMU", "RAW_IMU"})
+
 #: Messages the runner times by, and their vehicle-time field (s = field * scale).
 TIMED_FIELDS = {
     "HIGHRES_IMU": ("time_usec", 1e-6),
+    "RAW_IMU": ("time_usec", 1e-6),
     "ODOMETRY": ("time_usec", 1e-6),
     "LOCAL_POSITION_NED": ("time_boot_ms", 1e-3),
     "ATTITUDE": ("time_boot_ms", 1e-3),
@@ -170,7 +175,7 @@ class VehicleFilter:
     def _time_ok(self, mtype: str, t_s: float) -> bool:
         clock = self.clock_s
         tol = self.max_time_jump_s
-        if mtype != "HIGHRES_IMU":
+        if mtype not in FRAME_TYPES:
             return clock is None or abs(t_s - clock) <= tol
         if clock is None or abs(t_s - clock) <= tol:
             if clock is None or t_s > clock:

@@ -211,9 +211,12 @@ def decode_attitude_quaternion(msg) -> Attitude:
     return Attitude(int(msg.time_boot_ms), frames.R_ned_frd2enu_flu(R_ned_frd))
 
 
-def decode_param_value(msg) -> float | int:
+def decode_param_value(msg, bytewise: bool = True) -> float | int:
     """PARAM_VALUE's value: INT32 parameters travel byte-wise in the float field
-    (PX4's and this project's SITL's convention, MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
+    (PX4's convention, MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE); ``bytewise``
+    False: as a C cast to float (ArduPilot's, PARAM_ENCODE_C_CAST)."""
+    if not bytewise:
+        return int(msg.param_value) if int(msg.param_type) == mavlink.MAV_PARAM_TYPE_INT32 else float(msg.param_value)
     if int(msg.param_type) == mavlink.MAV_PARAM_TYPE_INT32:
         return struct.unpack("<i", struct.pack("<f", float(msg.param_value)))[0]
     return float(msg.param_value)

@@ -36,7 +36,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from ..errors import CommandRejected, InputError, LinkError, UnsafeMessage
 from . import codec
 from .command_rules import actuator_problem, outgoing_problem
-from .auth import LinkStats, VehicleFilter
+from .auth import FRAME_TYPES, LinkStats, VehicleFilter
 from .signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
 from .sockets import is_datagram_url, open_pipe
 from .tlog import TlogWriter
@@ -432,9 +432,9 @@ class Connection:
             if data:
                 out += vfilter.filter(self._parse_datagram(data), addr)
             # In lockstep the vehicle sends one datagram per frame, ending with
-            # HIGHRES_IMU, and waits for the answer: return it at once instead
+            # its sensor frame (HIGHRES_IMU, ArduCopter RAW_IMU), and waits for the answer: return it at once instead
             # of paying for a drain read that finds nothing.
-            if out and out[-1].get_type() == "HIGHRES_IMU":
+            if out and out[-1].get_type() in FRAME_TYPES:
                 break
         if out:
             self.n_received += len(out)
@@ -442,7 +442,7 @@ class Connection:
                 self._flush_rx()
                 # stamped when written (after the frame was handled: its vehicle time)
                 self._rx_log = [m.get_msgbuf() for m in out]
-                self._rx_frames = [(i, m.time_usec) for i, m in enumerate(out) if m.get_type() == "HIGHRES_IMU"]
+                self._rx_frames = [(i, m.time_usec) for i, m in enumerate(out) if m.get_type() in FRAME_TYPES]
         return out
 
     def poll(self, timeout_s: float = 0.0) -> list:

@@ -317,6 +317,7 @@ class SimConfig:
     sensor_profile: Literal[SENSOR_PROFILES] | None = None
     onboard_state: Literal["estimate", "truth"] = "estimate"
     collision: CollisionConfig = field(default_factory=CollisionConfig)
+    autopilot: Literal["px4", "ardupilot"] = "px4"
 
     def __post_init__(self) -> None:
         if self.sensor_profile is not None and self.sensor_profile not in SENSOR_PROFILES:
@@ -325,6 +326,8 @@ class SimConfig:
             raise ValueError("sim.vector_sensors must be physical or paper")
         if self.onboard_state not in ("estimate", "truth"):
             raise ValueError("sim.onboard_state must be estimate or truth")
+        if self.autopilot not in ("px4", "ardupilot"):
+            raise ValueError("sim.autopilot must be px4 or ardupilot")
         m = self.magnetic_field_enu_gauss
         if not all(math.isfinite(x) for x in m) or not math.hypot(*m) > 0:
             raise ValueError("sim.magnetic_field_enu_gauss must be finite and non-zero")

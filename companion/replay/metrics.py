@@ -43,10 +43,11 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from mavcore.autopilot import from_heartbeat
+
 from .. import frames
 from ..flight.core import PHASE_CODE
 from ..flight.log import ErrorStats, FlightLog
-from ..flight.monitor import px4_mode_name
 from ..flight.setup_record import SETUP_TEXT_ID
 from ..link import codec
 
@@ -143,7 +144,7 @@ class FlightMetrics:
     flight_time_source : str or None
     armed_time_s : float
     time_in_mode_s : dict
-        Vehicle time per mode name (``companion.flight.monitor.px4_mode_name``).
+        Vehicle time per mode name (the stack's, ``mavcore.autopilot``).
     mode_changes : tuple of ModeChange
         The first ``MAX_EVENTS`` changes of mode or armed state.
     distance_m, horizontal_distance_m : float or None
@@ -278,6 +279,7 @@ class MetricsAccumulator:
         M = mavlink
         self._handlers = {
             M.MAVLINK_MSG_ID_HIGHRES_IMU: self._imu,
+            M.MAVLINK_MSG_ID_RAW_IMU: self._imu,           # ArduCopter's sensor frame
             M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self._lpos,
             M.MAVLINK_MSG_ID_ODOMETRY: self._odometry,
             M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._gpos,
@@ -291,7 +293,8 @@ class MetricsAccumulator:
         }
 
     #: Vehicle message ids the metrics read (others need not be decoded).
-    MSG_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIGHRES_IMU, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+    MSG_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIGHRES_IMU, mavlink.MAVLINK_MSG_ID_RAW_IMU,
+                         mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
                          mavlink.MAVLINK_MSG_ID_ODOMETRY, mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
                          mavlink.MAVLINK_MSG_ID_HEARTBEAT, mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
                          mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR, mavlink.MAVLINK_MSG_ID_STATUSTEXT,
@@ -406,8 +409,8 @@ class MetricsAccumulator:
         if m.get_srcComponent() != self.vcomp or m.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
             return
         armed = bool(m.base_mode & _ARMED)
-        mode = px4_mode_name(m.custom_mode) if m.autopilot == mavlink.MAV_AUTOPILOT_PX4 \
-            else f"MODE({int(m.custom_mode)})"
+        ap = from_heartbeat(m.autopilot)      # the stack's own mode names (PX4, ArduCopter)
+        mode = ap.mode_name(m.custom_mode) if ap is not None else f"MODE({int(m.custom_mode)})"
         if mode != self.mode or armed != self.armed:
             if len(self.mode_changes) < MAX_EVENTS:
                 self.mode_changes.append(ModeChange(self.t, mode, armed))

@@ -1,0 +1,182 @@
+"""The ``Autopilot`` interface: what differs between flight stacks on the wire.
+
+A personality is pure data plus small pure functions (no I/O, no clock):
+mode names and ``custom_mode`` numbers, the behaviour each mode stands for in
+the bundled SITL, arming and take-off rules, parameter names (and their units
+against the SI values the SITL works in), the message set and its rates, how
+offboard/guided control is entered and kept alive, and what happens when it
+stops (docs/flying-a-real-vehicle.md gives the stack's documentation for
+each).
+
+Behaviours (``ModeDef.behaviour``) are the SITL's stack-independent mode
+kinds: ``MANUAL`` (no RC exists: holds), ``POSCTL`` (holds), ``TAKEOFF``,
+``LOITER``, ``MISSION``, ``RTL``, ``LAND``, ``OFFBOARD`` (tracks the
+companion's setpoints: PX4 OFFBOARD, ArduCopter GUIDED); None: a mode the
+stack has and the SITL refuses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+#: MAV_MODE_FLAG_CUSTOM_MODE_ENABLED (MAVLink common).
+MODE_FLAG_CUSTOM_MODE_ENABLED = 1
+
+BEHAVIOURS = ("MANUAL", "POSCTL", "TAKEOFF", "LOITER", "MISSION", "RTL", "LAND", "OFFBOARD")
+
+
+@dataclass(frozen=True)
+class ModeDef:
+    """One flight mode: its name as the stack's tools print it, its HEARTBEAT
+    ``custom_mode`` word, and the SITL behaviour it stands for."""
+
+    name: str
+    custom_mode: int
+    behaviour: str | None
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: name (<= 16 chars), MAV_PARAM_TYPE, default, bounds, meaning."""
+
+    name: str
+    param_type: int
+    default: float
+    min: float
+    max: float
+    doc: str
+
+
+@dataclass(frozen=True)
+class ParamAlias:
+    """An internal (SI) parameter exposed on the wire under the stack's name:
+    wire value = internal value * ``wire_per_si`` (e.g. 100 for cm/s)."""
+
+    internal: str
+    wire: str
+    wire_per_si: float = 1.0
+
+
+@dataclass(frozen=True)
+class OffboardLoss:
+    """What the stack does when offboard/guided setpoints stop.
+
+    Attributes
+    ----------
+    timeout_param : str
+        Internal parameter: seconds without a setpoint before the loss.
+    leave_to : str or None
+        Behaviour entered at the loss (PX4: LOITER, the Hold mode); None: the
+        mode is kept and the vehicle holds where it is (ArduCopter GUIDED).
+    act_after_param : str or None
+        Internal parameter: seconds after the loss before ``action``.
+    action_param : str or None
+        Internal parameter naming the action (``action_of`` maps its value).
+    """
+
+    timeout_param: str
+    leave_to: str | None
+    act_after_param: str | None
+    action_param: str | None
+
+
+class Autopilot:
+    """A flight stack's personality (one subclass instance per stack).
+
+    Subclasses set the class attributes; the methods derive from them.
+    """
+
+    #: Registry key (``--autopilot``).
+    key: str = ""
+    #: HEARTBEAT ``autopilot`` (MAV_AUTOPILOT).
+    mav_autopilot: int = 0
+    #: HEARTBEAT ``type`` (MAV_TYPE_QUADROTOR).
+    mav_type: int = 2
+    #: AUTOPILOT_VERSION ``flight_sw_version``.
+    flight_sw_version: int = 0
+    modes: tuple[ModeDef, ...] = ()
+    #: Mode at boot.
+    boot_mode: str = ""
+    #: The mode that tracks the companion's setpoints.
+    offboard_mode: str = ""
+    #: The mode attitude-rate setpoints (SET_ATTITUDE_TARGET, ``--control rates``,
+    #: branch h17-rates) are flown in: PX4 OFFBOARD, ArduCopter GUIDED (and
+    #: GUIDED_NOGPS without a position estimate). The hook for that control mode.
+    attitude_mode: str = ""
+    #: The mode the vehicle is in after a commanded take-off.
+    after_takeoff: str = ""
+    #: Entering the offboard mode needs a setpoint stream already present.
+    offboard_needs_stream: bool = False
+    #: Armed on the ground in the offboard mode, setpoints do not lift the
+    #: vehicle: a MAV_CMD_NAV_TAKEOFF (in that mode, armed) does.
+    takeoff_by_command: bool = False
+    #: MAV_CMD_NAV_TAKEOFF param7 is relative to home (else AMSL).
+    takeoff_alt_relative: bool = False
+    #: The per-frame IMU message.
+    imu_message: str = "HIGHRES_IMU"
+    #: Telemetry streams and their default rates (message name -> Hz; 0: off).
+    default_rates_hz: dict = {}
+    #: Integer parameters travel byte-wise in PARAM_VALUE's float (PX4);
+    #: False: as a C cast to float (ArduPilot).
+    param_bytewise: bool = True
+    param_specs: tuple[ParamSpec, ...] = ()
+    param_aliases: tuple[ParamAlias, ...] = ()
+    #: Internal parameters the stack has no parameter for: fixed values.
+    fixed_params: dict = {}
+    #: Behaviours reported as another mode (ArduCopter climbs inside GUIDED).
+    report_as: dict = {}
+    offboard_loss: OffboardLoss | None = None
+
+    # --- modes ------------------------------------------------------------------
+    def mode(self, name: str) -> ModeDef:
+        """The mode called ``name``; KeyError if the stack has none."""
+        for m in self.modes:
+            if m.name == name:
+                return m
+        raise KeyError(f"{self.key}: no mode {name}")
+
+    def custom_mode(self, name: str) -> int:
+        return self.mode(name).custom_mode
+
+    def decode_mode(self, custom_mode: int) -> ModeDef | None:
+        """The mode of a HEARTBEAT/SET_MODE ``custom_mode``; None if unknown."""
+        c = int(custom_mode)
+        for m in self.modes:
+            if m.custom_mode == c:
+                return m
+        return None
+
+    def mode_name(self, custom_mode: int) -> str:
+        m = self.decode_mode(custom_mode)
+        return m.name if m is not None else f"MODE({int(custom_mode)})"
+
+    def mode_for(self, behaviour: str) -> ModeDef:
+        """The (first) mode standing for a SITL behaviour."""
+        for m in self.modes:
+            if m.behaviour == behaviour:
+                return m
+        raise KeyError(f"{self.key}: no mode for {behaviour}")
+
+    def wire_mode(self, behaviour: str) -> ModeDef:
+        """The mode the HEARTBEAT reports while the SITL flies ``behaviour``."""
+        name = self.report_as.get(behaviour)
+        return self.mode(name) if name is not None else self.mode_for(behaviour)
+
+    def action_of(self, value: float) -> str:
+        """The offboard-loss action parameter's value -> 'land' | 'rtl' | 'hold'."""
+        raise NotImplementedError
+
+    def custom_mode_from_params(self, param2: float, param3: float) -> int:
+        """MAV_CMD_DO_SET_MODE param2/param3 -> ``custom_mode``."""
+        raise NotImplementedError
+
+    def set_mode_params(self, name: str) -> tuple[float, float, float]:
+        """MAV_CMD_DO_SET_MODE param1..3 selecting mode ``name``."""
+        raise NotImplementedError
+
+    # --- parameters -------------------------------------------------------------
+    def wire_name(self, internal: str) -> str:
+        for a in self.param_aliases:
+            if a.internal == internal:
+                return a.wire
+        return internal
