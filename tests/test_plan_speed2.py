@@ -182,3 +182,28 @@ def test_mission_loading_does_not_import_the_lqr_solver():
     with pytest.raises(AttributeError):
         import companion.trajectory as T
         T.no_such_name
+
+
+# --- sorties: corner way-points found without a k-d tree ---------------------------------
+
+def test_corner_indices_match_a_nearest_neighbour_query():
+    from scipy.spatial import cKDTree
+
+    from companion.coverage.waypoints import Waypoints
+    from companion.sorties import _corner_indices
+
+    rng = np.random.default_rng(186)
+    n = 400
+    p = np.column_stack([np.repeat(rng.uniform(0, 50, n // 4), 4), rng.uniform(0, 50, n), np.full(n, 2.0)])
+    corner = rng.random(n) < 0.4
+    w = Waypoints(t_s=np.arange(n, dtype=float), p_enu_m=p, v_enu_m_s=np.zeros((n, 3)),
+                  a_enu_m_s2=np.zeros((n, 3)), corner=corner)
+    cs = p[corner, :2]
+    # corners exactly, corners moved by less and by more than the 1 um tolerance, other points
+    q = np.vstack([cs, cs + [4e-7, -5e-7], cs + [0.0, 2e-6], p[~corner, :2], rng.uniform(0, 50, (50, 2))])
+    idx = np.flatnonzero(corner)
+    d, j = cKDTree(cs).query(q)
+    want = np.where(d < 1e-6, idx[j], -1)
+    got = _corner_indices(w, q)
+    np.testing.assert_array_equal(got, want)
+    assert (got[: len(cs)] == idx).all() and (got[2 * len(cs): 3 * len(cs)] == -1).all()
