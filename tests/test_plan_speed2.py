@@ -172,6 +172,7 @@ def test_json_depth_on_texts_without_backslashes():
 
 def test_mission_loading_does_not_import_the_lqr_solver():
     code = ("import sys; import companion.mission; import companion.commands.fly; import companion.plan_io; "
+            "import companion.preflight, companion.trajectory.cursor, companion.trajectory.sampling; "
             "assert 'companion.trajectory.lqr' not in sys.modules, 'lqr'; "
             "assert 'scipy.linalg' not in sys.modules, 'scipy.linalg'; "
             "from companion.trajectory import generate_trajectory, TrajectoryConfig, Trajectory; "
@@ -182,6 +183,12 @@ def test_mission_loading_does_not_import_the_lqr_solver():
     with pytest.raises(AttributeError):
         import companion.trajectory as T
         T.no_such_name
+    # fly --plan imports the LQR solver only for a 1.x plan (samples, no pieces)
+    import inspect
+
+    from companion.commands.fly import prepare
+    src = inspect.getsource(prepare)
+    assert src.index("import generate_trajectory") > src.index("if traj is None:")
 
 
 # --- sorties: corner way-points found without a k-d tree ---------------------------------

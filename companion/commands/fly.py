@@ -377,7 +377,6 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None,
                                   mission.trajectory, so.path_xy_m, w.corner,
                                   source=f"{mission.source} (planned) --sortie {sortie}")
     from ..plan_io import load_plan
-    from ..trajectory import generate_trajectory
 
     pf = load_plan(plan_path)
     from ..preflight import check_plan
@@ -397,6 +396,8 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None,
     traj = pf.trajectory
     if traj is None:
         # a 1.x plan stores samples only: the LQR solution through its way-points is exact
+        from ..trajectory import generate_trajectory     # scipy.linalg: only for these plans
+
         traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
                                    pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")
