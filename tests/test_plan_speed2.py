@@ -183,12 +183,24 @@ def test_mission_loading_does_not_import_the_lqr_solver():
     with pytest.raises(AttributeError):
         import companion.trajectory as T
         T.no_such_name
-    # fly --plan imports the LQR solver only for a 1.x plan (samples, no pieces)
-    import inspect
 
-    from companion.commands.fly import prepare
-    src = inspect.getsource(prepare)
-    assert src.index("import generate_trajectory") > src.index("if traj is None:")
+
+def test_flying_a_plan_does_not_import_scipy(tmp_path):
+    """``companion fly --plan`` of a 2.x plan: the stored pieces, no LQR solve, no scipy."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    mission = root / "missions" / "flat-rectangle" / "mission.yaml"
+    plan = tmp_path / "plan.json"
+    subprocess.run([sys.executable, "-m", "companion", "plan", str(mission), "-o", str(plan)],
+                   check=True, capture_output=True, timeout=120)
+    code = ("import sys; from companion.mission import load_mission; from companion.commands.fly import prepare; "
+            "fp = prepare(load_mission(sys.argv[1]), sys.argv[2]); fp.trajectory.sample(fp.trajectory.t0); "
+            "bad = sorted(m for m in sys.modules if m.startswith('scipy') or m == 'companion.trajectory.lqr'); "
+            "assert not bad, bad")
+    proc = subprocess.run([sys.executable, "-c", code, str(mission), str(plan)], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
 
 
 # --- sorties: corner way-points found without a k-d tree ---------------------------------
