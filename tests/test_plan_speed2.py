@@ -92,7 +92,7 @@ def test_sharpness_equals_all_bins_numbering():
     rows = np.column_stack([t * np.cos(a) - 2.1 * k * np.sin(a), t * np.sin(a) + 2.1 * k * np.cos(a)])
     for pts in (rows + rng.normal(0, 0.05, rows.shape), rng.uniform(-30, 50, (500, 2)), rows[:3]):
         for step_deg in (1.0, 0.1, 0.01):
-            cand = np.deg2rad(np.arange(0.0, 180.0, 7 * step_deg))
+            cand = np.deg2rad(np.r_[np.arange(0.0, 180.0, 7.3), 20.0 + step_deg * np.arange(-5, 6)])
             tile = 0.2 / np.tan(np.deg2rad(step_deg))
             np.testing.assert_array_equal(_sharpness(pts, cand, 0.2, tile),
                                           reference_sharpness(pts, cand, 0.2, tile))
@@ -231,31 +231,30 @@ def test_corner_indices_match_a_nearest_neighbour_query():
 # --- SITL: the squared clearance capped in uint16, built a band of rows at a time --------
 
 def open_field_grid():
-    """Rows every 8 cells at both ends of a 800 x 120 grid at 5 cm, 700 empty rows between:
+    """Rows every 8 cells at both ends of a 800 x 60 grid at 5 cm, 700 empty rows between:
     cells up to 350 cells from any row, so the middle is beyond the uint16 cap (256 cells)."""
     from companion.maps.grid import OccupancyGrid
 
-    occ = np.zeros((800, 120), dtype=bool)
-    occ[2:50:8, 5:115] = True
-    occ[752:798:8, 5:115] = True
-    occ[400, 60] = occ[20, 0] = False
+    occ = np.zeros((800, 60), dtype=bool)
+    occ[2:50:8, 5:55] = True
+    occ[752:798:8, 5:55] = True
     return OccupancyGrid(occ, ~occ, 0.05, (1.0, -2.0), 0.3)
 
 
-@pytest.mark.parametrize("band_cells", [120 * 40, 1 << 20])
+@pytest.mark.parametrize("band_cells", [60 * 40, 1 << 20])
 def test_capped_clearance_is_the_exact_one_below_the_cap(monkeypatch, band_cells):
     from companion import geometry
     from companion.geometry import CLEARANCE_SQ_CAP, clearance_sq_cells, clearance_sq_cells_capped
 
     monkeypatch.setattr(geometry, "_ROWS_CELLS", band_cells)       # 40-row bands: windows cut the field
     rng = np.random.default_rng(187)
-    posts = rng.random((300, 90)) < 0.002
+    posts = rng.random((300, 60)) < 0.002
     for occ in (open_field_grid().occupied, posts, np.zeros((40, 30), dtype=bool) | (np.arange(30) == 29)):
         got = clearance_sq_cells_capped(occ)
         want = np.minimum(clearance_sq_cells(occ), CLEARANCE_SQ_CAP)
         assert got.dtype == np.uint16
         np.testing.assert_array_equal(got, want)
-    assert (clearance_sq_cells_capped(open_field_grid().occupied) == CLEARANCE_SQ_CAP).sum() > 10_000
+    assert (clearance_sq_cells_capped(open_field_grid().occupied) == CLEARANCE_SQ_CAP).sum() > 5_000
 
 
 def test_sitl_rays_through_capped_cells_hit_the_same_rows():
@@ -269,8 +268,8 @@ def test_sitl_rays_through_capped_cells_hit_the_same_rows():
     rng = np.random.default_rng(188)
     ext = 800 * 0.05
     n_hit = n_exact = 0
-    for _ in range(1500):
-        o = np.array([rng.uniform(0.0, 6.0), rng.uniform(-5.0, ext), rng.uniform(0.2, 2.5)])
+    for _ in range(800):
+        o = np.array([rng.uniform(0.0, 3.0), rng.uniform(-5.0, ext), rng.uniform(0.2, 2.5)])
         o[:2] = grid.origin_xy_m + [[math.cos(0.3), -math.sin(0.3)], [math.sin(0.3), math.cos(0.3)]] @ o[:2]
         d = rng.normal(size=3) * [0.2, 1.0, 0.05]
         d /= np.linalg.norm(d)
@@ -281,7 +280,7 @@ def test_sitl_rays_through_capped_cells_hit_the_same_rows():
             n_hit += 1
             n_exact += a == b
             assert abs(a - b) <= 1e-9, (args, a, b)          # the stated tolerance: rounding of the path
-    assert n_hit > 300
+    assert n_hit > 80
 
 
 def test_collision_bounds_from_the_capped_table():
@@ -294,11 +293,11 @@ def test_collision_bounds_from_the_capped_table():
     old = np.maximum(np.nextafter(b, np.float32(-np.inf)), np.float32(0.0))
     below = edt * edt < 65535
     np.testing.assert_array_equal(cells._bound[below], old[below])       # the old bounds, bit for bit
-    assert (cells._bound[~below] <= old[~below]).all() and (~below).sum() > 10_000
+    assert (cells._bound[~below] <= old[~below]).all() and (~below).sum() > 5_000
     rng = np.random.default_rng(189)
     c, s = math.cos(0.3), math.sin(0.3)
     for _ in range(300):
-        u, v, z = rng.uniform(0, 6.0), rng.uniform(0, 40.0), rng.uniform(0.0, 3.0)
+        u, v, z = rng.uniform(0, 3.0), rng.uniform(0, 40.0), rng.uniform(0.0, 3.0)
         x, y = 1.0 + c * u - s * v, -2.0 + s * u + c * v
         lb = cells.lower_bound_m(x, y, z)
         assert lb <= max(cells.signed_distance_m(x, y, z), 0.0) + 1e-12
