@@ -33,6 +33,7 @@ in the report (``report_fallback``); exit code 3 either way.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import sys
@@ -379,6 +380,12 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None,
     from ..plan_io import load_plan
 
     pf = load_plan(plan_path)
+    # the document's tree of Python objects (~60 MB for a 10 ha plan) is not needed
+    # past the loader's arrays: freed before the maps are read on top of it
+    pf = dataclasses.replace(pf, data={})
+    from ..memory import release_freed_memory
+
+    release_freed_memory()
     from ..preflight import check_plan
     grid, dem = (maps or MissionMaps(mission)).get()
     check_plan(pf, mission, grid, dem)    # whole plan and every sortie: on the map, above the terrain, for this field
