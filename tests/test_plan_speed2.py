@@ -52,7 +52,7 @@ def test_sample_lines_in_blocks_equals_one_pass():
             for dtype in (np.float32, np.float64):
                 ref = reference_sample_lines(r, alpha, offsets, t, dtype)
                 assert ref.any() and not ref.all()
-                for block in (1, 3, 4, 23, 100):
+                for block in (None, 1, 3, 4, 23, 100):
                     got = r.sample_lines(alpha, offsets, t, dtype, block=block)
                     np.testing.assert_array_equal(got, ref)
     # every sample of a line inside one cell reads that cell (independent definition)
