@@ -273,11 +273,15 @@ def json_depth(text: str | bytes, chunk: int = 1 << 20) -> int:
     """Deepest nesting of ``[``/``{`` in JSON text, outside strings (a string's
     quote counts unless an odd run of backslashes precedes it). Vectorised, a
     chunk at a time, before the text is parsed: a deep document never reaches
-    the recursive parser."""
+    the recursive parser. Only quotes and brackets change the depth or the
+    string state, so a chunk without backslashes is scanned at those bytes
+    alone (an eighth of a plan.json's); one with backslashes byte by byte."""
     import numpy as np
 
     data = text.encode("utf-8", "surrogatepass") if isinstance(text, str) else text
     view = np.frombuffer(data, dtype=np.uint8)
+    structural = np.zeros(256, dtype=bool)
+    structural[[34, 91, 93, 123, 125]] = True
     deepest = depth = 0
     in_string = 0
     run = 0                                    # backslashes just before the chunk
@@ -291,10 +295,15 @@ def json_depth(text: str | bytes, chunk: int = 1 << 20) -> int:
             quote = (a == 34) & (((pos - 1 - before) & 1) == 0)
             run = int(n - 1 - last_plain[-1])
         else:                                  # the common case: only a carried run can escape
+            at = np.flatnonzero(structural.take(a))
+            escaped_first = bool(run & 1) and at.size > 0 and at[0] == 0
+            a = a[at]
             quote = a == 34
-            if run & 1:
+            if escaped_first:
                 quote[0] = False
             run = 0
+            if a.size == 0:
+                continue
         parity = (np.cumsum(quote, dtype=np.uint8) + np.uint8(in_string)) & 1
         outside = parity == 0
         step = ((a == 91) | (a == 123)).astype(np.int8) - ((a == 93) | (a == 125))

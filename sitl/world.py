@@ -35,7 +35,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import ndimage
 
-from companion.geometry import ExtrudedCells, SceneGeometry, clearance_sq_cells, obstacle_solids
+from companion.geometry import (ExtrudedCells, SceneGeometry, capped_clearance, clearance_sq_cells_capped,
+                               obstacle_solids)
 from companion.maps.heightfield import HeightField
 from companion.maps.grid import ElevationModel, OccupancyGrid
 from companion.mission.sim import ObstacleConfig
@@ -115,13 +116,16 @@ class RowField:
     """Vine rows: occupied OGM cells extruded from the DEM to the canopy height.
 
     Held compactly for a 10 ha map (22 M cells at 5 cm): the occupancy as a flat
-    view of the grid's own bool array, the clearance as the int32 squared
-    distance transform (``companion.geometry.clearance_sq_cells``, whose square
-    root is ``ndimage.distance_transform_edt`` bit for bit), and a cell's base
+    view of the grid's own bool array, the clearance as the squared distance
+    transform capped at 65 535 cells^2 in uint16
+    (``companion.geometry.clearance_sq_cells_capped``: below the cap its square
+    root is ``ndimage.distance_transform_edt`` bit for bit; a capped cell, ~256
+    cells or more from every row, leaps at most ~254 cells, a shorter leap that
+    is still clear, so a ray meets the same first cell), and a cell's base
     height read from the terrain the first time a ray reaches that cell (the
     same call on the same cell centre as reading them all up front). Indexing
     a flat memoryview gives a Python bool or int as fast as nested lists did,
-    at 5 bytes a cell instead of ~90.
+    at 3 bytes a cell instead of ~90.
     """
 
     def __init__(self, grid: OccupancyGrid, terrain: Terrain, canopy_height_m: float,
@@ -136,7 +140,7 @@ class RowField:
         self.occ = memoryview(occ.reshape(-1))
         self._d2 = None
         if self.any:
-            d2 = clearance_sq_cells(occ) if sq_distance_cells is None else sq_distance_cells
+            d2 = clearance_sq_cells_capped(occ) if sq_distance_cells is None else capped_clearance(sq_distance_cells)
             self._d2 = memoryview(np.ascontiguousarray(d2).reshape(-1))
         self._base: dict[int, float] = {}
         self.canopy = float(canopy_height_m)
@@ -409,7 +413,7 @@ class World:
         rows = cells = None
         if grid is not None:
             # one distance transform for the ray leaps and the collision bounds
-            d2 = clearance_sq_cells(grid.occupied) if grid.occupied.any() else None
+            d2 = clearance_sq_cells_capped(grid.occupied) if grid.occupied.any() else None
             rows = RowField(grid, terrain, canopy_height_m, d2)
             cells = ExtrudedCells(grid, row_base_heights(grid, terrain), canopy_height_m, d2)
             del d2

@@ -35,6 +35,7 @@ in the report (``report_fallback``); exit code 3 either way.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import sys
@@ -460,9 +461,14 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None,
                                   mission.trajectory, so.path_xy_m, w.corner,
                                   source=f"{mission.source} (planned) --sortie {sortie}")
     from ..plan_io import load_plan
-    from ..trajectory import generate_trajectory
 
     pf = load_plan(plan_path)
+    # the document's tree of Python objects (~60 MB for a 10 ha plan) is not needed
+    # past the loader's arrays: freed before the maps are read on top of it
+    pf = dataclasses.replace(pf, data={})
+    from ..memory import release_freed_memory
+
+    release_freed_memory()
     from ..preflight import check_plan
     grid, dem = (maps or MissionMaps(mission)).get()
     check_plan(pf, mission, grid, dem)    # whole plan and every sortie: on the map, above the terrain, for this field
@@ -480,6 +486,8 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None,
     traj = pf.trajectory
     if traj is None:
         # a 1.x plan stores samples only: the LQR solution through its way-points is exact
+        from ..trajectory import generate_trajectory     # scipy.linalg: only for these plans
+
         traj = generate_trajectory(pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
                                    pf.waypoint_a_enu_m_s2, mission.trajectory, target_enu_m=target)
     cov = pf.stats.get("coverage_fraction")

@@ -142,8 +142,14 @@ class Raster:
         return self.flat.take(idx)
 
     def sample_lines(self, alpha: float, offsets: np.ndarray, t: np.ndarray,
-                     dtype=np.float32) -> np.ndarray:
-        """(lines, samples) bool: the mask at ``offsets[i] n + t[j] u`` (G, m)."""
+                     dtype=np.float32, block: int | None = None) -> np.ndarray:
+        """(lines, samples) bool: the mask at ``offsets[i] n + t[j] u`` (G, m).
+
+        ``block`` lines at a time (default: ~32 Ki samples), so that the
+        coordinates and indices of a block stay in cache (the same arithmetic
+        as one whole-array pass, ``tests/test_plan_speed2.py``): half the CPU
+        time of one pass on the 10 ha fields and the 1 ha parcel.
+        """
         u0, u1 = np.cos(alpha), np.sin(alpha)
         n0, n1 = -u1, u0
         inv = 1.0 / self.cell_m
@@ -151,16 +157,29 @@ class Raster:
         ax = ((offsets * n0 - self.x0_m) * inv + 1.0).astype(dtype)
         ay = ((offsets * n1 - self.y0_m) * inv + 1.0).astype(dtype)
         bx, by = (t * (u0 * inv)).astype(dtype), (t * (u1 * inv)).astype(dtype)
-        x = ax[:, None] + bx[None, :]
-        y = ay[:, None] + by[None, :]
-        # truncation equals floor on [0, inf); anything below 1 is padding or beyond
-        np.clip(x, 0, self.cols + 1, out=x)
-        np.clip(y, 0, self.rows + 1, out=y)
         it = np.int32 if self.flat.size < 2**31 else np.int64
-        idx = y.astype(it)
-        idx *= self.cols + 2
-        idx += x.astype(it)
-        return self.flat.take(idx)
+        n_l, n_t = len(offsets), len(t)
+        out = np.empty((n_l, n_t), dtype=bool)
+        b = max(1, min((1 << 15) // max(1, n_t) if block is None else block, n_l))
+        x, y = np.empty((b, n_t), dtype), np.empty((b, n_t), dtype)
+        xi, yi = np.empty((b, n_t), it), np.empty((b, n_t), it)
+        x_hi, y_hi = dtype(self.cols + 1), dtype(self.rows + 1)
+        for s in range(0, n_l, b):
+            k = min(b, n_l - s)
+            xs, ys, xis, yis = x[:k], y[:k], xi[:k], yi[:k]
+            np.add(ax[s:s + k, None], bx[None, :], out=xs)
+            np.add(ay[s:s + k, None], by[None, :], out=ys)
+            # truncation equals floor on [0, inf); anything below 1 is padding or beyond
+            np.maximum(xs, 0, out=xs)
+            np.minimum(xs, x_hi, out=xs)
+            np.maximum(ys, 0, out=ys)
+            np.minimum(ys, y_hi, out=ys)
+            np.copyto(xis, xs, casting="unsafe")
+            np.copyto(yis, ys, casting="unsafe")
+            yis *= self.cols + 2
+            yis += xis
+            self.flat.take(yis, out=out[s:s + k])
+        return out
 
 
 def pool(mask: np.ndarray, f: int) -> np.ndarray:

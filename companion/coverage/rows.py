@@ -123,13 +123,18 @@ def _sharpness(pts: np.ndarray, alphas: np.ndarray, bin_m: float, tile_m: float)
     radius = float(np.hypot(*(pts.max(axis=0) - pts.min(axis=0)))) + 2 * bin_m
     centre = 0.5 * (pts.max(axis=0) + pts.min(axis=0))
     q = pts - centre
-    nbins = int(np.ceil(2 * radius / bin_m)) + 2
-    ntiles = int(np.ceil(2 * radius / tile_m)) + 1
     out = np.empty(len(alphas))
+    qx, qy = np.ascontiguousarray(q[:, 0]), np.ascontiguousarray(q[:, 1])
     for i, a in enumerate(alphas):
-        t, d = _project(q, a)
-        key = ((t + radius) / tile_m).astype(np.int64) * nbins + ((d + radius) / bin_m).astype(np.int64)
-        h = np.bincount(key, minlength=ntiles * nbins)
+        ca, sa = np.cos(a), np.sin(a)
+        ti = ((qx * ca + qy * sa + radius) / tile_m).astype(np.int64)
+        di = ((-qx * sa + qy * ca + radius) / bin_m).astype(np.int64)
+        # sum of squared bin counts: any one-to-one numbering of the occupied
+        # (tile, bin) pairs gives the same integer, so number them within the
+        # points' own range instead of all ntiles * nbins bins
+        d_lo = di.min()
+        key = (ti - ti.min()) * (di.max() - d_lo + 1) + (di - d_lo)
+        h = np.bincount(key)
         out[i] = float(np.dot(h, h)) / (n * n)
     return out
 
