@@ -140,26 +140,31 @@ def blocked_nodes(scene: RouteScene, lat: Lattice) -> tuple[np.ndarray, np.ndarr
     # obstacle columns: the top of the occupied voxels over each node's (x, y)
     pts = scene.obstacles.points()
     if len(pts):
-        v = scene.obstacles.voxel_m
-        top = np.full(X.shape, -np.inf)
-        kx = np.floor(X / v).astype(np.int64)
-        ky = np.floor(Y / v).astype(np.int64)
-        vx = np.floor(pts[:, 0] / v).astype(np.int64)
-        vy = np.floor(pts[:, 1] / v).astype(np.int64)
-        vtop = pts[:, 2] + 0.5 * v
-        col_top: dict[tuple[int, int], float] = {}
-        for a, b, t in zip(vx.tolist(), vy.tolist(), vtop.tolist()):
-            if t > col_top.get((a, b), -np.inf):
-                col_top[(a, b)] = t
-        for (a, b), t in col_top.items():
-            m = (kx == a) & (ky == b)
-            top[m] = np.maximum(top[m], t)
-        # a column thinner than the lattice step falls between nodes: mark the nearest node too
-        for (a, b), t in col_top.items():
-            i, j, _ = lat.index(((a + 0.5) * v, (b + 0.5) * v, 0.0))
-            top[i, j] = max(top[i, j], t)
-        blocked |= Z <= top[..., None]
+        blocked |= Z <= column_tops(scene.obstacles, lat, X, Y)[..., None]
     return blocked, ground
+
+
+def column_tops(obstacles: ObstacleMap, lat: Lattice, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """(nx, ny) the top (m) of the obstacle column over each lattice node's (x, y): the
+    highest occupied voxel's upper face in the voxel column holding it (-inf: none).
+    A column thinner than the lattice step may fall between nodes: its nearest node
+    gets it too."""
+    pts = obstacles.points()
+    v = obstacles.voxel_m
+    vk = np.floor(pts[:, :2] / v).astype(np.int64)
+    keys, inv = np.unique(vk[:, 0] * (1 << 32) + (vk[:, 1] + (1 << 31)), return_inverse=True)
+    tops = np.full(len(keys), -np.inf)
+    np.maximum.at(tops, inv.ravel(), pts[:, 2] + 0.5 * v)
+    nk = np.floor(X / v).astype(np.int64) * (1 << 32) + (np.floor(Y / v).astype(np.int64) + (1 << 31))
+    pos = np.clip(np.searchsorted(keys, nk), 0, len(keys) - 1)
+    top = np.where(keys[pos] == nk, tops[pos], -np.inf)
+    cx, cy = keys >> 32, (keys & 0xFFFFFFFF) - (1 << 31)
+    s = lat.x[1] - lat.x[0] if len(lat.x) > 1 else 1.0
+    i = np.rint(((cx + 0.5) * v - lat.x[0]) / s).astype(int)
+    j = np.rint(((cy + 0.5) * v - lat.y[0]) / s).astype(int)
+    inside = (i >= 0) & (i < len(lat.x)) & (j >= 0) & (j < len(lat.y))
+    np.maximum.at(top, (i[inside], j[inside]), tops[inside])
+    return top
 
 
 def free_nodes(scene: RouteScene, lat: Lattice) -> np.ndarray:

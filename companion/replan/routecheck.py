@@ -36,14 +36,16 @@ def _blocked(scene: RouteScene, lat) -> tuple[np.ndarray, np.ndarray]:
             elif grid.occupied[r, c]:
                 blocked[i, j, :] = lat.z <= g + known.canopy_height_m
     v = scene.obstacles.voxel_m
+    columns: dict[tuple[int, int], float] = {}
     for cx, cy, cz in scene.obstacles.points().tolist():
-        x0, y0 = np.floor(cx / v) * v, np.floor(cy / v) * v
-        ix = np.flatnonzero((np.floor(lat.x / v) * v == x0))
-        iy = np.flatnonzero((np.floor(lat.y / v) * v == y0))
-        nearest = lat.index((cx, cy, cz))
-        cells = {(a, b) for a in ix.tolist() for b in iy.tolist()} | {(nearest[0], nearest[1])}
-        for a, b in cells:
-            blocked[a, b, :] |= lat.z <= cz + 0.5 * v
+        key = (int(np.floor(cx / v)), int(np.floor(cy / v)))
+        columns[key] = max(columns.get(key, -np.inf), cz + 0.5 * v)
+    kx, ky = np.floor(lat.x / v).astype(int), np.floor(lat.y / v).astype(int)
+    for (a, b), top in columns.items():
+        nearest = lat.index(((a + 0.5) * v, (b + 0.5) * v, 0.0))
+        cells = {(i, j) for i in np.flatnonzero(kx == a).tolist() for j in np.flatnonzero(ky == b).tolist()}
+        for i, j in cells | {(nearest[0], nearest[1])}:
+            blocked[i, j, :] |= lat.z <= top
     return blocked, ground
 
 
