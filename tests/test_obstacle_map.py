@@ -8,7 +8,8 @@ import math
 import numpy as np
 
 from companion.replan.perception import BeamEvidence
-from companion.replan.voxmap import L_HIT, L_MAX, L_MISS, ObstacleMap, _box_distance
+from companion.replan.voxmap import (CANDIDATE_LIFETIME_S, L_CANDIDATE, L_HIT, L_MAX, L_MISS, ObstacleMap,
+                                     _box_distance)
 
 V = 0.1
 
@@ -50,11 +51,24 @@ def test_a_beam_clears_only_short_of_its_return_minus_the_margin():
 
 def test_a_wide_beam_clears_only_its_inner_cone():
     # 22.5 deg field: the inner cone is half of the 11.25 deg half-angle, tan(5.625 deg) = 0.0985,
-    # 0.300 m to the side at the voxel's centre 3.05 m along the axis
+    # 0.300 m to the side at the voxel's point 3.05 m along the axis, widened by half a voxel: 0.350 m
     half = math.radians(11.25)
     m = _one_voxel()
-    assert m.clear_beam(_beam((0.0, 0.05 + 0.35, 1.05), (1, 0, 0), 6.0, half)) == 0    # centre 0.35 m off
-    assert m.clear_beam(_beam((0.0, 0.05 + 0.25, 1.05), (1, 0, 0), 6.0, half)) == 1    # 0.25 m off
+    assert m.clear_beam(_beam((0.0, 0.05 + 0.40, 1.05), (1, 0, 0), 6.0, half)) == 0    # 0.40 m off
+    assert m.clear_beam(_beam((0.0, 0.05 + 0.30, 1.05), (1, 0, 0), 6.0, half)) == 1    # 0.30 m off
+
+
+def test_a_candidate_is_cleared_by_the_whole_cone_and_lapses_unless_confirmed():
+    half = math.radians(11.25)                        # the whole cone: 0.60 + 0.05 m off at 3.05 m
+    m = ObstacleMap(V)
+    m.add((3.05, 0.05, 1.05), L_CANDIDATE, t_s=0.0)
+    assert m.clear_beam(_beam((0.0, 0.05 + 0.40, 1.05), (1, 0, 0), 6.0, half)) == 1
+    m.add((3.05, 0.05, 1.05), L_CANDIDATE, t_s=0.0)
+    assert m.expire_candidates(CANDIDATE_LIFETIME_S - 0.01) == 0 and len(m) == 1
+    assert m.expire_candidates(CANDIDATE_LIFETIME_S + 0.01) == 1 and len(m) == 0
+    m.add((3.05, 0.05, 1.05), L_CANDIDATE, t_s=0.0)
+    m.add((3.06, 0.04, 1.02), L_HIT)                  # an axis hit in the same voxel confirms it
+    assert m.expire_candidates(1e6) == 0 and len(m) == 1
 
 
 def test_a_voxel_seen_often_needs_as_many_beams():
@@ -120,7 +134,8 @@ def test_distance_never_exceeds_the_true_one_and_exact_mode_is_exact():
     for p in rng.uniform(0.0, 4.0, (60, 3)):
         m.add(p)
     q = rng.uniform(-1.0, 5.0, (200, 3))
-    truth = _box_distance(q[:, None, :], m.points()[None], V / 2).min(axis=1)
+    centres = (m.keys() + 0.5) * V
+    truth = _box_distance(q[:, None, :], centres[None], V / 2).min(axis=1)
     np.testing.assert_allclose(m.distance(q, exact=True), truth, atol=1e-12)
     fast = m.distance(q)
     assert np.all(fast <= truth + 1e-12)

@@ -138,8 +138,7 @@ def blocked_nodes(scene: RouteScene, lat: Lattice) -> tuple[np.ndarray, np.ndarr
     Z = lat.z[None, None, :]
     blocked = not_free[..., None] | (occupied[..., None] & (Z <= (ground + known.canopy_height_m)[..., None]))
     # obstacle columns: the top of the occupied voxels over each node's (x, y)
-    pts = scene.obstacles.points()
-    if len(pts):
+    if len(scene.obstacles):
         blocked |= Z <= column_tops(scene.obstacles, lat, X, Y)[..., None]
     return blocked, ground
 
@@ -149,12 +148,11 @@ def column_tops(obstacles: ObstacleMap, lat: Lattice, X: np.ndarray, Y: np.ndarr
     highest occupied voxel's upper face in the voxel column holding it (-inf: none).
     A column thinner than the lattice step may fall between nodes: its nearest node
     gets it too."""
-    pts = obstacles.points()
+    vk = obstacles.keys()
     v = obstacles.voxel_m
-    vk = np.floor(pts[:, :2] / v).astype(np.int64)
     keys, inv = np.unique(vk[:, 0] * (1 << 32) + (vk[:, 1] + (1 << 31)), return_inverse=True)
     tops = np.full(len(keys), -np.inf)
-    np.maximum.at(tops, inv.ravel(), pts[:, 2] + 0.5 * v)
+    np.maximum.at(tops, inv.ravel(), (vk[:, 2] + 1) * v)
     nk = np.floor(X / v).astype(np.int64) * (1 << 32) + (np.floor(Y / v).astype(np.int64) + (1 << 31))
     pos = np.clip(np.searchsorted(keys, nk), 0, len(keys) - 1)
     top = np.where(keys[pos] == nk, tops[pos], -np.inf)

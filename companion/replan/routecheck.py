@@ -37,9 +37,8 @@ def _blocked(scene: RouteScene, lat) -> tuple[np.ndarray, np.ndarray]:
                 blocked[i, j, :] = lat.z <= g + known.canopy_height_m
     v = scene.obstacles.voxel_m
     columns: dict[tuple[int, int], float] = {}
-    for cx, cy, cz in scene.obstacles.points().tolist():
-        key = (int(np.floor(cx / v)), int(np.floor(cy / v)))
-        columns[key] = max(columns.get(key, -np.inf), cz + 0.5 * v)
+    for a, b, c in scene.obstacles.keys().tolist():
+        columns[(a, b)] = max(columns.get((a, b), -np.inf), (c + 1) * v)
     kx, ky = np.floor(lat.x / v).astype(int), np.floor(lat.y / v).astype(int)
     for (a, b), top in columns.items():
         nearest = lat.index(((a + 0.5) * v, (b + 0.5) * v, 0.0))

@@ -13,10 +13,20 @@ eq. 9.7; OctoMap's clamped update):
   Woo restricted to the stored voxels) and, for a wide beam, the voxels
   whose centre lies in the inner cone (``CLEAR_FOV_FRACTION`` of each
   half-angle: a small object at the edge of a wide field is not surely
-  seen). A voxel whose log-odds reaches 0 is deleted.
+  seen). A voxel only ever hit as a candidate (never on an axis) is cleared
+  by the whole cone plus half a voxel: it was a guess, and any beam whose
+  field holds it short of its return says the guess was wrong. A voxel whose
+  log-odds reaches 0 is deleted.
 
-Nothing else clears a voxel: not time, not a re-route, not the vehicle
-flying away. A voxel is *occupied* while stored (l > 0).
+Nothing else clears a voxel hit on a beam's axis (*confirmed*): not time,
+not a re-route, not the vehicle flying away. A voxel is *occupied* while
+stored (l > 0). The one exception is a wide beam's edge *candidate* (where
+the return may also lie, ``perception.BeamEvidence.fan_hits``): it is a
+hypothesis, not a measurement of that voxel, and beams that see the obstacle
+itself never clear it (they return at its range), so an unconfirmed
+candidate lapses ``CANDIDATE_LIFETIME_S`` (vehicle time) after its last
+sighting (``expire_candidates``); an axis hit in its voxel confirms it for
+good.
 
 Memory bound: only voxels that returned a hit are stored, and every hit is
 a surface within the sensors' maximum range of the flown path, so the
@@ -50,6 +60,8 @@ L_MISS = 1.0
 L_MAX = 3.0
 #: A wide beam clears the inner cone: this fraction of each half field of view.
 CLEAR_FOV_FRACTION = 0.5
+#: An unconfirmed candidate lapses this long (s, vehicle time) after its last sighting.
+CANDIDATE_LIFETIME_S = 1.0
 #: Hard cap on stored voxels (a flooding sensor; the bound of the module doc is far below).
 MAX_VOXELS = 200_000
 #: Nearest voxel centres examined per query point (``distance``).
@@ -78,13 +90,19 @@ class ObstacleMap:
         self.clear_margin_m = float(clear_margin_m)
         self.max_voxels = int(max_voxels)
         self._l: dict[tuple[int, int, int], float] = {}
+        #: the first return seen in each voxel (the voxel's point: it does not creep with the
+        #: sensor, a beam climbing a face would otherwise drag it up to the top)
+        self._first: dict[tuple[int, int, int], tuple[float, float, float]] = {}
         self._confirmed: set[tuple[int, int, int]] = set()
+        self._cand_until: dict[tuple[int, int, int], float] = {}
         self.dropped = 0
         self.version = 0
         self._cache_v = -1
         self._centres = np.zeros((0, 3))
+        self._points = np.zeros((0, 3))
         self._keys = np.zeros((0, 3), dtype=np.int64)
         self._tree: cKDTree | None = None
+        self._conf = np.zeros(0, dtype=bool)
 
     # --- contents ----------------------------------------------------------------------
 
@@ -106,29 +124,39 @@ class ObstacleMap:
         if self._l:
             self._keys = np.array(list(self._l.keys()), dtype=np.int64).reshape(-1, 3)
             self._centres = (self._keys + 0.5) * self.voxel_m
+            self._points = np.array([self._first[k] for k in self._l], dtype=float).reshape(-1, 3)
             self._tree = cKDTree(self._centres)
+            self._conf = np.fromiter((k in self._confirmed for k in self._l), dtype=bool, count=len(self._l))
         else:
+            self._conf = np.zeros(0, dtype=bool)
             self._keys = np.zeros((0, 3), dtype=np.int64)
             self._centres = np.zeros((0, 3))
+            self._points = np.zeros((0, 3))
             self._tree = None
         self._cache_v = self.version
 
     def points(self) -> np.ndarray:
-        """(k, 3) centres of the occupied voxels (ENU m; a cached array, do not modify)."""
+        """(k, 3) the occupied voxels' points (ENU m; the first return seen in each, inside
+        it; a cached array, do not modify)."""
         self._refresh()
-        return self._centres
+        return self._points
 
-    def confirmed_points(self) -> np.ndarray:
-        """(k, 3) centres of the occupied voxels hit on a beam's axis (not only as a
-        wide beam's edge candidate): what an obstacle's top is estimated from."""
-        pts = [(np.asarray(k) + 0.5) * self.voxel_m for k in self._confirmed if k in self._l]
-        return np.array(pts, dtype=float).reshape(-1, 3)
+    def keys(self) -> np.ndarray:
+        """(k, 3) int voxel indices of the occupied voxels, in the order of ``points``."""
+        self._refresh()
+        return self._keys
+
+    def confirmed(self) -> np.ndarray:
+        """(k,) bool, in the order of ``points``: hit on a beam's axis (not only as a
+        wide beam's edge candidate)."""
+        self._refresh()
+        return self._conf
 
     # --- evidence ----------------------------------------------------------------------
 
-    def add(self, point, weight: float = L_HIT) -> None:
+    def add(self, point, weight: float = L_HIT, t_s: float = 0.0) -> None:
         """A return at ``point`` (ENU m): ``weight`` log-odds (``L_HIT`` on the axis,
-        ``L_CANDIDATE`` for a field-of-view edge candidate)."""
+        ``L_CANDIDATE`` for a field-of-view edge candidate, seen at vehicle time ``t_s``)."""
         key = self.key_of(point)
         old = self._l.get(key)
         if old is None:
@@ -136,9 +164,15 @@ class ObstacleMap:
                 self.dropped += 1
                 return
             self.version += 1
+            self._first[key] = (float(point[0]), float(point[1]), float(point[2]))
         self._l[key] = min(L_MAX, (old or 0.0) + float(weight))
         if weight >= L_HIT:
-            self._confirmed.add(key)
+            if key not in self._confirmed:
+                self._confirmed.add(key)
+                self._cand_until.pop(key, None)
+                self.version += 1
+        elif key not in self._confirmed:
+            self._cand_until[key] = max(self._cand_until.get(key, -math.inf), float(t_s) + CANDIDATE_LIFETIME_S)
 
     def clear_beam(self, ev) -> int:
         """A miss for every stored voxel in the surely free part of a beam
@@ -151,9 +185,9 @@ class ObstacleMap:
             return 0
         self._refresh()
         o = np.asarray(ev.origin, dtype=float)
-        rel = self._centres - o
+        rel = self._points - o
         h = 0.5 * self.voxel_m
-        near = np.einsum("ki,ki->k", rel, rel) <= (reach + 2.0 * h) ** 2
+        near = np.einsum("ki,ki->k", rel, rel) <= (reach + 2.0 * self.voxel_m) ** 2
         if not near.any():
             return 0
         idx = np.flatnonzero(near)
@@ -161,11 +195,14 @@ class ObstacleMap:
         axis = np.asarray(ev.axis, dtype=float)
         hit = _segment_hits_boxes(o, axis, reach, self._centres[idx], h)
         along = rel @ axis
-        f = CLEAR_FOV_FRACTION
         if ev.half_h_rad > 0.0 or ev.half_v_rad > 0.0:
+            # the voxel's point in the cone (a candidate: the whole cone; a confirmed
+            # voxel: the inner one), widened by half a voxel (a fan beam's zero field
+            # is a sheet through the voxel)
+            f = np.where(self._conf[idx], CLEAR_FOV_FRACTION, 1.0)
             cone = (along > 0.0) & (along < reach)
-            cone &= np.abs(rel @ np.asarray(ev.h_axis, dtype=float)) <= along * math.tan(f * ev.half_h_rad)
-            cone &= np.abs(rel @ np.asarray(ev.v_axis, dtype=float)) <= along * math.tan(f * ev.half_v_rad)
+            for ax, half in ((ev.h_axis, ev.half_h_rad), (ev.v_axis, ev.half_v_rad)):
+                cone &= np.abs(rel @ np.asarray(ax, dtype=float)) <= along * np.tan(f * half) + h
             hit |= cone
         gone = 0
         for i in idx[hit].tolist():
@@ -173,13 +210,29 @@ class ObstacleMap:
             left = self._l[key] - L_MISS
             if left <= 1e-12:
                 del self._l[key]
+                del self._first[key]
                 self._confirmed.discard(key)
+                self._cand_until.pop(key, None)
                 gone += 1
             else:
                 self._l[key] = left
         if gone:
             self.version += 1
         return gone
+
+    def expire_candidates(self, t_s: float) -> int:
+        """Delete the unconfirmed candidates not seen since ``t_s - CANDIDATE_LIFETIME_S``
+        (module doc); returns how many. Confirmed voxels are never touched."""
+        if not self._cand_until:
+            return 0
+        gone = [k for k, until in self._cand_until.items() if until < t_s]
+        for k in gone:
+            del self._cand_until[k]
+            self._l.pop(k, None)
+            self._first.pop(k, None)
+        if gone:
+            self.version += 1
+        return len(gone)
 
     # --- queries -----------------------------------------------------------------------
 
