@@ -473,3 +473,25 @@ def test_replanner_map_remembers_an_obstacle_unseen_for_60_s_and_a_beam_clears_i
     assert len(rp.memory) == 1 and rp.memory.distance(where)[0] < 1e-9
     rp.on_range(1.234 + 60.0, _reading(2, 150))         # the same beam now returns at 1.5 m: through it
     assert rp.memory.log_odds((3.0, 0.4, 1.8)) == 0.0 and rp.memory.distance(where)[0] > 0.5
+
+
+def test_a_remembered_point_behind_a_row_is_no_threat():
+    """The map remembers for good, so an obstacle seen from the next corridor stays in it;
+    the line to it crosses the row (x 1..5 m, y 1.8..2.2 m), so it starts no avoidance here."""
+    from companion.replan import GlobalPlan, Replanner
+    from companion.trajectory import TrajectoryConfig, generate_trajectory
+    from companion.mission.schema import FlightConfig
+    km = _known()
+    t = np.array([0.0, 10.0])
+    p = np.array([[0.5, 1.0, 1.8], [5.5, 1.0, 1.8]])
+    plan = GlobalPlan.from_waypoints(generate_trajectory(t, p), t, p, np.zeros((2, 3)), np.zeros((2, 3)),
+                                     np.array([True, True]), None, None, FlightConfig(), TrajectoryConfig(), 1.0)
+    rp = Replanner(ReplanConfig(), km, plan)
+    pts = np.array([[3.0, 3.0, 1.5], [3.0, 0.2, 1.5], [6.0, 3.0, 1.5], [3.0, 3.0, 2.9]])
+    # across the row / beside the vehicle in its corridor / across the row's east end / above the canopy
+    np.testing.assert_array_equal(rp._behind_row((3.0, 1.0, 1.5), pts), [True, False, True, False])
+    rp.memory.add((3.0, 3.0, 1.5))
+    assert rp._threat((3.0, 1.0, 1.5), (0.0, 0.0, 0.0), np.array([1.0, 0.0])) is None
+    rp.memory.add((3.5, 0.5, 1.5))
+    assert rp._threat((3.0, 1.0, 1.5), (0.0, 0.0, 0.0), np.array([1.0, 0.0])) == pytest.approx(
+        math.dist((3.0, 1.0, 1.5), rp.memory.points()[1]))

@@ -352,23 +352,35 @@ def horizontal_clusters(points: np.ndarray, link_m: float) -> np.ndarray:
 
 
 def unpassable_points(points: np.ndarray, ground_z, ceiling_agl_m: float, keep_m: float,
-                      link_m: float = CLUSTER_M) -> np.ndarray:
+                      link_m: float = CLUSTER_M, confirmed: np.ndarray | None = None) -> np.ndarray:
     """The points of the obstacles (horizontal clusters) the vehicle cannot pass over:
-    top + ``keep_m`` + ``PASS_MARGIN_M`` above ``ceiling_agl_m`` over the ground
-    (``ground_z(x, y)``). A re-route goes round these; a low obstacle near them is
-    climbed over when the new route meets it (walling it off too sealed the vehicle
-    into a pocket of the free space in the randomized SITL benchmark)."""
+    ``too_tall`` (the cluster's top, from its ``confirmed`` points when it has any).
+    A re-route goes round these; a low obstacle near them is climbed over when the
+    new route meets it (walling it off too sealed the vehicle into a pocket of the
+    free space in the randomized SITL benchmark)."""
     if len(points) == 0:
         return points
     labels = horizontal_clusters(points, link_m)
     keep = np.zeros(len(points), dtype=bool)
+    conf = np.ones(len(points), dtype=bool) if confirmed is None else np.asarray(confirmed, dtype=bool)
     for c in np.unique(labels):
         m = labels == c
-        k = int(np.argmax(points[m, 2]))
-        top = points[m][k]
-        if top[2] + keep_m + PASS_MARGIN_M > ground_z(float(top[0]), float(top[1])) + ceiling_agl_m:
+        sel = m & conf if (m & conf).any() else m
+        k = int(np.argmax(np.where(sel, points[:, 2], -np.inf)))
+        top = points[k]
+        if too_tall(float(top[2]), ground_z(float(top[0]), float(top[1])) + ceiling_agl_m, keep_m):
             keep |= m
     return points[keep]
+
+
+def too_tall(top_z: float, ceiling_z: float, keep_m: float) -> bool:
+    """An obstacle whose top is at ``top_z`` cannot be passed over under ``ceiling_z``:
+    the highest the avoiding reference goes (the ceiling less the wall margin) keeps
+    less than ``keep_m`` (airframe radius + clearance) from it. No other margin is
+    stacked on the top (the climb's goal adds its own above it, capped at that
+    height), and the top comes from returns on a beam's axis where there are any
+    (a wide beam's edge candidates read high: the upper edge of its field)."""
+    return top_z + keep_m > ceiling_z - WALL_MARGIN_M
 
 
 def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m_s: float,
@@ -461,6 +473,7 @@ class Replanner:
         self.memory = ObstacleMap(cfg.voxel_m, CLEAR_MARGIN_M)
         self._active_key: tuple | None = None
         self._active = np.zeros((0, 3))
+        self._active_conf = np.zeros(0, dtype=bool)
         self.poses = PoseHistory()
         self.shaper = ReferenceShaper(cfg.accel_m_s2, cfg.jerk_m_s3)
         self._brake = 0.5 * cfg.accel_m_s2
@@ -590,6 +603,7 @@ class Replanner:
         candidates, re-routes and the route check read it whole."""
         pts = self.memory.points()
         if not len(pts) or not self.known.added.any():
+            self._active_conf = self.memory.confirmed()
             return pts
         key = (self.memory.version, id(self.known))
         if self._active_key != key:
@@ -601,8 +615,14 @@ class Replanner:
             added = np.zeros(len(pts), dtype=bool)
             added[on] = self.known.known_added[r[on], c[on]]
             self._active = pts[~added]
+            self._active_conf = self.memory.confirmed()[~added]
             self._active_key = key
         return self._active
+
+    def _confirmed(self) -> np.ndarray:
+        """(k,) bool, aligned with ``_points()``: the voxel was hit on a beam's axis."""
+        self._points()
+        return self._active_conf
 
     # --- modes --------------------------------------------------------------------------
 
@@ -682,21 +702,18 @@ class Replanner:
         g = known.grid
         ground = known.ground_z(float(p[0]), float(p[1]))
         top = ground + known.canopy_height_m
-        out = np.zeros(len(pts), dtype=bool)
-        if p[2] > top:
-            return out
-        step = 0.5 * g.resolution_m
+        if p[2] > top or not len(pts):
+            return np.zeros(len(pts), dtype=bool)
+        d = pts[:, :2] - np.asarray(p[:2], dtype=float)
+        L = float(np.sqrt(np.einsum("ki,ki->k", d, d)).max())
+        f = np.linspace(0.0, 1.0, max(2, int(L / (0.5 * g.resolution_m)) + 1))
+        r, c = g.world_to_cell(p[0] + f[None, :] * d[:, :1], p[1] + f[None, :] * d[:, 1:])
+        r, c = np.rint(r).astype(int), np.rint(c).astype(int)
         rows, cols = g.shape
-        for i, q in enumerate(pts):
-            if q[2] > top:
-                continue
-            L = math.hypot(q[0] - p[0], q[1] - p[1])
-            f = np.linspace(0.0, 1.0, max(2, int(L / step) + 1))
-            r, c = g.world_to_cell(p[0] + f * (q[0] - p[0]), p[1] + f * (q[1] - p[1]))
-            r, c = np.rint(r).astype(int), np.rint(c).astype(int)
-            on = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
-            out[i] = bool(g.occupied[r[on], c[on]].any())
-        return out
+        on = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+        hit = np.zeros(r.shape, dtype=bool)
+        hit[on] = g.occupied[r[on], c[on]]
+        return hit.any(axis=1) & (pts[:, 2] <= top)
 
     def _enter_avoid(self, tau: float, s, rng: float, events: list) -> None:
         self.shaper.reset(s.p, s.v, s.a, s.jerk)
@@ -764,9 +781,11 @@ class Replanner:
         goal = B.copy()
         if self.mode == "climb":
             if ahead.any():
-                z_top = float(pts[ahead, 2].max())
+                conf = self._confirmed()
+                top_of = ahead & conf if (ahead & conf).any() else ahead
+                z_top = float(pts[top_of, 2].max())
                 self._z_pass = max(self._z_pass, z_top + c_pass + PASS_MARGIN_M)
-                if not passable and self._z_pass > z_ceiling:
+                if not passable and too_tall(z_top, z_ceiling, self._keep_m):
                     return self._enter_stop(tau, events, "reroute", f"obstacle top above {z_top - ground:.2f} m, "
                                             f"ceiling {cfg.ceiling_agl_m:g} m")
                 self._far_along = float(along[ahead].max()) + float(P[:2] @ u)
@@ -898,7 +917,9 @@ class Replanner:
             near = pts[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else pts
             # only what cannot be climbed over blocks the corridor (a low obstacle
             # beside a tall one is climbed when the new route meets it)
-            blocking = unpassable_points(near, self.known.ground_z, self.cfg.ceiling_agl_m, self._keep_m)
+            conf = self._confirmed()[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else None
+            blocking = unpassable_points(near, self.known.ground_z, self.cfg.ceiling_agl_m, self._keep_m,
+                                         confirmed=conf)
             if len(blocking) == 0:
                 blocking = near
             travel = self._leg_frame(self._avoid_leg)[2]       # the leg the avoidance was on
