@@ -473,6 +473,7 @@ class Replanner:
         self.memory = ObstacleMap(cfg.voxel_m, CLEAR_MARGIN_M)
         self._active_key: tuple | None = None
         self._active = np.zeros((0, 3))
+        self._known0 = known                   # the map before any re-route added cells to it
         self._active_conf = np.zeros(0, dtype=bool)
         self.poses = PoseHistory()
         self.shaper = ReferenceShaper(cfg.accel_m_s2, cfg.jerk_m_s3)
@@ -602,7 +603,7 @@ class Replanner:
         reacting to them again would undo it). The map itself keeps them: rejoin
         candidates, re-routes and the route check read it whole."""
         pts = self.memory.points()
-        if not len(pts) or not self.known.added.any():
+        if not len(pts) or self.known is self._known0:
             self._active_conf = self.memory.confirmed()
             return pts
         key = (self.memory.version, id(self.known))

@@ -127,6 +127,7 @@ class ObstacleMap:
             self._points = np.array([self._first[k] for k in self._l], dtype=float).reshape(-1, 3)
             self._tree = cKDTree(self._centres)
             self._conf = np.fromiter((k in self._confirmed for k in self._l), dtype=bool, count=len(self._l))
+            self._box = (*self._points.min(axis=0).tolist(), *self._points.max(axis=0).tolist())
         else:
             self._conf = np.zeros(0, dtype=bool)
             self._keys = np.zeros((0, 3), dtype=np.int64)
@@ -184,28 +185,29 @@ class ObstacleMap:
         if reach <= 0.0:
             return 0
         self._refresh()
+        # most beams pass far from every voxel: a scalar test of the beam's bounding box
+        # (its axis, widened by the cone at its reach and a voxel) against the voxels'
+        w = reach * math.tan(max(ev.half_h_rad, ev.half_v_rad)) + 2.0 * self.voxel_m
+        box = self._box
+        for i in range(3):
+            a, b = ev.origin[i], ev.origin[i] + reach * ev.axis[i]
+            if min(a, b) - w > box[3 + i] or max(a, b) + w < box[i]:
+                return 0
         o = np.asarray(ev.origin, dtype=float)
-        rel = self._points - o
         h = 0.5 * self.voxel_m
-        near = np.einsum("ki,ki->k", rel, rel) <= (reach + 2.0 * self.voxel_m) ** 2
-        if not near.any():
-            return 0
-        idx = np.flatnonzero(near)
-        rel = rel[idx]
-        axis = np.asarray(ev.axis, dtype=float)
-        hit = _segment_hits_boxes(o, axis, reach, self._centres[idx], h)
-        along = rel @ axis
+        hit = _segment_hits_boxes(o, np.asarray(ev.axis, dtype=float), reach, self._centres, h)
         if ev.half_h_rad > 0.0 or ev.half_v_rad > 0.0:
             # the voxel's point in the cone (a candidate: the whole cone; a confirmed
             # voxel: the inner one), widened by half a voxel (a fan beam's zero field
             # is a sheet through the voxel)
-            f = np.where(self._conf[idx], CLEAR_FOV_FRACTION, 1.0)
-            cone = (along > 0.0) & (along < reach)
-            for ax, half in ((ev.h_axis, ev.half_h_rad), (ev.v_axis, ev.half_v_rad)):
-                cone &= np.abs(rel @ np.asarray(ax, dtype=float)) <= along * np.tan(f * half) + h
-            hit |= cone
+            rel = (self._points - o) @ np.array([ev.axis, ev.h_axis, ev.v_axis], dtype=float).T
+            along = rel[:, 0]
+            f = np.where(self._conf, CLEAR_FOV_FRACTION, 1.0)[:, None]
+            width = along[:, None] * np.tan(f * np.array([ev.half_h_rad, ev.half_v_rad])) + h
+            hit |= (along > 0.0) & (along < reach) & np.all(np.abs(rel[:, 1:]) <= width, axis=1)
+        idx = np.flatnonzero(hit)
         gone = 0
-        for i in idx[hit].tolist():
+        for i in idx.tolist():
             key = tuple(int(c) for c in self._keys[i])
             left = self._l[key] - L_MISS
             if left <= 1e-12:
@@ -283,16 +285,11 @@ def _box_distance(p: np.ndarray, c: np.ndarray, h: float) -> np.ndarray:
 def _segment_hits_boxes(o: np.ndarray, u: np.ndarray, length: float, c: np.ndarray, h: float) -> np.ndarray:
     """(k,) the segment o + s u, 0 <= s <= length, passes through the box of
     half-edge h centred at each c (slab test)."""
-    lo = np.zeros(len(c))
-    hi = np.full(len(c), float(length))
-    ok = np.ones(len(c), dtype=bool)
-    for ax in range(3):
-        a0 = c[:, ax] - h - o[ax]
-        a1 = c[:, ax] + h - o[ax]
-        if abs(u[ax]) < 1e-12:
-            ok &= (a0 <= 0.0) & (a1 >= 0.0)
-            continue
-        t0, t1 = a0 / u[ax], a1 / u[ax]
-        lo = np.maximum(lo, np.minimum(t0, t1))
-        hi = np.minimum(hi, np.maximum(t0, t1))
-    return ok & (lo <= hi)
+    # a zero component: the slab's parameters are +-huge (the sign of the offset), so the
+    # slab admits the whole segment exactly when the origin lies inside it
+    inv = 1.0 / np.where(np.abs(u) < 1e-12, 1e-300, u)
+    t0 = (c - h - o) * inv
+    t1 = (c + h - o) * inv
+    lo = np.maximum(np.minimum(t0, t1).max(axis=1), 0.0)
+    hi = np.minimum(np.maximum(t0, t1).min(axis=1), float(length))
+    return lo <= hi
