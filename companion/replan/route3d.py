@@ -174,7 +174,8 @@ def free_nodes(scene: RouteScene, lat: Lattice) -> np.ndarray:
     else:
         clear = np.full(blocked.shape, np.inf)
     Z = lat.z[None, None, :]
-    band = (Z >= (ground + scene.floor_agl_m)[..., None] - 1e-9) & (Z <= (ground + scene.ceiling_agl_m)[..., None] + 1e-9)
+    band = ((Z >= (ground + scene.floor_agl_m)[..., None] - 1e-9)
+            & (Z <= (ground + scene.ceiling_agl_m)[..., None] + 1e-9))
     return band & (clear >= scene.keep_m + 0.5 * s - 1e-9)
 
 
