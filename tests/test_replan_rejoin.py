@@ -256,3 +256,20 @@ def test_climb_limit_stacks_no_margin_and_reads_the_top_from_axis_returns():
     conf = np.array([True, True, False])
     assert len(unpassable_points(pts, flat, 3.0, keep, confirmed=conf)) == 0
     assert len(unpassable_points(pts, flat, 3.0, keep)) == 3           # the candidate taken as the top
+
+
+def test_rejoin_refused_when_it_would_dip_below_the_floor():
+    """Issue 15: a rejoin from a descending state re-solved into the ground. Low (0.8 m) and
+    still descending hard, the candidate undershoots; with the floor just above its lowest
+    sample it is refused ("floor"), with the floor just below it is accepted."""
+    plan = _plan()
+    st = replace(_off_path_state(), p=(8.0, 0.4, 0.8), v=(0.6, 0.0, -0.5), a=(0.0, 0.0, -0.8),
+                 jerk=(0.0, 0.0, -0.98))
+    free = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5)
+    traj = free.plan.trajectory
+    z = traj.sample(np.arange(14.0, traj.tf, 0.01)).p[:, 2]
+    assert z.min() < 0.8 - 0.05                            # it undershoots from this state
+    res = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5, floor_z=lambda x, y: z.min() + 0.05)
+    assert res.plan is None and res.reason == "floor"
+    ok = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5, floor_z=lambda x, y: z.min() - 0.05)
+    assert ok.plan is not None

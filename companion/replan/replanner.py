@@ -980,6 +980,10 @@ class Replanner:
     def _ceiling_z(self, x: float, y: float) -> float:
         return self.known.ground_z(x, y) + self.cfg.ceiling_agl_m
 
+    def _floor_z(self, x: float, y: float) -> float:
+        """Lowest a rejoin candidate may go: the airframe's radius above the terrain."""
+        return self.known.ground_z(x, y) + (self.cfg.body_radius_m or 0.0)
+
     def _try_rejoin(self, tau: float, events: list) -> RefSample | None:
         st = self.shaper.state()
         plan = self.plan
@@ -992,7 +996,8 @@ class Replanner:
         start = max(self._wp_leave, self._leg_wp)
         first = first_waypoint_ahead(plan, start, P, u, self.speed_m_s, self.cfg.vertical_speed_m_s)
         res = rejoin(plan, st, tau, first, self.memory.points(), self._keep_m,
-                     self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z, self._on_free_cell)
+                     self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z, self._on_free_cell,
+                     self._floor_z)
         if res.plan is None:
             self._next_rejoin = tau + REJOIN_RETRY_S
             return None
