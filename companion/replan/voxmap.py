@@ -11,10 +11,11 @@ eq. 9.7; OctoMap's clamped update):
   surely saw free, short of its return by ``clear_margin_m``: the voxels its
   axis traverses (an exact segment-box test, the traversal of Amanatides &
   Woo restricted to the stored voxels) and, for a wide beam, the voxels
-  whose centre lies in the inner cone (``CLEAR_FOV_FRACTION`` of each
-  half-angle: a small object at the edge of a wide field is not surely
-  seen). A voxel only ever hit as a candidate (never on an axis) is cleared
-  by the whole cone plus half a voxel: it was a guess, and any beam whose
+  whose point (the first return seen in it) lies in the inner cone
+  (``CLEAR_FOV_FRACTION`` of each half-angle, widened by half a voxel: a
+  small object at the edge of a wide field is not surely seen). A voxel only
+  ever hit as a candidate (never on an axis) is cleared by the whole cone
+  widened likewise: it was a guess, and any beam whose
   field holds it short of its return says the guess was wrong. A voxel whose
   log-odds reaches 0 is deleted.
 
@@ -38,9 +39,10 @@ nothing; the flight's duration does not enter. A hard cap ``MAX_VOXELS``
 (refusing new voxels, counted in ``dropped``) guards against a sensor
 that floods the map.
 
-``distance(points)`` is the query the guard (``companion.safety.guard``)
-uses: the Euclidean distance from each point to the nearest occupied
-voxel's surface (its box), exact, through a k-d tree of the voxel centres.
+``distance(points)`` is the query for the guard (``companion.safety``): the
+Euclidean distance from each point to the nearest occupied voxel's surface
+(its box), through a k-d tree of the voxel centres; never above the true
+distance, at most half a voxel diagonal below it (``exact=True``: exact).
 """
 
 from __future__ import annotations
