@@ -83,6 +83,8 @@ class ReplanningStats:
         DISTANCE_SENSOR readings handed to the replanner, classified unknown, without evidence.
     mode : str or None
         The replanner's last mode.
+    coverage_skipped : tuple of dict
+        Plan left out by rejoins and re-routes: {from_s, to_s, length_m, reason}.
     """
 
     events: int = 0
@@ -101,6 +103,7 @@ class ReplanningStats:
     unknown_hits: int = 0
     ignored_readings: int = 0
     mode: str | None = None
+    coverage_skipped: tuple = ()
 
     @property
     def actions(self) -> tuple[str, ...]:

@@ -193,9 +193,11 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "replan.canopy_height_m": ("m", "> 0", "Height of the rows above the terrain: returns from them are "
                                "known, not obstacles."),
     "replan.known_tolerance_m": ("m", ">= 0", "A return this close to the terrain or an occupied cell is known."),
-    "replan.memory_s": ("s", "> 0", "Lifetime of an unknown obstacle point not seen again."),
-    "replan.memory_radius_m": ("m", "> 0", "Obstacle points farther than this from the vehicle are forgotten."),
-    "replan.voxel_m": ("m", "> 0, at most clearance_m", "Resolution of the obstacle memory."),
+    "replan.memory_s": ("s", "> 0", "Not used: the obstacle map forgets nothing with time "
+                        "([replan.md](replan.md#the-obstacle-map)); accepted for older missions."),
+    "replan.memory_radius_m": ("m", "> 0", "Not used: the obstacle map keeps what it saw of the whole area flown; "
+                               "accepted for older missions."),
+    "replan.voxel_m": ("m", "> 0, at most clearance_m", "Voxel edge of the obstacle map."),
     "replan.stall_s": ("s", "> 0", "No progress for this long while avoiding starts the vertical escape."),
     "replan.escape_timeout_s": ("s", "> 0", "The escape must get past within this time, else hold."),
     "replan.obstacle_depth_m": ("m", ">= 0", "Assumed depth behind the face seen, when an obstacle is "

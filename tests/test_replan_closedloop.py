@@ -339,6 +339,13 @@ def test_tall_obstacle_stop_then_reroute_and_finish(field):
     # and the south headland line (the coverage after the corridor) is flown
     south = after & (np.abs(f.ref[:, 1] - 1.25) < 0.1)
     assert np.ptp(f.ref[south, 0]) > 14.0
+    # what the re-route left out is said (issue 15): the corridor round the post, at least the
+    # route's margin (clearance + body + ROUTE_MARGIN_M) either side of the seen face, a skip event
+    from companion.replan.replanner import ROUTE_MARGIN_M
+    skipped = f.replanner.stats.to_dict()["coverage_skipped"]
+    blocked = [g for g in skipped if g["reason"] == "blocked"]
+    assert blocked and "skip" in acts
+    assert 2.0 * (keep + ROUTE_MARGIN_M) <= max(g["length_m"] for g in blocked) < 10.0
 
 
 def test_obstacle_beside_the_line_is_passed_within_the_corridor(beside_flight):
@@ -371,7 +378,7 @@ def test_ablation_clearance_governor():
     for governor in (True, False):
         rp = Replanner(replace(ReplanConfig(), clearance_governor=governor, memory_s=1e3), build_field().known, plan)
         for q in post:
-            rp.memory.add(0.0, q)
+            rp.memory.add(q)
         d = []
         for k in range(1000):
             st = rp.step(0.02 * k, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -511,7 +518,7 @@ def test_garbage_readings_are_ignored(field):
     assert json.loads(json.dumps(rp.stats.to_dict()))["readings"] == len(bad) + 1
     # a reading stamped on another clock is placed with the pose at its arrival
     rp.on_range(0.0, codec.Range(10 ** 9, 1, 2.0, 0.1, 10.0, 0, 0.1, 0.1, math.nan, False, eye))
-    assert rp.memory.points()[0] == pytest.approx((3.0, CORRIDOR_Y, 1.5))
+    assert rp.memory.distance(np.array([(3.0, CORRIDOR_Y, 1.5)]))[0] < 1e-9     # its voxel
 
 
 def test_stats_for_the_report(field, low_flight):

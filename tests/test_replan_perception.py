@@ -335,7 +335,7 @@ def test_wide_beam_in_a_corridor_sees_the_post_not_the_row():
     rp.on_pose(1.234, (1.5, 1.0, 1.5), tuple(np.eye(3).ravel()))       # looking east along y = 1
     # post 1.5 m ahead on the axis; the beam's left edge (20 deg) meets the row face (y = 1.8) at 2.34 m
     rp.on_range(1.234, _reading(0, 150, hfov=math.radians(40), vfov=0.0))
-    assert len(rp.memory) >= 1 and rp.memory.points()[0] == pytest.approx((3.0, 1.0, 1.5))
+    assert len(rp.memory) >= 1 and rp.memory.distance(np.array([(3.0, 1.0, 1.5)]))[0] < 1e-9    # its voxel
     # the same beam whose return is the row face along its left edge: explained, nothing kept
     rp2 = Replanner(ReplanConfig(), km, plan)
     rp2.on_pose(1.234, (1.5, 1.0, 1.5), tuple(np.eye(3).ravel()))
@@ -373,8 +373,7 @@ def test_replanner_keeps_unknown_hits_only():
     rp.on_range(1.234, _reading(25, 150))        # down: the ground (0.3 m there)
     assert len(rp.memory) == 0
     rp.on_range(1.234, _reading(2, 60))          # right (south): something at y = 0.4
-    pts = rp.memory.points()
-    assert len(pts) == 1 and pts[0] == pytest.approx((3.0, 0.4, 1.8))
+    assert len(rp.memory) == 1 and rp.memory.distance(np.array([(3.0, 0.4, 1.8)]))[0] < 1e-9     # its voxel
     assert rp.stats.unknown_hits == 1 and rp.stats.readings == 3
 
 
@@ -449,3 +448,50 @@ def test_memory_bounded_and_local():
     m2.add(0.0, (5.0, 0.0, 0.0))
     m2.expire(0.0, (0.0, 0.0, 0.0))
     assert len(m2) == 1
+
+
+def test_replanner_map_remembers_an_obstacle_unseen_for_60_s_and_a_beam_clears_it():
+    """No time-out (issue 15): 60 s of flight with no reading leaves the obstacle in the
+    map; one beam through it (a longer return along the same line) clears it."""
+    from companion.replan import GlobalPlan, Replanner
+    from companion.trajectory import TrajectoryConfig, generate_trajectory
+    from companion.mission.schema import FlightConfig
+    km = _known()
+    t = np.array([0.0, 10.0])
+    p = np.array([[0.5, 1.0, 1.8], [5.5, 1.0, 1.8]])
+    plan = GlobalPlan.from_waypoints(generate_trajectory(t, p), t, p, np.zeros((2, 3)), np.zeros((2, 3)),
+                                     np.array([True, True]), None, None, FlightConfig(), TrajectoryConfig(), 1.0)
+    rp = Replanner(ReplanConfig(), km, plan)
+    eye = tuple(np.eye(3).ravel())
+    rp.on_pose(1.234, (3.0, 1.0, 1.8), eye)
+    rp.on_range(1.234, _reading(2, 60))                 # right (south): something at y = 0.4
+    where = np.array([(3.0, 0.4, 1.8)])
+    assert rp.memory.distance(where)[0] < 1e-9
+    for k in range(1, 1201):                             # 60 s, the vehicle holding there
+        rp.on_pose(1.234 + 0.05 * k, (3.0, 1.0, 1.8), eye)
+        rp.step(1.234 + 0.05 * k, (3.0, 1.0, 1.8), (0.0, 0.0, 0.0))
+    assert len(rp.memory) == 1 and rp.memory.distance(where)[0] < 1e-9
+    rp.on_range(1.234 + 60.0, _reading(2, 150))         # the same beam now returns at 1.5 m: through it
+    assert rp.memory.log_odds((3.0, 0.4, 1.8)) == 0.0 and rp.memory.distance(where)[0] > 0.5
+
+
+def test_a_remembered_point_behind_a_row_is_no_threat():
+    """The map remembers for good, so an obstacle seen from the next corridor stays in it;
+    the line to it crosses the row (x 1..5 m, y 1.8..2.2 m), so it starts no avoidance here."""
+    from companion.replan import GlobalPlan, Replanner
+    from companion.trajectory import TrajectoryConfig, generate_trajectory
+    from companion.mission.schema import FlightConfig
+    km = _known()
+    t = np.array([0.0, 10.0])
+    p = np.array([[0.5, 1.0, 1.8], [5.5, 1.0, 1.8]])
+    plan = GlobalPlan.from_waypoints(generate_trajectory(t, p), t, p, np.zeros((2, 3)), np.zeros((2, 3)),
+                                     np.array([True, True]), None, None, FlightConfig(), TrajectoryConfig(), 1.0)
+    rp = Replanner(ReplanConfig(), km, plan)
+    pts = np.array([[3.0, 3.0, 1.5], [3.0, 0.2, 1.5], [6.0, 3.0, 1.5], [3.0, 3.0, 2.9]])
+    # across the row / beside the vehicle in its corridor / across the row's east end / above the canopy
+    np.testing.assert_array_equal(rp._behind_row((3.0, 1.0, 1.5), pts), [True, False, True, False])
+    rp.memory.add((3.0, 3.0, 1.5))
+    assert rp._threat((3.0, 1.0, 1.5), (0.0, 0.0, 0.0), np.array([1.0, 0.0])) is None
+    rp.memory.add((3.5, 0.5, 1.5))
+    assert rp._threat((3.0, 1.0, 1.5), (0.0, 0.0, 0.0), np.array([1.0, 0.0])) == pytest.approx(
+        math.dist((3.0, 1.0, 1.5), rp.memory.points()[1]))

@@ -187,3 +187,89 @@ def test_a_remembered_point_is_the_top_of_a_grounded_column():
     post_top_high = np.array([[p1[0], p1[1] + 0.3, p1[2] + 0.4]])     # column top above the path, 0.3 m aside
     res = rejoin(plan, st, 14.0, 3, post_top_high, 0.5, 2.0, 0.5)
     assert res.plan is None and res.reason == "clearance" and res.min_clearance_m <= 0.3 + 1e-9
+
+
+# --- the leg's start corner and the coverage a rejoin skips (issue 15) ----------------------------
+
+
+def _back_track_plan() -> GlobalPlan:
+    """A corridor out and back, then the same corner (10, 0) again (a re-route's back-track)."""
+    P = np.array([[0, 0, 1.5], [5, 0, 1.5], [10, 0, 1.5], [10, 2.5, 1.5], [5, 2.5, 1.5], [0, 2.5, 1.5],
+                  [0, 0.5, 1.5], [10, 0.5, 1.5], [10, 0, 1.5], [15, 0, 1.5]], dtype=float)
+    t = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(P[:, :2], axis=0).T))])    # 1 m/s
+    corner = np.array([True, False, True, True, False, True, True, True, True, True])
+    traj = generate_trajectory(t, P, target_enu_m=TARGET)
+    return GlobalPlan.from_waypoints(traj, t, P, np.zeros_like(P), np.zeros_like(P), corner, None, TARGET,
+                                     FlightConfig(), TrajectoryConfig(), 1.0)
+
+
+def test_leg_start_corner_is_this_passage_not_a_later_visit():
+    from companion.replan.replanner import next_corner_visit
+    plan = _back_track_plan()
+    # left the plan at way-point 1 on the leg (0,0)-(10,0); turning onto the next leg at (10, 0):
+    # its start is way-point 2, not the back-track's visit (8)
+    assert next_corner_visit(plan, (10.0, 0.0), 1) == 2
+    assert next_corner_visit(plan, (10.0, 0.0), 2) == 8
+    assert next_corner_visit(plan, (3.0, 3.0), 1) == 1                # no corner there
+
+
+def test_rejoin_skip_is_the_plan_not_flown_beyond_the_chord():
+    from companion.replan.replanner import SKIP_REPORT_M, rejoin_skip
+    plan = _back_track_plan()
+    u = np.array([1.0, 0.0])
+    P = (6.0, 0.3, 1.5)                    # 1 m along the leg from way-point 1, 0.3 m beside it
+    # rejoining 4 m ahead on the same leg: path 5, progress 1, chord hypot(4, 0.3) = 4.011: nothing skipped
+    assert rejoin_skip(plan, 1, 2, P, u) is None
+    # rejoining at way-point 8 (the back-track's visit of (10, 0)): path 5 + 2.5 + 10 + 2 + 10 + 0.5 = 30,
+    # progress 1, chord hypot(4, 0.3): 24.989 m of corridor skipped, plan 5 s to 35 s (1 m/s)
+    f, t, L = rejoin_skip(plan, 1, 8, P, u)
+    assert (f, t) == (pytest.approx(5.0), pytest.approx(35.0))
+    assert L == pytest.approx(30.0 - 1.0 - math.hypot(4.0, 0.3)) and L > SKIP_REPORT_M
+
+
+def test_skipped_coverage_is_an_event_and_in_the_stats():
+    from companion.replan import Replanner, ReplanConfig
+    from companion.replan.replanner import ReplanStats
+    plan = _back_track_plan()
+    from test_replan_perception import _known
+    rp = Replanner(ReplanConfig(), _known(), plan)
+    rp.start(0.0)
+    rp._pos, rp._t_s = (6.0, 0.3, 1.5), 3.0
+    events: list = []
+    rp._skip(events, 5.0, 30.0, 24.99, "rejoin")
+    assert [e.action for e in events] == ["skip"] and events[0].detail.startswith("25.0 m of plan skipped")
+    d = rp.stats.to_dict()
+    assert d["coverage_skipped"] == [{"from_s": 5.0, "to_s": 30.0, "length_m": 24.99, "reason": "rejoin"}]
+    assert isinstance(rp.stats, ReplanStats)
+
+
+def test_climb_limit_stacks_no_margin_and_reads_the_top_from_axis_returns():
+    from companion.replan.replanner import WALL_MARGIN_M, too_tall, unpassable_points
+    keep = 0.5 + 0.442
+    # the reference rises to the ceiling less the wall margin: 3 - 0.1 = 2.9 m; over a top at
+    # 1.95 m it keeps 0.95 >= 0.942 m, over 1.97 m only 0.93 m
+    assert WALL_MARGIN_M == 0.1
+    assert not too_tall(1.95, 3.0, keep) and too_tall(1.97, 3.0, keep)
+    # a post whose axis returns top out at 1.9 m, and a wide beam's edge candidate reading 2.3 m
+    pts = np.array([[5.0, 0.0, 1.0], [5.0, 0.0, 1.9], [5.05, 0.0, 2.3]])
+    flat = lambda x, y: 0.0                                          # noqa: E731
+    conf = np.array([True, True, False])
+    assert len(unpassable_points(pts, flat, 3.0, keep, confirmed=conf)) == 0
+    assert len(unpassable_points(pts, flat, 3.0, keep)) == 3           # the candidate taken as the top
+
+
+def test_rejoin_refused_when_it_would_dip_below_the_floor():
+    """Issue 15: a rejoin from a descending state re-solved into the ground. Low (0.8 m) and
+    still descending hard, the candidate undershoots; with the floor just above its lowest
+    sample it is refused ("floor"), with the floor just below it is accepted."""
+    plan = _plan()
+    st = replace(_off_path_state(), p=(8.0, 0.4, 0.8), v=(0.6, 0.0, -0.5), a=(0.0, 0.0, -0.8),
+                 jerk=(0.0, 0.0, -0.98))
+    free = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5)
+    traj = free.plan.trajectory
+    z = traj.sample(np.arange(14.0, traj.tf, 0.01)).p[:, 2]
+    assert z.min() < 0.8 - 0.05                            # it undershoots from this state
+    res = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5, floor_z=lambda x, y: z.min() + 0.05)
+    assert res.plan is None and res.reason == "floor"
+    ok = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5, floor_z=lambda x, y: z.min() - 0.05)
+    assert ok.plan is not None

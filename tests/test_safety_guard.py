@@ -310,6 +310,9 @@ def _core_beside(obstacle_distance, pos):
     inputs = FlightInputs(None, np.zeros((1, 3)), (44.8, -0.6, 30.0), (0.0, 0.0, 0.0), guard=gate)
     core = FlightCore(inputs, RunnerConfig(control="vehicle"), VehicleConfig())
     core.armed, core.phase, core.t_s = True, "trajectory", 100.0
+    from mavcore import autopilot as autopilots
+
+    core.autopilot = autopilots.PX4_AUTOPILOT          # as detected from a PX4 HEARTBEAT
     core._pos, core._vel, core._proc = pos, (0.0, 0.0, 0.0), None
     return core, gate
 

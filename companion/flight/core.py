@@ -1422,7 +1422,8 @@ class FlightCore:
                                extra_path_m=st.extra_path_m, max_climb_m=st.max_climb_m,
                                min_obstacle_range_m=st.min_obstacle_range_m, event_list=tuple(d["event_list"]),
                                readings=st.readings, unknown_hits=st.unknown_hits,
-                               ignored_readings=st.ignored_readings, mode=self.replan_mode, **clearance)
+                               ignored_readings=st.ignored_readings, mode=self.replan_mode,
+                               coverage_skipped=tuple(d["coverage_skipped"]), **clearance)
 
 
 class _Shifted:

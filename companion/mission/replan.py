@@ -78,11 +78,11 @@ class ReplanConfig:
         A range hit within this distance of an occupied OGM cell (below the
         canopy) or of the terrain is a known feature (m).
     memory_s : float
-        Lifetime of an unknown obstacle point that is not seen again (s).
+        Not used (the obstacle map forgets nothing with time); accepted for older missions (s).
     memory_radius_m : float
-        Points farther than this from the vehicle are forgotten (m).
+        Not used (the obstacle map keeps the whole area flown); accepted for older missions (m).
     voxel_m : float
-        Resolution of the obstacle memory (one point per voxel, m).
+        Voxel edge of the obstacle map (``companion.replan.voxmap``, m).
     stall_s : float
         No progress along the path for this long while avoiding is a local
         minimum: the vertical escape starts (s).

@@ -10,6 +10,9 @@ from .perception import BeamEvidence, Pose, PoseHistory, beam_evidence
 from .rejoin import RejoinResult, rejoin
 from .replanner import MODES, ReplanEvent, Replanner, ReplanStats, ReplanStep, mission_replan_config
 from .reroute import RerouteResult, reroute
+from .route3d import Route3D, RouteScene, find_route
+from .routecheck import route_exists
+from .voxmap import ObstacleMap
 from .shaper import ReferenceShaper, ShapedState
 
 __all__ = [
@@ -17,5 +20,5 @@ __all__ = [
     "repulsive_potential", "total_potential", "GlobalPlan", "Segment", "KnownMap", "ObstacleMemory",
     "BeamEvidence", "Pose", "PoseHistory", "beam_evidence", "RejoinResult", "rejoin", "MODES",
     "ReplanEvent", "Replanner", "ReplanStats", "ReplanStep", "mission_replan_config", "RerouteResult", "reroute",
-    "ReferenceShaper", "ShapedState",
+    "ReferenceShaper", "ShapedState", "ObstacleMap", "Route3D", "RouteScene", "find_route", "route_exists",
 ]

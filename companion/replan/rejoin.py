@@ -61,7 +61,7 @@ class RejoinResult:
     plan : GlobalPlan or None
         The re-solved plan (None: no acceptable candidate).
     reason : str
-        "" when accepted, else why not ("jerk", "clearance", "solver").
+        "" when accepted, else why not ("jerk", "clearance", "ceiling", "floor", "solver").
     max_jerk_m_s3 : float
         Largest |jerk| over the checked horizon of the last candidate.
     min_clearance_m : float
@@ -86,35 +86,40 @@ def first_time_s(p0, p1, speed_m_s: float, vertical_speed_m_s: float) -> float:
 class CandidateCheck:
     """Figures of a candidate over [t0, t0 + CHECK_S]: largest per-axis |jerk| (m/s^3),
     smallest distance to an obstacle point (m, inf without points), largest height
-    above the ceiling (m, -inf without a ceiling)."""
+    above the ceiling (m, -inf without a ceiling); over all of it, the deepest it goes
+    below the floor (m, -inf without a floor)."""
 
     max_jerk_m_s3: float
     min_clearance_m: float
     above_ceiling_m: float
+    below_floor_m: float = -math.inf
 
 
 def check_candidate(trajectory, t0_s: float, obstacles_enu_m: np.ndarray,
                     ceiling_z: Callable[[float, float], float] | None = None,
-                    free_xy: Callable[[float, float], bool] | None = None) -> CandidateCheck:
+                    free_xy: Callable[[float, float], bool] | None = None,
+                    floor_z: Callable[[float, float], float] | None = None) -> CandidateCheck:
     """Check a candidate (``CandidateCheck``): jerk and obstacle clearance over its first
-    ``CHECK_S`` seconds, ceiling and free cells over all of it (a sample over a cell
-    ``free_xy`` refuses counts as infinitely above the ceiling)."""
+    ``CHECK_S`` seconds, ceiling, floor and free cells over all of it (a sample over a
+    cell ``free_xy`` refuses counts as infinitely above the ceiling)."""
     t_end = min(t0_s + CHECK_S, trajectory.tf)
     t = np.arange(t0_s, t_end + 1e-9, CHECK_DT_S)
     s = trajectory.sample(t)
     jerk = float(np.max(np.abs(s.jerk)))
-    above = -math.inf
-    if ceiling_z is not None or free_xy is not None:
+    above = below = -math.inf
+    if ceiling_z is not None or free_xy is not None or floor_z is not None:
         rest = np.arange(t_end, trajectory.tf, MAP_CHECK_DT_S)
         pts = np.vstack([s.p, trajectory.sample(np.append(rest, trajectory.tf)).p]) if len(rest) else s.p
         if ceiling_z is not None:
             above = max(float(z) - ceiling_z(float(x), float(y)) for x, y, z in pts)
         if free_xy is not None and not all(free_xy(float(x), float(y)) for x, y, _ in pts):
             above = math.inf
+        if floor_z is not None:
+            below = max(floor_z(float(x), float(y)) - float(z) for x, y, z in pts)
     obs = np.asarray(obstacles_enu_m, dtype=float).reshape(-1, 3)
     if len(obs) == 0:
-        return CandidateCheck(jerk, math.inf, above)
-    return CandidateCheck(jerk, column_clearance_m(s.p, obs), above)
+        return CandidateCheck(jerk, math.inf, above, below)
+    return CandidateCheck(jerk, column_clearance_m(s.p, obs), above, below)
 
 
 def column_clearance_m(path_enu_m: np.ndarray, points_enu_m: np.ndarray) -> float:
@@ -130,7 +135,8 @@ def column_clearance_m(path_enu_m: np.ndarray, points_enu_m: np.ndarray) -> floa
 def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_enu_m: np.ndarray,
            clearance_m: float, jerk_limit_m_s3: float, vertical_speed_m_s: float,
            ceiling_z: Callable[[float, float], float] | None = None,
-           free_xy: Callable[[float, float], bool] | None = None) -> RejoinResult:
+           free_xy: Callable[[float, float], bool] | None = None,
+           floor_z: Callable[[float, float], float] | None = None) -> RejoinResult:
     """Re-solve ``plan`` from ``state`` at ``t_now_s`` through way-points ``first_kept..``.
 
     Parameters
@@ -152,6 +158,11 @@ def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_e
     free_xy : callable (x, y) -> bool, optional
         Where the candidate may fly (the map's free cells); one that leaves
         them is refused like one above the ceiling.
+    floor_z : callable (x, y) -> z, optional
+        Lowest allowed z (ENU m) over (x, y), checked over the whole candidate:
+        one that dips below it (a rejoin started while descending re-solved into
+        the ground, issue 15) is stretched like one above the ceiling, and
+        refused as "floor".
 
     Returns
     -------
@@ -174,11 +185,11 @@ def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_e
                                        target_enu_m=plan.target_enu_m)
         except PlanError:
             return result
-        chk = check_candidate(traj, t_now_s, obstacles_enu_m, ceiling_z, free_xy)
+        chk = check_candidate(traj, t_now_s, obstacles_enu_m, ceiling_z, free_xy, floor_z)
         jerk, clear = chk.max_jerk_m_s3, chk.min_clearance_m
         if clear < clearance_m:
             return RejoinResult(None, "clearance", jerk, clear)
-        if jerk <= jerk_limit_m_s3 and chk.above_ceiling_m <= CEILING_TOL_M:
+        if jerk <= jerk_limit_m_s3 and chk.above_ceiling_m <= CEILING_TOL_M and chk.below_floor_m <= 0.0:
             corner = np.concatenate([[True], plan.corner[kept]])
             segs = tuple(replace(s, first_wp=max(0, s.first_wp - first_kept + 1),
                                  last_wp=s.last_wp - first_kept + 1)
@@ -186,6 +197,7 @@ def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_e
             new = replace(plan, trajectory=traj, t_s=times, p_enu_m=P, v_enu_m_s=V, a_enu_m_s2=A,
                           corner=corner, segments=segs)
             return RejoinResult(new, "", jerk, clear)
-        result = RejoinResult(None, "jerk" if jerk > jerk_limit_m_s3 else "ceiling", jerk, clear)
+        why = "jerk" if jerk > jerk_limit_m_s3 else "ceiling" if chk.above_ceiling_m > CEILING_TOL_M else "floor"
+        result = RejoinResult(None, why, jerk, clear)
         T *= STRETCH
     return result

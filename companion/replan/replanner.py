@@ -94,13 +94,17 @@ from .apf import ApfParams, apf_force
 from .globalplan import GlobalPlan
 from .knownmap import UNKNOWN, KnownMap
 from .nodata import BeamFreshness, block_no_data
-from .memory import ObstacleMemory
 from .perception import PoseHistory, beam_evidence
 from .rejoin import rejoin
 from .reroute import reroute
 from .shaper import ReferenceShaper
+from .route3d import RouteScene
+from .routecheck import route_exists
+from .voxmap import L_CANDIDATE, ObstacleMap
 
 MODES = ("follow", "avoid", "climb", "stop", "reroute", "rejoin", "hold", "done")
+#: Event actions (``ReplanEvent.action``); ``skip``: coverage of the plan left out (``coverage_skipped``).
+ACTIONS = ("avoid", "climb", "stop", "reroute", "rejoin", "hold", "skip")
 _FOLLOWING = ("follow", "rejoin", "reroute")
 
 #: The governor keeps the reference this much (m) beyond the clearance while braking.
@@ -143,9 +147,6 @@ GOAL_REACHED_M = 0.3
 REST_V_M_S, REST_A_M_S2 = 0.02, 0.05
 #: Propeller radius (m) added to the arm length for the body radius when the mission gives none.
 PROP_RADIUS_M = 0.127
-#: Lifetime (s) of the field-of-view edge candidates of a wide beam's return (the
-#: axis point lives ``memory_s``).
-CANDIDATE_LIFETIME_S = 1.0
 #: While an avoiding reference passes over a remembered point (horizontally within the
 #: clearance, the body, the governor margin and this lag's travel) it does not come
 #: down: the beams see a low obstacle's sides below its top, so the top may stand
@@ -154,6 +155,14 @@ CANDIDATE_LIFETIME_S = 1.0
 HOLD_HEIGHT_LAG_S = 1.0
 #: Events kept in the statistics (the count goes on).
 MAX_EVENTS_KEPT = 1000
+#: A rejoin that leaves out more plan than this (m) beyond what its chord covers reports it.
+SKIP_REPORT_M = 1.0
+#: A hold's route check looks for the coverage ends this near (m) ...
+ROUTE_CHECK_RADIUS_M = 15.0
+#: ... at most this many, nearest first.
+ROUTE_CHECK_GOALS = 6
+#: A corner way-point matches a leg's turning point within this distance (m).
+CORNER_MATCH_M = 0.05
 
 
 @dataclass(frozen=True, slots=True)
@@ -229,6 +238,8 @@ class ReplanStats:
         Smallest distance from the reference to a remembered obstacle point (m).
     readings, unknown_hits, ignored_readings : int
         DISTANCE_SENSOR readings handled, returns classified unknown, readings without evidence.
+    coverage_skipped : tuple of (from_s, to_s, length_m, reason)
+        Plan left out by rejoins and re-routes (plan-clock times, s; m).
     """
 
     events: int
@@ -240,6 +251,7 @@ class ReplanStats:
     readings: int
     unknown_hits: int
     ignored_readings: int
+    coverage_skipped: tuple = ()
 
     def to_dict(self) -> dict:
         """Plain JSON types (report.json ``replanning``; events as {t_s, pos_enu_m, obstacle_range_m, action, detail})."""
@@ -257,6 +269,8 @@ class ReplanStats:
             "readings": int(self.readings),
             "unknown_hits": int(self.unknown_hits),
             "ignored_readings": int(self.ignored_readings),
+            "coverage_skipped": [{"from_s": float(a), "to_s": float(b), "length_m": float(L), "reason": r}
+                                 for a, b, L, r in self.coverage_skipped],
         }
 
 
@@ -343,23 +357,35 @@ def horizontal_clusters(points: np.ndarray, link_m: float) -> np.ndarray:
 
 
 def unpassable_points(points: np.ndarray, ground_z, ceiling_agl_m: float, keep_m: float,
-                      link_m: float = CLUSTER_M) -> np.ndarray:
+                      link_m: float = CLUSTER_M, confirmed: np.ndarray | None = None) -> np.ndarray:
     """The points of the obstacles (horizontal clusters) the vehicle cannot pass over:
-    top + ``keep_m`` + ``PASS_MARGIN_M`` above ``ceiling_agl_m`` over the ground
-    (``ground_z(x, y)``). A re-route goes round these; a low obstacle near them is
-    climbed over when the new route meets it (walling it off too sealed the vehicle
-    into a pocket of the free space in the randomized SITL benchmark)."""
+    ``too_tall`` (the cluster's top, from its ``confirmed`` points when it has any).
+    A re-route goes round these; a low obstacle near them is climbed over when the
+    new route meets it (walling it off too sealed the vehicle into a pocket of the
+    free space in the randomized SITL benchmark)."""
     if len(points) == 0:
         return points
     labels = horizontal_clusters(points, link_m)
     keep = np.zeros(len(points), dtype=bool)
+    conf = np.ones(len(points), dtype=bool) if confirmed is None else np.asarray(confirmed, dtype=bool)
     for c in np.unique(labels):
         m = labels == c
-        k = int(np.argmax(points[m, 2]))
-        top = points[m][k]
-        if top[2] + keep_m + PASS_MARGIN_M > ground_z(float(top[0]), float(top[1])) + ceiling_agl_m:
+        sel = m & conf if (m & conf).any() else m
+        k = int(np.argmax(np.where(sel, points[:, 2], -np.inf)))
+        top = points[k]
+        if too_tall(float(top[2]), ground_z(float(top[0]), float(top[1])) + ceiling_agl_m, keep_m):
             keep |= m
     return points[keep]
+
+
+def too_tall(top_z: float, ceiling_z: float, keep_m: float) -> bool:
+    """An obstacle whose top is at ``top_z`` cannot be passed over under ``ceiling_z``:
+    the highest the avoiding reference goes (the ceiling less the wall margin) keeps
+    less than ``keep_m`` (airframe radius + clearance) from it. No other margin is
+    stacked on the top (the climb's goal adds its own above it, capped at that
+    height), and the top comes from returns on a beam's axis where there are any
+    (a wide beam's edge candidates read high: the upper edge of its field)."""
+    return top_z + keep_m > ceiling_z - WALL_MARGIN_M
 
 
 def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m_s: float,
@@ -389,6 +415,33 @@ def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m
         if a_i > max(1.0, speed_m_s, speed_m_s * t_down):
             return i
     return n - 1
+
+
+def next_corner_visit(plan: GlobalPlan, xy, after: int) -> int:
+    """Index of the first corner way-point after ``after`` at ``xy`` (ENU m, within
+    ``CORNER_MATCH_M``); ``after`` when there is none. A path may pass the same
+    corner twice (a re-route's back-track): the visit that starts a leg the
+    avoidance turned onto is the first one after the previous leg's start."""
+    q = plan.p_enu_m[after + 1:, :2] - np.asarray(xy, dtype=float)[:2]
+    hits = np.flatnonzero(plan.corner[after + 1:] & (np.hypot(q[:, 0], q[:, 1]) < CORNER_MATCH_M))
+    return after + 1 + int(hits[0]) if len(hits) else after
+
+
+def rejoin_skip(plan: GlobalPlan, start: int, first: int, p_enu_m, u_xy) -> tuple[float, float, float] | None:
+    """Plan left out by a rejoin through way-point ``first`` of an avoidance on the leg
+    (direction ``u_xy``) entered at way-point ``start``: the plan's path from ``start``
+    to ``first``, less the avoidance's progress along the leg from ``start`` and the
+    rejoin's horizontal chord to ``first`` (what the vehicle covers). Returns (from_s,
+    to_s, length_m) on the plan's clock when that exceeds ``SKIP_REPORT_M``, else None."""
+    P = np.asarray(p_enu_m, dtype=float)
+    xy = plan.p_enu_m[start:first + 1, :2]
+    plan_len = float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) if len(xy) > 1 else 0.0
+    progress = max(0.0, float((P[:2] - xy[0]) @ np.asarray(u_xy, dtype=float)))
+    chord = float(np.hypot(*(plan.p_enu_m[first, :2] - P[:2])))
+    left = plan_len - progress - chord
+    if left <= SKIP_REPORT_M:
+        return None
+    return float(plan.t_s[start]), float(plan.t_s[first]), left
 
 
 def mission_replan_config(mission) -> ReplanConfig:
@@ -421,7 +474,12 @@ class Replanner:
         self.speed_m_s = float(cfg.speed_m_s if cfg.speed_m_s is not None else plan.flight.speed_m_s)
         #: distance kept from every obstacle point by the vehicle's centre: the clearance plus the body
         self._keep_m = cfg.clearance_m + (cfg.body_radius_m or 0.0)
-        self.memory = ObstacleMemory(cfg.voxel_m, cfg.memory_s, cfg.memory_radius_m, CLEAR_MARGIN_M)
+        #: the persistent obstacle map (``voxmap``): cleared only by beams, never by time or a re-route
+        self.memory = ObstacleMap(cfg.voxel_m, CLEAR_MARGIN_M)
+        self._active_key: tuple | None = None
+        self._active = np.zeros((0, 3))
+        self._known0 = known                   # the map before any re-route added cells to it
+        self._active_conf = np.zeros(0, dtype=bool)
         self.poses = PoseHistory()
         self.fresh = BeamFreshness()
         self.shaper = ReferenceShaper(cfg.accel_m_s2, cfg.jerk_m_s3)
@@ -441,6 +499,7 @@ class Replanner:
         self._max_climb = 0.0
         self._min_range: float | None = None
         self.n_readings = self.n_unknown = self.n_ignored = 0
+        self._skipped: list[tuple] = []
         # avoidance context
         self._static: RefSample | None = None
         self._mode_until = -math.inf
@@ -493,15 +552,14 @@ class Replanner:
             mem.clear_beam(ev)
         if ev.hit is not None and not self._explained(ev):
             # the return may come from anywhere in the field of view: keep the edge
-            # points too where they are a voxel apart and not on a known feature,
-            # briefly (CANDIDATE_LIFETIME_S) unless seen again: later beams clear the
-            # wrong ones, and those no beam passes through again (a wide beam's
-            # candidates over a row seen from above the canopy) must not linger
-            mem.add(t_s, ev.hit)
+            # points too where they are a voxel apart and not on a known feature, as
+            # candidates (``voxmap``: one beam through them clears them, and unless an
+            # axis hit confirms them they lapse after ``voxmap.CANDIDATE_LIFETIME_S``)
+            mem.add(ev.hit)
             if ev.distance_m * math.tan(ev.half_max_rad) > self.cfg.voxel_m:
                 for q in ev.fan_hits:
                     if self.known.classify(*q) == UNKNOWN:
-                        mem.add(t_s, q, CANDIDATE_LIFETIME_S)
+                        mem.add(q, L_CANDIDATE, t_s)
             self.n_unknown += 1
 
     def _explained(self, ev) -> bool:
@@ -524,9 +582,7 @@ class Replanner:
         self._pos = pos_enu_m
         self._t_s = t_s
         events: list = []
-        if len(self.memory):
-            p = self._p_prev if self._p_prev is not None else pos_enu_m
-            self.memory.expire(t_s, p)
+        self.memory.expire_candidates(t_s)
         mode = self.mode
         if mode in _FOLLOWING:
             ref = self._follow(tau, events)
@@ -544,7 +600,37 @@ class Replanner:
         """Statistics so far (report.json ``replanning``)."""
         return ReplanStats(self._n_events, tuple(self._events), self._max_lat,
                            self._flown - self._planned_length, self._max_climb, self._min_range,
-                           self.n_readings, self.n_unknown, self.n_ignored)
+                           self.n_readings, self.n_unknown, self.n_ignored, tuple(self._skipped))
+
+    # --- the obstacle map's views ---------------------------------------------------------
+
+    def _points(self) -> np.ndarray:
+        """(k, 3) the occupied voxels the avoidance reacts to: the whole map but those over
+        the cells a re-route added to the known map (the new plan goes round them, and
+        reacting to them again would undo it). The map itself keeps them: rejoin
+        candidates, re-routes and the route check read it whole."""
+        pts = self.memory.points()
+        if not len(pts) or self.known is self._known0:
+            self._active_conf = self.memory.confirmed()
+            return pts
+        key = (self.memory.version, id(self.known))
+        if self._active_key != key:
+            g = self.known.grid
+            r, c = g.world_to_cell(pts[:, 0], pts[:, 1])
+            r, c = np.rint(r).astype(int), np.rint(c).astype(int)
+            rows, cols = g.shape
+            on = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+            added = np.zeros(len(pts), dtype=bool)
+            added[on] = self.known.known_added[r[on], c[on]]
+            self._active = pts[~added]
+            self._active_conf = self.memory.confirmed()[~added]
+            self._active_key = key
+        return self._active
+
+    def _confirmed(self) -> np.ndarray:
+        """(k,) bool, aligned with ``_points()``: the voxel was hit on a beam's axis."""
+        self._points()
+        return self._active_conf
 
     # --- modes --------------------------------------------------------------------------
 
@@ -555,6 +641,12 @@ class Replanner:
         self._n_events += 1
         if len(self._events) < MAX_EVENTS_KEPT:
             self._events.append(e)
+
+    def _skip(self, events: list, from_s: float, to_s: float, length_m: float, reason: str) -> None:
+        """Coverage left out: the ``skip`` event and ``coverage_skipped``."""
+        self._skipped.append((from_s, to_s, length_m, reason))
+        self._event(events, "skip", None, f"{length_m:.1f} m of plan skipped ({reason}), "
+                    f"plan {from_s:.1f}-{to_s:.1f} s")
 
     def _ref(self, p, v, a, j, s) -> RefSample:
         return RefSample(tuple(p), tuple(v), tuple(a), tuple(j), tuple(s), _pointing(p, self._target))
@@ -593,8 +685,10 @@ class Replanner:
         when hovering, at least -(clearance + body + ``extra_m``)); None if none.
         The same test starts an avoidance and (with ``REJOIN_HYSTERESIS_M``, and
         the leg ``follow`` will use) allows the rejoin, so the two cannot
-        alternate."""
-        pts = self.memory.points()
+        alternate. A point behind a row (the straight line to it crosses an
+        occupied cell below the canopy) is in another corridor: the map remembers
+        obstacles for good, and one seen from the next corridor is no threat here."""
+        pts = self._points()
         if not len(pts):
             return None
         rel = pts - np.asarray(p)
@@ -604,13 +698,37 @@ class Replanner:
         along = rel[:, :2] @ u
         speed = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
         ok = (dist <= self._trigger_m(speed) + extra_m) & (along >= -self._keep_m - extra_m)
+        if ok.any():
+            idx = np.flatnonzero(ok)
+            ok[idx[self._behind_row(p, pts[idx])]] = False
         return float(dist[ok].min()) if ok.any() else None
+
+    def _behind_row(self, p, pts: np.ndarray) -> np.ndarray:
+        """(k,) bool: the horizontal line from ``p`` to each point crosses an occupied map
+        cell (sampled every half cell) while both are below the canopy."""
+        known = self.known
+        g = known.grid
+        ground = known.ground_z(float(p[0]), float(p[1]))
+        top = ground + known.canopy_height_m
+        if p[2] > top or not len(pts):
+            return np.zeros(len(pts), dtype=bool)
+        d = pts[:, :2] - np.asarray(p[:2], dtype=float)
+        L = float(np.sqrt(np.einsum("ki,ki->k", d, d)).max())
+        f = np.linspace(0.0, 1.0, max(2, int(L / (0.5 * g.resolution_m)) + 1))
+        r, c = g.world_to_cell(p[0] + f[None, :] * d[:, :1], p[1] + f[None, :] * d[:, 1:])
+        r, c = np.rint(r).astype(int), np.rint(c).astype(int)
+        rows, cols = g.shape
+        on = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+        hit = np.zeros(r.shape, dtype=bool)
+        hit[on] = g.occupied[r[on], c[on]]
+        return hit.any(axis=1) & (pts[:, 2] <= top)
 
     def _enter_avoid(self, tau: float, s, rng: float, events: list) -> None:
         self.shaper.reset(s.p, s.v, s.a, s.jerk)
         k = self.plan.leg_near(s.p, s.v[:2])
         self._avoid_leg = k
         self._wp_leave = self.plan.waypoint_index_at(tau)
+        self._leg_wp = self._wp_leave          # the avoided leg began at or before it
         A, B, u, n = self._leg_frame(k)
         self._dev_leg = ((A[:2].copy(), B[:2].copy()),)
         along = float((np.asarray(s.p[:2]) - A[:2]) @ u)
@@ -629,13 +747,14 @@ class Replanner:
         if math.hypot(*(B[:2] - P[:2])) < GOAL_REACHED_M and k < self._n_legs - 1:
             k = self._avoid_leg = k + 1
             A, B, u, n = self._leg_frame(k)
+            self._leg_wp = next_corner_visit(self.plan, A, self._leg_wp)
             self._dev_leg = (self._dev_leg[-1], (A[:2].copy(), B[:2].copy()))   # this leg and the one before
             self._progress = float((P[:2] - A[:2]) @ u)
             self._t_progress = tau
             # along-leg coordinates change with the leg: restart the escape's goals on it
             self._far_along = float(P[:2] @ u)
             self._rise_xy = A[:2] + float((P[:2] - A[:2]) @ u) * u
-        pts = self.memory.points()
+        pts = self._points()
         rel = pts - P
         dist = np.sqrt(np.einsum("ki,ki->k", rel, rel))
         along = rel[:, :2] @ u
@@ -670,9 +789,11 @@ class Replanner:
         goal = B.copy()
         if self.mode == "climb":
             if ahead.any():
-                z_top = float(pts[ahead, 2].max())
+                conf = self._confirmed()
+                top_of = ahead & conf if (ahead & conf).any() else ahead
+                z_top = float(pts[top_of, 2].max())
                 self._z_pass = max(self._z_pass, z_top + c_pass + PASS_MARGIN_M)
-                if not passable and self._z_pass > z_ceiling:
+                if not passable and too_tall(z_top, z_ceiling, self._keep_m):
                     return self._enter_stop(tau, events, "reroute", f"obstacle top above {z_top - ground:.2f} m, "
                                             f"ceiling {cfg.ceiling_agl_m:g} m")
                 self._far_along = float(along[ahead].max()) + float(P[:2] @ u)
@@ -789,14 +910,14 @@ class Replanner:
         self.mode = "stop"
         self._stop_then = then
         self._stop_detail = detail
-        pts = self.memory.points()
+        pts = self._points()
         P = np.array(self.shaper.p)
         self._event(events, "stop", self._nearest(np.linalg.norm(pts - P, axis=1)), detail)
         return self._stop(tau, 0.0, events)
 
     def _stop(self, tau: float, dt: float, events: list) -> RefSample:
         P = np.array(self.shaper.p)
-        pts = self.memory.points()
+        pts = self._points()
         v = np.zeros(3)
         st = self.shaper.step(dt, v.tolist())
         self._deviation(st.p)
@@ -809,14 +930,15 @@ class Replanner:
             near = pts[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else pts
             # only what cannot be climbed over blocks the corridor (a low obstacle
             # beside a tall one is climbed when the new route meets it)
-            blocking = unpassable_points(near, self.known.ground_z, self.cfg.ceiling_agl_m, self._keep_m)
+            conf = self._confirmed()[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else None
+            blocking = unpassable_points(near, self.known.ground_z, self.cfg.ceiling_agl_m, self._keep_m,
+                                         confirmed=conf)
             if len(blocking) == 0:
                 blocking = near
             travel = self._leg_frame(self._avoid_leg)[2]       # the leg the avoidance was on
             res = reroute(self.plan, self.known, st, tau, self._wp_leave, blocking, travel,
                           self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s, self._keep_m + ROUTE_MARGIN_M)
             self.known = res.known
-            self.memory.forget(lambda q: np.array([self.known.classify(*map(float, x)) != UNKNOWN for x in q]))
             if res.plan is not None:
                 self._set_plan(res.plan)
                 self._dev_leg = None
@@ -824,15 +946,37 @@ class Replanner:
                 self._mode_until = float(res.plan.t_s[1]) if len(res.plan.t_s) > 1 else tau
                 self._event(events, "reroute", self._nearest(dist),
                             f"{res.n_pieces} coverage pieces left, {res.n_skipped} unreachable")
+                for gap in res.skipped:
+                    self._skip(events, *gap)
                 s = self._cursor.sample(tau)
                 return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
-            detail = res.reason
+            detail = f"{res.reason}; {self._route_check(st.p)}"
         else:
             detail = self._stop_detail
         self.mode = "hold"
         self._static = self._rest(st.p)
         self._event(events, "hold", self._nearest(dist), detail)
         return self._static
+
+    def _route_check(self, p) -> str:
+        """The independent 3-D route check (``routecheck``) from ``p`` to the ends of the
+        coverage left (the ``ROUTE_CHECK_GOALS`` nearest within ``ROUTE_CHECK_RADIUS_M``), on
+        the rows, the terrain and the obstacle map: the words a hold reports."""
+        plan = self.plan
+        _, nxt = plan.segment_at(self._wp_leave)
+        ends = [q for seg in plan.segments[max(0, nxt - 1):] for q in (seg.start_xy, seg.end_xy)]
+        P = np.asarray(p, dtype=float)
+        if not ends:
+            return "no coverage left to reach"
+        xy = np.asarray(ends, dtype=float)
+        d = np.hypot(*(xy - P[:2]).T)
+        order = [i for i in np.argsort(d) if d[i] <= ROUTE_CHECK_RADIUS_M][:ROUTE_CHECK_GOALS] or [int(np.argmin(d))]
+        goals = [(x, y, self.known.ground_z(x, y) + plan.flight.height_agl_m) for x, y in xy[order].tolist()]
+        scene = RouteScene(self.known, self.memory, self._keep_m, self.cfg.floor_agl_m, self.cfg.ceiling_agl_m)
+        found = route_exists(scene, P, goals)
+        if not any(found):
+            return "no route (independent check agrees)"
+        return f"independent check DISAGREES: a 3-D route reaches {sum(found)} of {len(goals)} coverage ends"
 
     def _calm(self) -> bool:
         """The reference is not manoeuvring hard (a rejoin from a hard manoeuvre overshoots)."""
@@ -848,19 +992,24 @@ class Replanner:
     def _ceiling_z(self, x: float, y: float) -> float:
         return self.known.ground_z(x, y) + self.cfg.ceiling_agl_m
 
+    def _floor_z(self, x: float, y: float) -> float:
+        """Lowest a rejoin candidate may go: the airframe's radius above the terrain."""
+        return self.known.ground_z(x, y) + (self.cfg.body_radius_m or 0.0)
+
     def _try_rejoin(self, tau: float, events: list) -> RefSample | None:
         st = self.shaper.state()
         plan = self.plan
         P = np.asarray(st.p)
         A, B, u, n = self._leg_frame(self._avoid_leg)
-        # way-points of earlier legs are behind, whatever their projection on this one
-        start = self._wp_leave
-        at_A = np.flatnonzero(plan.corner[start:] & (np.hypot(*(plan.p_enu_m[start:, :2] - A[:2]).T) < 0.05))
-        if len(at_A):
-            start += int(at_A[0])
+        # way-points of earlier legs are behind, whatever their projection on this one:
+        # from the visit of this leg's start corner that this passage made (searching
+        # from the leave way-point matched a re-route's later back-track through the
+        # same corner and skipped 12 way-points, a whole corridor, unreported)
+        start = max(self._wp_leave, self._leg_wp)
         first = first_waypoint_ahead(plan, start, P, u, self.speed_m_s, self.cfg.vertical_speed_m_s)
         res = rejoin(plan, st, tau, first, self.memory.points(), self._keep_m,
-                     self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z, self._on_free_cell)
+                     self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z, self._on_free_cell,
+                     self._floor_z)
         if res.plan is None:
             self._next_rejoin = tau + REJOIN_RETRY_S
             return None
@@ -875,6 +1024,9 @@ class Replanner:
         self.mode = "rejoin"
         self._mode_until = float(res.plan.t_s[1])
         self._event(events, "rejoin", None, f"LQR re-solved through {len(res.plan.t_s) - 1} way-points")
+        skip = rejoin_skip(plan, start, first, P, u)
+        if skip is not None:
+            self._skip(events, *skip, "rejoin")
         s = self._cursor.sample(tau)
         return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
 
@@ -896,8 +1048,8 @@ class Replanner:
         if q is not None:
             self._flown += math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
         self._p_prev = p
-        if len(self.memory):
-            pts = self.memory.points()
+        pts = self._points()
+        if len(pts):
             d = float(np.sqrt(np.min(np.einsum("ki,ki->k", pts - p, pts - p))))
             if self._min_range is None or d < self._min_range:
                 self._min_range = d

@@ -78,6 +78,13 @@ class RerouteResult:
         Pieces left out because they cannot be reached.
     path_xy_m : (m, 2) array
         The new route's turning points (ENU m; empty without a route).
+    skipped : tuple of (from_s, to_s, length_m, reason)
+        Coverage of the plan left out (``coverage_skipped`` in report.json): the
+        stretches of the remaining main segments outside the pieces flown (the
+        obstacle's footprint and its margin, runs shorter than the minimum
+        segment: ``"blocked"``) and the pieces that cannot be reached
+        (``"unreachable"``); times on the plan's clock, linear along each
+        segment between its end way-points.
     """
 
     plan: GlobalPlan | None
@@ -86,6 +93,7 @@ class RerouteResult:
     n_pieces: int
     n_skipped: int
     path_xy_m: np.ndarray
+    skipped: tuple = ()
 
 
 def obstacle_footprint(points_enu_m: np.ndarray, travel_xy: np.ndarray, depth_m: float,
@@ -230,6 +238,29 @@ def _merge(points: list) -> np.ndarray:
     return np.array(out)
 
 
+#: Stretches of a segment left out shorter than this (m) are not reported (sampling: half a cell).
+GAP_REPORT_M = 0.3
+
+
+def _segment_frame(plan: GlobalPlan, seg):
+    """(start (2,), unit direction (2,), length, s -> plan time) of a main segment."""
+    a, b = np.asarray(seg.start_xy, dtype=float), np.asarray(seg.end_xy, dtype=float)
+    L = max(float(np.hypot(*(b - a))), 1e-12)
+    t_a, t_b = float(plan.t_s[seg.first_wp]), float(plan.t_s[seg.last_wp])
+    return a, (b - a) / L, L, lambda s: t_a + (t_b - t_a) * min(max(s / L, 0.0), 1.0)
+
+
+def _gaps(s_from: float, L: float, runs, at) -> list[tuple]:
+    """The stretches of [s_from, L] outside ``runs`` ((s0, s1) pairs), as
+    (from_s, to_s, length_m, "blocked"), those of at least ``GAP_REPORT_M``."""
+    out, cur = [], s_from
+    for s0, s1 in sorted(runs) + [(L, L)]:
+        if s0 - cur >= GAP_REPORT_M:
+            out.append((at(cur), at(s0), float(s0 - cur), "blocked"))
+        cur = max(cur, s1)
+    return out
+
+
 def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: int,
             obstacle_enu_m: np.ndarray, travel_xy, depth_m: float, vertical_speed_m_s: float,
             keep_m: float | None = None) -> RerouteResult:
@@ -274,28 +305,29 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
     def fail(reason: str) -> RerouteResult:
         return RerouteResult(None, new_known, reason, 0, 0, np.zeros((0, 2)))
 
-    # what is left to cover, in flight order: (entry, exit) pairs (ENU xy)
+    # what is left to cover, in flight order: (entry, exit) pairs (ENU xy), their plan times
     pieces: list[tuple[np.ndarray, np.ndarray]] = []
-    n_forced = 0
+    times: list[tuple[float, float]] = []
+    gaps: list[tuple] = []
     min_len = plan.min_segment_m
     current, nxt = plan.segment_at(wp_index)
     if current is not None:
         seg = plan.segments[current]
-        a, b = np.asarray(seg.start_xy), np.asarray(seg.end_xy)
-        L = max(float(np.hypot(*(b - a))), 1e-12)
-        u = (b - a) / L
-        s_v = float((p[:2] - a) @ u)
-        beyond = [(s0, s1) for s0, s1 in free_runs(new_known, a, b) if s0 > s_v and s1 - s0 >= min_len]
+        a, u, L, at = _segment_frame(plan, seg)
+        s_v = min(max(float((p[:2] - a) @ u), 0.0), L)
+        beyond = [(s0, s1) for s0, s1 in free_runs(new_known, a, a + L * u) if s0 > s_v and s1 - s0 >= min_len]
+        gaps += _gaps(s_v, L, beyond, at)
         for s0, s1 in sorted(beyond, reverse=True):       # from the far end back toward the obstacle
             pieces.append((a + s1 * u, a + s0 * u))
+            times.append((at(s0), at(s1)))
     n_forced = len(pieces)
     for seg in plan.segments[nxt:]:
-        a, b = np.asarray(seg.start_xy), np.asarray(seg.end_xy)
-        L = max(float(np.hypot(*(b - a))), 1e-12)
-        u = (b - a) / L
-        for s0, s1 in free_runs(new_known, a, b):
-            if s1 - s0 >= min_len:
-                pieces.append((a + s0 * u, a + s1 * u))
+        a, u, L, at = _segment_frame(plan, seg)
+        runs = [(s0, s1) for s0, s1 in free_runs(new_known, a, a + L * u) if s1 - s0 >= min_len]
+        gaps += _gaps(0.0, L, runs, at)
+        for s0, s1 in runs:
+            pieces.append((a + s0 * u, a + s1 * u))
+            times.append((at(s0), at(s1)))
 
     # the start: in a component of the eroded free space that holds a piece left
     labels, _ = ndimage.label(new_known.free.eroded)
@@ -332,6 +364,8 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
             conn = aux_path(new_known.free, world_to_grid(grid, cur), world_to_grid(grid, entry))
         except InputError:
             skipped += 1
+            t0, t1 = sorted(times[k])
+            gaps.append((t0, t1, float(np.hypot(*(exit_ - entry))), "unreachable"))
             continue
         route.extend(grid_to_world(grid, conn)[1:])
         route.append(exit_)
@@ -359,4 +393,4 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
     new_plan = GlobalPlan.from_waypoints(traj, t + t_now_s, P, wps.v_enu_m_s, wps.a_enu_m_s2, wps.corner, segs,
                                          plan.target_enu_m, plan.flight, plan.trajectory_config,
                                          plan.min_segment_m, tuple(path[-1]))
-    return RerouteResult(new_plan, new_known, "", len(flown), skipped, path)
+    return RerouteResult(new_plan, new_known, "", len(flown), skipped, path, tuple(sorted(gaps)))

@@ -3,9 +3,10 @@
 The guard reads obstacles only through ``obstacle_distance(points) ->
 distances``: ``(M, 3)`` ENU points (m) in, ``(M,)`` distances (m) from each
 point to the nearest known obstacle surface out, ``inf`` where none is
-known. Any map can stand behind it (a persistent voxel map plugs in the same
-way). This module adapts today's: the replanner's ``ObstacleMemory`` points
-(each a point on a surface) and the obstacle cells a re-route added to its
+known. Any map can stand behind it. This module adapts the replanner's: its
+persistent ``ObstacleMap`` (``companion.replan.voxmap``: ``distance`` to the
+occupied voxels' boxes, never above the true distance), or any memory of
+surface points (``points()``; brute-force nearest point), and the obstacle cells a re-route added to its
 ``KnownMap`` (``added``: their top is unknown, so each is a column of any
 height over its cell's square).
 """
@@ -72,10 +73,16 @@ def known_obstacle_distance(memory, known_map: Callable[[], object] | None = Non
     it holds then) and, when ``known_map`` is given, the obstacle cells added to the
     map it returns (``lambda: replanner.known``; module doc)."""
     cells = _AddedCells()
+    box_distance = getattr(memory, "distance", None)
 
     def obstacle_distance(points_enu_m: np.ndarray) -> np.ndarray:
         p = np.asarray(points_enu_m, float).reshape(-1, 3)
-        d = points_distance(p, memory.points()) if len(memory) else np.full(len(p), np.inf)
+        if not len(memory):
+            d = np.full(len(p), np.inf)
+        elif box_distance is not None:       # the persistent map: distance to its voxels' boxes
+            d = np.asarray(box_distance(p), float)
+        else:
+            d = points_distance(p, memory.points())
         if known_map is not None:
             d = np.minimum(d, cells.distance(known_map(), p[:, 0], p[:, 1]))
         return d
