@@ -170,3 +170,39 @@ def test_bad_mover_spec_is_one_line_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "mission.yaml" in err[0] and "speed_m_s" in err[0]
     assert not (tmp_path / "plan.json").exists()
+
+
+# --- the companion's closing-speed rule (companion/replan/closing.py) ------------------
+
+
+def test_closing_speed_of_a_walker_coming_down_the_beam():
+    from companion.replan.closing import ClosingSpeed
+
+    c = ClosingSpeed()
+    u = (1.0, 0.0, 0.0)                          # beam along +x
+    # a walker at 1.5 m/s toward the sensor: its surface 5.0 m, then 0.6 m nearer 0.4 s later
+    for k in range(9):
+        c.on_hit(0.05 * k, 3, (5.0 - 1.5 * 0.05 * k, 0.0, 1.5), u)
+    assert c.approach_m_s(0.4) == pytest.approx(1.5, abs=1e-9)
+    assert c.approach_m_s(0.4 + 1.01) == 0.0      # not measured again for HOLD_S: forgotten
+
+
+def test_still_or_receding_obstacles_have_no_closing_speed():
+    from companion.replan.closing import ClosingSpeed
+
+    c = ClosingSpeed()
+    u = (1.0, 0.0, 0.0)
+    for k in range(20):                            # a post: the hit stays put while the vehicle flies
+        c.on_hit(0.05 * k, 0, (5.0, 0.0, 1.5), u)
+        c.on_hit(0.05 * k, 1, (5.0 + 1.0 * 0.05 * k, 0.0, 1.5), u)   # a walker walking away
+    assert c.approach_m_s(1.0) == 0.0
+
+
+def test_the_governor_bounds_the_closing_speed_not_the_vehicles_own():
+    from companion.replan.closing import allowed_approach_m_s
+
+    # still obstacle: the vehicle may approach at the stopping speed; a walker coming at
+    # 1.5 m/s takes that off; with no room left the vehicle backs away at the walker's speed
+    assert allowed_approach_m_s(2.0, 0.0) == 2.0
+    assert allowed_approach_m_s(2.0, 1.5) == pytest.approx(0.5)
+    assert allowed_approach_m_s(0.0, 1.5) == -1.5
