@@ -206,3 +206,40 @@ def test_the_governor_bounds_the_closing_speed_not_the_vehicles_own():
     assert allowed_approach_m_s(2.0, 0.0) == 2.0
     assert allowed_approach_m_s(2.0, 1.5) == pytest.approx(0.5)
     assert allowed_approach_m_s(0.0, 1.5) == -1.5
+
+
+# --- one short flight: a walker crosses the first corridor --------------------------------
+
+
+def test_vehicle_gives_way_to_a_walker_crossing_the_first_corridor(tmp_path):
+    """flat-rectangle's first corridor is flown westward along y = 8.75 m from x = 22 m
+    (the trajectory starts about 7 s after boot). A worker steps off the row face at
+    (17, 7.8) at 8.3 s and crosses the corridor at 1 m/s, into the next row: mid-corridor
+    when the vehicle is about 3 m away. The vehicle must give way (an avoidance event)
+    and keep the configured clearance (0.5 m, ``replan.clearance_m``) from the walker's
+    true position (the SITL's ground truth), with no crash."""
+    import json
+
+    from companion.cli import main
+    from companion.commands.demo import missions_dir
+    from companion.mission.replan import ReplanConfig
+
+    fr = missions_dir() / "flat-rectangle"
+    (tmp_path / "m.yaml").write_text(
+        "name: walker-cross\n"
+        f"map: {fr / 'map.yaml'}\ndem: {fr / 'dem.asc'}\n"
+        "home: {lat: 44.8, lon: -0.6, alt_m: 30.0}\n"
+        "flight: {height_agl_m: 1.5, speed_m_s: 1.0, waypoint_interval_s: 4.0}\n"
+        "coverage: {line_spacing_m: 2.5, safety_margin_m: 0.45}\n"
+        "pointing: {target: centroid}\n"
+        "sim:\n  noise: {vector_variance: 5.0e-4, gyro_variance: 5.0e-4}\n  seed: 1\n"
+        "  movers: [{type: walker, path: [[17.0, 7.8], [17.0, 11.5]], speed_m_s: 1.0, start_s: 8.3}]\n")
+    out = tmp_path / "out"
+    main(["demo", "--mission", str(tmp_path / "m.yaml"), "--transport", "inproc", "--cut", "9",
+          "--out", str(out), "--no-plots", "--quiet"])
+    rep = json.loads((out / "report.json").read_text())
+    rp = rep["replanning"]
+    assert rep["crashed"] is False and rep["crash"] is None
+    assert any(e["action"] in ("avoid", "stop") for e in rp["event_list"])       # it gave way
+    assert rp["clearance_source"] == "sim_truth" and rp["min_clearance_obstacle"] == 0    # the walker
+    assert rp["min_clearance_m"] >= ReplanConfig.clearance_m

@@ -13,9 +13,9 @@ w comes from the rangefinders: a DISTANCE_SENSOR hit placed in the world
 (``companion.replan.perception``) moves only with the obstacle (the
 vehicle's own motion is already taken out), so for one sensor the approach
 speed is ``-(h(t) - h(t0)) . u / (t - t0)`` (u the beam axis, from the
-vehicle outward; h(t0) the newest earlier hit of any sensor within
-``MATCH_M``: the vehicle yaws and a mover passes from beam to beam), taken
-over at least ``BASELINE_S`` (a 1 cm range noise
+vehicle outward; h(t0) the nearest hit of any sensor, within ``MATCH_M``,
+among those ``BASELINE_S`` to twice that old: the vehicle yaws and a mover
+passes from beam to beam), taken over at least ``BASELINE_S`` (a 1 cm range noise
 then reads as 0.03 m/s). Only hits within ``MATCH_M`` of each other are
 compared (the same object), and only unknown returns (not a row) are fed.
 The largest w counts while approaches keep being measured (each at most
@@ -61,20 +61,26 @@ class ClosingSpeed:
         u = (float(axis_enu[0]), float(axis_enu[1]), float(axis_enu[2]))
         while h and t_s - h[0][0] > _STALE_S:
             h.pop(0)
-        # the newest hit at least BASELINE_S old, of the same object (within MATCH_M)
-        for t0, p0, _ in reversed(h):
-            if t_s - t0 < BASELINE_S:
+        # the nearest hit (within MATCH_M: the same object) of those BASELINE_S to
+        # 2 BASELINE_S old; the nearest, not the newest: a post beside a walker
+        best, t0 = MATCH_M, None
+        for tk, pk, _ in reversed(h):
+            age = t_s - tk
+            if age < BASELINE_S:
                 continue
+            if age > 2.0 * BASELINE_S:
+                break
+            dk = math.dist(hit, pk)
+            if dk <= best:
+                best, t0, p0 = dk, tk, pk
+        if t0 is not None:
             d = (hit[0] - p0[0], hit[1] - p0[1], hit[2] - p0[2])
-            if math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) > MATCH_M:
-                continue
             w = -(d[0] * u[0] + d[1] * u[1] + d[2] * u[2]) / (t_s - t0)
             if MIN_M_S <= w <= MAX_M_S:
                 # the largest speed while the mover keeps coming (conservative), fresh again
                 if w >= self._w or t_s - self._t_w > HOLD_S:
                     self._w = w
                 self._t_w = t_s
-            break
         h.append((t_s, hit, u))
 
     def approach_m_s(self, t_s: float | None) -> float:
