@@ -243,3 +243,42 @@ def test_vehicle_gives_way_to_a_walker_crossing_the_first_corridor(tmp_path):
     assert any(e["action"] in ("avoid", "stop") for e in rp["event_list"])       # it gave way
     assert rp["clearance_source"] == "sim_truth" and rp["min_clearance_obstacle"] == 0    # the walker
     assert rp["min_clearance_m"] >= ReplanConfig.clearance_m
+
+
+# --- campaign: movers drawn from the seeded per-scenario generator ----------------------
+
+
+def test_campaign_movers_cross_a_corridor_and_leave_other_draws_alone():
+    import dataclasses
+
+    from companion.campaign.scenarios import load_fields, scenario
+    from companion.campaign.spec import MoverSpec, spec_from_dict
+
+    base = {"name": "m", "missions": ["flat-rectangle"], "flights": 10, "seed": 3, "cut_s": 20.0,
+            "obstacles": {"count": [1, 2], "placement": "rows"}, "wind": {"speed_m_s": [0.0, 2.0]}}
+    spec = spec_from_dict({**base, "movers": {"count": [1, 1], "speed_m_s": [0.5, 2.5]}}, "t.yaml")
+    plain = spec_from_dict(base, "t.yaml")
+    fields = load_fields(spec)
+    for i in (0, 7):
+        s, p = scenario(spec, fields, i), scenario(plain, fields, i)
+        sim = dict(s["overrides"]["sim"])
+        movers = sim.pop("movers")
+        assert sim == p["overrides"]["sim"] and s["seed"] == p["seed"]      # nothing else moved
+        assert scenario(dataclasses.replace(spec, flights=1000), fields, i) == s   # independent of the count
+        for mv in movers:
+            (ax, ay), (bx, by) = mv["path"]
+            # flat-rectangle's corridors run along x: across one is along y, 6 m long
+            assert ax == pytest.approx(bx, abs=1e-3) and abs(by - ay) == pytest.approx(MoverSpec.length_m, abs=2e-3)
+            assert 0.5 <= mv["speed_m_s"] <= 1.5 and mv["start_s"] >= 0.0      # a walker: capped at 1.5
+
+
+def test_bad_campaign_mover_spec_names_the_key():
+    from companion.campaign.spec import spec_from_dict
+    from companion.errors import CampaignError
+
+    with pytest.raises(CampaignError, match=r"movers.*kinds|kinds"):
+        spec_from_dict({"name": "m", "missions": ["flat-rectangle"], "flights": 1,
+                        "movers": {"kinds": ["horse"]}}, "t.yaml")
+    with pytest.raises(CampaignError, match=r"movers\.speed_m_s"):
+        spec_from_dict({"name": "m", "missions": ["flat-rectangle"], "flights": 1,
+                        "movers": {"speed_m_s": [0.5, 9.0]}}, "t.yaml")
