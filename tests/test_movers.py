@@ -282,3 +282,16 @@ def test_bad_campaign_mover_spec_names_the_key():
     with pytest.raises(CampaignError, match=r"movers\.speed_m_s"):
         spec_from_dict({"name": "m", "missions": ["flat-rectangle"], "flights": 1,
                         "movers": {"speed_m_s": [0.5, 9.0]}}, "t.yaml")
+
+
+def test_a_beam_sliding_over_a_still_wall_is_no_closing_speed():
+    from companion.replan.closing import ClosingSpeed
+
+    # flying +x at 1 m/s past a wall; a beam looking back-left at 60 deg from the wall:
+    # u = (-cos 60, sin 60); its return slides +x with the vehicle, d.u / |d| = -0.5:
+    # 0.5 m/s "toward" the sensor that is only the beam sweeping across the wall
+    c = ClosingSpeed()
+    u = (-0.5, math.sqrt(3.0) / 2.0, 0.0)
+    for k in range(20):
+        c.on_hit(0.05 * k, 9, (1.0 * 0.05 * k, 2.0, 1.5), u)
+    assert c.approach_m_s(0.95) == 0.0

@@ -21,7 +21,10 @@ compared (the same object), and only unknown returns (not a row) are fed.
 The largest w counts while approaches keep being measured (each at most
 ``HOLD_S`` after the last); speeds below
 ``MIN_M_S`` (noise, a beam sliding over a still post as the vehicle yaws)
-count as 0.
+count as 0, and so does a return that moved mostly across the beam (less
+than ``ALIGN_MIN`` of its displacement along the axis): a beam sweeping over
+a still surface as the vehicle flies past slides its return across, at up to
+the vehicle's speed.
 
 Pure: times are the vehicle clock (s), points world ENU (m); no I/O.
 """
@@ -40,6 +43,8 @@ HOLD_S = 1.0
 MIN_M_S = 0.3
 #: Approach speeds above this (m/s) are not a walker or a tractor: a wrong match.
 MAX_M_S = 6.0
+#: The return must have moved at least this fraction of its displacement along the beam.
+ALIGN_MIN = 0.8
 #: A hit older than this (s) is not compared.
 _STALE_S = 1.5
 
@@ -75,8 +80,11 @@ class ClosingSpeed:
                 best, t0, p0 = dk, tk, pk
         if t0 is not None:
             d = (hit[0] - p0[0], hit[1] - p0[1], hit[2] - p0[2])
-            w = -(d[0] * u[0] + d[1] * u[1] + d[2] * u[2]) / (t_s - t0)
-            if MIN_M_S <= w <= MAX_M_S:
+            along = d[0] * u[0] + d[1] * u[1] + d[2] * u[2]
+            w = -along / (t_s - t0)
+            # a mover coming down the beam moves its return along the axis; a beam sweeping
+            # over a still surface (the vehicle flying past a box) slides it across
+            if MIN_M_S <= w <= MAX_M_S and -along >= ALIGN_MIN * best:
                 # the largest speed while the mover keeps coming (conservative), fresh again
                 if w >= self._w or t_s - self._t_w > HOLD_S:
                     self._w = w
