@@ -26,6 +26,11 @@ than ``ALIGN_MIN`` of its displacement along the axis): a beam sweeping over
 a still surface as the vehicle flies past slides its return across, at up to
 the vehicle's speed.
 
+Movers move level: only the level parts count (the axis' level direction,
+the return's level displacement), and beams steeper than 60 deg (the down
+rangefinder, whose return jumps as the vehicle passes over a crate) are not
+used.
+
 Pure: times are the vehicle clock (s), points world ENU (m); no I/O.
 """
 
@@ -45,6 +50,8 @@ MIN_M_S = 0.3
 MAX_M_S = 6.0
 #: The return must have moved at least this fraction of its displacement along the beam.
 ALIGN_MIN = 0.8
+#: Beams whose axis has a level part below this (|u_xy|, a beam steeper than 60 deg) are not used.
+MIN_LEVEL = 0.5
 #: A hit older than this (s) is not compared.
 _STALE_S = 1.5
 
@@ -63,7 +70,10 @@ class ClosingSpeed:
         # one history for all sensors: the vehicle yaws and a mover passes from beam to beam
         h = self._hist.setdefault(0, [])
         hit = (float(hit_enu_m[0]), float(hit_enu_m[1]), float(hit_enu_m[2]))
-        u = (float(axis_enu[0]), float(axis_enu[1]), float(axis_enu[2]))
+        uh = math.hypot(float(axis_enu[0]), float(axis_enu[1]))
+        if uh < MIN_LEVEL:
+            return                   # a steep beam: its return moves as the vehicle climbs over things
+        u = (float(axis_enu[0]) / uh, float(axis_enu[1]) / uh, 0.0)      # level: movers move level
         while h and t_s - h[0][0] > _STALE_S:
             h.pop(0)
         # the nearest hit (within MATCH_M: the same object) of those BASELINE_S to
@@ -79,12 +89,12 @@ class ClosingSpeed:
             if dk <= best:
                 best, t0, p0 = dk, tk, pk
         if t0 is not None:
-            d = (hit[0] - p0[0], hit[1] - p0[1], hit[2] - p0[2])
-            along = d[0] * u[0] + d[1] * u[1] + d[2] * u[2]
+            d = (hit[0] - p0[0], hit[1] - p0[1], 0.0)
+            along = d[0] * u[0] + d[1] * u[1]
             w = -along / (t_s - t0)
             # a mover coming down the beam moves its return along the axis; a beam sweeping
             # over a still surface (the vehicle flying past a box) slides it across
-            if MIN_M_S <= w <= MAX_M_S and -along >= ALIGN_MIN * best:
+            if MIN_M_S <= w <= MAX_M_S and -along >= ALIGN_MIN * math.hypot(d[0], d[1]):
                 # the largest speed while the mover keeps coming (conservative), fresh again
                 if w >= self._w or t_s - self._t_w > HOLD_S:
                     self._w = w
