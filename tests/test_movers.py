@@ -131,6 +131,10 @@ def test_a_walker_walking_into_a_hovering_vehicle_is_a_crash_that_names_it():
     c = sim.crash
     assert c is not None and c.kind == "walker" and c.obstacle_index == 0
     assert c.text.startswith("CRASH: walker #1")
+    from companion.link.crash_text import parse_crash
+
+    back = parse_crash(c.text)                   # the companion reads it back
+    assert back is not None and (back.kind, back.obstacle_index) == ("walker", 0)
     # contact when the walker's axis is radius + 0.25 m from the vehicle: 3 - 0.65 m walked at 1.5 m/s
     t_contact = (3.0 - (RADIUS + WALKER_RADIUS_M)) / 1.5
     assert c.time_us * 1e-6 == pytest.approx(t_contact, abs=0.005)
