@@ -4,7 +4,9 @@ rangefinders. time.process_time over 1250 frames, median of 5 runs.
 
     python benchmarks/bench_movers.py
 """
-import time, statistics
+import statistics
+import time
+
 import numpy as np
 from companion.mission.schema import HomeConfig, Mission
 from companion.mission.sim import SimConfig, MoverConfig, NoiseConfig
@@ -13,7 +15,8 @@ from sitl.sim import Simulation
 VEH = VehicleConfig()
 def run(movers):
     m = Mission(name="t", map="m.yaml", dem="d.asc", home=HomeConfig(44.8, -0.6, 30.0),
-                sim=SimConfig(movers=movers, noise=NoiseConfig(vector_variance=0.0, gyro_variance=0.0, range_std_m=0.0)))
+                sim=SimConfig(movers=movers,
+                              noise=NoiseConfig(vector_variance=0.0, gyro_variance=0.0, range_std_m=0.0)))
     sim = Simulation(m, np.random.default_rng(0), start_enu_m=(0.0, 0.0))
     f = VEH.mass_kg * GRAVITY_M_S2 / 4.0
     sim.plant.set_state((0.0, 0.0, 1.5), v=(0.0, 0.0, 0.0), f=(f,) * 4)
