@@ -65,7 +65,8 @@ class ReplanningStats:
     min_clearance_t_s : float or None
         Vehicle time of the smallest clearance (s).
     min_clearance_obstacle : int or None
-        Index of that obstacle in ``sim.obstacles``.
+        Index of that obstacle in ``sim.obstacles``; ``len(sim.obstacles) + k``
+        for mover k of ``sim.movers`` (measured where it was at that vehicle time).
     min_range_m : float or None
         Smallest non-downward DISTANCE_SENSOR reading (m) in hold, trajectory and hover.
     max_lateral_deviation_m : float

@@ -210,6 +210,17 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "replan.sensors[].id": ("", "0 to 255", "DISTANCE_SENSOR id."),
     "replan.sensors[].offset_flu_m": ("m", "each within 10", "Sensor position from the centre of mass, "
                                       "body FLU."),
+    "sim.movers": ("", "", "Moving obstacles on scripted paths (SITL only): seen by the rangefinders and "
+                   "collided with where they are on the vehicle clock; a contact is a crash (`walker #k`, "
+                   "`tractor #k`), and report.json's true clearance includes them."),
+    "sim.movers[].type": ("", "", "`walker`: a worker, a cylinder 0.25 m in radius, 1.8 m tall; `tractor`: a "
+                          "box 3 m long along its heading, 1.5 m wide, 2.5 m tall."),
+    "sim.movers[].path": ("m", "at least 2 points, each within 1e6", "Polyline of [x, y] points, ENU on the "
+                          "map frame, walked point to point (no two equal in a row)."),
+    "sim.movers[].speed_m_s": ("m/s", "(0, 5]", "Speed along the path; a walker at most 1.5."),
+    "sim.movers[].loop": ("", "", "At the end of the path walk back, and so on (false: stop there)."),
+    "sim.movers[].start_s": ("s", "[0, 1e6]", "Vehicle time (since the SITL's boot) the mover sets off; "
+                             "until then it stands at the path's first point."),
     "sim.obstacles": ("", "", "Obstacles unknown to the planner (SITL only)."),
     "sim.obstacles[].type": ("", "", "`cylinder` or `box`."),
     "sim.obstacles[].x": ("m", "[-1e6, 1e6]", "Centre, ENU x on the map frame."),

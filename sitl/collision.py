@@ -84,9 +84,11 @@ class CrashEvent:
     time_us : int
         Vehicle time of the contact (us since boot).
     kind : str
-        What was hit: ``"cylinder"``, ``"box"``, ``"row"`` or ``"terrain"``.
+        What was hit: ``"cylinder"``, ``"box"``, ``"row"``, ``"terrain"``, or a
+        mover: ``"walker"``, ``"tractor"``.
     obstacle_index : int or None
-        Index in ``sim.obstacles`` (0-based; the text numbers from 1).
+        Index in ``sim.obstacles`` (0-based; the text numbers from 1); for a
+        mover, its index in ``sim.movers``.
     pos_enu_m : tuple (3,)
         Vehicle centre at the contact (world ENU, m).
     vel_enu_m_s : tuple (3,)

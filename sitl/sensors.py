@@ -242,7 +242,7 @@ class Rangefinder:
                 best = t
         ox, oy, oz = o
         edges = None
-        for ob in world.obstacles:
+        for ob in world.obstacles_now:
             # broad phase: the bounding sphere must reach into the field of view within range
             cx, cy, cz = ob.x - ox, ob.y - oy, ob.zc - oz
             if math.sqrt(cx * cx + cy * cy + cz * cz) - ob.bound_r >= min(best, self.cfg.max_m):

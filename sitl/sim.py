@@ -210,7 +210,9 @@ class Simulation:
     shell, says whether the vehicle was landing; without one every touchdown
     counts as a landing and only the speed limits apply). A crash stops the
     rotors for good (``Plant.crash``) and is kept in ``crash`` (a
-    ``CrashEvent``) until ``reset``.
+    ``CrashEvent``) until ``reset``. Movers (``sim.movers``) are posed on the
+    vehicle clock after every frame (``World.set_time``) and a contact with
+    one is a crash named ``walker #k`` / ``tractor #k`` (``sitl.movers``).
     """
 
     def __init__(self, mission: Mission, rng: np.random.Generator, *, physics_hz: int = 1000,
@@ -224,7 +226,7 @@ class Simulation:
         self.rng = rng
         sim = mission.sim
         self.world = world if world is not None else World.build(
-            None, None, sim.obstacles, sim.canopy_height_m)
+            None, None, sim.obstacles, sim.canopy_height_m, sim.movers)
         plant_params = PlantParams(mission.vehicle, drag_n_s_m=sim.wind.drag_n_s_m)
         self.params = SimParams(physics_hz, sensor_hz, plant_params, gains)
         self.plant = Plant(plant_params, self.world.ground_height, self.world.terrain.max_height_m)
@@ -276,6 +278,7 @@ class Simulation:
             self.plant.set_state(start, R=R, landed=False)
         self.onboard.reset()
         self.rates.reset()
+        self.world.set_time(self.time_us * 1e-6)
         self.crash = None
         self._truth = None
         pl = self.plant
@@ -315,6 +318,7 @@ class Simulation:
         if self.collisions is not None and not pl.crashed:
             self._check_contacts(p0, landed0, touchdowns0)
         self.time_us += self.sensor_period_us
+        self.world.set_time(self.time_us * 1e-6)     # movers where they are now, on the vehicle clock
         self._truth = None
         return self._sample()
 
@@ -329,10 +333,25 @@ class Simulation:
                 pos = tuple(a + f * (b - a) for a, b in zip(p0, pl.p))
                 self._crashed(c.kind, c.obstacle_index, pos, pl.v, f)
                 return
+        # movers walk into a parked vehicle too
+        if self.world.moving is not None and self._mover_contact(p0):
+            return
         if pl.touchdowns != touchdowns0:
             landing = True if self.landing_intent is None else bool(self.landing_intent())
             if mon.touchdown_is_crash(pl.impact_vel_enu_m_s, landing):
                 self._crashed("terrain", None, pl.p, pl.impact_vel_enu_m_s, 1.0)
+
+    def _mover_contact(self, p0) -> bool:
+        """Crash on a mover (``sim.movers``, ``sitl.movers``) hit during this frame."""
+        pl = self.plant
+        t0 = self.time_us * 1e-6
+        hit = self.world.moving.sweep(p0, pl.p, t0, t0 + self.dt_frame_s, self.vehicle_radius_m)
+        if hit is None:
+            return False
+        f, k = hit
+        pos = tuple(a + f * (b - a) for a, b in zip(p0, pl.p))
+        self._crashed(self.world.moving.movers[k].type, k, pos, pl.v, f)
+        return True
 
     def _crashed(self, kind: str, index, pos, vel, fraction: float) -> None:
         t_us = self.time_us + int(round(fraction * self.sensor_period_us))

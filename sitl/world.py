@@ -16,7 +16,8 @@ first surface, ``math.inf`` if none within ``max_m``:
   occupied cell that is a safe lower bound, minus a cell diagonal) and
   walks cell by cell (Amanatides-Woo) near the rows; an occupied cell is a
   box from the DEM (at the cell centre) up to ``canopy_height_m``;
-- obstacles: analytic ray/cylinder (with caps) and ray/box (slab) tests,
+- obstacles (static, and the movers of ``sim.movers`` at their pose of the
+  last ``set_time``, ``sitl.movers``): analytic ray/cylinder (with caps) and ray/box (slab) tests,
   standing on the terrain under their centre; ``Obstacle.project`` (the
   nearest point of the solid) and ``Obstacle.azimuth_span`` serve the exact
   field-of-view pass of ``sitl.fov``.
@@ -39,7 +40,8 @@ from companion.geometry import (ExtrudedCells, SceneGeometry, capped_clearance, 
                                obstacle_solids)
 from companion.maps.heightfield import HeightField
 from companion.maps.grid import ElevationModel, OccupancyGrid
-from companion.mission.sim import ObstacleConfig
+from companion.mission.sim import MoverConfig, ObstacleConfig
+from .movers import MovingObstacles
 
 if TYPE_CHECKING:  # pragma: no cover
     from companion.mission.schema import Mission
@@ -404,11 +406,14 @@ class World:
     obstacles: tuple[Obstacle, ...]
     grid: OccupancyGrid | None = None
     geometry: SceneGeometry | None = None
+    moving: MovingObstacles | None = None
 
     @classmethod
     def build(cls, grid: OccupancyGrid | None = None, dem: ElevationModel | None = None,
-              obstacles: tuple[ObstacleConfig, ...] = (), canopy_height_m: float = 2.0) -> "World":
-        """Assemble a world from in-memory maps (None: flat ground at z = 0, no rows)."""
+              obstacles: tuple[ObstacleConfig, ...] = (), canopy_height_m: float = 2.0,
+              movers: tuple[MoverConfig, ...] = ()) -> "World":
+        """Assemble a world from in-memory maps (None: flat ground at z = 0, no rows);
+        ``movers`` (``sim.movers``) are posed by ``set_time`` on the vehicle clock."""
         terrain = Terrain(dem)
         rows = cells = None
         if grid is not None:
@@ -418,7 +423,18 @@ class World:
             cells = ExtrudedCells(grid, row_base_heights(grid, terrain), canopy_height_m, d2)
             del d2
         geometry = SceneGeometry(obstacle_solids(tuple(obstacles), terrain.height), cells, terrain.height)
-        return cls(terrain, rows, tuple(Obstacle(o, terrain) for o in obstacles), grid, geometry)
+        moving = MovingObstacles(tuple(movers), terrain, Obstacle) if movers else None
+        return cls(terrain, rows, tuple(Obstacle(o, terrain) for o in obstacles), grid, geometry, moving)
+
+    def set_time(self, t_s: float) -> None:
+        """Pose the moving obstacles at vehicle time ``t_s`` (s since boot); no-op without any."""
+        if self.moving is not None:
+            self.moving.set_time(t_s)
+
+    @property
+    def obstacles_now(self) -> tuple:
+        """The static obstacles, then the movers at their current pose (``Obstacle``s)."""
+        return self.obstacles if self.moving is None else self.obstacles + self.moving.current
 
     def ground_height(self, x: float, y: float) -> float:
         """Terrain height (m, ENU z) under (x, y)."""
@@ -435,7 +451,7 @@ class World:
             if t < best:
                 best = t
                 lim = t
-        for ob in self.obstacles:
+        for ob in self.obstacles_now:
             t = ob.raycast(ox, oy, oz, dx, dy, dz, lim)
             if t < best:
                 best = t
@@ -496,4 +512,4 @@ def load_world(mission: "Mission") -> World:
 
     # the planner's loader: Nav2 maps or vector fields, local or georeferenced DEMs, home heading
     grid, dem = load_mission_maps(mission)
-    return World.build(grid, dem, mission.sim.obstacles, mission.sim.canopy_height_m)
+    return World.build(grid, dem, mission.sim.obstacles, mission.sim.canopy_height_m, mission.sim.movers)

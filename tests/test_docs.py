@@ -94,7 +94,9 @@ def _interval(text: str):
 
 BASE = {"name": "t", "map": "map.yaml", "dem": "dem.asc", "home": {"lat": 0.0, "lon": 0.0, "alt_m": 0.0},
         "sim": {"obstacles": [{"type": "cylinder", "x": 0.0, "y": 0.0, "height": 1.0, "radius": 0.5}],
-                "rangefinders": [{"id": 0}]}}
+                "rangefinders": [{"id": 0}],
+                # a tractor: the widest speed range of a mover (a walker's stops at 1.5 m/s)
+                "movers": [{"type": "tractor", "path": [[0.0, 0.0], [5.0, 0.0]], "speed_m_s": 1.0}]}}
 _CHECKED = [(r.key, r.type, _interval(r.range)) for r in MK.key_rows()
             if r.type in ("number", "integer", "number or null") and _interval(r.range)]
 

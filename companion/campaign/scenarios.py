@@ -2,7 +2,8 @@
 
 Scenario ``i`` draws from ``numpy.random.default_rng(SeedSequence([seed, i]))``
 (PCG64): it depends on the spec, its seed and ``i`` only, not on how many
-flights are run or in what order. Draws use float64 arithmetic on the
+flights are run or in what order. Movers (``movers:``) draw from their own
+generator, ``SeedSequence([seed, i, 15])`` (``companion.campaign.movers``). Draws use float64 arithmetic on the
 generator's output (``lo + (hi - lo) * u``); the values written are rounded
 (obstacles to the millimetre, everything else to 1e-6) so that the last-bit
 differences of ``cos``/``sin`` (wind direction) or of the planned path
@@ -77,11 +78,12 @@ def load_fields(spec: CampaignSpec) -> dict[str, Field]:
         ref = mission_ref(name, spec.base_dir, spec.source)
         if ref in fields:
             continue
-        if spec.obstacles is None:
+        if spec.obstacles is None and spec.movers is None:
             fields[ref] = None
             continue
         grid, path, _ = flown_path(load_mission(mission_path(ref)), spec.cut_s)
-        fields[ref] = Field(grid, path, cumulative(path, segment_mask(path, spec.obstacles.placement)))
+        placement = spec.obstacles.placement if spec.obstacles is not None else "path"
+        fields[ref] = Field(grid, path, cumulative(path, segment_mask(path, placement)))
     return fields
 
 
@@ -168,6 +170,10 @@ def scenario(spec: CampaignSpec, fields: dict[str, Field], index: int,
                 if ob is not None:
                     obstacles.append(ob)
         sim["obstacles"] = obstacles
+    if spec.movers is not None:
+        from .movers import scenario_movers
+
+        sim["movers"] = scenario_movers(spec.seed, index, fields[ref].path, spec.movers)
     if spec.sensors is not None:
         s = spec.sensors
         profile = dr.choice(s.profiles)

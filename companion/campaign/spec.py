@@ -88,6 +88,40 @@ class ObstacleSpec:
 
 
 @dataclass(frozen=True)
+class MoverSpec:
+    """Moving obstacles (``sim.movers``) placed relative to the flown path's
+    corridors or headlands (``companion.campaign.movers``): ``count`` per
+    flight, each of a kind from ``kinds``, on a straight path of ``length_m``
+    (``across`` or ``along`` a corridor, or along a ``headlands`` turn), at
+    ``speed_m_s`` (a walker at most 1.5), setting off ``lead_s`` before the
+    vehicle passes (``takeoff_s``: the SITL's boot to trajectory time)."""
+
+    count: tuple[int, int] = (0, 1)
+    kinds: tuple[Literal["walker", "tractor"], ...] = ("walker",)
+    placement: Literal["across", "along", "headlands"] = "across"
+    length_m: float = 6.0
+    speed_m_s: Dim = (0.5, 1.5)
+    lead_s: Dim = (1.0, 5.0)
+    takeoff_s: float = 7.0
+    loop: bool = False
+    keep_out_m: float = 3.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.count[0] <= self.count[1] <= 20:
+            raise ValueError(f"movers.count: need 0 <= min <= max <= 20, got {list(self.count)}")
+        if not self.kinds:
+            raise ValueError("movers.kinds: at least one kind")
+        _check_dim("movers.speed_m_s", self.speed_m_s, 0.01, 5.0)
+        _check_dim("movers.lead_s", self.lead_s, -600.0, 600.0)
+        for name, hi in (("length_m", 500.0), ("takeoff_s", 600.0), ("keep_out_m", 100.0)):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0 <= v <= hi):
+                raise ValueError(f"movers.{name} must be in [0, {hi:g}], got {v:g}")
+        if self.length_m <= 0:
+            raise ValueError("movers.length_m must be > 0")
+
+
+@dataclass(frozen=True)
 class SensorSpec:
     """Sensor profile (``sim.sensor_profile``, ``none`` = the mission's) and
     noise levels (``sim.noise``; gyro bias: the same on the three axes)."""
@@ -141,6 +175,7 @@ class CampaignSpec:
     control: tuple[Literal["companion", "vehicle"], ...] = ("companion",)
     keep_completed_fraction: float = 0.1
     obstacles: ObstacleSpec | None = None
+    movers: MoverSpec | None = None
     sensors: SensorSpec | None = None
     wind: WindSpec | None = None
     base_dir: str = dataclasses.field(default=".", init=False, compare=False)   # set by load_spec

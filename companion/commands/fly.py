@@ -654,20 +654,30 @@ def build_replanner(mission, flight_plan: FlightPlan, grid, dem):
 
 
 def obstacle_clearance_fn(mission, dem):
-    """``f(pos_enu_m) -> (clearance_m, index)``: the vehicle sphere's distance to the nearest
-    of the mission's simulated obstacles (``sim.obstacles``, standing on ``dem``); None
-    without any. Applied to the SITL's true position only (report ``replanning.min_clearance_m``)."""
+    """``f(pos_enu_m, t_us=None) -> (clearance_m, index)``: the vehicle sphere's distance to the
+    nearest of the mission's simulated obstacles (``sim.obstacles``, standing on ``dem``) and movers
+    (``sim.movers`` at vehicle time ``t_us``, us since boot; index ``len(sim.obstacles) + k`` for
+    mover k); None without any. Applied to the SITL's true position only (report
+    ``replanning.min_clearance_m``)."""
     obstacles = mission.sim.obstacles if mission.sim is not None else ()
-    if not obstacles:
+    movers = mission.sim.movers if mission.sim is not None else ()
+    if not obstacles and not movers:
         return None
     from ..geometry import scene_from_maps
     from ..mission.sim import vehicle_radius_m
+    from ..movers import movers_nearest
 
     scene = scene_from_maps(None, dem, tuple(obstacles), mission.sim.canopy_height_m)
     radius = vehicle_radius_m(mission.sim, mission.vehicle.arm_m)
+    n_static = len(obstacles)
 
-    def clearance(pos):
-        d, k = scene.nearest_obstacle(float(pos[0]), float(pos[1]), float(pos[2]))
+    def clearance(pos, t_us=None):
+        x, y, z = float(pos[0]), float(pos[1]), float(pos[2])
+        d, k = scene.nearest_obstacle(x, y, z)
+        if movers and t_us is not None:
+            dm, km = movers_nearest(movers, t_us * 1e-6, scene.height, x, y, z)
+            if dm < d:
+                d, k = dm, n_static + km
         return d - radius, k
     return clearance
 

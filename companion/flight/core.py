@@ -187,9 +187,10 @@ class FlightInputs:
         Flies the trajectory phase around unknown obstacles (``replan``
         mission key); None: the trajectory is flown as planned.
     obstacle_clearance : callable or None
-        ``f(pos_enu_m) -> (clearance_m, obstacle_index)``: the vehicle
+        ``f(pos_enu_m, t_us) -> (clearance_m, obstacle_index)``: the vehicle
         sphere's distance to the nearest unknown obstacle, from the SITL's
-        geometry (``sim.obstacles``). Applied to the true position (ODOMETRY)
+        geometry (``sim.obstacles``, and ``sim.movers`` where they are at the
+        ODOMETRY's vehicle time ``t_us``). Applied to the true position (ODOMETRY)
         only, for the report's ``replanning.min_clearance_m``.
     transit_floor_z_m : float or None
         Lowest safe height (ENU z, m) of a straight level flight across the
@@ -1133,7 +1134,7 @@ class FlightCore:
                         self._react(v)
         if self.inputs.obstacle_clearance is not None and self.truth_source == "sim_truth" and phase in FLYING \
                 and self._truth is not None and self.n_frames % 2 == 0:
-            c, k = self.inputs.obstacle_clearance(self._truth)
+            c, k = self.inputs.obstacle_clearance(self._truth, self._truth_t_us)
             mc = self.min_clearance
             if mc is None or c < mc[0]:
                 self.min_clearance = (float(c), t, k, tuple(float(x) for x in self._truth))

@@ -6,7 +6,8 @@ MAV_SEVERITY_CRITICAL, one STATUSTEXT of at most 50 characters::
     CRASH: cylinder #1 at E10.00 N3.75 U1.20, 1.02 m/s
 
 naming what was hit (``cylinder #k`` / ``box #k``, k numbering
-``sim.obstacles`` from 1; ``vine row``; ``terrain``), the vehicle centre at
+``sim.obstacles`` from 1; ``walker #k`` / ``tractor #k``, k numbering
+``sim.movers`` from 1; ``vine row``; ``terrain``), the vehicle centre at
 the contact (ENU metres on the map) and its speed. Long numbers shorten it:
 first ``CRASH: box #12 E-1234.57 N9876.54 U123.40 12.00m/s``, then fewer
 decimals (``CRASH box #12 E-1234.6 ...``). ``parse_crash`` reads every form.
@@ -20,7 +21,7 @@ from dataclasses import dataclass
 
 _NUM = r"-?\d+(?:\.\d+)?"
 _CRASH = re.compile(
-    rf"^CRASH:? (?P<what>(?P<kind>cylinder|box) #(?P<k>\d+)|vine row|terrain)(?: at)? "
+    rf"^CRASH:? (?P<what>(?P<kind>cylinder|box|walker|tractor) #(?P<k>\d+)|vine row|terrain)(?: at)? "
     rf"E(?P<x>{_NUM}) N(?P<y>{_NUM}) U(?P<z>{_NUM}),? (?P<v>{_NUM}) ?m/s$")
 
 
@@ -35,7 +36,8 @@ class CrashReport:
     kind : str
         ``cylinder``, ``box``, ``row`` or ``terrain``.
     obstacle_index : int or None
-        Index in ``sim.obstacles`` (0-based); None for a row or the terrain.
+        Index in ``sim.obstacles`` (0-based; for a walker or tractor, in
+        ``sim.movers``); None for a row or the terrain.
     pos_enu_m : tuple (3,)
         Vehicle centre at the contact (ENU, m; rounded as sent).
     speed_m_s : float

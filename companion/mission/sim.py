@@ -37,6 +37,54 @@ class ObstacleConfig:
             raise ValueError("box size_x and size_y must be > 0")
 
 
+#: Moving obstacle kinds (``sim.movers[].type``) and their solids: a
+#: ``walker`` (a worker) is a vertical cylinder of ``WALKER_RADIUS_M`` x
+#: ``WALKER_HEIGHT_M``; a ``tractor`` a box ``TRACTOR_WIDTH_M`` wide,
+#: ``TRACTOR_LENGTH_M`` long along its heading, ``TRACTOR_HEIGHT_M`` tall.
+MOVER_TYPES = ("walker", "tractor")
+WALKER_RADIUS_M = 0.25
+WALKER_HEIGHT_M = 1.8
+TRACTOR_WIDTH_M = 1.5
+TRACTOR_LENGTH_M = 3.0
+TRACTOR_HEIGHT_M = 2.5
+#: Fastest scripted speed (m/s) of a walker (a brisk walk) and of a tractor.
+WALKER_MAX_SPEED_M_S = 1.5
+TRACTOR_MAX_SPEED_M_S = 5.0
+
+
+@dataclass(frozen=True)
+class MoverConfig:
+    """A moving obstacle on a scripted path (``sim.movers[]``), ENU metres on
+    the map frame, standing on the terrain under its centre.
+
+    It waits at ``path[0]`` until ``start_s`` (vehicle clock, s since the
+    SITL's boot), then moves along the polyline at ``speed_m_s``; at the end
+    it stops (``loop: false``) or walks back and forth along it (``loop:
+    true``). Kinematics: ``companion.movers``.
+    """
+
+    type: Literal["walker", "tractor"]
+    path: tuple[tuple[float, float], ...]
+    speed_m_s: float
+    loop: bool = False
+    start_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.type not in MOVER_TYPES:
+            raise ValueError(f"mover type must be one of {', '.join(MOVER_TYPES)}")
+        if len(self.path) < 2:
+            raise ValueError("mover path needs at least 2 points")
+        if not all(math.isfinite(c) and abs(c) <= 1e6 for p in self.path for c in p):
+            raise ValueError("mover path points must be finite, within 1e6 m")
+        if any(math.hypot(b[0] - a[0], b[1] - a[1]) <= 0.0 for a, b in zip(self.path, self.path[1:])):
+            raise ValueError("mover path has two equal consecutive points")
+        top = WALKER_MAX_SPEED_M_S if self.type == "walker" else TRACTOR_MAX_SPEED_M_S
+        if not (math.isfinite(self.speed_m_s) and 0.0 < self.speed_m_s <= top):
+            raise ValueError(f"mover speed_m_s must be in (0, {top:g}] m/s for a {self.type}")
+        if not (math.isfinite(self.start_s) and self.start_s >= 0.0):
+            raise ValueError("mover start_s must be >= 0 s")
+
+
 #: Named sensor profiles (``sim.sensor_profile``). Their datasheet values
 #: live with the simulator (``sitl.profiles``); the schema only knows the names.
 SENSOR_PROFILES = ("icm42688p-bmm150-zedf9p",)
@@ -303,9 +351,11 @@ class SimConfig:
     frame (m); z is the terrain there. None: the SITL picks the free OGM
     cell nearest to the centroid of the free space (it never plans).
     ``collision``: the crash rules (``CollisionConfig``).
+    ``movers``: moving obstacles on scripted paths (``MoverConfig``).
     """
 
     obstacles: tuple[ObstacleConfig, ...] = ()
+    movers: tuple[MoverConfig, ...] = ()
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     seed: int = 0
     rangefinders: tuple[RangefinderConfig, ...] | None = None

@@ -19,6 +19,8 @@ obstacles[].height                 (0, 100]        m
 obstacles[].radius                 [0, 50]         m
 obstacles[].size_x, size_y         [0, 500]        m
 obstacles[].yaw_deg                [-360, 360]     deg
+movers[].speed_m_s                 (0, 5]          m/s       a walker at most 1.5 (checked by type)
+movers[].start_s                   [0, 1e6]        s         vehicle clock
 noise.vector_variance              [0, 1]                    per component of a unit vector
 noise.gyro_variance                [0, 1]          (rad/s)^2
 noise.position_std_m               [0, 10]         m
@@ -89,6 +91,8 @@ SIM_RANGES: dict[str, Range] = {
     "obstacles[].size_x": Range(0, 500, "m"),
     "obstacles[].size_y": Range(0, 500, "m"),
     "obstacles[].yaw_deg": Range(-360, 360, "deg"),
+    "movers[].speed_m_s": Range(0, 5, "m/s", lo_open=True),
+    "movers[].start_s": Range(0, 1e6, "s"),
     "noise.vector_variance": Range(0, 1),
     "noise.gyro_variance": Range(0, 1, "(rad/s)^2"),
     "noise.position_std_m": Range(0, 10, "m"),

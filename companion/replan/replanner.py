@@ -93,6 +93,7 @@ from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
 from .globalplan import GlobalPlan
 from .knownmap import UNKNOWN, KnownMap
+from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
 from .nodata import BeamFreshness, block_no_data
 from .perception import PoseHistory, beam_evidence
 from .rejoin import rejoin
@@ -482,6 +483,7 @@ class Replanner:
         self._active_conf = np.zeros(0, dtype=bool)
         self.poses = PoseHistory()
         self.fresh = BeamFreshness()
+        self.closing = ClosingSpeed()       # movers: the governor bounds the closing speed
         self.shaper = ReferenceShaper(cfg.accel_m_s2, cfg.jerk_m_s3)
         self._brake = 0.5 * cfg.accel_m_s2
         self._target = None if plan.target_enu_m is None else tuple(float(x) for x in plan.target_enu_m)
@@ -561,6 +563,7 @@ class Replanner:
                     if self.known.classify(*q) == UNKNOWN:
                         mem.add(q, L_CANDIDATE, t_s)
             self.n_unknown += 1
+            self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis)
 
     def _explained(self, ev) -> bool:
         """The known map accounts for the return along the axis or a field-of-view edge."""
@@ -676,6 +679,7 @@ class Replanner:
     def _trigger_m(self, speed: float) -> float:
         """Range (m) at which an obstacle point starts an avoidance: d_o, or farther when
         the governor's braking distance from ``speed`` (plus 0.5 m) needs it."""
+        speed += self.closing.approach_m_s(getattr(self, "_t_s", None))
         return max(self.cfg.influence_range_m, speed * speed / (2.0 * self._brake) + speed * GOVERNOR_LAG_S
                    + self._keep_m + GOVERNOR_MARGIN_M + 0.5)
 
@@ -759,7 +763,8 @@ class Replanner:
         dist = np.sqrt(np.einsum("ki,ki->k", rel, rel))
         along = rel[:, :2] @ u
         c = self._keep_m
-        near = dist <= cfg.influence_range_m
+        near = dist <= give_way_range_m(cfg.influence_range_m, self._trigger_m(self.speed_m_s),
+                                        self.closing.approach_m_s(self._t_s))
         v = self.shaper.v
         if tau >= self._next_rejoin and self._calm() and self._threat(
                 P, v, self._leg_frame(self.plan.leg_near(P, v[:2]))[2], REJOIN_HYSTERESIS_M) is None:
@@ -869,8 +874,9 @@ class Replanner:
         vz = min(max(vz, -cfg.vertical_speed_m_s, -wall(P[2] - z_lo)),
                  cfg.vertical_speed_m_s, wall(z_hi - P[2]))
         h = math.hypot(vt, vn)
-        if h > self.speed_m_s:
-            vt, vn = vt * self.speed_m_s / h, vn * self.speed_m_s / h
+        cap = give_way_speed_m_s(self.speed_m_s, self.closing.approach_m_s(getattr(self, "_t_s", None)))
+        if h > cap:
+            vt, vn = vt * cap / h, vn * cap / h
         return np.array([vt * u[0] + vn * n[0], vt * u[1] + vn * n[1], vz])
 
     def _allowed_speed(self, room_m):
@@ -892,12 +898,13 @@ class Replanner:
         shaper's lag t_lag = ``GOVERNOR_LAG_S``)."""
         d = np.maximum(obs_dist, 1e-9)
         nrm = (P - obs) / d[:, None]                        # from each point to the vehicle
-        allow = self._allowed_speed(np.maximum(0.0, d - self._keep_m - GOVERNOR_MARGIN_M))
+        allow = allowed_approach_m_s(self._allowed_speed(np.maximum(0.0, d - self._keep_m - GOVERNOR_MARGIN_M)),
+                                     self.closing.approach_m_s(getattr(self, "_t_s", None)))
         if scale_only:
             approach = -(nrm @ v)
             bad = approach > allow + 1e-12
             if bad.any():
-                v = v * float(np.min(allow[bad] / approach[bad]))
+                v = v * max(0.0, float(np.min(allow[bad] / approach[bad])))
             return v
         v = v.copy()
         for i in np.argsort(d)[:64]:
@@ -905,6 +912,18 @@ class Replanner:
             if approach > allow[i]:
                 v = v + (approach - allow[i]) * nrm[i]
         return v
+
+    def _give_way(self, P, pts) -> np.ndarray:
+        """Velocity (ENU, m/s) of a stop: zero, or backing away (level) from an obstacle
+        that comes closer than the vehicle could stop for (``companion.replan.closing``)."""
+        if not len(pts) or self.closing.approach_m_s(getattr(self, "_t_s", None)) <= 0.0:
+            return np.zeros(3)
+        v = self._govern(P, np.zeros(3), pts, np.linalg.norm(pts - P, axis=1))
+        u = self._leg_frame(self._avoid_leg)[2]            # along the corridor only: not into a row
+        v = float(v[:2] @ u[:2]) * np.array([u[0], u[1], 0.0])
+        h = math.hypot(v[0], v[1])
+        cap = give_way_speed_m_s(self.speed_m_s, self.closing.approach_m_s(getattr(self, "_t_s", None)))
+        return v if h <= cap else v * (cap / h)
 
     def _enter_stop(self, tau: float, events: list, then: str, detail: str) -> RefSample:
         self.mode = "stop"
@@ -918,7 +937,7 @@ class Replanner:
     def _stop(self, tau: float, dt: float, events: list) -> RefSample:
         P = np.array(self.shaper.p)
         pts = self._points()
-        v = np.zeros(3)
+        v = self._give_way(P, pts)
         st = self.shaper.step(dt, v.tolist())
         self._deviation(st.p)
         at_rest = math.sqrt(sum(x * x for x in st.v)) < REST_V_M_S and \

@@ -1,0 +1,134 @@
+"""How fast unknown obstacles come toward the vehicle, from successive ranges.
+
+The clearance governor (``companion.replan.replanner``) limits the vehicle's
+approach speed to every remembered obstacle point so that it can stop before
+the clearance: ``v <= v_stop(room)`` with ``v^2 / (2 a_b) + v t_lag = room``.
+That holds for a still obstacle. A worker or a tractor walking toward the
+vehicle closes the gap at ``v + w`` (w its own approach speed), so the rule
+here bounds the *closing* speed instead: ``v + w <= v_stop(room)``, i.e. the
+vehicle's allowed approach is ``v_stop(room) - w``; below zero the vehicle
+backs away at up to w, so it never closes on a mover faster than it can stop.
+
+w comes from the rangefinders: a DISTANCE_SENSOR hit placed in the world
+(``companion.replan.perception``) moves only with the obstacle (the
+vehicle's own motion is already taken out), so for one sensor the approach
+speed is ``-(h(t) - h(t0)) . u / (t - t0)`` (u the beam axis, from the
+vehicle outward; h(t0) the nearest hit of any sensor, within ``MATCH_M``,
+among those ``BASELINE_S`` to twice that old: the vehicle yaws and a mover
+passes from beam to beam), taken over at least ``BASELINE_S`` (a 1 cm range noise
+then reads as 0.03 m/s). Only hits within ``MATCH_M`` of each other are
+compared (the same object), and only unknown returns (not a row) are fed.
+The largest w counts while approaches keep being measured (each at most
+``HOLD_S`` after the last); speeds below
+``MIN_M_S`` (noise, a beam sliding over a still post as the vehicle yaws)
+count as 0, and so does a return that moved mostly across the beam (less
+than ``ALIGN_MIN`` of its displacement along the axis): a beam sweeping over
+a still surface as the vehicle flies past slides its return across, at up to
+the vehicle's speed.
+
+Movers move level: only the level parts count (the axis' level direction,
+the return's level displacement), and beams steeper than 60 deg (the down
+rangefinder, whose return jumps as the vehicle passes over a crate) are not
+used.
+
+Pure: times are the vehicle clock (s), points world ENU (m); no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+
+#: Shortest time (s) between the two hits of one sensor that give a speed.
+BASELINE_S = 0.3
+#: Two hits farther apart (m) are not the same object.
+MATCH_M = 1.0
+#: An approach speed is remembered this long (s) after it was last measured.
+HOLD_S = 1.0
+#: Approach speeds (m/s) below this are taken as a still obstacle.
+MIN_M_S = 0.3
+#: Approach speeds above this (m/s) are not a walker or a tractor: a wrong match.
+MAX_M_S = 6.0
+#: The return must have moved at least this fraction of its displacement along the beam.
+ALIGN_MIN = 0.8
+#: Beams whose axis has a level part below this (|u_xy|, a beam steeper than 60 deg) are not used.
+MIN_LEVEL = 0.5
+#: A hit older than this (s) is not compared.
+_STALE_S = 1.5
+
+
+class ClosingSpeed:
+    """The largest approach speed (m/s) of an unknown obstacle toward the vehicle."""
+
+    def __init__(self) -> None:
+        self._hist: dict[int, list[tuple[float, tuple, tuple]]] = {}
+        self._w = 0.0
+        self._t_w = -math.inf
+
+    def on_hit(self, t_s: float, sensor_id: int, hit_enu_m, axis_enu) -> None:
+        """An unknown return of ``sensor_id`` at vehicle time ``t_s``: the hit point
+        (ENU, m) and the beam's unit axis (ENU, from the sensor outward)."""
+        # one history for all sensors: the vehicle yaws and a mover passes from beam to beam
+        h = self._hist.setdefault(0, [])
+        hit = (float(hit_enu_m[0]), float(hit_enu_m[1]), float(hit_enu_m[2]))
+        uh = math.hypot(float(axis_enu[0]), float(axis_enu[1]))
+        if uh < MIN_LEVEL:
+            return                   # a steep beam: its return moves as the vehicle climbs over things
+        u = (float(axis_enu[0]) / uh, float(axis_enu[1]) / uh, 0.0)      # level: movers move level
+        while h and t_s - h[0][0] > _STALE_S:
+            h.pop(0)
+        # the nearest hit (within MATCH_M: the same object) of those BASELINE_S to
+        # 2 BASELINE_S old; the nearest, not the newest: a post beside a walker
+        best, t0 = MATCH_M, None
+        for tk, pk, _ in reversed(h):
+            age = t_s - tk
+            if age < BASELINE_S:
+                continue
+            if age > 2.0 * BASELINE_S:
+                break
+            dk = math.dist(hit, pk)
+            if dk <= best:
+                best, t0, p0 = dk, tk, pk
+        if t0 is not None:
+            d = (hit[0] - p0[0], hit[1] - p0[1], 0.0)
+            along = d[0] * u[0] + d[1] * u[1]
+            w = -along / (t_s - t0)
+            # a mover coming down the beam moves its return along the axis; a beam sweeping
+            # over a still surface (the vehicle flying past a box) slides it across
+            if MIN_M_S <= w <= MAX_M_S and -along >= ALIGN_MIN * math.hypot(d[0], d[1]):
+                # the largest speed while the mover keeps coming (conservative), fresh again
+                if w >= self._w or t_s - self._t_w > HOLD_S:
+                    self._w = w
+                self._t_w = t_s
+        h.append((t_s, hit, u))
+
+    def approach_m_s(self, t_s: float | None) -> float:
+        """The approach speed (m/s, >= 0) that the governor allows for at time ``t_s``
+        (None: before the first step, 0)."""
+        return self._w if t_s is not None and t_s - self._t_w <= HOLD_S else 0.0
+
+
+def allowed_approach_m_s(stop_speed_m_s, approach_m_s: float):
+    """The vehicle's allowed approach speed (m/s; negative: back away) toward a
+    point it could stop for from ``stop_speed_m_s`` when still, with the point
+    itself coming at ``approach_m_s``: the closing speed stays within the
+    stopping speed (module notes)."""
+    return stop_speed_m_s - approach_m_s
+
+
+#: A vehicle backing away from a mover outpaces it by this much (m/s).
+OUTPACE_M_S = 0.5
+
+
+def give_way_speed_m_s(cruise_m_s: float, approach_m_s: float) -> float:
+    """Horizontal speed cap (m/s) of the avoidance: the cruise speed, or more when a
+    mover comes at ``approach_m_s``: backing away must outpace it by ``OUTPACE_M_S``
+    (a vehicle held to a 1 m/s cruise cannot escape a worker walking at 1.5 m/s)."""
+    return max(cruise_m_s, approach_m_s + OUTPACE_M_S) if approach_m_s > 0.0 else cruise_m_s
+
+
+def give_way_range_m(influence_m: float, trigger_m: float, approach_m_s: float) -> float:
+    """Range (m) within which the governor acts on remembered points: the APF's
+    influence range, or, while a mover comes closer, the whole trigger range (the
+    braking distance of the closing speed): a mover first seen beyond the
+    influence range must slow the vehicle from there."""
+    return max(influence_m, trigger_m) if approach_m_s > 0.0 else influence_m

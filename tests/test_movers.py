@@ -1,0 +1,301 @@
+"""Moving obstacles (sim.movers): kinematics, rangefinder returns, crashes, bad specs.
+
+Every expected value is worked by hand from the scripted path: a walker is a
+cylinder of radius 0.25 m, 1.8 m tall (``companion.mission.sim``); the
+vehicle sphere's radius is set to 0.4 m here.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.errors import MissionError
+from companion.mission import load_mission
+from companion.mission.schema import HomeConfig, Mission
+from companion.mission.sim import (CollisionConfig, MoverConfig, NoiseConfig, RangefinderConfig, SimConfig,
+                                   WALKER_RADIUS_M)
+from companion.movers import mover_pose, movers_nearest
+from companion.vehicle import GRAVITY_M_S2, VehicleConfig
+from sitl.sensors import Rangefinder
+from sitl.sim import Simulation
+from sitl.world import World
+
+GOOD = """\
+name: test
+map: maps/map.yaml
+home: {lat: 44.8, lon: -0.6, alt_m: 30.0}
+flight: {height_agl_m: 2.0, speed_m_s: 1.5, waypoint_interval_s: 3.0}
+coverage: {line_spacing_m: 2.5, safety_margin_m: 0.45}
+pointing: {target: [1.0, 2.0, 3.0]}
+"""
+
+
+def write(tmp_path, text):
+    p = tmp_path / "mission.yaml"
+    p.write_text(text)
+    return p
+
+LEVEL = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+RING = RangefinderConfig(id=0, orientation=0, hfov_deg=22.5, vfov_deg=2.0, max_m=10.0, min_m=0.1)
+VEH = VehicleConfig()
+RADIUS = 0.4
+
+
+# --- kinematics ---------------------------------------------------------------------
+
+
+def test_pose_on_an_l_shaped_path_worked_by_hand():
+    # legs 3 m east then 4 m north (L = 7 m), 1 m/s, waits 2 s
+    c = MoverConfig("walker", ((0.0, 0.0), (3.0, 0.0), (3.0, 4.0)), 1.0, loop=False, start_s=2.0)
+    p = mover_pose(c, 1.0)
+    assert (p.x_m, p.y_m, p.vx_m_s) == (0.0, 0.0, 0.0)             # waiting at path[0]
+    p = mover_pose(c, 4.5)                                          # 2.5 m along the first leg
+    assert (p.x_m, p.y_m) == pytest.approx((2.5, 0.0)) and p.vx_m_s == 1.0 and p.heading_rad == 0.0
+    p = mover_pose(c, 7.0)                                          # 5 m: 2 m up the second leg
+    assert (p.x_m, p.y_m) == pytest.approx((3.0, 2.0)) and p.heading_rad == pytest.approx(math.pi / 2)
+    p = mover_pose(c, 100.0)                                        # stopped at the end
+    assert (p.x_m, p.y_m) == pytest.approx((3.0, 4.0)) and p.vx_m_s == p.vy_m_s == 0.0
+
+
+def test_looping_walker_goes_back_and_forth():
+    c = MoverConfig("walker", ((0.0, 0.0), (3.0, 0.0), (3.0, 4.0)), 1.0, loop=True, start_s=2.0)
+    p = mover_pose(c, 2.0 + 7.0 + 2.0)                              # 2 m back from the far end
+    assert (p.x_m, p.y_m) == pytest.approx((3.0, 2.0)) and p.vy_m_s == pytest.approx(-1.0)
+    p = mover_pose(c, 2.0 + 14.0 + 1.5)                             # a full round trip, then 1.5 m
+    assert (p.x_m, p.y_m) == pytest.approx((1.5, 0.0)) and p.vx_m_s == pytest.approx(1.0)
+
+
+def test_tractor_box_is_long_along_its_heading():
+    # a tractor driving north: 3 m along y, 1.5 m along x
+    c = MoverConfig("tractor", ((10.0, 0.0), (10.0, 20.0)), 2.0)
+    d, k = movers_nearest((c,), 5.0, lambda x, y: 0.0, 10.0 + 2.0, 10.0, 1.0)   # centre (10, 10)
+    assert k == 0 and d == pytest.approx(2.0 - 0.75)
+    d, _ = movers_nearest((c,), 5.0, lambda x, y: 0.0, 10.0, 10.0 + 3.0, 1.0)
+    assert d == pytest.approx(3.0 - 1.5)
+
+
+# --- the SITL sees them where they are -----------------------------------------------
+
+
+def _crossing(start_s=0.0, speed=1.5):
+    """A walker crossing the beam 3 m ahead: from (3, -3) to (3, 3)."""
+    return MoverConfig("walker", ((3.0, -3.0), (3.0, 3.0)), speed, start_s=start_s)
+
+
+def test_rangefinder_returns_a_walker_at_its_true_range():
+    world = World.build(movers=(_crossing(),))
+    rf = Rangefinder(RING, 0)
+    world.set_time(0.0)                          # at (3, -3): 45 deg off a 22.5 deg beam
+    assert rf.true_distance(world, (0.0, 0.0, 1.5), LEVEL) == math.inf
+    world.set_time(2.0)                          # 3 m walked at 1.5 m/s: on the axis
+    assert rf.true_distance(world, (0.0, 0.0, 1.5), LEVEL) == pytest.approx(3.0 - WALKER_RADIUS_M, abs=0.02)
+    # 0.4 s later it is 0.6 m aside, 11.3 deg: the nearest point in view is on the beam's edge
+    world.set_time(2.4)
+    a = math.radians(11.25)
+    off = 3.0 * math.sin(math.atan2(0.6, 3.0) - a) * math.hypot(3.0, 0.6) / 3.0
+    expect = math.hypot(3.0, 0.6) * math.cos(math.atan2(0.6, 3.0) - a) - math.sqrt(WALKER_RADIUS_M ** 2 - off ** 2)
+    assert rf.true_distance(world, (0.0, 0.0, 1.5), LEVEL) == pytest.approx(expect, abs=0.02)
+
+
+def _mission(movers, radius=RADIUS):
+    return Mission(name="t", map="m.yaml", dem="d.asc", home=HomeConfig(44.8, -0.6, 30.0),
+                   sim=SimConfig(movers=tuple(movers), noise=NoiseConfig(vector_variance=0.0, gyro_variance=0.0,
+                                                                          range_std_m=0.0),
+                                 rangefinders=(), collision=CollisionConfig(vehicle_radius_m=radius)))
+
+
+def _hover(sim, p, frames):
+    f = VEH.mass_kg * GRAVITY_M_S2 / 4.0
+    sim.plant.set_state(p, v=(0.0, 0.0, 0.0), f=(f,) * 4)
+    hover = (f / VEH.max_thrust_per_rotor_n,) * 4
+    for _ in range(frames):
+        sim.step_frame(hover)
+        if sim.crash is not None:
+            return
+
+
+def test_the_simulation_poses_movers_on_the_vehicle_clock():
+    sim = Simulation(_mission((_crossing(),)), np.random.default_rng(0), start_enu_m=(0.0, 0.0))
+    for _ in range(250):                         # 1 s of 4 ms frames
+        sim.step_frame((0.0,) * 4)
+    ob = sim.world.obstacles_now[0]
+    assert sim.time_us == 1_000_000 and (ob.x, ob.y) == pytest.approx((3.0, -1.5), abs=1e-12)
+
+
+def test_a_walker_walking_into_a_hovering_vehicle_is_a_crash_that_names_it():
+    sim = Simulation(_mission((_crossing(),)), np.random.default_rng(0), start_enu_m=(0.0, 0.0))
+    _hover(sim, (3.0, 0.0, 1.0), 750)
+    c = sim.crash
+    assert c is not None and c.kind == "walker" and c.obstacle_index == 0
+    assert c.text.startswith("CRASH: walker #1")
+    from companion.link.crash_text import parse_crash
+
+    back = parse_crash(c.text)                   # the companion reads it back
+    assert back is not None and (back.kind, back.obstacle_index) == ("walker", 0)
+    # contact when the walker's axis is radius + 0.25 m from the vehicle: 3 - 0.65 m walked at 1.5 m/s
+    t_contact = (3.0 - (RADIUS + WALKER_RADIUS_M)) / 1.5
+    assert c.time_us * 1e-6 == pytest.approx(t_contact, abs=0.005)
+
+
+def test_a_walker_passing_at_more_than_the_radius_is_no_crash():
+    # the walker's axis passes 0.7 m from the vehicle centre: 0.05 m of air between the surfaces
+    walker = MoverConfig("walker", ((3.7, -3.0), (3.7, 3.0)), 1.5)
+    sim = Simulation(_mission((walker,)), np.random.default_rng(0), start_enu_m=(0.0, 0.0))
+    _hover(sim, (3.0, 0.0, 1.0), 750)
+    assert sim.crash is None
+
+
+# --- bad specs ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("movers, match", [
+    ("[{type: walker, path: [[0, 0]], speed_m_s: 1.0}]", r"at least 2 points"),
+    ("[{type: walker, path: [[0, 0], [0, 0]], speed_m_s: 1.0}]", r"equal consecutive"),
+    ("[{type: walker, path: [[0, 0], [5, 0]], speed_m_s: 2.0}]", r"speed_m_s must be in \(0, 1.5\]"),
+    ("[{type: tractor, path: [[0, 0], [5, 0]], speed_m_s: 0}]", r"speed_m_s must be in \(0, 5\]"),
+    ("[{type: horse, path: [[0, 0], [5, 0]], speed_m_s: 1.0}]", r"sim\.movers\[0\]\.type"),
+    ("[{type: walker, path: [[0, 0], [5, .nan]], speed_m_s: 1.0}]", r"finite"),
+    ("[{type: walker, path: [[0, 0], [5, 0]], speed_m_s: 1.0, start_s: -1}]", r"start_s must be >= 0"),
+    ("[{type: walker, path: [[0, 0], [5, 0]], speed: 1.0}]", r"speed.*unknown key|unknown key.*speed"),
+])
+def test_bad_mover_specs_name_the_problem(tmp_path, movers, match):
+    with pytest.raises(MissionError, match=match):
+        load_mission(write(tmp_path, GOOD + f"sim: {{movers: {movers}}}\n"))
+
+
+def test_bad_mover_spec_is_one_line_exit_2(tmp_path, capsys):
+    from companion.cli import main
+
+    path = write(tmp_path, GOOD + "sim: {movers: [{type: walker, path: [[0, 0], [5, 0]], speed_m_s: 9}]}\n")
+    assert main(["plan", str(path), "-o", str(tmp_path / "plan.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "mission.yaml" in err[0] and "speed_m_s" in err[0]
+    assert not (tmp_path / "plan.json").exists()
+
+
+# --- the companion's closing-speed rule (companion/replan/closing.py) ------------------
+
+
+def test_closing_speed_of_a_walker_coming_down_the_beam():
+    from companion.replan.closing import ClosingSpeed
+
+    c = ClosingSpeed()
+    u = (1.0, 0.0, 0.0)                          # beam along +x
+    # a walker at 1.5 m/s toward the sensor: its surface 5.0 m, then 0.6 m nearer 0.4 s later
+    for k in range(9):
+        c.on_hit(0.05 * k, 3, (5.0 - 1.5 * 0.05 * k, 0.0, 1.5), u)
+    assert c.approach_m_s(0.4) == pytest.approx(1.5, abs=1e-9)
+    assert c.approach_m_s(0.4 + 1.01) == 0.0      # not measured again for HOLD_S: forgotten
+
+
+def test_still_or_receding_obstacles_have_no_closing_speed():
+    from companion.replan.closing import ClosingSpeed
+
+    c = ClosingSpeed()
+    u = (1.0, 0.0, 0.0)
+    for k in range(20):                            # a post: the hit stays put while the vehicle flies
+        c.on_hit(0.05 * k, 0, (5.0, 0.0, 1.5), u)
+        c.on_hit(0.05 * k, 1, (5.0 + 1.0 * 0.05 * k, 0.0, 1.5), u)   # a walker walking away
+    assert c.approach_m_s(1.0) == 0.0
+
+
+def test_the_governor_bounds_the_closing_speed_not_the_vehicles_own():
+    from companion.replan.closing import allowed_approach_m_s
+
+    # still obstacle: the vehicle may approach at the stopping speed; a walker coming at
+    # 1.5 m/s takes that off; with no room left the vehicle backs away at the walker's speed
+    assert allowed_approach_m_s(2.0, 0.0) == 2.0
+    assert allowed_approach_m_s(2.0, 1.5) == pytest.approx(0.5)
+    assert allowed_approach_m_s(0.0, 1.5) == -1.5
+
+
+# --- one short flight: a walker crosses the first corridor --------------------------------
+
+
+def test_vehicle_gives_way_to_a_walker_crossing_the_first_corridor(tmp_path):
+    """flat-rectangle's first corridor is flown westward along y = 8.75 m from x = 22 m
+    (the trajectory starts about 7 s after boot). A worker steps off the row face at
+    (17, 7.8) at 8.3 s and crosses the corridor at 1 m/s, into the next row: mid-corridor
+    when the vehicle is about 3 m away. The vehicle must give way (an avoidance event)
+    and keep the configured clearance (0.5 m, ``replan.clearance_m``) from the walker's
+    true position (the SITL's ground truth), with no crash."""
+    import json
+
+    from companion.cli import main
+    from companion.commands.demo import missions_dir
+    from companion.mission.replan import ReplanConfig
+
+    fr = missions_dir() / "flat-rectangle"
+    (tmp_path / "m.yaml").write_text(
+        "name: walker-cross\n"
+        f"map: {fr / 'map.yaml'}\ndem: {fr / 'dem.asc'}\n"
+        "home: {lat: 44.8, lon: -0.6, alt_m: 30.0}\n"
+        "flight: {height_agl_m: 1.5, speed_m_s: 1.0, waypoint_interval_s: 4.0}\n"
+        "coverage: {line_spacing_m: 2.5, safety_margin_m: 0.45}\n"
+        "pointing: {target: centroid}\n"
+        "sim:\n  noise: {vector_variance: 5.0e-4, gyro_variance: 5.0e-4}\n  seed: 1\n"
+        "  movers: [{type: walker, path: [[17.0, 7.8], [17.0, 11.5]], speed_m_s: 1.0, start_s: 8.3}]\n")
+    out = tmp_path / "out"
+    main(["demo", "--mission", str(tmp_path / "m.yaml"), "--transport", "inproc", "--cut", "9",
+          "--out", str(out), "--no-plots", "--quiet"])
+    rep = json.loads((out / "report.json").read_text())
+    rp = rep["replanning"]
+    assert rep["crashed"] is False and rep["crash"] is None
+    assert any(e["action"] in ("avoid", "stop") for e in rp["event_list"])       # it gave way
+    assert rp["clearance_source"] == "sim_truth" and rp["min_clearance_obstacle"] == 0    # the walker
+    assert rp["min_clearance_m"] >= ReplanConfig.clearance_m
+
+
+# --- campaign: movers drawn from the seeded per-scenario generator ----------------------
+
+
+def test_campaign_movers_cross_a_corridor_and_leave_other_draws_alone():
+    import dataclasses
+
+    from companion.campaign.scenarios import load_fields, scenario
+    from companion.campaign.spec import MoverSpec, spec_from_dict
+
+    base = {"name": "m", "missions": ["flat-rectangle"], "flights": 10, "seed": 3, "cut_s": 20.0,
+            "obstacles": {"count": [1, 2], "placement": "rows"}, "wind": {"speed_m_s": [0.0, 2.0]}}
+    spec = spec_from_dict({**base, "movers": {"count": [1, 1], "speed_m_s": [0.5, 2.5]}}, "t.yaml")
+    plain = spec_from_dict(base, "t.yaml")
+    fields = load_fields(spec)
+    for i in (0, 7):
+        s, p = scenario(spec, fields, i), scenario(plain, fields, i)
+        sim = dict(s["overrides"]["sim"])
+        movers = sim.pop("movers")
+        assert sim == p["overrides"]["sim"] and s["seed"] == p["seed"]      # nothing else moved
+        assert scenario(dataclasses.replace(spec, flights=1000), fields, i) == s   # independent of the count
+        for mv in movers:
+            (ax, ay), (bx, by) = mv["path"]
+            # flat-rectangle's corridors run along x: across one is along y, 6 m long
+            assert ax == pytest.approx(bx, abs=1e-3) and abs(by - ay) == pytest.approx(MoverSpec.length_m, abs=2e-3)
+            assert 0.5 <= mv["speed_m_s"] <= 1.5 and mv["start_s"] >= 0.0      # a walker: capped at 1.5
+
+
+def test_bad_campaign_mover_spec_names_the_key():
+    from companion.campaign.spec import spec_from_dict
+    from companion.errors import CampaignError
+
+    with pytest.raises(CampaignError, match=r"movers.*kinds|kinds"):
+        spec_from_dict({"name": "m", "missions": ["flat-rectangle"], "flights": 1,
+                        "movers": {"kinds": ["horse"]}}, "t.yaml")
+    with pytest.raises(CampaignError, match=r"movers\.speed_m_s"):
+        spec_from_dict({"name": "m", "missions": ["flat-rectangle"], "flights": 1,
+                        "movers": {"speed_m_s": [0.5, 9.0]}}, "t.yaml")
+
+
+def test_a_beam_sliding_over_a_still_wall_is_no_closing_speed():
+    from companion.replan.closing import ClosingSpeed
+
+    # flying +x at 1 m/s past a wall; a beam looking back-left at 60 deg from the wall:
+    # u = (-cos 60, sin 60); its return slides +x with the vehicle, d.u / |d| = -0.5:
+    # 0.5 m/s "toward" the sensor that is only the beam sweeping across the wall
+    c = ClosingSpeed()
+    u = (-0.5, math.sqrt(3.0) / 2.0, 0.0)
+    for k in range(20):
+        c.on_hit(0.05 * k, 9, (1.0 * 0.05 * k, 2.0, 1.5), u)
+    assert c.approach_m_s(0.95) == 0.0
