@@ -4,7 +4,11 @@ in both control modes. Checked on the recording: the vehicle said
 MAV_AUTOPILOT_ARDUPILOTMEGA and sent RAW_IMU, not HIGHRES_IMU, each frame; the companion set GUIDED with ArduCopter's number
 (DO_SET_MODE(1, 4)), armed, and took off with MAV_CMD_NAV_TAKEOFF (param7 in
 metres above home); the vehicle was in GUIDED (4) from arming to our landing
-command and reached the height asked for before our setpoints took over."""
+command and reached the height asked for before our setpoints took over. With
+``--control companion`` the controller took over a vehicle at rest (ArduCopter
+says "Takeoff complete" while still climbing at up to 2.7 m/s: taken over then,
+the velocity error turned the thrust vector down, a demanded flip) and the
+attitude stayed near level."""
 
 from __future__ import annotations
 
@@ -15,6 +19,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.cli import main
+from companion.flight.core import TAKEOFF_REST_SPEED_M_S
 from mavcore.autopilot import ARDUCOPTER
 
 pytestmark = pytest.mark.slow
@@ -36,6 +41,7 @@ def test_demo_flies_the_ardupilot_personality(tmp_path, caplog, control):
     counts = {"RAW_IMU": 0, "HIGHRES_IMU": 0, "SCALED_IMU2": 0}
     landing = False
     z = None
+    v_handover, max_tilt, speed, controlling = None, 0.0, None, False
     while (m := log.recv_match()) is not None:
         t = m.get_type()
         if m.get_srcSystem() == 1 and m.get_srcComponent() == 1:
@@ -48,8 +54,13 @@ def test_demo_flies_the_ardupilot_personality(tmp_path, caplog, control):
             elif t == "LOCAL_POSITION_NED":
                 z = -m.z
                 z0 = z if z0 is None else z0
+                speed = (m.vx ** 2 + m.vy ** 2 + m.vz ** 2) ** 0.5
+            elif t == "ATTITUDE" and controlling and not landing:
+                max_tilt = max(max_tilt, abs(m.roll), abs(m.pitch))
             elif t == "STATUSTEXT" and m.text.startswith("Takeoff complete"):
                 z_done = z
+        elif t == "HIL_ACTUATOR_CONTROLS" and not controlling and m.controls[0] == m.controls[0]:
+            controlling, v_handover = True, speed      # our first motor commands: the hand-over
         elif t == "COMMAND_LONG":
             if m.command == mavlink.MAV_CMD_DO_SET_MODE:
                 set_modes.append((m.param1, m.param2, m.param3))
@@ -65,3 +76,7 @@ def test_demo_flies_the_ardupilot_personality(tmp_path, caplog, control):
     assert len(set(takeoffs)) == 1 and takeoffs[0] > 0.5
     # reached within the take-off acceptance (NAV_MC_ALT_RAD, 0.8 m) of home + param7
     assert z_done is not None and abs(z_done - (z0 + takeoffs[0])) <= 0.8
+    if control == "companion":
+        # the controller took over a vehicle at rest, and flew it level (the flip was > 1.6 rad)
+        assert v_handover is not None and v_handover <= TAKEOFF_REST_SPEED_M_S
+        assert max_tilt < 0.3

@@ -103,6 +103,12 @@ UNUSED_STREAMS = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MS
 _SENSOR_DOWN = mavlink.MAV_SENSOR_ROTATION_PITCH_270
 #: Height error (m) within which an ArduCopter take-off (MAV_CMD_NAV_TAKEOFF) counts as done.
 TAKEOFF_ALT_TOLERANCE_M = 0.3
+#: Speed (m/s) under which the vehicle counts as at rest after an ArduCopter take-off: our
+#: take-off reference then starts, at rest, where the vehicle is. Handed over while still
+#: climbing (ArduCopter says "Takeoff complete" within NAV_MC_ALT_RAD, at up to ~2.7 m/s),
+#: the velocity error alone made the thrust vector of eq. (23) point down (kv |v| > m g:
+#: 30 x 2.54 = 76 N against 42.6 N), i.e. a demanded flip.
+TAKEOFF_REST_SPEED_M_S = 0.2
 _NAN3 = (math.nan, math.nan, math.nan)
 _NAN9 = (math.nan,) * 9
 _NAN_CTRL = (math.nan,) * 10
@@ -720,7 +726,10 @@ class FlightCore:
     def _guided_takeoff(self):
         """ArduCopter: armed in GUIDED on the ground, setpoints do not lift the
         vehicle; MAV_CMD_NAV_TAKEOFF (param7: metres above home) climbs it to
-        the take-off's first climb height, where our setpoints take over."""
+        the take-off's first climb height, where our setpoints take over once
+        it is there and at rest (``TAKEOFF_REST_SPEED_M_S``): the take-off
+        reference (``_schedule``) starts at rest from the vehicle's position,
+        so it must agree with the vehicle's velocity too."""
         x, y, z = self._pos
         seg = takeoff_segments(tuple(self._pos), self._hold_first.p, self.inputs.transit_floor_z_m,
                                self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s)[0]
@@ -730,9 +739,18 @@ class FlightCore:
         yield from self._command(mavlink.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, math.nan, math.nan, math.nan, top - z),
                                  "takeoff", temp_retries=10)
         t_limit = self.t_s + self.cfg.landing_timeout_s
-        yield lambda: abs(self._pos[2] - top) <= TAKEOFF_ALT_TOLERANCE_M or self.t_s >= t_limit
+
+        def there() -> bool:
+            v = self._vel
+            return (abs(self._pos[2] - top) <= TAKEOFF_ALT_TOLERANCE_M and v is not None
+                    and math.hypot(v[0], v[1], v[2]) <= TAKEOFF_REST_SPEED_M_S)
+
+        yield lambda: there() or self.t_s >= t_limit
         if abs(self._pos[2] - top) > TAKEOFF_ALT_TOLERANCE_M:
             raise LinkError(f"vehicle did not climb to {top - z:.2f} m within {self.cfg.landing_timeout_s:g} s")
+        if not there():
+            raise LinkError(f"vehicle did not come to rest (under {TAKEOFF_REST_SPEED_M_S:g} m/s) at {top - z:.2f} m "
+                            f"within {self.cfg.landing_timeout_s:g} s")
 
     def _schedule(self, t_arm: float) -> None:
         """The take-off/hold/trajectory/hover times, from arming at ``t_arm``."""
