@@ -56,8 +56,6 @@ from companion.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
 from . import plant_kernel as _plant_kernel
 
 _REORTHO_EVERY = _plant_kernel.REORTHO_EVERY
-#: ``Plant._kernel`` before the first ``advance`` chose it
-_UNSET = object()
 
 
 @dataclass(frozen=True)
@@ -125,8 +123,9 @@ class Plant:
         self.touchdowns = 0
         self._terrain = self.ground_height
         self._terrain_max_m = self.max_ground_m
-        # the compiled airborne kernel (``sitl.plant_kernel``), chosen at the first ``advance``
-        self._kernel = _UNSET
+        # the compiled airborne kernel (``sitl.plant_kernel``, None: the Python loop), chosen
+        # here so that numba's import and cache load (~0.3 s, once per process) precede the flight
+        self._kernel = _plant_kernel.kernel()
         self._kstate = self._kinp = self._kprm = None
         self.set_state((0.0, 0.0, 0.0))
 
@@ -212,8 +211,6 @@ class Plant:
         c3 = fmax * (0.0 if c3 < 0.0 else 1.0 if c3 > 1.0 else c3)
         if not self.landed:
             kern = self._kernel
-            if kern is _UNSET:
-                kern = self._kernel = _plant_kernel.kernel()
             if kern is not None:
                 n -= self._advance_compiled(kern, c0, c1, c2, c3, h, n, wind_enu_m_s)
                 if n == 0:

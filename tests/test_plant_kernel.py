@@ -103,7 +103,6 @@ def test_crash_rest_falls_in_python(monkeypatch):
 def test_env_forces_python(monkeypatch):
     monkeypatch.setenv(plant_kernel.ENV, "0")
     assert plant_kernel.kernel() is None
-    pl = Plant(PlantParams())
-    pl.set_state((0.0, 0.0, 5.0))
-    pl.advance((0.5,) * 4, 0.001, 4)
-    assert pl._kernel is None
+    assert Plant(PlantParams())._kernel is None
+    monkeypatch.setenv(plant_kernel.ENV, "1")
+    assert Plant(PlantParams())._kernel is plant_kernel.kernel() is not None
