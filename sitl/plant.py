@@ -40,7 +40,9 @@ The hot path is plain Python float arithmetic on purpose: numpy calls on
 3-vectors cost about 1 us each, the whole step here costs about as much as
 ten of them (see ``benchmarks/bench_sitl.py``). ``Plant.advance`` runs the
 several steps of a sensor frame with the state in local variables
-(bit-for-bit the same as repeated ``step`` calls).
+(bit-for-bit the same as repeated ``step`` calls). With numba installed (the
+``fast`` extra) the airborne steps run in ``sitl.plant_kernel`` instead, bit
+for bit the same (``VINEYARD_GNC_NUMBA=0``: this loop only).
 """
 
 from __future__ import annotations
