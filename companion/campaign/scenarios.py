@@ -223,7 +223,8 @@ def scenario(spec: CampaignSpec, fields: dict[str, Field], index: int,
                        "gust_time_constant_s": w.gust_time_constant_s, "drag_n_s_m": w.drag_n_s_m}
     # Drawn after everything above, so that adding these keys to a spec moves no earlier draw.
     if spec.sensors is not None and spec.sensors.range_dropout_probability is not None:
-        v = round(dr.uniform("sensors.range_dropout_probability", *dim_range(spec.sensors.range_dropout_probability)), 6)
+        d = spec.sensors.range_dropout_probability
+        v = round(dr.uniform("sensors.range_dropout_probability", *dim_range(d)), 6)
         sim.setdefault("noise", {})["range_dropout_probability"] = v
     link = None
     if spec.link is not None:
