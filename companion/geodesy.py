@@ -54,6 +54,11 @@ def geodetic2enu(lat_deg, lon_deg, alt_m, lat0_deg: float, lon0_deg: float, alt0
 
     Scalars give floats, arrays (broadcast together) give arrays.
     """
+    if type(lat_deg) is float and type(lon_deg) is float and type(alt_m) is float:
+        # one point (the telemetry path, every few frames): the same PROJ call
+        # without the array round trip (~2 us instead of ~11 us)
+        x, y, z = _transformer(lat0_deg, lon0_deg, alt0_m).transform(lon_deg, lat_deg, alt_m, errcheck=True)
+        return float(x), float(y), float(z)
     lat, lon, alt = np.broadcast_arrays(np.asarray(lat_deg, float), np.asarray(lon_deg, float),
                                         np.asarray(alt_m, float))
     x, y, z = _transformer(lat0_deg, lon0_deg, alt0_m).transform(lon, lat, alt, errcheck=True)
@@ -64,6 +69,10 @@ def geodetic2enu(lat_deg, lon_deg, alt_m, lat0_deg: float, lon0_deg: float, alt0
 
 def enu2geodetic(x_east_m, y_north_m, z_up_m, lat0_deg: float, lon0_deg: float, alt0_m: float):
     """ENU (m) about the home -> WGS-84 (lat deg, lon deg, alt m); the inverse of :func:`geodetic2enu`."""
+    if type(x_east_m) is float and type(y_north_m) is float and type(z_up_m) is float:
+        lon, lat, alt = _transformer(lat0_deg, lon0_deg, alt0_m).transform(x_east_m, y_north_m, z_up_m,
+                                                                            direction="INVERSE", errcheck=True)
+        return float(lat), float(lon), float(alt)
     x, y, z = np.broadcast_arrays(np.asarray(x_east_m, float), np.asarray(y_north_m, float),
                                   np.asarray(z_up_m, float))
     lon, lat, alt = _transformer(lat0_deg, lon0_deg, alt0_m).transform(x, y, z, direction="INVERSE",

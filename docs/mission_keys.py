@@ -238,6 +238,8 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "sim.noise.gyro_bias_rad_s": ("rad/s", "each in [-1, 1]", "Constant gyro bias, body FLU."),
     "sim.noise.accel_bias_m_s2": ("m/s^2", "each in [-5, 5]", "Constant accelerometer bias, body FLU."),
     "sim.noise.range_std_m": ("m", "[0, 5]", "Rangefinder white noise."),
+    "sim.noise.range_dropout_probability": ("", "[0, 1]", "Probability that a due rangefinder reading is lost "
+                                            "(no DISTANCE_SENSOR), each reading independently (seeded)."),
     "sim.noise.gyro_noise_density_rad_s_rthz": ("rad/s/sqrt(Hz)", "[0, 0.1]", "Gyro white-noise density; per-sample "
                                                 "std = density * sqrt(sensor rate). Overrides the profile's."),
     "sim.noise.accel_noise_density_m_s2_rthz": ("m/s^2/sqrt(Hz)", "[0, 1]", "Accelerometer white-noise density."),

@@ -213,6 +213,20 @@ def addressed_to_us(msg, system_id: int = 1, component_id: int = 1) -> bool:
     return ts in (0, system_id) and tc in (0, component_id)
 
 
+def _triple(mask: int, x, y, z, bx: int, by: int, bz: int, limit: float) -> tuple:
+    """Three setpoint components (floats): NaN where ``mask`` ignores one or it is
+    not finite; ValueError when a used one exceeds ``limit``."""
+    out = []
+    for v, bit in ((float(x), bx), (float(y), by), (float(z), bz)):
+        if not (mask & bit) and math.isfinite(v):
+            if abs(v) > limit:
+                raise ValueError
+            out.append(v)
+        else:
+            out.append(math.nan)
+    return out
+
+
 def decode_position_target(msg, yaw_enu_rad: float = 0.0,
                            pos_enu_m=(0.0, 0.0, 0.0)) -> PositionTarget | None:
     """SET_POSITION_TARGET_LOCAL_NED -> ``PositionTarget`` (ENU), or None.
@@ -236,23 +250,13 @@ def decode_position_target(msg, yaw_enu_rad: float = 0.0,
     if frame not in (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_NED):
         return None
 
-    def triple(vals, bits, limit):
-        out = [math.nan, math.nan, math.nan]
-        for i in range(3):
-            v = float(vals[i])
-            if not (mask & bits[i]) and math.isfinite(v):
-                if abs(v) > limit:
-                    raise ValueError
-                out[i] = v
-        return out
-
     try:
-        p_ned = triple((msg.x, msg.y, msg.z), (TM_X, TM_Y, TM_Z), MAX_SETPOINT_POS_M)
-        v_ned = triple((msg.vx, msg.vy, msg.vz), (TM_VX, TM_VY, TM_VZ), MAX_SETPOINT_VEL_M_S)
+        p_ned = _triple(mask, msg.x, msg.y, msg.z, TM_X, TM_Y, TM_Z, MAX_SETPOINT_POS_M)
+        v_ned = _triple(mask, msg.vx, msg.vy, msg.vz, TM_VX, TM_VY, TM_VZ, MAX_SETPOINT_VEL_M_S)
         if mask & TM_FORCE:
-            a_ned = list(_NAN3)
+            a_ned = _NAN3
         else:
-            a_ned = triple((msg.afx, msg.afy, msg.afz), (TM_AX, TM_AY, TM_AZ), MAX_SETPOINT_ACC_M_S2)
+            a_ned = _triple(mask, msg.afx, msg.afy, msg.afz, TM_AX, TM_AY, TM_AZ, MAX_SETPOINT_ACC_M_S2)
     except ValueError:
         return None
 
@@ -265,9 +269,10 @@ def decode_position_target(msg, yaw_enu_rad: float = 0.0,
             return None
         yaw_rate = -float(msg.yaw_rate)  # about down (NED) -> about up (ENU)
 
-    p = frames.ned2enu(np.array(p_ned))
-    v = frames.ned2enu(np.array(v_ned))
-    a = frames.ned2enu(np.array(a_ned))
+    # NED -> ENU (frames.ned2enu, on floats: (y, x, -z))
+    p = np.array((p_ned[1], p_ned[0], -p_ned[2]))
+    v = np.array((v_ned[1], v_ned[0], -v_ned[2]))
+    a = np.array((a_ned[1], a_ned[0], -a_ned[2]))
     if frame == mavlink.MAV_FRAME_BODY_NED:
         # Body-NED: x forward along the heading, y right, z down; the
         # horizontal parts rotate by the current heading, z stays vertical.

@@ -40,7 +40,9 @@ The hot path is plain Python float arithmetic on purpose: numpy calls on
 3-vectors cost about 1 us each, the whole step here costs about as much as
 ten of them (see ``benchmarks/bench_sitl.py``). ``Plant.advance`` runs the
 several steps of a sensor frame with the state in local variables
-(bit-for-bit the same as repeated ``step`` calls).
+(bit-for-bit the same as repeated ``step`` calls). With numba installed (the
+``fast`` extra) the airborne steps run in ``sitl.plant_kernel`` instead, bit
+for bit the same (``VINEYARD_GNC_NUMBA=0``: this loop only).
 """
 
 from __future__ import annotations
@@ -53,7 +55,9 @@ import numpy as np
 
 from companion.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
 
-_REORTHO_EVERY = 64
+from . import plant_kernel as _plant_kernel
+
+_REORTHO_EVERY = _plant_kernel.REORTHO_EVERY
 
 
 @dataclass(frozen=True)
@@ -121,6 +125,10 @@ class Plant:
         self.touchdowns = 0
         self._terrain = self.ground_height
         self._terrain_max_m = self.max_ground_m
+        # the compiled airborne kernel (``sitl.plant_kernel``, None: the Python loop), chosen
+        # here so that numba's import and cache load (~0.3 s, once per process) precede the flight
+        self._kernel = _plant_kernel.kernel()
+        self._kstate = self._kinp = self._kprm = None
         self.set_state((0.0, 0.0, 0.0))
 
     # ------------------------------------------------------------------ state
@@ -203,6 +211,12 @@ class Plant:
         c1 = fmax * (0.0 if c1 < 0.0 else 1.0 if c1 > 1.0 else c1)
         c2 = fmax * (0.0 if c2 < 0.0 else 1.0 if c2 > 1.0 else c2)
         c3 = fmax * (0.0 if c3 < 0.0 else 1.0 if c3 > 1.0 else c3)
+        if not self.landed:
+            kern = self._kernel
+            if kern is not None:
+                n -= self._advance_compiled(kern, c0, c1, c2, c3, h, n, wind_enu_m_s)
+                if n == 0:
+                    return
         (A00, A01, A02, A03), (A10, A11, A12, A13), (A20, A21, A22, A23), (A30, A31, A32, A33) = self._A
         m, g, kd = self._m, self._g, self._kd
         mg = m * g
@@ -370,6 +384,33 @@ class Plant:
         self.acc = acc
         self.landed = landed
         self._count = count
+
+    def _advance_compiled(self, kern, c0: float, c1: float, c2: float, c3: float, h: float, n: int,
+                          wind_enu_m_s) -> int:
+        """The airborne steps of ``advance`` in the compiled kernel (``sitl.plant_kernel``);
+        returns how many it did (it stops where the terrain is needed)."""
+        st, inp = self._kstate, self._kinp
+        if st is None:
+            st, inp = self._kstate, self._kinp = np.zeros(_plant_kernel.STATE_LEN), np.zeros(_plant_kernel.INP_LEN)
+            self._kprm = np.array([*(a for row in self._A for a in row), self._m, self._g, self._kd, *self._J,
+                                   0.0, 0.0, 0.0])
+        prm = self._kprm
+        prm[22] = self._lag_a
+        prm[23] = self._lag_b
+        st[:] = (*self.f, *self.p, *self.v, *self.w, *self.R, *self.acc, float(self._count))
+        gx, gy, gz = wind_enu_m_s
+        inp[:] = (c0, c1, c2, c3, h, gx, gy, gz, self.max_ground_m)
+        done = kern(st, prm, inp, n)
+        if done:
+            t = st.tolist()
+            self.f = tuple(t[0:4])
+            self.p = tuple(t[4:7])
+            self.v = tuple(t[7:10])
+            self.w = tuple(t[10:13])
+            self.R = tuple(t[13:22])
+            self.acc = tuple(t[22:25])
+            self._count = int(t[25])
+        return done
 
 
 def rotate_right(R, thx: float, thy: float, thz: float):

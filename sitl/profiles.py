@@ -87,6 +87,7 @@ PAPER_DEFAULTS: dict = {
     "gnss_rate_hz": None,              # None: every sensor frame
     "gnss_latency_s": 0.0,
     "range_std_m": 0.01,
+    "range_dropout_probability": 0.0,
 }
 
 _MOTOR_DIR = (0.3, 0.2, 0.93)
@@ -148,6 +149,8 @@ class SensorModel:
     gnss_latency_us : int
         Measurement-to-delivery delay (us).
     range_std_m : float
+    range_dropout_probability : float
+        Probability that a due rangefinder reading is lost.
     """
 
     sensor_hz: int
@@ -170,6 +173,7 @@ class SensorModel:
     gnss_period_us: int
     gnss_latency_us: int
     range_std_m: float
+    range_dropout_probability: float = 0.0
 
 
 def noise_values(sim: SimConfig) -> dict:
@@ -212,4 +216,5 @@ def resolve_sensor_model(sim: SimConfig, sensor_hz: int = 250) -> SensorModel:
         gnss_period_us=gnss_period_us,
         gnss_latency_us=int(round(float(v["gnss_latency_s"]) * 1e6)),
         range_std_m=float(v["range_std_m"]),
+        range_dropout_probability=float(v["range_dropout_probability"]),
     )

@@ -53,7 +53,9 @@ both modes
   ``min_m`` below it. The mounting rotation (sensor frame: beam along x,
   horizontal field of view across y, vertical across z -> body FLU) comes
   from the MAV_SENSOR_ORIENTATION or, for CUSTOM (100), from the mission's
-  ``rotation_flu_deg`` / ``quaternion_flu_wxyz``.
+  ``rotation_flu_deg`` / ``quaternion_flu_wxyz``. With
+  ``range_dropout_probability`` p > 0 each due reading is lost with
+  probability p (one uniform draw per due reading; none when p = 0).
 
 Every random draw comes from the ``numpy.random.Generator`` passed in.
 """
@@ -322,6 +324,7 @@ class SensorSuite:
         self.gnss = GnssReceiver(md.gnss_period_us, md.gnss_latency_us, md.position_std_xy_m,
                                  md.position_std_z_m, md.velocity_std_m_s, rng)
         self.range_std = md.range_std_m
+        self.range_dropout = md.range_dropout_probability
         cfgs = sim.rangefinders_or_default
         # Stagger the first readings over one period so the ray casting of
         # several sensors does not land on the same frame.
@@ -417,6 +420,9 @@ class SensorSuite:
                 continue
             while rf.next_due_us <= time_us:
                 rf.next_due_us += rf.period_us
+            # a dropout: the reading is lost (one draw per due reading, only when enabled)
+            if self.range_dropout > 0 and self.rng.random() < self.range_dropout:
+                continue
             out.append(self.range_reading(rf, p, R))
         return tuple(out)
 

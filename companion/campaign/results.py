@@ -26,6 +26,8 @@ COLUMNS = (
     ("wind_east_m_s", "float64"), ("wind_north_m_s", "float64"), ("wind_speed_m_s", "float64"),
     ("gust_std_m_s", "float64"), ("sensor_profile", "string"), ("velocity_std_m_s", "float64"),
     ("position_std_m", "float64"), ("gyro_bias_rad_s", "float64"), ("range_std_m", "float64"),
+    ("range_dropout_probability", "float64"), ("link_loss", "float64"), ("link_delay_min_ms", "float64"),
+    ("link_delay_max_ms", "float64"), ("start_x_m", "float64"), ("start_y_m", "float64"),
     ("outcome", "string"), ("reason", "string"), ("violation_kind", "string"),
     ("crash_x_m", "float64"), ("crash_y_m", "float64"), ("event_x_m", "float64"), ("event_y_m", "float64"),
     ("min_clearance_m", "float64"), ("tracking_max_error_m", "float64"), ("tracking_rms_error_m", "float64"),

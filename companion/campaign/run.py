@@ -1,8 +1,10 @@
 """Flights as Dask tasks: the worker's flight, the cluster, resume and progress.
 
 Each flight is ``companion demo --scenario FILE`` called in-process in a Dask
-worker (``fly_scenario``: the demo's own parser and ``run``; the demo starts
-the bundled SITL as its subprocess, lockstep over loopback UDP). Scenarios go
+worker (``fly_scenario``: the demo's own parser and ``run``; with the
+campaign's default ``--transport inproc`` the bundled SITL runs in the same
+process, lockstep through memory; ``udp``: the demo starts it as its
+subprocess, lockstep over loopback UDP). Scenarios go
 to the workers and rows come back as small dicts; the client writes each
 row to ``DIR/results/<hash>.json`` as it arrives, so an interrupted campaign
 resumes without re-flying what finished.

@@ -3,7 +3,7 @@ into the mission file that ``companion demo --scenario`` flies.
 
 A scenario = a base mission (bundled name or path) + ``overrides`` merged
 into it (mappings key by key, anything else replaced) + the SITL's ``seed``
-+ ``cut_s`` + ``control``. Schema: docs/campaign.md.
++ ``cut_s`` + ``control`` (+ ``link``: a lossy real-time link). Schema: docs/campaign.md.
 """
 
 from __future__ import annotations
@@ -22,6 +22,23 @@ PATH_KEYS = (("map",), ("dem",), ("field", "file"))
 
 
 @dataclass(frozen=True)
+class LinkScenario:
+    """A lossy, jittery link (``sitl.relay.UdpRelay``): each datagram, each
+    direction, dropped with probability ``loss`` or delayed uniformly in
+    ``delay_ms`` = [lo, hi] milliseconds; the flight then runs in real time over UDP."""
+
+    loss: float = 0.0
+    delay_ms: tuple[float, float] = (0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.loss <= 0.9:
+            raise ValueError(f"link.loss must be in [0, 0.9], got {self.loss:g}")
+        lo, hi = self.delay_ms
+        if not 0.0 <= lo <= hi <= 2000.0:
+            raise ValueError(f"link.delay_ms: need 0 <= lo <= hi <= 2000 ms, got [{lo:g}, {hi:g}]")
+
+
+@dataclass(frozen=True)
 class ScenarioFile:
     campaign: str
     scenario: int
@@ -30,6 +47,7 @@ class ScenarioFile:
     control: Literal["companion", "vehicle"] = "companion"
     cut_s: float | None = None
     overrides: Any = None
+    link: LinkScenario | None = None
 
     def __post_init__(self) -> None:
         if self.overrides is not None and not isinstance(self.overrides, dict):

@@ -28,8 +28,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CampaignError
-from .placement import DRAWS_PER_OBSTACLE, Placement, cumulative, propose_obstacle, segment_mask
-from .spec import CampaignSpec, dim_range, is_continuous
+from .placement import DRAWS_PER_OBSTACLE, Placement, cumulative, footprint_free, propose_obstacle, segment_mask
+from .spec import CampaignSpec, StartSpec, dim_range, is_continuous
+
+#: tries of the rejection sampling of a launch point on free cells
+START_TRIES = 10_000
 
 
 @dataclass(frozen=True)
@@ -69,7 +72,7 @@ def mission_path(ref: str) -> Path:
 
 
 def load_fields(spec: CampaignSpec) -> dict[str, Field]:
-    """The I/O edge: load and plan every base mission (needed only with ``obstacles``)."""
+    """The I/O edge: load and plan every base mission (needed only with ``obstacles`` or ``start``)."""
     from ..mission import load_mission
     from .placement import flown_path
 
@@ -78,7 +81,7 @@ def load_fields(spec: CampaignSpec) -> dict[str, Field]:
         ref = mission_ref(name, spec.base_dir, spec.source)
         if ref in fields:
             continue
-        if spec.obstacles is None and spec.movers is None:
+        if spec.obstacles is None and spec.movers is None and spec.start is None:
             fields[ref] = None
             continue
         grid, path, _ = flown_path(load_mission(mission_path(ref)), spec.cut_s)
@@ -122,7 +125,8 @@ def continuous_dims(spec: CampaignSpec) -> list[str]:
     if spec.obstacles is not None:
         names += [f"obstacle{k}.{j}" for k in range(spec.obstacles.count[1]) for j in range(DRAWS_PER_OBSTACLE)]
     if spec.sensors is not None:
-        for key in ("velocity_std_m_s", "position_std_m", "gyro_bias_rad_s", "range_std_m"):
+        for key in ("velocity_std_m_s", "position_std_m", "gyro_bias_rad_s", "range_std_m",
+                    "range_dropout_probability"):
             d = getattr(spec.sensors, key)
             if d is not None and is_continuous(d):
                 names.append(f"sensors.{key}")
@@ -130,7 +134,33 @@ def continuous_dims(spec: CampaignSpec) -> list[str]:
         for key in ("speed_m_s", "direction_deg", "gust_std_m_s"):
             if is_continuous(getattr(spec.wind, key)):
                 names.append(f"wind.{key}")
+    if spec.link is not None:
+        for key in ("loss", "delay_min_ms", "jitter_ms"):
+            if is_continuous(getattr(spec.link, key)):
+                names.append(f"link.{key}")
+    if spec.start is not None:
+        for key in ("offset_m", "direction_deg"):
+            if is_continuous(getattr(spec.start, key)):
+                names.append(f"start.{key}")
     return names
+
+
+def _start_point(st: StartSpec, f: Field, dr: _Draws, search: bool, source: str) -> list[float] | None:
+    """The launch point [x, y] (ENU m, rounded to the mm): ``offset_m`` from the flown
+    trajectory's first point towards ``direction_deg``, a disk of ``margin_m`` on free cells.
+
+    Monte Carlo: rejection-sampled (CampaignError when ``START_TRIES`` draws all fail);
+    search: one proposal, None (the default launch point) when it is rejected."""
+    x0, y0 = float(f.path[0, 0]), float(f.path[0, 1])
+    for _ in range(1 if search else START_TRIES):
+        r = dr.uniform("start.offset_m", *dim_range(st.offset_m))
+        a = math.radians(dr.uniform("start.direction_deg", *dim_range(st.direction_deg)))
+        x, y = round(x0 + r * math.cos(a), 3) + 0.0, round(y0 + r * math.sin(a), 3) + 0.0
+        if footprint_free(f.grid, {"type": "cylinder", "x": x, "y": y, "radius": st.margin_m}, 0.0):
+            return [x, y]
+    if search:
+        return None
+    raise CampaignError(f"{source}: key 'start'", f"no launch point on free cells in {START_TRIES} draws")
 
 
 def scenario(spec: CampaignSpec, fields: dict[str, Field], index: int,
@@ -196,8 +226,27 @@ def scenario(spec: CampaignSpec, fields: dict[str, Field], index: int,
                                         round(speed * math.sin(direction), 6) + 0.0, 0.0],
                        "gust_std_m_s": round(dr.uniform("wind.gust_std_m_s", *dim_range(w.gust_std_m_s)), 6),
                        "gust_time_constant_s": w.gust_time_constant_s, "drag_n_s_m": w.drag_n_s_m}
-    return {"campaign": spec.name, "scenario": int(index), "mission": ref, "seed": sim_seed,
-            "cut_s": spec.cut_s, "control": control, "overrides": {"sim": sim} if sim else {}}
+    # Drawn after everything above, so that adding these keys to a spec moves no earlier draw.
+    if spec.sensors is not None and spec.sensors.range_dropout_probability is not None:
+        d = spec.sensors.range_dropout_probability
+        v = round(dr.uniform("sensors.range_dropout_probability", *dim_range(d)), 6)
+        sim.setdefault("noise", {})["range_dropout_probability"] = v
+    link = None
+    if spec.link is not None:
+        L = spec.link
+        loss = round(dr.uniform("link.loss", *dim_range(L.loss)), 6)
+        d0 = round(dr.uniform("link.delay_min_ms", *dim_range(L.delay_min_ms)), 6)
+        jitter = round(dr.uniform("link.jitter_ms", *dim_range(L.jitter_ms)), 6)
+        link = {"loss": loss, "delay_ms": [d0, round(d0 + jitter, 6)]}
+    if spec.start is not None:
+        start = _start_point(spec.start, fields[ref], dr, unit is not None, spec.source)
+        if start is not None:
+            sim["start_enu_m"] = start
+    out = {"campaign": spec.name, "scenario": int(index), "mission": ref, "seed": sim_seed,
+           "cut_s": spec.cut_s, "control": control, "overrides": {"sim": sim} if sim else {}}
+    if link is not None:
+        out["link"] = link
+    return out
 
 
 def canonical_json(s: dict) -> str:
@@ -230,6 +279,12 @@ def scenario_params(s: dict) -> dict:
         "position_std_m": noise.get("position_std_m"),
         "gyro_bias_rad_s": None if gb is None else gb[0],
         "range_std_m": noise.get("range_std_m"),
+        "range_dropout_probability": noise.get("range_dropout_probability"),
+        "link_loss": (s.get("link") or {}).get("loss"),
+        "link_delay_min_ms": ((s.get("link") or {}).get("delay_ms") or [None, None])[0],
+        "link_delay_max_ms": ((s.get("link") or {}).get("delay_ms") or [None, None])[1],
+        "start_x_m": (sim.get("start_enu_m") or [None, None])[0],
+        "start_y_m": (sim.get("start_enu_m") or [None, None])[1],
     }
 
 

@@ -131,6 +131,7 @@ class SensorSpec:
     position_std_m: Dim | None = None
     gyro_bias_rad_s: Dim | None = None
     range_std_m: Dim | None = None
+    range_dropout_probability: Dim | None = None
 
     def __post_init__(self) -> None:
         if not self.profiles:
@@ -139,6 +140,7 @@ class SensorSpec:
         _check_dim("sensors.position_std_m", self.position_std_m, 0.0, 10.0)
         _check_dim("sensors.gyro_bias_rad_s", self.gyro_bias_rad_s, -1.0, 1.0)
         _check_dim("sensors.range_std_m", self.range_std_m, 0.0, 5.0)
+        _check_dim("sensors.range_dropout_probability", self.range_dropout_probability, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -164,6 +166,41 @@ class WindSpec:
 
 
 @dataclass(frozen=True)
+class LinkSpec:
+    """A lossy, jittery link between the companion and the SITL
+    (``sitl.relay.UdpRelay``): such a flight runs in real time over UDP.
+    Each datagram, each direction, is dropped with probability ``loss`` or
+    delayed uniformly in [``delay_min_ms``, ``delay_min_ms`` + ``jitter_ms``]."""
+
+    loss: Dim = 0.0
+    delay_min_ms: Dim = 0.0
+    jitter_ms: Dim = 0.0
+
+    def __post_init__(self) -> None:
+        _check_dim("link.loss", self.loss, 0.0, 0.9)
+        _check_dim("link.delay_min_ms", self.delay_min_ms, 0.0, 1000.0)
+        _check_dim("link.jitter_ms", self.jitter_ms, 0.0, 1000.0)
+
+
+@dataclass(frozen=True)
+class StartSpec:
+    """The launch point (``sim.start_enu_m``): ``offset_m`` from under the
+    first point of the flown trajectory, towards ``direction_deg`` (ENU,
+    from east, counter-clockwise); a disk of radius ``margin_m`` about it
+    lies on free map cells (rejection-sampled)."""
+
+    offset_m: Dim = (0.0, 1.0)
+    direction_deg: Dim = (0.0, 360.0)
+    margin_m: float = 0.5
+
+    def __post_init__(self) -> None:
+        _check_dim("start.offset_m", self.offset_m, 0.0, 100.0)
+        _check_dim("start.direction_deg", self.direction_deg, -360.0, 720.0)
+        if not 0 <= self.margin_m <= 10:
+            raise ValueError(f"start.margin_m must be in [0, 10] m, got {self.margin_m:g}")
+
+
+@dataclass(frozen=True)
 class CampaignSpec:
     """A campaign: base missions, the distributions, the flights and a seed."""
 
@@ -178,6 +215,8 @@ class CampaignSpec:
     movers: MoverSpec | None = None
     sensors: SensorSpec | None = None
     wind: WindSpec | None = None
+    link: LinkSpec | None = None
+    start: StartSpec | None = None
     base_dir: str = dataclasses.field(default=".", init=False, compare=False)   # set by load_spec
     source: str = dataclasses.field(default="<spec>", init=False, compare=False)  # set by load_spec
 

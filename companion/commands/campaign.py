@@ -28,8 +28,10 @@ def add_arguments(parser) -> None:
                         help="use this existing Dask scheduler instead of a LocalCluster")
     parser.add_argument("--flights", type=int, default=None, metavar="N", help="override the spec's flights")
     parser.add_argument("--cut", type=float, default=None, metavar="S", help="override the spec's cut_s")
-    parser.add_argument("--transport", default=None, metavar="KIND",
-                        help="passed to companion demo --transport where the demo has that option")
+    parser.add_argument("--transport", choices=("inproc", "udp"), default="inproc",
+                        help="how each flight reaches its SITL (companion demo --transport): inproc (default: "
+                             "in the worker's process, the same MAVLink bytes through memory) or udp (a SITL "
+                             "subprocess per flight, loopback UDP)")
     parser.add_argument("--search", choices=SEARCH_FIGURES, default=None,
                         help="falsification: CMA-ES over the spec's continuous dimensions to minimise the "
                              "true clearance, or the margin to the tracking bound")

@@ -125,18 +125,20 @@ def _table(rows: list[tuple[str, str]]) -> str:
     return "\n".join(out)
 
 
-def start_sitl(transport: str, mission_path, seed, signing_key_file, autopilot: str | None = None):
+def start_sitl(transport: str, mission_path, seed, signing_key_file, autopilot: str | None = None,
+               realtime: bool = False):
     """The bundled SITL for ``--transport``, launched with its launch pose to
     come (``set_start``, then ``wait_ready``): ``SitlProcess`` (a subprocess,
     loopback UDP; it imports and loads its world while we plan) or
-    ``SitlInProcess`` (this process, ``inproc:``). Lockstep either way.
+    ``SitlInProcess`` (this process, ``inproc:``). Lockstep either way, but
+    ``realtime`` (a scenario's lossy link): a subprocess at speed 1, no lockstep.
     ``autopilot``: the personality (None: the mission's ``sim.autopilot``)."""
     from sitl.api import SitlInProcess, SitlProcess
 
-    if transport == "inproc":
+    if transport == "inproc" and not realtime:
         return SitlInProcess(mission_path, seed=seed, start="later", signing_key_file=signing_key_file,
                              autopilot=autopilot).launch()
-    return SitlProcess(mission_path, lockstep=True, speed=1.0, seed=seed, start="later",
+    return SitlProcess(mission_path, lockstep=not realtime, speed=1.0, seed=seed, start="later",
                        signing_key_file=signing_key_file, autopilot=autopilot).launch()
 
 
@@ -192,15 +194,16 @@ def run(args) -> int:
         mission = load_mission(mission_path)     # bad input fails here, before the SITL starts
     # The SITL process starts now (it imports and loads its world while we
     # plan) and gets its launch pose once the plan exists.
+    link = scenario.link if scenario is not None else None
     sitl = start_sitl(getattr(args, "transport", "udp"), mission_path, args.seed, args.signing_key,
-                      getattr(args, "autopilot", None))
+                      getattr(args, "autopilot", None), realtime=link is not None)
     try:
-        return _plan_and_fly(args, mission, out, sitl, t_start, key, overrides)
+        return _plan_and_fly(args, mission, out, sitl, t_start, key, overrides, link)
     finally:
         sitl.stop()
 
 
-def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides=None) -> int:
+def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides=None, link=None) -> int:
     from ..plan_io import plan_json_text, plan_to_json_dict
     from ..progress import Progress
     from ..report import write_report_or_fallback
@@ -224,15 +227,31 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
     # way-point, facing the first pointing direction (take-off = climb + hold).
     # The SITL runs at speed 1 until the companion engages lockstep (the
     # vehicle clock barely moves while the link comes up), then flat out.
-    sitl.set_start(launch_pose(plan.trajectory, plan.target_enu_m))
+    # A mission's sim.start_enu_m (a campaign's start point) moves the launch
+    # point; the take-off then climbs and transfers level to the first point.
+    pose = launch_pose(plan.trajectory, plan.target_enu_m)
+    if mission.sim.start_enu_m is not None:
+        pose = (float(mission.sim.start_enu_m[0]), float(mission.sim.start_enu_m[1]), pose[2])
+    sitl.set_start(pose)
     sitl.wait_ready()
+    relay = None
+    url = sitl.url
     try:
-        result = execute(mission, fp, sitl.url, args.control, str(out / "flight.tlog"), progress, args.cut,
+        if link is not None:   # a scenario's lossy, jittery link: a relay between us and the SITL
+            from sitl.relay import UdpRelay
+
+            host, port = sitl.url.split(":")[1:]
+            relay = UdpRelay((host, int(port)), loss=link.loss, delay_min_s=link.delay_ms[0] / 1000,
+                             delay_max_s=link.delay_ms[1] / 1000, seed=int(args.seed or 0)).start()
+            url = f"udpout:127.0.0.1:{relay.port}"
+        result = execute(mission, fp, url, args.control, str(out / "flight.tlog"), progress, args.cut,
                          {"mute_streams": UNUSED_STREAMS + (() if mission.replan.enabled else (ATTITUDE,)),
                           **(overrides or {})},
                          signing_key=signing_key, report_path=str(out / "report.json"),
                          option_names=("--out", "--out"), sensor_gap=args.sensor_gap)
     finally:
+        if relay is not None:
+            relay.stop()
         sitl.stop()
     written = write_report_or_fallback(result.report, out / "report.json")
     rep = written.report

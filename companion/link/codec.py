@@ -274,8 +274,23 @@ def sensor_rotation_flu(orientation: int, quaternion_wxyz=None) -> tuple | None:
         q = [float(c) for c in quaternion_wxyz]
         if len(q) != 4 or not all(math.isfinite(c) for c in q) or sum(c * c for c in q) < 0.25:
             return None
-        return _sensor_R_flu(frames.quat_wxyz2rotmat(q))
+        # A rangefinder ring sends the same few quaternions with every reading: the
+        # rotation is cached by the quaternion's exact bits (a tuple result, immutable).
+        key = _Q4.pack(*q)
+        R = _CUSTOM_R_FLU.get(key)
+        if R is None:
+            R = _sensor_R_flu(frames.quat_wxyz2rotmat(q))
+            if len(_CUSTOM_R_FLU) >= _CUSTOM_CACHE_MAX:
+                _CUSTOM_R_FLU.clear()
+            _CUSTOM_R_FLU[key] = R
+        return R
     return _SENSOR_R_FLU.get(int(orientation))
+
+
+_Q4 = struct.Struct("<4d")
+#: quaternion bits -> rotation of MAV_SENSOR_ROTATION_CUSTOM sensors (bounded: cleared when full)
+_CUSTOM_R_FLU: dict = {}
+_CUSTOM_CACHE_MAX = 256
 
 
 def decode_distance_sensor(msg) -> Range:

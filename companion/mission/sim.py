@@ -146,6 +146,9 @@ class NoiseConfig:
         [0, 1)). Default 0.
     range_std_m : float
         Rangefinder white noise (m). Default 0.01.
+    range_dropout_probability : float
+        Probability that a due rangefinder reading is lost (no DISTANCE_SENSOR
+        sent), each reading independently, in [0, 1]. Default 0.
     """
 
     vector_variance: float | None = None
@@ -167,6 +170,7 @@ class NoiseConfig:
     gnss_rate_hz: float | None = None
     gnss_latency_s: float | None = None
     range_std_m: float | None = None
+    range_dropout_probability: float | None = None
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -28,6 +28,7 @@ noise.velocity_std_m_s             [0, 10]         m/s
 noise.gyro_bias_rad_s              [-1, 1]         rad/s     each; MEMS gyro biases are < 0.1 rad/s
 noise.accel_bias_m_s2              [-5, 5]         m/s^2     each
 noise.range_std_m                  [0, 5]          m
+noise.range_dropout_probability    [0, 1]
 noise.*_noise_density_*            [0, 0.1] / [0, 1]         gyro rad/s/sqrt(Hz) / accel m/s^2/sqrt(Hz)
 noise.*_bias_turn_on_std_*         [0, 1] / [0, 5]           rad/s / m/s^2
 noise.*_bias_walk_*                [0, 0.1] / [0, 1]         rad/s/sqrt(s) / m/s^2/sqrt(s)
@@ -100,6 +101,7 @@ SIM_RANGES: dict[str, Range] = {
     "noise.gyro_bias_rad_s": Range(-1, 1, "rad/s"),
     "noise.accel_bias_m_s2": Range(-5, 5, "m/s^2"),
     "noise.range_std_m": Range(0, 5, "m"),
+    "noise.range_dropout_probability": Range(0, 1),
     "noise.gyro_noise_density_rad_s_rthz": Range(0, 0.1, "rad/s/sqrt(Hz)"),
     "noise.accel_noise_density_m_s2_rthz": Range(0, 1, "m/s^2/sqrt(Hz)"),
     "noise.gyro_bias_turn_on_std_rad_s": Range(0, 1, "rad/s"),
