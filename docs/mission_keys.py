@@ -205,6 +205,8 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "replan.clearance_governor": ("", "", "Limit the approach speed to obstacles (false: ablation only)."),
     "replan.vertical_escape": ("", "", "Climb over obstacles the corridor does not let pass (false: "
                                "ablation only)."),
+    "replan.give_way": ("", "", "Bound the closing speed to obstacles moving toward the vehicle (movers; off by "
+                        "default: wide beams on still obstacles can read a false approach)."),
     "replan.sensors": ("", "ids unique", "Where each rangefinder sits on the airframe (ids not listed: "
                        "at the centre of mass)."),
     "replan.sensors[].id": ("", "0 to 255", "DISTANCE_SENSOR id."),

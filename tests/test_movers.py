@@ -236,6 +236,7 @@ def test_vehicle_gives_way_to_a_walker_crossing_the_first_corridor(tmp_path):
         "flight: {height_agl_m: 1.5, speed_m_s: 1.0, waypoint_interval_s: 4.0}\n"
         "coverage: {line_spacing_m: 2.5, safety_margin_m: 0.45}\n"
         "pointing: {target: centroid}\n"
+        "replan: {give_way: true}\n"
         "sim:\n  noise: {vector_variance: 5.0e-4, gyro_variance: 5.0e-4}\n  seed: 1\n"
         "  movers: [{type: walker, path: [[17.0, 7.8], [17.0, 11.5]], speed_m_s: 1.0, start_s: 8.3}]\n")
     out = tmp_path / "out"

@@ -242,8 +242,11 @@ def scenario(spec: CampaignSpec, fields: dict[str, Field], index: int,
         start = _start_point(spec.start, fields[ref], dr, unit is not None, spec.source)
         if start is not None:
             sim["start_enu_m"] = start
+    overrides = {"sim": sim} if sim else {}
+    if sim.get("movers"):
+        overrides["replan"] = {"give_way": True}    # people and machines move here: bound the closing speed
     out = {"campaign": spec.name, "scenario": int(index), "mission": ref, "seed": sim_seed,
-           "cut_s": spec.cut_s, "control": control, "overrides": {"sim": sim} if sim else {}}
+           "cut_s": spec.cut_s, "control": control, "overrides": overrides}
     if link is not None:
         out["link"] = link
     return out

@@ -718,8 +718,10 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
         check_free_space(outputs)
         check_writable([o[:2] for o in outputs])
         cfg = RunnerConfig(control=control, **(runner_overrides or {}))
-        core = build_flight_core(mission, flight_plan, cfg,
-                                 flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}), maps)
+        setup = flight_setup(mission, plan_path, control, cut_s, runner_overrides or {})
+        setup["sensor_gap"] = sensor_gap
+        core = build_flight_core(mission, flight_plan, cfg, setup, maps)
+        core.sensor_coverage = coverage_doc
     except BaseException:
         if conn is not None:
             conn.close()
@@ -736,9 +738,7 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
                 tlog.open()
             except OSError as exc:
                 raise InputError(str(tlog_path), f"cannot write: {exc.strerror or exc}") from None
-        result = MissionRunner(conn, core, progress).run()
-        result.report = dataclasses.replace(result.report, sensor_coverage=coverage_doc)
-        return result
+        return MissionRunner(conn, core, progress).run()
     finally:
         conn.close()
         if tlog is not None:

@@ -362,6 +362,8 @@ class FlightCore:
         self.interrupted: str | None = None
         # the guard (issue 15): every reference passes it (``_guarded``)
         self.guard = inputs.guard
+        #: The pre-flight sensor coverage check (``--sensor-gap``; report ``sensor_coverage``), set by who built us.
+        self.sensor_coverage: dict | None = None
         self._guard_plan = None         # the replanner's plan last checked whole
         self._guard_tau0 = 0.0          # its clock at the start of the trajectory phase
         self._guard_stopped = False
@@ -1410,6 +1412,7 @@ class FlightCore:
             control_mode_changes=tuple(dict(c) for c in self.control_mode_changes),
             faults=tuple(dict(f) for f in self.faults),
             guard=None if self.guard is None else self.guard.to_dict(),
+            sensor_coverage=self.sensor_coverage,
         )
 
     def coverage_flown(self, completed: bool = False) -> float | None:

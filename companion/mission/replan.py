@@ -99,6 +99,12 @@ class ReplanConfig:
         Climb over an obstacle the corridor does not let the vehicle pass
         (our escape from the APF's local minimum); False only for the
         ablation (the vehicle then holds after ``escape_timeout_s``).
+    give_way : bool
+        Bound the closing speed to obstacles that move toward the vehicle,
+        measured from successive returns (``companion.replan.closing``).
+        Off by default: on static obstacles seen by wide beams it can read
+        an approach that is not there (a false mover), which widens the
+        avoidance trigger; turn it on where people or machines move.
     sensors : tuple of SensorMount
         Mounting offsets by DISTANCE_SENSOR id; ids not listed sit at the
         centre of mass.
@@ -128,6 +134,7 @@ class ReplanConfig:
     obstacle_depth_m: float = 0.5
     clearance_governor: bool = True
     vertical_escape: bool = True
+    give_way: bool = False
     sensors: tuple[SensorMount, ...] = ()
 
     def __post_init__(self) -> None:

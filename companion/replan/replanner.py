@@ -563,7 +563,8 @@ class Replanner:
                     if self.known.classify(*q) == UNKNOWN:
                         mem.add(q, L_CANDIDATE, t_s)
             self.n_unknown += 1
-            self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis)
+            if self.cfg.give_way:          # else no approach is ever measured: a still world
+                self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis)
 
     def _explained(self, ev) -> bool:
         """The known map accounts for the return along the axis or a field-of-view edge."""

@@ -96,7 +96,7 @@ def build_core(setup: dict, mission, flight_plan) -> FlightCore:
     ValueError
         The setup record is not one this version can replay.
     """
-    from ..commands.fly import build_flight_core
+    from ..commands.fly import build_flight_core, sensor_coverage_gate, slowed_mission
 
     if setup.get("format") != SETUP_FORMAT:
         raise ValueError(f"setup record format {setup.get('format')!r}, expected {SETUP_FORMAT!r}")
@@ -104,7 +104,11 @@ def build_core(setup: dict, mission, flight_plan) -> FlightCore:
     cut_s = setup.get("cut_s")
     if cut_s is not None:
         flight_plan = flight_plan.cut(float(cut_s), mission.trajectory)
-    return build_flight_core(mission, flight_plan, cfg, setup)
+    # the pre-flight sensor coverage check, as ``execute`` made it (recordings before it: refuse)
+    flight_plan, coverage_doc = sensor_coverage_gate(mission, flight_plan, setup.get("sensor_gap", "refuse"))
+    core = build_flight_core(slowed_mission(mission, coverage_doc["time_scale"]), flight_plan, cfg, setup)
+    core.sensor_coverage = coverage_doc
+    return core
 
 
 def setup_mismatches(recorded: dict, current: dict) -> list[str]:
