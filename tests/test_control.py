@@ -306,18 +306,20 @@ def test_mixer_saturation_keeps_thrust_direction_first():
 
 
 def _fly(cfg, ref_fn, target, duration_s, p0, rng=None, noise_var=0.0, frame_hz=250.0, ext_force_n=(0.0, 0.0, 0.0),
-         return_controller=False):
+         return_controller=False, v0=(0.0, 0.0, 0.0), outputs=None):
     """Sample-and-hold loop: controller at frame_hz, plant by solve_ivp between frames.
 
     ``ext_force_n``: a constant external force (N, world ENU) on the plant,
-    seen by the accelerometer like drag (it is part of the specific force)."""
+    seen by the accelerometer like drag (it is part of the specific force).
+    ``v0``: initial velocity (m/s, ENU); ``outputs``: a list that collects
+    each frame's ``ControlOutput`` with the true body z axis (ENU)."""
     Fext = np.asarray(ext_force_n, float)
     m, J = VEH.mass_kg, VEH.J
     A = allocation_matrix(VEH)
     ctl = GeometricController(VEH, cfg, target)
     sig = math.sqrt(noise_var)
     R = np.eye(3)
-    y = np.concatenate([p0, np.zeros(3), R.ravel(), np.zeros(3)])
+    y = np.concatenate([p0, np.asarray(v0, float), R.ravel(), np.zeros(3)])
     thrusts = np.full(4, m * G / 4)
     dt = 1.0 / frame_hz
     log = []
@@ -342,6 +344,8 @@ def _fly(cfg, ref_fn, target, duration_s, p0, rng=None, noise_var=0.0, frame_hz=
         ref = ref_fn(t)
         out = ctl.update(t, Measurements(tuple(gyro), tuple(sf), tuple(mag), tuple(p), tuple(v)), ref)
         log.append((t, np.linalg.norm(p - np.array(ref.pos_enu_m)), min(out.motor_cmd), max(out.motor_cmd)))
+        if outputs is not None:
+            outputs.append((out, R[:, 2].copy()))
         thrusts = np.array(out.motor_cmd) * VEH.max_thrust_per_rotor_n
         w = A @ thrusts
         y = solve_ivp(rhs, (t, t + dt), y, args=(w,), rtol=1e-9, atol=1e-11).y[:, -1]

@@ -22,6 +22,7 @@ from companion.control.geometric import ControlOutput, DesiredAttitude, attitude
 from companion.control.observer import virtual_pairs
 from companion.control.rates import rate_command
 from companion.control.so3 import cross, dot, unit3, unit_d2
+from companion.control.tilt import limit_thrust
 from companion.control.vectors import controller_vectors
 from companion.vehicle import GRAVITY_M_S2, VehicleConfig
 
@@ -178,7 +179,14 @@ def plain_update(self, t_s: float, meas: Measurements, ref: Reference) -> Contro
         # eq. (21) made flyable (companion.control.pointing): a unit vector
         # with consistent derivatives passes desired_attitude's _unit_d2 unchanged.
         u_s, u_s_dot, u_s_ddot = self.pointing.update(t_s, *unit_d2(u_s, u_s_dot, u_s_ddot))
-    des = plain_desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, self._b2_prev)
+    # the safety limit of F_d (companion.control.tilt): None where inactive
+    lim = limit_thrust(F, F_dot, F_ddot, self.cfg.vertical_thrust_min_fraction * m * GRAVITY_M_S2,
+                       math.tan(math.radians(self.cfg.tilt_max_deg)))
+    if lim is not None:
+        F = lim.F
+        des = plain_desired_attitude(lim.G, lim.G_dot, lim.G_ddot, u_s, u_s_dot, u_s_ddot, self._b2_prev)
+    else:
+        des = plain_desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, self._b2_prev)
     self._b2_prev = des.b2d
 
     if self._decoupled:
