@@ -11,6 +11,11 @@ pointing ``s = (S_p - x_d)/|S_p - x_d|`` (eq. 21), ``sc = unit(s - (s.b3d)
 b3d)`` (eq. 22), ``b2d = sc``, ``b1d = b2d x b3d``, ``R_d = [b1d, b2d,
 b3d]``. Thrust ``f = F_d . (R e3)`` with ``R e3`` estimated from the two
 vector pairs (TRIAD, primary pair the specific force), never the true attitude.
+Safety invariant (not in the paper): before the normalisation F_d is limited
+to a tilt cone and a vertical floor (``companion.control.tilt``,
+``ControlConfig.tilt_max_deg`` and ``vertical_thrust_min_fraction``); b3d,
+f and Omega_d then follow the limited vector, bit for bit unchanged where no
+limit is active.
 
 Desired angular velocity (eq. 31), analytic
 --------------------------------------------
