@@ -277,16 +277,18 @@ def test_update_equals_reference_bit_for_bit(name, target):
     veh, cfg = VehicleConfig(), CONFIGS[name]
     fast = GeometricController(veh, cfg, target)
     ref = GeometricController(veh, cfg, target)
-    n_sat = 0
+    n_sat = n_lim = 0
     for t, meas, r in _frames(np.random.default_rng(3)):
         a = fast.update(t, meas, r)
         b = plain_update(ref, t, meas, r)
+        n_lim += fast.last_limited
         for f in dataclasses.fields(a):
             assert _same(getattr(a, f.name), getattr(b, f.name)), (t, f.name)
         n_sat += a.saturated
         # the fast path's log row is R_d's columns and f
         assert fast.last_desired == tuple(b.R_d[i][j] for j in range(3) for i in range(3)) + (b.f_n,)
     assert n_sat > 0                                      # the saturated mixer paths were visited
+    assert 0 < n_lim < 400                                # both sides of the thrust limit were visited
     if fast.observer is not None:                         # the observer ran the same in both
         assert fast.observer.R == ref.observer.R and fast.observer.p == ref.observer.p
         assert fast.observer.n_tilt_updates == ref.observer.n_tilt_updates
