@@ -130,6 +130,10 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "control.integral_limit_fraction": ("", "(0, 1)", "Anti-windup bound on k_i e_i as a fraction of m g."),
     "control.integral_zone_m": ("m", "> 0", "The integral accumulates only while the position error is "
                                 "below this."),
+    "control.tilt_max_deg": ("deg", "(0, 90)", "Safety limit: largest tilt of the desired thrust direction from "
+                             "vertical (PX4 MPC_TILTMAX_AIR); see control.md, Thrust direction limit."),
+    "control.vertical_thrust_min_fraction": ("", "(0, 1)", "Floor of the desired thrust's vertical component as "
+                                             "a fraction of m g (PX4 MPC_THR_MIN idea)."),
     "control.attitude_law": ("", "", "`decoupled` (tilt and yaw separated, the default) or `paper` "
                              "(eq. (27))."),
     "control.pointing_limit": ("", "", "Limit the yaw rate and acceleration of the pointing reference."),

@@ -306,18 +306,20 @@ def test_mixer_saturation_keeps_thrust_direction_first():
 
 
 def _fly(cfg, ref_fn, target, duration_s, p0, rng=None, noise_var=0.0, frame_hz=250.0, ext_force_n=(0.0, 0.0, 0.0),
-         return_controller=False):
+         return_controller=False, v0=(0.0, 0.0, 0.0), outputs=None):
     """Sample-and-hold loop: controller at frame_hz, plant by solve_ivp between frames.
 
     ``ext_force_n``: a constant external force (N, world ENU) on the plant,
-    seen by the accelerometer like drag (it is part of the specific force)."""
+    seen by the accelerometer like drag (it is part of the specific force).
+    ``v0``: initial velocity (m/s, ENU); ``outputs``: a list that collects
+    each frame's ``ControlOutput`` with the true body z axis (ENU)."""
     Fext = np.asarray(ext_force_n, float)
     m, J = VEH.mass_kg, VEH.J
     A = allocation_matrix(VEH)
     ctl = GeometricController(VEH, cfg, target)
     sig = math.sqrt(noise_var)
     R = np.eye(3)
-    y = np.concatenate([p0, np.zeros(3), R.ravel(), np.zeros(3)])
+    y = np.concatenate([p0, np.asarray(v0, float), R.ravel(), np.zeros(3)])
     thrusts = np.full(4, m * G / 4)
     dt = 1.0 / frame_hz
     log = []
@@ -342,6 +344,8 @@ def _fly(cfg, ref_fn, target, duration_s, p0, rng=None, noise_var=0.0, frame_hz=
         ref = ref_fn(t)
         out = ctl.update(t, Measurements(tuple(gyro), tuple(sf), tuple(mag), tuple(p), tuple(v)), ref)
         log.append((t, np.linalg.norm(p - np.array(ref.pos_enu_m)), min(out.motor_cmd), max(out.motor_cmd)))
+        if outputs is not None:
+            outputs.append((out, R[:, 2].copy()))
         thrusts = np.array(out.motor_cmd) * VEH.max_thrust_per_rotor_n
         w = A @ thrusts
         y = solve_ivp(rhs, (t, t + dt), y, args=(w,), rtol=1e-9, atol=1e-11).y[:, -1]
@@ -556,3 +560,31 @@ def test_fast_pointing_swing_keeps_position_error_bounded(kw):
     log = _fly_sitl_swing(dataclasses.replace(ControlConfig(), **kw))
     t, err = log[:, 0], log[:, 1]
     assert np.max(err[t >= 5.0]) < 2.8e-3
+
+
+# --- safety: the tilt limit of the desired thrust (companion.control.tilt) -------------------
+
+
+@pytest.mark.parametrize("v0", [(0.0, 0.0, 2.5), (1.5, -1.0, 2.5)], ids=["climb", "climb-and-drift"])
+def test_take_over_in_a_fast_climb_never_asks_for_more_than_the_tilt_limit_and_settles(v0):
+    # The hand-over of the crash: the vehicle 0.3 m below the reference still climbing at
+    # 2.5 m/s. Unlimited, F_z = -kv 2.5 + kx 0.3 + m g = -14.4 N: b3d would point down (a
+    # flip). With the limit b3d stays within tilt_max_deg of vertical in every frame (the
+    # drift case drives the horizontal part onto the cone), the vehicle stays upright, and
+    # the loop settles on the reference.
+    cfg = ControlConfig()
+    p_ref = np.array([1.0, 2.0, 1.5])
+    outs = []
+    log = _fly(cfg, _hover, (10.0, 20.0, 0.0), 4.5, p_ref - np.array([0.0, 0.0, 0.3]), v0=v0, outputs=outs)
+    t, err = log[:, 0], log[:, 1]
+    tilt_cmd = np.array([math.degrees(math.acos(min(1.0, o.b3d[2]))) for o, _ in outs])
+    tilt_true = np.array([math.degrees(math.acos(min(1.0, z[2]))) for _, z in outs])
+    assert tilt_cmd.max() <= cfg.tilt_max_deg + 1e-9
+    assert tilt_cmd[0] < 1e-6 or v0[0] != 0.0                       # straight climb: upright at once
+    if v0[0] != 0.0:
+        assert tilt_cmd.max() == pytest.approx(cfg.tilt_max_deg, abs=1e-6)   # the cone was reached
+    # the vehicle follows with the attitude loop's overshoot: zeta = alpha / (2 sqrt(rho1)) = 0.42,
+    # exp(-pi zeta / sqrt(1 - zeta^2)) = 23 %, 45 deg -> about 55 deg; nowhere near a flip
+    assert tilt_true.max() < 1.3 * cfg.tilt_max_deg
+    assert outs[0][0].f_n >= cfg.vertical_thrust_min_fraction * VEH.mass_kg * G * (1.0 - 1e-9)
+    assert np.max(err[t >= 4.0]) < 3e-3       # settled (the integral's slow pair: 1.19 /s)

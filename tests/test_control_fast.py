@@ -22,6 +22,7 @@ from companion.control.geometric import ControlOutput, DesiredAttitude, attitude
 from companion.control.observer import virtual_pairs
 from companion.control.rates import rate_command
 from companion.control.so3 import cross, dot, unit3, unit_d2
+from companion.control.tilt import limit_thrust
 from companion.control.vectors import controller_vectors
 from companion.vehicle import GRAVITY_M_S2, VehicleConfig
 
@@ -178,7 +179,14 @@ def plain_update(self, t_s: float, meas: Measurements, ref: Reference) -> Contro
         # eq. (21) made flyable (companion.control.pointing): a unit vector
         # with consistent derivatives passes desired_attitude's _unit_d2 unchanged.
         u_s, u_s_dot, u_s_ddot = self.pointing.update(t_s, *unit_d2(u_s, u_s_dot, u_s_ddot))
-    des = plain_desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, self._b2_prev)
+    # the safety limit of F_d (companion.control.tilt): None where inactive
+    lim = limit_thrust(F, F_dot, F_ddot, self.cfg.vertical_thrust_min_fraction * m * GRAVITY_M_S2,
+                       math.tan(math.radians(self.cfg.tilt_max_deg)))
+    if lim is not None:
+        F = lim.F
+        des = plain_desired_attitude(lim.G, lim.G_dot, lim.G_ddot, u_s, u_s_dot, u_s_ddot, self._b2_prev)
+    else:
+        des = plain_desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, self._b2_prev)
     self._b2_prev = des.b2d
 
     if self._decoupled:
@@ -269,16 +277,18 @@ def test_update_equals_reference_bit_for_bit(name, target):
     veh, cfg = VehicleConfig(), CONFIGS[name]
     fast = GeometricController(veh, cfg, target)
     ref = GeometricController(veh, cfg, target)
-    n_sat = 0
+    n_sat = n_lim = 0
     for t, meas, r in _frames(np.random.default_rng(3)):
         a = fast.update(t, meas, r)
         b = plain_update(ref, t, meas, r)
+        n_lim += fast.last_limited
         for f in dataclasses.fields(a):
             assert _same(getattr(a, f.name), getattr(b, f.name)), (t, f.name)
         n_sat += a.saturated
         # the fast path's log row is R_d's columns and f
         assert fast.last_desired == tuple(b.R_d[i][j] for j in range(3) for i in range(3)) + (b.f_n,)
     assert n_sat > 0                                      # the saturated mixer paths were visited
+    assert 0 < n_lim < 400                                # both sides of the thrust limit were visited
     if fast.observer is not None:                         # the observer ran the same in both
         assert fast.observer.R == ref.observer.R and fast.observer.p == ref.observer.p
         assert fast.observer.n_tilt_updates == ref.observer.n_tilt_updates

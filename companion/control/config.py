@@ -92,6 +92,18 @@ class ControlConfig:
         with the defaults), or a strong steady wind would never be
         integrated. The runner may also call ``GeometricController.reset()``.
 
+    tilt_max_deg : float
+        Safety limit: the largest tilt of the desired thrust direction b3d
+        from vertical (deg), in (0, 90); PX4's ``MPC_TILTMAX_AIR`` (default 45).
+        F_d of eq. (23) is limited to this cone before it is normalised
+        (``companion.control.tilt``): the controller never asks for a flip.
+        Inactive in ordinary flight (a few degrees); only large errors (a
+        hand-over during a fast climb) reach it.
+    vertical_thrust_min_fraction : float
+        Floor of the vertical component of F_d as a fraction of m g, in
+        (0, 1) (PX4's ``MPC_THR_MIN`` idea): at most ``(1 - fraction) g`` of
+        commanded downward acceleration, and never a thrust vector pointing down.
+
     attitude_law : str
         "decoupled" (default): the thrust direction is controlled in the body
         frame independently of the yaw error
@@ -203,6 +215,8 @@ class ControlConfig:
     ki: float = 60.0
     integral_limit_fraction: float = 0.1
     integral_zone_m: float = 0.1
+    tilt_max_deg: float = 45.0
+    vertical_thrust_min_fraction: float = 0.25
     attitude_law: str = "decoupled"
     pointing_limit: bool = True
     pointing_yaw_rate_max_rad_s: float = 1.0
@@ -237,6 +251,10 @@ class ControlConfig:
             raise ValueError("control.integral_limit_fraction must be in (0, 1)")
         if not self.integral_zone_m > 0:
             raise ValueError("control.integral_zone_m must be > 0")
+        if not 0 < self.tilt_max_deg < 90:
+            raise ValueError("control.tilt_max_deg must be in (0, 90)")
+        if not 0 < self.vertical_thrust_min_fraction < 1:
+            raise ValueError("control.vertical_thrust_min_fraction must be in (0, 1)")
         if self.attitude_law not in ("decoupled", "paper"):
             raise ValueError("control.attitude_law must be 'decoupled' or 'paper'")
         if not self.pointing_yaw_rate_max_rad_s > 0:

@@ -11,6 +11,11 @@ pointing ``s = (S_p - x_d)/|S_p - x_d|`` (eq. 21), ``sc = unit(s - (s.b3d)
 b3d)`` (eq. 22), ``b2d = sc``, ``b1d = b2d x b3d``, ``R_d = [b1d, b2d,
 b3d]``. Thrust ``f = F_d . (R e3)`` with ``R e3`` estimated from the two
 vector pairs (TRIAD, primary pair the specific force), never the true attitude.
+Safety invariant (not in the paper): before the normalisation F_d is limited
+to a tilt cone and a vertical floor (``companion.control.tilt``,
+``ControlConfig.tilt_max_deg`` and ``vertical_thrust_min_fraction``); b3d,
+f and Omega_d then follow the limited vector, bit for bit unchanged where no
+limit is active.
 
 Desired angular velocity (eq. 31), analytic
 --------------------------------------------
@@ -135,6 +140,7 @@ from .config import ControlConfig
 from .mixer import Mixer
 from .pointing import PointingGovernor
 from .rates import rate_command
+from .tilt import limit_thrust
 from .observer import AttitudeEstimate, VelocityAidedObserver, horizontal_field, virtual_pairs
 from .so3 import (Vec3, body_coordinates, cross, dot, thrust_axis_estimate, triad_body_z,  # noqa: F401
                   triad_frames, triad_rotation, triad_to_body3, unit3, unit_d2)
@@ -659,6 +665,12 @@ class GeometricController:
             raise ValueError(f"control.ki must be < kv kx / m = {cfg.kv * cfg.kx / self._m:.4g} N/(m s)")
         self._i_limit = float(cfg.integral_limit_fraction) * self._m * self._g
         self._i_zone = float(cfg.integral_zone_m)
+        # safety limit of F_d (companion.control.tilt): vertical floor (N) and tan of the largest tilt
+        self._fz_min = float(cfg.vertical_thrust_min_fraction) * self._m * self._g
+        self._tan_max = math.tan(math.radians(float(cfg.tilt_max_deg)))
+        self._tan2_max = self._tan_max * self._tan_max
+        #: True where the last command's F_d was limited (tilt or vertical floor).
+        self.last_limited = False
         self._e_i: Vec3 = _ZERO
         self._t_i: float | None = None
         self.last_desired = None
@@ -776,8 +788,9 @@ class GeometricController:
 
         The composition of this module's pieces: the observer (or the
         measured vector pairs), the acceleration estimate, the thrust
-        vector of eq. (23) with the integral term, the governed pointing,
-        :func:`desired_frame` (eqs. 21-26, 31), the torque law
+        vector of eq. (23) with the integral term, limited to the tilt cone
+        and the vertical floor (``companion.control.tilt``; ``last_limited``),
+        the governed pointing, :func:`desired_frame` (eqs. 21-26, 31), the torque law
         (:func:`decoupled_law` or :func:`attitude_torque`), the collective
         thrust ``f = F_d . R e3`` and the mixer.
 
@@ -812,7 +825,14 @@ class GeometricController:
         F, F_dot, F_ddot = self._thrust_vector(t_s, e_x, e_v, (a_hat[0] - ad[0], a_hat[1] - ad[1], a_hat[2] - ad[2]),
                                                ad, jd, sd)
         u, u_dot, u_ddot = self._pointing(t_s, self.target_enu_m if target is None else target, xd, vd, ad)
-        b1d, b2d, b3d, Od, Odd = desired_frame(F, F_dot, F_ddot, u, u_dot, u_ddot, self._b2_prev)
+        F2 = F[2]
+        # safety invariant: b3d within the tilt cone, F_d's vertical part above the floor (tilt.py)
+        self.last_limited = F2 < self._fz_min or F[0] * F[0] + F[1] * F[1] > F2 * F2 * self._tan2_max
+        if self.last_limited:     # b3d along the limited F, Omega_d from that direction's derivatives
+            F, G, G_dot, G_ddot = limit_thrust(F, F_dot, F_ddot, self._fz_min, self._tan_max)
+            b1d, b2d, b3d, Od, Odd = desired_frame(G, G_dot, G_ddot, u, u_dot, u_ddot, self._b2_prev)
+        else:
+            b1d, b2d, b3d, Od, Odd = desired_frame(F, F_dot, F_ddot, u, u_dot, u_ddot, self._b2_prev)
         self._b2_prev = b2d
         frames = triad_frames(b1, b2, r1, r2)
         if self._decoupled:
