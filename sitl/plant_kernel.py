@@ -20,8 +20,10 @@ and ``math.sqrt`` resolve to the same libm / instruction as CPython's:
 seeded flights and random states (documented tolerance: none, exact).
 
 Selection (``kernel()``): the compiled kernel when ``numba`` imports and the
-environment variable ``VINEYARD_GNC_NUMBA`` is not ``0``; otherwise None
-(the Python loop alone).
+environment variable ``VINEYARD_GNC_NUMBA`` is ``1``; otherwise None (the
+Python loop alone). Opt-in: numba's import and cache load cost ~0.7 s per
+process, repaid only after ~30,000 frames (a long-lived campaign worker, not
+a short flight or a test); ``companion campaign`` turns it on in its workers.
 
 Arrays (float64), one per plant, reused every frame:
 
@@ -236,9 +238,9 @@ _tried = False
 
 def kernel():
     """The compiled ``airborne_steps`` (numba, ``cache=True``), or None: numba not
-    installed, or ``VINEYARD_GNC_NUMBA=0``. Compiled (or loaded from the cache) once."""
+    installed, or ``VINEYARD_GNC_NUMBA`` not ``1``. Compiled (or loaded from the cache) once."""
     global _compiled, _tried
-    if os.environ.get(ENV, "1").strip() == "0":
+    if os.environ.get(ENV, "0").strip() != "1":
         return None
     if not _tried:
         _tried = True

@@ -25,7 +25,7 @@ def _state(pl: Plant) -> tuple:
 
 
 def _pair(monkeypatch, drag: float, ground):
-    monkeypatch.delenv(plant_kernel.ENV, raising=False)
+    monkeypatch.setenv(plant_kernel.ENV, "1")
     fast = Plant(PlantParams(drag_n_s_m=drag), ground_height=ground, max_ground_m=0.5 if ground else math.inf)
     ref = Plant(PlantParams(drag_n_s_m=drag), ground_height=ground, max_ground_m=0.5 if ground else math.inf)
     ref._kernel = None   # the Python loop only

@@ -116,7 +116,10 @@ def test_low_crate_is_climbed_over_inside_the_corridor(tmp_path, control):
     assert rp["max_climb_m"] >= 1.2 + 0.442 + 0.5 - FLIGHT_Z
 
 
-@pytest.mark.parametrize("control", ["companion", "vehicle"])
+# The companion's own controller only: the stop and the re-route are the replanner's,
+# the same in both modes (the vehicle mode's tracking of a replanned reference is
+# flown by the crate above); each of these flights costs ~45 s of the suite's budget.
+@pytest.mark.parametrize("control", ["companion"])
 def test_tall_post_stops_the_vehicle_and_reroutes(tmp_path, control):
     """The 3 m post (ceiling 3 m above ground): no way over or beside it; the
     vehicle stops in front of it, re-plans the rest and flies the blocked

@@ -144,6 +144,8 @@ def make_client(scheduler: str | None = None, workers: int | None = None):
     n = workers or os.cpu_count() or 1
     import logging
 
+    # long-lived workers repay numba's start-up (sitl.plant_kernel): on unless the user said otherwise
+    os.environ.setdefault("VINEYARD_GNC_NUMBA", "1")
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                            silence_logs=logging.ERROR)
     return Client(cluster)
