@@ -538,7 +538,8 @@ def open_link(connect: str, tlog_path: str | None, signing_key: bytes | None = N
     return Connection(connect, tlog=tlog, signing_key=signing_key).open()
 
 
-def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | None, overrides: dict) -> dict:
+def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | None, overrides: dict,
+                 sensor_gap: str = "refuse") -> dict:
     """The flight's setup record (``companion.flight.setup_record``): what ``companion replay``
     needs to rebuild this flight from its .tlog and the same mission (and plan) files, and the
     numeric environment it ran in (``companion.flight.environment``: bit-for-bit replay is
@@ -567,6 +568,7 @@ def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | No
         "control": control,
         "cut_s": cut_s,
         "runner": {k: (list(v) if isinstance(v, tuple) else v) for k, v in sorted(overrides.items())},
+        "sensor_gap": sensor_gap,
         "environment": fingerprint(),
     }
 
@@ -718,9 +720,9 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
         check_free_space(outputs)
         check_writable([o[:2] for o in outputs])
         cfg = RunnerConfig(control=control, **(runner_overrides or {}))
-        setup = flight_setup(mission, plan_path, control, cut_s, runner_overrides or {})
-        setup["sensor_gap"] = sensor_gap
-        core = build_flight_core(mission, flight_plan, cfg, setup, maps)
+        core = build_flight_core(mission, flight_plan, cfg,
+                                 flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}, sensor_gap),
+                                 maps)
         core.sensor_coverage = coverage_doc
     except BaseException:
         if conn is not None:
