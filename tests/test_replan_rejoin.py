@@ -244,14 +244,15 @@ def test_skipped_coverage_is_an_event_and_in_the_stats():
 
 
 def test_climb_limit_stacks_no_margin_and_reads_the_top_from_axis_returns():
-    from companion.replan.replanner import WALL_MARGIN_M, too_tall, unpassable_points
+    from companion.replan.replanner import GOVERNOR_MARGIN_M, WALL_MARGIN_M, too_tall, unpassable_points
     keep = 0.5 + 0.442
-    # the reference rises to the ceiling less the wall margin: 3 - 0.1 = 2.9 m; over a top at
-    # 1.95 m it keeps 0.95 >= 0.942 m, over 1.97 m only 0.93 m
-    assert WALL_MARGIN_M == 0.1
-    assert not too_tall(1.95, 3.0, keep) and too_tall(1.97, 3.0, keep)
-    # a post whose axis returns top out at 1.9 m, and a wide beam's edge candidate reading 2.3 m
-    pts = np.array([[5.0, 0.0, 1.0], [5.0, 0.0, 1.9], [5.05, 0.0, 2.3]])
+    # the reference rises to the ceiling less the wall margin: 3 - 0.1 = 2.9 m, where the
+    # governor must keep 0.942 + 0.1 = 1.042 m from the top: over 1.85 m it keeps 1.05 m,
+    # over 1.87 m only 1.03 m (it would hover over the post, never pass)
+    assert WALL_MARGIN_M == 0.1 and GOVERNOR_MARGIN_M == 0.1
+    assert not too_tall(1.85, 3.0, keep) and too_tall(1.87, 3.0, keep)
+    # a post whose axis returns top out at 1.8 m, and a wide beam's edge candidate reading 2.3 m
+    pts = np.array([[5.0, 0.0, 1.0], [5.0, 0.0, 1.8], [5.05, 0.0, 2.3]])
     flat = lambda x, y: 0.0                                          # noqa: E731
     conf = np.array([True, True, False])
     assert len(unpassable_points(pts, flat, 3.0, keep, confirmed=conf)) == 0

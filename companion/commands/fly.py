@@ -626,7 +626,10 @@ def build_guard(mission, replanner, grid, dem):
         od = known_obstacle_distance(replanner.memory, lambda: replanner.known)
     else:
         scene, od = SafetyScene.from_maps(grid, dem, mission.replan.canopy_height_m), None
-    return GuardGate(Guard(cfg, scene, od), mission.replan.jerk_m_s3)
+    gate = GuardGate(Guard(cfg, scene, od), mission.replan.jerk_m_s3)
+    if replanner is not None:
+        replanner.guard = gate.guard      # re-routes and rejoins are paced to it
+    return gate
 
 
 def build_replanner(mission, flight_plan: FlightPlan, grid, dem):

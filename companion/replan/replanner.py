@@ -83,7 +83,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -95,6 +95,7 @@ from .globalplan import GlobalPlan
 from .knownmap import UNKNOWN, KnownMap
 from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
 from .nodata import BeamFreshness, block_no_data
+from .pace import pace
 from .perception import PoseHistory, beam_evidence
 from .rejoin import rejoin
 from .reroute import reroute
@@ -381,12 +382,15 @@ def unpassable_points(points: np.ndarray, ground_z, ceiling_agl_m: float, keep_m
 
 def too_tall(top_z: float, ceiling_z: float, keep_m: float) -> bool:
     """An obstacle whose top is at ``top_z`` cannot be passed over under ``ceiling_z``:
-    the highest the avoiding reference goes (the ceiling less the wall margin) keeps
-    less than ``keep_m`` (airframe radius + clearance) from it. No other margin is
-    stacked on the top (the climb's goal adds its own above it, capped at that
-    height), and the top comes from returns on a beam's axis where there are any
-    (a wide beam's edge candidates read high: the upper edge of its field)."""
-    return top_z + keep_m > ceiling_z - WALL_MARGIN_M
+    at the highest the avoiding reference goes (the ceiling less the wall margin) the
+    clearance governor, which keeps ``keep_m`` (airframe radius + clearance) plus
+    ``GOVERNOR_MARGIN_M`` from every point, would not let it move over the top. (Judged
+    on ``keep_m`` alone, tops within the governor's margin of the limit were climbed
+    and then never passed: 20 s over the post, "escape not through", a hold.) No
+    margin is stacked on the top estimate itself, and the top comes from returns on
+    a beam's axis where there are any (a wide beam's edge candidates read high: the
+    upper edge of its field)."""
+    return top_z + keep_m + GOVERNOR_MARGIN_M > ceiling_z - WALL_MARGIN_M
 
 
 def first_waypoint_ahead(plan: GlobalPlan, wp_leave: int, p_enu_m, u_xy, speed_m_s: float,
@@ -508,6 +512,10 @@ class Replanner:
         self._stop_then = ""
         self._next_rejoin = -math.inf
         self._dev_leg: tuple | None = None
+        #: the guard (``companion.safety.Guard``; set by the flight's builder): a re-route or
+        #: a rejoin is paced to its stopping law and checked whole before it is installed
+        #: (``pace``); None: installed as planned
+        self.guard = None
 
     @classmethod
     def from_plan(cls, plan, mission) -> "Replanner":
@@ -522,6 +530,17 @@ class Replanner:
         self.plan = plan
         self._cursor = TrajectoryCursor(plan.trajectory)
         self._n_legs = max(1, len(plan.turns_enu_m) - 1)
+
+    def _paced(self, plan: GlobalPlan, st) -> tuple:
+        """(plan or None, verdict, seconds added): a new plan retimed to the guard's
+        stopping law (``pace``); None when the guard still refuses it."""
+        if self.guard is None:
+            return plan, None, 0.0
+        x0 = np.array([st.p, st.v, st.a, st.jerk], dtype=float)
+        paced, verdict = pace(plan, x0, self.guard)
+        if not verdict.ok:
+            return None, verdict, 0.0
+        return paced, verdict, float(paced.t_s[-1] - plan.t_s[-1])
 
     def _leg_frame(self, k: int):
         """(A (3,), B (3,), u_t (2,), u_n (2,)) of leg k of the plan (``GlobalPlan.leg_frame``)."""
@@ -956,27 +975,48 @@ class Replanner:
             if len(blocking) == 0:
                 blocking = near
             travel = self._leg_frame(self._avoid_leg)[2]       # the leg the avoidance was on
-            res = reroute(self.plan, self.known, st, tau, self._wp_leave, blocking, travel,
-                          self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s, self._keep_m + ROUTE_MARGIN_M)
+            # planned round every obstacle known at the route's height; when that finds no
+            # route (a 2-D route cannot go over the low ones), round the blocking one only,
+            # and the guard judges the candidate against the rest (docs/replan.md "Pacing")
+            for others in (self._at_route_height(), None):
+                res = reroute(self.plan, self.known, st, tau, self._wp_leave, blocking, travel,
+                              self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
+                              self._keep_m + ROUTE_MARGIN_M, others)
+                plan, verdict, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st)
+                if plan is not None:
+                    break
             self.known = res.known
-            if res.plan is not None:
-                self._set_plan(res.plan)
+            if plan is not None:
+                self._set_plan(plan)
                 self._dev_leg = None
                 self.mode = "reroute"
-                self._mode_until = float(res.plan.t_s[1]) if len(res.plan.t_s) > 1 else tau
+                self._mode_until = float(plan.t_s[1]) if len(plan.t_s) > 1 else tau
+                paced = f", paced +{added:.1f} s" if added > 0.0 else ""
                 self._event(events, "reroute", self._nearest(dist),
-                            f"{res.n_pieces} coverage pieces left, {res.n_skipped} unreachable")
+                            f"{res.n_pieces} coverage pieces left, {res.n_skipped} unreachable{paced}")
                 for gap in res.skipped:
                     self._skip(events, *gap)
                 s = self._cursor.sample(tau)
                 return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
-            detail = f"{res.reason}; {self._route_check(st.p)}"
+            why = res.reason if res.plan is None else f"guard refused the re-route: {verdict.detail}"
+            detail = f"{why}; {self._route_check(st.p)}"
         else:
             detail = self._stop_detail
         self.mode = "hold"
         self._static = self._rest(st.p)
         self._event(events, "hold", self._nearest(dist), detail)
         return self._static
+
+    def _at_route_height(self) -> np.ndarray:
+        """(j, 3) the map's occupied voxels within the clearance and body of the height a
+        re-route flies at (the plan's height above the terrain): the 2-D re-route keeps
+        clear of them all, not only of the obstacle that stopped the vehicle."""
+        pts = self.memory.points()
+        if not len(pts):
+            return pts
+        ground = np.array([self.known.ground_z(float(x), float(y)) for x, y in pts[:, :2]])
+        z = ground + float(self.plan.flight.height_agl_m)
+        return pts[np.abs(pts[:, 2] - z) <= self._keep_m + 0.5 * self.cfg.voxel_m]
 
     def _route_check(self, p) -> str:
         """The independent 3-D route check (``routecheck``) from ``p`` to the ends of the
@@ -1030,9 +1070,11 @@ class Replanner:
         res = rejoin(plan, st, tau, first, self.memory.points(), self._keep_m,
                      self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z, self._on_free_cell,
                      self._floor_z)
-        if res.plan is None:
+        paced, _, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st)
+        if paced is None:
             self._next_rejoin = tau + REJOIN_RETRY_S
             return None
+        res = replace(res, plan=paced)
         self._set_plan(res.plan)
         # the lateral deviation of the rejoin: from the avoidance's legs, and from its
         # own chord when the first way-point kept lies off them (the plan's end, in a
@@ -1043,7 +1085,8 @@ class Replanner:
             self._dev_leg = (chord,) if self._dev_leg is None else (*self._dev_leg, chord)
         self.mode = "rejoin"
         self._mode_until = float(res.plan.t_s[1])
-        self._event(events, "rejoin", None, f"LQR re-solved through {len(res.plan.t_s) - 1} way-points")
+        paced = f", paced +{added:.1f} s" if added > 0.0 else ""
+        self._event(events, "rejoin", None, f"LQR re-solved through {len(res.plan.t_s) - 1} way-points{paced}")
         skip = rejoin_skip(plan, start, first, P, u)
         if skip is not None:
             self._skip(events, *skip, "rejoin")

@@ -5,9 +5,14 @@ end, re-plan the remaining coverage from the current state).
 Steps of ``reroute`` (pure: maps, plan and state in, a new plan out):
 
 1. The obstacle's points (the face the sensors saw, extended by the assumed
-   depth along the direction of travel) are added to the map; the eroded
-   free space loses every cell within ``keep_m`` (the clearance plus the
-   vehicle's body radius, at least the map's own erosion threshold) of them.
+   depth along the direction of travel) are added to the map (the map
+   returned); the route is planned on that map with every other obstacle
+   the vehicle knows at the route's height added too (``others_enu_m``: the
+   route is planned in 2-D at that height, and the guard checks it in 3-D
+   against the same obstacles). The eroded free space loses every cell
+   within ``keep_m`` (the clearance plus the vehicle's body radius, at least
+   the map's own erosion threshold) of them. The others stay out of the
+   returned map: the avoidance goes on reacting to them in flight.
 2. What is left to cover: the rest of the current main segment beyond the
    obstacle (its free runs past the vehicle, each at least the minimum
    segment length) flown *from the segment's far end back toward the
@@ -28,7 +33,11 @@ Steps of ``reroute`` (pure: maps, plan and state in, a new plan out):
    although the track it came along is open), then
    an auxiliary connection (``coverage.gridpath.aux_path``:
    straight where clear, else the shortest grid path) to each piece in
-   turn; a piece that cannot be reached is skipped (counted).
+   turn, in the free space eroded by ``CONNECTION_MARGIN_M`` more where
+   that connects (a shortest connection grazes the eroded space's edge at a
+   row's end, and the LQR's soft corners cut it by millimetres), else in the
+   eroded free space itself; a piece that cannot be reached is skipped
+   (counted).
 4. Way-points along the route (``coverage.waypoints.waypoints_along``), the
    first one replaced by the current reference position (the vehicle may
    have climbed: the first interval is stretched for the descent at the
@@ -40,7 +49,7 @@ no route (the caller holds and reports).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -55,6 +64,8 @@ from .knownmap import KnownMap
 
 #: Farthest (m) the route may back off along the track to reach free space.
 MAX_BACK_OFF_M = 5.0
+#: Connections between pieces keep this much (m) more from the rows and obstacles where they can.
+CONNECTION_MARGIN_M = 0.1
 #: Route points closer than this (m) are merged.
 _MERGE_M = 0.05
 _QUINTIC_PEAK_V = 1.875
@@ -210,6 +221,29 @@ def _snap(known: KnownMap, xy) -> np.ndarray:
     return np.array([float(x), float(y)])
 
 
+def _connect(frees: list, grid, a_xy, b_xy) -> np.ndarray:
+    """The connection from a to b (ENU m) in the first of ``frees`` that holds one
+    (``aux_path``); InputError when none does."""
+    err = None
+    for free in frees:
+        try:
+            return aux_path(free, world_to_grid(grid, a_xy), world_to_grid(grid, b_xy))
+        except InputError as exc:
+            err = exc
+    raise err
+
+
+def _narrowed(free, margin_m: float):
+    """``free`` with its eroded space eroded by ``margin_m`` more (a disk)."""
+    h = free.resolution_m
+    r = int(np.ceil(margin_m / h - 1e-9))
+    if r <= 0:
+        return free
+    yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+    disk = (xx * xx + yy * yy) <= r * r
+    return replace(free, eroded=ndimage.binary_erosion(free.eroded, structure=disk, border_value=0))
+
+
 def _min_keep(keep_m: float | None, known: KnownMap) -> float:
     """What the back-off leg must keep from the obstacle: half the route's margin
     (the vehicle stopped within it; it must not go closer)."""
@@ -263,7 +297,7 @@ def _gaps(s_from: float, L: float, runs, at) -> list[tuple]:
 
 def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: int,
             obstacle_enu_m: np.ndarray, travel_xy, depth_m: float, vertical_speed_m_s: float,
-            keep_m: float | None = None) -> RerouteResult:
+            keep_m: float | None = None, others_enu_m: np.ndarray | None = None) -> RerouteResult:
     """Re-plan the remaining coverage around a blocking obstacle (module doc).
 
     Parameters
@@ -290,6 +324,9 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
     keep_m : float, optional
         Distance the route keeps from the obstacle (m; the replanner's
         clearance plus the body radius); default the map's erosion threshold.
+    others_enu_m : (j, 3) array, optional
+        The other known obstacle points at the route's height (kept from as far,
+        without the assumed depth).
     """
     travel = np.asarray(travel_xy, dtype=float)
     travel = travel / max(float(np.hypot(*travel)), 1e-12)
@@ -300,10 +337,13 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
         d = obs[np.argmin(np.hypot(*(obs[:, :2] - p[:2]).T)), :2] - p[:2]
         if np.hypot(*d) > 1e-6:
             toward = d / np.hypot(*d)
-    new_known = known.with_obstacle(obstacle_footprint(obs, toward, depth_m, 0.5 * known.free.resolution_m), keep_m)
+    known_out = known.with_obstacle(obstacle_footprint(obs, toward, depth_m, 0.5 * known.free.resolution_m), keep_m)
+    new_known = known_out           # the map the route is planned on: with the other obstacles too
+    if others_enu_m is not None and len(others_enu_m):
+        new_known = known_out.with_obstacle(np.asarray(others_enu_m, dtype=float).reshape(-1, 3)[:, :2], keep_m)
 
     def fail(reason: str) -> RerouteResult:
-        return RerouteResult(None, new_known, reason, 0, 0, np.zeros((0, 2)))
+        return RerouteResult(None, known_out, reason, 0, 0, np.zeros((0, 2)))
 
     # what is left to cover, in flight order: (entry, exit) pairs (ENU xy), their plan times
     pieces: list[tuple[np.ndarray, np.ndarray]] = []
@@ -351,6 +391,7 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
         return fail(f"no free space within {MAX_BACK_OFF_M:g} m behind the vehicle or away from the obstacle")
 
     grid = new_known.grid
+    frees = [_narrowed(new_known.free, CONNECTION_MARGIN_M), new_known.free]
     route = [p[:2], start]
     cur = start
     flown = []
@@ -361,7 +402,7 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
             entry, exit_ = exit_, entry           # enter a free piece by its nearer end
         entry, exit_ = _snap(new_known, entry), _snap(new_known, exit_)
         try:
-            conn = aux_path(new_known.free, world_to_grid(grid, cur), world_to_grid(grid, entry))
+            conn = _connect(frees, grid, cur, entry)
         except InputError:
             skipped += 1
             t0, t1 = sorted(times[k])
@@ -393,4 +434,4 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
     new_plan = GlobalPlan.from_waypoints(traj, t + t_now_s, P, wps.v_enu_m_s, wps.a_enu_m_s2, wps.corner, segs,
                                          plan.target_enu_m, plan.flight, plan.trajectory_config,
                                          plan.min_segment_m, tuple(path[-1]))
-    return RerouteResult(new_plan, new_known, "", len(flown), skipped, path, tuple(sorted(gaps)))
+    return RerouteResult(new_plan, known_out, "", len(flown), skipped, path, tuple(sorted(gaps)))

@@ -245,6 +245,25 @@ class Guard:
         where = f" at t={tk:.2f} s" if tk is not None else ""
         return Verdict(False, rule, kind, f"{kind} {rule}: {what}{where}", tk, q, d, req, app, allow)
 
+    def speed_limits(self, p_enu_m, u_enu) -> np.ndarray:
+        """(M,) the largest speed (m/s) at (M, 3) points ``p`` moving along (M, 3) unit
+        directions ``u`` that the speed rule passes: ``v_max(d - req)`` (the stopping law) over
+        the approach per unit speed along ``u`` (a finite difference over ``STEP_M``), the
+        least over the terrain and the obstacles; inf where ``u`` closes on neither. The same
+        law as ``_judge``'s, for planning a speed rather than judging one."""
+        p = np.asarray(p_enu_m, float).reshape(-1, 3)
+        u = np.asarray(u_enu, float).reshape(-1, 3)
+        d_all = self.distances(np.vstack([p, p + STEP_M * u]))
+        out = np.full(len(p), np.inf)
+        for kind in ("terrain", "obstacle"):
+            d0, d1 = d_all[kind][:len(p)], d_all[kind][len(p):]
+            with np.errstate(invalid="ignore"):
+                closing = np.where(np.isfinite(d0), (d0 - d1) / STEP_M, 0.0)
+            allowed = stopping_speed_m_s(d0 - self._req[kind], self.cfg.accel_m_s2, self.cfg.delay_s)
+            lim = np.where(closing > 1e-6, allowed / np.maximum(closing, 1e-6), np.inf)
+            out = np.minimum(out, lim)
+        return out
+
     def check_sample(self, p_enu_m, v_enu_m_s, terrain: bool = True, a_enu_m_s2=None) -> Verdict:
         """One reference sample (position ENU m, velocity ENU m/s): both rules (module doc).
         ``terrain`` False: the terrain is not checked (take-off from the ground).

@@ -1,0 +1,144 @@
+"""Pacing a candidate plan to the guard's stopping law (pure; docs/replan.md "Pacing").
+
+A re-route or a rejoin is an LQR trajectory through way-points timed at the
+cruise speed. Near an obstacle it knows, the guard's speed rule
+(``companion.safety.guard``, PX4 collision prevention's law) may ask for less:
+a route that ends its coverage piece 1.2 m short of a blocking post, flown at
+0.91 m/s toward it, leaves too little room to stop. Such a candidate is not
+flown as it is, and refusing it ends the flight.
+
+``pace`` keeps the candidate's path and retimes it, in two passes.
+
+1. **Plan the speed.** Each way-point interval is the straight segment
+   between its way-points, sampled every ``STEP_M``; the guard's
+   ``speed_limits`` gives the largest speed the stopping law allows at each
+   sample along that segment's direction. An interval flown faster than
+   ``HEADROOM`` times its least limit is stretched to it: its duration
+   multiplied by ``k`` (at most ``MAX_STRETCH``), the way-point velocities at
+   its ends divided by the larger ``k`` of the intervals they join and the
+   accelerations by its square (the same path, flown slower there).
+2. **Fly it.** The LQR is re-solved from the same initial state and sampled
+   every ``SAMPLE_DT_S`` (the guard's own sampling). The LQR tracks its
+   way-points softly, so its speed swings between them: every interval with
+   a sample faster than the limit along its velocity (the limit itself, not
+   the guard's tolerance above it) is stretched by the worst
+   ratio over ``HEADROOM`` (at least ``MIN_STRETCH``), and so is the interval
+   before it, where the deceleration starts. Repeated up to ``MAX_TRIES``
+   times, until no sample is too fast.
+3. **Check.** The guard checks the whole candidate (``check_trajectory``):
+   its verdict is returned with the plan. A refused candidate is not
+   installed; the mode treats it as no plan. Slowing down does not move a
+   path: a clearance or terrain refusal stays one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Callable
+
+import numpy as np
+
+from ..trajectory import generate_trajectory
+
+#: Retime to this fraction of the speed the guard allows (the LQR tracks its way-points softly).
+HEADROOM = 0.85
+#: Bounds of one stretch of an interval.
+MIN_STRETCH, MAX_STRETCH = 1.2, 4.0
+#: No interval is flown slower than this many times its plan's duration.
+MAX_TOTAL_STRETCH = 8.0
+#: Retimings of pass 2 tried before the candidate is given up.
+MAX_TRIES = 8
+#: Spacing (m) of the samples along a way-point interval in pass 1.
+STEP_M = 0.05
+#: Pass 2 samples the candidate this often (s): the guard's ``SAMPLE_DT_S``.
+SAMPLE_DT_S = 0.05
+
+
+def stretch(t_s: np.ndarray, v: np.ndarray, a: np.ndarray, k: np.ndarray) -> tuple:
+    """Way-point times, velocities and accelerations with interval ``j`` (``t_s[j] ..
+    t_s[j+1]``) ``k[j] >= 1`` times longer: the velocity at each way-point after the first
+    divided by the larger ``k`` of the intervals it joins, the acceleration by its square,
+    later times shifted by the time added."""
+    t = np.asarray(t_s, float)
+    k = np.maximum(np.asarray(k, float), 1.0)
+    v = np.array(v, float)
+    a = np.array(a, float)
+    out_t = np.concatenate([[t[0]], t[0] + np.cumsum(np.diff(t) * k)])
+    at_wp = np.maximum(k, np.append(k[1:], 1.0))        # way-point j + 1 joins intervals j and j + 1
+    v[1:] /= at_wp[:, None]
+    a[1:] /= (at_wp * at_wp)[:, None]
+    return out_t, v, a
+
+
+def planned_stretch(t_s: np.ndarray, p_enu_m: np.ndarray, speed_limits: Callable) -> np.ndarray:
+    """(N-1,) stretch of each way-point interval that flies its straight segment at no
+    more than ``HEADROOM`` times the least of ``speed_limits(points, directions)`` along
+    it (1 where it already does; pass 1 of the module doc)."""
+    t = np.asarray(t_s, float)
+    p = np.asarray(p_enu_m, float)
+    k = np.ones(len(t) - 1)
+    for j in range(len(t) - 1):
+        d = p[j + 1] - p[j]
+        L = float(np.linalg.norm(d))
+        dt = float(t[j + 1] - t[j])
+        if L < 1e-6 or dt <= 0.0:
+            continue
+        m = max(2, int(np.ceil(L / STEP_M)) + 1)
+        pts = p[j] + np.linspace(0.0, 1.0, m)[:, None] * d
+        lim = float(np.min(speed_limits(pts, np.broadcast_to(d / L, (m, 3)))))
+        k[j] = float(np.clip((L / dt) / max(HEADROOM * lim, 1e-3), 1.0, MAX_STRETCH))
+    return k
+
+
+def _resolve(plan, x0: np.ndarray, k: np.ndarray):
+    t, v, a = stretch(plan.t_s, plan.v_enu_m_s, plan.a_enu_m_s2, k)
+    traj = generate_trajectory(t, plan.p_enu_m, v, a, plan.trajectory_config, initial_state=x0,
+                               target_enu_m=plan.target_enu_m)
+    return replace(plan, trajectory=traj, t_s=t, v_enu_m_s=v, a_enu_m_s2=a)
+
+
+def sampled_stretch(plan, speed_limits: Callable, dt_s: float = SAMPLE_DT_S) -> np.ndarray:
+    """(N-1,) stretch of each way-point interval whose trajectory samples (every ``dt_s``)
+    fly faster than ``speed_limits`` allows along their velocity: ``max(speed / limit) /
+    HEADROOM`` over the interval (at least ``MIN_STRETCH``), the interval before it stretched
+    as much (the deceleration starts there); 1 elsewhere (pass 2 of the module doc)."""
+    tr = plan.trajectory
+    t_wp = np.asarray(plan.t_s, float)
+    t = np.arange(float(t_wp[0]), float(tr.tf), dt_s)
+    s = tr.sample(t)
+    p, v = np.asarray(s.p, float).reshape(-1, 3), np.asarray(s.v, float).reshape(-1, 3)
+    speed = np.linalg.norm(v, axis=1)
+    moving = speed > 1e-3
+    k = np.ones(len(t_wp) - 1)
+    if not moving.any():
+        return k
+    lim = speed_limits(p[moving], v[moving] / speed[moving, None])
+    ratio = speed[moving] / np.maximum(lim, 1e-6)
+    j = np.clip(np.searchsorted(t_wp, t[moving], side="right") - 1, 0, len(k) - 1)
+    over = ratio > 1.0
+    if not over.any():
+        return k
+    worst = np.zeros(len(k))
+    np.maximum.at(worst, j[over], ratio[over])
+    hit = worst > 0.0
+    k[hit] = np.clip(worst[hit] / HEADROOM, MIN_STRETCH, MAX_STRETCH)
+    lead = np.append(k[1:], 1.0)
+    return np.maximum(k, lead)
+
+
+def pace(plan, x0: np.ndarray, guard) -> tuple:
+    """(plan, verdict): ``plan`` (a ``GlobalPlan`` whose trajectory starts from state
+    ``x0``, (4, 3) [p, v, a, jerk]) retimed to ``guard`` (its ``speed_limits`` and
+    ``check_trajectory``), and the guard's last verdict on it (module doc)."""
+    if len(plan.t_s) >= 2:
+        dt0 = np.diff(plan.t_s)
+        k = planned_stretch(plan.t_s, plan.p_enu_m, guard.speed_limits)
+        for _ in range(MAX_TRIES):
+            # no interval slower than MAX_TOTAL_STRETCH times its plan: a sample that stays too
+            # fast at that pace is too near to be paced (the check refuses it)
+            k = np.minimum(k, MAX_TOTAL_STRETCH * dt0 / np.diff(plan.t_s))
+            if not np.any(k > 1.0 + 1e-9):
+                break
+            plan = _resolve(plan, x0, k)
+            k = sampled_stretch(plan, guard.speed_limits)
+    return plan, guard.check_trajectory(plan.trajectory, float(plan.t_s[0]))

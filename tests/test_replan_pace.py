@@ -1,0 +1,136 @@
+"""Pacing a re-route or rejoin to the guard's stopping law (companion.replan.pace, issue 15).
+
+The stretch arithmetic is worked by hand. The paced flight is judged by the
+stopping law itself, v toward the obstacle <= sqrt(2 a room + (a tau)^2) - a tau,
+evaluated here from the box's exact distance (not through the guard), at
+every sample of the paced trajectory.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.maps.grid import ElevationModel, OccupancyGrid
+from companion.mission.schema import FlightConfig
+from companion.replan.globalplan import GlobalPlan
+from companion.replan.pace import HEADROOM, MAX_TOTAL_STRETCH, pace, planned_stretch, stretch
+from companion.safety import Guard, GuardConfig, SafetyScene
+from companion.trajectory import TrajectoryConfig, generate_trajectory
+
+R, C = 0.4, 0.5
+REQ = R + C                  # the centre keeps 0.9 m from the obstacle and the ground
+A_BRAKE, TAU = 1.0, 0.5
+BOX_LO, BOX_HI = np.array([8.0, 7.0, 0.0]), np.array([8.5, 8.0, 3.0])
+
+
+def box_distance(points) -> np.ndarray:
+    p = np.asarray(points, float).reshape(-1, 3)
+    e = np.maximum(np.maximum(BOX_LO - p, p - BOX_HI), 0.0)
+    return np.sqrt((e * e).sum(axis=1))
+
+
+def _guard() -> Guard:
+    occ = np.zeros((150, 150), bool)
+    grid = OccupancyGrid(occ, ~occ, 0.1)
+    dem = ElevationModel(np.zeros((16, 16)), 0.0, 0.0, 1.0)
+    cfg = GuardConfig(airframe_radius_m=R, terrain_clearance_m=C, row_clearance_m=C, obstacle_clearance_m=C,
+                      accel_m_s2=A_BRAKE, delay_s=TAU)
+    return Guard(cfg, SafetyScene.from_maps(grid, dem, 2.0), box_distance)
+
+
+def _plan(x_end: float) -> tuple[GlobalPlan, np.ndarray]:
+    """Along y = 7.5 at 1.5 m height from x = 0 toward the box at 1 m/s, way-points
+    every 1 m (1 s), stopping at x_end; the LQR from rest at the first."""
+    xs = np.arange(0.0, x_end + 1e-9, 1.0)
+    if xs[-1] < x_end - 1e-9:
+        xs = np.append(xs, x_end)
+    P = np.column_stack([xs, np.full(len(xs), 7.5), np.full(len(xs), 1.5)])
+    t = np.concatenate([[0.0], 1.0 + np.cumsum(np.diff(xs))])       # 1 s to get going
+    V = np.zeros_like(P)
+    V[1:-1, 0] = 1.0
+    A = np.zeros_like(P)
+    x0 = np.array([P[0], [0, 0, 0], [0, 0, 0], [0, 0, 0]], float)
+    cfg = TrajectoryConfig()
+    traj = generate_trajectory(t, P, V, A, cfg, initial_state=x0)
+    corner = np.zeros(len(P), bool)
+    corner[[0, -1]] = True
+    plan = GlobalPlan.from_waypoints(traj, t, P, V, A, corner, None, None, FlightConfig(), cfg, 0.5)
+    return plan, x0
+
+
+def test_stretch_hand_worked():
+    t = np.array([0.0, 1.0, 3.0, 4.0])
+    v = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0], [0.0, 0, 0]])
+    a = np.array([[0.0, 0, 0], [4.0, 0, 0], [4.0, 0, 0], [0.0, 0, 0]])
+    t2, v2, a2 = stretch(t, v, a, np.array([1.0, 2.0, 1.0]))
+    # the middle interval (2 s) doubles: 0, 1, 5, 6
+    assert t2.tolist() == [0.0, 1.0, 5.0, 6.0]
+    # way-points 1 and 2 join the doubled interval: velocity / 2, acceleration / 4; 0 and 3 keep theirs
+    assert v2[:, 0].tolist() == [0.0, 0.5, 1.0, 0.0]
+    assert a2[:, 0].tolist() == [0.0, 1.0, 1.0, 0.0]
+
+
+def test_planned_stretch_hand_worked():
+    # 4 m in 4 s (1 m/s) where 0.5 m/s is allowed: 1 / (HEADROOM * 0.5) times longer
+    t = np.array([0.0, 4.0, 8.0])
+    p = np.array([[0.0, 0, 1], [4.0, 0, 1], [8.0, 0, 1]])
+
+    def limits(points, u):
+        return np.where(np.asarray(points)[:, 0] <= 4.0, 0.5, np.inf)
+    k = planned_stretch(t, p, limits)
+    assert k[0] == pytest.approx(1.0 / (HEADROOM * 0.5))
+    assert k[1] == pytest.approx(1.0 / (HEADROOM * 0.5))     # its first sample (x = 4) is limited too
+    assert planned_stretch(t, p, lambda q, u: np.full(len(q), 5.0)).tolist() == [1.0, 1.0]
+
+
+def test_speed_limits_follow_the_stopping_law():
+    g = _guard()
+    # 2 m from the box's face (x = 8), flying straight at it: room 2 - 0.9 = 1.1 m
+    lim = g.speed_limits(np.array([[6.0, 7.5, 1.5]]), np.array([[1.0, 0.0, 0.0]]))[0]
+    assert lim == pytest.approx(math.sqrt(2 * A_BRAKE * 1.1 + (A_BRAKE * TAU) ** 2) - A_BRAKE * TAU, abs=1e-6)
+    # flying away from it, or along the ground at a height with room: no limit
+    assert np.isinf(g.speed_limits(np.array([[6.0, 7.5, 1.5]]), np.array([[-1.0, 0.0, 0.0]]))[0])
+
+
+def _worst_law_excess(traj, t0: float) -> float:
+    """Largest (approach speed - stopping law) over the trajectory, from the box's exact distance."""
+    t = np.arange(t0, traj.tf, 0.01)
+    s = traj.sample(t)
+    p, v = np.asarray(s.p), np.asarray(s.v)
+    d = box_distance(p)
+    approach = -np.gradient(d, t)
+    allowed = np.sqrt(2 * A_BRAKE * np.maximum(d - REQ, 0.0) + (A_BRAKE * TAU) ** 2) - A_BRAKE * TAU
+    return float(np.max(approach - allowed))
+
+
+def test_a_route_ending_near_an_obstacle_is_paced_to_the_stopping_law():
+    g = _guard()
+    # stop 1.4 m before the box: 0.5 m of room. At 1 m/s the stopping law (0.62 m/s at 0.5 m
+    # of room, 0.84 m/s at 0.9 m) is broken in the last metres: the guard refuses the plan.
+    plan, x0 = _plan(6.6)
+    assert _worst_law_excess(plan.trajectory, 0.0) > 0.05
+    assert not g.check_trajectory(plan.trajectory, 0.0).ok
+    paced, verdict = pace(plan, x0, g)
+    assert verdict.ok, verdict.detail
+    # the same path: the same way-points, the same end
+    assert np.array_equal(paced.p_enu_m, plan.p_enu_m)
+    end = np.asarray(paced.trajectory.sample(np.array([paced.trajectory.tf])).p)[0]
+    assert end == pytest.approx([6.6, 7.5, 1.5], abs=0.02)
+    # slower, but not slower than the bound on any interval
+    assert paced.t_s[-1] > plan.t_s[-1]
+    assert np.all(np.diff(paced.t_s) <= MAX_TOTAL_STRETCH * np.diff(plan.t_s) + 1e-9)
+    # the stopping law holds at every sample, within the guard's 0.05 m/s tolerance
+    assert _worst_law_excess(paced.trajectory, 0.0) <= 0.05
+    # the first metres, far from the box, keep their cruise timing
+    assert paced.t_s[2] == pytest.approx(plan.t_s[2])
+
+
+def test_a_route_into_the_clearance_is_refused_not_paced_for_ever():
+    g = _guard()
+    plan, x0 = _plan(7.5)                 # ends 0.5 m from the box's face, inside the 0.9 m
+    paced, verdict = pace(plan, x0, g)
+    assert not verdict.ok                 # no pace gets it there: refused, in bounded tries
+    assert np.all(np.diff(paced.t_s) <= MAX_TOTAL_STRETCH * np.diff(plan.t_s) + 1e-9)
