@@ -307,7 +307,7 @@ def test_lossy_real_time_link_errors_are_measured_at_matching_times(tmp_path):
             via = type("Via", (), {"url": f"udpout:127.0.0.1:{relay.port}"})
             # the bound is not what this test is about: a real-time SITL on a loaded
             # machine may fall behind (the 10 cm target is the benchmark's)
-            rc, rep, msgs = _fly(tmp_path, via, "--cut", "20", "--control", "vehicle", "--max-error", "2")
+            rc, rep, msgs = _fly(tmp_path, via, "--cut", "12", "--control", "vehicle", "--max-error", "2")
     assert rc == 0 and rep["completed"] and not rep["crashed"], rep["violation"]
     # no phantom obstacles on a clear field: each reading is placed with the pose
     # carried to its time (an 80 ms old attitude at 12 deg/s of yaw once put a row's
@@ -318,10 +318,11 @@ def test_lossy_real_time_link_errors_are_measured_at_matching_times(tmp_path):
     odo = [(m.time_usec // 1000, (m.y, m.x, -m.z)) for m in msgs
            if m.get_type() == "ODOMETRY" and m.get_srcSystem() == 1]
     err = np.array([np.linalg.norm(np.subtract(p, sp[ms])) for ms, p in odo if ms in sp and sp[ms][2] > 1.0])
-    # enough pairs for the two comparisons below to cover the flight: an idle machine
-    # gives over 100; a loaded one, whose real-time SITL and companion both run late,
-    # fewer (77 and 87 seen with the suite running beside it), so the floor is 50
-    assert len(err) > 50
+    # enough pairs for the two comparisons below to cover the flight: over a 20 s cut an
+    # idle machine gave over 100, a loaded one, whose real-time SITL and companion both
+    # run late, 77 and 87; this 12 s cut (suite budget) gives about 3/5 of those, so the
+    # floor is 30
+    assert len(err) > 30
     # the report's samples are every frame's, these the setpoints' (every 5th, from take-off
     # on): the same error, sampled a little differently
     assert rep["tracking"]["max_error_m"] <= err.max() + 0.005

@@ -1,5 +1,7 @@
-"""Obstacle avoidance end to end (issue 8): ``companion demo`` against the SITL
-subprocess over real UDP, in both control modes, with the scenarios' crate and
+"""Obstacle avoidance end to end (issue 8): ``companion demo`` against the bundled
+SITL in process (``--transport inproc``: the same MAVLink bytes through memory;
+tests/test_transport_e2e.py flies an obstacle flight over real UDP and checks it
+is identical), in both control modes, with the scenarios' crate and
 post moved into the first corridor (x = 17 m on the line y = 8.75 m, flown
 westward from x = 22.45 m) so that a short cut meets them.
 
@@ -39,10 +41,10 @@ def _mission(tmp_path, name: str, old: str) -> str:
     return str(path)
 
 
-def _demo(tmp_path, mission: str, control: str, cut: str):
+def _demo(tmp_path, mission: str, control: str, cut: str, *extra: str):
     out = tmp_path / f"out-{control}"
     rc = main(["demo", "--mission", mission, "--control", control, "--cut", cut, "--out", str(out),
-               "--no-plots", "--quiet"])
+               "--no-plots", "--quiet", *extra])
     rep = json.loads((out / "report.json").read_text())
     msgs = [r.msg for r in read_tlog(out / "flight.tlog")]
     page = (out / "map.html").read_text()          # the flight's map: flown track and obstacles
@@ -101,7 +103,7 @@ def _horizontal_distance(points: np.ndarray) -> np.ndarray:
 def test_low_crate_is_climbed_over_inside_the_corridor(tmp_path, control):
     """The 0.8 x 0.6 x 1.2 m crate: over it at >= 1.2 + 0.442 + 0.5 m, never beside it."""
     mission = _mission(tmp_path, "obstacle-low", "{type: box, x: 7.0, y: 6.25,")
-    rc, rep, msgs = _demo(tmp_path, mission, control, "20")
+    rc, rep, msgs = _demo(tmp_path, mission, control, "20", "--transport", "inproc")
     rp, truth, sp = _check_common(rc, rep, msgs, mission)
     actions = [e["action"] for e in rp["event_list"]]
     assert "avoid" in actions and "climb" in actions and "rejoin" in actions
@@ -121,14 +123,16 @@ def test_low_crate_is_climbed_over_inside_the_corridor(tmp_path, control):
 
 # The companion's own controller only: the stop and the re-route are the replanner's,
 # the same in both modes (the vehicle mode's tracking of a replanned reference is
-# flown by the crate above); each of these flights costs ~45 s of the suite's budget.
+# flown by the crate above). In process (the same MAVLink bytes through memory):
+# over UDP this flight cost 45 s of the suite's budget, and the obstacle flights of
+# tests/test_transport_e2e.py show the two transports fly identically.
 @pytest.mark.parametrize("control", ["companion"])
 def test_tall_post_stops_the_vehicle_and_reroutes(tmp_path, control):
     """The 3 m post (ceiling 3 m above ground): no way over or beside it; the
     vehicle stops in front of it, re-plans the rest and flies the blocked
     corridor from its other end, never closer than the clearance."""
     mission = _mission(tmp_path, "obstacle-tall", "{type: cylinder, x: 11.0, y: 3.75,")
-    rc, rep, msgs = _demo(tmp_path, mission, control, "12")
+    rc, rep, msgs = _demo(tmp_path, mission, control, "12", "--transport", "inproc")
     rp, truth, sp = _check_common(rc, rep, msgs, mission)
     actions = [e["action"] for e in rp["event_list"]]
     assert "stop" in actions and "reroute" in actions and "hold" not in actions
