@@ -15,10 +15,11 @@ made absolute) with its ``sim.obstacles`` list replaced by the placement.
 
 Placements (all drawn up front from ``--seed``, so flight I is the same with
 ``--only I``): 0-3 obstacles per flight, cylinders (radius 0.15-0.4 m) or
-boxes (sides 0.3-1.0 m, yaw 0-90 deg), heights 0.8-4 m (above
-``ceiling - clearance - body radius`` = 3 - 0.5 - 0.442 = 2.058 m an obstacle
-cannot be climbed: the vehicle has to stop and re-route, or hold and report
-when no route exists). A centre is a point of the part of the trajectory
+boxes (sides 0.3-1.0 m, yaw 0-90 deg), heights 0.8-4 m (above ``ceiling -
+wall margin - clearance - body radius - governor margin`` = 3 - 0.1 - 0.5 -
+0.442 - 0.1 = 1.858 m an obstacle cannot be climbed, ``replanner.too_tall``:
+the vehicle has to stop and re-route, or hold and report when no route
+exists). A centre is a point of the part of the trajectory
 that is flown (the plan cut at ``--cut`` seconds, as ``companion fly
 --cut`` cuts it: corridors y = 8.75 m westward and 6.25 m eastward, the
 headlands between them, the start of the east headland), uniform in arc
