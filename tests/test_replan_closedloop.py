@@ -626,3 +626,27 @@ def test_avoiding_reference_does_not_come_down_over_remembered_points(field):
         dist = np.linalg.norm(obs - P, axis=1)
         v = rp._apf_velocity(P, obs, dist, goal, A, u, n, 0.0)
         assert (v[2] >= 0.0) if held else (v[2] < -0.1), (dx, v)
+
+
+def test_a_holds_route_check_asks_only_for_the_coverage_left(field, monkeypatch):
+    """The independent check behind a hold's words looks for routes to the coverage still
+    to fly: the far end of the segment being flown and both ends of each segment not
+    started, never an end of a segment already flown (a vehicle stopped at one once
+    "reached" it, and the hold read "independent check DISAGREES")."""
+    import companion.replan.replanner as rpmod
+
+    rp = Replanner(ReplanConfig(), field.known, field.plan)
+    segs = field.plan.segments
+    assert len(segs) >= 3
+    asked = []
+    monkeypatch.setattr(rpmod, "route_exists", lambda scene, p, goals: asked.append(goals) or [False] * len(goals))
+    rp._wp_leave = segs[1].first_wp                 # flying the second segment
+    p = (*segs[1].start_xy, 1.5)
+    rp._route_check(p)
+    want = [segs[1].end_xy] + [q for s in segs[2:] for q in (s.start_xy, s.end_xy)]
+    near = sorted(want, key=lambda q: math.hypot(q[0] - p[0], q[1] - p[1]))
+    near = [q for q in near if math.hypot(q[0] - p[0], q[1] - p[1]) <= rpmod.ROUTE_CHECK_RADIUS_M]
+    got = [(g[0], g[1]) for g in asked[0]]
+    assert got == [tuple(q) for q in near[:rpmod.ROUTE_CHECK_GOALS]] or (not near and len(got) == 1)
+    flown = {tuple(segs[0].start_xy), tuple(segs[0].end_xy), tuple(segs[1].start_xy)} - set(map(tuple, want))
+    assert not flown & set(got)

@@ -1023,8 +1023,13 @@ class Replanner:
         coverage left (the ``ROUTE_CHECK_GOALS`` nearest within ``ROUTE_CHECK_RADIUS_M``), on
         the rows, the terrain and the obstacle map: the words a hold reports."""
         plan = self.plan
-        _, nxt = plan.segment_at(self._wp_leave)
-        ends = [q for seg in plan.segments[max(0, nxt - 1):] for q in (seg.start_xy, seg.end_xy)]
+        # the coverage left: the far end of the segment being flown (the re-route flies its
+        # rest from there), and both ends of every segment not yet started. (The segment
+        # before those, already flown, once counted too: a vehicle stopped at its end
+        # "reached" it, and every hold there read "independent check DISAGREES".)
+        current, nxt = plan.segment_at(self._wp_leave)
+        ends = ([plan.segments[current].end_xy] if current is not None else []) + \
+            [q for seg in plan.segments[nxt:] for q in (seg.start_xy, seg.end_xy)]
         P = np.asarray(p, dtype=float)
         if not ends:
             return "no coverage left to reach"
