@@ -93,6 +93,7 @@ from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
 from .globalplan import GlobalPlan
 from .knownmap import UNKNOWN, KnownMap
+from .lift import Over
 from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
@@ -981,7 +982,7 @@ class Replanner:
             for others in (self._at_route_height(), None):
                 res = reroute(self.plan, self.known, st, tau, self._wp_leave, blocking, travel,
                               self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
-                              self._keep_m + ROUTE_MARGIN_M, others)
+                              self._keep_m + ROUTE_MARGIN_M, others, self._over())
                 plan, verdict, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st)
                 if plan is not None:
                     break
@@ -1007,16 +1008,25 @@ class Replanner:
         self._event(events, "hold", self._nearest(dist), detail)
         return self._static
 
+    def _over(self) -> Over:
+        """What a re-route is lifted over (``lift``): every voxel of the map, kept from by
+        the clearance and body plus the governor's and the climb's margins (the height a
+        climb passes at), ramps at the vertical over the cruise speed, under the ceiling."""
+        return Over(self.memory.points(), float(self.cfg.voxel_m), self._keep_m,
+                    GOVERNOR_MARGIN_M + PASS_MARGIN_M, self.cfg.vertical_speed_m_s / max(self.speed_m_s, 1e-3),
+                    float(self.cfg.ceiling_agl_m))
+
     def _at_route_height(self) -> np.ndarray:
-        """(j, 3) the map's occupied voxels within the clearance and body of the height a
-        re-route flies at (the plan's height above the terrain): the 2-D re-route keeps
-        clear of them all, not only of the obstacle that stopped the vehicle."""
+        """(j, 3) the map's occupied voxels whose column (obstacles stand on the ground)
+        reaches within the clearance and body of the height a re-route flies at (the plan's
+        height above the terrain): the 2-D re-route keeps clear of them all, not only of
+        the obstacle that stopped the vehicle; what lies lower it flies over (``_over``)."""
         pts = self.memory.points()
         if not len(pts):
             return pts
         ground = np.array([self.known.ground_z(float(x), float(y)) for x, y in pts[:, :2]])
         z = ground + float(self.plan.flight.height_agl_m)
-        return pts[np.abs(pts[:, 2] - z) <= self._keep_m + 0.5 * self.cfg.voxel_m]
+        return pts[pts[:, 2] >= z - self._keep_m - 0.5 * self.cfg.voxel_m]
 
     def _route_check(self, p) -> str:
         """The independent 3-D route check (``routecheck``) from ``p`` to the ends of the

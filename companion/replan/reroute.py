@@ -38,7 +38,10 @@ Steps of ``reroute`` (pure: maps, plan and state in, a new plan out):
    row's end, and the LQR's soft corners cut it by millimetres), else in the
    eroded free space itself; a piece that cannot be reached is skipped
    (counted).
-4. Way-points along the route (``coverage.waypoints.waypoints_along``), the
+4. The route's height: the plan's above the terrain, lifted over the known
+   obstacles it passes (``over``, ``lift``: a way back over a low crate the
+   vehicle climbed flies over it again); then way-points along the route
+   (``coverage.waypoints.waypoints_along``), the
    first one replaced by the current reference position (the vehicle may
    have climbed: the first interval is stretched for the descent at the
    vertical speed), and the LQR from the current state (``initial_state``).
@@ -61,6 +64,7 @@ from ..errors import InputError
 from ..trajectory import generate_trajectory
 from .globalplan import GlobalPlan
 from .knownmap import KnownMap
+from .lift import Over, lift
 
 #: Farthest (m) the route may back off along the track to reach free space.
 MAX_BACK_OFF_M = 5.0
@@ -297,7 +301,8 @@ def _gaps(s_from: float, L: float, runs, at) -> list[tuple]:
 
 def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: int,
             obstacle_enu_m: np.ndarray, travel_xy, depth_m: float, vertical_speed_m_s: float,
-            keep_m: float | None = None, others_enu_m: np.ndarray | None = None) -> RerouteResult:
+            keep_m: float | None = None, others_enu_m: np.ndarray | None = None,
+            over: Over | None = None) -> RerouteResult:
     """Re-plan the remaining coverage around a blocking obstacle (module doc).
 
     Parameters
@@ -327,6 +332,8 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
     others_enu_m : (j, 3) array, optional
         The other known obstacle points at the route's height (kept from as far,
         without the assumed depth).
+    over : lift.Over, optional
+        The known obstacles the route is lifted over where it passes them (``lift``).
     """
     travel = np.asarray(travel_xy, dtype=float)
     travel = travel / max(float(np.hypot(*travel)), 1e-12)
@@ -417,8 +424,14 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
     path = _merge(route)
     if len(path) < 2:
         path = np.array([p[:2], p[:2] - 0.1 * travel])      # nothing left: settle just behind
+    terrain = new_known.dem
+    if over is not None:
+        lifted = lift(path, terrain, plan.flight.height_agl_m, over)
+        if lifted is None:
+            return fail("the route would have to fly above the ceiling over a known obstacle")
+        path, terrain = lifted
     try:
-        wps = waypoints_along(path, new_known.dem, plan.flight)
+        wps = waypoints_along(path, terrain, plan.flight)
         t = wps.t_s.copy()
         P = wps.p_enu_m.copy()
         dz = abs(float(P[0, 2] - p[2]))
