@@ -15,6 +15,7 @@ ramps at 0.5 (0.5 m/s up at 1 m/s on). Worked by hand:
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from companion.replan.lift import SIMPLIFY_M, STEP_M, Over, lift
 
@@ -66,6 +67,20 @@ def test_a_tall_post_beside_the_route_outside_the_clearance_is_left_to_the_guard
     assert terrain is dem
     # 0.8 m from the route (< 0.942): no route
     assert lift(PATH, dem, AGL, _over([[5.0, 0.9, 2.9]])) is None
+    # 0.95 m from it (the distance a stopped vehicle keeps, just outside 0.942): left to the guard
+    path, terrain = lift(PATH, dem, AGL, _over([[5.0, 1.0, 2.9]]))
+    assert terrain is dem
+
+
+def test_a_crate_just_under_the_climb_limit_is_flown_at_the_cap():
+    # top 1.8 m: 1.8 + 1.142 = 2.942 m is over the 2.9 m cap, 1.8 + 0.942 = 2.742 m is under
+    # it: the route flies at the cap over it, a lift of 2.9 - 1.5 = 1.4 m, and keeps 1.1 m
+    path, terrain = lift(PATH, Flat(), AGL, _over([[5.0, 0.0, 1.75]]))
+    x = np.arange(0.0, 10.0001, 0.01)
+    lift_m = terrain.height_at(x, np.zeros_like(x))
+    assert lift_m.max() == pytest.approx(1.4, abs=1e-9)
+    route = np.column_stack([x, 0 * x, AGL + lift_m])
+    assert _box_distance(route, [4.95, -0.05, 1.7], [5.05, 0.05, 1.8]).min() >= KEEP - 1e-9
 
 
 def test_nothing_near_the_route_leaves_it_as_it_was():

@@ -102,8 +102,9 @@ def required_height(xy: np.ndarray, ground: np.ndarray, agl_m: float, voxels: np
     the sphere of radius R about the vehicle's centre clears the box's top edge. A voxel that
     would need more than ``ground + cap_agl_m`` stands above any height the route can take, so
     flying higher gains nothing beside it: it is left to the 2-D route and the guard where
-    ``r >= keep_m`` (outside the guard's clearance), and makes the point unflyable (inf)
-    where ``r < keep_m``."""
+    the sample lies outside the guard's clearance (its own distance to the box ``>= keep_m``:
+    a route starts where the vehicle stopped, just outside it), and makes the point
+    unflyable (inf) where it lies inside."""
     z = ground + agl_m
     if not len(voxels):
         return z
@@ -115,15 +116,28 @@ def required_height(xy: np.ndarray, ground: np.ndarray, agl_m: float, voxels: np
         if not near:
             continue
         d = np.abs(voxels[near, :2] - xy[j])
-        r = np.maximum(np.hypot(*np.maximum(d - h, 0.0).T) - 0.5 * STEP_M, 0.0)
+        r_box = np.hypot(*np.maximum(d - h, 0.0).T)          # to the box, at this sample
+        r = np.maximum(r_box - 0.5 * STEP_M, 0.0)             # the nearest a point between samples may be
         inside = r < R
         if not inside.any():
             continue
-        need = tops[near][inside] + np.sqrt(R * R - r[inside] ** 2)
+        top, ri = tops[near][inside], r[inside]
+        need = top + np.sqrt(R * R - ri ** 2)
         cap = ground[j] + cap_agl_m
         over = need > cap
         if over.any():
-            if np.any(r[inside][over] < keep_m):
+            # the margin is a preference, the clearance is not (as the climb, which flies at the
+            # cap when top + clearance + body fits under it): at the cap where the sphere of
+            # ``keep_m`` clears the box's edge there
+            hard = top + np.sqrt(np.maximum(keep_m * keep_m - ri ** 2, 0.0))
+            fits = over & (hard <= cap)
+            need = np.where(fits, cap, need)
+            over = over & ~fits
+        if over.any():
+            # too tall to clear: unflyable only where the sample itself is inside the clearance
+            # (the route starts where the vehicle stopped, just outside it; the guard checks
+            # between samples), else left to the 2-D route and the guard
+            if np.any(r_box[inside][over] < keep_m):
                 z[j] = np.inf
                 continue
             need = np.where(over, -np.inf, need)
@@ -210,6 +224,5 @@ def lift(path_xy: np.ndarray, dem, agl_m: float, over: Over):
         if under > 0.0:
             ep[j] += under
             ep[j + 1] += under
-    if np.any(ep > room + SIMPLIFY_M):
-        return None
+    ep = np.minimum(ep, room)           # e <= room everywhere: the clipped pieces still stand over it
     return xy[idx], LiftedTerrain(dem, xy, np.interp(arc, arc[idx], ep))
