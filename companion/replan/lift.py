@@ -77,9 +77,9 @@ class LiftedTerrain:
         return out.reshape(x.shape) if x.ndim else float(out[0])
 
 
-def _dense(path_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(samples (M, 2), arc length (M,), index of the vertex each sample follows (M,))."""
-    pts, arc, seg = [path_xy[:1]], [np.zeros(1)], [np.zeros(1, int)]
+def _dense(path_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(samples (M, 2), arc length (M,)) of the path every ``STEP_M`` at most, its vertices kept."""
+    pts, arc = [path_xy[:1]], [np.zeros(1)]
     s0 = 0.0
     for i in range(len(path_xy) - 1):
         a, b = path_xy[i], path_xy[i + 1]
@@ -88,9 +88,8 @@ def _dense(path_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         f = np.arange(1, k + 1) / k
         pts.append(a + f[:, None] * (b - a))
         arc.append(s0 + f * L)
-        seg.append(np.full(k, i))
         s0 += L
-    return np.vstack(pts), np.concatenate(arc), np.concatenate(seg)
+    return np.vstack(pts), np.concatenate(arc)
 
 
 def required_height(xy: np.ndarray, ground: np.ndarray, agl_m: float, voxels: np.ndarray, voxel_m: float,
@@ -194,7 +193,7 @@ def lift(path_xy: np.ndarray, dem, agl_m: float, over: Over):
     vox = np.asarray(over.voxels_enu_m, float).reshape(-1, 3)
     if len(path) < 2 or not len(vox):
         return path, dem
-    xy, arc, _ = _dense(path)
+    xy, arc = _dense(path)
     ground = np.asarray(dem.height_at(xy[:, 0], xy[:, 1]), float)
     base = ground + agl_m
     room = over.ceiling_agl_m - WALL_MARGIN_M - agl_m

@@ -979,11 +979,11 @@ class Replanner:
             # planned round every obstacle known at the route's height; when that finds no
             # route (a 2-D route cannot go over the low ones), round the blocking one only,
             # and the guard judges the candidate against the rest (docs/replan.md "Pacing")
-            known0 = self.known
+            known0, over = self.known, self._over()
             for others in (self._at_route_height(), None):
                 res = reroute(self.plan, known0, st, tau, self._wp_leave, blocking, travel,
                               self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
-                              self._keep_m + ROUTE_MARGIN_M, others, self._over())
+                              self._keep_m + ROUTE_MARGIN_M, others, over)
                 # the guard reads the map the route is flown on: the obstacle added (its cells)
                 self.known = res.known
                 plan, verdict, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st)

@@ -52,12 +52,13 @@ no route (the caller holds and reports).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
 
-from ..coverage.freespace import grid_to_world, lookup, world_to_grid
+from ..coverage.freespace import dilate_runs, disk_half_widths, grid_to_world, lookup, world_to_grid
 from ..coverage.gridpath import aux_path
 from ..coverage.waypoints import waypoints_along
 from ..errors import InputError
@@ -238,14 +239,14 @@ def _connect(frees: list, grid, a_xy, b_xy) -> np.ndarray:
 
 
 def _narrowed(free, margin_m: float):
-    """``free`` with its eroded space eroded by ``margin_m`` more (a disk)."""
-    h = free.resolution_m
-    r = int(np.ceil(margin_m / h - 1e-9))
+    """``free`` with its eroded space eroded by ``margin_m`` more (the closed disk of
+    ``ceil(margin_m / h)`` cells: for integer offsets the open disk of ``freespace``'s
+    ``disk_half_widths`` with radius ``sqrt(r^2 + 1)``; off the grid counts as blocked)."""
+    r = int(np.ceil(margin_m / free.resolution_m - 1e-9))
     if r <= 0:
         return free
-    yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
-    disk = (xx * xx + yy * yy) <= r * r
-    return replace(free, eroded=ndimage.binary_erosion(free.eroded, structure=disk, border_value=0))
+    blocked = dilate_runs(~free.eroded, disk_half_widths(math.sqrt(r * r + 1)), outside=True)
+    return replace(free, eroded=free.eroded & ~blocked)
 
 
 def _min_keep(keep_m: float | None, known: KnownMap) -> float:
