@@ -250,6 +250,45 @@ def test_vehicle_gives_way_to_a_walker_crossing_the_first_corridor(tmp_path):
     assert rp["min_clearance_m"] >= ReplanConfig.clearance_m
 
 
+def test_vehicle_stops_and_looks_before_passing_a_worker_crossing_its_path(tmp_path):
+    """tilted-hexagon's first corridor runs at 30 deg (direction (0.87, 0.5)). A worker
+    sets off at 11 s from (7.0, 2.37) toward (4.0, 7.56) at 0.92 m/s (campaign
+    obstacles-wide, scenario 7): across the corridor, perpendicular to it, and into the
+    vehicle's path 2.4 m ahead of where it is first seen. Flying, the beams sweep, and a
+    return moving across a beam reads as still (``closing``); the vehicle avoided it as
+    a still obstacle, flew on toward the crossing point and was walked into at
+    14.1 s. With ``give_way`` it stops and watches first (``LOOK_S`` at rest), reads the
+    worker's motion, gives way and passes only once nothing moves: no crash, and the
+    configured clearance from the worker's true position (SITL truth)."""
+    import json
+
+    from companion.cli import main
+    from companion.commands.demo import missions_dir
+    from companion.mission.replan import ReplanConfig
+
+    th = missions_dir() / "tilted-hexagon"
+    (tmp_path / "m.yaml").write_text(
+        "name: walker-across\n"
+        f"map: {th / 'map.yaml'}\ndem: {th / 'dem.asc'}\n"
+        "home: {lat: 44.85, lon: -0.55, alt_m: 45.0}\n"
+        "flight: {height_agl_m: 1.5, speed_m_s: 1.0, waypoint_interval_s: 4.0}\n"
+        "coverage: {line_spacing_m: 2.5, safety_margin_m: 0.45}\n"
+        "pointing: {target: centroid}\n"
+        "replan: {give_way: true}\n"
+        "sim:\n  noise: {vector_variance: 5.0e-4, gyro_variance: 5.0e-4}\n  seed: 2\n"
+        "  movers: [{type: walker, path: [[6.998, 2.368], [3.998, 7.564]], speed_m_s: 0.919, start_s: 10.997}]\n")
+    out = tmp_path / "out"
+    main(["demo", "--mission", str(tmp_path / "m.yaml"), "--transport", "inproc", "--cut", "10",
+          "--out", str(out), "--no-plots", "--quiet"])
+    rep = json.loads((out / "report.json").read_text())
+    rp = rep["replanning"]
+    assert rep["crashed"] is False and rep["crash"] is None
+    stops = [e for e in rp["event_list"] if e["action"] == "stop"]
+    assert stops and "whether it moves" in stops[0]["detail"]          # it looked first
+    assert rp["clearance_source"] == "sim_truth" and rp["min_clearance_obstacle"] == 0    # the walker
+    assert rp["min_clearance_m"] >= ReplanConfig.clearance_m
+
+
 # --- campaign: movers drawn from the seeded per-scenario generator ----------------------
 
 
@@ -300,3 +339,25 @@ def test_a_beam_sliding_over_a_still_wall_is_no_closing_speed():
     for k in range(20):
         c.on_hit(0.05 * k, 9, (1.0 * 0.05 * k, 2.0, 1.5), u)
     assert c.approach_m_s(0.95) == 0.0
+
+
+def test_a_walker_crossing_the_beam_counts_only_while_the_vehicle_is_still():
+    from companion.replan.closing import ClosingSpeed
+
+    # a worker crossing a beam along +x at 0.9 m/s, 3 m ahead: its return moves across
+    # the axis (-y, sensor to the north of it). Flying, that is what a beam sweeping
+    # over a still wall does, so it is no closing speed; with the vehicle still the
+    # beams do not sweep, and the whole level displacement is the worker's speed.
+    u = (0.0, -1.0, 0.0)
+    crossing = [(0.05 * k, (0.9 * 0.05 * k, 0.0, 1.5)) for k in range(20)]
+    flying, still = ClosingSpeed(), ClosingSpeed()
+    for t, hit in crossing:
+        flying.on_hit(t, 2, hit, u)
+        still.on_hit(t, 2, hit, u, still=True)
+    assert flying.approach_m_s(0.95) == 0.0
+    assert still.approach_m_s(0.95) == pytest.approx(0.9, abs=1e-9)
+    # the same still vehicle before a still post: 1 cm of range noise is no mover
+    post = ClosingSpeed()
+    for k in range(20):
+        post.on_hit(0.05 * k, 2, (0.0, 3.0 + 0.01 * (-1) ** k, 1.5), u, still=True)
+    assert post.approach_m_s(0.95) == 0.0

@@ -26,6 +26,16 @@ than ``ALIGN_MIN`` of its displacement along the axis): a beam sweeping over
 a still surface as the vehicle flies past slides its return across, at up to
 the vehicle's speed.
 
+While the vehicle is still (``still=True``: its reference at rest, its measured
+speed below ``replanner.STILL_M_S``) the beams do not sweep, so a return that
+moves at all is something moving: then the whole level displacement counts, in
+any direction (a worker crossing the corridor moves its return across the beam,
+which the alignment rule would drop as a sweep; a crossing walker read as still
+walked into a vehicle that flew on toward it, campaign obstacles-wide scenario 7).
+This is how the replanner's *look* tells a still obstacle from a mover
+(``replanner``: with ``give_way`` the vehicle stops at an unknown obstacle and
+watches before it avoids it).
+
 Movers move level: only the level parts count (the axis' level direction,
 the return's level displacement), and beams steeper than 60 deg (the down
 rangefinder, whose return jumps as the vehicle passes over a crate) are not
@@ -64,9 +74,10 @@ class ClosingSpeed:
         self._w = 0.0
         self._t_w = -math.inf
 
-    def on_hit(self, t_s: float, sensor_id: int, hit_enu_m, axis_enu) -> None:
+    def on_hit(self, t_s: float, sensor_id: int, hit_enu_m, axis_enu, still: bool = False) -> None:
         """An unknown return of ``sensor_id`` at vehicle time ``t_s``: the hit point
-        (ENU, m) and the beam's unit axis (ENU, from the sensor outward)."""
+        (ENU, m) and the beam's unit axis (ENU, from the sensor outward); ``still``: the
+        vehicle is still, so any motion of the return is the obstacle's (module notes)."""
         # one history for all sensors: the vehicle yaws and a mover passes from beam to beam
         h = self._hist.setdefault(0, [])
         hit = (float(hit_enu_m[0]), float(hit_enu_m[1]), float(hit_enu_m[2]))
@@ -91,10 +102,15 @@ class ClosingSpeed:
         if t0 is not None:
             d = (hit[0] - p0[0], hit[1] - p0[1], 0.0)
             along = d[0] * u[0] + d[1] * u[1]
-            w = -along / (t_s - t0)
-            # a mover coming down the beam moves its return along the axis; a beam sweeping
-            # over a still surface (the vehicle flying past a box) slides it across
-            if MIN_M_S <= w <= MAX_M_S and -along >= ALIGN_MIN * math.hypot(d[0], d[1]):
+            moved = math.hypot(d[0], d[1])
+            if still:
+                # no sweep: the return moved because the obstacle did, whichever way
+                w, aligned = moved / (t_s - t0), True
+            else:
+                # a mover coming down the beam moves its return along the axis; a beam sweeping
+                # over a still surface (the vehicle flying past a box) slides it across
+                w, aligned = -along / (t_s - t0), -along >= ALIGN_MIN * moved
+            if MIN_M_S <= w <= MAX_M_S and aligned:
                 # the largest speed while the mover keeps coming (conservative), fresh again
                 if w >= self._w or t_s - self._t_w > HOLD_S:
                     self._w = w

@@ -148,6 +148,15 @@ CLEAR_MARGIN_M = 0.15
 GOAL_REACHED_M = 0.3
 #: The reference is at rest below these speed (m/s) and acceleration (m/s^2).
 REST_V_M_S, REST_A_M_S2 = 0.02, 0.05
+#: With ``give_way`` the vehicle stops at a new unknown obstacle and watches it this
+#: long (s, at rest) before it avoids it as a still one (``_look``): a worker crossing
+#: the corridor is read as moving only while the beams do not sweep
+#: (``closing``: ``still``). Four baselines of the closing-speed rule.
+LOOK_S = 4.0 * 0.3
+#: The vehicle is still (its beams do not sweep) below this measured speed (m/s): over
+#: the closing rule's longest baseline (0.6 s) it moves 0.06 m, a sweep of 0.1 m/s,
+#: a third of the slowest speed the rule reads as a mover (0.3 m/s).
+STILL_M_S = 0.1
 #: Propeller radius (m) added to the arm length for the body radius when the mission gives none.
 PROP_RADIUS_M = 0.127
 #: While an avoiding reference passes over a remembered point (horizontally within the
@@ -511,6 +520,9 @@ class Replanner:
         self._static: RefSample | None = None
         self._mode_until = -math.inf
         self._stop_then = ""
+        self._look_since: float | None = None     # the look's rest began (tau); None: not at rest
+        self._still = False                       # the reference is at rest and the vehicle still
+        self._vel = (0.0, 0.0, 0.0)
         self._next_rejoin = -math.inf
         self._dev_leg: tuple | None = None
         #: the guard (``companion.safety.Guard``; set by the flight's builder): a re-route or
@@ -584,7 +596,7 @@ class Replanner:
                         mem.add(q, L_CANDIDATE, t_s)
             self.n_unknown += 1
             if self.cfg.give_way:          # else no approach is ever measured: a still world
-                self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis)
+                self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still)
 
     def _explained(self, ev) -> bool:
         """The known map accounts for the return along the axis or a field-of-view edge."""
@@ -604,7 +616,9 @@ class Replanner:
         dt = 0.0 if self._tau_prev is None else tau - self._tau_prev
         self._tau_prev = tau
         self._pos = pos_enu_m
+        self._vel = vel_enu_m_s
         self._t_s = t_s
+        self._still = False                      # set by ``_look`` while at rest
         events: list = []
         self.memory.expire_candidates(t_s)
         mode = self.mode
@@ -695,6 +709,9 @@ class Replanner:
             rng = self._threat(s.p, s.v, self._leg_frame(self.plan.leg_near(s.p, s.v[:2]))[2])
             if rng is not None:
                 self._enter_avoid(tau, s, rng, events)
+                if self.cfg.give_way:
+                    # people and machines move here: stop and look before avoiding it as still
+                    self._enter_stop(tau, events, "look", "stopping to see whether it moves")
         return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
 
     def _trigger_m(self, speed: float) -> float:
@@ -963,6 +980,8 @@ class Replanner:
         self._deviation(st.p)
         at_rest = math.sqrt(sum(x * x for x in st.v)) < REST_V_M_S and \
             math.sqrt(sum(x * x for x in st.a)) < REST_A_M_S2
+        if self._stop_then == "look":
+            return self._look(tau, st, at_rest, events)
         if not at_rest:
             return self._ref(st.p, st.v, st.a, st.jerk, st.snap)
         dist = np.linalg.norm(pts - P, axis=1) if len(pts) else np.zeros(0)
@@ -1009,6 +1028,32 @@ class Replanner:
         self._static = self._rest(st.p)
         self._event(events, "hold", self._nearest(dist), detail)
         return self._static
+
+    def _look(self, tau: float, st, at_rest: bool, events: list) -> RefSample:
+        """The look (``give_way``): at rest, with the vehicle still, for ``LOOK_S`` with no
+        motion seen, then the avoidance of the obstacle as a still one. While something
+        moves the vehicle gives way (``_give_way``) and the look starts again when it is
+        at rest: it waits for a worker to cross. (Flying on toward a crossing worker read
+        as still, the vehicle was walked into: campaign obstacles-wide scenario 7.)"""
+        v = self._vel
+        self._still = at_rest and math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2) < STILL_M_S
+        moving = self.closing.approach_m_s(self._t_s) > 0.0
+        if not self._still or moving:
+            self._look_since = None
+        elif self._look_since is None:
+            self._look_since = tau
+        if self._look_since is None or tau - self._look_since < LOOK_S:
+            return self._ref(st.p, st.v, st.a, st.jerk, st.snap)
+        self._look_since = None
+        self._still = False
+        self.mode = "avoid"
+        self._t_avoid = self._t_progress = tau
+        A, B, u, n = self._leg_frame(self._avoid_leg)
+        self._progress = float((np.asarray(st.p[:2]) - A[:2]) @ u)
+        pts = self._points()
+        self._event(events, "avoid", self._nearest(np.linalg.norm(pts - np.asarray(st.p), axis=1)),
+                    f"no motion seen in {LOOK_S:g} s: avoiding it as still")
+        return self._ref(st.p, st.v, st.a, st.jerk, st.snap)
 
     def _over(self) -> Over:
         """What a re-route is lifted over (``lift``): every voxel of the map, kept from by
