@@ -134,3 +134,60 @@ def test_a_route_into_the_clearance_is_refused_not_paced_for_ever():
     paced, verdict = pace(plan, x0, g)
     assert not verdict.ok                 # no pace gets it there: refused, in bounded tries
     assert np.all(np.diff(paced.t_s) <= MAX_TOTAL_STRETCH * np.diff(plan.t_s) + 1e-9)
+
+
+def _long_plan(x0_state) -> tuple[GlobalPlan, np.ndarray]:
+    """Along y = 7.5 at 1.5 m, x = 0 .. 7, 1 m/s, the LQR from ``x0_state``."""
+    xs = np.arange(0.0, 7.0 + 1e-9, 1.0)
+    P = np.column_stack([xs, np.full(len(xs), 7.5), np.full(len(xs), 1.5)])
+    t = np.concatenate([[0.0], 1.0 + np.cumsum(np.diff(xs))])
+    V = np.zeros_like(P)
+    V[1:-1, 0] = 1.0
+    A = np.zeros_like(P)
+    cfg = TrajectoryConfig()
+    traj = generate_trajectory(t, P, V, A, cfg, initial_state=x0_state)
+    corner = np.zeros(len(P), bool)
+    corner[[0, -1]] = True
+    return GlobalPlan.from_waypoints(traj, t, P, V, A, corner, None, None, FlightConfig(), cfg, 0.5), t
+
+
+def test_a_rejoin_is_new_only_until_it_flies_its_parent_again():
+    from companion.replan.rejoin import CONVERGED_M, CONVERGED_M_S, converged_from
+
+    rest = np.array([[0.0, 7.5, 1.5], [0, 0, 0], [0, 0, 0], [0, 0, 0]], float)
+    parent, t = _long_plan(rest)
+    # the same way-points, all 5 s later, from a state 0.3 m off the line and moving across it
+    off = np.array([[0.0, 7.8, 1.6], [0.2, -0.3, 0.1], [0, 0, 0], [0, 0, 0]], float)
+    cfg = TrajectoryConfig()
+    child = generate_trajectory(t + 5.0, parent.p_enu_m, parent.v_enu_m_s, parent.a_enu_m_s2, cfg,
+                                initial_state=off)
+    tc = converged_from(child, parent.trajectory, 5.0)
+    assert tc is not None and 5.0 < tc < child.tf
+    # judged independently, sampled ten times finer: within the bounds after tc, not just before
+    ts = np.arange(tc, child.tf, 0.005)
+    a, b = child.sample(ts), parent.trajectory.sample(ts - 5.0)
+    assert np.linalg.norm(np.asarray(a.p) - np.asarray(b.p), axis=1).max() <= CONVERGED_M * 1.01
+    assert np.linalg.norm(np.asarray(a.v) - np.asarray(b.v), axis=1).max() <= CONVERGED_M_S * 1.01
+    before = tc - 0.05
+    a, b = child.sample(np.array([before])), parent.trajectory.sample(np.array([before - 5.0]))
+    dp, dv = np.linalg.norm(np.asarray(a.p) - np.asarray(b.p)), np.linalg.norm(np.asarray(a.v) - np.asarray(b.v))
+    assert dp > CONVERGED_M or dv > CONVERGED_M_S
+    # a trajectory that never comes back onto its parent (ends 0.3 m beside it) is new to its end
+    P2 = parent.p_enu_m + np.array([0.0, 0.3, 0.0])
+    other = generate_trajectory(t + 5.0, P2, parent.v_enu_m_s, parent.a_enu_m_s2, cfg, initial_state=off)
+    assert converged_from(other, parent.trajectory, 5.0) is None
+
+
+def test_pacing_judges_a_rejoin_up_to_its_horizon_only():
+    # the plan of the test above: too fast for the stopping law in its last metres. Told
+    # that it is new only for its first 2 s (a rejoin that has converged onto a plan
+    # accepted before), the pacing leaves the rest alone and the check passes; told
+    # nothing, it paces the end
+    plan, x0 = _plan(6.6)
+    g = _guard()
+    whole, v_whole = pace(plan, x0, g)
+    assert v_whole.ok and whole.t_s[-1] > plan.t_s[-1] and whole.new_until_s is None
+    first, v_first = pace(plan, x0, g, horizon=lambda p: 2.0)
+    assert v_first.ok and first.new_until_s == 2.0
+    assert np.array_equal(first.t_s, plan.t_s)                   # nothing slowed down
+    assert not g.check_trajectory(first.trajectory).ok            # its end alone would be refused

@@ -1298,7 +1298,8 @@ class FlightCore:
         rp = self.replanner
         if rp is not None and self.phase == "trajectory" and rp.plan is not self._guard_plan:
             self._guard_plan = rp.plan
-            v = g.check_trajectory(t, rp.plan.trajectory, t - self._t_traj + self._guard_tau0)
+            v = g.check_trajectory(t, rp.plan.trajectory, t - self._t_traj + self._guard_tau0,
+                                   getattr(rp.plan, "new_until_s", None))
             if not v.ok:
                 self._guard_say(v)
                 g.engage(t, ref)

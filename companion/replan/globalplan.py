@@ -74,6 +74,10 @@ class GlobalPlan:
         them are the corridors' lines the avoidance keeps to. A rejoined plan
         keeps its parent's (its first way-point, the state it starts from,
         is not a turning point of the path).
+    new_until_s : float or None
+        A rejoined plan is new up to this time (plan clock) and flies its parent's
+        trajectory, to within ``rejoin.CONVERGED_M``, after it: the guard checks it up to
+        here (``rejoin.converged_from``). None: the whole plan is new.
     """
 
     trajectory: Trajectory
@@ -89,6 +93,7 @@ class GlobalPlan:
     min_segment_m: float
     final_xy: tuple[float, float]
     turns_enu_m: np.ndarray
+    new_until_s: float | None = None
 
     @classmethod
     def from_plan(cls, plan, mission) -> "GlobalPlan":

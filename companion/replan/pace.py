@@ -27,8 +27,14 @@ flown as it is, and refusing it ends the flight.
    times, until no sample is too fast.
 3. **Check.** The guard checks the whole candidate (``check_trajectory``):
    its verdict is returned with the plan. A refused candidate is not
-   installed; the mode treats it as no plan. Slowing down does not move a
-   path: a clearance or terrain refusal stays one.
+   installed; the mode treats it as no plan. Slowing down moves a path only
+   by the LQR's soft tracking (up to about 1 cm, obstacles-wide scenario 10):
+   a clearance or terrain refusal stays one.
+
+A rejoin is new only up to the time it converges onto the plan it leaves
+(``horizon``, ``rejoin.converged_from``): only that part is paced and
+checked, and the result carries it as ``new_until_s`` (recomputed on every
+re-solve: the stretches move it).
 """
 
 from __future__ import annotations
@@ -70,14 +76,18 @@ def stretch(t_s: np.ndarray, v: np.ndarray, a: np.ndarray, k: np.ndarray) -> tup
     return out_t, v, a
 
 
-def planned_stretch(t_s: np.ndarray, p_enu_m: np.ndarray, speed_limits: Callable) -> np.ndarray:
+def planned_stretch(t_s: np.ndarray, p_enu_m: np.ndarray, speed_limits: Callable,
+                    until_s: float | None = None) -> np.ndarray:
     """(N-1,) stretch of each way-point interval that flies its straight segment at no
     more than ``HEADROOM`` times the least of ``speed_limits(points, directions)`` along
-    it (1 where it already does; pass 1 of the module doc)."""
+    it (1 where it already does; pass 1 of the module doc); intervals that start at or
+    after ``until_s`` are left as they are."""
     t = np.asarray(t_s, float)
     p = np.asarray(p_enu_m, float)
     k = np.ones(len(t) - 1)
     for j in range(len(t) - 1):
+        if until_s is not None and t[j] >= until_s:
+            break
         d = p[j + 1] - p[j]
         L = float(np.linalg.norm(d))
         dt = float(t[j + 1] - t[j])
@@ -97,14 +107,16 @@ def _resolve(plan, x0: np.ndarray, k: np.ndarray):
     return replace(plan, trajectory=traj, t_s=t, v_enu_m_s=v, a_enu_m_s2=a)
 
 
-def sampled_stretch(plan, speed_limits: Callable, dt_s: float = SAMPLE_DT_S) -> np.ndarray:
-    """(N-1,) stretch of each way-point interval whose trajectory samples (every ``dt_s``)
-    fly faster than ``speed_limits`` allows along their velocity: ``max(speed / limit) /
-    HEADROOM`` over the interval (at least ``MIN_STRETCH``), the interval before it stretched
-    as much (the deceleration starts there); 1 elsewhere (pass 2 of the module doc)."""
+def sampled_stretch(plan, speed_limits: Callable, dt_s: float = SAMPLE_DT_S,
+                    until_s: float | None = None) -> np.ndarray:
+    """(N-1,) stretch of each way-point interval whose trajectory samples (every ``dt_s``,
+    up to ``until_s``) fly faster than ``speed_limits`` allows along their velocity:
+    ``max(speed / limit) / HEADROOM`` over the interval (at least ``MIN_STRETCH``), the
+    interval before it stretched as much (the deceleration starts there); 1 elsewhere
+    (pass 2 of the module doc)."""
     tr = plan.trajectory
     t_wp = np.asarray(plan.t_s, float)
-    t = np.arange(float(t_wp[0]), float(tr.tf), dt_s)
+    t = np.arange(float(t_wp[0]), float(tr.tf if until_s is None else min(until_s, tr.tf)), dt_s)
     s = tr.sample(t)
     p, v = np.asarray(s.p, float).reshape(-1, 3), np.asarray(s.v, float).reshape(-1, 3)
     speed = np.linalg.norm(v, axis=1)
@@ -126,13 +138,17 @@ def sampled_stretch(plan, speed_limits: Callable, dt_s: float = SAMPLE_DT_S) -> 
     return np.maximum(k, lead)
 
 
-def pace(plan, x0: np.ndarray, guard) -> tuple:
+def pace(plan, x0: np.ndarray, guard, horizon: Callable | None = None) -> tuple:
     """(plan, verdict): ``plan`` (a ``GlobalPlan`` whose trajectory starts from state
     ``x0``, (4, 3) [p, v, a, jerk]) retimed to ``guard`` (its ``speed_limits`` and
-    ``check_trajectory``), and the guard's last verdict on it (module doc)."""
+    ``check_trajectory``), and the guard's last verdict on it (module doc).
+    ``horizon(plan) -> float | None``: where the plan stops being new (a rejoin,
+    ``rejoin.converged_from``; None: nowhere); only that part is paced and checked, and
+    the plan returned carries it as ``new_until_s``."""
+    until = None if horizon is None else horizon(plan)
     if len(plan.t_s) >= 2:
         dt0 = np.diff(plan.t_s)
-        k = planned_stretch(plan.t_s, plan.p_enu_m, guard.speed_limits)
+        k = planned_stretch(plan.t_s, plan.p_enu_m, guard.speed_limits, until)
         for _ in range(MAX_TRIES):
             # no interval slower than MAX_TOTAL_STRETCH times its plan: a sample that stays too
             # fast at that pace is too near to be paced (the check refuses it)
@@ -140,5 +156,7 @@ def pace(plan, x0: np.ndarray, guard) -> tuple:
             if not np.any(k > 1.0 + 1e-9):
                 break
             plan = _resolve(plan, x0, k)
-            k = sampled_stretch(plan, guard.speed_limits)
-    return plan, guard.check_trajectory(plan.trajectory, float(plan.t_s[0]))
+            until = None if horizon is None else horizon(plan)
+            k = sampled_stretch(plan, guard.speed_limits, until_s=until)
+    plan = replace(plan, new_until_s=until)
+    return plan, guard.check_trajectory(plan.trajectory, float(plan.t_s[0]), until)

@@ -98,7 +98,7 @@ from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
 from .perception import PoseHistory, beam_evidence
-from .rejoin import rejoin
+from .rejoin import converged_from, rejoin
 from .reroute import reroute
 from .shaper import ReferenceShaper
 from .route3d import RouteScene
@@ -544,13 +544,17 @@ class Replanner:
         self._cursor = TrajectoryCursor(plan.trajectory)
         self._n_legs = max(1, len(plan.turns_enu_m) - 1)
 
-    def _paced(self, plan: GlobalPlan, st) -> tuple:
+    def _paced(self, plan: GlobalPlan, st, parent: GlobalPlan | None = None) -> tuple:
         """(plan or None, verdict, seconds added): a new plan retimed to the guard's
-        stopping law (``pace``); None when the guard still refuses it."""
+        stopping law (``pace``); None when the guard still refuses it. ``parent``: the
+        plan a rejoin leaves, which it is new only until it flies again
+        (``rejoin.converged_from``)."""
         if self.guard is None:
             return plan, None, 0.0
         x0 = np.array([st.p, st.v, st.a, st.jerk], dtype=float)
-        paced, verdict = pace(plan, x0, self.guard)
+        horizon = None if parent is None else \
+            (lambda p: converged_from(p.trajectory, parent.trajectory, float(p.t_s[0])))
+        paced, verdict = pace(plan, x0, self.guard, horizon)
         if not verdict.ok:
             return None, verdict, 0.0
         return paced, verdict, float(paced.t_s[-1] - plan.t_s[-1])
@@ -1132,7 +1136,7 @@ class Replanner:
         res = rejoin(plan, st, tau, first, self.memory.points(), self._keep_m,
                      self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z, self._on_free_cell,
                      self._floor_z)
-        paced, _, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st)
+        paced, _, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st, plan)
         if paced is None:
             self._next_rejoin = tau + REJOIN_RETRY_S
             return None

@@ -64,10 +64,12 @@ class GuardGate:
             self.refusals.append({"t_s": None if t_s is None else float(t_s), "candidate": what,
                                   **verdict.to_dict()})
 
-    def check_trajectory(self, t_s: float, trajectory, t_from_s: float | None) -> Verdict:
-        """A mode's new candidate trajectory, from ``t_from_s`` (its clock) to its end."""
+    def check_trajectory(self, t_s: float, trajectory, t_from_s: float | None,
+                         t_to_s: float | None = None) -> Verdict:
+        """A mode's new candidate trajectory, from ``t_from_s`` (its clock) to ``t_to_s``
+        (where it stops being new: a rejoin's ``GlobalPlan.new_until_s``; None: its end)."""
         self.n_trajectories += 1
-        v = self.guard.check_trajectory(trajectory, t_from_s)
+        v = self.guard.check_trajectory(trajectory, t_from_s, t_to_s)
         if not v.ok:
             self.refuse(t_s, v, "trajectory")
         return v
