@@ -650,3 +650,18 @@ def test_a_holds_route_check_asks_only_for_the_coverage_left(field, monkeypatch)
     assert got == [tuple(q) for q in near[:rpmod.ROUTE_CHECK_GOALS]] or (not near and len(got) == 1)
     flown = {tuple(segs[0].start_xy), tuple(segs[0].end_xy), tuple(segs[1].start_xy)} - set(map(tuple, want))
     assert not flown & set(got)
+
+
+def test_a_reroute_goes_round_only_what_no_lift_clears(field):
+    # the re-route's middle tier (docs/replan.md "Pacing"): round the columns whose top
+    # plus clearance and body stands above the highest a route flies (ceiling less its
+    # 0.1 m wall margin), over the rest. Flat ground at 0: keep = 0.5 + 0.442, ceiling 3 m,
+    # so a column is too tall when its voxel's top is above 3 - 0.1 - 0.942 = 1.958 m
+    cfg = ReplanConfig(body_radius_m=0.442, voxel_m=0.1)
+    rp = Replanner(cfg, field.known, field.plan)
+    # voxel centres (k + 1/2) 0.1 m: tops 1.5, 1.9 (5.8 cm under the limit), 2.0 (4.2 cm over)
+    for x, zc in ((5.05, 1.45), (9.05, 1.95), (12.05, 1.85)):
+        rp.memory.add((x, CORRIDOR_Y, zc))
+    got = rp._too_tall_to_lift()
+    assert len(rp.memory.points()) == 3 and len(got) == 1
+    assert got[0][0] == pytest.approx(9.05) and got[0][2] == pytest.approx(1.95)

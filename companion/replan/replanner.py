@@ -93,7 +93,7 @@ from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
 from .globalplan import GlobalPlan
 from .knownmap import UNKNOWN, KnownMap
-from .lift import Over
+from .lift import WALL_MARGIN_M as LIFT_WALL_MARGIN_M, Over
 from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
@@ -1000,10 +1000,14 @@ class Replanner:
                 blocking = near
             travel = self._leg_frame(self._avoid_leg)[2]       # the leg the avoidance was on
             # planned round every obstacle known at the route's height; when that finds no
-            # route (a 2-D route cannot go over the low ones), round the blocking one only,
-            # and the guard judges the candidate against the rest (docs/replan.md "Pacing")
+            # route (a 2-D route cannot go over the low ones), round those too tall to be
+            # lifted over, then round the blocking one only, and the guard judges the
+            # candidate against the rest (docs/replan.md "Pacing")
             known0, over = self.known, self._over()
-            for others in (self._at_route_height(), None):
+            tiers = [self._at_route_height(), self._too_tall_to_lift()]
+            if not 0 < len(tiers[1]) < len(tiers[0]):
+                tiers.pop()               # the same columns as a tier beside it: the same route
+            for others in (*tiers, None):
                 res = reroute(self.plan, known0, st, tau, self._wp_leave, blocking, travel,
                               self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
                               self._keep_m + ROUTE_MARGIN_M, others, over)
@@ -1078,6 +1082,17 @@ class Replanner:
         ground = np.array([self.known.ground_z(float(x), float(y)) for x, y in pts[:, :2]])
         z = ground + float(self.plan.flight.height_agl_m)
         return pts[pts[:, 2] >= z - self._keep_m - 0.5 * self.cfg.voxel_m]
+
+    def _too_tall_to_lift(self) -> np.ndarray:
+        """(j, 3) the map's occupied voxels whose top, plus the clearance and body, stands
+        above the highest a route flies there (``lift``: the ceiling less its wall margin):
+        no lift goes over them, a 2-D route must go round."""
+        pts = self.memory.points()
+        if not len(pts):
+            return pts
+        ground = np.array([self.known.ground_z(float(x), float(y)) for x, y in pts[:, :2]])
+        top = pts[:, 2] + 0.5 * self.cfg.voxel_m
+        return pts[top + self._keep_m > ground + self.cfg.ceiling_agl_m - LIFT_WALL_MARGIN_M]
 
     def _route_check(self, p) -> str:
         """The independent 3-D route check (``routecheck``) from ``p`` to the ends of the
