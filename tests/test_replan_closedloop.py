@@ -665,3 +665,62 @@ def test_a_reroute_goes_round_only_what_no_lift_clears(field):
     got = rp._too_tall_to_lift()
     assert len(rp.memory.points()) == 3 and len(got) == 1
     assert got[0][0] == pytest.approx(9.05) and got[0][2] == pytest.approx(1.95)
+
+
+def test_quintic_leg_way_points_hand_worked():
+    from companion.replan.reroute3d import prefix_waypoints, quintic
+
+    s, ds, dds = quintic(np.array([0.0, 0.5, 1.0]))
+    assert s.tolist() == [0.0, 0.5, 1.0] and ds.tolist() == [0.0, 1.875, 0.0] and dds.tolist() == [0.0, 0.0, 0.0]
+    # one 2 m level leg at 1 m/s: T = 2 / 1 + t_ramp, two way-points (1 m apart at most)
+    from companion.replan.rejoin import first_time_s
+    T = first_time_s((0, 0, 1), (2, 0, 1), 1.0, 0.5)
+    t, P, V, A, corner = prefix_waypoints(np.array([[0.0, 0, 1], [2.0, 0, 1]]), 1.0, 0.5)
+    assert t == pytest.approx([0.0, T / 2, T]) and corner.tolist() == [True, False, True]
+    assert P[1] == pytest.approx([1.0, 0.0, 1.0]) and V[1] == pytest.approx([1.875 * 2 / T, 0, 0])
+    assert np.abs(V[[0, 2]]).max() == 0.0 and np.abs(A).max() == pytest.approx(0.0, abs=1e-12)
+
+
+def test_boxed_in_the_re_route_leaves_over_the_row(field):
+    """Tall walls across the corridor on both sides of the vehicle (3.5 m, above any
+    climb under a 4 m ceiling): no 2-D re-route reaches the coverage left. The row's
+    canopy (2.0 m) is crossed at 2.0 + clearance + body < 4 m: the re-route leaves in
+    3-D, over the row into the next corridor. Its trajectory is judged against the
+    walls' and the rows' exact boxes (``Box.clearance``), every 0.02 s."""
+    from companion.replan.reroute import reroute
+    from companion.replan.reroute3d import reroute_3d
+    from companion.replan.route3d import RouteScene
+    from companion.replan.shaper import ShapedState
+    from companion.replan.voxmap import ObstacleMap
+
+    cfg = ReplanConfig(body_radius_m=0.442, ceiling_agl_m=4.0)
+    keep = cfg.clearance_m + cfg.body_radius_m
+    mem = ObstacleMap(0.1)
+    walls = (Box(7.0, 7.2, 2.7, 4.8, 3.5), Box(10.4, 10.6, 2.7, 4.8, 3.5))
+    for b in walls:
+        for x in np.arange(b.x0 + 0.05, b.x1, 0.1):
+            for y in np.arange(b.y0 + 0.05, b.y1, 0.1):
+                for z in np.arange(0.05, b.h, 0.1):
+                    mem.add((x, y, z))
+    blocking = mem.points()[mem.points()[:, 0] > 9.0]          # the wall ahead
+    plan = field.plan
+    wp = int(np.flatnonzero(plan.p_enu_m[:, 0] <= 8.5)[0:4].max())      # on the first corridor
+    z3 = (0.0, 0.0, 0.0)
+    st = ShapedState((8.5, CORRIDOR_Y, 1.5), z3, z3, z3, z3)      # beside the pointing target (9, 3.75)
+    two_d = reroute(plan, field.known, st, 10.0, wp, blocking, (1.0, 0.0), cfg.obstacle_depth_m,
+                    cfg.vertical_speed_m_s, keep + 0.3, mem.points())
+    assert two_d.plan is None                                          # boxed in, in 2-D
+    ends = [q for s in plan.segments[1:] for q in (s.start_xy, s.end_xy)]
+    goals = np.array([(x, y, 1.5) for x, y in ends])
+    scene = RouteScene(field.known, mem, keep + 0.3, cfg.floor_agl_m, cfg.ceiling_agl_m)
+    res = reroute_3d(plan, scene, goals, st, 10.0, wp, blocking, (1.0, 0.0), cfg.obstacle_depth_m,
+                     cfg.vertical_speed_m_s, keep + 0.3, mem.points())
+    assert res is not None and res.plan is not None, None if res is None else res.reason
+    tr = res.plan.trajectory
+    ts = np.arange(tr.t0, tr.tf, 0.02)
+    p = np.asarray(tr.sample(ts).p)
+    assert p[0] == pytest.approx([8.5, CORRIDOR_Y, 1.5], abs=1e-6)
+    assert p[:, 2].max() > CANOPY_M + keep                              # over the row's canopy
+    clear = min(b.clearance(q) for q in p for b in (*walls, *ROW_BOXES))
+    assert clear >= keep
+    assert p[:, 2].max() <= 4.0 and p[:, 2].min() >= cfg.floor_agl_m - 0.05

@@ -100,6 +100,7 @@ from .pace import pace
 from .perception import PoseHistory, beam_evidence
 from .rejoin import converged_from, rejoin
 from .reroute import reroute
+from .reroute3d import reroute_3d
 from .shaper import ReferenceShaper
 from .route3d import RouteScene
 from .routecheck import route_exists
@@ -1016,6 +1017,30 @@ class Replanner:
                 plan, verdict, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st)
                 if plan is not None:
                     break
+            via = ""
+            if plan is None:
+                # no 2-D start reaches the coverage left: leave in 3-D (over a row's canopy,
+                # over a low obstacle at the ceiling) to the nearest coverage end a 3-D route
+                # reaches, and re-route from there (``reroute3d``)
+                # (the lattice keeps the clearance and body plus a margin, the route's where it
+                # can, else the governor's: a route on the clearance itself leaves the stopping
+                # law no speed at all, and the guard refuses it)
+                goals = self._coverage_goals(st.p)
+                for margin, others in ((m, o) for m in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M) for o in (*tiers, None)):
+                    scene = RouteScene(known0, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
+                                       self.cfg.ceiling_agl_m)
+                    res3 = reroute_3d(self.plan, scene, goals, st, tau, self._wp_leave, blocking, travel,
+                                      self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
+                                      self._keep_m + ROUTE_MARGIN_M, others, over) if len(goals) else None
+                    if res3 is None:
+                        continue              # no 3-D route to any coverage end with this margin
+                    if res3.plan is not None:
+                        self.known = res3.known
+                        plan3, v3, add3 = self._paced(res3.plan, st)
+                        if plan3 is not None:
+                            res, plan, verdict, added, via = res3, plan3, v3, add3, ", leaving in 3-D"
+                            break
+                        res, verdict = res3, v3
             if plan is not None:
                 self._set_plan(plan)
                 self._dev_leg = None
@@ -1023,7 +1048,7 @@ class Replanner:
                 self._mode_until = float(plan.t_s[1]) if len(plan.t_s) > 1 else tau
                 paced = f", paced +{added:.1f} s" if added > 0.0 else ""
                 self._event(events, "reroute", self._nearest(dist),
-                            f"{res.n_pieces} coverage pieces left, {res.n_skipped} unreachable{paced}")
+                            f"{res.n_pieces} coverage pieces left, {res.n_skipped} unreachable{paced}{via}")
                 for gap in res.skipped:
                     self._skip(events, *gap)
                 s = self._cursor.sample(tau)
@@ -1094,25 +1119,34 @@ class Replanner:
         top = pts[:, 2] + 0.5 * self.cfg.voxel_m
         return pts[top + self._keep_m > ground + self.cfg.ceiling_agl_m - LIFT_WALL_MARGIN_M]
 
+    def _coverage_goals(self, p) -> np.ndarray:
+        """(k, 3) the ends of the coverage left nearest ``p`` (``ROUTE_CHECK_GOALS`` within
+        ``ROUTE_CHECK_RADIUS_M``, else the nearest), at the plan's height: the far end of
+        the segment being flown (the re-route flies its rest from there), and both ends
+        of every segment not yet started. (The segment before those, already flown, once
+        counted too: a vehicle stopped at its end "reached" it, and every hold there read
+        "independent check DISAGREES".)"""
+        plan = self.plan
+        current, nxt = plan.segment_at(self._wp_leave)
+        ends = ([plan.segments[current].end_xy] if current is not None else []) + \
+            [q for seg in plan.segments[nxt:] for q in (seg.start_xy, seg.end_xy)]
+        if not ends:
+            return np.zeros((0, 3))
+        P = np.asarray(p, dtype=float)
+        xy = np.asarray(ends, dtype=float)
+        d = np.hypot(*(xy - P[:2]).T)
+        order = [i for i in np.argsort(d) if d[i] <= ROUTE_CHECK_RADIUS_M][:ROUTE_CHECK_GOALS] or [int(np.argmin(d))]
+        return np.array([(x, y, self.known.ground_z(x, y) + plan.flight.height_agl_m)
+                         for x, y in xy[order].tolist()])
+
     def _route_check(self, p) -> str:
         """The independent 3-D route check (``routecheck``) from ``p`` to the ends of the
         coverage left (the ``ROUTE_CHECK_GOALS`` nearest within ``ROUTE_CHECK_RADIUS_M``), on
         the rows, the terrain and the obstacle map: the words a hold reports."""
-        plan = self.plan
-        # the coverage left: the far end of the segment being flown (the re-route flies its
-        # rest from there), and both ends of every segment not yet started. (The segment
-        # before those, already flown, once counted too: a vehicle stopped at its end
-        # "reached" it, and every hold there read "independent check DISAGREES".)
-        current, nxt = plan.segment_at(self._wp_leave)
-        ends = ([plan.segments[current].end_xy] if current is not None else []) + \
-            [q for seg in plan.segments[nxt:] for q in (seg.start_xy, seg.end_xy)]
-        P = np.asarray(p, dtype=float)
-        if not ends:
+        goals = self._coverage_goals(p)
+        if not len(goals):
             return "no coverage left to reach"
-        xy = np.asarray(ends, dtype=float)
-        d = np.hypot(*(xy - P[:2]).T)
-        order = [i for i in np.argsort(d) if d[i] <= ROUTE_CHECK_RADIUS_M][:ROUTE_CHECK_GOALS] or [int(np.argmin(d))]
-        goals = [(x, y, self.known.ground_z(x, y) + plan.flight.height_agl_m) for x, y in xy[order].tolist()]
+        P = np.asarray(p, dtype=float)
         scene = RouteScene(self.known, self.memory, self._keep_m, self.cfg.floor_agl_m, self.cfg.ceiling_agl_m)
         found = route_exists(scene, P, goals)
         if not any(found):
