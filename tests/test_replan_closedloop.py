@@ -724,3 +724,29 @@ def test_boxed_in_the_re_route_leaves_over_the_row(field):
     clear = min(b.clearance(q) for q in p for b in (*walls, *ROW_BOXES))
     assert clear >= keep
     assert p[:, 2].max() <= 4.0 and p[:, 2].min() >= cfg.floor_agl_m - 0.05
+
+
+def test_giving_way_never_backs_into_a_still_obstacle_faster_than_it_could_stop(field):
+    # a mover 1.6 m ahead along the corridor (+x) closes at 1.2 m/s; a post stands 1.4 m
+    # behind. The give-way backs away along the corridor, toward the post: at most the
+    # speed the stopping law allows toward a still obstacle (the guard's rule; the
+    # governor's form: v^2 / (2 a_b) + v t_lag = room, a_b half the acceleration limit,
+    # room = d - clearance - body - 0.1 m)
+    from companion.replan.replanner import GOVERNOR_LAG_S, GOVERNOR_MARGIN_M
+
+    cfg = ReplanConfig(body_radius_m=0.442, give_way=True)
+    rp = Replanner(cfg, field.known, field.plan)
+    rp._avoid_leg = 0                                   # the first corridor, along +x
+    rp._t_s = 10.0
+    rp.closing._w, rp.closing._t_w = 1.2, 10.0          # measured 1.2 m/s, just now
+    P = np.array([8.5, CORRIDOR_Y, 1.5])
+    pts = np.array([[8.5 + 1.6, CORRIDOR_Y, 1.5], [8.5 - 1.4, CORRIDOR_Y, 1.5]])
+    v = rp._give_way(P, pts)
+    a_b, lag = 0.5 * cfg.accel_m_s2, GOVERNOR_LAG_S
+    room = 1.4 - cfg.clearance_m - 0.442 - GOVERNOR_MARGIN_M
+    v_stop = math.sqrt((a_b * lag) ** 2 + 2 * a_b * room) - a_b * lag
+    assert v[0] < 0.0 and abs(v[1]) < 1e-12 and v[2] == 0.0       # backing away, along the corridor
+    assert -v[0] <= v_stop + 1e-9
+    # nothing behind: it backs away faster than that (the clamp above is the post's)
+    v_free = rp._give_way(P, pts[:1])
+    assert -v_free[0] > v_stop + 0.1

@@ -935,14 +935,15 @@ class Replanner:
             return WALL_GAIN_1_S * d
         return min(WALL_GAIN_1_S * d, float(self._allowed_speed(d)))
 
-    def _govern(self, P, v, obs, obs_dist, scale_only: bool = False) -> np.ndarray:
+    def _govern(self, P, v, obs, obs_dist, scale_only: bool = False, movers: bool = True) -> np.ndarray:
         """Clearance governor: the approach speed to each point is at most the v with
         v^2 / (2 a_b) + v t_lag = d - clearance - margin (braking at a_b after the
-        shaper's lag t_lag = ``GOVERNOR_LAG_S``)."""
+        shaper's lag t_lag = ``GOVERNOR_LAG_S``), less a mover's closing speed
+        (``movers`` False: every point still, the guard's own law)."""
         d = np.maximum(obs_dist, 1e-9)
         nrm = (P - obs) / d[:, None]                        # from each point to the vehicle
-        allow = allowed_approach_m_s(self._allowed_speed(np.maximum(0.0, d - self._keep_m - GOVERNOR_MARGIN_M)),
-                                     self.closing.approach_m_s(getattr(self, "_t_s", None)))
+        w = self.closing.approach_m_s(getattr(self, "_t_s", None)) if movers else 0.0
+        allow = allowed_approach_m_s(self._allowed_speed(np.maximum(0.0, d - self._keep_m - GOVERNOR_MARGIN_M)), w)
         if scale_only:
             approach = -(nrm @ v)
             bad = approach > allow + 1e-12
@@ -966,7 +967,11 @@ class Replanner:
         v = float(v[:2] @ u[:2]) * np.array([u[0], u[1], 0.0])
         h = math.hypot(v[0], v[1])
         cap = give_way_speed_m_s(self.speed_m_s, self.closing.approach_m_s(getattr(self, "_t_s", None)))
-        return v if h <= cap else v * (cap / h)
+        v = v if h <= cap else v * (cap / h)
+        # backing away from a mover never closes on anything faster than the stopping law
+        # allows a still obstacle (the guard's rule): a give-way toward a post behind at
+        # 0.70 m/s where 0.57 m/s was allowed ended a flight (obstacles-wide scenario 1)
+        return self._govern(P, v, pts, np.linalg.norm(pts - P, axis=1), scale_only=True, movers=False)
 
     def _enter_stop(self, tau: float, events: list, then: str, detail: str) -> RefSample:
         self.mode = "stop"
