@@ -204,7 +204,14 @@ def _set(doc: dict, path: str, value) -> None:
         d[leaf] = value
 
 
-_DELETE = object()
+class _Deleted:
+    """The key is removed (a stable repr: test ids must match across pytest-xdist workers)."""
+
+    def __repr__(self) -> str:
+        return "<deleted>"
+
+
+_DELETE = _Deleted()
 
 PLAN_BREAKAGES = [
     ("format_version", "1.0"), ("format_version", "3.0"), ("format_version", "2"), ("format_version", 2.0),
