@@ -77,12 +77,6 @@ class ReplanConfig:
     known_tolerance_m : float
         A range hit within this distance of an occupied OGM cell (below the
         canopy) or of the terrain is a known feature (m).
-    heading_uncertainty_deg : float
-        How far (deg) the estimated heading may be from the true one: a return
-        is a known feature when it is one for the beam's field of view turned
-        by up to this much either way (``Replanner._explained``). 3 deg: an
-        uncalibrated magnetometer's hard iron (the SITL's realistic profile)
-        turns the heading by about 2.6 deg.
     memory_s : float
         Not used (the obstacle map forgets nothing with time); accepted for older missions (s).
     memory_radius_m : float
@@ -132,7 +126,6 @@ class ReplanConfig:
     jerk_m_s3: float = 2.0
     canopy_height_m: float = 2.0
     known_tolerance_m: float = 0.2
-    heading_uncertainty_deg: float = 3.0
     memory_s: float = 10.0
     memory_radius_m: float = 15.0
     voxel_m: float = 0.1
@@ -156,8 +149,6 @@ class ReplanConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"replan.{name} must be a finite number >= 0, got {v}")
-        if not (math.isfinite(self.heading_uncertainty_deg) and 0 <= self.heading_uncertainty_deg <= 30):
-            raise ValueError(f"replan.heading_uncertainty_deg must be in [0, 30] deg, got {self.heading_uncertainty_deg}")
         if self.body_radius_m is not None and not (math.isfinite(self.body_radius_m) and 0 <= self.body_radius_m <= 10):
             raise ValueError(f"replan.body_radius_m must be in [0, 10] m, got {self.body_radius_m}")
         if self.speed_m_s is not None and not (math.isfinite(self.speed_m_s) and self.speed_m_s > 0):

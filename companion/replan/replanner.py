@@ -499,12 +499,6 @@ class Replanner:
         self.poses = PoseHistory()
         self.fresh = BeamFreshness()
         self.closing = ClosingSpeed()       # movers: the governor bounds the closing speed
-        # the field of view turned by a third, two thirds and all of the heading's uncertainty,
-        # each way (turned too far, a ray grazing a row's face would enter the row before
-        # the return, which does not explain it)
-        h = math.radians(cfg.heading_uncertainty_deg)
-        self._turns = tuple((math.cos(a), math.sin(a)) for k in (1, 2, 3) for a in (k * h / 3, -k * h / 3)) \
-            if h > 0.0 else ()
         self.shaper = ReferenceShaper(cfg.accel_m_s2, cfg.jerk_m_s3)
         self._brake = 0.5 * cfg.accel_m_s2
         self._target = None if plan.target_enu_m is None else tuple(float(x) for x in plan.target_enu_m)
@@ -610,25 +604,13 @@ class Replanner:
                 self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still)
 
     def _explained(self, ev) -> bool:
-        """The known map accounts for the return along the axis or a field-of-view edge,
-        the field of view turned by up to ``heading_uncertainty_deg`` either way (the
-        heading is an estimate: a beam grazing a row's face along the corridor returns the
-        face at its field's edge, and 2.6 deg of uncalibrated hard iron put that edge 0.1-0.2 m
-        into the corridor at 3-4 m, a phantom obstacle the vehicle climbed over for 20 s:
-        7 of the 8 obstacles-wide flights on the realistic profile and the tilted field held)."""
+        """The known map accounts for the return along the axis or a field-of-view edge."""
         known, o, d = self.known, ev.origin, ev.distance_m
-        dirs = [ev.axis] + [((q[0] - o[0]) / d, (q[1] - o[1]) / d, (q[2] - o[2]) / d) for q in ev.fan_hits]
-        for u in dirs:
-            if known.explains(o, u, d):
+        if known.explains(o, ev.axis, d):
+            return True
+        for q in ev.fan_hits:
+            if known.explains(o, ((q[0] - o[0]) / d, (q[1] - o[1]) / d, (q[2] - o[2]) / d), d):
                 return True
-        # the horizontal field's edges only (``fan_hits`` starts with them): a return the row's face
-        # gives at the edge; on the axis the return is what the beam points at, and turned
-        # by the heading's uncertainty it would reach past a post beside a row at range
-        edges = dirs[1:3]                          # the horizontal field's two edges
-        for c, s in self._turns:                   # about the vertical, both ways
-            for u in edges:
-                if known.explains(o, (c * u[0] - s * u[1], s * u[0] + c * u[1], u[2]), d):
-                    return True
         return False
 
     def step(self, t_s: float, pos_enu_m, vel_enu_m_s) -> ReplanStep:
