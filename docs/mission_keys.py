@@ -197,7 +197,6 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "replan.canopy_height_m": ("m", "> 0", "Height of the rows above the terrain: returns from them are "
                                "known, not obstacles."),
     "replan.known_tolerance_m": ("m", ">= 0", "A return this close to the terrain or an occupied cell is known."),
-    "replan.heading_uncertainty_deg": ("deg", "[0, 30]", "How far the estimated heading may be off: a return is known when the field of view's horizontal edges turned by up to this either way explain it (an uncalibrated magnetometer's hard iron turns the heading by about 2.6 deg)."),
     "replan.memory_s": ("s", "> 0", "Not used: the obstacle map forgets nothing with time "
                         "([replan.md](replan.md#the-obstacle-map)); accepted for older missions."),
     "replan.memory_radius_m": ("m", "> 0", "Not used: the obstacle map keeps what it saw of the whole area flown; "
