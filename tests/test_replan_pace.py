@@ -191,3 +191,14 @@ def test_pacing_judges_a_rejoin_up_to_its_horizon_only():
     assert v_first.ok and first.new_until_s == 2.0
     assert np.array_equal(first.t_s, plan.t_s)                   # nothing slowed down
     assert not g.check_trajectory(first.trajectory).ok            # its end alone would be refused
+
+
+def test_a_rejoin_whose_rest_runs_into_a_known_obstacle_is_refused():
+    # new only for its first 2 s, but the plan it goes on to fly ends 0.5 m from the
+    # box's face, inside its 0.9 m: the rest is not re-paced, and it is still not flown
+    plan, x0 = _plan(7.5)
+    g = _guard()
+    _, verdict = pace(plan, x0, g, horizon=lambda p: 2.0)
+    assert not verdict.ok and verdict.surface == "obstacle" and verdict.rule == "clearance"
+    assert verdict.distance_m < REQ and verdict.t_s > 2.0
+    assert box_distance([verdict.point_enu_m])[0] == pytest.approx(verdict.distance_m, abs=1e-9)

@@ -159,4 +159,8 @@ def pace(plan, x0: np.ndarray, guard, horizon: Callable | None = None) -> tuple:
             until = None if horizon is None else horizon(plan)
             k = sampled_stretch(plan, guard.speed_limits, until_s=until)
     plan = replace(plan, new_until_s=until)
-    return plan, guard.check_trajectory(plan.trajectory, float(plan.t_s[0]), until)
+    verdict = guard.check_trajectory(plan.trajectory, float(plan.t_s[0]), until)
+    if verdict.ok and until is not None:
+        # the rest flies the installed plan: not re-paced, but never into an obstacle seen since
+        verdict = guard.check_obstacle_clear(plan.trajectory, until)
+    return plan, verdict

@@ -365,6 +365,27 @@ class Guard:
                 return verdict
         return PASS
 
+    def check_obstacle_clear(self, trajectory, t_from_s: float) -> Verdict:
+        """The part of a candidate from ``t_from_s`` to its end keeps out of every known
+        obstacle's clearance (samples every ``SAMPLE_DT_S``; the clearance alone, not the
+        speed rule, not the rows): the tail of a rejoin, which flies the installed plan
+        (``companion.replan.pace``), must not run into an obstacle seen since."""
+        if self.obstacle_distance is None:
+            return PASS
+        t0, tf = float(max(t_from_s, trajectory.t0)), float(trajectory.tf)
+        req = self._req["obstacle"]
+        for k0 in range(0, int(math.floor(max(tf - t0, 0.0) / SAMPLE_DT_S)) + 1, CHUNK):
+            t = t0 + SAMPLE_DT_S * np.arange(k0, min(k0 + CHUNK, int(math.floor(max(tf - t0, 0.0) / SAMPLE_DT_S)) + 1))
+            p = np.asarray(trajectory.sample(t).p, float).reshape(-1, 3)
+            d = np.asarray(self.obstacle_distance(p), float)
+            bad = d < req
+            if bad.any():
+                k = int(np.argmax(bad))
+                return Verdict(False, "clearance", "obstacle",
+                               f"obstacle clearance: {d[k] - req:+.2f} m from its clearance at t={t[k]:.2f} s "
+                               "(the plan it rejoins)", float(t[k]), tuple(float(c) for c in p[k]), float(d[k]), req)
+        return PASS
+
     def check_segments(self, segments, terrain_from: int = 0) -> Verdict:
         """Straight segments ``[(p0, p1, duration_s), ...]`` (the take-off) flown back to back
         at their mean speed, sampled every ``COLUMN_STEP_M``; the terrain is checked from
