@@ -374,8 +374,9 @@ class Guard:
             return PASS
         t0, tf = float(max(t_from_s, trajectory.t0)), float(trajectory.tf)
         req = self._req["obstacle"]
-        for k0 in range(0, int(math.floor(max(tf - t0, 0.0) / SAMPLE_DT_S)) + 1, CHUNK):
-            t = t0 + SAMPLE_DT_S * np.arange(k0, min(k0 + CHUNK, int(math.floor(max(tf - t0, 0.0) / SAMPLE_DT_S)) + 1))
+        n = int(math.floor(max(tf - t0, 0.0) / SAMPLE_DT_S)) + 1
+        for k0 in range(0, n, CHUNK):
+            t = t0 + SAMPLE_DT_S * np.arange(k0, min(k0 + CHUNK, n))
             p = np.asarray(trajectory.sample(t).p, float).reshape(-1, 3)
             d = np.asarray(self.obstacle_distance(p), float)
             bad = d < req
