@@ -1109,9 +1109,13 @@ class Replanner:
         pts = self.memory.points()
         if not len(pts):
             return pts
-        ground = np.array([self.known.ground_z(float(x), float(y)) for x, y in pts[:, :2]])
+        ground = self._ground_under(pts)
         z = ground + float(self.plan.flight.height_agl_m)
         return pts[pts[:, 2] >= z - self._keep_m - 0.5 * self.cfg.voxel_m]
+
+    def _ground_under(self, pts: np.ndarray) -> np.ndarray:
+        """(k,) the terrain height (m) under each of the (k, 3) points."""
+        return np.array([self.known.ground_z(float(x), float(y)) for x, y in pts[:, :2]])
 
     def _too_tall_to_lift(self) -> np.ndarray:
         """(j, 3) the map's occupied voxels whose top, plus the clearance and body, stands
@@ -1120,7 +1124,7 @@ class Replanner:
         pts = self.memory.points()
         if not len(pts):
             return pts
-        ground = np.array([self.known.ground_z(float(x), float(y)) for x, y in pts[:, :2]])
+        ground = self._ground_under(pts)
         top = pts[:, 2] + 0.5 * self.cfg.voxel_m
         return pts[top + self._keep_m > ground + self.cfg.ceiling_agl_m - LIFT_WALL_MARGIN_M]
 
