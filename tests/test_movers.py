@@ -215,6 +215,39 @@ def test_the_governor_bounds_the_closing_speed_not_the_vehicles_own():
 # --- one short flight: a walker crosses the first corridor --------------------------------
 
 
+def _walker_flight(tmp_path, field: str, home: str, seed: int, walker: str, cut_s: str) -> dict:
+    """report.json's ``replanning`` of a ``demo`` flight over the bundled ``field``, in
+    process, ``give_way`` on, one walker (``walker``: its sim.movers item), cut at
+    ``cut_s``; asserts no crash and the configured clearance from the walker's true
+    position (SITL truth)."""
+    import json
+
+    from companion.cli import main
+    from companion.commands.demo import missions_dir
+    from companion.mission.replan import ReplanConfig
+
+    fd = missions_dir() / field
+    (tmp_path / "m.yaml").write_text(
+        f"name: walker-{field}\n"
+        f"map: {fd / 'map.yaml'}\ndem: {fd / 'dem.asc'}\n"
+        f"home: {home}\n"
+        "flight: {height_agl_m: 1.5, speed_m_s: 1.0, waypoint_interval_s: 4.0}\n"
+        "coverage: {line_spacing_m: 2.5, safety_margin_m: 0.45}\n"
+        "pointing: {target: centroid}\n"
+        "replan: {give_way: true}\n"
+        f"sim:\n  noise: {{vector_variance: 5.0e-4, gyro_variance: 5.0e-4}}\n  seed: {seed}\n"
+        f"  movers: [{walker}]\n")
+    out = tmp_path / "out"
+    main(["demo", "--mission", str(tmp_path / "m.yaml"), "--transport", "inproc", "--cut", cut_s,
+          "--out", str(out), "--no-plots", "--quiet"])
+    rep = json.loads((out / "report.json").read_text())
+    rp = rep["replanning"]
+    assert rep["crashed"] is False and rep["crash"] is None
+    assert rp["clearance_source"] == "sim_truth" and rp["min_clearance_obstacle"] == 0    # the walker
+    assert rp["min_clearance_m"] >= ReplanConfig.clearance_m
+    return rp
+
+
 def test_vehicle_gives_way_to_a_walker_crossing_the_first_corridor(tmp_path):
     """flat-rectangle's first corridor is flown westward along y = 8.75 m from x = 22 m
     (the trajectory starts about 7 s after boot). A worker steps off the row face at
@@ -222,32 +255,9 @@ def test_vehicle_gives_way_to_a_walker_crossing_the_first_corridor(tmp_path):
     when the vehicle is about 3 m away. The vehicle must give way (an avoidance event)
     and keep the configured clearance (0.5 m, ``replan.clearance_m``) from the walker's
     true position (the SITL's ground truth), with no crash."""
-    import json
-
-    from companion.cli import main
-    from companion.commands.demo import missions_dir
-    from companion.mission.replan import ReplanConfig
-
-    fr = missions_dir() / "flat-rectangle"
-    (tmp_path / "m.yaml").write_text(
-        "name: walker-cross\n"
-        f"map: {fr / 'map.yaml'}\ndem: {fr / 'dem.asc'}\n"
-        "home: {lat: 44.8, lon: -0.6, alt_m: 30.0}\n"
-        "flight: {height_agl_m: 1.5, speed_m_s: 1.0, waypoint_interval_s: 4.0}\n"
-        "coverage: {line_spacing_m: 2.5, safety_margin_m: 0.45}\n"
-        "pointing: {target: centroid}\n"
-        "replan: {give_way: true}\n"
-        "sim:\n  noise: {vector_variance: 5.0e-4, gyro_variance: 5.0e-4}\n  seed: 1\n"
-        "  movers: [{type: walker, path: [[17.0, 7.8], [17.0, 11.5]], speed_m_s: 1.0, start_s: 8.3}]\n")
-    out = tmp_path / "out"
-    main(["demo", "--mission", str(tmp_path / "m.yaml"), "--transport", "inproc", "--cut", "9",
-          "--out", str(out), "--no-plots", "--quiet"])
-    rep = json.loads((out / "report.json").read_text())
-    rp = rep["replanning"]
-    assert rep["crashed"] is False and rep["crash"] is None
+    rp = _walker_flight(tmp_path, "flat-rectangle", "{lat: 44.8, lon: -0.6, alt_m: 30.0}", 1,
+                        "{type: walker, path: [[17.0, 7.8], [17.0, 11.5]], speed_m_s: 1.0, start_s: 8.3}", "9")
     assert any(e["action"] in ("avoid", "stop") for e in rp["event_list"])       # it gave way
-    assert rp["clearance_source"] == "sim_truth" and rp["min_clearance_obstacle"] == 0    # the walker
-    assert rp["min_clearance_m"] >= ReplanConfig.clearance_m
 
 
 def test_vehicle_stops_and_looks_before_passing_a_worker_crossing_its_path(tmp_path):
@@ -260,33 +270,11 @@ def test_vehicle_stops_and_looks_before_passing_a_worker_crossing_its_path(tmp_p
     14.1 s. With ``give_way`` it stops and watches first (``LOOK_S`` at rest), reads the
     worker's motion, gives way and passes only once nothing moves: no crash, and the
     configured clearance from the worker's true position (SITL truth)."""
-    import json
-
-    from companion.cli import main
-    from companion.commands.demo import missions_dir
-    from companion.mission.replan import ReplanConfig
-
-    th = missions_dir() / "tilted-hexagon"
-    (tmp_path / "m.yaml").write_text(
-        "name: walker-across\n"
-        f"map: {th / 'map.yaml'}\ndem: {th / 'dem.asc'}\n"
-        "home: {lat: 44.85, lon: -0.55, alt_m: 45.0}\n"
-        "flight: {height_agl_m: 1.5, speed_m_s: 1.0, waypoint_interval_s: 4.0}\n"
-        "coverage: {line_spacing_m: 2.5, safety_margin_m: 0.45}\n"
-        "pointing: {target: centroid}\n"
-        "replan: {give_way: true}\n"
-        "sim:\n  noise: {vector_variance: 5.0e-4, gyro_variance: 5.0e-4}\n  seed: 2\n"
-        "  movers: [{type: walker, path: [[6.998, 2.368], [3.998, 7.564]], speed_m_s: 0.919, start_s: 10.997}]\n")
-    out = tmp_path / "out"
-    main(["demo", "--mission", str(tmp_path / "m.yaml"), "--transport", "inproc", "--cut", "10",
-          "--out", str(out), "--no-plots", "--quiet"])
-    rep = json.loads((out / "report.json").read_text())
-    rp = rep["replanning"]
-    assert rep["crashed"] is False and rep["crash"] is None
+    rp = _walker_flight(tmp_path, "tilted-hexagon", "{lat: 44.85, lon: -0.55, alt_m: 45.0}", 2,
+                        "{type: walker, path: [[6.998, 2.368], [3.998, 7.564]], speed_m_s: 0.919, "
+                        "start_s: 10.997}", "10")
     stops = [e for e in rp["event_list"] if e["action"] == "stop"]
     assert stops and "whether it moves" in stops[0]["detail"]          # it looked first
-    assert rp["clearance_source"] == "sim_truth" and rp["min_clearance_obstacle"] == 0    # the walker
-    assert rp["min_clearance_m"] >= ReplanConfig.clearance_m
 
 
 # --- campaign: movers drawn from the seeded per-scenario generator ----------------------
