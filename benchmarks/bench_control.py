@@ -9,7 +9,7 @@ Timing: median wall time of ``GeometricController.update`` (one 250 Hz
 sensor frame) over many calls along a moving reference.
 
 Tracking: the controller against an in-process plant (eq. 20 + the rotor
-allocation of ``companion/vehicle.py`` + first-order motors), 250 Hz sample
+allocation of ``mavcore/vehicle.py`` + first-order motors), 250 Hz sample
 and hold, plant integrated by RK4 at 1 ms. Measurements: gyro, specific
 force and magnetic field directions with white noise of the paper's
 variance (5e-4 per component on the unit vectors and on Omega), exact
@@ -30,8 +30,9 @@ import time
 
 import numpy as np
 
-from companion.control import ControlConfig, GeometricController, Measurements, Reference
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
+from companion.control import GeometricController, Measurements, ReferenceNone
+from mavcore.mission.control import ControlConfigNone
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
 
 
 def circle(radius_m: float = 1.25, speed_m_s: float = 1.0, height_m: float = 1.5):

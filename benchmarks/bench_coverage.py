@@ -19,8 +19,8 @@ import time
 import numpy as np
 
 from companion.coverage import plan_coverage
-from companion.maps.grid import OccupancyGrid
-from companion.mission.schema import CoverageConfig
+from mavcore.maps.grid import OccupancyGrid
+from mavcore.mission.schema import CoverageConfig
 
 
 def field(angle_deg: float = 0.0, res: float = 0.1, side: float = 316.0, spacing: float = 3.0,

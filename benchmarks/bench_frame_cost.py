@@ -46,7 +46,7 @@ from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 from companion.commands.fly import prepare  # noqa: E402
 from companion.link.connection import COMPANION_COMPONENT_ID, COMPANION_SYSTEM_ID  # noqa: E402
 from companion.link.tlog_scan import TlogScanner, decode_record, new_decoder  # noqa: E402
-from companion.mission import load_mission  # noqa: E402
+from mavcore.mission import load_mission  # noqa: E402
 from companion.replay import build_core, find_setup, replay_chunks  # noqa: E402
 
 CORPUS = ROOT / "tests" / "data" / "replay"

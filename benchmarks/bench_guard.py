@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from companion.flight.reference import RefSample
-from companion.mission import load_mission
+from mavcore.mission import load_mission
 from companion.planner import plan_mission
 from companion.replan import KnownMap
 from companion.replan.memory import ObstacleMemory

@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 
 from companion.commands.demo import launch_pose, resolve_mission  # noqa: E402
 from companion.commands.fly import FlightPlan, execute  # noqa: E402
-from companion.mission import load_mission  # noqa: E402
+from mavcore.mission import load_mission  # noqa: E402
 from companion.planner import plan_mission  # noqa: E402
 from companion.runner import UNUSED_STREAMS  # noqa: E402
 from sitl.api import SitlInProcess, SitlProcess  # noqa: E402

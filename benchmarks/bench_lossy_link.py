@@ -64,7 +64,7 @@ def fly(mission_name: str, control: str, loss: float, delay_ms: tuple, cut_s: fl
 
     from companion.commands.demo import launch_pose, missions_dir
     from companion.commands.fly import execute, prepare
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
 
     path = missions_dir() / mission_name / "mission.yaml"
     mission = load_mission(path)

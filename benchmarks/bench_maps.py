@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 from companion.geo_export import geojson_text, kml_text  # noqa: E402
 from companion.html_map import html_map_text  # noqa: E402
 from companion.map_layers import plan_layers, row_lines_xy  # noqa: E402
-from companion.mission import load_mission  # noqa: E402
+from mavcore.mission import load_mission  # noqa: E402
 from companion.planner import plan_mission  # noqa: E402
 
 

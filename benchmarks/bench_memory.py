@@ -52,7 +52,7 @@ def main() -> int:
     rss0 = rss_mb()
     from companion.commands.demo import resolve_mission
     from companion.commands.fly import FlightPlan, execute
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from companion.planner import plan_mission
     from companion.runner import UNUSED_STREAMS
     from sitl.api import SitlProcess

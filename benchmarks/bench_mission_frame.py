@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from companion.cli import main as companion_main   # noqa: E402
-from companion.mission import load_mission   # noqa: E402
+from mavcore.mission import load_mission   # noqa: E402
 from sitl.flightstack import FlightMode, MissionItem, NavState   # noqa: E402
 from sitl.server import ServerConfig, SitlServer   # noqa: E402
 

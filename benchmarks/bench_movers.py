@@ -8,9 +8,9 @@ import statistics
 import time
 
 import numpy as np
-from companion.mission.schema import HomeConfig, Mission
-from companion.mission.sim import SimConfig, MoverConfig, NoiseConfig
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig
+from mavcore.mission.schema import HomeConfig, Mission
+from mavcore.mission.sim import SimConfig, MoverConfig, NoiseConfig
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
 from sitl.sim import Simulation
 VEH = VehicleConfig()
 def run(movers):

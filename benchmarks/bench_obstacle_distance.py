@@ -18,10 +18,10 @@ import time
 
 import numpy as np
 
-from companion.frames import euler_zyx2rotmat
+from mavcore.frames import euler_zyx2rotmat
 from companion.link.codec import Range
 from companion.link.obstacle_distance import pack_sectors, sector_beam
-from companion.mission import load_mission
+from mavcore.mission import load_mission
 from companion.planner import plan_mission
 from companion.replan.coverage_check import mission_coverage, sample_times
 from companion.trajectory.extrema import max_speed_on_intervals

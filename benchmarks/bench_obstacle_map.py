@@ -49,7 +49,7 @@ def distance_cost() -> None:
 
 def step_cost() -> None:
     import bench_replan as B
-    from companion.mission.sim import ObstacleConfig
+    from mavcore.mission.sim import ObstacleConfig
 
     B.time.perf_counter = time.process_time          # the benchmark's per-frame timer, CPU time instead
     m, plan, known, gplan = B.setup("flat-rectangle")

@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT / "missions"))
 
 import generate  # noqa: E402  (missions/generate.py)
 
-from companion.mission import load_mission  # noqa: E402
+from mavcore.mission import load_mission  # noqa: E402
 from companion.planner import plan_mission  # noqa: E402
 
 

@@ -32,7 +32,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 ENV = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
            PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-PREPARE = ("import sys; from companion.mission import load_mission; from companion.commands.fly import prepare; "
+PREPARE = ("import sys; from mavcore.mission import load_mission; from companion.commands.fly import prepare; "
            "from companion.trajectory.cursor import TrajectoryCursor; "
            "fp = prepare(load_mission(sys.argv[1]), sys.argv[2]); "
            "TrajectoryCursor(fp.trajectory).sample(fp.trajectory.t0)")

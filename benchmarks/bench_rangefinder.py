@@ -22,7 +22,7 @@ import math
 import statistics
 import time
 
-from companion.mission import load_mission
+from mavcore.mission import load_mission
 from sitl.sensors import Rangefinder
 from sitl.world import load_world
 
@@ -37,7 +37,7 @@ def main() -> None:
     a = ap.parse_args()
     mission = load_mission(a.mission)
     world = load_world(mission)
-    from companion.mission.sim import default_rangefinders
+    from mavcore.mission.sim import default_rangefinders
 
     cfgs = default_rangefinders() if a.default_suite else mission.sim.rangefinders_or_default
     rfs = [Rangefinder(c, 0) for c in cfgs]

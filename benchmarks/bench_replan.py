@@ -41,10 +41,10 @@ from pathlib import Path
 
 import numpy as np
 
-from companion import frames
+from mavcore import frames
 from companion.link import codec
-from companion.mission import load_mission
-from companion.mission.sim import ObstacleConfig
+from mavcore.mission import load_mission
+from mavcore.mission.sim import ObstacleConfig
 from companion.planner import plan_mission
 from companion.replan import GlobalPlan, KnownMap, Replanner
 from companion.replan.replanner import mission_replan_config

@@ -38,7 +38,7 @@ sys.path.insert(0, str(ROOT))
 
 from companion.commands.fly import prepare  # noqa: E402
 from companion.commands.replay import read_chunks  # noqa: E402
-from companion.mission import load_mission  # noqa: E402
+from mavcore.mission import load_mission  # noqa: E402
 from companion.replay import build_core, find_setup, replay_chunks  # noqa: E402
 
 MISSION = ROOT / "missions" / "flat-rectangle" / "mission.yaml"

@@ -21,8 +21,8 @@ import time
 
 import numpy as np
 
-from companion.mission import load_mission
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
+from mavcore.mission import load_mission
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
 from sitl.onboard import Setpoint
 from sitl.plant import Plant, PlantParams
 from sitl.sim import Simulation

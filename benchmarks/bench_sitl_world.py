@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--save", help="write the hit distances (.npy)")
     ap.add_argument("--compare", help="hit distances of another build (.npy) to compare with")
     args = ap.parse_args(argv)
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from sitl.world import load_world
 
     mission = load_mission(args.mission)

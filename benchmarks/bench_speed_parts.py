@@ -12,7 +12,7 @@ sensors, estimator) and the plant alone (4 physics steps), each with the
 compiled kernel (when numba imports) and with the Python loop
 (``VINEYARD_GNC_NUMBA=0`` semantics: the plant's ``_kernel`` set to None);
 the SITL's decoding of a SET_POSITION_TARGET_LOCAL_NED; one ENU -> WGS-84
-point (``companion.geodesy.enu2geodetic``, GLOBAL_POSITION_INT's and
+point (``mavcore.geodesy.enu2geodetic``, GLOBAL_POSITION_INT's and
 GPS_RAW_INT's conversion). Runs on any revision that has these functions
 (the kernel rows are skipped where ``sitl.plant_kernel`` does not exist).
 """
@@ -46,9 +46,9 @@ def main() -> int:
     import numpy as np
     from pymavlink.dialects.v20 import common as mavlink
 
-    from companion import geodesy
+    from mavcore import geodesy
     from companion.commands.demo import resolve_mission
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from sitl import codec
     from sitl.plant import Plant, PlantParams
     from sitl.sim import Simulation
@@ -87,7 +87,7 @@ def main() -> int:
                  per_call_us(lambda: codec.decode_position_target(msg, 0.0, (0.0, 0.0, 0.0)), args.number,
                              args.repeat)))
     geodesy.enu2geodetic(1.0, 2.0, 3.0, 44.8, -0.6, 30.0)
-    rows.append(("companion.geodesy.enu2geodetic, one point",
+    rows.append(("mavcore.geodesy.enu2geodetic, one point",
                  per_call_us(lambda: geodesy.enu2geodetic(1.0, 2.0, 3.0, 44.8, -0.6, 30.0), args.number, args.repeat)))
     print(f"| part ({ROOT.name}) | CPU us per call (min of {args.repeat} x {args.number}) |")
     print("|---|---|")

@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from companion.mission import load_mission  # noqa: E402
+from mavcore.mission import load_mission  # noqa: E402
 from companion.planner import plan_mission  # noqa: E402
 from companion.runner import setpoint_yaw_enu  # noqa: E402
 from sitl.sim import Setpoint, Simulation  # noqa: E402

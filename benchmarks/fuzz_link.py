@@ -405,7 +405,7 @@ def run_flight_campaign(n_datagrams: int, signing: bool, cut_s: float | None, ra
     dict of figures (see ``main``).
     """
     from companion.commands.fly import execute, open_link, prepare
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from sitl.api import SitlProcess
 
     mission_path = ROOT / "missions" / "flat-rectangle" / "mission.yaml"

@@ -52,8 +52,8 @@ CONTROLLERS = {
 
 
 def _fly_inprocess(mission: str, control: str, cfg: dict, noise: dict, sensors, cut_s, seed, cache) -> dict:
-    from companion.control import ControlConfig
-    from companion.mission import load_mission
+    from mavcore.mission.control import ControlConfigNone
+    from mavcore.mission import load_mission
     from companion.planner import plan_mission
     from track_inprocess import fly
 

@@ -42,7 +42,7 @@ sys.path.insert(0, str(ROOT / "missions"))
 
 import corpus  # noqa: E402  (missions/corpus.py)
 
-from companion.mission import load_mission  # noqa: E402
+from mavcore.mission import load_mission  # noqa: E402
 from companion.planner import plan_mission  # noqa: E402
 
 

@@ -44,8 +44,9 @@ for _p in (str(ROOT), str(Path(__file__).resolve().parent)):
     if _p not in sys.path:
         sys.path.insert(0, _p)
 
-from companion.control import ControlConfig, GeometricController, Measurements, Reference  # noqa: E402
-from companion.mission import load_mission  # noqa: E402
+from companion.control import GeometricController, Measurements, Reference  # noqa: E402
+from mavcore.mission.control import ControlConfig  # noqa: E402
+from mavcore.mission import load_mission  # noqa: E402
 from companion.planner import plan_mission  # noqa: E402
 from companion.runner import setpoint_yaw_enu  # noqa: E402
 from sensor_models import SensorModels, SensorSpec  # noqa: E402

@@ -14,7 +14,7 @@ import sys
 from mavcore.logs import add_verbosity, configure
 
 from . import process_clock  # noqa: F401  (starts the fallback clock of timings_s.wall)
-from .errors import InputError
+from mavcore.errors import InputError
 
 COMMANDS = {
     "plan": "plan a coverage mission: maps -> ISOA -> way-points -> LQR trajectory -> plan.json",

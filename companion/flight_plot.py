@@ -28,7 +28,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .frames import rotmat2euler_zyx, yaw_enu2ned
+from mavcore.frames import rotmat2euler_zyx, yaw_enu2ned
 
 FIGURE_NAMES = ("path3d", "position", "attitude", "errors", "directions")
 #: Points drawn along each vine row in 3D (it follows the terrain).

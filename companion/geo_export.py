@@ -2,7 +2,7 @@
 
 Pure: ``MapLayers`` (``companion.map_layers``, ENU metres) in, text out.
 Latitude/longitude come from the project's one ENU -> geodetic conversion,
-``companion.frames.enu2geodetic`` about the mission home, called through the
+``mavcore.frames.enu2geodetic`` about the mission home, called through the
 module so that whatever that function becomes is what the exports use (in one
 call on arrays where it takes them, else point by point).
 
@@ -31,7 +31,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from . import frames
+from mavcore import frames
 from .map_layers import LAYER_COLOURS, MapLayers, sortie_colour
 
 #: Decimals of the written degrees: 1e-8 deg is at most 1.2 mm on the ground.

@@ -2,7 +2,7 @@
 WGS-84 latitude/longitude, or a GeoJSON Point (inline or in a file).
 
 Geodetic forms go through the local tangent plane at ``home``
-(``companion.geodesy``) at the home's altitude; only x and y are kept (the
+(``mavcore.geodesy``) at the home's altitude; only x and y are kept (the
 take-off starts on the terrain under them).
 """
 
@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MissionError
-from .geodesy import geodetic2enu
-from .inputs import parse_json, read_text
+from mavcore.errors import MissionError
+from mavcore.geodesy import geodetic2enu
+from mavcore.inputs import parse_json, read_text
 
 
 def _point_of_geojson(doc, src: str) -> tuple[float, float]:

@@ -53,7 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .frames import enu2geodetic
+from mavcore.frames import enu2geodetic
 
 MAV_CMD_NAV_WAYPOINT = 16
 MAV_CMD_NAV_RETURN_TO_LAUNCH = 20

@@ -18,7 +18,7 @@ QGroundControl exports
     ROI at S_p, the way-points with yaw toward S_p, RTL; AMSL altitudes in
     MAV_FRAME_GLOBAL, which do not depend on where the vehicle arms; the
     inclusion fence in the .plan), latitude/longitude through
-    ``companion.frames.enu2geodetic`` about the mission home. The home
+    ``mavcore.frames.enu2geodetic`` about the mission home. The home
     position is written with its AMSL altitude (``plannedHomePosition``;
     item 0 of the WPL file, frame 0 = MAV_FRAME_GLOBAL).
 """
@@ -37,11 +37,11 @@ from pathlib import Path
 import numpy as np
 import orjson
 
-from .config import to_dict
-from .errors import PlanError
+from mavcore.config import to_dict
+from mavcore.errors import PlanError
 from .format_version import check_format_version
-from .inputs import brief, parse_json, read_text
-from .mission import Mission
+from mavcore.inputs import brief, parse_json, read_text
+from mavcore.mission import Mission
 
 MAV_CMD_NAV_WAYPOINT = 16
 MAV_FRAME_GLOBAL = 0
@@ -179,7 +179,7 @@ def _waypoints_json(w) -> list:
 
 def sorties_json(plan, mission: Mission) -> dict:
     """plan.json's ``energy`` summary and ``sorties`` (``companion.sorties``)."""
-    from .energy import cruise_power_w, hover_power_w
+    from mavcore.energy import cruise_power_w, hover_power_w
 
     sp = plan.sorties
     if sp is None:
@@ -363,7 +363,8 @@ def _samples(tr, src: str, key: str) -> dict:
 
 def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, src: str):
     """The 2.x ``trajectory`` as a ``Trajectory``, checked against the way-points."""
-    from .trajectory import Trajectory, TrajectoryConfig
+    from .trajectory import Trajectory
+    from mavcore.mission.trajectory import TrajectoryConfig
     from .trajectory.sampling import hermite_position_coefficients
 
     tr = _get(data, "trajectory", src)

@@ -15,13 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .coverage import extract_waypoints, plan_coverage
-from .errors import PlanError
-from .maps import ElevationModel, OccupancyGrid
+from mavcore.errors import PlanError
+from mavcore.maps import ElevationModel, OccupancyGrid
 from .launch import launch_enu_xy, launch_key
-from .maps.field import flat_field_warning, load_mission_maps
-from .maps.grid import mask_centroid_rc
+from mavcore.maps.field import flat_field_warning, load_mission_maps
+from mavcore.maps.grid import mask_centroid_rc
 from .margins import PlanMargins, margin_warning, mission_airframe_radius_m, plan_margins, planning_clearance_m
-from .mission import Mission
+from mavcore.mission import Mission
 from .sorties import plan_sorties
 from .trajectory import Trajectory, generate_trajectory
 

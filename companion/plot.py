@@ -16,7 +16,7 @@ import io
 
 import numpy as np
 
-from .errors import InputError
+from mavcore.errors import InputError
 
 #: Largest image side drawn; bigger grids are strided (display only).
 MAX_IMAGE_PX = 1500

@@ -36,8 +36,8 @@ import math
 
 import numpy as np
 
-from .errors import PlanError
-from .vehicle import GRAVITY_M_S2
+from mavcore.errors import PlanError
+from mavcore.vehicle import GRAVITY_M_S2
 
 MAX_DURATION_S = 86_400.0
 MAX_SPEED_M_S = 30.0
@@ -200,7 +200,7 @@ def check_flight_plan(where: str, fp, mission, grid, dem) -> None:
 
 def check_plan_file(pf, mission) -> None:
     """``check_plan`` with the mission's map and DEM read from disk (MapError if unreadable)."""
-    from .maps.field import load_mission_maps
+    from mavcore.maps.field import load_mission_maps
 
     grid, dem = load_mission_maps(mission)
     check_plan(pf, mission, grid, dem)

@@ -35,8 +35,8 @@ import threading
 import time
 from dataclasses import dataclass
 
-from .errors import LinkError, UnsafeMessage
-from .link.command_rules import command_name
+from mavcore.errors import LinkError, UnsafeMessage
+from mavcore.link.command_rules import command_name
 
 _log = logging.getLogger("companion")
 from .flight.config import RunnerConfig  # noqa: F401  (re-export)
@@ -119,7 +119,7 @@ class MissionRunner:
                 self._refused(out, exc)
 
     def _refused(self, out, exc: UnsafeMessage) -> None:
-        """The link refused to send ``out`` (``companion.link.command_rules``): unusable
+        """The link refused to send ``out`` (``mavcore.link.command_rules``): unusable
         motor commands become a tick without override and the vehicle's controller
         takes over (``degrade``); any other message stops the flight (land or hold)."""
         core = self.core

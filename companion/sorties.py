@@ -16,7 +16,7 @@ sortie's estimated energy stays within the usable battery
 (``energy.usable_wh``) and its mission within ``energy.max_mission_items``.
 The estimate times every straight run as the way-points will
 (``coverage.waypoints.run_duration_s``) at the cruise power of
-``companion.energy``, and the transits by their length in the transit
+``mavcore.energy``, and the transits by their length in the transit
 tree plus ``_TRANSIT_STOPS`` stops. Then
 the sortie's real path is built, its way-points placed and its energy
 computed exactly (``energy.flight_energy``); if that breaks a limit the
@@ -34,10 +34,10 @@ import numpy as np
 from .coverage.freespace import grid_to_world, world_to_grid
 from .coverage.transit import build_transit_tree
 from .coverage.waypoints import Waypoints, run_duration_s, run_waypoints, waypoints_along
-from .energy import EnergyConfig, EnergyEstimate, cruise_power_w, flight_energy, leg_energy_j
-from .errors import PlanError
-from .maps.grid import mask_centroid_rc
-from .vehicle import GRAVITY_M_S2, VehicleConfig
+from mavcore.energy import EnergyConfig, EnergyEstimate, cruise_power_w, flight_energy, leg_energy_j
+from mavcore.errors import PlanError
+from mavcore.maps.grid import mask_centroid_rc
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
 
 #: Mission items of a sortie besides its way-points: take-off, ROI, return and the
 #: three speed changes (transit, coverage, transit).

@@ -4,8 +4,8 @@
     python docs/mission_keys.py --write    # rewrite it in docs/mission.md
     python docs/mission_keys.py --check    # exit 1 when docs/mission.md is stale
 
-Key, type and default come from ``companion.mission.schema.Mission`` (the
-dataclasses the loader builds, ``companion.config.from_dict``); unit, range
+Key, type and default come from ``mavcore.mission.schema.Mission`` (the
+dataclasses the loader builds, ``mavcore.config.from_dict``); unit, range
 and meaning come from ``NOTES`` below, which must name every key and nothing
 else (``tests/test_docs.py`` checks both, and checks every range written as an
 interval against the loader).
@@ -36,7 +36,7 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "map": ("", "exactly one of map, field", "Occupancy grid: a Nav2 / ROS map_server YAML (image in any "
             "format Nav2 reads: PGM, PNG, BMP, TIFF, ...), relative to the mission file."),
     "field": ("", "exactly one of map, field", "A field as vectors instead of `map` (GeoJSON or KML, "
-              "WGS-84), rasterised by companion/maps/field.py."),
+              "WGS-84), rasterised by mavcore/maps/field.py."),
     "field.file": ("", "", "The GeoJSON or KML file, relative to the mission file: the boundary polygon, "
                    "exclusion polygons (occupied), row lines (occupied)."),
     "field.resolution_m": ("m", "0.01 to 10 (checked with the field)", "Cell size of the rasterised field."),
@@ -77,7 +77,7 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "energy.battery_capacity_ah": ("Ah", "> 0", "Battery capacity."),
     "energy.battery_voltage_v": ("V", "> 0", "Nominal battery voltage (cells = V / 3.7)."),
     "energy.reserve_fraction": ("", "[0, 1)", "Share of the capacity a sortie leaves unused."),
-    "energy.rotor_radius_m": ("m", "> 0", "Rotor radius (momentum theory, companion/energy.py)."),
+    "energy.rotor_radius_m": ("m", "> 0", "Rotor radius (momentum theory, mavcore/energy.py)."),
     "energy.figure_of_merit": ("", "(0, 1]", "Rotor figure of merit (ideal over actual power)."),
     "energy.drive_efficiency": ("", "(0, 1]", "Motor and ESC efficiency (shaft over battery power)."),
     "energy.drag_area_m2": ("m^2", ">= 0", "Parasite drag area CdA."),
@@ -399,11 +399,11 @@ def leaf_fields(cls=None, prefix: str = ""):
 
     Nested sections are walked; a list of mappings gives its own row and
     then its items' keys as ``key[].field``. The keys the loader sets itself
-    (``companion.mission.loader.SET_BY_LOADER``) are left out: a file may
+    (``mavcore.mission.loader.SET_BY_LOADER``) are left out: a file may
     not hold them.
     """
-    from companion.mission.loader import SET_BY_LOADER
-    from companion.mission.schema import Mission
+    from mavcore.mission.loader import SET_BY_LOADER
+    from mavcore.mission.schema import Mission
 
     cls = Mission if cls is None else cls
     hints = typing.get_type_hints(cls)

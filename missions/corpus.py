@@ -235,7 +235,7 @@ def large_irregular(hectares: float = 10.0, seed: int = 1010) -> Field:
 
 def grid_of(f: Field):
     """The field as a ``companion`` OccupancyGrid (trinary map_server classification)."""
-    from companion.maps.grid import OccupancyGrid
+    from mavcore.maps.grid import OccupancyGrid
 
     pix = f.pixels[::-1]
     return OccupancyGrid(occupied=pix == PIX_OCCUPIED, free=pix == PIX_FREE, resolution_m=f.resolution_m,
@@ -351,7 +351,7 @@ def write_field(f: Field, out: str | Path) -> Path:
     vehicle 0.5 m from its surface: the corpus stresses the planner's geometry.
     """
     from companion.margins import airframe_radius_m
-    from companion.vehicle import VehicleConfig
+    from mavcore.vehicle import VehicleConfig
 
     surface_margin = max(0.0, round(f.safety_margin_m - airframe_radius_m(VehicleConfig().arm_m), 9))
     out = Path(out)

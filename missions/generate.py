@@ -43,14 +43,14 @@ from pathlib import Path
 import numpy as np
 
 try:
-    from companion.maps.dem import write_dem
-    from companion.maps.field import points_in_polygon  # noqa: F401  (re-exported for the corpus)
-    from companion.maps.ogm import write_pgm
+    from mavcore.maps.dem import write_dem
+    from mavcore.maps.field import points_in_polygon  # noqa: F401  (re-exported for the corpus)
+    from mavcore.maps.ogm import write_pgm
 except ModuleNotFoundError:  # running from a checkout without the package installed
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from companion.maps.dem import write_dem
-    from companion.maps.field import points_in_polygon  # noqa: F401
-    from companion.maps.ogm import write_pgm
+    from mavcore.maps.dem import write_dem
+    from mavcore.maps.field import points_in_polygon  # noqa: F401
+    from mavcore.maps.ogm import write_pgm
 
 PIX_OCCUPIED = 0
 PIX_FREE = 254

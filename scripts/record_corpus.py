@@ -129,7 +129,7 @@ def record(name: str, out: Path, plan_path: Path) -> dict:
 
     from companion.commands.demo import launch_pose
     from companion.commands.fly import execute, prepare
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from companion.report import write_report
     from companion.runner import UNUSED_STREAMS
 

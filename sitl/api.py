@@ -4,7 +4,7 @@
 (cheap, shares the GIL with the caller); ``SitlProcess`` runs ``python -m
 sitl`` as a subprocess (its own interpreter: ``companion demo --transport
 udp``); ``SitlInProcess`` runs no loop of its own: its one link is the
-in-process transport (``inproc:NAME``, ``sitl.pipe.MemoryPipe``) and the
+in-process transport (``inproc:NAME``, ``mavcore.link.pipe.MemoryPipe``) and the
 companion's waits step it (``companion demo --transport inproc``, campaigns).
 All are context managers with ``start()``/``stop()``; ``start()`` returns
 once the links are open (readiness), so a client may connect at once.
@@ -30,7 +30,7 @@ import threading
 import time
 from pathlib import Path
 
-from companion.errors import LinkError
+from mavcore.errors import LinkError
 
 
 def free_udp_port(host: str = "127.0.0.1") -> int:
@@ -90,12 +90,12 @@ class _SitlOptions:
     def _server_inputs(self):
         """What an in-process server is built from: the mission, the signing key (or
         None) and the allowed controllers (or None), read from the options' files."""
-        from companion.mission import load_mission
+        from mavcore.mission import load_mission
 
         mission = load_mission(self.mission_path)
         key = None
         if self.signing_key_file is not None:
-            from companion.link.signing import load_signing_key
+            from mavcore.link.signing import load_signing_key
             key = load_signing_key(self.signing_key_file)
         controllers = None
         if self.controllers is not None:
@@ -192,7 +192,7 @@ class SitlThread(_SitlOptions):
 class SitlInProcess(_SitlOptions):
     """The SITL in this process, stepped by its peer (``SitlServer.service``):
     the same server, codec, framing, signing and lockstep as ``SitlProcess``,
-    with the datagrams passed through memory (``sitl.pipe``) instead of UDP.
+    with the datagrams passed through memory (``mavcore.link.pipe``) instead of UDP.
     Always lockstep; one link, ``inproc:NAME`` (``url``), for one peer in
     this process (``companion.link.Connection``), whose waits run the vehicle.
 

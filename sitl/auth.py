@@ -59,7 +59,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.link.signing import SignatureVerifier
+from mavcore.link.signing import SignatureVerifier
 
 READ_ONLY_MESSAGES = frozenset({
     "HEARTBEAT", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_EXT_REQUEST_LIST",

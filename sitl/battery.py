@@ -1,7 +1,7 @@
 """The simulated battery: drains with the power the rotors draw (pure, no clock).
 
 Power: the same momentum-theory rotor model the planner uses
-(``companion.energy.rotor_power_w``) applied to each rotor's actual thrust,
+(``mavcore.energy.rotor_power_w``) applied to each rotor's actual thrust,
 plus the avionics. The pack is ``n`` LiPo cells (``n = round(V_nominal /
 3.7 V)``) whose open-circuit voltage falls linearly from 4.2 V to 3.5 V per
 cell with the state of charge, behind the pack resistance ``R``: drawing
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 
-from companion.energy import EnergyConfig
+from mavcore.energy import EnergyConfig
 
 CELL_FULL_V = 4.2
 CELL_EMPTY_V = 3.5

@@ -23,7 +23,7 @@ at most ``--max-clients`` peers, dropping those silent for
 exit, who controlled the vehicle and what was ignored (JSON; per UDP link
 also ``lockstep_spins``, the lockstep waits that busy-polled, and
 ``lockstep_spin_hits``, those whose answer came within the spin:
-``sitl.pipe.AdaptiveSpin``).
+``mavcore.link.pipe.AdaptiveSpin``).
 
 Loopback addresses by default (a ``udpout`` link is connected to its
 peer, so nobody else can write to it). Bad input (mission file, maps,
@@ -46,7 +46,7 @@ import signal
 import sys
 from pathlib import Path
 
-from companion.errors import InputError
+from mavcore.errors import InputError
 from mavcore.logs import add_verbosity, configure
 
 READY_MARKER = "sitl: ready"
@@ -197,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(args) -> int:
     # Imports here so that ``sitl --help`` stays instant.
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
 
     from .server import ServerConfig, SitlServer
 
@@ -222,7 +222,7 @@ def _run(args) -> int:
         raise InputError(f"--client-timeout {args.client_timeout}", "must be in [0.1, 3600] seconds")
     key = None
     if args.signing_key is not None:
-        from companion.link.signing import load_signing_key
+        from mavcore.link.signing import load_signing_key
         key = load_signing_key(args.signing_key)
     if args.stats is not None:
         sp = Path(args.stats)

@@ -4,7 +4,7 @@ quaternions.
 
 Everything it takes and returns is ENU world / FLU body, SI units
 (docs/frames.md); every frame change goes through
-``companion.frames``. Encoders take a pymavlink ``MAVLink`` protocol object
+``mavcore.frames``. Encoders take a pymavlink ``MAVLink`` protocol object
 (``conn.mav``, it only supplies the message classes) and return the message
 object, ready for ``conn.mav.send``; decoders take a pymavlink message and
 return a small named result, or ``None`` for a message that must be ignored
@@ -14,7 +14,7 @@ The encoders of the per-frame messages (HIGHRES_IMU, LOCAL_POSITION_NED,
 ATTITUDE) write the frame change component by component instead of calling
 ``frames.flu2frd`` on a stacked array: they run at up to 250 Hz and the
 explicit form is several times cheaper. ``tests/test_sitl_codec.py`` checks
-each of them against ``companion.frames``.
+each of them against ``mavcore.frames``.
 
 Wire conventions chosen here (documented once)
 ----------------------------------------------
@@ -63,13 +63,13 @@ from dataclasses import dataclass
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion import frames
+from mavcore import frames
 
 from .rate_control import RateSetpoint
 # Sanity limits on decoded setpoints (a message beyond them is ignored) and the
-# actuator rule: ``companion.link.command_rules``, the one table of both ends.
-from companion.link.command_rules import (MAX_SETPOINT_ACC_M_S2, MAX_SETPOINT_POS_M, MAX_SETPOINT_VEL_M_S,
-                                          actuator_problem, attitude_target_problem)
+# actuator rule: ``mavcore.link.command_rules``, the one table of both ends.
+from mavcore.link.command_rules import (MAX_SETPOINT_ACC_M_S2, MAX_SETPOINT_POS_M, MAX_SETPOINT_VEL_M_S,
+                                        actuator_problem, attitude_target_problem)
 
 # --- constants named once ---------------------------------------------------
 

@@ -2,7 +2,7 @@
 unknown obstacles and the vine rows, and touchdowns on the terrain.
 
 Pure: positions and velocities in (world ENU, m, m/s), named results out;
-the distances come from ``companion.geometry`` (the same functions the
+the distances come from ``mavcore.geometry`` (the same functions the
 companion's flight report uses for its true clearance).
 
 Contacts (obstacles, rows)
@@ -39,8 +39,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from companion.geometry import Box, Cylinder, SceneGeometry
-from companion.mission.sim import CollisionConfig
+from mavcore.geometry import Box, Cylinder, SceneGeometry
+from mavcore.mission.sim import CollisionConfig
 
 #: Broad-phase bucket edge (m).
 BUCKET_M = 4.0
@@ -142,7 +142,7 @@ class CollisionMonitor:
     scene : SceneGeometry
         Obstacles, rows and terrain (``World.geometry``).
     radius_m : float
-        Vehicle sphere radius (``companion.mission.sim.vehicle_radius_m``).
+        Vehicle sphere radius (``mavcore.mission.sim.vehicle_radius_m``).
     config : CollisionConfig
         Touchdown limits.
     """

@@ -71,7 +71,7 @@ from enum import Enum
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.link.command_rules import mission_item_problem
+from mavcore.link.command_rules import mission_item_problem
 from mavcore.autopilot import PX4_AUTOPILOT, READ_ONLY_PARAMS, Autopilot, ParamSpec  # noqa: F401 (re-exported)
 
 from .collision import CrashEvent, landing_intended
@@ -847,7 +847,7 @@ class FlightStack:
         """MAV_CMD_NAV_TAKEOFF: climb to ``target_z_enu_m`` (None, or not above
         home: home + MIS_TAKEOFF_ALT; more than 150 m above home: DENIED). In the
         air below the vehicle: its own height (PX4 does not descend for a take-off).
-        The parameters were checked by ``companion.link.command_rules`` first.
+        The parameters were checked by ``mavcore.link.command_rules`` first.
 
         Disarmed: switches to AUTO.TAKEOFF; arming then takes off (PX4).
         """

@@ -3,7 +3,7 @@ vehicle time for the rangefinders, and the swept contact of the vehicle
 sphere with them for the crash check.
 
 Pure state machine: ``set_time`` moves every mover to its pose at a time of
-the vehicle clock (``companion.movers.mover_pose``); nothing reads a wall
+the vehicle clock (``mavcore.movers.mover_pose``); nothing reads a wall
 clock. ``current`` holds ``sitl.world.Obstacle`` objects (the exact
 field-of-view pass of ``sitl.fov`` and the ray casts use them as they use the
 static obstacles).
@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import math
 
-from companion.mission.sim import MoverConfig, ObstacleConfig, TRACTOR_HEIGHT_M, TRACTOR_LENGTH_M, \
-    TRACTOR_WIDTH_M, WALKER_HEIGHT_M, WALKER_RADIUS_M
-from companion.movers import MoverPose, mover_pose, mover_solid
+from mavcore.mission.sim import (MoverConfig, ObstacleConfig, TRACTOR_HEIGHT_M, TRACTOR_LENGTH_M, TRACTOR_WIDTH_M,
+                                 WALKER_HEIGHT_M, WALKER_RADIUS_M)
+from mavcore.movers import MoverPose, mover_pose, mover_solid
 
 _CONTACT_EPS_M = 1e-6
 _MAX_ITERS = 200
@@ -69,7 +69,7 @@ class MovingObstacles:
                              for c in self.movers)
 
     def solid_at(self, k: int, t_s: float):
-        """The solid (``companion.geometry``) of mover ``k`` at time ``t_s``."""
+        """The solid (``mavcore.geometry``) of mover ``k`` at time ``t_s``."""
         cfg = self.movers[k]
         pose = mover_pose(cfg, t_s)
         return pose, mover_solid(cfg, pose, self.terrain.height(pose.x_m, pose.y_m))

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ Equations (world ENU, body FLU, e3 = (0, 0, 1))::
     R' = R [Omega]x
     J Omega' = -Omega x J Omega + tau
 
-with ``[f, tau] = A @ f_rotor`` (``companion.vehicle.allocation_matrix``),
+with ``[f, tau] = A @ f_rotor`` (``mavcore.vehicle.allocation_matrix``),
 per-rotor thrusts limited to ``[0, max_thrust_per_rotor_n]`` and a
 first-order motor lag ``T f_i' = f_cmd_i - f_i``.
 
@@ -53,7 +53,7 @@ from typing import Callable
 
 import numpy as np
 
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
 
 from . import plant_kernel as _plant_kernel
 

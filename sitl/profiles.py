@@ -61,7 +61,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
-from companion.mission.sim import SENSOR_PROFILES, NoiseConfig, SimConfig
+from mavcore.mission.sim import SENSOR_PROFILES, NoiseConfig, SimConfig
 
 _DEG = math.pi / 180.0
 _G0 = 9.80665          # standard gravity (datasheets' "g")
@@ -116,7 +116,7 @@ PROFILES: dict[str, dict] = {
         gnss_latency_s=0.08,
     ),
 }
-assert tuple(PROFILES) == SENSOR_PROFILES, "profile names must match companion.mission.sim.SENSOR_PROFILES"
+assert tuple(PROFILES) == SENSOR_PROFILES, "profile names must match mavcore.mission.sim.SENSOR_PROFILES"
 
 
 @dataclass(frozen=True)

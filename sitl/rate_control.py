@@ -28,7 +28,7 @@ of ``MOT_THST_EXPO``)::
     u_i = curve^-1(t_i)                              (motor signal)
     curve(u) = (1 - k) u + k u^2                     (PX4 THR_MDL_FAC = k; ArduPilot MOT_THST_EXPO)
 
-The simulated motors are linear (``f_i = u_i f_max``, ``companion/vehicle.py``),
+The simulated motors are linear (``f_i = u_i f_max``, ``mavcore/vehicle.py``),
 so ``k = 0`` (the default) is the correct setting for them; another value
 shows the error a mis-set curve makes. The hover thrust the companion needs
 to normalise its force is ``m g / (4 f_max)`` (the SITL's ``MPC_THR_HOVER``).
@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from companion.vehicle import GRAVITY_M_S2
+from mavcore.vehicle import GRAVITY_M_S2
 
 
 @dataclass(frozen=True, slots=True)

@@ -67,8 +67,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion import frames
-from companion.mission.sim import SENSOR_ROTATION_CUSTOM, RangefinderConfig, SimConfig
+from mavcore import frames
+from mavcore.mission.sim import SENSOR_ROTATION_CUSTOM, RangefinderConfig, SimConfig
 
 from .gnss import GnssReceiver
 from .fov import Pyramid, nearest_in_view

@@ -4,7 +4,7 @@ pymavlink connections (docs/mavlink.md).
 The vehicle is system 1, component 1, MAVLink 2, common dialect. Connection
 strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
 ``tcp:...``, ``tcpin:...``), or ``inproc:NAME``: the in-process transport
-(``sitl.pipe``), where the peer's waits run the vehicle (``service``) instead
+(``mavcore.link.pipe``), where the peer's waits run the vehicle (``service``) instead
 of ``run``. Telemetry goes to every link; replies
 (COMMAND_ACK, PARAM_VALUE on read, MISSION_*) go to the link the request
 came from, addressed to the requester.
@@ -103,16 +103,15 @@ import numpy as np
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.mission.schema import Mission
+from mavcore.mission.schema import Mission
 
 from . import codec
-from companion.link.signing import (
-    SignatureVerifier, disable_outgoing_signing, enable_outgoing_signing, signing_timestamp,
-)
-from companion.link import command_rules as rules
-from companion.link.sockets import is_datagram_url, open_pipe
+from mavcore.link.signing import (SignatureVerifier, disable_outgoing_signing, enable_outgoing_signing,
+                                  signing_timestamp)
+from mavcore.link import command_rules as rules
+from mavcore.link.sockets import is_datagram_url, open_pipe
 
-from .pipe import MEMORY_SCHEME
+from mavcore.link.pipe import MEMORY_SCHEME
 from mavcore import autopilot as autopilots
 
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
@@ -269,7 +268,7 @@ class ServerConfig:
 class _Link:
     """One MAVLink link with our own common-dialect MAVLink 2 encoder.
 
-    UDP links are our own sockets (``companion.link.sockets.open_udp``: a
+    UDP links are our own sockets (``mavcore.link.sockets.open_udp``: a
     ``udpin`` port in use is an error, ``udpout`` is connected to its peer so
     nobody else can write to it), read and written directly (one
     ``recvfrom`` per datagram; one ``sendto`` per client for a frame's
@@ -289,7 +288,7 @@ class _Link:
                  client_timeout_s: float = 10.0, option: str = "--listen") -> None:
         self.url = url
         self.control = control
-        #: A datagram link (UDP or in-process, ``sitl.pipe``): read datagram by datagram.
+        #: A datagram link (UDP or in-process, ``mavcore.link.pipe``): read datagram by datagram.
         self.udp = is_datagram_url(url)
         self.conn = None
         self.pipe = None
@@ -441,7 +440,7 @@ class _Link:
         queued now), or None (datagram links only).
 
         ``spin``: busy-poll before sleeping in the kernel, for the pipe's
-        adaptive budget (``sitl.pipe.AdaptiveSpin``, at most SIM_LS_SPIN). A
+        adaptive budget (``mavcore.link.pipe.AdaptiveSpin``, at most SIM_LS_SPIN). A
         lockstep answer from a peer on another core comes back within tens of
         microseconds, less than a process wake-up costs; on a loaded machine
         it comes late and the spin backs off."""
@@ -786,7 +785,7 @@ class SitlServer:
 
     def service(self) -> None:
         """One cooperative turn of ``run`` (the in-process transport,
-        ``sitl.pipe.MemoryPipe``): the peer's pipe calls it in the peer's
+        ``mavcore.link.pipe.MemoryPipe``): the peer's pipe calls it in the peer's
         thread whenever the peer waits for a datagram and none is queued.
 
         It does what ``run`` does between two waits, without waiting: the
@@ -1227,7 +1226,7 @@ class SitlServer:
     def _poll_one(self, link: _Link, timeout_s: float, until_released: bool, spin: bool = False) -> None:
         """``_poll`` for a single datagram link: the first read blocks in the
         kernel (SO_RCVTIMEO) instead of in select(), after the adaptive spin
-        (``spin``, ``sitl.pipe.AdaptiveSpin``); later reads do not wait."""
+        (``spin``, ``mavcore.link.pipe.AdaptiveSpin``); later reads do not wait."""
         # A steady timeout value avoids a setsockopt() per frame.
         wait = 0.05 if timeout_s >= 0.05 else timeout_s
         for k in range(1000):
@@ -1349,7 +1348,7 @@ class SitlServer:
     REFUSAL_TEXT_S = 1.0
 
     def _refuse(self, kind: str, why: str) -> None:
-        """Count a message refused by ``companion.link.command_rules`` and say why
+        """Count a message refused by ``mavcore.link.command_rules`` and say why
         (at most once per ``REFUSAL_TEXT_S``)."""
         self.stats["refused"][kind] += 1
         now = time.monotonic()

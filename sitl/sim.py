@@ -21,10 +21,10 @@ from dataclasses import FrozenInstanceError, dataclass
 
 import numpy as np
 
-from companion.mission.schema import Mission
+from mavcore.mission.schema import Mission
 
 from .estimator import Estimate, EstimatorConfig, OnboardEstimator
-from companion.mission.sim import vehicle_radius_m
+from mavcore.mission.sim import vehicle_radius_m
 
 from .collision import CollisionMonitor, CrashEvent
 from .onboard import CascadedController, OnboardGains, Setpoint  # noqa: F401  (re-export)
@@ -303,7 +303,7 @@ class Simulation:
         ----------
         motor_cmd_norm : (4,) array-like
             Normalised motor commands in [0, 1], PX4 quad-X order
-            (``companion.vehicle``); values outside are clipped.
+            (``mavcore.vehicle``); values outside are clipped.
 
         Returns
         -------

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from companion.mission.sim import WindConfig
+from mavcore.mission.sim import WindConfig
 
 
 class WindModel:

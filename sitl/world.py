@@ -3,7 +3,7 @@ height) and the mission's unknown obstacles, with ray casting for the
 rangefinders.
 
 Everything is in the map's local ENU frame (m). Pure: the maps come in as
-``companion.maps.grid`` objects; ``load_world`` is the only function that
+``mavcore.maps.grid`` objects; ``load_world`` is the only function that
 reads files.
 
 Ray casting (``World.raycast``) returns the distance along a unit ray to the
@@ -23,7 +23,7 @@ first surface, ``math.inf`` if none within ``max_m``:
   field-of-view pass of ``sitl.fov``.
 
 ``World.geometry`` is the same scene for distance queries
-(``companion.geometry.SceneGeometry``): the collision check of
+(``mavcore.geometry.SceneGeometry``): the collision check of
 ``sitl.collision`` and the companion's clearance report measure on it.
 """
 
@@ -36,15 +36,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import ndimage
 
-from companion.geometry import (ExtrudedCells, SceneGeometry, capped_clearance, clearance_sq_cells_capped,
-                               obstacle_solids)
-from companion.maps.heightfield import HeightField
-from companion.maps.grid import ElevationModel, OccupancyGrid
-from companion.mission.sim import MoverConfig, ObstacleConfig
+from mavcore.geometry import (ExtrudedCells, SceneGeometry, capped_clearance, clearance_sq_cells_capped,
+                              obstacle_solids)
+from mavcore.maps.heightfield import HeightField
+from mavcore.maps.grid import ElevationModel, OccupancyGrid
+from mavcore.mission.sim import MoverConfig, ObstacleConfig
 from .movers import MovingObstacles
 
 if TYPE_CHECKING:  # pragma: no cover
-    from companion.mission.schema import Mission
+    from mavcore.mission.schema import Mission
 
 _INF = math.inf
 _EPS_T = 1e-9          # nudge (m) past a cell boundary during the traversal
@@ -120,7 +120,7 @@ class RowField:
     Held compactly for a 10 ha map (22 M cells at 5 cm): the occupancy as a flat
     view of the grid's own bool array, the clearance as the squared distance
     transform capped at 65 535 cells^2 in uint16
-    (``companion.geometry.clearance_sq_cells_capped``: below the cap its square
+    (``mavcore.geometry.clearance_sq_cells_capped``: below the cap its square
     root is ``ndimage.distance_transform_edt`` bit for bit; a capped cell, ~256
     cells or more from every row, leaps at most ~254 cells, a shorter leap that
     is still clear, so a ray meets the same first cell), and a cell's base
@@ -398,7 +398,7 @@ class World:
 
     Build with ``World.build``; ``ground_height(x, y)`` and
     ``raycast(origin, direction, max_m)`` are the queries; ``geometry`` the
-    same solids for distances (``companion.geometry.SceneGeometry``).
+    same solids for distances (``mavcore.geometry.SceneGeometry``).
     """
 
     terrain: Terrain
@@ -508,7 +508,7 @@ def load_world(mission: "Mission") -> World:
     MapError
         A map file cannot be loaded (from the companion's loaders).
     """
-    from companion.maps.field import load_mission_maps  # noqa: PLC0415  (I/O only here)
+    from mavcore.maps.field import load_mission_maps  # noqa: PLC0415  (I/O only here)
 
     # the planner's loader: Nav2 maps or vector fields, local or georeferenced DEMs, home heading
     grid, dem = load_mission_maps(mission)

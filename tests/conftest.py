@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="session")
 def multi_sortie_plan():
     """(mission, plan) of flat-rectangle with a 0.9 Ah battery: several sorties."""
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from companion.planner import plan_mission
 
     m = load_mission(ROOT / "missions" / "flat-rectangle" / "mission.yaml")

@@ -55,7 +55,7 @@ class Case:
 # --- the good base -------------------------------------------------------------------
 
 def _lonlat(x: float, y: float) -> list:
-    from companion.frames import enu2geodetic
+    from mavcore.frames import enu2geodetic
 
     lat, lon, _ = enu2geodetic(x, y, 0.0, *HOME)
     return [lon, lat]
@@ -74,7 +74,7 @@ def make_base(d: Path) -> Path:
     """The good inputs every case breaks one thing of (module doc)."""
     from test_bad_input import good_plan_doc
 
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
 
     d.mkdir(parents=True, exist_ok=True)
     for f in SRC.iterdir():
@@ -91,8 +91,8 @@ def make_base(d: Path) -> Path:
 
 def check_base(base: Path) -> None:
     """The base passes every loader the cases break (raises otherwise)."""
-    from companion.maps.field import load_mission_maps
-    from companion.mission import load_mission
+    from mavcore.maps.field import load_mission_maps
+    from mavcore.mission import load_mission
     from companion.plan_io import load_plan
 
     for m in (M, "field.yaml"):
@@ -359,7 +359,7 @@ def ring_of(n: int, w: float = 20.0, h: float = 10.0) -> list:
     """A closed ring of ``n`` vertices on the border of the w x h m rectangle at home."""
     import numpy as np
 
-    from companion.maps.gis import enu_to_lonlat
+    from mavcore.maps.gis import enu_to_lonlat
 
     t = np.linspace(0.0, 2 * (w + h), n, endpoint=False)
     x = np.where(t < w, t, np.where(t < w + h, w, np.where(t < 2 * w + h, 2 * w + h - t, 0.0)))

@@ -49,7 +49,7 @@ def good_plan_doc(mission) -> dict:
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
     """A copy of the flat-rectangle mission and a good plan.json for it."""
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from companion.plan_io import load_plan
     from companion.preflight import check_plan_file
 

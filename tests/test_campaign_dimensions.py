@@ -13,7 +13,7 @@ from companion.campaign.placement import cumulative, footprint_free
 from companion.campaign.scenario_file import load_scenario, scenario_mission
 from companion.campaign.scenarios import Field, continuous_dims, scenario, scenario_params, scenario_yaml
 from companion.campaign.spec import load_spec, spec_from_dict
-from companion.errors import CampaignError
+from mavcore.errors import CampaignError
 
 BASE = {"name": "d", "missions": ["flat-rectangle"], "flights": 50, "seed": 11, "cut_s": 10.0,
         "sensors": {"velocity_std_m_s": [0.0, 0.01]},
@@ -25,7 +25,7 @@ NEW = {"link": {"loss": [0.0, 0.3], "delay_min_ms": 5.0, "jitter_ms": [0.0, 40.0
 @pytest.fixture(scope="module")
 def field():
     """30 m x 12 m free, a vine row along y = 6 m (x 5..25 m); the path starts at (2, 3)."""
-    from companion.maps.grid import OccupancyGrid
+    from mavcore.maps.grid import OccupancyGrid
 
     occ = np.zeros((120, 300), dtype=bool)
     occ[58:62, 50:250] = True

@@ -12,7 +12,7 @@ from companion.campaign.scenario_file import deep_merge, load_scenario, scenario
 from companion.campaign.scenarios import (canonical_json, continuous_dims, load_fields, scenario, scenario_hash,
                                           scenario_yaml)
 from companion.campaign.spec import spec_from_dict
-from companion.errors import CampaignError
+from mavcore.errors import CampaignError
 
 NO_OBSTACLES = {"name": "w", "missions": ["flat-rectangle"], "flights": 50, "seed": 7, "cut_s": 10.0,
                 "sensors": {"velocity_std_m_s": [0.0, 0.01]},
@@ -52,7 +52,7 @@ def obstacle_spec_and_fields():
     the path flies east along y = 3 m, turns north at x = 28 m, and back west along y = 9 m."""
     from companion.campaign.placement import cumulative
     from companion.campaign.scenarios import Field
-    from companion.maps.grid import OccupancyGrid
+    from mavcore.maps.grid import OccupancyGrid
 
     res = 0.1
     occ = np.zeros((120, 300), dtype=bool)

@@ -6,7 +6,7 @@ import pytest
 
 from companion.campaign.spec import dim_range, is_continuous, spec_from_dict
 from companion.cli import main
-from companion.errors import CampaignError
+from mavcore.errors import CampaignError
 
 BASE = {"name": "t", "missions": ["flat-rectangle"], "flights": 3}
 

@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.errors import MissionError
-from companion.geometry import Box, Cylinder, SceneGeometry
-from companion.maps.grid import OccupancyGrid
-from companion.mission.loader import load_mission
-from companion.mission.schema import HomeConfig, Mission
-from companion.mission.sim import CollisionConfig, NoiseConfig, ObstacleConfig, SimConfig, vehicle_radius_m
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig
+from mavcore.errors import MissionError
+from mavcore.geometry import Box, Cylinder, SceneGeometry
+from mavcore.maps.grid import OccupancyGrid
+from mavcore.mission.loader import load_mission
+from mavcore.mission.schema import HomeConfig, Mission
+from mavcore.mission.sim import CollisionConfig, NoiseConfig, ObstacleConfig, SimConfig, vehicle_radius_m
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
 from sitl.collision import CollisionMonitor, CrashEvent, landing_intended
 from sitl.flightstack import FlightMode, FlightStack, NavState, Parameters
 from sitl.onboard import Setpoint

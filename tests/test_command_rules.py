@@ -1,4 +1,4 @@
-"""Commands are sane: ``companion.link.command_rules`` on both ends.
+"""Commands are sane: ``mavcore.link.command_rules`` on both ends.
 
 Over real UDP to the SITL (a vehicle holding at 2 m in AUTO.LOITER after an
 AUTO take-off, commanded by an allowed ground station 255/190), every hostile
@@ -16,8 +16,8 @@ import socket
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.errors import UnsafeMessage
-from companion.link import command_rules as rules
+from mavcore.errors import UnsafeMessage
+from mavcore.link import command_rules as rules
 from sitl.api import SitlThread
 
 from test_sitl_mavlink import MISSION, Client

@@ -28,8 +28,8 @@ from companion.control import (
     measurement_vectors,
     thrust_axis_estimate,
 )
-from companion.vehicle import GRAVITY_M_S2 as G
-from companion.vehicle import VehicleConfig, allocation_matrix
+from mavcore.vehicle import GRAVITY_M_S2 as G
+from mavcore.vehicle import VehicleConfig, allocation_matrix
 
 VEH = VehicleConfig()
 MAG_ENU = np.array([0.0, 0.21, -0.42])
@@ -517,7 +517,7 @@ def _fly_sitl_swing(cfg, duration_s=14.0, seed=5):
     """The SITL plant (sitl.sim, the paper's noise) flying x = -7 + t at 1 m/s,
     1.5 m high, pointing at a target 1.25 m beside the line: the eq. (21)
     heading swings by 180 deg in ~5 s, beyond this vehicle's yaw authority."""
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from pathlib import Path
     from sitl.sim import Simulation
 

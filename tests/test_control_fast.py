@@ -17,14 +17,15 @@ import math
 import numpy as np
 import pytest
 
-from companion.control import ControlConfig, GeometricController, Measurements, Mixer, Reference
+from companion.control import GeometricController, Measurements, Mixer, ReferenceNone
+from mavcore.mission.control import ControlConfigNone
 from companion.control.geometric import ControlOutput, DesiredAttitude, attitude_torque
 from companion.control.observer import virtual_pairs
 from companion.control.rates import rate_command
 from companion.control.so3 import cross, dot, unit3, unit_d2
 from companion.control.tilt import limit_thrust
 from companion.control.vectors import controller_vectors
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
 
 _ZERO = (0.0, 0.0, 0.0)
 

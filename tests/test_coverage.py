@@ -13,9 +13,9 @@ import pytest
 from scipy.spatial import cKDTree
 
 from companion.coverage import detect_row_spacing, plan_coverage
-from companion.errors import PlanError
-from companion.maps.grid import OccupancyGrid
-from companion.mission.schema import CoverageConfig
+from mavcore.errors import PlanError
+from mavcore.maps.grid import OccupancyGrid
+from mavcore.mission.schema import CoverageConfig
 
 RES = 0.1
 # A real SLAM map of a simulated vineyard (LCAS bacchus_lcas, MIT; see its README).
@@ -102,7 +102,7 @@ def test_detect_row_spacing_other_spacing():
 
 
 def test_detect_row_spacing_on_lcas_laser_map():
-    from companion.maps.ogm import load_ogm
+    from mavcore.maps.ogm import load_ogm
     grid = load_ogm(LCAS)
     spacing, orientation = detect_row_spacing(grid)
     # the image shows six east-west rows 60 px (3.0 m) apart
@@ -288,7 +288,7 @@ def test_tilted_hexagon_mission_rows_and_beam_match_the_generator():
     import sys
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "missions"))
     import generate
-    from companion.maps.ogm import load_ogm
+    from mavcore.maps.ogm import load_ogm
 
     spec = generate.tilted_hexagon()
     root = Path(__file__).resolve().parents[1] / "missions" / spec.name
@@ -468,7 +468,7 @@ def test_lock_step_string_pulling_and_transits_equal_one_at_a_time():
 
 
 def test_mask_centroid_is_the_mean_of_the_true_cells():
-    from companion.maps.grid import mask_centroid_rc
+    from mavcore.maps.grid import mask_centroid_rc
 
     rng = np.random.default_rng(5)
     mask = rng.random((37, 53)) < 0.3
@@ -484,7 +484,7 @@ def test_lcas_mission_flies_each_detected_corridor_once_inside_free_space():
     y (east-west rows, gaps > 1 m between clusters); each corridor between
     two consecutive rows must hold exactly one main segment, near its middle.
     """
-    from companion.maps.ogm import load_ogm
+    from mavcore.maps.ogm import load_ogm
 
     grid = load_ogm(LCAS)
     margin = 0.5

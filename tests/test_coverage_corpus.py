@@ -18,9 +18,9 @@ from scipy import ndimage
 from companion.coverage import plan_coverage
 from companion.coverage.freespace import erode_free_space
 from companion.coverage.gridpath import aux_path
-from companion.errors import PlanError
-from companion.maps.grid import OccupancyGrid
-from companion.mission.schema import CoverageConfig
+from mavcore.errors import PlanError
+from mavcore.maps.grid import OccupancyGrid
+from mavcore.mission.schema import CoverageConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "missions"))
 import corpus  # noqa: E402

@@ -4,7 +4,7 @@
   the mission dataclasses (every key, its type and default), and every range
   written there as an interval is the loader's: a value on a closed bound is
   accepted, a value on an open bound or just outside a closed one refused;
-- every hand-worked point of docs/frames.md holds for ``companion.frames``;
+- every hand-worked point of docs/frames.md holds for ``mavcore.frames``;
 - every ``docs/...`` path named in the code and the pages exists, and nothing
   in the repository points to a design document outside it.
 """
@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion import frames
-from companion.config import from_dict
-from companion.errors import MissionError
-from companion.mission.schema import Mission
+from mavcore import frames
+from mavcore.config import from_dict
+from mavcore.errors import MissionError
+from mavcore.mission.schema import Mission
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"

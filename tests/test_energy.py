@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.energy import EnergyConfig, cruise_power_w, flight_energy, hover_power_w, rotor_power_w
-from companion.mission import load_mission
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig
+from mavcore.energy import EnergyConfig, cruise_power_w, flight_energy, hover_power_w, rotor_power_w
+from mavcore.mission import load_mission
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
 from sitl.battery import Battery
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -67,7 +67,7 @@ def test_flight_energy_of_a_level_leg_and_a_climb():
 
 def independent_flight_energy_wh(t_s, p_enu_m, height_agl_m, vehicle, cfg, dt_s=0.01):
     """Energy (Wh) of flying the way-points plus the take-off and landing, computed apart from
-    ``companion.energy``, and the bound (Wh) of its quadrature error.
+    ``mavcore.energy``, and the bound (Wh) of its quadrature error.
 
     Momentum theory per rotor at T = m g / 4 on a disk A = pi r^2: hover induced velocity
     v_h = sqrt(T / (2 rho A)); in level flight at V, v_i is the root in [0, v_h] of
@@ -249,7 +249,7 @@ def test_fly_one_sortie_from_the_launch_point(tmp_path, capsys):
     import json
 
     from companion.cli import main
-    from companion.frames import geodetic2enu
+    from mavcore.frames import geodetic2enu
     from companion.link.tlog import read_tlog
     from sitl.api import SitlProcess
 

@@ -45,7 +45,7 @@ def test_differences_name_the_keys_and_an_unknown_environment():
 def test_the_flight_setup_records_the_environment():
     from companion.commands.demo import missions_dir
     from companion.commands.fly import flight_setup
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
 
     mission = load_mission(missions_dir() / "flat-rectangle" / "mission.yaml")
     setup = flight_setup(mission, None, "companion", None, {})

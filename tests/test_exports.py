@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from companion.cli import main
-from companion.frames import enu2geodetic, geodetic2enu
-from companion.maps import load_dem, load_ogm
-from companion.mission import load_mission
+from mavcore.frames import enu2geodetic, geodetic2enu
+from mavcore.maps import load_dem, load_ogm
+from mavcore.mission import load_mission
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSION = ROOT / "missions" / "tilted-hexagon" / "mission.yaml"

@@ -1,4 +1,4 @@
-"""Scanline rasterisation of vector fields (companion/maps/field.py): the same
+"""Scanline rasterisation of vector fields (mavcore/maps/field.py): the same
 cells as the point-by-point even-odd test (``points_in_polygon``, the former
 rasteriser, vectorised over cells and looping over edges) on random polygons,
 on polygons whose vertices sit exactly on cell centres, and on whole fields
@@ -11,9 +11,9 @@ import time
 import numpy as np
 import pytest
 
-from companion.errors import MapError
-from companion.inputs import Limits
-from companion.maps.field import points_in_polygon, polygon_mask, rasterize_field
+from mavcore.errors import MapError
+from mavcore.inputs import Limits
+from mavcore.maps.field import points_in_polygon, polygon_mask, rasterize_field
 
 
 def _grid(rows, cols, res=0.5, x0=-1.0, y0=-1.0):

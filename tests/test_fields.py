@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.config import from_dict
-from companion.errors import MissionError
-from companion.geodesy import geodetic2enu
+from mavcore.config import from_dict
+from mavcore.errors import MissionError
+from mavcore.geodesy import geodetic2enu
 from companion.launch import launch_enu_xy
-from companion.mission import Mission, load_mission
+from mavcore.mission import Mission, load_mission
 
 ROOT = Path(__file__).resolve().parents[1]
 VINEYARD = ROOT / "missions" / "vineyard-1ha"
@@ -163,7 +163,7 @@ def test_launch_forms_agree():
 
 
 def test_flat_field_without_dem_warns_only_without_elevation(tmp_path):
-    from companion.maps.field import flat_field_warning, load_mission_dem
+    from mavcore.maps.field import flat_field_warning, load_mission_dem
 
     m = _mission({})
     assert "home.alt_m = 35 m AMSL" in flat_field_warning(m)

@@ -13,9 +13,9 @@ import pytest
 pytest.importorskip("matplotlib")
 
 from companion.flight_plot import compass_heading_deg, flight_figures  # noqa: E402
-from companion.maps import load_ogm  # noqa: E402
-from companion.maps.grid import ElevationModel  # noqa: E402
-from companion.mission.sim import ObstacleConfig  # noqa: E402
+from mavcore.maps import load_ogm  # noqa: E402
+from mavcore.maps.grid import ElevationModel  # noqa: E402
+from mavcore.mission.sim import ObstacleConfig  # noqa: E402
 from companion.runner import FlightLog, _PHASE_CODE  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

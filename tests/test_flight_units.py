@@ -20,7 +20,7 @@ from companion.link.codec import px4_custom_mode
 
 @pytest.fixture(scope="module")
 def plan():
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from companion.planner import plan_mission
 
     return plan_mission(load_mission(missions_dir() / "flat-rectangle" / "mission.yaml"))

@@ -7,7 +7,7 @@ import pytest
 
 from companion.commands.demo import missions_dir
 from companion.commands.fly import FlightPlan
-from companion.mission import load_mission
+from mavcore.mission import load_mission
 from companion.planner import plan_mission
 
 
@@ -47,7 +47,7 @@ def test_pointing_target_recovered_from_rays():
 
 def test_pointing_target_from_parallel_rays_is_an_error():
     from companion.commands.fly import pointing_target_from_rays
-    from companion.errors import PlanError
+    from mavcore.errors import PlanError
 
     p = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
     s = np.tile([0.0, 1.0, 0.0], (3, 1))

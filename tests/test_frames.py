@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from companion import frames as F
+from mavcore import frames as F
 
 
 def random_rotations(n: int, seed: int = 0) -> list[np.ndarray]:

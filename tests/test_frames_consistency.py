@@ -5,7 +5,7 @@ One tilted, yawed, moving true state is built by hand (roll 10 deg, pitch
 rotation +20 deg about body left, +10 deg about body forward), every SITL
 telemetry message is encoded with ``sitl.codec``, framed to bytes and parsed
 back with pymavlink, and each field is checked against values derived
-independently of ``companion.frames`` (hand-worked axes, the standard
+independently of ``mavcore.frames`` (hand-worked axes, the standard
 Euler->quaternion formula, the textbook degree-length series). Then the
 companion's decoders are checked to be the inverses of the SITL's encoders,
 the setpoint yaw conventions, the SITL's SET_POSITION_TARGET_LOCAL_NED frames
@@ -21,7 +21,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.link import codec as ccodec
-from companion.mission.sim import NoiseConfig, RangefinderConfig, SimConfig
+from mavcore.mission.sim import NoiseConfig, RangefinderConfig, SimConfig
 from companion.runner import setpoint_yaw_enu
 from sitl import codec as scodec
 from sitl.sensors import Rangefinder, SensorSuite
@@ -505,7 +505,7 @@ def test_simulation_heading_reaches_the_wire(mav):
     import dataclasses
     from pathlib import Path
 
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from sitl.sim import Simulation
     mission = load_mission(Path(__file__).resolve().parents[1] / "missions" / "flat-rectangle" / "mission.yaml")
     quiet = dataclasses.replace(mission.sim.noise, vector_variance=0.0, gyro_variance=0.0)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.link.signing import SignatureVerifier
+from mavcore.link.signing import SignatureVerifier
 
 import fuzz_link   # benchmarks/ (pyproject: pytest pythonpath)
 

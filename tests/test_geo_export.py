@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion import frames
+from mavcore import frames
 from companion.cli import main
 from companion.plan_io import load_plan
 

@@ -1,4 +1,4 @@
-"""Geodesy (companion/geodesy.py): the local tangent plane through pyproj, checked
+"""Geodesy (mavcore/geodesy.py): the local tangent plane through pyproj, checked
 against the WGS-84 formulas written out here, and the error of the flat-earth map
 it replaced, recorded over 2 km."""
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from companion import frames, geodesy
+from mavcore import frames, geodesy
 
 A = 6378137.0                      # WGS-84 semi-major axis (m)
 F = 1.0 / 298.257223563            # flattening

@@ -1,4 +1,4 @@
-"""True clearance (companion/geometry.py) against hand-placed geometry and
+"""True clearance (mavcore/geometry.py) against hand-placed geometry and
 against an independent computation (the nearest point by clipping into each
 box, or into the cylinder's half-section)."""
 
@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from companion.geometry import (Box, Cylinder, ExtrudedCells, SceneGeometry, obstacle_solids,
-                                scene_from_maps, terrain_distance_m)
-from companion.maps.grid import ElevationModel, OccupancyGrid
-from companion.mission.sim import ObstacleConfig
+from mavcore.geometry import (Box, Cylinder, ExtrudedCells, SceneGeometry, obstacle_solids, scene_from_maps,
+                              terrain_distance_m)
+from mavcore.maps.grid import ElevationModel, OccupancyGrid
+from mavcore.mission.sim import ObstacleConfig
 
 
 def _grid(occ, res=0.1, origin=(0.0, 0.0), yaw=0.0):

@@ -2,7 +2,7 @@
 (UTM 31N, Lambert-93) reprojected to ENU about home, a field as GeoJSON or KML, the home
 heading, GDAL's dx/dy header; and their bad inputs as one-line errors.
 
-Expected heights are computed independently: the ENU point -> WGS-84 (companion.frames)
+Expected heights are computed independently: the ENU point -> WGS-84 (mavcore.frames)
 -> the DEM's CRS (pyproj) -> the analytic surface the test wrote into the file.
 These tests need the ``gis`` extra (installed by .ci/run and the README's test line).
 """
@@ -21,12 +21,12 @@ import rasterio
 from rasterio.transform import from_origin
 
 from companion.cli import main
-from companion.errors import MapError
-from companion.frames import enu2geodetic, geodetic2enu
-from companion.maps import load_dem
-from companion.maps.field import load_field, load_mission_maps
-from companion.maps.gis import load_geo_dem
-from companion.mission import load_mission
+from mavcore.errors import MapError
+from mavcore.frames import enu2geodetic, geodetic2enu
+from mavcore.maps import load_dem
+from mavcore.maps.field import load_field, load_mission_maps
+from mavcore.maps.gis import load_geo_dem
+from mavcore.mission import load_mission
 
 ROOT = Path(__file__).resolve().parents[1]
 HOME = (44.80, 2.50, 30.0)          # in UTM zone 31N (0..6 deg E) and in Lambert-93's area

@@ -38,7 +38,7 @@ def flight_layers(multi_sortie_plan):
     """flat-rectangle with several sorties, a made-up flown track (a 1 m circle
     about (6, 6.25) m) and a box obstacle between a row and a lane."""
     from companion.map_layers import plan_layers, with_flight
-    from companion.mission.sim import ObstacleConfig
+    from mavcore.mission.sim import ObstacleConfig
 
     m, plan = multi_sortie_plan
     th = np.linspace(0, 2 * np.pi, 200)

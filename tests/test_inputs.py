@@ -1,4 +1,4 @@
-"""companion/inputs.py: the bounded loading layer (docs/limits.md). Each cap is
+"""mavcore/inputs.py: the bounded loading layer (docs/limits.md). Each cap is
 checked at its boundary (the cap passes, one more fails), so a cap that is
 changed or no longer enforced fails here; the YAML loader gives what
 ``yaml.safe_load`` gives on every bundled mission; the JSON depth scan agrees
@@ -16,9 +16,9 @@ import pytest
 import yaml
 
 from companion.commands.demo import missions_dir
-from companion.errors import InputError, MapError
-from companion.inputs import (Limits, brief, check, count_tokens, json_depth, limits, open_regular, parse_json,
-                              parse_yaml, read_bytes)
+from mavcore.errors import InputError, MapError
+from mavcore.inputs import (Limits, brief, check, count_tokens, json_depth, limits, open_regular, parse_json,
+                            parse_yaml, read_bytes)
 
 
 def test_defaults_and_environment_overrides():

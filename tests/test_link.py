@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion import frames
-from companion.errors import CommandRejected, InputError, LinkError
+from mavcore import frames
+from mavcore.errors import CommandRejected, InputError, LinkError
 from companion.link import codec
 from companion.link.connection import Connection, check_connection_string
 from companion.link.mission_upload import MissionRejected, upload_mission
@@ -80,7 +80,7 @@ def test_highres_imu_frd_to_flu():
     np.testing.assert_allclose(s.accel_flu_m_s2, (0.1, -0.2, 9.81), rtol=1e-6)
     np.testing.assert_allclose(s.gyro_flu_rad_s, (0.01, 0.02, -0.03), rtol=1e-6)
     np.testing.assert_allclose(s.mag_flu_gauss, (0.21, 0.0, -0.42), rtol=1e-6)
-    # the hand-written fast path agrees with companion.frames
+    # the hand-written fast path agrees with mavcore.frames
     np.testing.assert_allclose(s.accel_flu_m_s2, frames.frd2flu((0.1, 0.2, -9.81)), rtol=1e-6)
 
 
@@ -139,7 +139,7 @@ def test_distance_sensor_cm_to_m_and_no_return():
 
 def _meridian_m_per_deg(lat_deg: float) -> float:
     """Length of one degree of latitude (m), the standard WGS-84 series
-    (independent of companion.frames' radius-of-curvature formula)."""
+    (independent of mavcore.frames' radius-of-curvature formula)."""
     phi = math.radians(lat_deg)
     return 111132.954 - 559.822 * math.cos(2 * phi) + 1.175 * math.cos(4 * phi)
 

@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.link import Connection
 from companion.link.auth import VehicleFilter
-from companion.link.signing import SignatureVerifier, enable_outgoing_signing
+from mavcore.link.signing import SignatureVerifier, enable_outgoing_signing
 
 VEH, SPOOF = ("127.0.0.1", 40001), ("127.0.0.1", 40002)
 KEY = bytes(range(32))

@@ -13,7 +13,7 @@ import math
 import pytest
 
 from companion.link.auth import TIMED_FIELDS, LinkStats, VehicleFilter
-from companion.link.signing import SignatureVerifier
+from mavcore.link.signing import SignatureVerifier
 
 VEH, SPOOF = ("127.0.0.1", 40001), ("127.0.0.1", 40002)
 

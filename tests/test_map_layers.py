@@ -11,8 +11,8 @@ import numpy as np
 
 from companion.map_layers import (LAYER_COLOURS, LEGEND_SORTIES, obstacle_ring_xy, row_lines_xy, sortie_colour,
                                   sortie_legend)
-from companion.maps import load_ogm
-from companion.mission.sim import ObstacleConfig
+from mavcore.maps import load_ogm
+from mavcore.mission.sim import ObstacleConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.errors import MapError
-from companion.maps import ElevationModel, load_dem, load_ogm
+from mavcore.errors import MapError
+from mavcore.maps import ElevationModel, load_dem, load_ogm
 
 ROOT = Path(__file__).resolve().parents[1]
 

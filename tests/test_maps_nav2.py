@@ -15,8 +15,8 @@ import pytest
 from PIL import Image
 
 from companion.cli import main
-from companion.errors import MapError
-from companion.maps import load_ogm
+from mavcore.errors import MapError
+from mavcore.maps import load_ogm
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -15,7 +15,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from companion import margins
-from companion.mission import load_mission
+from mavcore.mission import load_mission
 
 ROOT = Path(__file__).resolve().parents[1]
 RECT = ROOT / "missions" / "flat-rectangle" / "mission.yaml"

@@ -200,8 +200,8 @@ def test_mavcore_imports_neither_side():
 
 
 def test_bad_sim_autopilot_names_the_key(tmp_path):
-    from companion.errors import InputError
-    from companion.mission import load_mission
+    from mavcore.errors import InputError
+    from mavcore.mission import load_mission
 
     src = Path(__file__).resolve().parents[1] / "missions" / "flat-rectangle" / "mission.yaml"
     text = src.read_text().replace("\nsim:\n", "\nsim:\n  autopilot: betaflight\n", 1)

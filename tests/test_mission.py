@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from companion.errors import MissionError
-from companion.mission import FlightConfig, load_mission
+from mavcore.errors import MissionError
+from mavcore.mission import FlightConfig, load_mission
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,7 +1,7 @@
 """Moving obstacles (sim.movers): kinematics, rangefinder returns, crashes, bad specs.
 
 Every expected value is worked by hand from the scripted path: a walker is a
-cylinder of radius 0.25 m, 1.8 m tall (``companion.mission.sim``); the
+cylinder of radius 0.25 m, 1.8 m tall (``mavcore.mission.sim``); the
 vehicle sphere's radius is set to 0.4 m here.
 """
 
@@ -12,13 +12,13 @@ import math
 import numpy as np
 import pytest
 
-from companion.errors import MissionError
-from companion.mission import load_mission
-from companion.mission.schema import HomeConfig, Mission
-from companion.mission.sim import (CollisionConfig, MoverConfig, NoiseConfig, RangefinderConfig, SimConfig,
-                                   WALKER_RADIUS_M)
-from companion.movers import mover_pose, movers_nearest
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig
+from mavcore.errors import MissionError
+from mavcore.mission import load_mission
+from mavcore.mission.schema import HomeConfig, Mission
+from mavcore.mission.sim import (CollisionConfig, MoverConfig, NoiseConfig, RangefinderConfig, SimConfig,
+                                 WALKER_RADIUS_M)
+from mavcore.movers import mover_pose, movers_nearest
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
 from sitl.sensors import Rangefinder
 from sitl.sim import Simulation
 from sitl.world import World
@@ -224,7 +224,7 @@ def _walker_flight(tmp_path, field: str, home: str, seed: int, walker: str, cut_
 
     from companion.cli import main
     from companion.commands.demo import missions_dir
-    from companion.mission.replan import ReplanConfig
+    from mavcore.mission.replan import ReplanConfig
 
     fd = missions_dir() / field
     (tmp_path / "m.yaml").write_text(
@@ -306,7 +306,7 @@ def test_campaign_movers_cross_a_corridor_and_leave_other_draws_alone():
 
 def test_bad_campaign_mover_spec_names_the_key():
     from companion.campaign.spec import spec_from_dict
-    from companion.errors import CampaignError
+    from mavcore.errors import CampaignError
 
     with pytest.raises(CampaignError, match=r"movers.*kinds|kinds"):
         spec_from_dict({"name": "m", "missions": ["flat-rectangle"], "flights": 1,

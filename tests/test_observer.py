@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from companion.control import ControlConfig, GeometricController, Measurements, Reference
+from companion.control import GeometricController, Measurements, ReferenceNone
+from mavcore.mission.control import ControlConfigNone
 from companion.control.observer import (
     VelocityAidedObserver,
     heading_from_accel_mag,
@@ -26,8 +27,8 @@ from companion.control.observer import (
     tilt_gain,
     triad_rotation,
 )
-from companion.vehicle import GRAVITY_M_S2 as G
-from companion.vehicle import VehicleConfig
+from mavcore.vehicle import GRAVITY_M_S2 as G
+from mavcore.vehicle import VehicleConfig
 
 MAG_ENU = np.array([0.0, 0.21, -0.42])
 DT = 0.004
@@ -334,7 +335,7 @@ def test_attitude_estimate_accessor_with_and_without_observer():
 def _fly_circle(cfg: ControlConfig, vel_std: float, duration_s: float, seed: int = 3) -> float:
     """Max position error (m) after 3 s on a 1 m/s circle of radius 1.25 m (a turn between rows),
     the SITL's plant and sensors (the paper's IMU noise, ``vel_std`` white velocity noise every frame)."""
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from sitl.sim import Simulation
 
     mission = load_mission("missions/flat-rectangle/mission.yaml")

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion import frames
+from mavcore import frames
 from companion.link.codec import Range, sensor_rotation_flu
 from companion.link.obstacle_distance import (UNKNOWN_CM, ObstacleDistancePublisher, encode_obstacle_distance,
                                               pack_sectors, sector_beam)

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from companion.mission.schema import HomeConfig, Mission
-from companion.mission.sim import NoiseConfig, SimConfig
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
+from mavcore.mission.schema import HomeConfig, Mission
+from mavcore.mission.sim import NoiseConfig, SimConfig
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
 from sitl.onboard import CascadedController, Setpoint
 from sitl.sim import Simulation
 

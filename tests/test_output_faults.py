@@ -18,7 +18,7 @@ from jsonschema import Draft202012Validator
 
 from companion.cli import main
 from companion.commands import fly
-from companion.errors import InputError
+from mavcore.errors import InputError
 from companion.link import tlog as tlog_mod
 from companion.link.tlog import TlogWriter, read_tlog
 from companion.progress import Progress

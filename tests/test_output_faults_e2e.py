@@ -230,7 +230,7 @@ def test_cut_flight_console_and_report_agree_on_the_coverage_flown(tmp_path, cap
     """``--cut 5`` flies the way-points up to the first at or after 5 s (docs:
     ``companion fly --cut``); the coverage flown is the plan's coverage times the
     share of the coverage path's length up to that way-point."""
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from companion.planner import plan_mission
     from companion.summary import coverage_text
     from sitl.api import SitlProcess

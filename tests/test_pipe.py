@@ -1,6 +1,6 @@
-"""Datagram pipes (sitl/pipe.py): the adaptive lockstep spin, the in-process
+"""Datagram pipes (mavcore/link/pipe.py): the adaptive lockstep spin, the in-process
 pipe's delivery and cooperative driving, and the one place that picks a pipe
-from a connection string (companion.link.sockets.open_pipe)."""
+from a connection string (mavcore.link.sockets.open_pipe)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import time
 
 import pytest
 
-from companion.errors import InputError
-from companion.link.sockets import open_pipe
-from sitl.pipe import PEER_ADDR, VEHICLE_ADDR, AdaptiveSpin, MemoryPipe, UdpPipe
+from mavcore.errors import InputError
+from mavcore.link.sockets import open_pipe
+from mavcore.link.pipe import PEER_ADDR, VEHICLE_ADDR, AdaptiveSpin, MemoryPipe, UdpPipe
 
 
 def test_adaptive_spin_backs_off_exponentially_and_recovers():

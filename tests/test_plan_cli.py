@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from companion.cli import main
-from companion.errors import PlanError
-from companion.maps import load_dem, load_ogm
-from companion.mission import load_mission
+from mavcore.errors import PlanError
+from mavcore.maps import load_dem, load_ogm
+from mavcore.mission import load_mission
 from companion.plan_io import load_plan
 
 ROOT = Path(__file__).resolve().parents[1]

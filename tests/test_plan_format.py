@@ -24,11 +24,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.errors import PlanError
-from companion.mission import load_mission
+from mavcore.errors import PlanError
+from mavcore.mission import load_mission
 from companion.plan_io import load_plan, plan_json_text, plan_to_json_dict
 from companion.planner import plan_mission
-from companion.trajectory import TrajectoryConfig, generate_trajectory
+from companion.trajectory import generate_trajectoryNone
+from mavcore.mission.trajectory import TrajectoryConfigNone
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSION = ROOT / "missions" / "flat-rectangle" / "mission.yaml"

@@ -12,8 +12,8 @@ from scipy import ndimage
 
 from companion.coverage import blockgraph
 from companion.coverage.blockgraph import block_size, build_block_graph
-from companion.maps import ogm
-from companion.maps.ogm import Shades, classify
+from mavcore.maps import ogm
+from mavcore.maps.ogm import Shades, classify
 
 
 # --- block graph: labels held per block -------------------------------------------------
@@ -161,9 +161,9 @@ def test_fly_prepare_and_execute_share_one_reading_of_the_maps(monkeypatch):
     fresh reading of the files."""
     from pathlib import Path
 
-    import companion.maps.field as field
+    import mavcore.maps.field as field
     from companion.commands.fly import MissionMaps, prepare
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
 
     root = Path(__file__).resolve().parents[1]
     mission = load_mission(root / "missions" / "flat-rectangle" / "mission.yaml")
@@ -423,7 +423,7 @@ def _ref_cell_exit(uu, vv, du, dv, cc, r):
 
 def sitl_fields():
     """(grid, dem) pairs: rows on a slope, a yawed offset grid, random posts."""
-    from companion.maps.grid import ElevationModel, OccupancyGrid
+    from mavcore.maps.grid import ElevationModel, OccupancyGrid
 
     rng = np.random.default_rng(11)
     out = []
@@ -473,7 +473,7 @@ def test_sitl_rows_cast_the_same_rays_as_the_nested_lists(field):
 
 
 def test_clearance_sq_cells_is_the_square_of_the_distance_transform():
-    from companion.geometry import clearance_sq_cells
+    from mavcore.geometry import clearance_sq_cells
 
     for field in random_fields():
         d2 = clearance_sq_cells(~field)
@@ -505,8 +505,8 @@ def test_table_lookup_of_any_table_matches_fancy_indexing(monkeypatch, chunk):
 
 
 def test_collision_cells_keep_a_ready_float32_base_and_copy_any_other():
-    from companion.geometry import ExtrudedCells
-    from companion.maps.grid import OccupancyGrid
+    from mavcore.geometry import ExtrudedCells
+    from mavcore.maps.grid import OccupancyGrid
 
     occ = random_fields()[0]
     grid = OccupancyGrid(occ, ~occ, 0.1)

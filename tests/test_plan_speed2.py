@@ -14,7 +14,7 @@ import pytest
 
 from companion.coverage.freespace import Raster
 from companion.coverage.rows import _sharpness
-from companion.inputs import json_depth
+from mavcore.inputs import json_depth
 from companion.plan_io import _dumps
 
 
@@ -171,11 +171,12 @@ def test_json_depth_on_texts_without_backslashes():
 # --- the trajectory package loads the LQR solver on first use -------------------------
 
 def test_mission_loading_does_not_import_the_lqr_solver():
-    code = ("import sys; import companion.mission; import companion.commands.fly; import companion.plan_io; "
+    code = ("import sys; import mavcore.mission; import companion.commands.fly; import companion.plan_io; "
             "import companion.preflight, companion.trajectory.cursor, companion.trajectory.sampling; "
             "assert 'companion.trajectory.lqr' not in sys.modules, 'lqr'; "
             "assert 'scipy.linalg' not in sys.modules, 'scipy.linalg'; "
-            "from companion.trajectory import generate_trajectory, TrajectoryConfig, Trajectory; "
+            "from companion.trajectory import generate_trajectory, Trajectory; "
+            "from mavcore.mission.trajectory import TrajectoryConfig; "
             "import companion.trajectory as T; assert T.generate_trajectory.__module__ == 'companion.trajectory.lqr'; "
             "assert 'generate_trajectory' in dir(T)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
@@ -194,7 +195,7 @@ def test_flying_a_plan_does_not_import_scipy(tmp_path):
     plan = tmp_path / "plan.json"
     subprocess.run([sys.executable, "-m", "companion", "plan", str(mission), "-o", str(plan)],
                    check=True, capture_output=True, timeout=120)
-    code = ("import sys; from companion.mission import load_mission; from companion.commands.fly import prepare; "
+    code = ("import sys; from mavcore.mission import load_mission; from companion.commands.fly import prepare; "
             "fp = prepare(load_mission(sys.argv[1]), sys.argv[2]); fp.trajectory.sample(fp.trajectory.t0); "
             "bad = sorted(m for m in sys.modules if m.startswith('scipy') or m == 'companion.trajectory.lqr'); "
             "assert not bad, bad")
@@ -233,7 +234,7 @@ def test_corner_indices_match_a_nearest_neighbour_query():
 def open_field_grid():
     """Rows every 8 cells at both ends of a 800 x 60 grid at 5 cm, 700 empty rows between:
     cells up to 350 cells from any row, so the middle is beyond the uint16 cap (256 cells)."""
-    from companion.maps.grid import OccupancyGrid
+    from mavcore.maps.grid import OccupancyGrid
 
     occ = np.zeros((800, 60), dtype=bool)
     occ[2:50:8, 5:55] = True
@@ -243,8 +244,8 @@ def open_field_grid():
 
 @pytest.mark.parametrize("band_cells", [60 * 40, 1 << 20])
 def test_capped_clearance_is_the_exact_one_below_the_cap(monkeypatch, band_cells):
-    from companion import geometry
-    from companion.geometry import CLEARANCE_SQ_CAP, clearance_sq_cells, clearance_sq_cells_capped
+    from mavcore import geometry
+    from mavcore.geometry import CLEARANCE_SQ_CAP, clearance_sq_cells, clearance_sq_cells_capped
 
     monkeypatch.setattr(geometry, "_ROWS_CELLS", band_cells)       # 40-row bands: windows cut the field
     rng = np.random.default_rng(187)
@@ -284,7 +285,7 @@ def test_sitl_rays_through_capped_cells_hit_the_same_rows():
 
 
 def test_collision_bounds_from_the_capped_table():
-    from companion.geometry import ExtrudedCells
+    from mavcore.geometry import ExtrudedCells
 
     grid = open_field_grid()
     cells = ExtrudedCells(grid, np.zeros(grid.shape), 1.7)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
 from sitl.plant import Plant, PlantParams, polar_step, rotate_right
 
 VEH = VehicleConfig()

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from companion.commands.demo import missions_dir
-from companion.errors import PlanError
-from companion.maps.field import load_mission_maps
-from companion.mission import load_mission
+from mavcore.errors import PlanError
+from mavcore.maps.field import load_mission_maps
+from mavcore.mission import load_mission
 from companion.plan_io import load_plan
 from companion.preflight import (check_flight_plan, check_plan, check_waypoints, max_thrust_accel_m_s2,
                                  resume_index)

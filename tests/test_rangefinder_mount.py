@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion import frames
-from companion.mission.sim import NoiseConfig, ObstacleConfig, RangefinderConfig, SimConfig
+from mavcore import frames
+from mavcore.mission.sim import NoiseConfig, ObstacleConfig, RangefinderConfig, SimConfig
 from sitl import codec
 from sitl.sensors import RangeReading, SensorSuite, fan_directions_flu, mount_rotation_flu
 from sitl.world import World

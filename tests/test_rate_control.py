@@ -14,9 +14,9 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.cli import main
 from companion.control.rates import normalised_thrust, rate_command, vehicle_hover_thrust
 from companion.link import codec
-from companion.link.command_rules import attitude_target_problem, outgoing_problem
+from mavcore.link.command_rules import attitude_target_problem, outgoing_problem
 from companion.link.tlog_scan import TlogScanner
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
 from sitl import codec as sitl_codec
 from sitl.flightstack import FlightMode, FlightStack, NavState, Parameters
 from sitl.codec import PositionTarget

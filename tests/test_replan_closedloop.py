@@ -26,11 +26,12 @@ import pytest
 from companion.coverage.freespace import erode_free_space
 from companion.coverage.waypoints import waypoints_along
 from companion.link import codec
-from companion.maps.grid import ElevationModel, OccupancyGrid
-from companion.mission.replan import ReplanConfig
-from companion.mission.schema import FlightConfig
+from mavcore.maps.grid import ElevationModel, OccupancyGrid
+from mavcore.mission.replan import ReplanConfig
+from mavcore.mission.schema import FlightConfig
 from companion.replan import GlobalPlan, KnownMap, Replanner
-from companion.trajectory import TrajectoryConfig, generate_trajectory
+from companion.trajectory import generate_trajectoryNone
+from mavcore.mission.trajectory import TrajectoryConfigNone
 
 RES = 0.1
 ROWS = ((3.0, 15.0, 2.3, 2.7), (3.0, 15.0, 4.8, 5.2))     # x0, x1, y0, y1 (m)
@@ -366,7 +367,7 @@ def test_ablation_clearance_governor():
     vanishes at the goal, so the APF alone settles at the goal, within the
     clearance; with the governor the reference keeps the clearance. The post
     is given to the memory directly (a column of points), no sensors."""
-    from companion.mission.schema import FlightConfig
+    from mavcore.mission.schema import FlightConfig
     t = np.array([0.0, 12.0, 16.0])
     P = np.array([[0.0, 0.0, 1.5], [10.0, 0.0, 1.5], [10.0, -3.0, 1.5]])
     traj = generate_trajectory(t, P, target_enu_m=np.array([5.0, 5.0, 1.5]))
@@ -490,7 +491,7 @@ def test_escape_is_time_bounded_then_holds(field):
 
 
 def test_body_radius_from_the_vehicle():
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from companion.replan.replanner import PROP_RADIUS_M, mission_replan_config
     from pathlib import Path
     m = load_mission(Path(__file__).resolve().parents[1] / "missions" / "flat-rectangle" / "mission.yaml")

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from companion.cli import main
-from companion.errors import MissionError
-from companion.mission import ReplanConfig, SensorMount, load_mission
+from mavcore.errors import MissionError
+from mavcore.mission import ReplanConfig, SensorMount, load_mission
 
 ROOT = Path(__file__).resolve().parents[1]
 FLAT = ROOT / "missions" / "flat-rectangle"

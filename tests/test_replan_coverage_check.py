@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import yaml
 
-from companion.mission.sim import RangefinderConfig, default_rangefinders
+from mavcore.mission.sim import RangefinderConfig, default_rangefinders
 from companion.replan.coverage_check import (CONTROL_DELAY_S, allowed_speed, beam_from_config, check_coverage,
                                              level_body_axes, stopping_distance_m)
 
@@ -138,7 +138,7 @@ def _mission_dir(tmp_path, rangefinders):
 @pytest.fixture(scope="module")
 def flat_plan():
     from companion.commands.fly import FlightPlan
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from companion.planner import plan_mission
 
     m = load_mission(FLAT / "mission.yaml")
@@ -147,8 +147,8 @@ def flat_plan():
 
 def test_gate_refuses_naming_the_gap_and_slow_flies_short_gaps_slower(tmp_path, flat_plan):
     from companion.commands.fly import sensor_coverage_gate
-    from companion.errors import PlanError
-    from companion.mission import load_mission
+    from mavcore.errors import PlanError
+    from mavcore.mission import load_mission
 
     # forward only: blind whenever the travel is not along body x
     m = load_mission(_mission_dir(tmp_path, [{"id": 0, "orientation": 0}]))

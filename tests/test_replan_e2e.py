@@ -21,7 +21,7 @@ import pytest
 from companion.cli import main
 from companion.commands.demo import missions_dir
 from companion.link.tlog import read_tlog
-from companion.mission.loader import load_mission
+from mavcore.mission.loader import load_mission
 
 pytestmark = pytest.mark.slow
 

@@ -79,7 +79,7 @@ def test_replanner_governor_blocks_a_direction_without_data():
     import numpy as np
     from test_replan_closedloop import CORRIDOR_Y, build_field
 
-    from companion.mission.replan import ReplanConfig
+    from mavcore.mission.replan import ReplanConfig
     from companion.replan.replanner import Replanner
 
     field = build_field()

@@ -13,12 +13,13 @@ import math
 import numpy as np
 import pytest
 
-from companion.maps.grid import ElevationModel, OccupancyGrid
-from companion.mission.schema import FlightConfig
+from mavcore.maps.grid import ElevationModel, OccupancyGrid
+from mavcore.mission.schema import FlightConfig
 from companion.replan.globalplan import GlobalPlan
 from companion.replan.pace import HEADROOM, MAX_TOTAL_STRETCH, pace, planned_stretch, stretch
 from companion.safety import Guard, GuardConfig, SafetyScene
-from companion.trajectory import TrajectoryConfig, generate_trajectory
+from companion.trajectory import generate_trajectoryNone
+from mavcore.mission.trajectory import TrajectoryConfigNone
 
 R, C = 0.4, 0.5
 REQ = R + C                  # the centre keeps 0.9 m from the obstacle and the ground

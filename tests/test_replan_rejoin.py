@@ -9,10 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from companion.mission.schema import FlightConfig
+from mavcore.mission.schema import FlightConfig
 from companion.replan import GlobalPlan, ShapedState, rejoin
 from companion.replan.rejoin import CHECK_S, first_time_s
-from companion.trajectory import TrajectoryConfig, generate_trajectory
+from companion.trajectory import generate_trajectoryNone
+from mavcore.mission.trajectory import TrajectoryConfigNone
 from companion.trajectory.cursor import TrajectoryCursor
 
 T_WP = np.array([0.0, 4.85, 8.85, 12.85, 16.85, 21.7, 27.0, 31.9])

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion import frames
+from mavcore import frames
 from companion.flight.core import ActuatorOut
 from companion.link import codec
 from companion.link.tlog_scan import RawRecord

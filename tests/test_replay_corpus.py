@@ -42,7 +42,7 @@ from companion.flight.core import ActuatorOut
 from companion.flight.environment import differences, fingerprint
 from companion.link import codec
 from companion.link.tlog_scan import TlogScanner
-from companion.mission import load_mission
+from mavcore.mission import load_mission
 from companion.replay import build_core, find_setup, replay_chunks
 from companion.replay.compare import DRIFT_REL, drift_allowance
 

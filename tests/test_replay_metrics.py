@@ -18,7 +18,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion import frames
+from mavcore import frames
 from companion.link.tlog import TlogWriter
 from companion.replay import replay_chunks
 from companion.replay.metrics import REPLAN_PREFIX

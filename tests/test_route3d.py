@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from companion.coverage.freespace import erode_free_space
-from companion.maps.grid import ElevationModel, OccupancyGrid
+from mavcore.maps.grid import ElevationModel, OccupancyGrid
 from companion.replan.knownmap import KnownMap
 from companion.replan.route3d import RouteScene, find_route
 from companion.replan.routecheck import route_exists

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from companion.flight.reference import smooth_segment
-from companion.maps.grid import ElevationModel, OccupancyGrid
+from mavcore.maps.grid import ElevationModel, OccupancyGrid
 from companion.replan.memory import ObstacleMemory
 from companion.safety import (Guard, GuardConfig, SafetyScene, known_obstacle_distance, stopping_distance_m,
                               stopping_speed_m_s)
@@ -304,7 +304,7 @@ def _core_beside(obstacle_distance, pos):
     from companion.flight.config import RunnerConfig
     from companion.flight.core import FlightCore, FlightInputs
     from companion.safety.gate import GuardGate
-    from companion.vehicle import VehicleConfig
+    from mavcore.vehicle import VehicleConfig
 
     gate = GuardGate(_guard(obstacle_distance), 2.0)
     inputs = FlightInputs(None, np.zeros((1, 3)), (44.8, -0.6, 30.0), (0.0, 0.0, 0.0), guard=gate)

@@ -14,11 +14,11 @@ import pytest
 from companion.cli import main
 from companion.commands.demo import missions_dir
 from companion.commands.fly import EXIT_FAILED
-from companion.geometry import scene_from_maps
+from mavcore.geometry import scene_from_maps
 from companion.link.tlog import read_tlog
-from companion.maps import load_dem, load_ogm
-from companion.mission.loader import load_mission
-from companion.mission.sim import vehicle_radius_m
+from mavcore.maps import load_dem, load_ogm
+from mavcore.mission.loader import load_mission
+from mavcore.mission.sim import vehicle_radius_m
 from companion.planner import plan_mission
 
 

@@ -29,7 +29,7 @@ from jsonschema import Draft202012Validator
 
 from companion.cli import main
 from companion.commands.demo import missions_dir
-from companion.errors import PlanError
+from mavcore.errors import PlanError
 from companion.format_version import check_format_version
 from companion.plan_io import PLAN_FORMAT_VERSION, load_plan
 from companion.flight.monitor import FlightMonitor, Violation

@@ -76,7 +76,7 @@ def attack_packets(mav) -> list[tuple[str, bytes]]:
 
 
 def _signing_mav(mav, key):
-    from companion.link.signing import enable_outgoing_signing, signing_timestamp
+    from mavcore.link.signing import enable_outgoing_signing, signing_timestamp
     enable_outgoing_signing(mav, key, 0, signing_timestamp(time.time()))
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from companion import frames
+from mavcore import frames
 from companion.link import codec
 
 

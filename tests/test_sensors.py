@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.mission.schema import HomeConfig, Mission
-from companion.mission.sim import NoiseConfig, ObstacleConfig, RangefinderConfig, SimConfig
-from companion.vehicle import GRAVITY_M_S2
+from mavcore.mission.schema import HomeConfig, Mission
+from mavcore.mission.sim import NoiseConfig, ObstacleConfig, RangefinderConfig, SimConfig
+from mavcore.vehicle import GRAVITY_M_S2
 from sitl.sensors import SensorSuite, fan_directions_flu, orientation_direction_flu
 from sitl.sim import Simulation
 from sitl.world import World
@@ -111,7 +111,7 @@ def _ranges_at(sim: Simulation, p, yaw=0.0, frames=30):
 def test_rangefinders_against_hand_placed_geometry():
     occ = np.zeros((100, 200), bool)
     occ[60, :] = True                                 # a vine row along x at y in [6.0, 6.1)
-    from companion.maps.grid import OccupancyGrid
+    from mavcore.maps.grid import OccupancyGrid
     grid = OccupancyGrid(occ, ~occ, 0.1)
     cyl = ObstacleConfig("cylinder", x=10.0, y=3.75, height=3.0, radius=0.3)
     # 0 forward, 1 left, 2 right, 3 down (5 deg beams)

@@ -8,9 +8,9 @@ import math
 
 import numpy as np
 
-from companion.mission.schema import HomeConfig, Mission
-from companion.mission.sim import NoiseConfig, RangefinderConfig, SimConfig
-from companion.vehicle import GRAVITY_M_S2
+from mavcore.mission.schema import HomeConfig, Mission
+from mavcore.mission.sim import NoiseConfig, RangefinderConfig, SimConfig
+from mavcore.vehicle import GRAVITY_M_S2
 from sitl.sim import Simulation
 
 RF = (RangefinderConfig(id=7, orientation=25, min_m=0.2, max_m=5.0, rate_hz=250.0),)   # one reading per frame

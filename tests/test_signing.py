@@ -1,4 +1,4 @@
-"""MAVLink 2 signing (companion/link/signing.py): key files as MAVProxy makes
+"""MAVLink 2 signing (mavcore/link/signing.py): key files as MAVProxy makes
 them, signatures checked against pymavlink's own signer and verifier, replay
 and lock-out rules."""
 
@@ -9,11 +9,9 @@ import hashlib
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.errors import InputError
-from companion.link.signing import (
-    NEW_STREAM_WINDOW, SignatureVerifier, enable_outgoing_signing, is_signed, key_from_file_bytes,
-    load_signing_key, sign_packet, signing_timestamp,
-)
+from mavcore.errors import InputError
+from mavcore.link.signing import (NEW_STREAM_WINDOW, SignatureVerifier, enable_outgoing_signing, is_signed,
+                                  key_from_file_bytes, load_signing_key, sign_packet, signing_timestamp)
 
 KEY = bytes(range(100, 132))
 OTHER = bytes(range(1, 33))

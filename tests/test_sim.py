@@ -9,12 +9,12 @@ import math
 import numpy as np
 import pytest
 
-from companion.errors import MissionError
-from companion.maps.grid import ElevationModel, OccupancyGrid
-from companion.mission import load_mission
-from companion.mission.schema import HomeConfig, Mission
-from companion.mission.sim import SimConfig
-from companion.vehicle import GRAVITY_M_S2, VehicleConfig
+from mavcore.errors import MissionError
+from mavcore.maps.grid import ElevationModel, OccupancyGrid
+from mavcore.mission import load_mission
+from mavcore.mission.schema import HomeConfig, Mission
+from mavcore.mission.sim import SimConfig
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
 from sitl.onboard import CascadedController, OnboardGains, Setpoint
 from sitl.plant import Plant, PlantParams
 from sitl.sim import SensorFrame, Simulation, TrueState

@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.link.signing import SignatureVerifier
+from mavcore.link.signing import SignatureVerifier
 from sitl.auth import (
     DEFAULT_CONTROLLERS, READ_ONLY_COMMANDS, ClientTable, ControlPolicy, Controller, IntakeBudget, is_control,
     parse_controller,
@@ -30,7 +30,7 @@ def test_every_handled_message_is_classified():
     """Every message type the SITL acts on is control unless it only reads;
     every command it executes that changes something is control (a new
     handler or command fails here until it is classified)."""
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from test_sitl_mavlink import MISSION
 
     server = SitlServer(load_mission(MISSION))          # no I/O: nothing is opened

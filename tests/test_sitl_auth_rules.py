@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.link.signing import SignatureVerifier
+from mavcore.link.signing import SignatureVerifier
 from sitl.auth import (
     DEFAULT_CONTROLLERS, READ_ONLY_COMMANDS, READ_ONLY_MESSAGES, ClientTable, ControlPolicy, Controller,
     IntakeBudget, is_control, parse_controller,

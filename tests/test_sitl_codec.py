@@ -1,5 +1,5 @@
 """sitl.codec: known points worked by hand, round trips against
-companion.frames and pymavlink, type_mask decoding table."""
+mavcore.frames and pymavlink, type_mask decoding table."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion import frames
-from companion.mission import load_mission
+from mavcore import frames
+from mavcore.mission import load_mission
 from sitl import codec
 from sitl.sensors import RangeReading
 from sitl.sim import Setpoint, Simulation

@@ -316,6 +316,6 @@ def test_mission_upload_retries_then_gives_up():
 
 def test_idle_constant_is_below_hover():
     # Idle spin must not lift the paper's vehicle: 4 * cmd * f_max < m g.
-    from companion.vehicle import VehicleConfig
+    from mavcore.vehicle import VehicleConfig
     v = VehicleConfig()
     assert 4 * IDLE_MOTOR_CMD * v.max_thrust_per_rotor_n < v.mass_kg * 9.81

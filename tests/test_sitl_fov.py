@@ -20,7 +20,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.mission.sim import ObstacleConfig, RangefinderConfig
+from mavcore.mission.sim import ObstacleConfig, RangefinderConfig
 from sitl.fov import Pyramid, project_pyramid
 from sitl.sensors import Rangefinder, fan_directions_flu
 from sitl.world import World

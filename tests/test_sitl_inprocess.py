@@ -10,7 +10,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.commands.demo import missions_dir
 from companion.link import codec
-from companion.link.sockets import open_pipe
+from mavcore.link.sockets import open_pipe
 from sitl.api import SitlInProcess
 
 MISSION = missions_dir() / "flat-rectangle" / "mission.yaml"

@@ -17,7 +17,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion import frames
+from mavcore import frames
 from sitl.api import SitlProcess, SitlThread
 from sitl.flightstack import PARAM_SPECS
 
@@ -506,7 +506,7 @@ def signed(m) -> bool:
 def test_signing(gcs):
     """SETUP_SIGNING from a controller (as MAVProxy's ``signing setup``): the SITL
     signs from then on and wants signed control; the key holder turns it off again."""
-    from companion.link.signing import enable_outgoing_signing, signing_timestamp
+    from mavcore.link.signing import enable_outgoing_signing, signing_timestamp
 
     key = bytes(range(1, 33))
     gcs.mav.setup_signing_send(1, 1, key, 1)

@@ -19,7 +19,7 @@ from mavsdk.plugins.action import Action   # noqa: E402
 from mavsdk.plugins.offboard import Offboard, PositionNedYaw   # noqa: E402
 from mavsdk.plugins.telemetry import FlightMode, LandedState, Telemetry   # noqa: E402
 
-from companion import frames   # noqa: E402
+from mavcore import frames   # noqa: E402
 from sitl.api import SitlThread   # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -33,8 +33,8 @@ from mavsdk.plugins.mavlink_direct import MavlinkDirect   # noqa: E402
 from mavsdk.plugins.mission_raw import MissionRaw   # noqa: E402
 
 from companion.cli import main   # noqa: E402
-from companion.frames import geodetic2enu   # noqa: E402
-from companion.mission import load_mission   # noqa: E402
+from mavcore.frames import geodetic2enu   # noqa: E402
+from mavcore.mission import load_mission   # noqa: E402
 from sitl.api import SitlThread   # noqa: E402
 from sitl.flightstack import FlightMode   # noqa: E402
 
@@ -156,7 +156,7 @@ def test_mavsdk_goto_location_is_do_reposition_in_hold():
     """MAVSDK's ``goto_location`` (DO_REPOSITION, yaw sent in radians as PX4 reads it):
     the vehicle flies to the point 6 m north-east of its start, holds there in HOLD and
     turns to the asked compass heading (135 deg: south-east, ENU yaw -45 deg)."""
-    from companion.frames import enu2geodetic
+    from mavcore.frames import enu2geodetic
     from mavsdk.plugins.telemetry import FlightMode as MavsdkMode, Telemetry
 
     home = load_mission(MISSION).home

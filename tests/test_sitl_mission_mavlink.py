@@ -3,7 +3,7 @@ ground station): MAV_CMD_MISSION_START flies an uploaded mission with
 MISSION_CURRENT and MISSION_ITEM_REACHED as PX4 sends them, the return goes
 to the closest rally point, and DO_REPOSITION (MAVSDK's goto_location) moves
 a hovering vehicle in Hold. Positions are worked out here from the ENU
-offsets through companion.frames, not read back from the SITL."""
+offsets through mavcore.frames, not read back from the SITL."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.frames import enu2geodetic
-from companion.mission import load_mission
+from mavcore.frames import enu2geodetic
+from mavcore.mission import load_mission
 from sitl.api import SitlThread
 from sitl.flightstack import FlightMode
 

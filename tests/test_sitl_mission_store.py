@@ -1,6 +1,6 @@
 """Where the SITL's DO_REPOSITION goes (sitl.mission_store.reposition_target),
 and the geodetic reading of stored items (sitl.codec.mission_item_enu), on
-points worked out through companion.frames (the project's pyproj plane)."""
+points worked out through mavcore.frames (the project's pyproj plane)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.frames import enu2geodetic
+from mavcore.frames import enu2geodetic
 from sitl.codec import GeoOrigin, mission_item_enu
 from sitl.flightstack import MissionItem
 from sitl.mission_store import INT32_MAX, reposition_target
@@ -60,7 +60,7 @@ def test_stored_items_in_amsl_relative_and_local_frames():
 
 
 def test_a_fence_upload_during_a_mission_leaves_it_flying_a_new_mission_stops_it():
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from sitl.flightstack import FlightMode
     from sitl.server import SitlServer
     from test_sitl_mavlink import MISSION

@@ -104,7 +104,7 @@ def test_command_results(gcs):
     assert gcs.command(SET_MODE, CUSTOM, 2, 0) == mavlink.MAV_RESULT_DENIED  # ALTCTL: not available
     assert gcs.command(SET_MODE, CUSTOM, float("nan"), 0) == mavlink.MAV_RESULT_DENIED
     assert gcs.command(mavlink.MAV_CMD_REQUEST_MESSAGE, float("nan")) == mavlink.MAV_RESULT_DENIED
-    # not a message id (24 bits) nor an interval (int32 us): bad parameters (companion/link/command_rules.py)
+    # not a message id (24 bits) nor an interval (int32 us): bad parameters (mavcore/link/command_rules.py)
     assert gcs.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 1e30, 1e30) == mavlink.MAV_RESULT_DENIED
     assert gcs.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 4242, 1000) == mavlink.MAV_RESULT_UNSUPPORTED
     assert gcs.command(mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST, 5, 0, 1) == mavlink.MAV_RESULT_UNSUPPORTED

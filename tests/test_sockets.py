@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.errors import InputError
+from mavcore.errors import InputError
 from fuzz_link import inet_sockets   # benchmarks/ (pyproject: pytest pythonpath)
 from companion.link import Connection
 from sitl.api import SitlThread, free_udp_port

@@ -13,10 +13,11 @@ import math
 import numpy as np
 import pytest
 
-from companion.control import ControlConfig, GeometricController, Measurements, Reference
+from companion.control import GeometricController, Measurements, ReferenceNone
+from mavcore.mission.control import ControlConfigNone
 from companion.control.tilt import limit_thrust, needs_limit
-from companion.vehicle import GRAVITY_M_S2 as G
-from companion.vehicle import VehicleConfig
+from mavcore.vehicle import GRAVITY_M_S2 as G
+from mavcore.vehicle import VehicleConfig
 
 VEH = VehicleConfig()
 MG = VEH.mass_kg * G

@@ -57,7 +57,7 @@ def flight(tmp_path_factory):
     from sitl.api import SitlProcess, free_udp_port
 
     from companion.commands.fly import prepare
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
 
     tmp = tmp_path_factory.mktemp("tools")
     mission = load_mission(MISSION)
@@ -195,8 +195,8 @@ def test_mavflighttime_distance_and_time_moving(flight):
     assert abs(dist - ours) <= 0.051 + 1e-3 * ours, (dist, ours)
     # and the fixes are the true positions (ODOMETRY of the same frame) to the 1e-7 degree
     # resolution: at most half a step north and east (~5.6 mm, 5.6 mm x cos(lat))
-    from companion.frames import geodetic2enu
-    from companion.mission import load_mission
+    from mavcore.frames import geodetic2enu
+    from mavcore.mission import load_mission
 
     home = load_mission(MISSION).home
     odo = {r.msg.time_usec: (r.msg.y, r.msg.x) for r in recs if r.msg.get_type() == "ODOMETRY"}   # ENU

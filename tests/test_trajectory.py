@@ -16,7 +16,7 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 from scipy.linalg import expm, solve_continuous_are
 
-from companion.errors import PlanError
+from mavcore.errors import PlanError
 from companion.trajectory import (
     TrajectoryConfig,
     generate_trajectory,

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from companion.trajectory import Trajectory, TrajectoryConfig
+from companion.trajectory import TrajectoryNone
+from mavcore.mission.trajectory import TrajectoryConfigNone
 from companion.trajectory.extrema import max_speed_on_intervals
 
 
@@ -33,7 +34,7 @@ def test_hand_worked_piece_whose_samples_miss_the_peak():
 
 
 def test_every_piece_of_a_planned_trajectory_against_dense_samples_and_a_lipschitz_bound():
-    from companion.mission import load_mission
+    from mavcore.mission import load_mission
     from companion.planner import plan_mission
     from pathlib import Path
 

@@ -3,7 +3,7 @@ the same flight, packet for packet, as over UDP with the SITL in its own process
 
 Why identical and not merely close: in lockstep the vehicle clock only moves
 when the companion answers a frame, both transports carry the same bytes in
-the same order (``sitl.pipe``), the in-process SITL starts like the UDP one
+the same order (``mavcore.link.pipe``), the in-process SITL starts like the UDP one
 (frame 0's telemetry reaches nobody until the peer is known, then it is
 re-sent, so every stream's schedule has the same phase), and replies between
 frames are handled with the next frame (``Connection.frame_sync``). Nothing the

@@ -7,9 +7,9 @@ import pytest
 
 from companion.coverage import CoveragePlan, extract_waypoints
 from companion.coverage.waypoints import A_REF_M_S2
-from companion.errors import MapError
-from companion.maps.grid import ElevationModel
-from companion.mission.schema import FlightConfig
+from mavcore.errors import MapError
+from mavcore.maps.grid import ElevationModel
+from mavcore.mission.schema import FlightConfig
 
 # plane z = A x + B y + C, sampled on a 1 m DEM (bilinear reproduces a plane exactly)
 A, B, C = 0.08, -0.05, 3.0

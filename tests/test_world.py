@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from companion.maps.grid import ElevationModel, OccupancyGrid
-from companion.mission.sim import ObstacleConfig
+from mavcore.maps.grid import ElevationModel, OccupancyGrid
+from mavcore.mission.sim import ObstacleConfig
 from sitl.world import Terrain, World
 
 

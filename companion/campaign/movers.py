@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mission.sim import WALKER_MAX_SPEED_M_S
+from mavcore.mission.sim import WALKER_MAX_SPEED_M_S
 from .placement import cumulative, segment_mask
 
 #: Sampling step (s) of the flown path (``placement.flown_path``'s default).

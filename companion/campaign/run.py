@@ -77,7 +77,7 @@ def fly_scenario(scenario: dict, out_dir: str, keep_if_completed: bool = False,
     """One flight (runs in a worker): write the scenario file, run ``companion demo --scenario``
     in this process, classify, keep the files of a flight that did not complete, return the row."""
     from ..cli import build_parser
-    from ..errors import InputError
+    from mavcore.errors import InputError
 
     t0 = time.perf_counter()
     h = scenario_hash(scenario)

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from ..config import from_dict
-from ..errors import CampaignError, MissionError
-from ..inputs import parse_yaml, read_text
+from mavcore.config import from_dict
+from mavcore.errors import CampaignError, MissionError
+from mavcore.inputs import parse_yaml, read_text
 
 #: mission keys holding a path relative to the mission file
 PATH_KEYS = (("map",), ("dem",), ("field", "file"))
@@ -82,7 +82,7 @@ def scenario_mission(sc: ScenarioFile, source: str):
 
     Raises CampaignError naming ``source`` when the merged mission is not valid."""
     from ..commands.demo import resolve_mission
-    from ..mission.schema import Mission
+    from mavcore.mission.schema import Mission
 
     ref = sc.mission
     if not Path(ref).is_absolute() and "/" in ref:

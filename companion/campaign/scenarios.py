@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CampaignError
+from mavcore.errors import CampaignError
 from .placement import DRAWS_PER_OBSTACLE, Placement, cumulative, footprint_free, propose_obstacle, segment_mask
 from .spec import CampaignSpec, StartSpec, dim_range, is_continuous
 
@@ -73,7 +73,7 @@ def mission_path(ref: str) -> Path:
 
 def load_fields(spec: CampaignSpec) -> dict[str, Field]:
     """The I/O edge: load and plan every base mission (needed only with ``obstacles`` or ``start``)."""
-    from ..mission import load_mission
+    from mavcore.mission import load_mission
     from .placement import flown_path
 
     fields = {}

@@ -48,7 +48,7 @@ def run_search(spec, fields, out: Path, args, client=None, fly=None) -> int:
     ``fly``: the flight function (default ``run.fly_scenario``)."""
     import cma
 
-    from ..errors import InputError
+    from mavcore.errors import InputError
     from .results import read_results, write_table
     from .run import CampaignProgress, fly_scenario, make_client, run_flights
     from .scenarios import continuous_dims, scenario, scenario_yaml

@@ -3,7 +3,7 @@
 A dimension (``Dim``) is either a number (fixed) or a list ``[lo, hi]``
 (uniform in it; ``lo < hi`` makes it a *continuous dimension* that
 ``--search`` optimises over). The spec is a frozen dataclass built by
-``companion.config.from_dict`` (unknown keys rejected); errors are one line
+``mavcore.config.from_dict`` (unknown keys rejected); errors are one line
 ``<file>: key '<dotted.key>': <problem>`` (``CampaignError``, exit code 2).
 Schema: docs/campaign.md.
 """
@@ -16,9 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from ..config import from_dict
-from ..errors import CampaignError
-from ..inputs import parse_yaml, read_text
+from mavcore.config import from_dict
+from mavcore.errors import CampaignError
+from mavcore.inputs import parse_yaml, read_text
 
 #: a fixed number, or [lo, hi]: uniform in it
 Dim = float | tuple[float, float]

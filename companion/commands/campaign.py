@@ -14,7 +14,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..errors import CampaignError, InputError
+from mavcore.errors import CampaignError, InputError
 
 SEARCH_FIGURES = ("clearance", "tracking")
 
@@ -139,7 +139,7 @@ def _map_field(spec, fields):
     try:
         from ..campaign.placement import cumulative, flown_path
         from ..campaign.scenarios import Field, mission_path
-        from ..mission import load_mission
+        from mavcore.mission import load_mission
 
         grid, path, _ = flown_path(load_mission(mission_path(next(iter(fields)))), spec.cut_s)
         return Field(grid, path, cumulative(path))

@@ -2,7 +2,7 @@
 
 No arguments needed: starts the bundled SITL (``python -m sitl``, a separate
 process, lockstep, loopback UDP on a free port; ``--transport inproc``: in
-this process, the same MAVLink bytes through memory, ``sitl.pipe``), plans the bundled
+this process, the same MAVLink bytes through memory, ``mavcore.link.pipe``), plans the bundled
 ``flat-rectangle`` mission, flies it with the geometric controller, prints a
 summary table and writes ``out/``: ``plan.json``, ``flight.tlog``,
 ``report.json``, ``map.html`` (the plan and the flown track on a
@@ -22,7 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..errors import InputError
+from mavcore.errors import InputError
 
 DEFAULT_MISSION = "flat-rectangle"
 #: How the companion reaches the bundled SITL (``--transport``).
@@ -172,9 +172,9 @@ def run(args) -> int:
                             + (("mission.yaml",) if scenario is not None else ())])
     key = None
     if args.signing_key is not None:
-        from ..link.signing import load_signing_key
+        from mavcore.link.signing import load_signing_key
         key = load_signing_key(args.signing_key)
-    from ..mission import load_mission
+    from mavcore.mission import load_mission
     from .fly import safety_overrides
 
     overrides = safety_overrides(args)

@@ -43,7 +43,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import InputError
+from mavcore.errors import InputError
 
 #: The companion's side of each port convention (``--ports``; ``sitl --ports``):
 #: PX4's (the vehicle sends to the companion's port 14540) and the legacy one
@@ -351,7 +351,7 @@ def sensor_coverage_gate(mission, fp: FlightPlan, mode: str) -> tuple[FlightPlan
     ``mode`` is "refuse", or when a gap is blind. Without the replanner
     (``replan.enabled: false``) nothing reads the rangefinders: not checked.
     """
-    from ..errors import PlanError
+    from mavcore.errors import PlanError
     from ..replan.coverage_check import mission_coverage
     from ..replan.replanner import mission_replan_config
 
@@ -422,7 +422,7 @@ class MissionMaps:
     def get(self):
         """(OccupancyGrid, ElevationModel); MapError if unreadable."""
         if self._maps is None:
-            from ..maps.field import load_mission_maps
+            from mavcore.maps.field import load_mission_maps
 
             self._maps = load_mission_maps(self._mission)
         return self._maps
@@ -511,7 +511,7 @@ def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
     """
     import numpy as np
 
-    from ..errors import PlanError
+    from mavcore.errors import PlanError
 
     p = np.asarray(p_enu_m, dtype=float)
     s = np.asarray(s_enu, dtype=float)
@@ -594,7 +594,7 @@ def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None,
     from ..control import GeometricController
     from ..runner import FlightCore, FlightInputs
 
-    from ..maps.field import load_mission_maps
+    from mavcore.maps.field import load_mission_maps
 
     ctrl = None
     if cfg.control in ("companion", "rates"):
@@ -668,9 +668,9 @@ def obstacle_clearance_fn(mission, dem):
     movers = mission.sim.movers if mission.sim is not None else ()
     if not obstacles and not movers:
         return None
-    from ..geometry import scene_from_maps
-    from ..mission.sim import vehicle_radius_m
-    from ..movers import movers_nearest
+    from mavcore.geometry import scene_from_maps
+    from mavcore.mission.sim import vehicle_radius_m
+    from mavcore.movers import movers_nearest
 
     scene = scene_from_maps(None, dem, tuple(obstacles), mission.sim.canopy_height_m)
     radius = vehicle_radius_m(mission.sim, mission.vehicle.arm_m)
@@ -752,7 +752,7 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
 
 def run(args) -> int:
     from ..link import check_connection_string
-    from ..mission import load_mission
+    from mavcore.mission import load_mission
     from ..progress import Progress
 
     if args.connect is None:
@@ -763,7 +763,7 @@ def run(args) -> int:
     check_output_paths((("--tlog", args.tlog), ("--report", args.report)))
     key = None
     if args.signing_key is not None:
-        from ..link.signing import load_signing_key
+        from mavcore.link.signing import load_signing_key
         key = load_signing_key(args.signing_key)
     overrides = safety_overrides(args)
     if args.sortie is not None and args.sortie < 1:

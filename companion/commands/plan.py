@@ -22,7 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from ..errors import InputError
+from mavcore.errors import InputError
 from ..process_clock import process_wall_s
 
 
@@ -100,7 +100,7 @@ def run(args) -> int:
             # Checked up front: the final renames cannot be undone one by one.
             raise InputError(p, "cannot write: is a directory")
 
-    from ..mission import load_mission
+    from mavcore.mission import load_mission
     from ..plan_io import (field_fence, flight_items, plan_json_text, plan_to_json_dict, qgc_plan_text,
                            qgc_wpl_text, sortie_file)
     from ..planner import plan_mission

@@ -26,8 +26,8 @@ import math
 import sys
 from pathlib import Path
 
-from ..errors import InputError
-from ..inputs import Limits, check, clip, limits, name, open_regular
+from mavcore.errors import InputError
+from mavcore.inputs import Limits, check, clip, limits, name, open_regular
 
 #: Exit code of a replay whose outputs differ from the recording.
 EXIT_DIVERGED = 4
@@ -138,7 +138,7 @@ def _check_args(args) -> tuple:
 def _rebuild(args):
     """(core, flight plan, warnings) of the recorded flight, from its setup and the given files."""
     from ..link.tlog_scan import TlogGarbage
-    from ..mission import load_mission
+    from mavcore.mission import load_mission
     from ..replay import build_core, find_setup, setup_mismatches
     from .fly import flight_setup, prepare
 
@@ -280,8 +280,8 @@ def run(args) -> int:
         dem = grid = None
         obstacles = ()
         if args.mission:      # the terrain (heights above ground), the rows and the obstacles
-            from ..maps.field import load_mission_maps
-            from ..mission import load_mission
+            from mavcore.maps.field import load_mission_maps
+            from mavcore.mission import load_mission
 
             m = load_mission(args.mission)
             grid, dem = load_mission_maps(m)

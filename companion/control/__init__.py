@@ -1,6 +1,5 @@
 """Geometric SE(3) controller on vector measurements (paper Section 2.4.2), its attitude observer and mixer."""
 
-from .config import ControlConfig
 from .geometric import (
     ControlOutput,
     DecoupledTorque,
@@ -30,7 +29,6 @@ __all__ = [
     "AccelerationEstimator",
     "AttitudeEstimate",
     "BodyVectorFilter",
-    "ControlConfig",
     "ControlOutput",
     "DecoupledTorque",
     "DesiredAttitude",

@@ -135,8 +135,8 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from ..vehicle import GRAVITY_M_S2, VehicleConfig
-from .config import ControlConfig
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
+from mavcore.mission.control import ControlConfig
 from .mixer import Mixer
 from .pointing import PointingGovernor
 from .rates import rate_command

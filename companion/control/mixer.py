@@ -1,8 +1,8 @@
 """Thrust and torque -> normalised motor commands (PX4 quad-X order).
 
 The wrench ``[f, tau_x, tau_y, tau_z]`` (N, N m, body FLU) maps to rotor
-thrusts through the inverse of ``companion.vehicle.allocation_matrix``;
-``cmd_i = f_i / max_thrust_per_rotor_n`` (``companion/vehicle.py``).
+thrusts through the inverse of ``mavcore.vehicle.allocation_matrix``;
+``cmd_i = f_i / max_thrust_per_rotor_n`` (``mavcore/vehicle.py``).
 
 Saturation policy (thrust direction first). A quadrotor's thrust direction
 is its attitude, and the attitude is steered by the roll/pitch torques, so:
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..vehicle import VehicleConfig, allocation_matrix
+from mavcore.vehicle import VehicleConfig, allocation_matrix
 
 
 @dataclass(frozen=True, slots=True)

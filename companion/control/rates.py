@@ -41,7 +41,7 @@ the vehicle; without it, ``m g / (4 f_max)`` of the vehicle model.
 
 from __future__ import annotations
 
-from ..vehicle import GRAVITY_M_S2, VehicleConfig
+from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
 
 
 def rate_command(omega_d_body_rad_s, z_rad_s2, alpha_1_s: float) -> tuple:

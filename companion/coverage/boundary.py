@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from ..maps.grid import OccupancyGrid
+from mavcore.maps.grid import OccupancyGrid
 from .freespace import grid_to_world
 
 # edge direction index -> (d_row, d_col) of the corner step; 0 +x, 1 +y, 2 -x, 3 -y

@@ -29,7 +29,7 @@ from functools import cached_property
 import numpy as np
 from scipy import ndimage
 
-from ..maps.grid import OccupancyGrid
+from mavcore.maps.grid import OccupancyGrid
 
 
 @dataclass(frozen=True, eq=False)

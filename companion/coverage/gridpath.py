@@ -37,7 +37,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from ..errors import PlanError
+from mavcore.errors import PlanError
 from .freespace import FreeSpace
 
 _SQRT2 = float(np.sqrt(2.0))

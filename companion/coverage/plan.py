@@ -49,9 +49,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import PlanError
-from ..maps.grid import OccupancyGrid
-from ..mission.schema import CoverageConfig
+from mavcore.errors import PlanError
+from mavcore.maps.grid import OccupancyGrid
+from mavcore.mission.schema import CoverageConfig
 from .beam import beam_phase, corridor_phase, full_scores, isoa_sweep, main_segments
 from .boustrophedon import join_segments
 from .corridors import coverage_fraction, find_corridors

@@ -42,8 +42,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import PlanError
-from ..maps.grid import OccupancyGrid
+from mavcore.errors import PlanError
+from mavcore.maps.grid import OccupancyGrid
 from .freespace import bbox_cells, dilate_runs
 from .peaks import find_peaks
 

@@ -35,9 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import PlanError
-from ..maps.grid import ElevationModel
-from ..mission.schema import FlightConfig
+from mavcore.errors import PlanError
+from mavcore.maps.grid import ElevationModel
+from mavcore.mission.schema import FlightConfig
 from .plan import CoveragePlan
 
 #: reference peak acceleration of the speed ramps (m/s^2)

@@ -73,12 +73,12 @@ from mavcore import autopilot as autopilots
 
 from ..control.observer import heading_from_accel_mag
 from ..control.rates import normalised_thrust, vehicle_hover_thrust
-from ..errors import CommandRejected, LinkError
+from mavcore.errors import CommandRejected, LinkError
 from ..link import codec
 from ..link.obstacle_distance import ObstacleDistancePublisher, encode_obstacle_distance
 from ..report import FlightReport, ReplanningStats, TrackingStats
 from ..replan.perception import propagated_pose
-from ..vehicle import VehicleConfig
+from mavcore.vehicle import VehicleConfig
 from .config import RunnerConfig
 from .coverage import PathCoverage
 from .log import ErrorStats, FlightLog

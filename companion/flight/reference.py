@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..vehicle import GRAVITY_M_S2
+from mavcore.vehicle import GRAVITY_M_S2
 
 
 @dataclass(frozen=True, slots=True)

@@ -4,7 +4,7 @@ A message is accepted when, in this order:
 
 1. its system/component ids are the vehicle's (DESIGN: 1/1);
 2. with a signing key: its signature verifies and its timestamp is new
-   (``companion.link.signing.SignatureVerifier``; the vehicle signs all it sends);
+   (``mavcore.link.signing.SignatureVerifier``; the vehicle signs all it sends);
 3. it comes from the vehicle's address: the source address of the first
    HEARTBEAT that passed 1-2 binds it (before that only a HEARTBEAT is
    accepted); a spoofed sysid 1 from another port is dropped. The binding
@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from .signing import SignatureVerifier
+from mavcore.link.signing import SignatureVerifier
 
 #: The sensor-frame messages that carry the vehicle's clock (PX4: HIGHRES_IMU,
 #: ArduCopter: RAW_IMU; ``mavcore.autopilot``).

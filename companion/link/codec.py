@@ -2,7 +2,7 @@
 speaks NED/FRD, wire units and MAVLink's [w, x, y, z] quaternions.
 
 Everything it returns is ENU world / FLU body, SI units (docs/frames.md);
-every frame change goes through ``companion.frames``. Decoders take a
+every frame change goes through ``mavcore.frames``. Decoders take a
 pymavlink message object and return a small named result; encoders take a
 pymavlink ``MAVLink`` protocol object (``conn.mav``) and return the message
 object, ready for ``conn.send``.
@@ -10,7 +10,7 @@ object, ready for ``conn.send``.
 The decoders of the per-frame messages (HIGHRES_IMU, LOCAL_POSITION_NED) are
 written out component by component instead of via ``frames.frd2flu`` on a
 stacked array: they run 250 times per simulated second and the explicit form
-is several times cheaper. Their tests check them against ``companion.frames``.
+is several times cheaper. Their tests check them against ``mavcore.frames``.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from .. import frames
-from .command_rules import ATTITUDE_TARGET_RATES_ONLY
+from mavcore import frames
+from mavcore.link.command_rules import ATTITUDE_TARGET_RATES_ONLY
 
 # --- MAVLink constants used by the companion (named here once) --------------
 
@@ -320,7 +320,7 @@ def decode_odometry(msg) -> TruthState:
     degree latitude/longitude, about 1 cm). A velocity in
     MAV_FRAME_LOCAL_NED (child frame) is accepted as well. Plain float
     arithmetic (it runs every frame): ``R_enu_flu = T_en R_ned_frd T_fb``
-    written out, checked against ``companion.frames`` by the tests.
+    written out, checked against ``mavcore.frames`` by the tests.
     """
     w, x, y, z = msg.q
     n = math.sqrt(w * w + x * x + y * y + z * z)
@@ -508,7 +508,7 @@ def encode_hil_actuator_controls(mav, time_usec: int, motor_cmd, armed: bool):
         The ``time_usec`` of the HIGHRES_IMU being answered.
     motor_cmd : sequence of 4 floats or None
         Normalised motor commands 0..1 in PX4 quad-X order
-        (``companion.vehicle``); None sends four NaN: a lockstep tick that
+        (``mavcore.vehicle``); None sends four NaN: a lockstep tick that
         leaves the vehicle's own controller in charge.
     armed : bool
         Sets ``MAV_MODE_FLAG_SAFETY_ARMED`` in ``mode``.

@@ -14,7 +14,7 @@ bytes: undecodable data is counted in ``n_bad`` and dropped. Timeouts that
 guard the link's liveness (no answer at all) are wall-clock; everything the
 flight does is timed by the vehicle's clock in the runner.
 
-UDP sockets are opened by ``companion.link.sockets.open_udp``: ``udpout``
+UDP sockets are opened by ``mavcore.link.sockets.open_udp``: ``udpout``
 is connected to the vehicle (the kernel drops datagrams from anyone else),
 ``udpin`` binds exactly the address given, and a port in use is an error.
 Every received message passes ``companion.link.auth.VehicleFilter`` (the
@@ -33,12 +33,12 @@ from typing import Callable, Iterable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from ..errors import CommandRejected, InputError, LinkError, UnsafeMessage
+from mavcore.errors import CommandRejected, InputError, LinkError, UnsafeMessage
 from . import codec
-from .command_rules import actuator_problem, outgoing_problem
+from mavcore.link.command_rules import actuator_problem, outgoing_problem
 from .auth import FRAME_TYPES, LinkStats, VehicleFilter
-from .signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
-from .sockets import is_datagram_url, open_pipe
+from mavcore.link.signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
+from mavcore.link.sockets import is_datagram_url, open_pipe
 from .tlog import TlogWriter
 
 COMPANION_SYSTEM_ID = 1
@@ -83,7 +83,7 @@ class Connection:
     target_system, target_component : int
         The vehicle (1/1, docs/mavlink.md "Who is who").
     signing_key : bytes or None
-        32-byte MAVLink 2 signing key (``companion.link.signing.load_signing_key``).
+        32-byte MAVLink 2 signing key (``mavcore.link.signing.load_signing_key``).
     max_time_jump_s : float
         Vehicle-time tolerance of ``VehicleFilter`` (s).
 
@@ -114,7 +114,7 @@ class Connection:
         self._fd = None
         self._is_udp = url.startswith(("udp", _MEMORY))   # datagrams carry whole packets
         self._last_heartbeat_s: float | None = None
-        self._pipe = None          # datagram pipe (UDP socket or in-process, ``sitl.pipe``), see ``open``
+        self._pipe = None          # datagram pipe (UDP socket or in-process, ``mavcore.link.pipe``), see ``open``
         self._dest = None          # udpout: the vehicle's resolved address
         self._rx_log = None        # packets received, not yet in the tlog (see ``_record_answer``)
         self._rx_frames = None     # [(index in _rx_log, HIGHRES_IMU time_usec)] of that batch
@@ -134,7 +134,7 @@ class Connection:
     def spin_s(self) -> float:
         """Lockstep (set by the runner): busy-poll up to this long (s) for the
         next datagram before sleeping in the kernel (UDP; adaptive, see
-        ``sitl.pipe.AdaptiveSpin``). The vehicle's next frame usually arrives
+        ``mavcore.link.pipe.AdaptiveSpin``). The vehicle's next frame usually arrives
         within tens of microseconds, less than a process wake-up costs. Only
         worth it with the vehicle on another core and that core free."""
         return self._spin_s
@@ -165,7 +165,7 @@ class Connection:
             Unknown host, port in use, connection refused: one line naming ``--connect``.
         """
         if is_datagram_url(self.url):
-            # Read and write datagrams directly (``sitl.pipe``): on UDP a
+            # Read and write datagrams directly (``mavcore.link.pipe``): on UDP a
             # blocking socket with a kernel receive timeout (SO_RCVTIMEO) waits
             # for the next frame in one recvfrom() instead of select() +
             # recvfrom() + a failing recvfrom(); MSG_DONTWAIT polls without

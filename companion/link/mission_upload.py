@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from ..errors import CommandRejected, LinkError
+from mavcore.errors import CommandRejected, LinkError
 
 
 def mission_result_text(result: int, n_items: int | None = None, capacity: int | None = None) -> str:

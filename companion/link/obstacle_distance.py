@@ -22,7 +22,7 @@ the cm), the smallest where several overlap; a beam with no return fills
 them with "no obstacle" (``max_distance + 1``) when its own range is the
 message's ``max_distance``, else with its own range (free up to there, no
 further claim). Frames: inside, a beam's direction is a body FLU azimuth;
-``companion.frames.azimuth_flu2frd_deg`` turns it into the message's angle.
+``mavcore.frames.azimuth_flu2frd_deg`` turns it into the message's angle.
 
 Publishing (``ObstacleDistancePublisher``): timed by the vehicle's clock, at
 most ``PUBLISH_HZ`` (PX4 expects about 10 Hz), from the readings of the last
@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import frames
+from mavcore import frames
 
 #: Sectors of OBSTACLE_DISTANCE and their width (deg).
 N_SECTORS = 72

@@ -1,7 +1,7 @@
 """Online re-planning around unknown obstacles (paper Section 2.3.3, issue 8):
 perception from DISTANCE_SENSOR, the improved APF, rejoin and re-route."""
 
-from ..mission.replan import ReplanConfig, SensorMount
+from mavcore.mission.replan import ReplanConfig, SensorMount
 from .apf import ApfForce, ApfParams, apf_force, attractive_potential, repulsive_potential, total_potential
 from .globalplan import GlobalPlan, Segment
 from .knownmap import KnownMap

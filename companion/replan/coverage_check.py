@@ -292,8 +292,8 @@ _ENUM_EULER_FLU_DEG = {**{k: (0.0, 0.0, -45.0 * k) for k in range(8)},
 
 
 def beam_from_config(cfg) -> Beam:
-    """A ``Beam`` from a ``companion.mission.sim.RangefinderConfig``."""
-    from .. import frames
+    """A ``Beam`` from a ``mavcore.mission.sim.RangefinderConfig``."""
+    from mavcore import frames
 
     if cfg.orientation in _ENUM_EULER_FLU_DEG:
         R = frames.euler_zyx2rotmat(*np.radians(_ENUM_EULER_FLU_DEG[cfg.orientation]))
@@ -311,7 +311,7 @@ def mission_coverage(mission, trajectory, body_radius_m: float) -> SensorCoverag
     (``sim.rangefinders``, else the default suite), braking at
     ``replan.accel_m_s2`` and stopping ``replan.clearance_m + body_radius_m``
     from what they see."""
-    from ..mission.sim import default_rangefinders
+    from mavcore.mission.sim import default_rangefinders
     from ..trajectory.extrema import max_speed_on_intervals
 
     sim = mission.sim

@@ -17,8 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..mission.schema import FlightConfig
-from ..trajectory import Trajectory, TrajectoryConfig
+from mavcore.mission.schema import FlightConfig
+from ..trajectory import Trajectory
+from mavcore.mission.trajectory import TrajectoryConfig
 
 #: An end of a main segment matches a corner way-point within this distance (m).
 _MATCH_TOL_M = 0.05

@@ -28,8 +28,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..coverage.freespace import FreeSpace, dilate_runs, disk_half_widths, erode_free_space
-from ..maps.grid import ElevationModel, OccupancyGrid
-from ..maps.heightfield import HeightField
+from mavcore.maps.grid import ElevationModel, OccupancyGrid
+from mavcore.maps.heightfield import HeightField
 
 KNOWN_GROUND, KNOWN_ROW, KNOWN_ADDED, UNKNOWN = "ground", "row", "added", "unknown"
 #: ``explains``: a ray enters a row within this distance (m) beyond the return ...

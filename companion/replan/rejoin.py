@@ -48,7 +48,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..coverage.waypoints import A_REF_M_S2
-from ..errors import PlanError
+from mavcore.errors import PlanError
 from ..trajectory import generate_trajectory
 from .globalplan import GlobalPlan, Segment
 

@@ -87,7 +87,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..mission.replan import ReplanConfig
+from mavcore.mission.replan import ReplanConfig
 from ..flight.reference import RefSample
 from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force

@@ -61,7 +61,7 @@ from scipy import ndimage
 from ..coverage.freespace import dilate_runs, disk_half_widths, grid_to_world, lookup, world_to_grid
 from ..coverage.gridpath import aux_path
 from ..coverage.waypoints import waypoints_along
-from ..errors import InputError
+from mavcore.errors import InputError
 from ..trajectory import generate_trajectory
 from .globalplan import GlobalPlan
 from .knownmap import KnownMap

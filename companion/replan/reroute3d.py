@@ -28,7 +28,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..errors import InputError, PlanError
+from mavcore.errors import InputError, PlanError
 from ..trajectory import generate_trajectory
 from .globalplan import GlobalPlan
 from .rejoin import first_time_s

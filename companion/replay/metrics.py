@@ -45,7 +45,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore.autopilot import from_heartbeat
 
-from .. import frames
+from mavcore import frames
 from ..flight.core import PHASE_CODE
 from ..flight.log import ErrorStats, FlightLog
 from ..flight.setup_record import SETUP_TEXT_ID

@@ -85,7 +85,7 @@ def build_core(setup: dict, mission, flight_plan) -> FlightCore:
     ----------
     setup : dict
         The recorded setup record.
-    mission : companion.mission.Mission
+    mission : mavcore.mission.Mission
         The mission loaded from the same file.
     flight_plan : companion.commands.fly.FlightPlan
         From ``companion.commands.fly.prepare`` with the same plan source,

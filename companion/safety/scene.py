@@ -4,7 +4,7 @@ distance fields over arrays of ENU points.
 Terrain
     ``TerrainField``: the DEM's height under each point, bilinear between cell
     centres, clamped to the grid and NODATA filled with the nearest valid cell
-    (the same terrain as ``companion.maps.heightfield.HeightField``, the SITL's
+    (the same terrain as ``mavcore.maps.heightfield.HeightField``, the SITL's
     and the replanner's, vectorised).
 Rows
     ``RowField``: each occupied OGM cell is a box from the ground to the
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..maps.heightfield import HeightField
+from mavcore.maps.heightfield import HeightField
 
 
 class TerrainField:

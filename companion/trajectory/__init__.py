@@ -1,14 +1,13 @@
 """LQR trajectory generation (Section 2.3.2) and the pointing direction (eq. 21).
 
 The names are loaded on first use (PEP 562): ``companion fly --plan`` reads
-``TrajectoryConfig`` and the stored pieces without the LQR solver, whose
+the stored pieces without the LQR solver, whose
 ``scipy.linalg`` import is 0.2 s of the 0.5 s a flight may take to start.
 """
 
 from importlib import import_module
 
 _WHERE = {
-    "TrajectoryConfig": ".config",
     "generate_trajectory": ".lqr",
     "PointingDerivatives": ".pointing",
     "pointing_derivatives": ".pointing",

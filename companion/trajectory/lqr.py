@@ -66,8 +66,8 @@ import math
 import numpy as np
 from scipy.linalg import expm, solve_banded
 
-from ..errors import PlanError
-from .config import TrajectoryConfig
+from mavcore.errors import PlanError
+from mavcore.mission.trajectory import TrajectoryConfig
 from .sampling import Trajectory, derivative_coefficients
 
 #: Taylor degree of the in-interval polynomials when Q != 0 (see module doc).

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import PlanError
+from mavcore.errors import PlanError
 
 #: Closer than this to S_p [m] the direction is undefined.
 MIN_TARGET_DISTANCE_M = 1e-6

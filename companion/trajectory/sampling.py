@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import TrajectoryConfig
+from mavcore.mission.trajectory import TrajectoryConfig
 from .pointing import pointing_derivatives
 
 #: Below this many samples per non-empty interval a gather is cheaper than

@@ -4,7 +4,7 @@
 
 Deterministic. The parcel is drawn in metres east/north of its south-west
 corner (the mission's home) and written as WGS-84 longitude/latitude
-(RFC 7946) through the local tangent plane (``companion.geodesy``):
+(RFC 7946) through the local tangent plane (``mavcore.geodesy``):
 
 - ``boundary``: a quadrilateral of 1.05 ha;
 - ``exclusion``: a 12 m x 8 m shed inside the parcel;
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from companion.geodesy import enu2geodetic
+from mavcore.geodesy import enu2geodetic
 
 HERE = Path(__file__).resolve().parent
 HOME = (44.81, -0.58, 35.0)                     # lat, lon, alt (m AMSL) of the south-west corner

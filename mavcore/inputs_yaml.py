@@ -1,7 +1,7 @@
-"""The bounded YAML loader of ``companion.inputs`` (docs/limits.md): PyYAML's safe
+"""The bounded YAML loader of ``mavcore.inputs`` (docs/limits.md): PyYAML's safe
 loader with an alias budget, a cap on the document's size with its aliases
 expanded, and a nesting cap, all counted while composing (nothing is expanded
-first). Kept apart so that importing ``companion.inputs`` does not import PyYAML.
+first). Kept apart so that importing ``mavcore.inputs`` does not import PyYAML.
 """
 
 from __future__ import annotations

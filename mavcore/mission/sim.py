@@ -60,7 +60,7 @@ class MoverConfig:
     It waits at ``path[0]`` until ``start_s`` (vehicle clock, s since the
     SITL's boot), then moves along the polyline at ``speed_m_s``; at the end
     it stops (``loop: false``) or walks back and forth along it (``loop:
-    true``). Kinematics: ``companion.movers``.
+    true``). Kinematics: ``mavcore.movers``.
     """
 
     type: Literal["walker", "tractor"]

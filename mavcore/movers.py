@@ -2,7 +2,7 @@
 time of the vehicle clock, and its solid there.
 
 Pure: a ``MoverConfig`` and a time (s since the SITL's boot) in, positions
-(world ENU, m) and ``companion.geometry`` solids out. The SITL renders and
+(world ENU, m) and ``mavcore.geometry`` solids out. The SITL renders and
 collides with these solids (``sitl.world``, ``sitl.collision``) and the
 companion's report measures its true clearance to the same ones.
 

@@ -15,7 +15,7 @@ Conventions
   with the two constant permutation/reflection matrices below.
 - Quaternions on the wire are [w, x, y, z] (Hamilton, body FRD -> world NED).
 - Geodetic: the local tangent plane at the mission home (geodetic -> ECEF ->
-  ENU on the WGS-84 ellipsoid, through pyproj: ``companion.geodesy``).
+  ENU on the WGS-84 ellipsoid, through pyproj: ``mavcore.geodesy``).
 """
 
 from __future__ import annotations
@@ -162,11 +162,11 @@ def enu2geodetic(x_east_m, y_north_m, z_up_m, lat0_deg, lon0_deg, alt0_m):
     """Local ENU (m) about a home point -> (lat_deg, lon_deg, alt_m).
 
     The local tangent plane at the home on the WGS-84 ellipsoid, through
-    pyproj (``companion.geodesy``); the inverse of ``geodetic2enu``.
+    pyproj (``mavcore.geodesy``); the inverse of ``geodetic2enu``.
     """
     return _geodesy.enu2geodetic(x_east_m, y_north_m, z_up_m, lat0_deg, lon0_deg, alt0_m)
 
 
 def geodetic2enu(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m):
-    """(lat_deg, lon_deg, alt_m) -> local ENU (m) about a home point (``companion.geodesy``)."""
+    """(lat_deg, lon_deg, alt_m) -> local ENU (m) about a home point (``mavcore.geodesy``)."""
     return _geodesy.geodetic2enu(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m)

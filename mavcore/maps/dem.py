@@ -6,7 +6,7 @@ Header keys (case-insensitive, one ``key value`` pair per line, any order):
 cells), optional ``NODATA_value``. A grid with ``dx != dy`` is resampled
 bilinearly onto square cells of ``min(dx, dy)`` (:func:`resample_square`), so
 every ``ElevationModel`` has square cells. Georeferenced DEMs (GeoTIFF, an
-``.asc`` with a ``.prj``, any CRS) go through :mod:`companion.maps.gis`. ``*llcorner`` is the
+``.asc`` with a ``.prj``, any CRS) go through :mod:`mavcore.maps.gis`. ``*llcorner`` is the
 outer lower-left corner of the grid, ``*llcenter`` the centre of the
 lower-left cell (half a cell further in). Then ``nrows`` rows of ``ncols``
 numbers, the first row being the northernmost; the model is flipped so that

@@ -3,7 +3,7 @@
 The SITL's links (``sitl.server._Link``) and the companion's
 (``companion.link.connection.Connection``) read and write whole datagrams
 through a pipe; which pipe a connection string gives is decided in one place,
-``companion.link.sockets.open_pipe``:
+``mavcore.link.sockets.open_pipe``:
 
 - ``UdpPipe`` (``udpin:``/``udpout:``/``udp:``): a UDP socket, read with one
   ``recvfrom`` per datagram. A wait is one blocking ``recvfrom`` under a
@@ -98,7 +98,7 @@ class AdaptiveSpin:
 
 
 class UdpPipe:
-    """A UDP socket as a datagram pipe (opened by ``companion.link.sockets.open_udp``).
+    """A UDP socket as a datagram pipe (opened by ``mavcore.link.sockets.open_udp``).
 
     Parameters
     ----------

@@ -2,7 +2,7 @@
 
 The field comes from ``map`` (a Nav2 map YAML) or ``field`` (GeoJSON/KML);
 ``dem`` is a local ASCII grid or a georeferenced raster (``dem_crs`` when the
-file has no CRS); see ``companion.maps.field``.
+file has no CRS); see ``mavcore.maps.field``.
 
 Only the keys below are accepted; an unknown key or a wrong type is a
 ``MissionError`` naming the file and the dotted key.
@@ -15,10 +15,10 @@ from dataclasses import field as _field   # the Mission class has a key named "f
 from pathlib import Path
 from typing import Literal
 
-from ..control.config import ControlConfig
+from mavcore.mission.control import ControlConfig
 from ..energy import EnergyConfig
 from ..vehicle import VehicleConfig
-from ..trajectory.config import TrajectoryConfig
+from mavcore.mission.trajectory import TrajectoryConfig
 from .replan import ReplanConfig
 from .sim import SimConfig
 
@@ -36,7 +36,7 @@ class HomeConfig:
 
     ``heading_deg``: compass bearing (deg, clockwise from north) of the local
     map files' x axis; 90 (default) is east. The loaders rotate local maps
-    into ENU (``companion.maps.field``); everything else in the mission is ENU.
+    into ENU (``mavcore.maps.field``); everything else in the mission is ENU.
     """
 
     lat: float
@@ -103,7 +103,7 @@ class CoverageConfig:
 @dataclass(frozen=True)
 class FieldConfig:
     """A field given as vectors (GeoJSON or KML, WGS-84): rasterised at ``resolution_m``;
-    line strings are vine rows ``row_width_m`` wide (``companion.maps.field``)."""
+    line strings are vine rows ``row_width_m`` wide (``mavcore.maps.field``)."""
 
     file: str
     resolution_m: float = 0.1

@@ -164,7 +164,7 @@ def check_sim_ranges(sim) -> None:
     for key, value in numeric_keys(sim):
         r = SIM_RANGES.get(key)
         if r is None:
-            raise ValueError(f"sim.{key}: no physical range is defined (companion/mission/sim_ranges.py)")
+            raise ValueError(f"sim.{key}: no physical range is defined (mavcore/mission/sim_ranges.py)")
         if isinstance(value, tuple):
             vals = [math.hypot(*(float(x) for x in value))] if r.norm else [float(x) for x in value]
         else:

@@ -15,7 +15,7 @@ can then send to them. Here:
 No address is ever widened: loopback unless the user gives another one.
 
 ``open_pipe`` is the one place where a connection string becomes a datagram
-pipe (``sitl.pipe``), for the SITL's links and the companion's alike: a UDP
+pipe (``mavcore.link.pipe``), for the SITL's links and the companion's alike: a UDP
 socket as above, or ``inproc:NAME``, the in-process transport.
 """
 
@@ -25,7 +25,7 @@ import errno
 import socket
 from dataclasses import dataclass
 
-from sitl.pipe import UdpPipe, connect_memory, is_memory_url, listen_memory
+from mavcore.link.pipe import UdpPipe, connect_memory, is_memory_url, listen_memory
 
 from ..errors import InputError
 
@@ -65,13 +65,13 @@ def is_udp_url(url: str) -> bool:
 
 
 def is_datagram_url(url: str) -> bool:
-    """A link read datagram by datagram through a ``sitl.pipe`` pipe (UDP or in-process)."""
+    """A link read datagram by datagram through a ``mavcore.link.pipe`` pipe (UDP or in-process)."""
     return url.startswith(UDP_SCHEMES) or is_memory_url(url)
 
 
 def open_pipe(url: str, option: str, listen: bool = False):
-    """The datagram pipe of ``url``: ``sitl.pipe.UdpPipe`` for ``udpin:``/``udp:``/
-    ``udpout:`` (``open_udp``), ``sitl.pipe.MemoryPipe`` for ``inproc:NAME``
+    """The datagram pipe of ``url``: ``mavcore.link.pipe.UdpPipe`` for ``udpin:``/``udp:``/
+    ``udpout:`` (``open_udp``), ``mavcore.link.pipe.MemoryPipe`` for ``inproc:NAME``
     (``listen``: the vehicle end, registered under NAME; else the peer's end).
 
     Raises

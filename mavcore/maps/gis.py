@@ -4,7 +4,7 @@ Needs the optional ``gis`` extra (rasterio, pyproj; wheels on PyPI, no system
 libraries): ``pip install "vineyard-gnc[gis]"``. The bundled missions do not.
 
 Reprojection (:func:`reproject_to_enu`, pure given the two transforms)
-    The mission's map frame is ENU about ``home`` (``companion.geodesy``: the
+    The mission's map frame is ENU about ``home`` (``mavcore.geodesy``: the
     local tangent plane through pyproj, the same one the exports use to turn
     ENU back into latitude/longitude, so a height read here is put back at
     the same place). A square ENU grid is laid over the DEM's footprint at the DEM's
@@ -44,13 +44,13 @@ def _need_gis(src: str, what: str):
 
 
 def enu_to_lonlat(x_m: np.ndarray, y_m: np.ndarray, home: tuple[float, float, float]):
-    """ENU (m, z = 0) about ``home`` -> (lon_deg, lat_deg) arrays (``companion.geodesy``)."""
+    """ENU (m, z = 0) about ``home`` -> (lon_deg, lat_deg) arrays (``mavcore.geodesy``)."""
     lat, lon, _ = geodesy.enu2geodetic(np.asarray(x_m, float), np.asarray(y_m, float), 0.0, *home)
     return lon, lat
 
 
 def lonlat_to_enu(lon_deg, lat_deg, home: tuple[float, float, float]):
-    """(lon_deg, lat_deg) at the home's altitude -> ENU (x_m, y_m) arrays (``companion.geodesy``)."""
+    """(lon_deg, lat_deg) at the home's altitude -> ENU (x_m, y_m) arrays (``mavcore.geodesy``)."""
     x, y, _ = geodesy.geodetic2enu(np.asarray(lat_deg, float), np.asarray(lon_deg, float), home[2], *home)
     return x, y
 

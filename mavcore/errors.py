@@ -60,7 +60,7 @@ class LinkError(RuntimeError):
 
 class UnsafeMessage(ValueError):
     """The companion refused to send a message that breaks
-    ``companion.link.command_rules`` (a non-finite or out-of-range command
+    ``mavcore.link.command_rules`` (a non-finite or out-of-range command
     parameter, setpoint or motor command): nothing was sent.
 
     Parameters
