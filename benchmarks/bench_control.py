@@ -30,8 +30,8 @@ import time
 
 import numpy as np
 
-from companion.control import GeometricController, Measurements, ReferenceNone
-from mavcore.mission.control import ControlConfigNone
+from companion.control import GeometricController, Measurements, Reference
+from mavcore.mission.control import ControlConfig
 from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
 
 

@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT))
 
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
-from companion.link import codec  # noqa: E402
+from mavcore import codec  # noqa: E402
 from sitl.api import SitlProcess  # noqa: E402
 
 _IMU_ID = mavlink.MAVLINK_MSG_ID_HIGHRES_IMU

@@ -33,7 +33,8 @@ sys.path.insert(0, str(ROOT))
 
 from companion.cli import main as companion_main   # noqa: E402
 from mavcore.mission import load_mission   # noqa: E402
-from sitl.flightstack import FlightMode, MissionItem, NavState   # noqa: E402
+from mavcore.codec import MissionItem   # noqa: E402
+from sitl.flightstack import FlightMode, NavState   # noqa: E402
 from sitl.server import ServerConfig, SitlServer   # noqa: E402
 
 

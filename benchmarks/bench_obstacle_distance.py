@@ -19,13 +19,13 @@ import time
 import numpy as np
 
 from mavcore.frames import euler_zyx2rotmat
-from companion.link.codec import Range
+from mavcore.codec import Range
 from companion.link.obstacle_distance import pack_sectors, sector_beam
 from mavcore.mission import load_mission
 from companion.planner import plan_mission
 from companion.replan.coverage_check import mission_coverage, sample_times
 from companion.trajectory.extrema import max_speed_on_intervals
-from sitl.codec import ObstacleSectors
+from mavcore.codec import ObstacleSectors
 from sitl.collision_prevention import CollisionPrevention, CollisionPreventionConfig
 
 

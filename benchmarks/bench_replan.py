@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from mavcore import frames
-from companion.link import codec
+from mavcore import codec
 from mavcore.mission import load_mission
 from mavcore.mission.sim import ObstacleConfig
 from companion.planner import plan_mission

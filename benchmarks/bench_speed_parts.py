@@ -49,7 +49,7 @@ def main() -> int:
     from mavcore import geodesy
     from companion.commands.demo import resolve_mission
     from mavcore.mission import load_mission
-    from sitl import codec
+    from mavcore import codec
     from sitl.plant import Plant, PlantParams
     from sitl.sim import Simulation
 
@@ -83,7 +83,7 @@ def main() -> int:
     mav = mavlink.MAVLink(None, 255, 190)
     msg = mav.set_position_target_local_ned_encode(1000, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b0000_1100_0000_0000,
                                                    1.0, 2.0, -3.0, 0.1, 0.2, -0.3, 0.01, 0.02, -0.03, 0.5, 0.0)
-    rows.append(("sitl.codec.decode_position_target",
+    rows.append(("mavcore.codec.decode_position_target",
                  per_call_us(lambda: codec.decode_position_target(msg, 0.0, (0.0, 0.0, 0.0)), args.number,
                              args.repeat)))
     geodesy.enu2geodetic(1.0, 2.0, 3.0, 44.8, -0.6, 30.0)

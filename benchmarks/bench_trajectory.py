@@ -23,8 +23,8 @@ import time
 
 import numpy as np
 
-from companion.trajectory import generate_trajectoryNone
-from mavcore.mission.trajectory import TrajectoryConfigNone
+from companion.trajectory import generate_trajectory
+from mavcore.mission.trajectory import TrajectoryConfig
 
 
 def boustrophedon(n_points: int, row_length_m: float = 160.0, spacing_m: float = 2.5,

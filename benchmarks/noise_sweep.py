@@ -52,7 +52,7 @@ CONTROLLERS = {
 
 
 def _fly_inprocess(mission: str, control: str, cfg: dict, noise: dict, sensors, cut_s, seed, cache) -> dict:
-    from mavcore.mission.control import ControlConfigNone
+    from mavcore.mission.control import ControlConfig
     from mavcore.mission import load_mission
     from companion.planner import plan_mission
     from track_inprocess import fly

@@ -121,7 +121,7 @@ def _baseline_row(sensors: str, inprocess: bool) -> Row:
 
 
 def fly_inprocess(mission: str, row: Row, cut_s: float | None, seed: int | None, cache: dict) -> dict:
-    from mavcore.mission.control import ControlConfigNone
+    from mavcore.mission.control import ControlConfig
     from mavcore.mission import load_mission
     from companion.planner import plan_mission
     from sensor_models import SensorSpec

@@ -2,7 +2,7 @@
 
 One list of items is built here and written three ways: the QGroundControl
 ``.plan``, the ``QGC WPL 110`` file (``companion.plan_io``) and the
-MISSION_INT upload (``companion.link.codec.encode_mission_item``). Order:
+MISSION_INT upload (``mavcore.codec.encode_mission_item``). Order:
 
 ==  =======================  ================================================
 #   command                  what

@@ -3,7 +3,7 @@
 Inside the project everything is ENU world / FLU body, z up, SI units
 (docs/frames.md). MAVLink speaks NED world / FRD body, [w, x, y, z] quaternions,
 1e7 degrees, mm and cm. The MAVLink encode/decode module of each side
-(``companion.link.codec``, ``sitl.codec``) calls these functions and nothing
+(``mavcore.codec``, ``mavcore.codec``) calls these functions and nothing
 else does.
 
 Conventions

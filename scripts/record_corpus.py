@@ -96,7 +96,7 @@ class DropRelay(threading.Thread):
         return f"udpout:127.0.0.1:{self.c.getsockname()[1]}"
 
     def run(self) -> None:
-        from companion.link.codec import split_datagram
+        from mavcore.codec import split_datagram
 
         while not self.stop:
             r, _, _ = select.select([self.c, self.v], [], [], 0.05)

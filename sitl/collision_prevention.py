@@ -94,7 +94,7 @@ class CollisionPrevention:
         self._now_us = int(now_us)
 
     def on_sectors(self, sectors, now_us: int | None = None, keep_age: bool = False) -> None:
-        """A decoded OBSTACLE_DISTANCE (``sitl.codec.ObstacleSectors``) received at
+        """A decoded OBSTACLE_DISTANCE (``mavcore.codec.ObstacleSectors``) received at
         ``now_us`` (vehicle clock; default: the time last set): the new picture."""
         self._sectors = sectors
         d = np.asarray(sectors.distance_m, dtype=float)

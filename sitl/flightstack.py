@@ -5,7 +5,7 @@ freshness, failsafes, parameters and mission storage.
 Pure: no sockets, no clock. Everything is timed by the vehicle time handed
 in (``now_us``); the transport (``sitl.server``) turns MAVLink messages into
 calls here and the results back into MAVLink. World ENU, SI units; the
-MAVLink codec (``sitl.codec``) does every NED/wire-unit conversion.
+MAVLink codec (``mavcore.codec``) does every NED/wire-unit conversion.
 
 Modes (PX4 main/sub modes, ``custom_mode = main << 16 | sub << 24``)
 --------------------------------------------------------------------
@@ -71,6 +71,7 @@ from enum import Enum
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from mavcore.codec import MissionItem, RateSetpoint
 from mavcore.link.command_rules import mission_item_problem
 from mavcore.autopilot import PX4_AUTOPILOT, READ_ONLY_PARAMS, Autopilot, ParamSpec  # noqa: F401 (re-exported)
 
@@ -79,7 +80,6 @@ from .fence import Fence
 from .mission_exec import MissionExecutor, carrot_step
 from .onboard import Setpoint
 from .rally import return_destination
-from .rate_control import RateSetpoint
 
 # MAVLink enum values used by the stack (named once, from the common dialect).
 RESULT_ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
@@ -279,26 +279,6 @@ class Parameters:
 
 
 # --- mission storage (the MISSION_INT protocol, pure) ----------------------
-
-
-@dataclass(frozen=True, slots=True)
-class MissionItem:
-    """One stored MISSION_ITEM_INT, in wire units as received (x, y: 1e7 deg
-    for global frames or 1e4 m for local frames; z in the item's frame)."""
-
-    seq: int
-    frame: int
-    command: int
-    current: int
-    autocontinue: int
-    param1: float
-    param2: float
-    param3: float
-    param4: float
-    x: int
-    y: int
-    z: float
-    mission_type: int = 0
 
 
 @dataclass(frozen=True, slots=True)

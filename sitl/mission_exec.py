@@ -6,7 +6,7 @@ yaw targets for the onboard controller (pure: no I/O, no clock).
 https://docs.px4.io/main/en/flying/missions.html); its one entry point for a
 flight-stack personality is ``start(state, seq)`` (then ``update`` every
 frame). Items were converted to world ENU once (``NavItem``, built by
-``nav_items`` from a converter such as ``sitl.codec.mission_item_enu``).
+``nav_items`` from a converter such as ``mavcore.codec.mission_item_enu``).
 
 =============================  ===============================================
 item                           flown as

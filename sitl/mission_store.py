@@ -6,7 +6,7 @@ the end of its upload (``validator``), turns the stored lists into the
 flight stack's ``MissionExecutor``, ``Fence`` and rally points
 (``flight_objects``), and says what MISSION_CURRENT reports
 (``mission_state``), and where a DO_REPOSITION goes
-(``reposition_target``). Geodetic positions go through ``sitl.codec``
+(``reposition_target``). Geodetic positions go through ``mavcore.codec``
 (``mission_item_enu``), the SITL's one way in from WGS-84.
 """
 
@@ -18,7 +18,7 @@ from functools import partial
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from . import codec
+from mavcore import codec
 from .fence import Fence, FenceError, fence_from_items
 from .mission_exec import MissionExecutor, nav_items
 from .rally import RallyError, rally_points_from_items

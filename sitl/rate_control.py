@@ -42,22 +42,6 @@ from dataclasses import dataclass
 from mavcore.vehicle import GRAVITY_M_S2
 
 
-@dataclass(frozen=True, slots=True)
-class RateSetpoint:
-    """A decoded attitude-rate setpoint (SET_ATTITUDE_TARGET, attitude ignored).
-
-    Attributes
-    ----------
-    rates_flu_rad_s : tuple (3,)
-        Body rates, FLU (rad/s).
-    thrust : float
-        Collective thrust normalised to [0, 1] (1: every rotor at full thrust).
-    """
-
-    rates_flu_rad_s: tuple
-    thrust: float
-
-
 @dataclass(frozen=True)
 class RateLoopGains:
     """Gains of the rate loop, per body axis (x, y, z), as angular-acceleration gains.

@@ -105,7 +105,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore.mission.schema import Mission
 
-from . import codec
+from mavcore import codec
 from mavcore.link.signing import (SignatureVerifier, disable_outgoing_signing, enable_outgoing_signing,
                                   signing_timestamp)
 from mavcore.link import command_rules as rules

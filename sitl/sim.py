@@ -28,7 +28,9 @@ from mavcore.mission.sim import vehicle_radius_m
 
 from .collision import CollisionMonitor, CrashEvent
 from .onboard import CascadedController, OnboardGains, Setpoint  # noqa: F401  (re-export)
-from .rate_control import RateLoop, RateSetpoint, thrust_curve_inverse
+from mavcore.codec import RateSetpoint
+
+from .rate_control import RateLoop, thrust_curve_inverse
 from .plant import Plant, PlantParams
 from .sensors import RangeReading, SensorSuite  # noqa: F401  (re-export)
 from .wind import WindModel

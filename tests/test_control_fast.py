@@ -17,8 +17,8 @@ import math
 import numpy as np
 import pytest
 
-from companion.control import GeometricController, Measurements, Mixer, ReferenceNone
-from mavcore.mission.control import ControlConfigNone
+from companion.control import GeometricController, Measurements, Mixer, Reference
+from mavcore.mission.control import ControlConfig
 from companion.control.geometric import ControlOutput, DesiredAttitude, attitude_torque
 from companion.control.observer import virtual_pairs
 from companion.control.rates import rate_command

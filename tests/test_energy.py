@@ -201,7 +201,8 @@ def test_sitl_reports_the_battery_and_refuses_a_mission_it_cannot_hold():
     items than energy.max_mission_items is refused with MAV_MISSION_NO_SPACE, named so."""
     from test_sitl_mavlink import Client, offboard_flight
 
-    from companion.link import Connection, codec
+    from companion.link import Connection
+    from mavcore import codec
     from companion.link.mission_upload import MissionRejected, upload_mission
     from sitl.api import SitlThread
 

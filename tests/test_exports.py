@@ -225,7 +225,7 @@ def test_mission_int_encoding_of_the_items_round_trips(exported):
     pymavlink pack/parse."""
     from pymavlink.dialects.v20 import common as mavlink
 
-    from companion.link import codec
+    from mavcore import codec
     from companion.mission_items import build_flight_items
 
     mission, doc = exported["mission"], exported["doc"]

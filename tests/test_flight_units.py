@@ -15,7 +15,7 @@ from companion.flight.health import LinkHealth
 from companion.flight.log import ErrorStats, FlightLog
 from companion.flight.monitor import FlightMonitor, MonitorConfig
 from companion.flight.reference import TrajectoryWindow
-from companion.link.codec import px4_custom_mode
+from mavcore.codec import px4_custom_mode
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,7 @@
 One tilted, yawed, moving true state is built by hand (roll 10 deg, pitch
 -20 deg, yaw 30 deg in the NED/FRD sense, i.e. ENU/FLU heading 60 deg,
 rotation +20 deg about body left, +10 deg about body forward), every SITL
-telemetry message is encoded with ``sitl.codec``, framed to bytes and parsed
+telemetry message is encoded with ``mavcore.codec``, framed to bytes and parsed
 back with pymavlink, and each field is checked against values derived
 independently of ``mavcore.frames`` (hand-worked axes, the standard
 Euler->quaternion formula, the textbook degree-length series). Then the
@@ -20,10 +20,11 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.link import codec as ccodec
+from mavcore import codec as ccodec
+from mavcore import frames
 from mavcore.mission.sim import NoiseConfig, RangefinderConfig, SimConfig
 from companion.runner import setpoint_yaw_enu
-from sitl import codec as scodec
+from mavcore import codec as scodec
 from sitl.sensors import Rangefinder, SensorSuite
 from sitl.sim import Setpoint
 
@@ -345,7 +346,7 @@ def test_companion_setpoint_yaw_and_sitl_decode(mav, yaw_enu_deg, yaw_ned_deg):
     msg = wire(mav, ccodec.encode_set_position_target(mav, 10, (1.0, 2.0, 3.0), (0.1, 0.2, 0.3),
                                                       (0.01, 0.02, 0.03), yaw_enu_deg * D2R))
     assert msg.coordinate_frame == mavlink.MAV_FRAME_LOCAL_NED
-    assert math.degrees(scodec.frames.wrap_pi(msg.yaw - yaw_ned_deg * D2R)) == pytest.approx(0.0, abs=1e-4)
+    assert math.degrees(frames.wrap_pi(msg.yaw - yaw_ned_deg * D2R)) == pytest.approx(0.0, abs=1e-4)
     assert (msg.x, msg.y, msg.z) == pytest.approx((2.0, 1.0, -3.0))
     assert (msg.vx, msg.vy, msg.vz) == pytest.approx((0.2, 0.1, -0.3))
     assert (msg.afx, msg.afy, msg.afz) == pytest.approx((0.02, 0.01, -0.03))

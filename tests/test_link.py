@@ -15,7 +15,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import frames
 from mavcore.errors import CommandRejected, InputError, LinkError
-from companion.link import codec
+from mavcore import codec
 from companion.link.connection import Connection, check_connection_string
 from companion.link.mission_upload import MissionRejected, upload_mission
 from companion.link.tlog import TlogWriter, read_tlog
@@ -571,8 +571,8 @@ def test_int32_parameters_are_decoded_bytewise_as_they_travel():
 
     from pymavlink.dialects.v20 import common as mavlink
 
-    from companion.link.codec import decode_param_value
-    from sitl.codec import param_to_wire
+    from mavcore.codec import decode_param_value
+    from mavcore.codec import param_to_wire
 
     mav = mavlink.MAVLink(None)
     for v in (0, 1, -7, 123456):

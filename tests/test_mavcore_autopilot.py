@@ -18,7 +18,7 @@ from pymavlink import mavutil
 
 from mavcore import autopilot as autopilots
 from mavcore.autopilot import ARDUCOPTER, PX4_AUTOPILOT
-from sitl.codec import PositionTarget
+from mavcore.codec import PositionTarget
 from sitl.flightstack import (
     RESULT_ACCEPTED, RESULT_FAILED, RESULT_TEMPORARILY_REJECTED, FlightMode, FlightStack, NavState, Parameters,
 )
@@ -165,7 +165,7 @@ def test_raw_imu_units_by_hand_and_back():
     from types import SimpleNamespace
 
     from companion.flight.core import _SiImu
-    from sitl.codec import raw_imu_args
+    from mavcore.codec import raw_imu_args
 
     a = raw_imu_args(123, (0.0, 0.0, 9.80665), (0.1, 0.2, -0.3), (0.2, 0.0, -0.4))
     assert a == (123, 0, 0, -1000, 100, -200, 300, 200, 0, 400, 0, 0)

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from companion.control import GeometricController, Measurements, ReferenceNone
-from mavcore.mission.control import ControlConfigNone
+from companion.control import GeometricController, Measurements, Reference
+from mavcore.mission.control import ControlConfig
 from companion.control.observer import (
     VelocityAidedObserver,
     heading_from_accel_mag,

@@ -1,5 +1,5 @@
 """OBSTACLE_DISTANCE packing (companion/link/obstacle_distance.py) and its decoding
-by the SITL (sitl/codec.py), with hand-worked sectors.
+by the SITL (mavcore/codec/vehicle_end.py), with hand-worked sectors.
 
 Sector i is centred i * 5 deg clockwise of forward (body FRD); a beam looking
 theta deg to the left (FLU azimuth +theta) is centred on FRD -theta = 360 - theta.
@@ -14,10 +14,10 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import frames
-from companion.link.codec import Range, sensor_rotation_flu
+from mavcore.codec import Range, sensor_rotation_flu
 from companion.link.obstacle_distance import (UNKNOWN_CM, ObstacleDistancePublisher, encode_obstacle_distance,
                                               pack_sectors, sector_beam)
-from sitl.codec import decode_obstacle_distance
+from mavcore.codec import decode_obstacle_distance
 
 
 def _rot_flu(yaw_left_deg, pitch_down_deg=0.0):

@@ -28,8 +28,8 @@ from mavcore.errors import PlanError
 from mavcore.mission import load_mission
 from companion.plan_io import load_plan, plan_json_text, plan_to_json_dict
 from companion.planner import plan_mission
-from companion.trajectory import generate_trajectoryNone
-from mavcore.mission.trajectory import TrajectoryConfigNone
+from companion.trajectory import generate_trajectory
+from mavcore.mission.trajectory import TrajectoryConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSION = ROOT / "missions" / "flat-rectangle" / "mission.yaml"

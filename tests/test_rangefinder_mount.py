@@ -1,6 +1,6 @@
 """Rangefinders on the airframe: mounting offsets and CUSTOM orientations
 (sitl/sensors.py) against hand-worked distances, and their DISTANCE_SENSOR
-fields (sitl/codec.py): the FRD quaternion both ways, covariance, no return."""
+fields (mavcore/codec/vehicle_end.py): the FRD quaternion both ways, covariance, no return."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import frames
 from mavcore.mission.sim import NoiseConfig, ObstacleConfig, RangefinderConfig, SimConfig
-from sitl import codec
+from mavcore import codec
 from sitl.sensors import RangeReading, SensorSuite, fan_directions_flu, mount_rotation_flu
 from sitl.world import World
 

@@ -13,14 +13,15 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.cli import main
 from companion.control.rates import normalised_thrust, rate_command, vehicle_hover_thrust
-from companion.link import codec
+from mavcore import codec
 from mavcore.link.command_rules import attitude_target_problem, outgoing_problem
 from companion.link.tlog_scan import TlogScanner
 from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
-from sitl import codec as sitl_codec
+from mavcore import codec as sitl_codec
 from sitl.flightstack import FlightMode, FlightStack, NavState, Parameters
-from sitl.codec import PositionTarget
-from sitl.rate_control import (RateLoop, RateLoopGains, RateSetpoint, hover_thrust, thrust_curve,
+from mavcore.codec import PositionTarget
+from mavcore.codec import RateSetpoint
+from sitl.rate_control import (RateLoop, RateLoopGains, hover_thrust, thrust_curve,
                                thrust_curve_inverse)
 
 S = 1_000_000

@@ -25,13 +25,13 @@ import pytest
 
 from companion.coverage.freespace import erode_free_space
 from companion.coverage.waypoints import waypoints_along
-from companion.link import codec
+from mavcore import codec
 from mavcore.maps.grid import ElevationModel, OccupancyGrid
 from mavcore.mission.replan import ReplanConfig
 from mavcore.mission.schema import FlightConfig
 from companion.replan import GlobalPlan, KnownMap, Replanner
-from companion.trajectory import generate_trajectoryNone
-from mavcore.mission.trajectory import TrajectoryConfigNone
+from companion.trajectory import generate_trajectory
+from mavcore.mission.trajectory import TrajectoryConfig
 
 RES = 0.1
 ROWS = ((3.0, 15.0, 2.3, 2.7), (3.0, 15.0, 4.8, 5.2))     # x0, x1, y0, y1 (m)

@@ -65,7 +65,7 @@ def test_blocked_command_keeps_only_its_vertical_part():
 
 
 def _range(sensor_id, R_flu_sensor, hfov_deg):
-    from companion.link.codec import Range
+    from mavcore.codec import Range
 
     return Range(1000, sensor_id, math.nan, 0.1, 10.0, 100, math.radians(hfov_deg), math.radians(2.0),
                  math.nan, True, R_flu_sensor)

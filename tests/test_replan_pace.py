@@ -18,8 +18,8 @@ from mavcore.mission.schema import FlightConfig
 from companion.replan.globalplan import GlobalPlan
 from companion.replan.pace import HEADROOM, MAX_TOTAL_STRETCH, pace, planned_stretch, stretch
 from companion.safety import Guard, GuardConfig, SafetyScene
-from companion.trajectory import generate_trajectoryNone
-from mavcore.mission.trajectory import TrajectoryConfigNone
+from companion.trajectory import generate_trajectory
+from mavcore.mission.trajectory import TrajectoryConfig
 
 R, C = 0.4, 0.5
 REQ = R + C                  # the centre keeps 0.9 m from the obstacle and the ground

@@ -17,7 +17,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import frames
 from companion.coverage.freespace import erode_free_space
-from companion.link import codec
+from mavcore import codec
 from mavcore.maps.grid import ElevationModel, OccupancyGrid
 from mavcore.mission.replan import ReplanConfig, SensorMount
 from companion.replan import KnownMap, ObstacleMemory, Pose, PoseHistory, beam_evidence
@@ -324,8 +324,8 @@ def test_wide_beam_in_a_corridor_sees_the_post_not_the_row():
     """A 40 deg beam in front of a post: its edge reaches the row only beyond
     the post's range, so the row does not explain the return."""
     from companion.replan import GlobalPlan, Replanner
-    from companion.trajectory import generate_trajectoryNone
-    from mavcore.mission.trajectory import TrajectoryConfigNone
+    from companion.trajectory import generate_trajectory
+    from mavcore.mission.trajectory import TrajectoryConfig
     from mavcore.mission.schema import FlightConfig
     km = _known()
     t = np.array([0.0, 10.0])
@@ -359,8 +359,8 @@ def test_with_obstacle_erodes_the_free_space_locally():
 
 def test_replanner_keeps_unknown_hits_only():
     from companion.replan import GlobalPlan, Replanner
-    from companion.trajectory import generate_trajectoryNone
-    from mavcore.mission.trajectory import TrajectoryConfigNone
+    from companion.trajectory import generate_trajectory
+    from mavcore.mission.trajectory import TrajectoryConfig
     from mavcore.mission.schema import FlightConfig
     km = _known()
     t = np.array([0.0, 10.0])
@@ -456,8 +456,8 @@ def test_replanner_map_remembers_an_obstacle_unseen_for_60_s_and_a_beam_clears_i
     """No time-out (issue 15): 60 s of flight with no reading leaves the obstacle in the
     map; one beam through it (a longer return along the same line) clears it."""
     from companion.replan import GlobalPlan, Replanner
-    from companion.trajectory import generate_trajectoryNone
-    from mavcore.mission.trajectory import TrajectoryConfigNone
+    from companion.trajectory import generate_trajectory
+    from mavcore.mission.trajectory import TrajectoryConfig
     from mavcore.mission.schema import FlightConfig
     km = _known()
     t = np.array([0.0, 10.0])
@@ -482,8 +482,8 @@ def test_a_remembered_point_behind_a_row_is_no_threat():
     """The map remembers for good, so an obstacle seen from the next corridor stays in it;
     the line to it crosses the row (x 1..5 m, y 1.8..2.2 m), so it starts no avoidance here."""
     from companion.replan import GlobalPlan, Replanner
-    from companion.trajectory import generate_trajectoryNone
-    from mavcore.mission.trajectory import TrajectoryConfigNone
+    from companion.trajectory import generate_trajectory
+    from mavcore.mission.trajectory import TrajectoryConfig
     from mavcore.mission.schema import FlightConfig
     km = _known()
     t = np.array([0.0, 10.0])

@@ -12,8 +12,8 @@ import pytest
 from mavcore.mission.schema import FlightConfig
 from companion.replan import GlobalPlan, ShapedState, rejoin
 from companion.replan.rejoin import CHECK_S, first_time_s
-from companion.trajectory import generate_trajectoryNone
-from mavcore.mission.trajectory import TrajectoryConfigNone
+from companion.trajectory import generate_trajectory
+from mavcore.mission.trajectory import TrajectoryConfig
 from companion.trajectory.cursor import TrajectoryCursor
 
 T_WP = np.array([0.0, 4.85, 8.85, 12.85, 16.85, 21.7, 27.0, 31.9])

@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import frames
 from companion.flight.core import ActuatorOut
-from companion.link import codec
+from mavcore import codec
 from companion.link.tlog_scan import RawRecord
 from companion.replay.compare import (
     DRIFT_REL,
@@ -161,7 +161,7 @@ def test_comparer_nan_and_types():
 
 
 def test_global_position_round_trip_with_the_sitls_encoder():
-    from sitl import codec as sitl_codec
+    from mavcore import codec as sitl_codec
 
     origin = sitl_codec.GeoOrigin(44.8, -0.6, 30.0)
     home = (0.0, 0.0, 0.0)
@@ -176,7 +176,7 @@ def test_global_position_round_trip_with_the_sitls_encoder():
 
 
 def test_home_position_round_trip_with_the_sitls_encoder():
-    from sitl import codec as sitl_codec
+    from mavcore import codec as sitl_codec
 
     origin = sitl_codec.GeoOrigin(44.8, -0.6, 30.0)
     home_enu = (3.0, -4.0, 0.5)

@@ -40,7 +40,7 @@ from companion.commands.demo import missions_dir
 from companion.commands.fly import prepare
 from companion.flight.core import ActuatorOut
 from companion.flight.environment import differences, fingerprint
-from companion.link import codec
+from mavcore import codec
 from companion.link.tlog_scan import TlogScanner
 from mavcore.mission import load_mission
 from companion.replay import build_core, find_setup, replay_chunks

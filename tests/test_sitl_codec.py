@@ -1,4 +1,4 @@
-"""sitl.codec: known points worked by hand, round trips against
+"""mavcore.codec: known points worked by hand, round trips against
 mavcore.frames and pymavlink, type_mask decoding table."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import frames
 from mavcore.mission import load_mission
-from sitl import codec
+from mavcore import codec
 from sitl.sensors import RangeReading
 from sitl.sim import Setpoint, Simulation
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
-from sitl.codec import ObstacleSectors
+from mavcore.codec import ObstacleSectors
 from sitl.collision_prevention import CollisionPrevention, CollisionPreventionConfig, allowed_speed_m_s
 
 ROOT = Path(__file__).resolve().parents[1]

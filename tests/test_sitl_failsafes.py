@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.codec import PositionTarget
+from mavcore.codec import PositionTarget
 from sitl.collision import CrashEvent
 from sitl.flightstack import (
     RESULT_ACCEPTED, RESULT_DENIED, RESULT_TEMPORARILY_REJECTED, FlightMode, FlightStack, NavState, Parameters,

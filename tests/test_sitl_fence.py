@@ -14,7 +14,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.fence import (CIRCLE_EXCLUSION, CIRCLE_INCLUSION, POLYGON_EXCLUSION, POLYGON_INCLUSION, Fence, FenceError,
                         fence_from_items, point_in_polygon)
-from sitl.flightstack import FlightMode, FlightStack, MissionItem, NavState, Parameters
+from mavcore.codec import MissionItem
+from sitl.flightstack import FlightMode, FlightStack, NavState, Parameters
 from sitl.rally import RallyError, rally_points_from_items, return_destination
 
 # an L-shaped (concave) field: 0..10 x 0..4 plus 0..4 x 4..10

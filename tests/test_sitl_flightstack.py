@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl.codec import PositionTarget
+from mavcore.codec import PositionTarget
 from sitl.flightstack import (
     IDLE_MOTOR_CMD, PARAM_SPECS, RESULT_ACCEPTED, RESULT_DENIED, RESULT_TEMPORARILY_REJECTED,
     FlightMode, FlightStack, MissionItem, MissionProtocol, NavState, Parameters, SendAck, SendCount,

@@ -9,7 +9,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.commands.demo import missions_dir
-from companion.link import codec
+from mavcore import codec
 from mavcore.link.sockets import open_pipe
 from sitl.api import SitlInProcess
 

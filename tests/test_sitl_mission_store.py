@@ -1,5 +1,5 @@
 """Where the SITL's DO_REPOSITION goes (sitl.mission_store.reposition_target),
-and the geodetic reading of stored items (sitl.codec.mission_item_enu), on
+and the geodetic reading of stored items (mavcore.codec.mission_item_enu), on
 points worked out through mavcore.frames (the project's pyproj plane)."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore.frames import enu2geodetic
-from sitl.codec import GeoOrigin, mission_item_enu
-from sitl.flightstack import MissionItem
+from mavcore.codec import GeoOrigin, mission_item_enu
+from mavcore.codec import MissionItem
 from sitl.mission_store import INT32_MAX, reposition_target
 
 ORIGIN = GeoOrigin(44.8, -0.6, 30.0)

@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from companion.control import GeometricController, Measurements, ReferenceNone
-from mavcore.mission.control import ControlConfigNone
+from companion.control import GeometricController, Measurements, Reference
+from mavcore.mission.control import ControlConfig
 from companion.control.tilt import limit_thrust, needs_limit
 from mavcore.vehicle import GRAVITY_M_S2 as G
 from mavcore.vehicle import VehicleConfig

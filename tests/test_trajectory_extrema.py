@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from companion.trajectory import TrajectoryNone
-from mavcore.mission.trajectory import TrajectoryConfigNone
+from companion.trajectory import Trajectory
+from mavcore.mission.trajectory import TrajectoryConfig
 from companion.trajectory.extrema import max_speed_on_intervals
 
 

@@ -4,7 +4,7 @@ A flight stack that takes body rates and a collective thrust (PX4 OFFBOARD
 with SET_ATTITUDE_TARGET rates, ArduPilot GUIDED / GUIDED_NOGPS) closes the
 rate loop itself; the companion keeps the paper's position and attitude
 laws and hands over at the angular velocity. Body FLU, SI units; the MAVLink
-edge (``companion.link.codec.encode_set_attitude_rates``) turns FLU into FRD.
+edge (``mavcore.codec.encode_set_attitude_rates``) turns FLU into FRD.
 
 Rate command from the torque law (derivation in ``docs/control.md``)
 --------------------------------------------------------------------

@@ -74,7 +74,7 @@ from mavcore import autopilot as autopilots
 from ..control.observer import heading_from_accel_mag
 from ..control.rates import normalised_thrust, vehicle_hover_thrust
 from mavcore.errors import CommandRejected, LinkError
-from ..link import codec
+from mavcore import codec
 from ..link.obstacle_distance import ObstacleDistancePublisher, encode_obstacle_distance
 from ..report import FlightReport, ReplanningStats, TrackingStats
 from ..replan.perception import propagated_pose

@@ -34,7 +34,7 @@ from typing import Callable, Iterable
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore.errors import CommandRejected, InputError, LinkError, UnsafeMessage
-from . import codec
+from mavcore import codec
 from mavcore.link.command_rules import actuator_problem, outgoing_problem
 from .auth import FRAME_TYPES, LinkStats, VehicleFilter
 from mavcore.link.signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp

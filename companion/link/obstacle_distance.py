@@ -96,7 +96,7 @@ class ObstacleSectors:
 
 
 def sector_beam(r) -> SectorBeam | None:
-    """A ``SectorBeam`` from a decoded DISTANCE_SENSOR (``companion.link.codec.Range``);
+    """A ``SectorBeam`` from a decoded DISTANCE_SENSOR (``mavcore.codec.Range``);
     None for a beam steeper than ``MAX_ELEVATION_RAD``, an unknown mounting, or a
     reading that is neither a range nor "no return" (too close, garbage)."""
     if r.R_flu_sensor is None:

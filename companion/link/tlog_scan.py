@@ -41,7 +41,7 @@ from typing import NamedTuple
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from .codec import FAST_DECODERS, x25_crc
+from mavcore.codec import FAST_DECODERS, x25_crc
 
 try:   # the C implementation (codec uses it too)
     from fastcrc import crc16 as _fastcrc16

@@ -7,7 +7,7 @@ Geometry (all ENU world / FLU body, m)::
     axis = R_enu_sensor[:, 0]                            beam direction
     hit = origin + distance * axis                       (a return)
 
-``R_flu_sensor`` comes decoded with the reading (``companion.link.codec``:
+``R_flu_sensor`` comes decoded with the reading (``mavcore.codec``:
 orientations 0..7, 24, 25 and MAV_SENSOR_ROTATION_CUSTOM's quaternion).
 The return is placed on the beam axis, and a rangefinder reports the
 nearest surface anywhere in its field of view, so the true point may be off
@@ -212,7 +212,7 @@ def beam_evidence(reading, pose: Pose, offset_flu_m=(0.0, 0.0, 0.0)) -> BeamEvid
 
     Parameters
     ----------
-    reading : companion.link.codec.Range
+    reading : mavcore.codec.Range
         Decoded DISTANCE_SENSOR (``R_flu_sensor``, ``distance_m``, ``no_return``,
         ``max_m``, ``hfov_rad``, ``vfov_rad``).
     pose : Pose

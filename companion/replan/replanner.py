@@ -576,7 +576,7 @@ class Replanner:
         self.poses.add(t_s, pos_enu_m, R_enu_flu)
 
     def on_range(self, t_s: float, reading) -> None:
-        """One decoded DISTANCE_SENSOR (``companion.link.codec.Range``) received at ``t_s``."""
+        """One decoded DISTANCE_SENSOR (``mavcore.codec.Range``) received at ``t_s``."""
         self.n_readings += 1
         pose = self.poses.at(reading.time_boot_ms * 1e-3)
         if pose is None:

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import common as mavlink
 
 from ..flight.core import ActuatorOut
-from ..link import codec
+from mavcore import codec
 
 HIL_ACTUATOR_CONTROLS_ID = mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS
 _SETPOINT_ID = mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED

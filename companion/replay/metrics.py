@@ -49,7 +49,7 @@ from mavcore import frames
 from ..flight.core import PHASE_CODE
 from ..flight.log import ErrorStats, FlightLog
 from ..flight.setup_record import SETUP_TEXT_ID
-from ..link import codec
+from mavcore import codec
 
 #: STATUSTEXT prefix of the companion's replanning announcements (issue 8's replanner).
 REPLAN_PREFIX = "companion: replan"

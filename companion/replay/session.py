@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import common as mavlink
 
 from ..flight.core import DEGRADE_PREFIX, INTERRUPT_PREFIX
-from ..link import codec
+from mavcore import codec
 from ..link.connection import COMPANION_COMPONENT_ID, COMPANION_SYSTEM_ID
 from ..link.tlog_scan import decode_record, new_decoder
 from .compare import OutputComparer, computed_payload, message_name

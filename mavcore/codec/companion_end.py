@@ -16,7 +16,6 @@ is several times cheaper. Their tests check them against ``mavcore.frames``.
 from __future__ import annotations
 
 import math
-import operator
 import struct
 from dataclasses import dataclass
 
@@ -26,10 +25,21 @@ from pymavlink.dialects.v20 import common as mavlink
 from mavcore import frames
 from mavcore.link.command_rules import ATTITUDE_TARGET_RATES_ONLY
 
-# --- MAVLink constants used by the companion (named here once) --------------
+
+__all__ = ['MAV_FRAME_GLOBAL_INT', 'MAV_FRAME_LOCAL_NED', 'PX4_MAIN_MODE_MANUAL', 'PX4_MAIN_MODE_AUTO',
+           'PX4_MAIN_MODE_OFFBOARD', 'PX4_SUB_MODE_AUTO_TAKEOFF', 'PX4_SUB_MODE_AUTO_LAND',
+           'TYPE_MASK_POS_VEL_ACC_YAW', 'ImuSample', 'LocalPosition', 'Attitude', 'VehicleState', 'Range',
+           'TruthState', 'decode_highres_imu', 'decode_local_position_ned', 'decode_attitude',
+           'decode_attitude_quaternion', 'decode_param_value', 'decode_heartbeat', 'SENSOR_ORIENTATION_EULER_DEG',
+           'MAV_SENSOR_ROTATION_CUSTOM', 'sensor_rotation_flu', 'decode_distance_sensor', 'decode_odometry',
+           'decode_odometry_pose', 'encode_odometry_truth', 'encode_set_attitude_rates',
+           'encode_set_position_target', 'decode_position_target_local_ned', 'GlobalPosition', 'HomePosition',
+           'decode_home_position', 'decode_global_position_int']
+
 
 MAV_FRAME_GLOBAL_INT = mavlink.MAV_FRAME_GLOBAL_INT
 MAV_FRAME_LOCAL_NED = mavlink.MAV_FRAME_LOCAL_NED
+
 
 #: PX4 custom main modes (``custom_mode = main << 16 | sub << 24``).
 PX4_MAIN_MODE_MANUAL = 1
@@ -38,17 +48,10 @@ PX4_MAIN_MODE_OFFBOARD = 6
 PX4_SUB_MODE_AUTO_TAKEOFF = 2
 PX4_SUB_MODE_AUTO_LAND = 6
 
+
 #: SET_POSITION_TARGET_LOCAL_NED type_mask: use position, velocity,
 #: acceleration (as acceleration, not force) and yaw; ignore yaw rate.
 TYPE_MASK_POS_VEL_ACC_YAW = mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
-
-#: HIL_ACTUATOR_CONTROLS.flags bit: this answer is a lockstep tick.
-HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP = 1
-
-_NAN16 = (float("nan"),) * 16
-
-
-# --- decoded messages ------------------------------------------------------
 
 
 @dataclass(frozen=True, slots=True)
@@ -241,6 +244,8 @@ SENSOR_ORIENTATION_EULER_DEG = {
     24: (0.0, 90.0, 0.0),                             # PITCH_90: up
     25: (0.0, 270.0, 0.0),                            # PITCH_270: down
 }
+
+
 MAV_SENSOR_ROTATION_CUSTOM = mavlink.MAV_SENSOR_ROTATION_CUSTOM
 
 
@@ -288,8 +293,12 @@ def sensor_rotation_flu(orientation: int, quaternion_wxyz=None) -> tuple | None:
 
 
 _Q4 = struct.Struct("<4d")
+
+
 #: quaternion bits -> rotation of MAV_SENSOR_ROTATION_CUSTOM sensors (bounded: cleared when full)
 _CUSTOM_R_FLU: dict = {}
+
+
 _CUSTOM_CACHE_MAX = 256
 
 
@@ -377,9 +386,6 @@ def encode_odometry_truth(mav, time_usec: int, pos_enu_m, vel_enu_m_s, R_enu_flu
         cov, cov, 0, mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN, 100)
 
 
-# --- encoders ---------------------------------------------------------------
-
-
 def encode_set_attitude_rates(mav, time_boot_ms: int, rates_flu_rad_s, thrust: float,
                               target_system: int = 1, target_component: int = 1):
     """SET_ATTITUDE_TARGET as a body-rate setpoint: rates and collective thrust, attitude ignored.
@@ -452,81 +458,6 @@ def decode_position_target_local_ned(msg):
     )
 
 
-def encode_mission_item_int(mav, seq: int, pos_enu_m, home_lat_deg: float, home_lon_deg: float,
-                            home_alt_m: float, target_system: int = 1, target_component: int = 1,
-                            current: bool = False):
-    """MISSION_ITEM_INT (NAV_WAYPOINT, ``MAV_FRAME_GLOBAL_INT``) from an ENU way-point.
-
-    Parameters
-    ----------
-    pos_enu_m : array_like (3,)
-        Way-point about the mission home, ENU, m.
-    home_lat_deg, home_lon_deg, home_alt_m : float
-        Geodetic pose of the mission home (the map origin), WGS-84, m AMSL.
-
-    Notes
-    -----
-    The altitude is AMSL (``home_alt_m + z``), so the item does not depend
-    on where the vehicle happened to set its own home.
-    """
-    x, y, z = (float(c) for c in pos_enu_m)
-    lat, lon, alt = frames.enu2geodetic(x, y, z, home_lat_deg, home_lon_deg, home_alt_m)
-    return mav.mission_item_int_encode(
-        target_system, target_component, seq, MAV_FRAME_GLOBAL_INT, mavlink.MAV_CMD_NAV_WAYPOINT,
-        1 if current else 0, 1, 0.0, 0.0, 0.0, math.nan,
-        int(round(lat * 1e7)), int(round(lon * 1e7)), float(alt), mavlink.MAV_MISSION_TYPE_MISSION,
-    )
-
-
-def encode_mission_item(mav, seq: int, item, target_system: int = 1, target_component: int = 1,
-                        mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION, current: bool = False):
-    """MISSION_ITEM_INT from a ``companion.mission_items.MissionItem`` (degrees, m AMSL).
-
-    Latitude/longitude become 1e7 degrees here (the only place they may).
-    ``mission_type``: MAV_MISSION_TYPE_MISSION or MAV_MISSION_TYPE_FENCE.
-    """
-    p1, p2, p3, p4 = (float(v) for v in item.params)
-    return mav.mission_item_int_encode(
-        target_system, target_component, seq, int(item.frame), int(item.command), 1 if current else 0,
-        1 if item.autocontinue else 0, p1, p2, p3, p4,
-        int(round(item.lat_deg * 1e7)), int(round(item.lon_deg * 1e7)), float(item.alt_m), mission_type,
-    )
-
-
-def decode_mission_item_int(msg, home_lat_deg: float, home_lon_deg: float, home_alt_m: float) -> np.ndarray:
-    """MISSION_ITEM_INT in ``MAV_FRAME_GLOBAL_INT`` -> ENU way-point (3,) m about home."""
-    x, y, z = frames.geodetic2enu(msg.x * 1e-7, msg.y * 1e-7, float(msg.z), home_lat_deg, home_lon_deg, home_alt_m)
-    return np.array((x, y, z))
-
-
-def encode_hil_actuator_controls(mav, time_usec: int, motor_cmd, armed: bool):
-    """HIL_ACTUATOR_CONTROLS answering one lockstep sensor frame.
-
-    Parameters
-    ----------
-    time_usec : int
-        The ``time_usec`` of the HIGHRES_IMU being answered.
-    motor_cmd : sequence of 4 floats or None
-        Normalised motor commands 0..1 in PX4 quad-X order
-        (``mavcore.vehicle``); None sends four NaN: a lockstep tick that
-        leaves the vehicle's own controller in charge.
-    armed : bool
-        Sets ``MAV_MODE_FLAG_SAFETY_ARMED`` in ``mode``.
-    """
-    if motor_cmd is None:
-        controls = _NAN16
-    else:
-        m0, m1, m2, m3 = motor_cmd
-        controls = (float(m0), float(m1), float(m2), float(m3)) + (0.0,) * 12
-    mode = mavlink.MAV_MODE_FLAG_HIL_ENABLED | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-    return mav.hil_actuator_controls_encode(int(time_usec), controls, mode, HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP)
-
-
-def px4_custom_mode(main_mode: int, sub_mode: int = 0) -> int:
-    """PX4 custom_mode value of a main/sub mode pair."""
-    return (main_mode << 16) | (sub_mode << 24)
-
-
 @dataclass(frozen=True, slots=True)
 class GlobalPosition:
     """GLOBAL_POSITION_INT in SI units and ENU.
@@ -579,203 +510,3 @@ def decode_global_position_int(msg) -> GlobalPosition:
     """GLOBAL_POSITION_INT (1e7 deg, mm, cm/s NED) -> ``GlobalPosition`` (deg, m, m/s ENU)."""
     return GlobalPosition(int(msg.time_boot_ms), msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3,
                           msg.relative_alt * 1e-3, (msg.vy * 0.01, msg.vx * 0.01, -msg.vz * 0.01))
-
-
-# --- fast MAVLink 2 framing of the per-frame messages ---------------------------
-#
-# In lockstep every sensor frame is one datagram (LOCAL_POSITION_NED, ODOMETRY,
-# DISTANCE_SENSOR, HIGHRES_IMU) answered by one HIL_ACTUATOR_CONTROLS. pymavlink
-# parses byte by byte and builds a generic message object per packet; doing
-# those few types with one precompiled ``struct.Struct`` each, after the same
-# framing and CRC checks, is several times cheaper. Everything else (and any
-# packet that does not frame or CRC-check) still goes through pymavlink.
-
-try:   # the CRC implementation pymavlink itself uses when fastcrc is installed
-    from fastcrc import crc16 as _fastcrc16
-    _mcrf4xx = _fastcrc16.mcrf4xx
-except ImportError:   # pragma: no cover - pymavlink's pure Python CRC
-    _mcrf4xx = None
-
-_V2_HEADER = struct.Struct("<BBBBBBBBBB")
-_CRC16 = struct.Struct("<H")
-
-
-def x25_crc(data: bytes) -> int:
-    """MAVLink's CRC-16/MCRF4XX (X.25) of ``data`` (include the crc_extra byte)."""
-    if _mcrf4xx is not None:
-        return _mcrf4xx(data, 0xFFFF)
-    return mavlink.x25crc(data).crc   # pragma: no cover
-
-
-class FastMessage(tuple):
-    """A decoded packet of one of the per-frame types: a tuple of the field
-    values in wire order (arrays as lists, as pymavlink gives them) followed by
-    system id, component id and the raw packet; fields read by name like a
-    pymavlink message (``m.xacc``, ``m.get_type()``, ``m.get_msgbuf()``)."""
-
-    __slots__ = ()
-    # underscored: a field may be called ``id`` (HIGHRES_IMU, DISTANCE_SENSOR)
-    _msgname = ""
-    _msgid = -1
-    _fieldnames: tuple = ()
-
-    def get_type(self) -> str:
-        return self._msgname
-
-    def get_msgId(self) -> int:
-        return self._msgid
-
-    def get_srcSystem(self) -> int:
-        return self[-3]
-
-    def get_srcComponent(self) -> int:
-        return self[-2]
-
-    def get_msgbuf(self) -> bytes:
-        return self[-1]
-
-    def get_seq(self) -> int:
-        return self[-1][4]
-
-    def get_fieldnames(self) -> list:
-        return list(self._fieldnames)
-
-    def to_dict(self) -> dict:
-        d = {"mavpackettype": self._msgname}
-        d.update((k, getattr(self, k)) for k in self._fieldnames)
-        return d
-
-    def __repr__(self) -> str:
-        return f"{self._msgname} {{{', '.join(f'{k} : {getattr(self, k)}' for k in self._fieldnames)}}}"
-
-
-def _array_field(a: int, b: int, name: str) -> property:
-    """An array field: a fresh list of the flat values a..b (built only when read)."""
-    return property(lambda self: list(self[a:b]), doc=f"field {name}")
-
-
-class FastDecoder:
-    """struct decoder of one message type (``msg_class``: pymavlink's class).
-
-    The message is the flat unpacked tuple (then system id, component id,
-    packet); an array field (ODOMETRY's ``q`` and covariances) is a list made
-    from its slice of that tuple when it is read, not at every decode.
-    """
-
-    def __init__(self, msg_class) -> None:
-        self.msgid = int(msg_class.id)
-        self.crc_extra = bytes((int(msg_class.crc_extra),))
-        self.unpacker = msg_class.unpacker
-        self.size = int(msg_class.unpacker.size)
-        names = tuple(msg_class.ordered_fieldnames)
-        lengths = tuple(int(k) for k in msg_class.array_lengths)
-        types = dict(zip(msg_class.fieldnames, msg_class.fieldtypes))
-        attrs = {"__slots__": (), "_msgname": msg_class.msgname, "_msgid": self.msgid,
-                 "_fieldnames": tuple(msg_class.fieldnames)}
-        i = 0
-        for n, k in zip(names, lengths):
-            if k and types[n] == "char":
-                raise ValueError(f"FastDecoder: {msg_class.msgname}.{n} is text (not supported)")
-            if k:
-                attrs[n] = _array_field(i, i + k, n)
-                i += k
-            else:
-                attrs[n] = property(operator.itemgetter(i), doc=f"field {n}")
-                i += 1
-        self.cls = type("Fast_" + msg_class.msgname, (FastMessage,), attrs)
-
-    def decode(self, packet: bytes, payload: bytes, sysid: int, compid: int) -> FastMessage:
-        """Message from a framed, CRC-checked packet and its payload bytes."""
-        n = len(payload)
-        if n != self.size:   # MAVLink 2 zero truncation, or a longer (newer) payload
-            payload = payload + bytes(self.size - n) if n < self.size else payload[:self.size]
-        return tuple.__new__(self.cls, self.unpacker.unpack(payload) + (sysid, compid, packet))
-
-
-#: The types decoded without pymavlink (the per-frame telemetry of a lockstep run; ATTITUDE
-#: streams at 50 Hz while the replanner flies).
-FAST_DECODERS = {d.msgid: d for d in (FastDecoder(c) for c in (
-    mavlink.MAVLink_highres_imu_message, mavlink.MAVLink_local_position_ned_message,
-    mavlink.MAVLink_odometry_message, mavlink.MAVLink_distance_sensor_message,
-    mavlink.MAVLink_attitude_message))}
-
-
-def split_datagram(data: bytes, fast: bool = True) -> list:
-    """The MAVLink 2 packets of one UDP datagram, in order.
-
-    ``FastMessage`` objects for the types of ``FAST_DECODERS`` and raw
-    ``bytes`` for every other packet. A well-framed unsigned packet with a
-    good CRC is one item; at the first byte that does not start one
-    (MAVLink 1, signed packets, garbage, bad CRC, unknown id, truncation)
-    the rest of the datagram is one ``bytes`` item for pymavlink's robust
-    parser, so garbage is handled exactly as before. ``fast=False`` gives
-    every good packet as bytes. (A list, not a generator: it runs for every
-    frame and a generator's resumptions cost more than the list.)
-    """
-    n = len(data)
-    i = 0
-    out = []
-    decoders = FAST_DECODERS if fast else {}
-    mmap = mavlink.mavlink_map
-    crc = _mcrf4xx if _mcrf4xx is not None else (lambda b, _init: x25_crc(b))
-    while i < n:
-        if n - i < 12 or data[i] != 0xFD or data[i + 2] != 0:
-            out.append(data[i:])
-            return out
-        end = i + 12 + data[i + 1]
-        if end > n:
-            out.append(data[i:])
-            return out
-        msgid = data[i + 7] | data[i + 8] << 8 | data[i + 9] << 16
-        dec = decoders.get(msgid)
-        if dec is not None:
-            extra = dec.crc_extra
-        else:
-            cls = mmap.get(msgid)
-            if cls is None:
-                out.append(data[i:])
-                return out
-            extra = bytes((cls.crc_extra,))
-        if crc(data[i + 1:end - 2] + extra, 0xFFFF) != (data[end - 2] | data[end - 1] << 8):
-            out.append(data[i:])
-            return out
-        packet = data[i:end]
-        if dec is not None:
-            out.append(dec.decode(packet, data[i + 10:end - 2], data[i + 5], data[i + 6]))
-        else:
-            out.append(packet)
-        i = end
-    return out
-
-
-_HIL_PAYLOAD = struct.Struct("<QQ16fB")
-_HIL_ID = int(mavlink.MAVLink_hil_actuator_controls_message.id)
-_HIL_CRC_EXTRA = bytes((int(mavlink.MAVLink_hil_actuator_controls_message.crc_extra),))
-_MODE_ARMED = mavlink.MAV_MODE_FLAG_HIL_ENABLED | mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-_MODE_DISARMED = mavlink.MAV_MODE_FLAG_HIL_ENABLED
-_ZERO12 = (0.0,) * 12
-
-
-def hil_actuator_controls_payload(time_usec: int, motor_cmd, armed: bool) -> bytes:
-    """The MAVLink 2 payload (zero-truncated, as on the wire) of
-    ``encode_hil_actuator_controls(mav, time_usec, motor_cmd, armed)``."""
-    mode = _MODE_ARMED if armed else _MODE_DISARMED
-    if motor_cmd is None:
-        payload = _HIL_PAYLOAD.pack(time_usec, HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP, *_NAN16, mode)
-    else:
-        m0, m1, m2, m3 = motor_cmd
-        payload = _HIL_PAYLOAD.pack(time_usec, HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP, m0, m1, m2, m3, *_ZERO12,
-                                    mode)
-    return payload.rstrip(b"\0") or b"\0"   # MAVLink 2 trailing-zero truncation
-
-
-def pack_hil_actuator_controls(seq: int, system_id: int, component_id: int, time_usec: int, motor_cmd,
-                               armed: bool) -> bytes:
-    """The packet of ``encode_hil_actuator_controls(...)`` framed as pymavlink
-    would (unsigned MAVLink 2, sequence ``seq``), without a message object:
-    byte-identical to ``msg.pack(mav)`` (tested)."""
-    payload = hil_actuator_controls_payload(time_usec, motor_cmd, armed)
-    head = _V2_HEADER.pack(0xFD, len(payload), 0, 0, seq, system_id, component_id, _HIL_ID & 0xFF,
-                           (_HIL_ID >> 8) & 0xFF, _HIL_ID >> 16)
-    body = head + payload
-    return body + _CRC16.pack(x25_crc(body[1:] + _HIL_CRC_EXTRA))

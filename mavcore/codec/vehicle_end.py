@@ -56,7 +56,6 @@ Wire conventions chosen here (documented once)
 from __future__ import annotations
 
 import math
-import operator
 import struct
 from dataclasses import dataclass
 
@@ -64,25 +63,32 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import frames
-
-from .rate_control import RateSetpoint
-# Sanity limits on decoded setpoints (a message beyond them is ignored) and the
-# actuator rule: ``mavcore.link.command_rules``, the one table of both ends.
 from mavcore.link.command_rules import (MAX_SETPOINT_ACC_M_S2, MAX_SETPOINT_POS_M, MAX_SETPOINT_VEL_M_S,
-                                        actuator_problem, attitude_target_problem)
+                                        attitude_target_problem)
 
-# --- constants named once ---------------------------------------------------
+from .mission_items import GeoOrigin
 
-#: HIL_ACTUATOR_CONTROLS.flags bit 0: this message is a lockstep answer.
-HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP = 1
+
+__all__ = ['RateSetpoint', 'ARM_FORCE_MAGIC', 'HIGHRES_IMU_FIELDS', 'TM_X', 'TM_Y', 'TM_Z', 'TM_VX', 'TM_VY',
+           'TM_VZ', 'TM_AX', 'TM_AY', 'TM_AZ', 'TM_FORCE', 'TM_YAW', 'TM_YAW_RATE', 'TM_POS', 'TM_VEL', 'TM_ACC',
+           'base_mode', 'param_to_wire', 'param_from_wire', 'PositionTarget', 'addressed_to_us',
+           'decode_position_target', 'decode_attitude_rates', 'ObstacleSectors', 'FRAME_BODY_FRD',
+           'decode_obstacle_distance', 'decode_takeoff_altitude', 'heartbeat', 'highres_imu_args', 'G0_M_S2',
+           'raw_imu_args', 'scaled_imu2', 'highres_imu', 'attitude_args', 'attitude', 'attitude_quaternion_args',
+           'attitude_quaternion', 'local_position_ned_args', 'local_position_ned', 'quat_wxyz_of',
+           'odometry_truth_args', 'heading_cdeg', 'yaw_enu_of', 'global_position_int', 'gps_raw_int',
+           'home_position', 'distance_sensor_args', 'mount_quaternion_frd', 'mount_rotation_flu_of',
+           'distance_sensor', 'position_target_local_ned', 'STATUSTEXT_CHUNK', 'STATUSTEXT_MAX', 'statustext',
+           'statustext_chunks', 'yaw_ned2enu', 'odometry_truth', 'sys_status', 'battery_status']
+
 
 #: MAV_CMD_COMPONENT_ARM_DISARM param2 magic that bypasses the arming checks.
 ARM_FORCE_MAGIC = 21196
 
+
 #: HIGHRES_IMU.fields_updated: acc, gyro, mag (bits 0-8), abs pressure (9),
 #: pressure altitude (11), temperature (12). No differential pressure.
 HIGHRES_IMU_FIELDS = 0x1FF | (1 << 9) | (1 << 11) | (1 << 12)
-
 TM_X = mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE
 TM_Y = mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE
 TM_Z = mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE
@@ -98,9 +104,8 @@ TM_YAW_RATE = mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 TM_POS = TM_X | TM_Y | TM_Z
 TM_VEL = TM_VX | TM_VY | TM_VZ
 TM_ACC = TM_AX | TM_AY | TM_AZ
-
-
 _NAN3 = (math.nan, math.nan, math.nan)
+
 
 # International Standard Atmosphere (for HIGHRES_IMU's barometer fields).
 _P0_HPA = 1013.25
@@ -109,29 +114,12 @@ _LAPSE_K_M = 0.0065
 _ISA_EXP = 5.25588
 
 
-# --- PX4 custom mode -----------------------------------------------------
-
-
-def px4_custom_mode(main_mode: int, sub_mode: int) -> int:
-    """PX4 ``custom_mode`` word from a main and a sub mode."""
-    return (int(main_mode) & 0xFF) << 16 | (int(sub_mode) & 0xFF) << 24
-
-
-def px4_modes_from_custom(custom_mode: int) -> tuple[int, int]:
-    """(main_mode, sub_mode) of a PX4 ``custom_mode`` word."""
-    c = int(custom_mode)
-    return (c >> 16) & 0xFF, (c >> 24) & 0xFF
-
-
 def base_mode(armed: bool) -> int:
     """HEARTBEAT ``base_mode``: custom mode enabled, plus the armed flag."""
     flags = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     if armed:
         flags |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
     return flags
-
-
-# --- parameters: PX4 byte-wise encoding -----------------------------------
 
 
 def param_to_wire(value: float | int, param_type: int) -> float:
@@ -153,7 +141,20 @@ def param_from_wire(wire_value: float, param_type: int) -> float | int:
     return float(wire_value)
 
 
-# --- decoded incoming messages ------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class RateSetpoint:
+    """A decoded attitude-rate setpoint (SET_ATTITUDE_TARGET, attitude ignored).
+
+    Attributes
+    ----------
+    rates_flu_rad_s : tuple (3,)
+        Body rates, FLU (rad/s).
+    thrust : float
+        Collective thrust normalised to [0, 1] (1: every rotor at full thrust).
+    """
+
+    rates_flu_rad_s: tuple
+    thrust: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -179,31 +180,6 @@ class PositionTarget:
     yaw_enu_rad: float | None
     yaw_rate_enu_rad_s: float | None
     type_mask: int
-
-
-@dataclass(frozen=True, slots=True)
-class ActuatorAnswer:
-    """A decoded HIL_ACTUATOR_CONTROLS.
-
-    Attributes
-    ----------
-    time_usec : int
-        The vehicle time the peer answers (lockstep: a HIGHRES_IMU's time_usec).
-    motor_cmd : tuple of 4 float, or None
-        Normalised motor commands clipped to [0, 1], PX4 quad-X order; None when
-        controls[0..3] are all NaN (a lockstep tick without override) or
-        otherwise unusable.
-    lockstep : bool
-        ``flags & HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP``.
-    refused : str or None
-        Why controls[0..3] are unusable (``command_rules.actuator_problem``:
-        NaN mixed with numbers, infinite, outside [-1, 1]); None otherwise.
-    """
-
-    time_usec: int
-    motor_cmd: tuple | None
-    lockstep: bool
-    refused: str | None = None
 
 
 def addressed_to_us(msg, system_id: int = 1, component_id: int = 1) -> bool:
@@ -294,7 +270,7 @@ def decode_position_target(msg, yaw_enu_rad: float = 0.0,
 
 
 def decode_attitude_rates(msg):
-    """SET_ATTITUDE_TARGET (a body-rate setpoint) -> ``sitl.rate_control.RateSetpoint`` (FLU).
+    """SET_ATTITUDE_TARGET (a body-rate setpoint) -> ``RateSetpoint`` (FLU).
 
     Returns (setpoint or None, problem or None): None with the reason of
     ``command_rules.attitude_target_problem`` when the message is not a
@@ -306,26 +282,6 @@ def decode_attitude_rates(msg):
     if why is not None:
         return None, why
     return RateSetpoint((float(rates[0]), -float(rates[1]), -float(rates[2])), float(msg.thrust)), None
-
-
-def decode_actuator_controls(msg) -> ActuatorAnswer | None:
-    """HIL_ACTUATOR_CONTROLS -> ``ActuatorAnswer``.
-
-    controls[0..3] all NaN: a lockstep tick without override. Values that
-    break ``command_rules.actuator_problem`` (NaN mixed with numbers,
-    infinite, outside MAVLink's [-1, 1]) make the command unusable
-    (``motor_cmd`` None, ``refused`` says why) but the message still counts
-    as a lockstep answer. Usable values are clipped to [0, 1].
-    """
-    c = msg.controls
-    return _answer(int(msg.time_usec), c[0], c[1], c[2], c[3],
-                   bool(int(msg.flags) & HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP))
-
-
-def _answer(t: int, c0: float, c1: float, c2: float, c3: float, lockstep: bool) -> ActuatorAnswer:
-    if -1.0 <= c0 <= 1.0 and -1.0 <= c1 <= 1.0 and -1.0 <= c2 <= 1.0 and -1.0 <= c3 <= 1.0:
-        return ActuatorAnswer(t, _clip01(c0, c1, c2, c3), lockstep)
-    return ActuatorAnswer(t, None, lockstep, actuator_problem(c0, c1, c2, c3))
 
 
 @dataclass(frozen=True)
@@ -386,9 +342,6 @@ def decode_takeoff_altitude(param7: float, origin_alt_amsl_m: float) -> float | 
     if not math.isfinite(param7):
         return None
     return float(param7) - origin_alt_amsl_m
-
-
-# --- encoders ----------------------------------------------------------------
 
 
 def heartbeat(mav, armed: bool, custom_mode: int, system_status: int,
@@ -562,15 +515,6 @@ def odometry_truth_args(time_us: int, pos_enu_m, vel_enu_m_s, R_enu_flu, omega_f
             _COV_UNKNOWN, _COV_UNKNOWN, 0, mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN, 100)
 
 
-@dataclass(frozen=True, slots=True)
-class GeoOrigin:
-    """Geodetic pose of the ENU origin (the mission's ``home``: map origin)."""
-
-    lat_deg: float
-    lon_deg: float
-    alt_m: float
-
-
 def _geo(origin: GeoOrigin, pos_enu_m):
     lat, lon, alt = frames.enu2geodetic(float(pos_enu_m[0]), float(pos_enu_m[1]),
                                         float(pos_enu_m[2]), origin.lat_deg, origin.lon_deg,
@@ -638,6 +582,8 @@ def distance_sensor_args(time_boot_ms: int, reading) -> tuple:
 
 
 _I9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+
+
 _MOUNT_Q: dict[tuple, tuple] = {}
 
 
@@ -701,6 +647,8 @@ def position_target_local_ned(mav, time_boot_ms: int, setpoint):
 
 
 STATUSTEXT_CHUNK = 50
+
+
 #: Longest text sent in chunks (the rest is cut).
 STATUSTEXT_MAX = 250
 
@@ -726,211 +674,9 @@ def _clip16(x: float) -> int:
     return int(max(-32768, min(32767, round(x))))
 
 
-# --- mission items -----------------------------------------------------------
-
-_GLOBAL_FRAMES = frozenset((
-    mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
-    mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-    mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT, mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT))
-
-
-def mission_item_from_int(msg):
-    """MISSION_ITEM_INT -> ``flightstack.MissionItem`` (stored as on the wire)."""
-    from .flightstack import MissionItem
-    return MissionItem(int(msg.seq), int(msg.frame), int(msg.command), int(msg.current),
-                       int(msg.autocontinue), float(msg.param1), float(msg.param2),
-                       float(msg.param3), float(msg.param4), int(msg.x), int(msg.y),
-                       float(msg.z), int(getattr(msg, "mission_type", 0)))
-
-
-def mission_item_from_float(msg):
-    """Legacy MISSION_ITEM (float x, y) -> ``MissionItem`` in MISSION_ITEM_INT
-    units: degrees * 1e7 for global frames, metres * 1e4 for local ones.
-    None if x or y is not finite or does not fit an int32."""
-    from .flightstack import MissionItem
-    scale = 1e7 if int(msg.frame) in _GLOBAL_FRAMES else 1e4
-    x, y = float(msg.x), float(msg.y)
-    if not (math.isfinite(x) and math.isfinite(y)):
-        return None
-    xi, yi = int(round(x * scale)), int(round(y * scale))
-    if max(abs(xi), abs(yi)) >= 2 ** 31:
-        return None
-    return MissionItem(int(msg.seq), int(msg.frame), int(msg.command), int(msg.current),
-                       int(msg.autocontinue), float(msg.param1), float(msg.param2),
-                       float(msg.param3), float(msg.param4), xi, yi, float(msg.z),
-                       int(getattr(msg, "mission_type", 0)))
-
-
-_RELATIVE_FRAMES = frozenset((mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT))
-_AMSL_FRAMES = frozenset((mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT))
-
-
-def global_to_enu(origin: GeoOrigin, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> tuple:
-    """WGS-84 (deg, deg, m AMSL) -> world ENU (m) about ``origin``: the SITL's
-    one way in from geodetic coordinates (missions, fences, rally points,
-    DO_REPOSITION), through the project's pyproj tangent plane."""
-    x, y, z = frames.geodetic2enu(float(lat_deg), float(lon_deg), float(alt_amsl_m),
-                                  origin.lat_deg, origin.lon_deg, origin.alt_m)
-    return float(x), float(y), float(z)
-
-
-def enu_to_global(origin: GeoOrigin, pos_enu_m) -> tuple:
-    """World ENU (m) -> (lat_deg, lon_deg, alt_m AMSL): ``global_to_enu``'s inverse."""
-    lat, lon, alt = frames.enu2geodetic(float(pos_enu_m[0]), float(pos_enu_m[1]), float(pos_enu_m[2]),
-                                        origin.lat_deg, origin.lon_deg, origin.alt_m)
-    return float(lat), float(lon), float(alt)
-
-
 def yaw_ned2enu(yaw_ned_rad: float) -> float:
     """Heading from north, clockwise (rad) -> ENU yaw from east, CCW (rad)."""
     return float(frames.yaw_ned2enu(yaw_ned_rad))
-
-
-def mission_item_enu(origin: GeoOrigin, home_enu_m, item) -> tuple | None:
-    """Position of a stored ``MissionItem`` in world ENU (m), or None when the
-    item has no position the SITL flies: MAV_FRAME_MISSION, a terrain frame,
-    or latitude = longitude = 0 (QGC's "here"/unset). Global frames: x, y in
-    1e7 deg; z AMSL (GLOBAL, GLOBAL_INT) or above home (the RELATIVE_ALT
-    frames, as PX4 reads them). Local frames: x, y in 1e4 m, LOCAL_NED or
-    LOCAL_ENU about the ENU origin."""
-    f = int(item.frame)
-    if f in _AMSL_FRAMES or f in _RELATIVE_FRAMES:
-        if item.x == 0 and item.y == 0:
-            return None
-        alt = float(item.z) + (origin.alt_m + float(home_enu_m[2]) if f in _RELATIVE_FRAMES else 0.0)
-        return global_to_enu(origin, item.x * 1e-7, item.y * 1e-7, alt)
-    if f == mavlink.MAV_FRAME_LOCAL_ENU:
-        return item.x * 1e-4, item.y * 1e-4, float(item.z)
-    if f == mavlink.MAV_FRAME_LOCAL_NED:
-        return item.y * 1e-4, item.x * 1e-4, -float(item.z)
-    return None
-
-
-def mission_item_int(mav, target_system: int, target_component: int, item):
-    """``MissionItem`` -> MISSION_ITEM_INT for a download."""
-    return mav.mission_item_int_encode(
-        target_system, target_component, item.seq, item.frame, item.command, item.current,
-        item.autocontinue, item.param1, item.param2, item.param3, item.param4,
-        item.x, item.y, item.z, item.mission_type)
-
-
-# --- fast MAVLink 2 framing for the per-frame messages --------------------------
-
-_V2_HEADER = struct.Struct("<BBBBBBBHB")
-_CRC16 = struct.Struct("<H")
-
-try:   # the same CRC pymavlink uses when fastcrc is installed
-    from fastcrc import crc16 as _fastcrc16
-    _mcrf4xx = _fastcrc16.mcrf4xx
-except ImportError:   # pragma: no cover
-    _mcrf4xx = None
-
-
-def _crc_x25(data: bytes) -> int:
-    if _mcrf4xx is not None:
-        return _mcrf4xx(data, 0xFFFF)
-    crc = mavlink.x25crc(data)   # pragma: no cover
-    return crc.crc
-
-
-class FastPacker:
-    """MAVLink 2 framing of one message type straight from its field tuple.
-
-    Byte-identical to ``msg.pack(mav)`` of pymavlink (trailing-zero payload
-    truncation, CRC with crc_extra) but without building the message object:
-    the per-frame messages cost a third of the pymavlink path. When the link
-    signs, ``pack`` uses pymavlink's packer instead.
-
-    Parameters
-    ----------
-    msg_class : pymavlink MAVLink_*_message class
-    """
-
-    def __init__(self, msg_class) -> None:
-        self.msg_class = msg_class
-        self.msgid = int(msg_class.id)
-        self.crc_extra = bytes((int(msg_class.crc_extra),))
-        self.payload = msg_class.unpacker
-        names = list(msg_class.fieldnames)
-        # (argument index, array length) in wire order; 0 = scalar
-        self.order = tuple((names.index(n), int(k)) for n, k in
-                           zip(msg_class.ordered_fieldnames, msg_class.array_lengths))
-        self.has_arrays = any(k for _, k in self.order)
-        # scalar-only types: the wire order as one C-level getter
-        idx = [i for i, _ in self.order]
-        self._reorder = operator.itemgetter(*idx) if len(idx) > 1 else (lambda a, i=idx[0]: (a[i],))
-        self._id_lo = self.msgid & 0xFFFF
-        self._id_hi = self.msgid >> 16
-
-    def pack(self, mav, args: tuple) -> bytes:
-        """Frame ``args`` (in ``*_encode`` argument order) with ``mav``'s
-        sequence number and ids; advances ``mav.seq``."""
-        if mav.signing.sign_outgoing:
-            buf = self.msg_class(*args).pack(mav)
-        else:
-            if self.has_arrays:
-                flat = []
-                for i, k in self.order:
-                    if k:
-                        flat.extend(args[i])
-                    else:
-                        flat.append(args[i])
-            else:
-                flat = self._reorder(args)
-            payload = self.payload.pack(*flat).rstrip(b"\0") or b"\0"
-            head = _V2_HEADER.pack(0xFD, len(payload), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent,
-                                   self._id_lo, self._id_hi)
-            body = head + payload
-            crc_in = body[1:] + self.crc_extra
-            buf = body + _CRC16.pack(_mcrf4xx(crc_in, 0xFFFF) if _mcrf4xx is not None else _crc_x25(crc_in))
-        mav.seq = (mav.seq + 1) & 0xFF
-        return buf
-
-
-PACK_HIGHRES_IMU = FastPacker(mavlink.MAVLink_highres_imu_message)
-PACK_RAW_IMU = FastPacker(mavlink.MAVLink_raw_imu_message)
-PACK_LOCAL_POSITION_NED = FastPacker(mavlink.MAVLink_local_position_ned_message)
-PACK_ATTITUDE = FastPacker(mavlink.MAVLink_attitude_message)
-PACK_ODOMETRY = FastPacker(mavlink.MAVLink_odometry_message)
-PACK_ATTITUDE_QUATERNION = FastPacker(mavlink.MAVLink_attitude_quaternion_message)
-PACK_DISTANCE_SENSOR = FastPacker(mavlink.MAVLink_distance_sensor_message)
-
-
-_HIL_CLASS = mavlink.MAVLink_hil_actuator_controls_message
-_HIL_ID = int(_HIL_CLASS.id)
-_HIL_LEN = _HIL_CLASS.unpacker.size
-_HIL_CRC_EXTRA = bytes((int(_HIL_CLASS.crc_extra),))
-_HIL_PAYLOAD = struct.Struct("<QQ16fB")
-
-
-def decode_actuator_datagram(data: bytes) -> ActuatorAnswer | None:
-    """Fast path for a UDP datagram holding exactly one unsigned MAVLink 2
-    HIL_ACTUATOR_CONTROLS (the lockstep answer, once per frame).
-
-    Returns None for anything else (other messages, several packets, signed
-    packets, bad CRC): the caller then hands the datagram to pymavlink's
-    parser, so the result is always the same as the generic path.
-    """
-    n = len(data)
-    if n < 12 or data[0] != 0xFD or data[2] != 0:
-        return None
-    plen = data[1]
-    if n != 12 + plen or plen > _HIL_LEN or (data[7] | data[8] << 8 | data[9] << 16) != _HIL_ID:
-        return None
-    if data[5] == 1 and data[6] == 1:
-        return None   # our own id: let the generic path drop it
-    crc = data[n - 2] | data[n - 1] << 8
-    if _mcrf4xx is None or _mcrf4xx(data[1:n - 2] + _HIL_CRC_EXTRA, 0xFFFF) != crc:
-        return None
-    payload = data[10:n - 2]
-    if plen < _HIL_LEN:
-        payload = payload + bytes(_HIL_LEN - plen)   # MAVLink 2 zero-truncation
-    f = _HIL_PAYLOAD.unpack(payload)
-    return _answer(f[0], f[2], f[3], f[4], f[5], bool(f[1] & HIL_ACTUATOR_CONTROLS_FLAGS_LOCKSTEP))
-
-
-def _clip01(c0: float, c1: float, c2: float, c3: float) -> tuple:
-    return (min(max(c0, 0.0), 1.0), min(max(c1, 0.0), 1.0), min(max(c2, 0.0), 1.0), min(max(c3, 0.0), 1.0))
 
 
 def odometry_truth(mav, time_us: int, pos_enu_m, vel_enu_m_s, R_enu_flu, omega_flu_rad_s):
