@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from companion.flight.reference import RefSample
+from companion.trajectory.reference import RefSample
 from mavcore.mission import load_mission
 from companion.planner import plan_mission
 from companion.replan import KnownMap

@@ -30,8 +30,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from companion.commands.demo import launch_pose, resolve_mission  # noqa: E402
-from companion.commands.fly import FlightPlan, execute  # noqa: E402
+from companion.commands.demo import launch_pose
+from companion.bundled import resolve_mission  # noqa: E402
+from companion.commands.fly import execute
+from companion.flight_plan import FlightPlan  # noqa: E402
 from mavcore.mission import load_mission  # noqa: E402
 from companion.planner import plan_mission  # noqa: E402
 from companion.runner import UNUSED_STREAMS  # noqa: E402

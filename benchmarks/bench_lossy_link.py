@@ -62,7 +62,8 @@ def fly(mission_name: str, control: str, loss: float, delay_ms: tuple, cut_s: fl
     from sitl.api import SitlProcess
     from sitl.relay import UdpRelay
 
-    from companion.commands.demo import launch_pose, missions_dir
+    from companion.commands.demo import launch_pose
+    from companion.bundled import missions_dir
     from companion.commands.fly import execute, prepare
     from mavcore.mission import load_mission
 

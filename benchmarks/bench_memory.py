@@ -50,8 +50,9 @@ def main() -> int:
     a = ap.parse_args()
 
     rss0 = rss_mb()
-    from companion.commands.demo import resolve_mission
-    from companion.commands.fly import FlightPlan, execute
+    from companion.bundled import resolve_mission
+    from companion.commands.fly import execute
+    from companion.flight_plan import FlightPlan
     from mavcore.mission import load_mission
     from companion.planner import plan_mission
     from companion.runner import UNUSED_STREAMS

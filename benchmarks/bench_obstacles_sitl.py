@@ -91,7 +91,7 @@ __all__ = ["KEEP_OUT_M", "OFFSET_M", "FOOTPRINT_MARGIN_M", "footprint_free", "ra
 def setup(base: Path, cut_s: float):
     """The base mission, its plan, the flown (cut) trajectory sampled every 0.05 s,
     and the vehicle's clearance figures."""
-    from companion.commands.fly import FlightPlan
+    from companion.flight_plan import FlightPlan
     from mavcore.mission import load_mission
     from companion.planner import plan_mission
     from companion.replan.replanner import mission_replan_config

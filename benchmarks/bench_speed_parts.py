@@ -47,7 +47,7 @@ def main() -> int:
     from pymavlink.dialects.v20 import common as mavlink
 
     from mavcore import geodesy
-    from companion.commands.demo import resolve_mission
+    from companion.bundled import resolve_mission
     from mavcore.mission import load_mission
     from mavcore import codec
     from sitl.plant import Plant, PlantParams

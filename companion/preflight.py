@@ -189,7 +189,7 @@ def check_plan(pf, mission, grid, dem) -> None:
 
 
 def check_flight_plan(where: str, fp, mission, grid, dem) -> None:
-    """Raise ``PlanError`` unless what is about to be flown (``commands.fly.FlightPlan``:
+    """Raise ``PlanError`` unless what is about to be flown (``companion.flight_plan.FlightPlan``:
     a whole plan, a sortie, a cut) keeps the rules: its way-points (when it has
     their times) and its trajectory, sampled."""
     if fp.waypoints_t_s is not None:

@@ -44,8 +44,7 @@ from .flight.core import (LAUNCH_TOLERANCE_M, PHASES, UNUSED_STREAMS, ActuatorOu
                           FlightCore, FlightInputs)
 from .flight.health import LinkHealth
 from .flight.log import FlightLog  # noqa: F401  (re-export)
-from .flight.reference import (RefSample, climb_duration_s, pointing_at,  # noqa: F401  (re-export)
-                               setpoint_yaw_enu, smooth_segment)
+from .trajectory.reference import RefSample, climb_duration_s, pointing_at, setpoint_yaw_enu, smooth_segment
 from .progress import Progress
 from .report import FlightReport
 

@@ -258,15 +258,6 @@ def read_text(path, error: type[Exception], what: str = "", *, encoding: str = "
                                f"{exc.start})") from None
 
 
-# --- YAML ------------------------------------------------------------------------------
-
-def parse_yaml(text: str, source: str, error: type[Exception], lim=None):
-    """One YAML document, safely and boundedly loaded, or ``error("<source>: line N", problem)``
-    (``mavcore.inputs_yaml``: PyYAML is imported on first use, not by ``companion --help``)."""
-    from .inputs_yaml import parse_yaml_bounded
-    return parse_yaml_bounded(text, source, error, lim or limits())
-
-
 # --- JSON ------------------------------------------------------------------------------
 
 def json_depth(text: str | bytes, chunk: int = 1 << 20) -> int:

@@ -1,14 +1,20 @@
 """The bounded YAML loader of ``mavcore.inputs`` (docs/limits.md): PyYAML's safe
 loader with an alias budget, a cap on the document's size with its aliases
 expanded, and a nesting cap, all counted while composing (nothing is expanded
-first). Kept apart so that importing ``mavcore.inputs`` does not import PyYAML.
+first). Kept apart so that importing ``mavcore.inputs`` does not import PyYAML:
+import this module where a YAML file is read, not at the top of a module.
 """
 
 from __future__ import annotations
 
 import yaml
 
-from .inputs import _DEFAULTS, Limits, brief, clip
+from .inputs import _DEFAULTS, Limits, brief, clip, limits
+
+
+def parse_yaml(text: str, source: str, error: type[Exception], lim=None):
+    """One YAML document, safely and boundedly loaded, or ``error("<source>: line N", problem)``."""
+    return parse_yaml_bounded(text, source, error, lim or limits())
 
 
 class _TooBig(Exception):

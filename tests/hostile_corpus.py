@@ -33,7 +33,7 @@ from typing import Callable
 
 import yaml
 
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 
 SRC = missions_dir() / "flat-rectangle"
 

@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from companion.cli import main as companion_main
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from companion.plan_io import STATS_KEYS, TIMING_KEYS
 from sitl.cli import main as sitl_main
 

@@ -43,7 +43,7 @@ def test_differences_name_the_keys_and_an_unknown_environment():
 
 
 def test_the_flight_setup_records_the_environment():
-    from companion.commands.demo import missions_dir
+    from companion.bundled import missions_dir
     from companion.commands.fly import flight_setup
     from mavcore.mission import load_mission
 

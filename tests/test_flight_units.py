@@ -8,13 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from companion.control.observer import heading_from_accel_mag
 from companion.flight.coverage import PathCoverage
 from companion.flight.health import LinkHealth
 from companion.flight.log import ErrorStats, FlightLog
 from companion.flight.monitor import FlightMonitor, MonitorConfig
-from companion.flight.reference import TrajectoryWindow
+from companion.trajectory.reference import TrajectoryWindow
 from mavcore.codec import px4_custom_mode
 
 

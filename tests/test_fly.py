@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from companion.commands.demo import missions_dir
-from companion.commands.fly import FlightPlan
+from companion.bundled import missions_dir
+from companion.flight_plan import FlightPlan
 from mavcore.mission import load_mission
 from companion.planner import plan_mission
 

@@ -15,10 +15,11 @@ import threading
 import pytest
 import yaml
 
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from mavcore.errors import InputError, MapError
 from mavcore.inputs import (Limits, brief, check, count_tokens, json_depth, limits, open_regular, parse_json,
-                            parse_yaml, read_bytes)
+                            read_bytes)
+from mavcore.inputs_yaml import parse_yaml
 
 
 def test_defaults_and_environment_overrides():

@@ -223,7 +223,7 @@ def _walker_flight(tmp_path, field: str, home: str, seed: int, walker: str, cut_
     import json
 
     from companion.cli import main
-    from companion.commands.demo import missions_dir
+    from companion.bundled import missions_dir
     from mavcore.mission.replan import ReplanConfig
 
     fd = missions_dir() / field

@@ -16,7 +16,7 @@ import time
 import pytest
 
 from companion.cli import main
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from companion.link.tlog import read_tlog
 
 pytestmark = pytest.mark.slow

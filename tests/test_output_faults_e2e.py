@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from companion.cli import main
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from companion.link import tlog as tlog_mod
 
 pytestmark = pytest.mark.slow

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from mavcore.errors import PlanError
 from mavcore.maps.field import load_mission_maps
 from mavcore.mission import load_mission
@@ -54,7 +54,7 @@ def test_the_hand_worked_limits(field):
 
 def test_the_bundled_missions_plans_and_sorties_pass():
     """Every bundled mission's own plan (made here), each sortie and a cut pass."""
-    from companion.commands.fly import FlightPlan, sortie_flight_plan
+    from companion.flight_plan import FlightPlan, sortie_flight_plan
     from companion.planner import plan_mission
 
     mission = load_mission(missions_dir() / "tilted-hexagon" / "mission.yaml")
@@ -148,7 +148,7 @@ def test_a_trajectory_that_leaves_the_band_is_refused(field):
     """Way-points in the band, but the middle one passes 1.5 m going down at 5 m/s:
     the re-solved trajectory is 2 m higher 0.4 s before it (3.5 m, the ceiling)
     and 0.75 m lower 0.15 s after it (the clearance), so it leaves the band."""
-    from companion.commands.fly import sortie_flight_plan
+    from companion.flight_plan import sortie_flight_plan
 
     mission, grid, dem = field
     t = np.array([0.0, 4.0, 8.0])
@@ -205,7 +205,8 @@ def test_fly_checks_what_it_flies_before_opening_anything(field, tmp_path):
     whose re-solved trajectory leaves the band) before the link or the tlog."""
     import socket
 
-    from companion.commands.fly import execute, sortie_flight_plan
+    from companion.commands.fly import execute
+    from companion.flight_plan import sortie_flight_plan
 
     mission, _, _ = field
     t = np.array([0.0, 4.0, 8.0])

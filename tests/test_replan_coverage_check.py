@@ -137,7 +137,7 @@ def _mission_dir(tmp_path, rangefinders):
 
 @pytest.fixture(scope="module")
 def flat_plan():
-    from companion.commands.fly import FlightPlan
+    from companion.flight_plan import FlightPlan
     from mavcore.mission import load_mission
     from companion.planner import plan_mission
 
@@ -146,7 +146,7 @@ def flat_plan():
 
 
 def test_gate_refuses_naming_the_gap_and_slow_flies_short_gaps_slower(tmp_path, flat_plan):
-    from companion.commands.fly import sensor_coverage_gate
+    from companion.flight_plan import sensor_coverage_gate
     from mavcore.errors import PlanError
     from mavcore.mission import load_mission
 
@@ -182,7 +182,7 @@ def test_gate_refuses_naming_the_gap_and_slow_flies_short_gaps_slower(tmp_path, 
         assert np.linalg.norm(tr1.sample(t).v, axis=1).max() <= v_ok + 1e-9
     again, doc2 = sensor_coverage_gate(m, slow, "refuse")      # the slowed plan passes
     assert doc2["gaps"] == [] and again is slow
-    from companion.commands.fly import slowed_mission      # and avoidance is no faster than the flight
+    from companion.flight_plan import slowed_mission      # and avoidance is no faster than the flight
     assert slowed_mission(m, k).replan.speed_m_s == pytest.approx(m.flight.speed_m_s / k)
     assert slowed_mission(m, 1.0) is m
 

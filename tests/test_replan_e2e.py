@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from companion.cli import main
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from companion.link.tlog import read_tlog
 from mavcore.mission.loader import load_mission
 

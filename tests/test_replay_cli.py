@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from companion.cli import main
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from companion.link.tlog_scan import TlogScanner
 
 DATA = Path(__file__).parent / "data" / "replay"

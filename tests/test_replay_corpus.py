@@ -36,7 +36,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.cli import main
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from companion.commands.fly import prepare
 from companion.flight.core import ActuatorOut
 from companion.flight.environment import differences, fingerprint

@@ -21,7 +21,7 @@ import pytest
 
 from companion.cli import main
 from companion.link.tlog import read_tlog
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 
 pytestmark = pytest.mark.slow
 

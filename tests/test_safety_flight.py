@@ -14,7 +14,7 @@ import json
 import pytest
 
 from companion.cli import main
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 
 OBSTACLE_XY = (17.0, 8.75)
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from companion.flight.reference import smooth_segment
+from companion.trajectory.reference import smooth_segment
 from mavcore.maps.grid import ElevationModel, OccupancyGrid
 from companion.replan.memory import ObstacleMemory
 from companion.safety import (Guard, GuardConfig, SafetyScene, known_obstacle_distance, stopping_distance_m,
@@ -248,7 +248,7 @@ def test_default_law_hand_value():
 
 @pytest.mark.parametrize("speed", [0.5, 1.0, 1.5])
 def test_gate_brakes_to_rest_within_the_stopping_distance(speed):
-    from companion.flight.reference import RefSample
+    from companion.trajectory.reference import RefSample
     from companion.safety.gate import GuardGate
     from companion.safety.guard import DELAY_S, GRACE_S
 
@@ -281,7 +281,7 @@ def test_gate_brakes_to_rest_within_the_stopping_distance(speed):
 
 
 def test_gate_lets_a_braking_mode_brake():
-    from companion.flight.reference import RefSample
+    from companion.trajectory.reference import RefSample
     from companion.safety.gate import GuardGate
 
     g = GuardGate(_guard(_box((1.9, 6.0, 0.0), (3.0, 10.0, 3.0))), 2.0)
@@ -364,7 +364,7 @@ def test_core_refuses_a_new_trajectory_into_the_ground_and_flies_the_braked_hove
 
     from pymavlink.dialects.v20 import common as mavlink
 
-    from companion.flight.reference import RefSample
+    from companion.trajectory.reference import RefSample
 
     z = (0.0, 0.0, 0.0)
     level = _Line((2.0, 8.0, 1.5), (0.5, 0.0, 0.0), 10.0)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from companion.cli import main
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from companion.commands.fly import EXIT_FAILED
 from mavcore.geometry import scene_from_maps
 from companion.link.tlog import read_tlog

@@ -28,7 +28,7 @@ import pytest
 from jsonschema import Draft202012Validator
 
 from companion.cli import main
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from mavcore.errors import PlanError
 from companion.format_version import check_format_version
 from companion.plan_io import PLAN_FORMAT_VERSION, load_plan

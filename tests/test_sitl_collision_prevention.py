@@ -95,7 +95,8 @@ def _wall_mission(tmp_path):
 
 def _fly_toward_wall(tmp_path, cp_dist_m):
     from companion.commands.demo import launch_pose
-    from companion.commands.fly import FlightPlan, execute
+    from companion.commands.fly import execute
+    from companion.flight_plan import FlightPlan
     from mavcore.mission import load_mission
     from companion.planner import plan_mission
     from sitl.api import SitlInProcess

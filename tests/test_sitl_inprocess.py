@@ -8,7 +8,7 @@ import time
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from mavcore import codec
 from mavcore.link.sockets import open_pipe
 from sitl.api import SitlInProcess

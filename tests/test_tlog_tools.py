@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.commands.demo import launch_pose, missions_dir
+from companion.commands.demo import launch_pose
+from companion.bundled import missions_dir
 from companion.link.tlog import read_tlog
 
 pytestmark = pytest.mark.slow

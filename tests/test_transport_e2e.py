@@ -20,7 +20,7 @@ import json
 import pytest
 
 from companion.cli import main
-from companion.commands.demo import missions_dir
+from companion.bundled import missions_dir
 from companion.link.tlog_scan import TlogScanner
 
 pytestmark = pytest.mark.slow

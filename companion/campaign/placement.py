@@ -56,7 +56,7 @@ def flown_path(mission, cut_s: float | None, step_s: float = 0.05):
     path : (N, 3) ENU m
     duration_s : float
     """
-    from ..commands.fly import FlightPlan
+    from ..flight_plan import FlightPlan
     from ..planner import plan_mission
 
     plan = plan_mission(mission)

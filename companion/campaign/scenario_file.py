@@ -81,7 +81,7 @@ def scenario_mission(sc: ScenarioFile, source: str):
     """(mission data dict with absolute map/dem/field paths, Mission) for the scenario.
 
     Raises CampaignError naming ``source`` when the merged mission is not valid."""
-    from ..commands.demo import resolve_mission
+    from ..bundled import resolve_mission
     from mavcore.mission.schema import Mission
 
     ref = sc.mission

@@ -51,7 +51,7 @@ class Field:
 
 def mission_ref(name: str, base_dir: str, source: str = "<spec>") -> str:
     """A bundled mission name stays a name; anything else is a path made absolute."""
-    from ..commands.demo import missions_dir
+    from ..bundled import missions_dir
 
     if "/" not in name and not name.endswith((".yaml", ".yml")) and (missions_dir() / name / "mission.yaml").exists():
         return name
@@ -65,7 +65,7 @@ def mission_ref(name: str, base_dir: str, source: str = "<spec>") -> str:
 
 
 def mission_path(ref: str) -> Path:
-    from ..commands.demo import missions_dir
+    from ..bundled import missions_dir
 
     p = Path(ref)
     return p if p.is_absolute() else missions_dir() / ref / "mission.yaml"

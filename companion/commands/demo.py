@@ -24,30 +24,11 @@ from pathlib import Path
 
 from mavcore.errors import InputError
 
+from ..bundled import resolve_mission
+
 DEFAULT_MISSION = "flat-rectangle"
 #: How the companion reaches the bundled SITL (``--transport``).
 TRANSPORTS = ("udp", "inproc")
-
-
-def missions_dir() -> Path:
-    """The bundled missions (``missions/`` next to the ``companion`` package)."""
-    return Path(__file__).resolve().parents[2] / "missions"
-
-
-def resolve_mission(name_or_path: str) -> Path:
-    """A bundled mission name (``flat-rectangle``) or a mission YAML path."""
-    p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") or p.exists():
-        if p.is_dir():
-            p = p / "mission.yaml"
-        return p
-    bundled = missions_dir() / name_or_path / "mission.yaml"
-    if not bundled.exists():
-        names = sorted(d.name for d in missions_dir().iterdir() if (d / "mission.yaml").exists()) \
-            if missions_dir().is_dir() else []
-        raise InputError(f"--mission {name_or_path}", f"no such mission file or bundled mission "
-                         f"(bundled: {', '.join(names) or 'none'})")
-    return bundled
 
 
 def add_arguments(parser) -> None:
@@ -209,7 +190,8 @@ def _plan_and_fly(args, mission, out, sitl, t_start, signing_key=None, overrides
     from ..report import write_report_or_fallback
     from ..runner import UNUSED_STREAMS
     from ..summary import control_text, coverage_text, failure_lines, outcome_text
-    from .fly import EXIT_FAILED, FlightPlan, execute
+    from .fly import EXIT_FAILED, execute
+    from ..flight_plan import FlightPlan
 
     ATTITUDE = 30   # MAVLINK_MSG_ID_ATTITUDE: the SITL's ground-truth ODOMETRY carries the attitude
 

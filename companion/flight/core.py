@@ -84,8 +84,8 @@ from .coverage import PathCoverage
 from .log import ErrorStats, FlightLog
 from .monitor import FlightMonitor, MonitorConfig, Violation
 from .setup_record import MAV_SEVERITY_DEBUG, SETUP_TEXT_ID, setup_chunks
-from .reference import (RefSample, TrajectoryWindow, at_rest, climb_duration_s, pointing_at,
-                        setpoint_yaw_enu, smooth_segment)
+from ..trajectory.reference import (RefSample, TrajectoryWindow, at_rest, climb_duration_s, pointing_at,
+                                    setpoint_yaw_enu, smooth_segment)
 
 PHASES = ("connect", "setup", "upload", "preflight", "takeoff", "hold", "trajectory", "hover", "landing", "done",
           "holding", "released", "ended")

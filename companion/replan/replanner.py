@@ -88,7 +88,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mavcore.mission.replan import ReplanConfig
-from ..flight.reference import RefSample
+from ..trajectory.reference import RefSample
 from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
 from .globalplan import GlobalPlan

@@ -87,7 +87,7 @@ def build_core(setup: dict, mission, flight_plan) -> FlightCore:
         The recorded setup record.
     mission : mavcore.mission.Mission
         The mission loaded from the same file.
-    flight_plan : companion.commands.fly.FlightPlan
+    flight_plan : companion.flight_plan.FlightPlan
         From ``companion.commands.fly.prepare`` with the same plan source,
         not yet cut: the recorded ``cut_s`` is applied here, as ``execute`` does.
 
@@ -96,7 +96,8 @@ def build_core(setup: dict, mission, flight_plan) -> FlightCore:
     ValueError
         The setup record is not one this version can replay.
     """
-    from ..commands.fly import build_flight_core, sensor_coverage_gate, slowed_mission
+    from ..assembly import build_flight_core
+    from ..flight_plan import sensor_coverage_gate, slowed_mission
 
     if setup.get("format") != SETUP_FORMAT:
         raise ValueError(f"setup record format {setup.get('format')!r}, expected {SETUP_FORMAT!r}")

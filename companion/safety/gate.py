@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 
-from ..flight.reference import RefSample
+from ..trajectory.reference import RefSample
 from ..replan.shaper import ReferenceShaper
 from .guard import GRACE_S, Guard, Verdict
 

@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MapError
-from ..inputs import brief, check, clip, count_tokens, limits, name, open_regular, parse_yaml, read_bytes, read_text
+from ..inputs import brief, check, clip, count_tokens, limits, name, open_regular, read_bytes, read_text
 from .grid import OccupancyGrid
 
 _REQUIRED = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
@@ -366,6 +366,8 @@ def load_ogm(yaml_path: str | Path) -> OccupancyGrid:
     MapError
         Any malformed input, naming the file (and key) and the problem.
     """
+    from ..inputs_yaml import parse_yaml   # PyYAML on first use
+
     ypath = Path(yaml_path)
     src = str(ypath)
     data = parse_yaml(read_text(ypath, MapError, "occupancy grid YAML"), src, MapError)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..config import from_dict
 from ..errors import MissionError
-from ..inputs import parse_yaml, read_text
+from ..inputs import read_text
 from .schema import Mission
 
 #: Fields of ``Mission`` that the loader sets; a mission file may not hold them.
@@ -23,6 +23,8 @@ def load_mission(path: str | Path) -> Mission:
         The file is missing, is not YAML, or breaks the schema (message names
         the file and the key).
     """
+    from ..inputs_yaml import parse_yaml   # PyYAML on first use
+
     p = Path(path)
     data = parse_yaml(read_text(p, MissionError), str(p), MissionError)
     if not isinstance(data, dict):
