@@ -27,8 +27,8 @@ def build_flight_core(mission, flight_plan: FlightPlan, cfg, setup: dict | None,
     """The ``FlightCore`` that flies ``flight_plan`` (already cut) with ``cfg``: the
     same construction for ``companion fly`` and ``companion replay``. ``maps``: the
     mission's (grid, dem) when already read (``load_mission_maps``)."""
-    from ..control import GeometricController
-    from ..runner import FlightCore, FlightInputs
+    from .control import GeometricController
+    from .runner import FlightCore, FlightInputs
 
     from mavcore.maps.field import load_mission_maps
 
@@ -53,8 +53,8 @@ def build_guard(mission, replanner, grid, dem):
     the replanner's known map (rows, terrain) and what it knows of the obstacles
     (its memory and the cells a re-route added); without a replanner, the mission's
     maps and no obstacles."""
-    from ..safety import Guard, GuardConfig, SafetyScene, known_obstacle_distance
-    from ..safety.gate import GuardGate
+    from .safety import Guard, GuardConfig, SafetyScene, known_obstacle_distance
+    from .safety.gate import GuardGate
 
     cfg = GuardConfig.from_mission(mission)
     if replanner is not None:
@@ -75,8 +75,8 @@ def build_replanner(mission, flight_plan: FlightPlan, grid, dem):
     their stops (v = 0) as turns."""
     import numpy as np
 
-    from ..replan import GlobalPlan, KnownMap, Replanner
-    from ..replan.replanner import mission_replan_config
+    from .replan import GlobalPlan, KnownMap, Replanner
+    from .replan.replanner import mission_replan_config
 
     fp = flight_plan
     if fp.waypoints_t_s is None:

@@ -51,7 +51,7 @@ class FlightPlan:
         rest instead of a reference that halts at cruise speed."""
         import numpy as np
 
-        from ..trajectory import generate_trajectory
+        from .trajectory import generate_trajectory
 
         t = self.waypoints_t_s
         n = min(len(t), max(2, int(np.searchsorted(t, t[0] + cut_s, side="left")) + 1))
@@ -85,7 +85,7 @@ def slowed_flight_plan(fp: FlightPlan, k: float) -> FlightPlan:
     normalised time of each piece: only the knot times change)."""
     import numpy as np
 
-    from ..trajectory import Trajectory
+    from .trajectory import Trajectory
 
     tr = fp.trajectory
     t0 = float(tr.t0)
@@ -110,8 +110,8 @@ def sensor_coverage_gate(mission, fp: FlightPlan, mode: str) -> tuple[FlightPlan
     (``replan.enabled: false``) nothing reads the rangefinders: not checked.
     """
     from mavcore.errors import PlanError
-    from ..replan.coverage_check import mission_coverage
-    from ..replan.replanner import mission_replan_config
+    from .replan.coverage_check import mission_coverage
+    from .replan.replanner import mission_replan_config
 
     if not mission.replan.enabled:
         return fp, {"mode": mode, "checked": False, "gaps": [], "time_scale": 1.0}
@@ -153,7 +153,7 @@ def sortie_flight_plan(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, target_enu_m, config
     through them with the mission's weights; the runner flies it like a whole plan."""
     import numpy as np
 
-    from ..trajectory import generate_trajectory
+    from .trajectory import generate_trajectory
 
     t, p, v, a = (np.asarray(x, dtype=float) for x in (t_s, p_enu_m, v_enu_m_s, a_enu_m_s2))
     traj = generate_trajectory(t, p, v, a, config, target_enu_m=target_enu_m)

@@ -15,7 +15,7 @@ from typing import Any, Literal
 
 from mavcore.config import from_dict
 from mavcore.errors import CampaignError, MissionError
-from mavcore.inputs import parse_yaml, read_text
+from mavcore.inputs import read_text
 
 #: mission keys holding a path relative to the mission file
 PATH_KEYS = (("map",), ("dem",), ("field", "file"))
@@ -60,6 +60,7 @@ class ScenarioFile:
 
 def load_scenario(path: str | Path) -> ScenarioFile:
     p = Path(path)
+    from mavcore.inputs_yaml import parse_yaml   # PyYAML on first use
     data = parse_yaml(read_text(p, CampaignError, "scenario file"), str(p), CampaignError)
     if not isinstance(data, dict):
         raise CampaignError(str(p), "expected a mapping of scenario keys at the top level")
@@ -91,6 +92,7 @@ def scenario_mission(sc: ScenarioFile, source: str):
         base = resolve_mission(ref)
     except Exception as exc:
         raise CampaignError(f"{source}: key 'mission'", str(exc)) from None
+    from mavcore.inputs_yaml import parse_yaml   # PyYAML on first use
     data = parse_yaml(read_text(base, MissionError), str(base), MissionError)
     if not isinstance(data, dict):
         raise CampaignError(f"{source}: key 'mission'", f"{base}: not a mapping of mission keys")

@@ -18,7 +18,7 @@ from typing import Literal
 
 from mavcore.config import from_dict
 from mavcore.errors import CampaignError
-from mavcore.inputs import parse_yaml, read_text
+from mavcore.inputs import read_text
 
 #: a fixed number, or [lo, hi]: uniform in it
 Dim = float | tuple[float, float]
@@ -243,6 +243,7 @@ def spec_from_dict(data, source: str) -> CampaignSpec:
 def load_spec(path: str | Path) -> CampaignSpec:
     """Read and validate a campaign spec YAML; mission paths resolve against its directory."""
     p = Path(path)
+    from mavcore.inputs_yaml import parse_yaml   # PyYAML on first use
     data = parse_yaml(read_text(p, CampaignError, "campaign spec"), str(p), CampaignError)
     if not isinstance(data, dict):
         raise CampaignError(str(p), "expected a mapping of campaign keys at the top level")
