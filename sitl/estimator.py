@@ -79,7 +79,7 @@ import collections
 import math
 from dataclasses import dataclass
 
-from .plant import polar_step, rotate_right
+from mavcore.so3 import polar_step, rotate_right
 
 
 @dataclass(frozen=True)

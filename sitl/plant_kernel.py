@@ -86,7 +86,7 @@ def _body_rates(wx, wy, wz, tx, ty, tz, J, h):
 
 
 def _rotate_right(R, thx, thy, thz):
-    """``sitl.plant.rotate_right``: R Exp(theta), Rodrigues, row-major 9-tuples."""
+    """``mavcore.so3.rotate_right``: R Exp(theta), Rodrigues, row-major 9-tuples."""
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
     t2 = thx * thx + thy * thy + thz * thz
     if t2 > 1e-12:
@@ -117,7 +117,7 @@ def _rotate_right(R, thx, thy, thz):
 
 
 def _polar_step(R):
-    """``sitl.plant.polar_step``: one Newton step toward the nearest rotation."""
+    """``mavcore.so3.polar_step``: one Newton step toward the nearest rotation."""
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
     s00 = r00 * r00 + r10 * r10 + r20 * r20
     s11 = r01 * r01 + r11 * r11 + r21 * r21

@@ -15,10 +15,10 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
+from mavcore.mission.control import ControlConfig
 from companion.control import (
     AccelerationEstimator,
     BodyVectorFilter,
-    ControlConfig,
     GeometricController,
     Measurements,
     Mixer,

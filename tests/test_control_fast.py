@@ -22,7 +22,7 @@ from mavcore.mission.control import ControlConfig
 from companion.control.geometric import ControlOutput, DesiredAttitude, attitude_torque
 from companion.control.observer import virtual_pairs
 from companion.control.rates import rate_command
-from companion.control.so3 import cross, dot, unit3, unit_d2
+from mavcore.so3 import cross, dot, unit3, unit_d2
 from companion.control.tilt import limit_thrust
 from companion.control.vectors import controller_vectors
 from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig

@@ -17,7 +17,7 @@ import pytest
 
 from sitl.estimator import EstimatorConfig, OnboardEstimator, initial_attitude
 from sitl.gnss import GnssReceiver
-from sitl.plant import rotate_right
+from mavcore.so3 import rotate_right
 
 G = 9.81
 M_E = (0.0, 0.21, -0.42)

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig, allocation_matrix
-from sitl.plant import Plant, PlantParams, polar_step, rotate_right
+from sitl.plant import Plant, PlantParams
+from mavcore.so3 import polar_step, rotate_right
 
 VEH = VehicleConfig()
 H = 1e-3

@@ -122,7 +122,7 @@ Everything here is pure: the controller object holds only filter state and
 takes the vehicle's time as an argument. One path: ``GeometricController.command``
 (the 250 Hz path, motor commands) composes the pieces below on float
 tuples (:func:`desired_frame`, :func:`decoupled_law`, the TRIAD helpers of
-``companion.control.so3``); ``update`` adds the named ``ControlOutput``.
+``mavcore.so3``); ``update`` adds the named ``ControlOutput``.
 :func:`desired_attitude` and :func:`attitude_torque_decoupled` are the same
 pieces with named results. ``tests/test_control_fast.py`` checks the path
 against a plain composition of eqs. (21)-(31) written in the test
@@ -142,8 +142,8 @@ from .pointing import PointingGovernor
 from .rates import rate_command
 from .tilt import limit_thrust
 from .observer import AttitudeEstimate, VelocityAidedObserver, horizontal_field, virtual_pairs
-from .so3 import (Vec3, body_coordinates, cross, dot, thrust_axis_estimate, triad_body_z,  # noqa: F401
-                  triad_frames, triad_rotation, triad_to_body3, unit3, unit_d2)
+from mavcore.so3 import (Vec3, body_coordinates, cross, dot, thrust_axis_estimate, triad_body_z, triad_frames,
+                         triad_rotation, triad_to_body3, unit3, unit_d2)
 from .vectors import AccelerationEstimator, BodyVectorFilter, controller_vectors
 
 # --- small float-tuple vector algebra (the hot path avoids numpy) ---------

@@ -165,8 +165,7 @@ from dataclasses import dataclass
 from operator import itemgetter
 
 
-from .so3 import (Mat3, Vec3, mat_apply, mat_apply_t, mat_mul, orthonormalise, so3_exp,  # noqa: F401
-                  triad_rotation, unit)
+from mavcore.so3 import Mat3, Vec3, mat_apply, mat_apply_t, mat_mul, orthonormalise, so3_exp, triad_rotation, unit
 from .vectors import BodyVectorFilter
 
 _E3 = (0.0, 0.0, 1.0)

@@ -22,7 +22,7 @@ is not saturated, and the derivatives given to ``desired_frame`` for
 ``Omega_d`` are those of that direction: floor only, ``G = (F_x, F_y,
 F_z_min)`` with ``G_dot = (F_dot_x, F_dot_y, 0)``; tilt, ``G = (tan(theta_max)
 u, 1)`` with ``u = F_h/|F_h|`` and ``G_dot = (tan(theta_max) u_dot, 0)`` (u's
-derivatives as :func:`companion.control.so3.unit_d2`).
+derivatives as :func:`mavcore.so3.unit_d2`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from .so3 import unit_d2
+from mavcore.so3 import unit_d2
 
 
 class LimitedThrust(NamedTuple):

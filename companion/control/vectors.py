@@ -50,7 +50,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .so3 import Vec3, reject, unit3
+from mavcore.so3 import Vec3, reject, unit3
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,4 +1,4 @@
-"""The one set of small SO(3) and vector helpers of the controller, on float tuples.
+"""The one set of small SO(3) and vector helpers (the controller's and the SITL's), on float tuples.
 
 World ENU / body FLU; a vector is a 3-tuple of floats, a rotation a row-major
 9-tuple (``R[3 i + j]``), body to world. The hot paths (the controller, the
@@ -9,7 +9,9 @@ arithmetic. Everything here is pure.
   on a zero or non-finite vector), :func:`reject`, :func:`unit_d2` (a unit
   vector and its first two time derivatives);
 - rotations: :func:`so3_exp` (Rodrigues), :func:`mat_mul`, :func:`mat_apply`,
-  :func:`mat_apply_t`, :func:`orthonormalise`;
+  :func:`mat_apply_t`, :func:`orthonormalise`, :func:`rotate_right` (``R Exp(theta)``,
+  the plant's and estimator's attitude step) and :func:`polar_step` (one Newton step to
+  the nearest rotation; ``sitl.plant_kernel`` compiles copies of both);
 - two vector pairs ``b_i = R^T r_i`` (TRIAD): :func:`triad_rotation` (R),
   :func:`body_coordinates` (``R^T w``), :func:`thrust_axis_estimate` (``R e3``).
 """
@@ -242,3 +244,62 @@ def thrust_axis_estimate(b1, b2, r1, r2) -> Vec3:
         Estimate of the body z axis in the world frame (unit).
     """
     return triad_body_z(b1, r1, triad_frames(b1, b2, r1, r2))
+
+
+def rotate_right(R, thx: float, thy: float, thz: float):
+    """``R Exp(theta)`` for a row-major 9-tuple R and a rotation vector theta
+    (rad, body frame): Rodrigues' formula, plain floats.
+
+    ``Exp(theta) = I + a [theta]x + b [theta]x^2`` with ``a = sin|t|/|t|``
+    and ``b = (1 - cos|t|)/|t|^2`` written as ``2 sin^2(|t|/2)/|t|^2`` (no
+    cancellation for small angles).
+    """
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+    t2 = thx * thx + thy * thy + thz * thz
+    if t2 > 1e-12:
+        ang = math.sqrt(t2)
+        a = math.sin(ang) / ang
+        s = math.sin(0.5 * ang)
+        b = 2.0 * s * s / t2
+    else:  # Taylor series, exact to rounding for |theta| < 1e-6
+        a = 1.0 - t2 / 6.0
+        b = 0.5 - t2 / 24.0
+    xx, yy, zz = thx * thx, thy * thy, thz * thz
+    xy, xz, yz = thx * thy, thx * thz, thy * thz
+    E00 = 1.0 - b * (yy + zz)
+    E11 = 1.0 - b * (xx + zz)
+    E22 = 1.0 - b * (xx + yy)
+    E01 = b * xy - a * thz
+    E10 = b * xy + a * thz
+    E02 = b * xz + a * thy
+    E20 = b * xz - a * thy
+    E12 = b * yz - a * thx
+    E21 = b * yz + a * thx
+    return (r00 * E00 + r01 * E10 + r02 * E20, r00 * E01 + r01 * E11 + r02 * E21,
+            r00 * E02 + r01 * E12 + r02 * E22,
+            r10 * E00 + r11 * E10 + r12 * E20, r10 * E01 + r11 * E11 + r12 * E21,
+            r10 * E02 + r11 * E12 + r12 * E22,
+            r20 * E00 + r21 * E10 + r22 * E20, r20 * E01 + r21 * E11 + r22 * E21,
+            r20 * E02 + r21 * E12 + r22 * E22)
+
+
+def polar_step(R):
+    """One Newton step toward the nearest rotation, ``R (3 I - R^T R) / 2``
+    (row-major 9-tuples); quadratic convergence, so one step per 64 physics
+    steps removes the rounding drift of ``rotate_right``."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+    # S = R^T R (symmetric)
+    s00 = r00 * r00 + r10 * r10 + r20 * r20
+    s11 = r01 * r01 + r11 * r11 + r21 * r21
+    s22 = r02 * r02 + r12 * r12 + r22 * r22
+    s01 = r00 * r01 + r10 * r11 + r20 * r21
+    s02 = r00 * r02 + r10 * r12 + r20 * r22
+    s12 = r01 * r02 + r11 * r12 + r21 * r22
+    m00, m11, m22 = 1.5 - 0.5 * s00, 1.5 - 0.5 * s11, 1.5 - 0.5 * s22
+    m01, m02, m12 = -0.5 * s01, -0.5 * s02, -0.5 * s12
+    return (r00 * m00 + r01 * m01 + r02 * m02, r00 * m01 + r01 * m11 + r02 * m12,
+            r00 * m02 + r01 * m12 + r02 * m22,
+            r10 * m00 + r11 * m01 + r12 * m02, r10 * m01 + r11 * m11 + r12 * m12,
+            r10 * m02 + r11 * m12 + r12 * m22,
+            r20 * m00 + r21 * m01 + r22 * m02, r20 * m01 + r21 * m11 + r22 * m12,
+            r20 * m02 + r21 * m12 + r22 * m22)
