@@ -593,6 +593,27 @@ class SitlServer:
             ID.MAVLINK_MSG_ID_ODOMETRY: (codec.PACK_ODOMETRY, self._odometry_args),
             ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: (codec.PACK_ATTITUDE_QUATERNION, self._attitude_q_args),
         }
+        self._init_dispatch()
+        #: Link diagnostics: garbage seen, and what peers asked for that the
+        #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
+        self.stats = {"bad_packets": 0, "ignored": collections.Counter(), "unsupported": collections.Counter(),
+                      "refused": collections.Counter()}
+        self._refusal_said_s = -math.inf    # wall time of the last STATUSTEXT about a refused input
+        #: Who may control the vehicle (``sitl.auth``); its ``counts`` are the
+        #: accepted and ignored control messages.
+        self.auth = ControlPolicy(
+            (config.listen, *config.control_outs),
+            DEFAULT_CONTROLLERS if config.controllers is None else config.controllers,
+            None if config.signing_key is None else SignatureVerifier(config.signing_key),
+            key_locked=config.signing_key is not None)
+        self._intake = IntakeBudget()
+
+    #: COMMAND_INT frame of the command being handled (None: COMMAND_LONG).
+    _command_frame: int | None = None
+
+
+    def _init_dispatch(self) -> None:
+        """The receive tables: message type -> handler, MAV_CMD -> command handler."""
         self._handlers = {
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
@@ -630,22 +651,6 @@ class SitlServer:
             mavlink.MAV_CMD_MISSION_START: self._cmd_mission_start,
             mavlink.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
         }
-        #: Link diagnostics: garbage seen, and what peers asked for that the
-        #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
-        self.stats = {"bad_packets": 0, "ignored": collections.Counter(), "unsupported": collections.Counter(),
-                      "refused": collections.Counter()}
-        self._refusal_said_s = -math.inf    # wall time of the last STATUSTEXT about a refused input
-        #: Who may control the vehicle (``sitl.auth``); its ``counts`` are the
-        #: accepted and ignored control messages.
-        self.auth = ControlPolicy(
-            (config.listen, *config.control_outs),
-            DEFAULT_CONTROLLERS if config.controllers is None else config.controllers,
-            None if config.signing_key is None else SignatureVerifier(config.signing_key),
-            key_locked=config.signing_key is not None)
-        self._intake = IntakeBudget()
-
-    #: COMMAND_INT frame of the command being handled (None: COMMAND_LONG).
-    _command_frame: int | None = None
 
     def _init_mission_store(self, max_items: int) -> None:
         """The mission, fence and rally storage (``MissionProtocol``) and what

@@ -301,27 +301,7 @@ class FlightCore:
         self.phase = "connect"
         self.error: str | None = None
         self.finished = False
-        # vehicle state (from its messages)
-        self.t_us: int | None = None
-        self.t_s: float | None = None
-        self.t_first_s: float | None = None
-        self._imu_times: list[int] = []
-        self.period_us: int | None = None
-        self.n_frames = 0
-        self.armed = False
-        self.vstate = None
-        self.custom_mode: int | None = None
-        self.autopilot: autopilots.Autopilot | None = None   # the vehicle's stack, from its first HEARTBEAT
-        self.landed_state = mavlink.MAV_LANDED_STATE_UNDEFINED
-        self._pos = None
-        self._vel = None
-        self._nav_t = None
-        self._imu = None                # (accel, mag) FLU of the last frame
-        self._truth = None
-        self._truth_t_us = None
-        self._truth_new = False
-        self._pos_ms = None
-        self._pos_new = False
+        self._init_vehicle_state()
         #: (frame time us, reference position, phase) of the last frames: a measurement is
         #: compared with the reference of its own time (a late datagram is not an error)
         self._ref_hist: deque = deque(maxlen=REF_HISTORY_FRAMES)
@@ -370,7 +350,37 @@ class FlightCore:
         self._next_sp_t = -math.inf
         self._sp_dt = 1.0 / cfg.setpoint_hz
         self._hb_t = None
-        # schedule (vehicle seconds), set at arming
+        self._init_schedule()
+        self._init_protocol()
+        #: Optional tap on the controller's inputs (tests check them against the link).
+        self.input_tap = None
+
+
+    def _init_vehicle_state(self) -> None:
+        """The vehicle's state as its messages tell it (nothing known yet)."""
+        self.t_us: int | None = None
+        self.t_s: float | None = None
+        self.t_first_s: float | None = None
+        self._imu_times: list[int] = []
+        self.period_us: int | None = None
+        self.n_frames = 0
+        self.armed = False
+        self.vstate = None
+        self.custom_mode: int | None = None
+        self.autopilot: autopilots.Autopilot | None = None   # the vehicle's stack, from its first HEARTBEAT
+        self.landed_state = mavlink.MAV_LANDED_STATE_UNDEFINED
+        self._pos = None
+        self._vel = None
+        self._nav_t = None
+        self._imu = None                # (accel, mag) FLU of the last frame
+        self._truth = None
+        self._truth_t_us = None
+        self._truth_new = False
+        self._pos_ms = None
+        self._pos_new = False
+
+    def _init_schedule(self) -> None:
+        """The procedure's schedule (vehicle seconds), set at arming."""
         self._t_arm = None
         self._segments: list[tuple] = []     # take-off: (p0, p1, T) smooth segments back to back
         self._takeoff_T = 0.0
@@ -379,7 +389,9 @@ class FlightCore:
         self._window: TrajectoryWindow | None = None
         self._hold_first = self._hold_last = self._preflight_ref = None
         self.resumed_from_s: float | None = None
-        # command / mission protocol plumbing of the procedure
+
+    def _init_protocol(self) -> None:
+        """The command / mission / parameter protocol plumbing of the procedure and the receive table."""
         self._ack = None
         self._ack_for = None
         self._mission_msg = None
@@ -406,8 +418,6 @@ class FlightCore:
             "MISSION_ACK": self._on_mission_msg,
             "PARAM_VALUE": self._on_param_value,
         }
-        #: Optional tap on the controller's inputs (tests check them against the link).
-        self.input_tap = None
 
     # --- the runner's face ----------------------------------------------------------
 
