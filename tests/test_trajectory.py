@@ -17,8 +17,8 @@ from scipy.integrate import quad, solve_ivp
 from scipy.linalg import expm, solve_continuous_are
 
 from mavcore.errors import PlanError
+from mavcore.mission.trajectory import TrajectoryConfig
 from companion.trajectory import (
-    TrajectoryConfig,
     generate_trajectory,
     pointing_derivatives,
     pointing_directions,
