@@ -167,3 +167,26 @@ def test_mavcore_imports_neither_companion_nor_sitl(graph):
 
 def test_no_package_level_import_cycle(graph):
     assert cycles(package_graph(graph)) == []
+
+
+def relative_imports_beyond_top(source: str, module: str, is_package: bool) -> list:
+    """Line numbers of the relative imports of ``source`` that climb above its top-level package
+    (``from ..x`` in ``companion/flight_plan.py``: an ImportError only when that line runs)."""
+    depth = len(module.split(".")) - (0 if is_package else 1)
+    return [n.lineno for n in ast.walk(ast.parse(source))
+            if isinstance(n, ast.ImportFrom) and n.level and n.level > depth]
+
+
+def test_relative_import_beyond_top_is_found():
+    src = "from .a import b\n\ndef f():\n    from ..c import d\n"
+    assert relative_imports_beyond_top(src, "pkg.mod", False) == [4]
+    assert relative_imports_beyond_top(src, "pkg.sub.mod", False) == []
+
+
+def test_no_relative_import_climbs_out_of_its_package():
+    bad = []
+    for pkg in PACKAGES:
+        for p in (ROOT / pkg).rglob("*.py"):
+            lines = relative_imports_beyond_top(p.read_text(encoding="utf-8"), module_name(p), p.name == "__init__.py")
+            bad += [f"{p.relative_to(ROOT)}:{k}" for k in lines]
+    assert bad == []
