@@ -102,7 +102,7 @@ from .rejoin import converged_from, rejoin
 from .reroute import reroute
 from .reroute3d import reroute_3d
 from .shaper import ReferenceShaper
-from .route3d import RouteScene
+from .route3d import RouteScene, find_route
 from .routecheck import route_exists
 from .voxmap import L_CANDIDATE, ObstacleMap
 
@@ -1031,21 +1031,25 @@ class Replanner:
                 # can, else the governor's: a route on the clearance itself leaves the stopping
                 # law no speed at all, and the guard refuses it)
                 goals = self._coverage_goals(st.p)
-                for margin, others in ((m, o) for m in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M) for o in (*tiers, None)):
+                for margin in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M) if len(goals) else ():
                     scene = RouteScene(known0, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
                                        self.cfg.ceiling_agl_m)
-                    res3 = reroute_3d(self.plan, scene, goals, st, tau, self._wp_leave, blocking, travel,
-                                      self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
-                                      self._keep_m + ROUTE_MARGIN_M, others, over) if len(goals) else None
-                    if res3 is None:
+                    route = find_route(scene, np.asarray(st.p, float), goals)   # one lattice search per margin
+                    if route is None:
                         continue              # no 3-D route to any coverage end with this margin
-                    if res3.plan is not None:
-                        self.known = res3.known
-                        plan3, v3, add3 = self._paced(res3.plan, st)
-                        if plan3 is not None:
-                            res, plan, verdict, added, via = res3, plan3, v3, add3, ", leaving in 3-D"
-                            break
-                        res, verdict = res3, v3
+                    for others in (*tiers, None):
+                        res3 = reroute_3d(self.plan, scene, goals, st, tau, self._wp_leave, blocking, travel,
+                                          self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
+                                          self._keep_m + ROUTE_MARGIN_M, others, over, route=route)
+                        if res3.plan is not None:
+                            self.known = res3.known
+                            plan3, v3, add3 = self._paced(res3.plan, st)
+                            if plan3 is not None:
+                                res, plan, verdict, added, via = res3, plan3, v3, add3, ", leaving in 3-D"
+                                break
+                            res, verdict = res3, v3
+                    if plan is not None:
+                        break
             if plan is not None:
                 self._set_plan(plan)
                 self._dev_leg = None
