@@ -1049,6 +1049,8 @@ class FlightStack:
             self._offboard_loss(now_us, state)
 
         sp, idle = self._mode_setpoint(now_us, state, dt)
+        if not self.armed:     # the mode disarmed (ArduCopter: the mission ended on the ground)
+            return _DISARMED_OUTPUT
         o = self._out
         if self._override_active:
             cmd = self._act_cmd
