@@ -159,3 +159,58 @@ def test_compare_plans_ignores_timings_and_reports_every_kind_of_difference(tmp_
     assert subprocess.run([sys.executable, script, str(pa), str(pb)], capture_output=True).returncode == 1
     bad = subprocess.run([sys.executable, script, str(pa), str(tmp_path / "none.json")], capture_output=True)
     assert bad.returncode == 2 and b"Traceback" not in bad.stderr
+
+
+# --- block graph: corridors and their cells without sparse row slicing ----------------------
+
+def reference_corridor(bg, s_from: int, s_to: int):
+    """``BlockGraph.corridor`` before: the nodes' neighbours by slicing the sparse matrix."""
+    from scipy.sparse.csgraph import dijkstra
+    if s_from <= 0 or s_to <= 0 or bg.component[s_from] != bg.component[s_to]:
+        return None
+    if s_from == s_to:
+        nodes = np.array([s_from])
+    else:
+        _, pred = dijkstra(bg.graph, directed=True, indices=s_from, return_predecessors=True)
+        path = [s_to]
+        while path[-1] != s_from:
+            path.append(int(pred[path[-1]]))
+        nodes = np.array(path)
+    return np.unique(np.concatenate([nodes, bg.graph[nodes].indices]))
+
+
+def reference_cells_of(bg, subs):
+    """``BlockGraph.cells_of`` before: membership by ``np.isin``."""
+    f, nbc = bg.block, bg.local.shape[1]
+    bi, bj = bg.block_of[subs].T
+    ub = np.unique(bi * nbc + bj)
+    loc = bg.local[ub // nbc, ub % nbc].astype(np.int64)
+    ids = np.where(loc > 0, loc + bg.base[ub // nbc, ub % nbc][:, None, None], 0)
+    m, lr, lc = np.nonzero(np.isin(ids, subs))
+    return bg.r0 + (ub[m] // nbc) * f + lr, bg.c0 + (ub[m] % nbc) * f + lc
+
+
+def test_corridor_and_cells_of_match_the_sparse_slicing_and_isin():
+    from companion.coverage.blockgraph import build_block_graph
+    from companion.coverage.freespace import bbox_cells
+    rng = np.random.default_rng(185)
+    mask = np.ones((160, 220), dtype=bool)
+    mask[::6, 10:200] = False                   # rows, with a headland on each side
+    mask[40:60, 100:130] = False                # a shed
+    mask &= rng.random(mask.shape) > 0.03       # scattered posts
+    bg = build_block_graph(mask, bbox_cells(mask))
+    subs = np.flatnonzero(bg.component >= 0)
+    comp = bg.component[subs]
+    main = subs[comp == np.bincount(comp).argmax()]
+    checked = 0
+    for a, b in rng.choice(main, size=(25, 2)).tolist() + [(int(main[0]), int(main[0]))]:
+        got, ref = bg.corridor(a, b), reference_corridor(bg, a, b)
+        np.testing.assert_array_equal(got, ref)
+        for g, r in zip(bg.cells_of(got), reference_cells_of(bg, ref)):
+            np.testing.assert_array_equal(g, r)
+        # every cell listed is eroded and belongs to one of the corridor's sub-components
+        rr, cc = bg.cells_of(got)
+        assert mask[rr, cc].all() and np.isin([bg.sub_at(r, c) for r, c in zip(rr, cc)], got).all()
+        checked += len(rr)
+    assert checked > 1000
+    assert bg.corridor(0, int(main[0])) is None
