@@ -82,6 +82,14 @@ law above. Separately, the pointing reference is made flyable
 (``companion.control.pointing``: eq. 21 exactly where the vehicle can
 follow it, yaw-rate/acceleration limited elsewhere).
 
+The yaw channel of the decoupled law has its own gains (``companion.control.yaw``,
+issue 17): the paper's single alpha = 12 on the raw gyro asked the yaw for more
+noise (0.27 rad/s^2) than the rotors can make (0.247), so the yaw damping
+``alpha_y`` acts on a low-passed yaw rate and is sized so that the gyro noise
+takes a stated fraction of the authority, and the yaw stiffness ``rho_y``
+follows from a damping ratio; roll and pitch keep rho1 and alpha
+(``docs/control.md``, "The yaw channel").
+
 Where the vector pairs come from (``ControlConfig.vectors``, ``velocity_aided``, ``observer``)
 --------------------------------------------------------------------------------------------
 By default (``observer``) from the attitude observer of
@@ -505,7 +513,13 @@ def attitude_torque_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2
     Lyapunov: ``d_dot = d x e_Omega`` (b3d turns with the desired rate), so
     ``d/dt rho1 (1 - d_z) = -e_Omega . z_t``, and for the yaw ``d/dt rho2 (1
     - cos psi_e) = -e_Omega . z_y`` (exact for d = e3), hence ``V_dot = -alpha
-    |e_Omega|^2`` as eq. (41). The tilt subsystem's torque involves the yaw
+    |e_Omega|^2`` as eq. (41). With the yaw's own damping (``alpha_yaw``,
+    ``companion.control.yaw``) the damping is ``A = diag(alpha, alpha,
+    alpha_y)`` and ``V_dot = -e_Omega^T A e_Omega <= 0`` all the same; with
+    the yaw rate low-passed (``yaw_rate_filtered``) the yaw damping acts on
+    ``e_f`` and ``V_dot <= -e^T A' e + alpha_y |e_z - e_f|^2 / 2`` (A' with
+    alpha_y / 2 in yaw), the filter's lag ``|e_z - e_f|`` bounded by the
+    yaw acceleration over the filter's rate (``docs/control.md``). The tilt subsystem's torque involves the yaw
     error only through the damping of ``Q Omega_d`` (which is the correct
     body-frame desired rate); a yaw torque that the mixer cuts (yaw-first
     desaturation) leaves it untouched.
