@@ -885,9 +885,12 @@ class Replanner:
         if len(obs) and self.cfg.clearance_governor:
             v = self._govern(P, v, obs, obs_dist)
             v = self._constrain(P, v, A, u, n, ground)
+            v = self._govern_rows(P, v)
             v = self._govern(P, v, obs, obs_dist, scale_only=True)
             if v[2] < 0.0 and self._over_points(P, v, obs):
                 v[2] = 0.0
+        elif self.cfg.clearance_governor:
+            v = self._govern_rows(P, v)
         t_s = getattr(self, "_t_s", None)      # None: called outside ``step``
         if self.cfg.clearance_governor and t_s is not None:
             pose = self.poses.at(t_s)
@@ -957,6 +960,26 @@ class Replanner:
                 v = v + (approach - allow[i]) * nrm[i]
         return v
 
+    def _govern_rows(self, P, v) -> np.ndarray:
+        """The clearance governor against the vine rows (the guard's row rule, through
+        ``Guard.row_room``): the approach to the nearest row surface is at most the speed
+        that stops ``GOVERNOR_MARGIN_M`` short of the distance the guard makes the
+        reference keep, none inside it. The corridor walls of ``_constrain`` are drawn
+        along the leg being flown; at a leg's end (a headland turn, a row's end) they are
+        not the rows, and an avoidance there closed on a row until the guard refused it
+        (obstacles-wide, seed 20261127, flight 4). No guard, no governor."""
+        if self.guard is None:
+            return v
+        room, nrm = self.guard.row_room(P)
+        if not math.isfinite(room):
+            return v
+        nrm = np.asarray(nrm)
+        allow = float(self._allowed_speed(max(0.0, room - GOVERNOR_MARGIN_M)))
+        approach = -float(nrm @ v)
+        if approach > allow:
+            v = v + (approach - allow) * nrm
+        return v
+
     def _give_way(self, P, pts) -> np.ndarray:
         """Velocity (ENU, m/s) of a stop: zero, or backing away (level) from an obstacle
         that comes closer than the vehicle could stop for (``companion.replan.closing``)."""
@@ -968,6 +991,7 @@ class Replanner:
         h = math.hypot(v[0], v[1])
         cap = give_way_speed_m_s(self.speed_m_s, self.closing.approach_m_s(getattr(self, "_t_s", None)))
         v = v if h <= cap else v * (cap / h)
+        v = self._govern_rows(P, v)
         # backing away from a mover never closes on anything faster than the stopping law
         # allows a still obstacle (the guard's rule): a give-way toward a post behind at
         # 0.70 m/s where 0.57 m/s was allowed ended a flight (obstacles-wide scenario 1)
