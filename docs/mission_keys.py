@@ -115,8 +115,15 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "control.kx": ("N/m", "> 0", "Position gain k_x, eq. (23)."),
     "control.kv": ("N s/m", "> 0", "Velocity gain k_v, eq. (23)."),
     "control.rho1": ("1/s^2", "> 0", "Weight rho_1 of the specific-force vector, eq. (28)."),
-    "control.rho2": ("1/s^2", "> 0", "Weight rho_2 of the magnetic vector, eq. (28)."),
-    "control.alpha": ("1/s", "> 0", "Angular-velocity damping alpha, eqs. (27), (35)."),
+    "control.rho2": ("1/s^2", "> 0", "Weight rho_2 of the magnetic vector, eq. (28), with `attitude_law: "
+                     "paper`; the decoupled law derives its yaw stiffness (`yaw_*`)."),
+    "control.alpha": ("1/s", "> 0", "Angular-velocity damping alpha, eqs. (27), (35): roll and pitch (all axes "
+                      "with `attitude_law: paper`)."),
+    "control.yaw_rate_cutoff_hz": ("Hz", "> 0", "Corner of the low-pass on the yaw rate the decoupled law's yaw "
+                                   "damping acts on (docs/control.md, \"The yaw channel\")."),
+    "control.yaw_noise_fraction": ("", "in (0, 1)", "Yaw damping = this fraction of the hover yaw acceleration "
+                                   "over the filtered gyro noise: the noise's 1-sigma share of the yaw authority."),
+    "control.yaw_damping_ratio": ("", "> 0", "Damping ratio of the yaw loop: yaw stiffness (alpha_y / (2 zeta))^2."),
     "control.mag_field_enu_gauss": ("gauss", "not zero", "Earth field in the world frame (ENU): the known "
                                     "inertial direction of the magnetometer vector."),
     "control.accel_filter_tau_s": ("s", ">= 0", "Low-pass on the differentiated velocity; 0: raw difference."),

@@ -628,6 +628,9 @@ class FlightStack:
         #: The vehicle is outside the geofence now (SYS_STATUS geofence health).
         self.fence_breached = False
         self._goto: tuple | None = None          # DO_REPOSITION: (target (3,), speed m/s, yaw)
+        #: ArduCopter's ``auto_armed``: the mission's take-off may leave the ground
+        #: (``MissionRules.auto_armed``; released by a GUIDED take-off or MISSION_START).
+        self._auto_armed = False
 
     # ------------------------------------------------------------------ info
     @property
@@ -785,6 +788,9 @@ class FlightStack:
             return "no offboard setpoint stream"
         if self.mode is FlightMode.MISSION and self.mission is None:
             return "no mission"
+        if (self.mode is FlightMode.MISSION and self.autopilot.mission_rules.auto_armed
+                and not int(self.params["AUTO_OPTIONS"]) & 1):
+            return "Mode not armable"        # ArduCopter ModeAuto::allows_arming (AUTO_OPTIONS bit 0)
         if self.fence is not None and self.fence.breached(state.pos_enu_m[0], state.pos_enu_m[1]):
             return "vehicle outside geofence"
         return ""
@@ -797,6 +803,7 @@ class FlightStack:
             self._say(SEVERITY_CRITICAL, "Disarming denied: not landed")
             return CommandResult(RESULT_DENIED, "not landed")
         self.armed = False
+        self._auto_armed = False
         self._override_active = False
         self._failsafe = None
         self._say(SEVERITY_INFO, "Disarmed" + (f" ({why})" if why else " (forced)" if force else ""))
@@ -858,6 +865,7 @@ class FlightStack:
             z = z_now
         self._takeoff_z = z
         self._failsafe = None
+        self._auto_armed = self.armed       # ArduCopter Mode::do_user_takeoff: set_auto_armed(true)
         self._enter(FlightMode.TAKEOFF, state)
         return CommandResult(RESULT_ACCEPTED)
 
@@ -879,6 +887,11 @@ class FlightStack:
         calls to fly the stored mission (``MissionExecutor.start``)."""
         if self.crash_event is not None:
             return self._denied_crashed("Mission")
+        if (self.mission is not None and not self.autopilot.mission_rules.implicit_takeoff and self.armed
+                and state.landed and not self.mission.starts_with_takeoff(seq)):
+            # ArduCopter ModeAuto::init: armed on the ground, the first command must be a take-off
+            self._say(SEVERITY_CRITICAL, "Auto: Missing Takeoff Cmd")
+            return CommandResult(RESULT_DENIED, "missing takeoff command")
         why = "no mission stored" if self.mission is None else self.mission.start(state, seq)
         if why:
             self._say(SEVERITY_WARNING, f"Mission denied: {why}")
@@ -886,6 +899,25 @@ class FlightStack:
         self._failsafe = None
         self._enter(FlightMode.MISSION, state, resume=False)
         return CommandResult(RESULT_ACCEPTED)
+
+    def mission_start_command(self, now_us: int, state: NavState, first: float, last: float) -> CommandResult:
+        """MAV_CMD_MISSION_START (param1 first item, param2 last item; NaN: unset).
+
+        PX4: AUTO.MISSION from item ``first``. ArduCopter
+        (GCS_MAVLINK_Copter::handle_MAV_CMD_MISSION_START): first/last other
+        than 0 DENIED; AUTO as by the mode change (FAILED when that is
+        refused), and the take-off released (``auto_armed``).
+        """
+        if not self.autopilot.mission_rules.auto_armed:
+            return self.start_mission(now_us, state, None if math.isnan(first) else int(first))
+        if any(math.isfinite(v) and v != 0 for v in (first, last)):
+            return CommandResult(RESULT_DENIED, "first/last item not supported")
+        r = self.set_mode(now_us, state, FlightMode.MISSION) if self.mode is not FlightMode.MISSION \
+            else CommandResult(RESULT_ACCEPTED)
+        if not r.accepted:
+            return CommandResult(RESULT_FAILED, r.reason)
+        self._auto_armed = self.armed
+        return r
 
     def set_mission(self, mission: MissionExecutor | None, state: NavState | None) -> None:
         """A new stored mission (None: none). Flying the old one, the vehicle
@@ -997,6 +1029,8 @@ class FlightStack:
             self._offboard_loss(now_us, state)
 
         sp, idle = self._mode_setpoint(now_us, state, dt)
+        if not self.armed:     # the mode disarmed (ArduCopter: the mission ended on the ground)
+            return _DISARMED_OUTPUT
         o = self._out
         if self._override_active:
             cmd = self._act_cmd
@@ -1130,7 +1164,16 @@ class FlightStack:
         if self.mission is None:   # pragma: no cover - set_mission leaves the mode first
             self._enter(FlightMode.LOITER, state)
             return self._hold_sp, False
+        rules = self.autopilot.mission_rules
+        if rules.auto_armed and state.landed and not self._auto_armed and not self.mission.finished:
+            if not int(self.params["AUTO_OPTIONS"]) & 2:
+                return None, True      # ArduCopter: motors idle until the take-off is released
+            self._auto_armed = True    # AUTO_OPTIONS bit 1: take off without raising the throttle
         step = self.mission.update(state, dt)
+        if rules.auto_armed and self.mission.finished and state.landed:
+            # ArduCopter ModeAuto::exit_mission: the mission ended on the ground, disarm
+            self.disarm(self._now_us, state, why="mission complete")
+            return None, True
         if step.action == "rtl":
             if state.landed:
                 self._enter(FlightMode.LAND, state)

@@ -25,6 +25,9 @@ NAV_LOITER_UNLIM (17)          a way-point held until the mode changes
 NAV_LAND (21)                  fly to the point (none: where it is), descend
                                at MPC_LAND_SPEED; reached on touchdown
 NAV_RETURN_TO_LAUNCH (20)      reached at once; the stack enters AUTO.RTL
+                               (``rtl_in_mission``, ArduCopter: flown here,
+                               climb to RTL_ALT, home at WPNAV_SPEED, land;
+                               reached on touchdown)
 DO_CHANGE_SPEED (178)          param2 > 0: the mission speed (capped at
                                MPC_XY_VEL_MAX); -1, 0: unchanged; -2: back to
                                MPC_XY_CRUISE
@@ -36,10 +39,15 @@ DO_JUMP (177)                  to item param1, param2 times (-1: for ever),
                                advances, never the current item (PX4)
 =============================  ===============================================
 
-Yaw: toward the ROI when one is set, else the item's param4 when finite,
-else along the leg (PX4 MPC_YAW_MODE 0). A mission that was landed when
-started without a NAV_TAKEOFF first climbs to MIS_TAKEOFF_ALT (PX4). After
-the last item the vehicle holds where it is, in the mission mode (PX4).
+Yaw: toward the ROI when one is set, else the item's param4 when finite
+(``item_yaw``), else along the leg (PX4 MPC_YAW_MODE 0, ArduCopter
+WP_YAW_BEHAVIOR 2). A mission that was landed when started without a
+NAV_TAKEOFF first climbs to MIS_TAKEOFF_ALT (PX4; ``implicit_takeoff``).
+After the last item the vehicle holds where it is, in the mission mode.
+
+The stack's rules (``mavcore.autopilot.MissionRules``, one per personality)
+say what differs: the first item flown (ArduPilot's item 0 is home), whether
+param2/param4 are read, and where a RETURN_TO_LAUNCH item is flown.
 
 MISSION_ITEM_REACHED: every item is reported when it completes (DO items at
 once), DO_JUMP excepted; ``events`` holds the reached sequence numbers and
@@ -54,6 +62,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from mavcore.autopilot import MissionRules
+
 from .onboard import Setpoint
 
 NAV_WAYPOINT = 16
@@ -66,6 +76,9 @@ DO_CHANGE_SPEED = 178
 DO_SET_ROI_LOCATION = 195
 DO_SET_ROI_NONE = 197
 DO_JUMP = 177
+
+#: Items whose completion ArduCopter also announces ("Reached command #N").
+ANNOUNCED_COMMANDS = frozenset({NAV_WAYPOINT, NAV_LOITER_TIME})
 
 #: Positional items (the ones with a place to fly to).
 NAV_COMMANDS = frozenset({NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_LAND, NAV_TAKEOFF})
@@ -112,19 +125,21 @@ def nav_items(items: Sequence, item_enu: Callable) -> tuple[NavItem, ...]:
                  for it in items)
 
 
-def mission_problem(items: Sequence[NavItem]) -> str | None:
-    """Why the mission cannot be flown (the first problem), or None."""
-    if not items:
+def mission_problem(items: Sequence[NavItem], first_seq: int = 0) -> str | None:
+    """Why the mission cannot be flown (the first problem), or None; the items
+    before ``first_seq`` (ArduPilot's home) are not flown and not checked."""
+    if len(items) <= first_seq:
         return "no mission stored"
     n = len(items)
-    for it in items:
+    for it in items[first_seq:]:
         if it.command not in SUPPORTED_COMMANDS:
             return f"item {it.seq}: command {it.command} is not flown by this SITL"
         if it.command in (NAV_WAYPOINT, NAV_LOITER_TIME, NAV_LOITER_UNLIM, NAV_TAKEOFF) and it.pos_enu_m is None:
             return f"item {it.seq}: no position in a frame this SITL flies"
         if it.command == DO_JUMP:
             target = it.params[0]
-            if not (math.isfinite(target) and target == int(target) and 0 <= target < n and target != it.seq):
+            if not (math.isfinite(target) and target == int(target) and first_seq <= target < n
+                    and target != it.seq):
                 return f"item {it.seq}: DO_JUMP to {target:g}"
     return None
 
@@ -164,13 +179,16 @@ class MissionExecutor:
         Read live: NAV_ACC_RAD, NAV_MC_ALT_RAD, MPC_XY_CRUISE, MPC_XY_VEL_MAX,
         MPC_TKO_SPEED, MPC_LAND_SPEED, MIS_TAKEOFF_ALT.
     home_enu_m : (3,)
+    rules : mavcore.autopilot.MissionRules
+        The personality's (default: PX4's).
     """
 
-    def __init__(self, items: Sequence[NavItem], params, home_enu_m) -> None:
+    def __init__(self, items: Sequence[NavItem], params, home_enu_m, rules: MissionRules = MissionRules()) -> None:
         self.items = tuple(items)
         self.params = params
         self.home_enu_m = np.array(home_enu_m, dtype=float)
-        self.current = 0
+        self.rules = rules
+        self.current = rules.first_seq
         self.finished = False
         #: Sequence numbers reached since the transport last looked (MISSION_ITEM_REACHED).
         self.events: list[int] = []
@@ -187,27 +205,30 @@ class MissionExecutor:
         self._landing = False
         self._takeoff_z: float | None = None
         self._entered = False
+        self._rtl_z: float | None = None         # in-mission return: its altitude once started
 
     # ------------------------------------------------------------------ control
     def start(self, state, seq: int | None = None) -> str | None:
         """Fly from item ``seq`` (None: the current one; from 0 again once
         finished), the vehicle being where ``state`` says. Returns why the
         mission cannot be flown, or None."""
-        why = mission_problem(self.items)
+        first = self.rules.first_seq
+        why = mission_problem(self.items, first)
         if why is not None:
             return why
         if seq is not None:
             if not 0 <= int(seq) < len(self.items):
                 return f"no item {int(seq)}"
-            self._set_current(int(seq))
+            self._set_current(max(int(seq), first))
         elif self.finished:
             self._jumps = [0] * len(self.items)
-            self._set_current(0)
+            self._set_current(first)
         self.finished = False
         self.resume(state)
         self._resolve_jumps()
         self._takeoff_z = None
-        if state.landed and self.items[self.current].command != NAV_TAKEOFF:
+        if (state.landed and self.rules.implicit_takeoff
+                and self.items[self.current].command != NAV_TAKEOFF):
             self._takeoff_z = float(self.home_enu_m[2]) + self.params["MIS_TAKEOFF_ALT"]
         return None
 
@@ -217,12 +238,22 @@ class MissionExecutor:
         self._yaw = float(state.yaw_enu_rad)
         self._entered = False
         self._landing = False
+        self._rtl_z = None
+
+    def starts_with_takeoff(self, seq: int | None = None) -> bool:
+        """The first positional item flown from ``seq`` (None: where ``start``
+        would begin) is a NAV_TAKEOFF (ArduPilot's ``starts_with_takeoff_cmd``)."""
+        i = (self.rules.first_seq if self.finished else self.current) if seq is None else int(seq)
+        for it in self.items[max(i, self.rules.first_seq):]:
+            if it.command in NAV_COMMANDS or it.command == NAV_RETURN_TO_LAUNCH:
+                return it.command == NAV_TAKEOFF
+        return False
 
     def set_current(self, seq: int) -> bool:
         """MISSION_SET_CURRENT: True if ``seq`` exists."""
         if not 0 <= int(seq) < len(self.items):
             return False
-        self._set_current(int(seq))
+        self._set_current(max(int(seq), self.rules.first_seq))
         self.finished = False
         self._entered = False
         return True
@@ -278,13 +309,18 @@ class MissionExecutor:
         elif c == DO_SET_ROI_NONE:
             self._roi = None
         elif c == NAV_RETURN_TO_LAUNCH:
-            self._complete(it)
-            self.finished = True
-            return MissionStep(self._hold_setpoint(), action="rtl")
+            if self.rules.rtl_in_mission:
+                step = self._rtl_step(it, state, dt)
+                if step is not None:
+                    return step
+            else:
+                self._complete(it)
+                self.finished = True
+                return MissionStep(self._hold_setpoint(), action="rtl")
         elif c == NAV_TAKEOFF:
             if not self._entered:
                 self._entered = True
-                if math.isfinite(it.params[3]):
+                if self.rules.item_yaw and math.isfinite(it.params[3]):
                     self._yaw = heading_deg_to_yaw_enu(it.params[3])
             sp = self._climb(state, dt, it.pos_enu_m[2])
             if sp is not None:
@@ -304,6 +340,8 @@ class MissionExecutor:
         """``it`` reached: report it, move to the next item (through DO_JUMPs)."""
         self.events.append(it.seq)
         self._entered = False
+        self._landing = False
+        self._rtl_z = None
         if self.current + 1 >= len(self.items):
             self.finished = True
             return
@@ -336,7 +374,7 @@ class MissionExecutor:
             if math.hypot(dx, dy) > 0.1:
                 self._yaw = math.atan2(dy, dx)
             return self._yaw
-        if it is not None and math.isfinite(it.params[3]):
+        if it is not None and self.rules.item_yaw and math.isfinite(it.params[3]):
             self._yaw = heading_deg_to_yaw_enu(it.params[3])
         elif leg is not None and math.hypot(leg[0], leg[1]) > 0.1:
             self._yaw = math.atan2(leg[1], leg[0])
@@ -385,7 +423,8 @@ class MissionExecutor:
         self._carrot, vel, _ = carrot_step(self._carrot, target, self._speed_m_s(), self._leg_end_v, dt)
         yaw = self._yaw_toward(state.pos_enu_m, it, self._leg_dir)
         p = state.pos_enu_m
-        acc = it.params[1] if it.command == NAV_WAYPOINT and it.params[1] > 0 else self.params["NAV_ACC_RAD"]
+        acc = (it.params[1] if self.rules.item_acceptance and it.command == NAV_WAYPOINT and it.params[1] > 0
+               else self.params["NAV_ACC_RAD"])
         inside = (math.hypot(p[0] - target[0], p[1] - target[1]) <= acc
                   and abs(p[2] - target[2]) <= self.params["NAV_MC_ALT_RAD"])
         return Setpoint(tuple(self._carrot), vel, None, yaw, None), inside
@@ -420,3 +459,19 @@ class MissionExecutor:
         yaw = self._yaw_toward(state.pos_enu_m, it, None)
         return MissionStep(Setpoint((self._carrot[0], self._carrot[1], math.nan),
                                     (0.0, 0.0, -self.params["MPC_LAND_SPEED"]), None, yaw, None))
+
+    def _rtl_step(self, it: NavItem, state, dt: float) -> MissionStep | None:
+        """RETURN_TO_LAUNCH flown inside the mission mode (ArduCopter's
+        ``do_RTL``: ModeRTL run from AUTO): climb to RTL_ALT above home when
+        lower, fly home at the return speed (the mission's speed change and
+        ROI end), land there; None on touchdown."""
+        if self._rtl_z is None:
+            self._rtl_z = max(float(state.pos_enu_m[2]), float(self.home_enu_m[2]) + self.params["RTL_RETURN_ALT"])
+            self._speed = None
+            self._roi = None
+        if not self._landing and not self._entered:
+            sp = self._climb(state, dt, self._rtl_z)
+            if sp is not None:
+                return MissionStep(sp)
+        home = NavItem(it.seq, NAV_LAND, (0.0, 0.0, 0.0, math.nan), tuple(float(v) for v in self.home_enu_m))
+        return self._land_step(home, state, dt)

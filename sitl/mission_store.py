@@ -19,6 +19,8 @@ from functools import partial
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import codec
+from mavcore.autopilot import MissionRules
+
 from .fence import Fence, FenceError, fence_from_items
 from .mission_exec import MissionExecutor, nav_items
 from .rally import RallyError, rally_points_from_items
@@ -56,11 +58,13 @@ def validator(origin: codec.GeoOrigin, home_enu_m):
     return validate
 
 
-def flight_objects(stored: dict, origin: codec.GeoOrigin, home_enu_m, params) -> FlightObjects:
-    """``MissionProtocol.stored`` -> the executor, the fence and the rally points."""
+def flight_objects(stored: dict, origin: codec.GeoOrigin, home_enu_m, params,
+                   rules: MissionRules = MissionRules()) -> FlightObjects:
+    """``MissionProtocol.stored`` -> the executor (flying by the personality's
+    ``rules``), the fence and the rally points."""
     to_enu = item_enu_function(origin, home_enu_m)
     items = stored[mavlink.MAV_MISSION_TYPE_MISSION]
-    mission = MissionExecutor(nav_items(items, to_enu), params, home_enu_m) if items else None
+    mission = MissionExecutor(nav_items(items, to_enu), params, home_enu_m, rules) if items else None
     fence_items = stored[mavlink.MAV_MISSION_TYPE_FENCE]
     fence = fence_from_items(fence_items, to_enu) if fence_items else None
     rally = rally_points_from_items(stored[mavlink.MAV_MISSION_TYPE_RALLY], to_enu)

@@ -19,6 +19,16 @@ With ``Ki = 0`` and the torque applied at once, each axis obeys ``W_dot =
 Kp (W_sp - W)``: a first-order lag with time constant ``1 / Kp``
 (``tests/test_rate_control.py`` checks the step response against it).
 
+The yaw torque then goes through a first-order low-pass, PX4's
+``MC_YAW_TQ_CUTOFF`` ("Low pass filter cutoff frequency for yaw torque
+setpoint", default 2 Hz, ``mc_rate_control``): yaw is the weak axis (0.247
+rad/s^2 at hover on the paper's vehicle) and ``Kp_z`` times the gyro noise
+(8 x 0.022 rad/s = 0.18 rad/s^2 with the paper's noise) would otherwise
+swing the spin pairs between zero and full every frame. With it the noise
+asks for ``Kp_z n sqrt(pi f_c)`` = 0.028 rad/s^2 (n = 1.4e-3 rad/s/sqrt(Hz)),
+and the yaw rate loop ``s^2 + w_c s + w_c Kp_z`` (w_c = 2 pi f_c) has
+natural frequency 10.0 rad/s and damping 0.63.
+
 Thrust (PX4's normalised thrust setpoint, linear in force once the motor
 curve is compensated; ArduPilot's "throttle" with the thrust linearisation
 of ``MOT_THST_EXPO``)::
@@ -57,11 +67,15 @@ class RateLoopGains:
         Integral gain (1/s^2).
     int_limit_rad_s2 : float
         Bound on each axis of ``Ki int(e_W)`` (rad/s^2).
+    yaw_torque_cutoff_hz : float
+        Corner of the low-pass on the yaw torque (Hz), PX4's ``MC_YAW_TQ_CUTOFF``
+        (module docstring); 0: no filter.
     """
 
     kp: tuple = (50.0, 50.0, 8.0)
     ki: tuple = (20.0, 20.0, 1.0)
     int_limit_rad_s2: float = 5.0
+    yaw_torque_cutoff_hz: float = 2.0
 
 
 class RateLoop:
@@ -80,8 +94,9 @@ class RateLoop:
         self.reset()
 
     def reset(self) -> None:
-        """Clear the integrator (when the rate loop takes over)."""
+        """Clear the integrator and the yaw torque filter (when the rate loop takes over)."""
         self._int = [0.0, 0.0, 0.0]
+        self._yaw_acc = 0.0
 
     def update(self, omega_flu_rad_s, omega_sp_flu_rad_s, dt_s: float, landed: bool = False) -> tuple:
         """One step: the torque (N m, body FLU) for the measured and wanted rates.
@@ -108,6 +123,10 @@ class RateLoop:
                 x = self._int[i] + g.ki[i] * e * dt_s
                 self._int[i] = -lim if x < -lim else (lim if x > lim else x)
             acc[i] = g.kp[i] * e + self._int[i]
+        fc = g.yaw_torque_cutoff_hz
+        if fc > 0.0:        # first-order low-pass, exact for a torque held over dt_s
+            self._yaw_acc += (1.0 - math.exp(-2.0 * math.pi * fc * dt_s)) * (acc[2] - self._yaw_acc)
+            acc[2] = self._yaw_acc
         wx, wy, wz = float(w[0]), float(w[1]), float(w[2])
         Jx, Jy, Jz = J
         return (Jx * acc[0] + (wy * Jz * wz - wz * Jy * wy),

@@ -117,7 +117,7 @@ from mavcore import autopilot as autopilots
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .battery import Battery
 from .collision_prevention import CollisionPrevention, CollisionPreventionConfig
-from . import mission_store
+from . import mission_exec, mission_store
 from .flightstack import (
     IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
     Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
@@ -1499,8 +1499,7 @@ class SitlServer:
         return mavlink.MAV_RESULT_ACCEPTED, [self._enc_home()]
 
     def _cmd_mission_start(self, p):
-        seq = None if math.isnan(p[0]) else int(p[0])
-        return self.stack.start_mission(self.sim.time_us, self._state(), seq).result, None
+        return self.stack.mission_start_command(self.sim.time_us, self._state(), p[0], p[1]).result, None
 
     def _cmd_reposition(self, p):
         """DO_REPOSITION (MAVSDK ``goto_location``): ``mission_store.reposition_target``."""
@@ -1707,7 +1706,8 @@ class SitlServer:
         if self.missions.version == self._store_version:
             return
         self._store_version = self.missions.version
-        objs = mission_store.flight_objects(self.missions.stored, self.origin, self.home_enu_m, self.params)
+        objs = mission_store.flight_objects(self.missions.stored, self.origin, self.home_enu_m, self.params,
+                                            self.autopilot.mission_rules)
         self.stack.fence = objs.fence
         self.stack.rally_points = objs.rally_points
         if objs.fence is None:
@@ -1731,6 +1731,8 @@ class SitlServer:
         if m.events:
             for seq in m.pop_events():
                 self._broadcast(self._mav().mission_item_reached_encode(seq))
+                if m.rules.reached_text and m.items[seq].command in mission_exec.ANNOUNCED_COMMANDS:
+                    self._say(SEVERITY_INFO, f"Reached command #{seq}")   # ArduCopter verify_nav_wp
         if m.current_changed or self.sim.time_us >= self._mission_current_due_us:
             m.current_changed = False
             self._send_mission_current()

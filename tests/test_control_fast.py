@@ -88,8 +88,24 @@ def plain_desired_attitude(F, F_dot, F_ddot, u_s, u_s_dot, u_s_ddot, b2_fallback
     return DesiredAttitude(R_d, b1, b2, b3, Omega_d, Omega_d_dot)
 
 
-def plain_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho, alpha):
-    """attitude_torque_decoupled as first written (tuple comprehensions): (tau, z, V)."""
+def plain_yaw_filter(state, t_s, x, cutoff_hz):
+    """The yaw-rate low-pass (companion.control.yaw) written out: ``state`` is a dict
+    holding the previous time and output; exact discretisation ``y += (1 - exp(-w dt)) (x - y)``."""
+    if "t" not in state:
+        state["t"], state["y"] = t_s, x
+        return x
+    dt = t_s - state["t"]
+    if not dt > 0.0:
+        return state["y"]
+    state["t"] = t_s
+    state["y"] = state["y"] + (1.0 - math.exp(-(2.0 * math.pi * cutoff_hz) * dt)) * (x - state["y"])
+    return state["y"]
+
+
+def plain_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho, alpha, alpha_yaw=None,
+                    yaw_rate_filtered=None):
+    """attitude_torque_decoupled as first written (tuple comprehensions): (tau, z, V); the yaw
+    damping ``alpha_yaw`` on ``yaw_rate_filtered - (Q Omega_d)_z`` where given."""
     dx, dy, dz = q3
     kx, ky = -dy, dx                       # k = e3 x d (k_z = 0)
     s_t = math.sqrt(kx * kx + ky * ky)
@@ -114,7 +130,10 @@ def plain_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho,
     Jx, Jy, Jz = inertia_kg_m2
     Jw = (Jx * wx, Jy * wy, Jz * wz)
     gyro = (wy * Jw[2] - wz * Jw[1], wz * Jw[0] - wx * Jw[2], wx * Jw[1] - wy * Jw[0])
-    tau = tuple(gyro[i] + inertia_kg_m2[i] * (Odd[i] - WxOd[i] + z[i] - alpha * e[i]) for i in range(3))
+    damp = [alpha * e[0], alpha * e[1], alpha * e[2]]
+    if alpha_yaw is not None:
+        damp[2] = alpha_yaw * (yaw_rate_filtered - Od[2])
+    tau = tuple(gyro[i] + inertia_kg_m2[i] * (Odd[i] - WxOd[i] + z[i] - damp[i]) for i in range(3))
     V = r1 * (1.0 - dz) + r2 * (1.0 - math.cos(psi)) + 0.5 * dot(e, e)
     return tau, z, V
 
@@ -192,15 +211,19 @@ def plain_update(self, t_s: float, meas: Measurements, ref: Reference) -> Contro
 
     if self._decoupled:
         q = [plain_body_coordinates(bd, b1, b2, r1, r2) for bd in (des.b1d, des.b2d, des.b3d)]
+        # the yaw loop of companion.control.yaw: its own gains, damping on the low-passed yaw rate
+        yaw = self.yaw
+        wz_f = plain_yaw_filter(self.__dict__.setdefault("_spec_yaw_filter", {}), t_s, Omega[2], yaw.cutoff_hz)
         tau, z, V = plain_decoupled(self._J, Omega, des.Omega_d, des.Omega_d_dot, q[0], q[1], q[2],
-                                    self._rho, self.cfg.alpha)
+                                    (self.cfg.rho1, yaw.stiffness_1_s2), self.cfg.alpha, yaw.damping_1_s, wz_f)
         Od = des.Omega_d
         Od_body = tuple(Od[0] * q[0][i] + Od[1] * q[1][i] + Od[2] * q[2][i] for i in range(3))   # Q Omega_d
+        rates = rate_command(Od_body, z, self.cfg.alpha)
+        rates = (rates[0], rates[1], rate_command(Od_body, z, yaw.damping_1_s)[2])   # yaw: z / alpha_y
     else:
         tau, z, V = attitude_torque(self._J, Omega, des.Omega_d, des.Omega_d_dot, (b1, b2), (r1, r2),
                                     des.b1d, des.b2d, des.b3d, self._rho, self.cfg.alpha)
-        Od_body = des.Omega_d
-    rates = rate_command(Od_body, z, self.cfg.alpha)
+        rates = rate_command(des.Omega_d, z, self.cfg.alpha)
     f = dot(F, plain_thrust_axis(b1, b2, r1, r2))
     mc = self.mixer.mix(f, tau)
     self._thrust_prev = (mc.cmd[0] + mc.cmd[1] + mc.cmd[2] + mc.cmd[3]) * self._fmax

@@ -125,7 +125,7 @@ def test_rate_loop_step_is_first_order_with_time_constant_one_over_kp(axis):
     W(t) = W_sp (1 - exp(-kp t)), 63.2 % at t = 1/kp, 95.0 % at 3/kp."""
     kp = RateLoopGains().kp
     J = VehicleConfig().inertia_kg_m2
-    loop = RateLoop(J, RateLoopGains(kp=kp, ki=(0.0, 0.0, 0.0)))
+    loop = RateLoop(J, RateLoopGains(kp=kp, ki=(0.0, 0.0, 0.0), yaw_torque_cutoff_hz=0.0))
     w_sp = [0.0, 0.0, 0.0]
     w_sp[axis] = 0.8
     w = [0.0, 0.0, 0.0]
@@ -143,9 +143,47 @@ def test_rate_loop_step_is_first_order_with_time_constant_one_over_kp(axis):
     assert seen[3] == pytest.approx(1.0 - math.exp(-3.0), abs=2e-3)
 
 
+def test_yaw_torque_low_pass_makes_the_yaw_step_second_order_and_quiets_the_gyro_noise():
+    """PX4's MC_YAW_TQ_CUTOFF (2 Hz): with the yaw torque low-passed at w_c = 2 pi f_c the yaw
+    rate obeys W'' + w_c W' + w_c kp W = w_c kp W_sp, by hand w_n = sqrt(w_c kp) = 10.03 rad/s,
+    zeta = w_c / (2 w_n) = 0.627, overshoot exp(-pi zeta / sqrt(1 - zeta^2)) = 8.0 %; and white
+    gyro noise of per-sample std sigma leaves kp sigma sqrt(k / (2 - k)) in the yaw acceleration
+    (k = 1 - exp(-w_c dt), the variance of a first-order recursion on white noise)."""
+    g = RateLoopGains(ki=(0.0, 0.0, 0.0))
+    kp, fc = g.kp[2], g.yaw_torque_cutoff_hz
+    assert fc == 2.0
+    J = VehicleConfig().inertia_kg_m2
+    loop = RateLoop(J, g)
+    wc = 2.0 * math.pi * fc
+    wn = math.sqrt(wc * kp)
+    zeta = wc / (2.0 * wn)
+    wd = wn * math.sqrt(1.0 - zeta * zeta)
+    w, dt, t, peak = [0.0, 0.0, 0.0], 1e-5, 0.0, 0.0
+    while t < 1.0:
+        tau = loop.update(w, (0.0, 0.0, 1.0), dt)
+        w[2] += dt * tau[2] / J[2]
+        t += dt
+        peak = max(peak, w[2])
+        if abs(t - 0.2) < dt / 2:
+            exact = 1.0 - math.exp(-zeta * wn * t) * (math.cos(wd * t) + zeta / math.sqrt(1 - zeta ** 2)
+                                                       * math.sin(wd * t))
+            assert w[2] == pytest.approx(exact, abs=2e-3)
+    assert peak - 1.0 == pytest.approx(math.exp(-math.pi * zeta / math.sqrt(1.0 - zeta ** 2)), abs=2e-3)
+    # noise: the paper's gyro variance 5e-4 per 250 Hz sample
+    sigma, dt = math.sqrt(5e-4), 0.004
+    loop.reset()
+    rng = np.random.default_rng(17)
+    acc = np.array([loop.update((0.0, 0.0, x), (0.0, 0.0, 0.0), dt)[2] / J[2]
+                    for x in sigma * rng.standard_normal(100_000)])[1000:]
+    k = 1.0 - math.exp(-wc * dt)
+    assert acc.std() == pytest.approx(kp * sigma * math.sqrt(k / (2.0 - k)), rel=0.03)
+    assert acc.std() < 0.15 * VehicleConfig().torque_coeff_m * 4.34 * 9.81 / J[2]   # of the yaw authority
+
+
 def test_rate_loop_torque_includes_the_gyroscopic_term_and_the_integral():
     J = (0.1, 0.2, 0.3)
-    loop = RateLoop(J, RateLoopGains(kp=(0.0, 0.0, 0.0), ki=(10.0, 10.0, 10.0), int_limit_rad_s2=1.0))
+    loop = RateLoop(J, RateLoopGains(kp=(0.0, 0.0, 0.0), ki=(10.0, 10.0, 10.0), int_limit_rad_s2=1.0,
+                                     yaw_torque_cutoff_hz=0.0))
     w = (1.0, 2.0, 0.0)
     # at the setpoint the torque is W x J W = (wy Jz wz - wz Jy wy, wz Jx wx - wx Jz wz, wx Jy wy - wy Jx wx)
     assert loop.update(w, w, 0.01) == pytest.approx((0.0, 0.0, 1.0 * 0.2 * 2.0 - 2.0 * 0.1 * 1.0))

@@ -240,12 +240,17 @@ def test_a_gain_change_is_caught_across_machines(tlogs, mission, flight_plan, re
     c = res.comparison
     assert c.mode == "drift" and not c.identical
     d = c.first_divergence
-    # named: a motor command, within the first second of control (values near zero move by
-    # several float32 steps there: more than one rounding step plus the drift allowance)
-    assert d.kind == "value" and d.recorded == "HIL_ACTUATOR_CONTROLS" and re.fullmatch(r"controls\[[0-3]\]", d.field)
-    t0 = first_motor_command_s(tlogs["companion-cut4"])
-    assert t0 <= d.t_s <= t0 + 1.0
-    assert abs(d.recorded_value - d.computed_value) > drift_allowance(d.recorded_value, d.computed_value)
+    # named: a motor command. Either one frame moved by more than a rounding step plus the
+    # drift allowance (values near zero move by several float32 steps: a rotor at idle), then
+    # within the first second of control; or no single frame did (the rotors away from zero,
+    # as since the yaw channel stopped driving spin pairs to 0, issue 17) and the verdict is
+    # the accumulated drift, named at the end of the flight
+    assert d.kind in ("value", "drift") and d.recorded == "HIL_ACTUATOR_CONTROLS"
+    assert re.fullmatch(r"controls\[[0-3]\]", d.field)
+    if d.kind == "value":
+        t0 = first_motor_command_s(tlogs["companion-cut4"])
+        assert t0 <= d.t_s <= t0 + 1.0
+        assert abs(d.recorded_value - d.computed_value) > drift_allowance(d.recorded_value, d.computed_value)
     # and over the whole flight each command's differences add up to far more than drift
     changed = {k: mean / bound for k, (mean, bound) in c.drift.items()}
     here = {k: mean / bound for k, (mean, bound) in honest.drift.items()}

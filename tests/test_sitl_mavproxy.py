@@ -4,13 +4,6 @@ was uploaded with pymavlink, see the geofence status without a breach. Driven th
 
 from __future__ import annotations
 
-import os
-import queue
-import re
-import subprocess
-import sys
-import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -19,6 +12,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 pytest.importorskip("MAVProxy.mavproxy")
 
+from mission_flight import MavProxy   # noqa: E402
 from sitl.api import SitlThread   # noqa: E402
 from sitl.flightstack import PARAM_SPECS   # noqa: E402
 
@@ -47,54 +41,6 @@ def upload_with_pymavlink(url: str) -> None:
         assert ack is not None and ack.type == mavlink.MAV_MISSION_ACCEPTED
     finally:
         c.close()
-
-
-class MavProxy:
-    """MAVProxy in a subprocess, its console read line by line."""
-
-    def __init__(self, master: str, workdir: Path, modules: str = "param,wp,mode,cmdlong,fence") -> None:
-        cmd = [sys.executable, "-m", "MAVProxy.mavproxy", f"--master={master}", "--no-state", "--mav20",
-               f"--default-modules={modules}"]
-        self.p = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                  text=True, bufsize=1, cwd=workdir, env=dict(os.environ, TERM="dumb"))
-        self.q: queue.Queue = queue.Queue()
-        self.out: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        for line in self.p.stdout:
-            self.q.put(line)
-        self.q.put(None)
-
-    def expect(self, pattern: str, timeout_s: float = 10.0) -> re.Match:
-        rx = re.compile(pattern)
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            try:
-                line = self.q.get(timeout=0.1)
-            except queue.Empty:
-                continue
-            assert line is not None, "MAVProxy exited:\n" + "".join(self.out[-30:])
-            self.out.append(line)
-            m = rx.search(line)
-            if m:
-                return m
-        raise AssertionError(f"no {pattern!r} from MAVProxy within {timeout_s} s:\n" + "".join(self.out[-30:]))
-
-    def send(self, command: str) -> None:
-        self.p.stdin.write(command + "\n")
-        self.p.stdin.flush()
-
-    def close(self) -> None:
-        if self.p.poll() is None:
-            self.p.terminate()
-            try:
-                self.p.wait(5)
-            except subprocess.TimeoutExpired:
-                self.p.kill()
-                self.p.wait(5)
-        self.p.stdin.close()
-        self.p.stdout.close()
 
 
 def test_mavproxy_mode_params_mission(tmp_path):

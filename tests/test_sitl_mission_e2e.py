@@ -17,7 +17,6 @@ import contextlib
 import io
 import json
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -31,45 +30,39 @@ from mavsdk import ComponentType, Configuration, Mavsdk   # noqa: E402
 from mavsdk.plugins.action import Action   # noqa: E402
 from mavsdk.plugins.mavlink_direct import MavlinkDirect   # noqa: E402
 from mavsdk.plugins.mission_raw import MissionRaw   # noqa: E402
+from mavsdk.plugins.param import Param   # noqa: E402
 
 from companion.cli import main   # noqa: E402
 from mavcore.frames import geodetic2enu   # noqa: E402
 from mavcore.mission import load_mission   # noqa: E402
+from mission_flight import (DO_CHANGE_SPEED, NAV_RETURN_TO_LAUNCH, NAV_WAYPOINT, check_flown_path,   # noqa: E402
+                            cut_index, record_flight, wait_until)
 from sitl.api import SitlThread   # noqa: E402
 from sitl.flightstack import FlightMode   # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSION = ROOT / "missions" / "flat-rectangle" / "mission.yaml"
-NAV_WAYPOINT, NAV_RETURN_TO_LAUNCH, DO_CHANGE_SPEED = 16, 20, 178
-#: Way-points flown: the three of the transit and the seven of the first row.
-N_WAYPOINTS = 10
 
 pytestmark = pytest.mark.slow
 
 
-def wait_until(pred, timeout_s: float, period_s: float = 0.02) -> bool:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(period_s)
-    return pred()
-
-
-def point_segment_distance(p, a, b) -> float:
-    ab = b - a
-    t = float(np.clip((p - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0))
-    return float(np.linalg.norm(p - (a + t * ab)))
-
-
-def cut(items):
-    """The items up to the N-th way-point, then the plan's own last item (RTL), renumbered."""
-    idx = [i for i, m in enumerate(items) if m.command == NAV_WAYPOINT][N_WAYPOINTS - 1]
-    kept = list(items[:idx + 1]) + [items[-1]]
+def cut(items, first: int = 0):
+    """The items up to the N-th way-point (counted from ``first``: ArduPilot's
+    item 0 is home), then the plan's own last item (RTL), renumbered."""
+    k = cut_index([m.command for m in items], first)
+    kept = list(items[:k + 1]) + [items[-1]]
     assert kept[-1].command == NAV_RETURN_TO_LAUNCH
     for seq, m in enumerate(kept):
-        m.seq, m.current = seq, int(seq == 0)
+        m.seq, m.current = seq, int(seq == first)
     return kept
+
+
+def planned_waypoints(items, home, first: int = 0, radius_m: float | None = None):
+    """(seq, ENU, acceptance radius) of the NAV_WAYPOINTs from item ``first``
+    (ArduPilot: 1, item 0 is home); the radius is the item's param2 unless given."""
+    return [(m.seq, np.array(geodetic2enu(m.x * 1e-7, m.y * 1e-7, m.z, home.lat, home.lon, home.alt_m)),
+             m.param2 if radius_m is None else radius_m)
+            for m in items if m.command == NAV_WAYPOINT and m.seq >= first]
 
 
 @pytest.fixture(scope="module")
@@ -80,20 +73,31 @@ def exported(tmp_path_factory):
     return out / "p.plan"
 
 
+def connect(sitl):
+    drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    drone.add_any_connection(f"udpout://127.0.0.1:{sitl.listen.rsplit(':', 1)[1]}")
+    system = drone.first_autopilot(10.0)
+    assert system is not None
+    return drone, system
+
+
+def subscribe_reached(system) -> tuple[MavlinkDirect, list[int]]:
+    """MISSION_ITEM_REACHED sequence numbers, as received; keep the plugin
+    referenced while they arrive (its subscription ends with it)."""
+    reached: list[int] = []
+    direct = MavlinkDirect(system)
+    direct.subscribe_message("MISSION_ITEM_REACHED", lambda m, _: reached.append(json.loads(m.fields_json)["seq"]))
+    return direct, reached
+
+
 def test_mavsdk_flies_the_exported_plan_in_auto_mission(exported, record_property):
     home = load_mission(MISSION).home
     with SitlThread(MISSION, speed=3.0, sensor_hz=100) as sitl:
         srv = sitl.server
-        port = sitl.listen.rsplit(":", 1)[1]
-        drone = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+        drone, system = connect(sitl)
         try:
-            drone.add_any_connection(f"udpout://127.0.0.1:{port}")
-            system = drone.first_autopilot(10.0)
-            assert system is not None
-            raw, action, direct = MissionRaw(system), Action(system), MavlinkDirect(system)
-            reached: list[int] = []
-            direct.subscribe_message("MISSION_ITEM_REACHED",
-                                     lambda m, _: reached.append(json.loads(m.fields_json)["seq"]))
+            raw, action = MissionRaw(system), Action(system)
+            _direct, reached = subscribe_reached(system)
             data = raw.import_qgroundcontrol_mission(str(exported))
             items = cut(data.mission_items)
             raw.upload_mission(items)
@@ -102,54 +106,65 @@ def test_mavsdk_flies_the_exported_plan_in_auto_mission(exported, record_propert
             raw.start_mission()              # AUTO.MISSION while disarmed; arming then takes off
             assert wait_until(lambda: srv.stack.mode is FlightMode.MISSION, 5.0)
             action.arm()
-
-            path, nav_err, breached = [], 0.0, False
             done = lambda: srv.stack.mode is FlightMode.RTL or srv.stack.mission.finished   # noqa: E731
-            end = time.monotonic() + 60.0
-            while not done() and time.monotonic() < end:
-                p, est = srv.sim.plant.p, srv._frame.estimate
-                path.append(tuple(p))
-                nav_err = max(nav_err, math.hypot(est.pos_enu_m[0] - p[0], est.pos_enu_m[1] - p[1]))
-                breached |= srv.stack.fence_breached
-                time.sleep(0.002)
-            path.append(tuple(srv.sim.plant.p))
-            assert done(), "the mission did not complete"
+            flown = record_flight(srv, done, 60.0)
             assert wait_until(lambda: len(reached) >= len(items), 3.0), f"MISSION_ITEM_REACHED: {reached}"
         finally:
             drone.destroy()
 
-    assert not breached
+    assert not flown.breached
     # MISSION_ITEM_REACHED for every item, in order (DO items included), the RTL item last
     assert reached[:len(items)] == list(range(len(items)))
-    path = np.array(path)
-    wps = [(m, np.array(geodetic2enu(m.x * 1e-7, m.y * 1e-7, m.z, home.lat, home.lon, home.alt_m)))
-           for m in items if m.command == NAV_WAYPOINT]
-    segs = list(zip(path[:-1], path[1:]))
-    # every way-point within its acceptance radius (horizontal), in order: the SITL judges it on
-    # its position estimate, as PX4 on its EKF's, so the truth is within R + the estimate's error
-    assert nav_err < 0.1
-    t_closest, worst = [], -math.inf
-    for m, w in wps:
-        d = [point_segment_distance(w[:2], a[:2], b[:2]) for a, b in segs]
-        k = int(np.argmin(d))
-        assert d[k] <= m.param2 + nav_err + 1e-3, f"way-point {m.seq} missed by {d[k]:.3f} m (radius {m.param2} m)"
-        t_closest.append(k)
-        worst = max(worst, d[k] - m.param2)
-    assert t_closest == sorted(t_closest)
-    # lateral deviation from the planned legs, between the first and the last way-point: the
-    # leg target moves on once the vehicle is inside the acceptance radius R (a corner is cut by
-    # at most R), and at a corner taken at speed v the vehicle overshoots by at most the stopping
-    # distance v^2 / (2 g tan(MPC_TILTMAX_AIR)); v is the plan's largest DO_CHANGE_SPEED.
     v = max(m.param2 for m in items if m.command == DO_CHANGE_SPEED)
-    radius = max(m.param2 for m, _ in wps)
-    bound = radius + v * v / (2.0 * 9.81 * math.tan(math.radians(35.0)))
-    legs = [(a[:2], b[:2]) for (_, a), (_, b) in zip(wps[:-1], wps[1:])]
-    flown = path[t_closest[0]:t_closest[-1] + 1]
-    dev = max(min(point_segment_distance(p[:2], a, b) for a, b in legs) for p in flown)
-    for name, v in (("nav_err_m", nav_err), ("worst_waypoint_miss_minus_radius_m", worst),
-                    ("lateral_deviation_m", dev), ("lateral_bound_m", bound)):
-        record_property(name, round(float(v), 4))   # figures, in the junit XML (--junitxml)
-    assert dev <= bound, f"lateral deviation {dev:.3f} m > {bound:.3f} m"
+    for name, value in check_flown_path(flown, planned_waypoints(items, home), v).items():
+        record_property(name, round(float(value), 4))   # figures, in the junit XML (--junitxml)
+
+
+def test_mavsdk_flies_the_exported_plan_in_auto_on_ardupilot(exported, record_property):
+    """The same .plan on the ArduCopter personality, flown as ArduPilot users
+    fly it with MAVSDK: the importer puts the planned home at item 0 for
+    ArduPilot (MAVSDK ``MissionImport::import_mission``) and ArduCopter never
+    flies item 0; WPNAV_RADIUS is set to the plan's acceptance radius
+    (Copter does not read NAV_WAYPOINT param2); ``action.takeoff()`` in
+    GUIDED releases the take-off (ArduCopter's ``auto_armed``: without RC
+    no throttle is raised) and ``start_mission`` switches to AUTO (3). The
+    RETURN_TO_LAUNCH item is flown inside AUTO and reached on touchdown; the
+    vehicle disarms when the mission ends on the ground."""
+    home = load_mission(MISSION).home
+    with SitlThread(MISSION, speed=3.0, sensor_hz=100, autopilot="ardupilot") as sitl:
+        srv = sitl.server
+        drone, system = connect(sitl)
+        try:
+            raw, action, param = MissionRaw(system), Action(system), Param(system)
+            _direct, reached = subscribe_reached(system)
+            data = raw.import_qgroundcontrol_mission(str(exported))
+            assert data.mission_items[0].command == NAV_WAYPOINT and data.mission_items[1].command == 22
+            items = cut(data.mission_items, first=1)
+            radius = max(m.param2 for m in items if m.command == NAV_WAYPOINT)
+            raw.upload_mission(items)
+            raw.upload_geofence(data.geofence_items)
+            assert len(srv.missions.stored[1]) == len(data.geofence_items)
+            param.set_param_float("WPNAV_RADIUS", radius * 100.0)   # cm
+            param.set_param_int("DISARM_DELAY", 0)   # no auto-disarm while a loaded machine is slow to take off
+            assert srv.params["NAV_ACC_RAD"] == pytest.approx(radius, abs=1e-4)
+            action.arm()
+            action.takeoff()
+            assert wait_until(lambda: srv.sim.plant.p[2] > srv.home_enu_m[2] + 1.0, 20.0)
+            raw.start_mission()
+            assert wait_until(lambda: srv.stack.mode is FlightMode.MISSION, 5.0)
+            assert srv.stack.custom_mode == 3                         # ArduCopter AUTO
+            flown = record_flight(srv, lambda: not srv.stack.armed, 60.0)
+            assert wait_until(lambda: len(reached) >= len(items) - 1, 3.0), f"MISSION_ITEM_REACHED: {reached}"
+        finally:
+            drone.destroy()
+
+    assert not flown.breached
+    # every item but home reached, in order, the RTL item last (on touchdown, near home)
+    assert reached[:len(items) - 1] == list(range(1, len(items)))
+    assert math.dist(flown.path[-1][:2], srv.home_enu_m[:2]) <= radius + flown.nav_err_m
+    v = max(m.param2 for m in items if m.command == DO_CHANGE_SPEED)
+    for name, value in check_flown_path(flown, planned_waypoints(items, home, 1, radius), v).items():
+        record_property(name, round(float(value), 4))
 
 
 def test_mavsdk_goto_location_is_do_reposition_in_hold():

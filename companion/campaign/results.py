@@ -33,6 +33,7 @@ COLUMNS = (
     ("min_clearance_m", "float64"), ("tracking_max_error_m", "float64"), ("tracking_rms_error_m", "float64"),
     ("max_lateral_deviation_m", "float64"), ("extra_path_m", "float64"), ("replan_events", "int64"),
     ("coverage_fraction", "float64"), ("path_flown_fraction", "float64"), ("sim_time_s", "float64"),
+    ("mover_in_sight_s", "float64"), ("mover_sighted_m", "float64"),
     ("wall_s", "float64"), ("kept", "string"),
 )
 #: wall-clock columns: not reproducible, left out when two tables are compared
@@ -65,8 +66,9 @@ def _where(report: dict) -> tuple[float | None, float | None]:
 
 
 def make_row(scenario: dict, report: dict | None, error: str | None, wall_s: float, kept: str | None = None,
-             crash_xy: tuple[float, float] | None = None) -> dict:
-    """The table row of one flight (plain types: it travels back from a worker as a small dict)."""
+             crash_xy: tuple[float, float] | None = None, sight: dict | None = None) -> dict:
+    """The table row of one flight (plain types: it travels back from a worker as a small dict).
+    ``sight``: the line-of-sight columns of a flight with movers (``campaign.sight``)."""
     outcome, reason = classify(report, error)
     r = report or {}
     rp = r.get("replanning") or {}
@@ -84,7 +86,7 @@ def make_row(scenario: dict, report: dict | None, error: str | None, wall_s: flo
            "max_lateral_deviation_m": rp.get("max_lateral_deviation_m"), "extra_path_m": rp.get("extra_path_m"),
            "replan_events": rp.get("events"), "coverage_fraction": r.get("coverage_fraction"),
            "path_flown_fraction": r.get("path_flown_fraction"), "sim_time_s": r.get("sim_time_s"),
-           "wall_s": round(float(wall_s), 3), "kept": kept}
+           "wall_s": round(float(wall_s), 3), "kept": kept, **(sight or {})}
     return {name: row.get(name) for name, _ in COLUMNS}
 
 

@@ -72,6 +72,20 @@ def _position_at(tlog: Path, t_s: float | None) -> tuple[float, float] | None:
     return last
 
 
+def _sight(mission_file: Path, tlog: Path) -> dict | None:
+    """The line-of-sight columns of a flight with movers (``sight.flight_sight``); None
+    without movers, or when the flight left no track or mission to measure them on."""
+    if not (mission_file.exists() and tlog.exists()):
+        return None
+    from mavcore.mission import load_mission
+    from .sight import flight_sight
+
+    try:
+        return flight_sight(load_mission(str(mission_file)), tlog)
+    except (OSError, ValueError):
+        return None
+
+
 def fly_scenario(scenario: dict, out_dir: str, keep_if_completed: bool = False,
                  transport: str | None = None) -> dict:
     """One flight (runs in a worker): write the scenario file, run ``companion demo --scenario``
@@ -115,6 +129,7 @@ def fly_scenario(scenario: dict, out_dir: str, keep_if_completed: bool = False,
         where = None
         if outcome != "completed" and tlog.exists():
             where = _position_at(tlog, ((report or {}).get("crash") or {}).get("t_s"))
+        sight = _sight(work / "out" / "mission.yaml", tlog)
         kept = None
         if outcome != "completed" or keep_if_completed:
             dest = Path(out_dir) / "flights" / f"{scenario['scenario']:04d}-{h}"
@@ -124,7 +139,7 @@ def fly_scenario(scenario: dict, out_dir: str, keep_if_completed: bool = False,
                     shutil.copy2(work / "out" / name, dest / name)
             (dest / "demo.log").write_text(log.getvalue(), encoding="utf-8")
             kept = str(dest.relative_to(out_dir)) if dest.is_relative_to(out_dir) else str(dest)
-        return make_row(scenario, report, error, time.perf_counter() - t0, kept, where)
+        return make_row(scenario, report, error, time.perf_counter() - t0, kept, where, sight)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

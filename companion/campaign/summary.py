@@ -82,6 +82,18 @@ def reproduce_command(row: dict, out: Path) -> str:
     return f"companion demo --scenario {out / 'scenarios' / (str(row['scenario']).zfill(4) + '.yaml')}"
 
 
+def sight_note(row: dict) -> str:
+    """How long the mover that came closest had been in sight (``campaign.sight``), for a
+    flight with movers; "" otherwise. A mover hidden until it was within the vehicle's
+    stopping distance could not have been avoided."""
+    s = row.get("mover_in_sight_s")
+    if s is None:
+        return ""
+    m = row.get("mover_sighted_m")
+    return "nearest mover hidden (no line of sight)" if m is None else \
+        f"nearest mover in sight {s:.1f} s, first at {m:.2f} m"
+
+
 def markdown(name: str, rows: list[dict], out: Path, wall_s: float | None, figures: list[Path]) -> str:
     n = len(rows)
     lines = [f"# Campaign {name}", "",
@@ -101,7 +113,7 @@ def markdown(name: str, rows: list[dict], out: Path, wall_s: float | None, figur
     for r in worst(rows):
         c = "n/a" if r.get("min_clearance_m") is None else f"{r['min_clearance_m']:.3f} m"
         t = "n/a" if r.get("tracking_max_error_m") is None else f"{r['tracking_max_error_m'] * 1e3:.1f} mm"
-        reason = (r.get("reason") or "").replace("|", "/")[:80]
+        reason = "; ".join(x for x in ((r.get("reason") or "")[:80], sight_note(r)) if x).replace("|", "/")
         lines.append(f"| {r['scenario']} | {r['outcome']} | {c} | {t} | {reason} | "
                      f"`{reproduce_command(r, out)}` |")
     if figures:
@@ -184,7 +196,7 @@ def html_page(name: str, rows: list[dict], out: Path, wall_s: float | None, figu
     for r in worst(rows):
         c = "n/a" if r.get("min_clearance_m") is None else f"{r['min_clearance_m']:.3f}"
         parts.append(f"<tr><td>{r['scenario']}</td><td>{r['outcome']}</td><td>{c}</td>"
-                     f"<td>{e((r.get('reason') or '')[:120])}</td>"
+                     f"<td>{e('; '.join(x for x in ((r.get('reason') or '')[:120], sight_note(r)) if x))}</td>"
                      f"<td><code>{e(reproduce_command(r, out))}</code></td></tr>")
     parts.append("</table>")
     for f in figures:

@@ -82,6 +82,14 @@ law above. Separately, the pointing reference is made flyable
 (``companion.control.pointing``: eq. 21 exactly where the vehicle can
 follow it, yaw-rate/acceleration limited elsewhere).
 
+The yaw channel of the decoupled law has its own gains (``companion.control.yaw``,
+issue 17): the paper's single alpha = 12 on the raw gyro asked the yaw for more
+noise (0.27 rad/s^2) than the rotors can make (0.247), so the yaw damping
+``alpha_y`` acts on a low-passed yaw rate and is sized so that the gyro noise
+takes a stated fraction of the authority, and the yaw stiffness ``rho_y``
+follows from a damping ratio; roll and pitch keep rho1 and alpha
+(``docs/control.md``, "The yaw channel").
+
 Where the vector pairs come from (``ControlConfig.vectors``, ``velocity_aided``, ``observer``)
 --------------------------------------------------------------------------------------------
 By default (``observer``) from the attitude observer of
@@ -145,6 +153,7 @@ from .observer import AttitudeEstimate, VelocityAidedObserver, horizontal_field,
 from mavcore.so3 import (Vec3, body_coordinates, cross, dot, thrust_axis_estimate, triad_body_z, triad_frames,
                          triad_rotation, triad_to_body3, unit3, unit_d2)
 from .vectors import AccelerationEstimator, BodyVectorFilter, controller_vectors
+from .yaw import YawGains, YawRateFilter, yaw_gains
 
 # --- small float-tuple vector algebra (the hot path avoids numpy) ---------
 
@@ -469,7 +478,8 @@ class DecoupledTorque:
 
 
 def attitude_torque_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho,
-                              alpha: float) -> DecoupledTorque:
+                              alpha: float, alpha_yaw: float | None = None,
+                              yaw_rate_filtered: float | None = None) -> DecoupledTorque:
     r"""Attitude law with the thrust direction decoupled from the yaw (tilt first).
 
     The paper's law (27) acts on the full error ``R_e = R R_d^T`` expressed
@@ -503,7 +513,13 @@ def attitude_torque_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2
     Lyapunov: ``d_dot = d x e_Omega`` (b3d turns with the desired rate), so
     ``d/dt rho1 (1 - d_z) = -e_Omega . z_t``, and for the yaw ``d/dt rho2 (1
     - cos psi_e) = -e_Omega . z_y`` (exact for d = e3), hence ``V_dot = -alpha
-    |e_Omega|^2`` as eq. (41). The tilt subsystem's torque involves the yaw
+    |e_Omega|^2`` as eq. (41). With the yaw's own damping (``alpha_yaw``,
+    ``companion.control.yaw``) the damping is ``A = diag(alpha, alpha,
+    alpha_y)`` and ``V_dot = -e_Omega^T A e_Omega <= 0`` all the same; with
+    the yaw rate low-passed (``yaw_rate_filtered``) the yaw damping acts on
+    ``e_f`` and ``V_dot <= -e^T A' e + alpha_y |e_z - e_f|^2 / 2`` (A' with
+    alpha_y / 2 in yaw), the filter's lag ``|e_z - e_f|`` bounded by the
+    yaw acceleration over the filter's rate (``docs/control.md``). The tilt subsystem's torque involves the yaw
     error only through the damping of ``Q Omega_d`` (which is the correct
     body-frame desired rate); a yaw torque that the mixer cuts (yaw-first
     desaturation) leaves it untouched.
@@ -519,9 +535,15 @@ def attitude_torque_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2
     rho : (rho1, rho2)
         Tilt and yaw stiffness (1/s^2).
     alpha : float
-        Damping (1/s).
+        Damping (1/s); of roll and pitch only where ``alpha_yaw`` is given.
+    alpha_yaw : float or None
+        Yaw damping alpha_y (1/s; ``companion.control.yaw``); None: alpha.
+    yaw_rate_filtered : float or None
+        The low-passed yaw rate (rad/s, body z) that the yaw damping acts on,
+        ``e_f = yaw_rate_filtered - (Q Omega_d)_z``; None: ``Omega_z``.
     """
-    tau, z, e, _, psi = decoupled_law(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho, alpha)
+    tau, z, e, _, psi = decoupled_law(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho, alpha,
+                                      alpha_yaw, yaw_rate_filtered)
     kx, ky, dz = -q3[1], q3[0], q3[2]
     tilt = math.atan2(math.sqrt(kx * kx + ky * ky), dz)
     r1, r2 = rho
@@ -529,12 +551,13 @@ def attitude_torque_decoupled(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2
     return DecoupledTorque(tau, z, e, tilt, psi, V)
 
 
-def decoupled_law(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho, alpha: float) -> tuple:
+def decoupled_law(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho, alpha: float,
+                  alpha_yaw: float | None = None, yaw_rate_filtered: float | None = None) -> tuple:
     """:func:`attitude_torque_decoupled` as plain tuples: ``(tau, z, e_Omega, Q Omega_d, psi_e)``.
 
     The controller's per-frame path (no tilt angle, no V); ``Q Omega_d`` is
     the desired rate in body axes, the rate command's feed-forward
-    (``companion.control.rates``).
+    (``companion.control.rates``). ``e_Omega`` is returned unfiltered.
     """
     dx, dy, dz = q3
     q10, q11, q12 = q1
@@ -564,7 +587,11 @@ def decoupled_law(inertia_kg_m2, Omega, Omega_d, Omega_d_dot, q1, q2, q3, rho, a
     Jw0, Jw1, Jw2 = J0 * wx, J1 * wy, J2 * wz
     tx = (wy * Jw2 - wz * Jw1) + J0 * (oo0 - (wy * o2 - wz * o1) + z0 - alpha * e0)
     ty = (wz * Jw0 - wx * Jw2) + J1 * (oo1 - (wz * o0 - wx * o2) + z1 - alpha * e1)
-    tz = (wx * Jw1 - wy * Jw0) + J2 * (oo2 - (wx * o1 - wy * o0) + z2 - alpha * e2)
+    if alpha_yaw is None:
+        tz = (wx * Jw1 - wy * Jw0) + J2 * (oo2 - (wx * o1 - wy * o0) + z2 - alpha * e2)
+    else:                                  # the yaw channel's own damping on the filtered rate (yaw.py)
+        ez = e2 if yaw_rate_filtered is None else yaw_rate_filtered - o2
+        tz = (wx * Jw1 - wy * Jw0) + J2 * (oo2 - (wx * o1 - wy * o0) + z2 - alpha_yaw * ez)
     return (tx, ty, tz), (z0, z1, z2), (e0, e1, e2), (o0, o1, o2), psi
 
 
@@ -636,12 +663,25 @@ class GeometricController:
         self.vehicle = vehicle
         self.cfg = cfg
         self.target_enu_m = (float(target_enu_m[0]), float(target_enu_m[1]), float(target_enu_m[2]))
-        self.mixer = Mixer(vehicle)
         self._m = float(vehicle.mass_kg)
         self._J = tuple(float(j) for j in vehicle.inertia_kg_m2)
         self._g = GRAVITY_M_S2
         self._r2 = unit3(cfg.mag_field_enu_gauss)
-        self._rho = (float(cfg.rho1), float(cfg.rho2))
+        self.mixer = Mixer(vehicle)
+        #: The yaw loop of the decoupled law (``companion.control.yaw``); None with the paper's law.
+        self.yaw: YawGains | None = None
+        self._yaw_filter = None
+        if cfg.attitude_law == "decoupled":
+            a_yaw = self.mixer.yaw_torque_limit(self._m * self._g) / self._J[2]
+            self.yaw = yaw_gains(a_yaw, cfg.gyro_noise_rad_s_sqrt_hz, cfg.yaw_rate_cutoff_hz,
+                                 cfg.yaw_damping_ratio, cfg.yaw_noise_fraction, cfg.alpha)
+            self._yaw_filter = YawRateFilter(cfg.yaw_rate_cutoff_hz)
+            self._rho = (float(cfg.rho1), self.yaw.stiffness_1_s2)
+            self._alpha_y = self.yaw.damping_1_s
+        else:
+            self._rho = (float(cfg.rho1), float(cfg.rho2))
+            self._alpha_y = float(cfg.alpha)
+        self._ialpha_y = 1.0 / self._alpha_y
         self.accel = AccelerationEstimator(cfg.accel_filter_tau_s)
         self._tau_a = float(cfg.accel_filter_tau_s)
         # the paper's accelerometer vector is R^T e3, a world-fixed direction: propagate it with the gyro
@@ -837,9 +877,11 @@ class GeometricController:
         frames = triad_frames(b1, b2, r1, r2)
         if self._decoupled:
             q1, q2, q3 = triad_to_body3(b1d, b2d, b3d, b1, r1, frames)    # R^T b_jd
-            tau, z, e, Od_b, psi = decoupled_law(self._J, gyro, Od, Odd, q1, q2, q3, self._rho, self._alpha)
+            wz_f = self._yaw_filter.step(t_s, gyro[2])
+            tau, z, e, Od_b, psi = decoupled_law(self._J, gyro, Od, Odd, q1, q2, q3, self._rho, self._alpha,
+                                                 self._alpha_y, wz_f)
             ia = self._ialpha
-            self.last_rate_cmd = (Od_b[0] + ia * z[0], Od_b[1] + ia * z[1], Od_b[2] + ia * z[2])
+            self.last_rate_cmd = (Od_b[0] + ia * z[0], Od_b[1] + ia * z[1], Od_b[2] + self._ialpha_y * z[2])
             zV, V = (z[0], z[1], z[2], q3[2], psi, e), None
         else:
             tau, zV, V = attitude_torque(self._J, gyro, Od, Odd, (b1, b2), (r1, r2), b1d, b2d, b3d, self._rho,

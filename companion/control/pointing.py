@@ -35,7 +35,9 @@ s_z^2)``; its first two derivatives are analytic from ``psi_r``'s and
 It is causal (computed on the vehicle clock inside the controller), so it
 needs nothing from the runner. ``a_max`` is a fraction of the vehicle's yaw
 acceleration at hover (``ControlConfig.pointing_yaw_accel_fraction``): the
-rest is left to reject disturbances and noise. Pure: no clock, no I/O.
+rest is left to reject disturbances and noise (the yaw loop's gains,
+``companion.control.yaw``, give the gyro noise 10 % of it at 1 sigma).
+Pure: no clock, no I/O.
 """
 
 from __future__ import annotations

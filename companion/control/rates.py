@@ -22,8 +22,10 @@ function ``V_att = rho1 (1 - d_z) + rho2 (1 - cos psi_e)`` the derivative
 ``V_att_dot = -e_Omega . z = -|z|^2 / alpha <= 0`` (the same identity as
 eq. 41's proof). For a small tilt error theta the attitude is then first
 order with rate ``rho1 / alpha`` (16.7 /s with the defaults) and the yaw
-``rho2 / alpha`` (4.2 /s): the flight stack's rate loop must be several
-times faster (the SITL's 50 /s, ``sitl.rate_control``).
+``rho_y / alpha_y`` (1.74 /s, the decoupled law's yaw gains,
+``companion.control.yaw``; its yaw-rate command has no gyro term): the
+flight stack's rate loop must be several times faster (the SITL's 50 /s on
+roll and pitch, 8 /s on yaw, ``sitl.rate_control``).
 
 Thrust
 ------

@@ -113,7 +113,11 @@ class BlockGraph:
         ub = np.unique(bi * nbc + bj)
         loc = self.local[ub // nbc, ub % nbc].astype(np.int64)
         ids = np.where(loc > 0, loc + self.base[ub // nbc, ub % nbc][:, None, None], 0)
-        sel = np.isin(ids, subs)
+        # membership by a table over all sub-component ids (np.isin sorts the cells)
+        wanted = np.zeros(len(self.component), dtype=bool)
+        wanted[subs] = True
+        wanted[0] = False                       # 0: not eroded
+        sel = wanted[ids]
         m, lr, lc = np.nonzero(sel)
         return self.r0 + (ub[m] // nbc) * f + lr, self.c0 + (ub[m] % nbc) * f + lc
 
@@ -139,12 +143,19 @@ class BlockGraph:
                 if limit > float(self.graph.data.sum()):    # longer than any simple path
                     return None
                 limit *= 2.0
+            step = pred.item            # Python ints per step
             path = [s_to]
             while path[-1] != s_from:
-                path.append(int(pred[path[-1]]))
+                path.append(step(path[-1]))
             nodes = np.array(path)
-        neigh = self.graph[nodes].indices
-        return np.unique(np.concatenate([nodes, neigh]))
+        # the nodes' neighbours straight from the CSR arrays (row slicing of the
+        # sparse matrix builds a new matrix per call); np.unique sorts them anyway
+        indptr, indices = self.graph.indptr, self.graph.indices
+        starts = indptr[nodes].astype(np.int64)
+        counts = indptr[nodes + 1] - starts
+        first = np.cumsum(counts) - counts
+        pos = np.arange(int(counts.sum()), dtype=np.int64) + np.repeat(starts - first, counts)
+        return np.unique(np.concatenate([nodes, indices[pos]]))
 
 
 def block_size(n_cells: int) -> int:

@@ -279,9 +279,10 @@ def cell_path(rr: np.ndarray, cc: np.ndarray, src: tuple[int, int], dst: tuple[i
     dist, pred = dijkstra(graph, directed=True, indices=i_src, return_predecessors=True)
     if not np.isfinite(dist[i_dst]):
         return None
+    step = pred.item            # Python ints per step: no numpy scalar per cell of the path
     path = [i_dst]
     while path[-1] != i_src:
-        path.append(int(pred[path[-1]]))
+        path.append(step(path[-1]))
     nodes = order[np.array(path[::-1])]
     return np.column_stack([rr[nodes], cc[nodes]])
 

@@ -89,6 +89,42 @@ class RowStructure:
     spans_m: np.ndarray
 
 
+class BorderCells(NamedTuple):
+    """The occupied cells that border free space (:func:`border_cells`), as flat
+    indices into a box of the grid, turned into points only when asked."""
+
+    flat: np.ndarray        # (N,) int64, ascending: np.nonzero order of the box
+    width: int              # columns of the box
+    r0: int                 # the box's first row and column in the grid
+    c0: int
+    resolution_m: float
+
+    def points(self, n_max: int | None = None) -> np.ndarray:
+        """(n, 2) G-frame centres (m) of every ``ceil(N / n_max)``-th cell (all of them
+        when ``N <= n_max`` or without ``n_max``): a deterministic stride subsample (no
+        randomness needed for a statistic), the other points never built."""
+        f = self.flat if n_max is None or len(self.flat) <= n_max else \
+            self.flat[:: int(np.ceil(len(self.flat) / n_max))]
+        r, c = np.divmod(f, self.width)
+        h = self.resolution_m
+        return np.column_stack([(c + self.c0 + 0.5) * h, (r + self.r0 + 0.5) * h])
+
+
+def border_cells(grid: OccupancyGrid) -> BorderCells:
+    """The occupied cells that border free space (:func:`occupied_points_g`)."""
+    h = grid.resolution_m
+    k = max(2, int(np.ceil(0.3 / h)))
+    r0, r1, c0, c1 = bbox_cells(grid.free)
+    if r1 <= r0:
+        return BorderCells(np.zeros(0, dtype=np.int64), 1, 0, 0, h)
+    r0, r1 = max(0, r0 - k), min(grid.shape[0], r1 + k)
+    c0, c1 = max(0, c0 - k), min(grid.shape[1], c1 + k)
+    diamond = k - np.abs(np.arange(-k, k + 1))
+    near_free = dilate_runs(grid.free[r0:r1, c0:c1], diamond, outside=False)
+    near_free &= grid.occupied[r0:r1, c0:c1]
+    return BorderCells(np.flatnonzero(near_free), c1 - c0, r0, c0, h)
+
+
 def occupied_points_g(grid: OccupancyGrid) -> np.ndarray:
     """(N, 2) G-frame centres (m) of the occupied cells that border free space.
 
@@ -96,19 +132,10 @@ def occupied_points_g(grid: OccupancyGrid) -> np.ndarray:
     free cell count (the dilation by ``k`` crosses, a diamond): rows, posts
     and the edges of large occupied areas, not their interiors (a field
     surrounded by occupied land would otherwise swamp the rows). Only the
-    free cells' bounding box grown by ``k`` can hold such cells.
+    free cells' bounding box grown by ``k`` can hold such cells. In
+    ``np.nonzero`` order.
     """
-    h = grid.resolution_m
-    k = max(2, int(np.ceil(0.3 / h)))
-    r0, r1, c0, c1 = bbox_cells(grid.free)
-    if r1 <= r0:
-        return np.zeros((0, 2))
-    r0, r1 = max(0, r0 - k), min(grid.shape[0], r1 + k)
-    c0, c1 = max(0, c0 - k), min(grid.shape[1], c1 + k)
-    diamond = k - np.abs(np.arange(-k, k + 1))
-    near_free = dilate_runs(grid.free[r0:r1, c0:c1], diamond, outside=False)
-    r, c = np.nonzero(grid.occupied[r0:r1, c0:c1] & near_free)
-    return np.column_stack([(c + c0 + 0.5) * h, (r + r0 + 0.5) * h])
+    return border_cells(grid).points()
 
 
 def _project(pts: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
@@ -229,13 +256,6 @@ def _span(t_sorted: np.ndarray, gap_m: float) -> tuple[float, float]:
     return float(t_sorted[lo[long]].min()), float(t_sorted[hi[long]].max())
 
 
-def _subsample(pts: np.ndarray, n_max: int) -> np.ndarray:
-    """Deterministic stride subsample (no randomness needed for a statistic)."""
-    if len(pts) <= n_max:
-        return pts
-    return pts[:: int(np.ceil(len(pts) / n_max))]
-
-
 def _rows_at(pts: np.ndarray, alpha: float, h: float, min_spacing_m: float):
     """Period, row offsets, row spans and pooled in-row slope at direction alpha, or None."""
     t, d = _project(pts, alpha)
@@ -279,22 +299,21 @@ def detect_rows(grid: OccupancyGrid, min_spacing_m: float = 1.0) -> RowStructure
     min_spacing_m : float
         Shortest row period considered (m).
     """
-    pts = occupied_points_g(grid)
-    if len(pts) < 10:
+    cells = border_cells(grid)      # millions of cells at 10 ha: points only for the subsamples
+    if len(cells.flat) < 10:
         return None
     h = grid.resolution_m
     bin_m = max(2 * h, 0.1)
-    sweep = _subsample(pts, _MAX_SWEEP_POINTS)
-    alpha = _best_angle(sweep, bin_m)
+    alpha = _best_angle(cells.points(_MAX_SWEEP_POINTS), bin_m)
     # the first pass only yields the in-row slope: a statistic, so a stride
     # subsample of the points is enough (the final pass uses up to _MAX_ROW_POINTS)
-    found = _rows_at(_subsample(pts, _MAX_SLOPE_POINTS), alpha, h, min_spacing_m)
+    found = _rows_at(cells.points(_MAX_SLOPE_POINTS), alpha, h, min_spacing_m)
     if found is None:
         return None
     # refine the direction by the pooled least-squares slope of the rows'
     # points (d against t within each row), then find the rows again
     alpha = (alpha + np.arctan(found[3])) % np.pi
-    found = _rows_at(_subsample(pts, _MAX_ROW_POINTS), alpha, h, min_spacing_m)
+    found = _rows_at(cells.points(_MAX_ROW_POINTS), alpha, h, min_spacing_m)
     if found is None:
         return None
     period, offsets, spans, _ = found

@@ -102,7 +102,7 @@ from .rejoin import converged_from, rejoin
 from .reroute import reroute
 from .reroute3d import reroute_3d
 from .shaper import ReferenceShaper
-from .route3d import RouteScene
+from .route3d import RouteScene, find_route
 from .routecheck import route_exists
 from .voxmap import L_CANDIDATE, ObstacleMap
 
@@ -885,9 +885,12 @@ class Replanner:
         if len(obs) and self.cfg.clearance_governor:
             v = self._govern(P, v, obs, obs_dist)
             v = self._constrain(P, v, A, u, n, ground)
+            v = self._govern_rows(P, v)
             v = self._govern(P, v, obs, obs_dist, scale_only=True)
             if v[2] < 0.0 and self._over_points(P, v, obs):
                 v[2] = 0.0
+        elif self.cfg.clearance_governor:
+            v = self._govern_rows(P, v)
         t_s = getattr(self, "_t_s", None)      # None: called outside ``step``
         if self.cfg.clearance_governor and t_s is not None:
             pose = self.poses.at(t_s)
@@ -957,6 +960,26 @@ class Replanner:
                 v = v + (approach - allow[i]) * nrm[i]
         return v
 
+    def _govern_rows(self, P, v) -> np.ndarray:
+        """The clearance governor against the vine rows (the guard's row rule, through
+        ``Guard.row_room``): the approach to the nearest row surface is at most the speed
+        that stops ``GOVERNOR_MARGIN_M`` short of the distance the guard makes the
+        reference keep, none inside it. The corridor walls of ``_constrain`` are drawn
+        along the leg being flown; at a leg's end (a headland turn, a row's end) they are
+        not the rows, and an avoidance there closed on a row until the guard refused it
+        (obstacles-wide, seed 20261127, flight 4). No guard, no governor."""
+        if self.guard is None:
+            return v
+        room, nrm = self.guard.row_room(P)
+        if not math.isfinite(room):
+            return v
+        nrm = np.asarray(nrm)
+        allow = float(self._allowed_speed(max(0.0, room - GOVERNOR_MARGIN_M)))
+        approach = -float(nrm @ v)
+        if approach > allow:
+            v = v + (approach - allow) * nrm
+        return v
+
     def _give_way(self, P, pts) -> np.ndarray:
         """Velocity (ENU, m/s) of a stop: zero, or backing away (level) from an obstacle
         that comes closer than the vehicle could stop for (``companion.replan.closing``)."""
@@ -968,6 +991,7 @@ class Replanner:
         h = math.hypot(v[0], v[1])
         cap = give_way_speed_m_s(self.speed_m_s, self.closing.approach_m_s(getattr(self, "_t_s", None)))
         v = v if h <= cap else v * (cap / h)
+        v = self._govern_rows(P, v)
         # backing away from a mover never closes on anything faster than the stopping law
         # allows a still obstacle (the guard's rule): a give-way toward a post behind at
         # 0.70 m/s where 0.57 m/s was allowed ended a flight (obstacles-wide scenario 1)
@@ -1031,21 +1055,25 @@ class Replanner:
                 # can, else the governor's: a route on the clearance itself leaves the stopping
                 # law no speed at all, and the guard refuses it)
                 goals = self._coverage_goals(st.p)
-                for margin, others in ((m, o) for m in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M) for o in (*tiers, None)):
+                for margin in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M) if len(goals) else ():
                     scene = RouteScene(known0, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
                                        self.cfg.ceiling_agl_m)
-                    res3 = reroute_3d(self.plan, scene, goals, st, tau, self._wp_leave, blocking, travel,
-                                      self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
-                                      self._keep_m + ROUTE_MARGIN_M, others, over) if len(goals) else None
-                    if res3 is None:
+                    route = find_route(scene, np.asarray(st.p, float), goals)   # one lattice search per margin
+                    if route is None:
                         continue              # no 3-D route to any coverage end with this margin
-                    if res3.plan is not None:
-                        self.known = res3.known
-                        plan3, v3, add3 = self._paced(res3.plan, st)
-                        if plan3 is not None:
-                            res, plan, verdict, added, via = res3, plan3, v3, add3, ", leaving in 3-D"
-                            break
-                        res, verdict = res3, v3
+                    for others in (*tiers, None):
+                        res3 = reroute_3d(self.plan, scene, goals, st, tau, self._wp_leave, blocking, travel,
+                                          self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
+                                          self._keep_m + ROUTE_MARGIN_M, others, over, route=route)
+                        if res3.plan is not None:
+                            self.known = res3.known
+                            plan3, v3, add3 = self._paced(res3.plan, st)
+                            if plan3 is not None:
+                                res, plan, verdict, added, via = res3, plan3, v3, add3, ", leaving in 3-D"
+                                break
+                            res, verdict = res3, v3
+                    if plan is not None:
+                        break
             if plan is not None:
                 self._set_plan(plan)
                 self._dev_leg = None

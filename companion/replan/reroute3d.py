@@ -75,13 +75,16 @@ def prefix_waypoints(path_enu_m: np.ndarray, speed_m_s: float, vertical_speed_m_
 
 def reroute_3d(plan: GlobalPlan, scene: RouteScene, goals_enu_m: np.ndarray, state, t_now_s: float,
                wp_index: int, blocking_enu_m: np.ndarray, travel_xy, depth_m: float,
-               vertical_speed_m_s: float, keep_m: float, others_enu_m=None, over=None) -> RerouteResult | None:
+               vertical_speed_m_s: float, keep_m: float, others_enu_m=None, over=None,
+               route=None) -> RerouteResult | None:
     """The re-route through the nearest coverage end (``goals_enu_m`` (k, 3)) a 3-D route
     reaches (module doc); None when no 3-D route reaches one, else the 2-D re-route's
     result from there with the leg in 3-D put in front of its plan (its ``plan`` None and
-    its reason when that re-route fails)."""
+    its reason when that re-route fails). ``route``: ``find_route(scene, state.p,
+    goals_enu_m)`` when the caller already has it (it depends only on those three)."""
     P0 = np.asarray(state.p, float)
-    route = find_route(scene, P0, goals_enu_m)
+    if route is None:
+        route = find_route(scene, P0, goals_enu_m)
     if route is None:
         return None
     speed = float(plan.flight.speed_m_s)

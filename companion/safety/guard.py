@@ -283,6 +283,26 @@ class Guard:
         decel = (d[1] - d[0]) / h           # the rate at which the approach speed falls
         return replace(v, braking=bool(decel >= BRAKING_FRACTION * self.cfg.accel_m_s2))
 
+    def row_room(self, p_enu_m) -> tuple[float, tuple[float, float, float]]:
+        """(room m, unit normal) of a point against the rows: its distance to them less the
+        distance it must keep (negative inside the clearance), and the direction in which
+        that distance grows fastest (central differences of ``STEP_M``; the distance is
+        1-Lipschitz, so this is the normal away from the nearest row surface). (inf, 0)
+        without rows. The replanner's avoidance governs its approach with it, so the
+        guard's ``clearance`` rule has nothing to refuse (docs/replan.md "Rows")."""
+        rows = self.scene.rows
+        x, y, z = float(p_enu_m[0]), float(p_enu_m[1]), float(p_enu_m[2])
+        d = rows.distance_one(x, y, z)
+        if not math.isfinite(d):
+            return math.inf, (0.0, 0.0, 0.0)
+        e = STEP_M
+        g = ((rows.distance_one(x + e, y, z) - rows.distance_one(x - e, y, z)) / (2.0 * e),
+             (rows.distance_one(x, y + e, z) - rows.distance_one(x, y - e, z)) / (2.0 * e),
+             (rows.distance_one(x, y, z + e) - rows.distance_one(x, y, z - e)) / (2.0 * e))
+        norm = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+        n = (0.0, 0.0, 0.0) if norm <= 1e-9 else (g[0] / norm, g[1] / norm, g[2] / norm)
+        return d - self._req["row"], n
+
     def _judge_one(self, p, v, terrain: bool) -> Verdict:
         """``_judge`` of one sample in plain floats (the per-frame path: about a third
         of the array version's cost); the same rules, the same verdicts."""

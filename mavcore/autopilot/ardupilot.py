@@ -15,14 +15,21 @@ Rules that differ from PX4 (docs/flying-a-real-vehicle.md):
   MAV_CMD_NAV_TAKEOFF (param7: metres above home), armed, in GUIDED, after
   which the vehicle stays in GUIDED holding the take-off point;
 - setpoints older than GUID_TIMEOUT: the vehicle stops and holds in GUIDED;
-  FS_GCS_ENABLE (off by default) names the action after FS_GCS_TIMEOUT.
+  FS_GCS_ENABLE (off by default) names the action after FS_GCS_TIMEOUT;
+- AUTO (``MissionRules``, docs/mission.md "Missions on each personality"):
+  item 0 is home and never flown; way-points are reached within WPNAV_RADIUS
+  (param2 is not read by Copter); a mission started armed on the ground
+  needs a NAV_TAKEOFF first and waits for the take-off to be released
+  (MAV_CMD_MISSION_START, a GUIDED take-off before, or AUTO_OPTIONS bit 1);
+  NAV_RETURN_TO_LAUNCH is flown inside AUTO and the vehicle disarms when the
+  mission ends on the ground.
 """
 
 from __future__ import annotations
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from .base import MODE_FLAG_CUSTOM_MODE_ENABLED, Autopilot, ModeDef, OffboardLoss, ParamAlias, ParamSpec
+from .base import MODE_FLAG_CUSTOM_MODE_ENABLED, Autopilot, MissionRules, ModeDef, OffboardLoss, ParamAlias, ParamSpec
 from .sim_params import SIM_PARAM_SPECS
 
 #: MAV_AUTOPILOT_ARDUPILOTMEGA
@@ -79,6 +86,9 @@ class ArduCopter(Autopilot):
         ParamSpec("ANGLE_MAX", _I, 3000, 1000, 8000, "tilt limit (centidegrees)"),
         ParamSpec("RTL_ALT", _R, 500.0, 0.0, 15000.0, "return altitude above home (cm; ArduCopter's default is 1500)"),
         ParamSpec("WPNAV_RADIUS", _R, 200.0, 5.0, 1000.0, "way-point acceptance radius (cm)"),
+        ParamSpec("AUTO_OPTIONS", _I, 0, 0, 255,
+                  "AUTO options bitmask: bit 0 allows arming in AUTO, bit 1 allows the take-off without raising "
+                  "the throttle (the SITL has no RC: MAV_CMD_MISSION_START or a GUIDED take-off release it)"),
         ParamSpec("MOT_THST_HOVER", _R, 0.35, 0.05, 1.0,
                   "hover thrust, normalised (the vehicle's m g / (4 f_max) at start; ArduCopter learns it in flight)"),
         ParamSpec("MOT_THST_EXPO", _R, 0.0, 0.0, 1.0,
@@ -115,6 +125,11 @@ class ArduCopter(Autopilot):
     #: after the last setpoint (the SITL counts the controlling link's
     #: setpoints; the companion sends its HEARTBEAT on the same link).
     offboard_loss = OffboardLoss("COM_OF_LOSS_T", None, "FS_GCS_TIMEOUT", "FS_GCS_ENABLE")
+    #: ArduCopter's AUTO: ArduCopter/mode_auto.cpp (init, takeoff_run, verify_nav_wp,
+    #: exit_mission), libraries/AP_Mission (AP_MISSION_FIRST_REAL_COMMAND 1; NAV_WAYPOINT
+    #: keeps param1 only on Copter) and GCS_Mavlink.cpp (MAV_CMD_MISSION_START).
+    mission_rules = MissionRules(first_seq=1, item_acceptance=False, item_yaw=False, implicit_takeoff=False,
+                                 rtl_in_mission=True, auto_armed=True, reached_text=True)
 
     def action_of(self, value: float) -> str:
         return _FS_GCS_ACTION.get(int(value), "hold")

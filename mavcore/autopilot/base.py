@@ -80,6 +80,47 @@ class OffboardLoss:
     action_param: str | None
 
 
+@dataclass(frozen=True)
+class MissionRules:
+    """How the stack flies a stored mission in its mission mode (AUTO.MISSION,
+    ArduCopter AUTO); the SITL's ``sitl.mission_exec`` reads these.
+
+    Attributes
+    ----------
+    first_seq : int
+        First item flown (ArduPilot: item 0 holds home and is never flown).
+    item_acceptance : bool
+        NAV_WAYPOINT param2 is the acceptance radius (PX4); False: the stack's
+        radius parameter for every way-point (ArduCopter WPNAV_RADIUS).
+    item_yaw : bool
+        NAV_WAYPOINT / NAV_TAKEOFF param4 sets the heading (PX4); False: the
+        nose follows the leg or the ROI (ArduCopter WP_YAW_BEHAVIOR 2).
+    implicit_takeoff : bool
+        Started on the ground without a NAV_TAKEOFF first, the stack climbs to
+        its take-off altitude itself (PX4); False: entering the mission mode
+        armed on the ground without one is refused ("Auto: Missing Takeoff Cmd").
+    rtl_in_mission : bool
+        NAV_RETURN_TO_LAUNCH is flown inside the mission mode and reached on
+        touchdown (ArduCopter); False: it switches to the return mode (PX4).
+    auto_armed : bool
+        Armed on the ground in the mission mode the motors idle until the
+        take-off is released (ArduCopter's ``auto_armed``: the pilot's
+        throttle, MAV_CMD_MISSION_START, a GUIDED take-off, or AUTO_OPTIONS bit
+        1); arming in the mission mode needs AUTO_OPTIONS bit 0; the vehicle
+        disarms when the mission ends on the ground.
+    reached_text : bool
+        A way-point reached is also announced by STATUSTEXT "Reached command #N".
+    """
+
+    first_seq: int = 0
+    item_acceptance: bool = True
+    item_yaw: bool = True
+    implicit_takeoff: bool = True
+    rtl_in_mission: bool = False
+    auto_armed: bool = False
+    reached_text: bool = False
+
+
 class Autopilot:
     """A flight stack's personality (one subclass instance per stack).
 
@@ -126,6 +167,8 @@ class Autopilot:
     #: Behaviours reported as another mode (ArduCopter climbs inside GUIDED).
     report_as: dict = {}
     offboard_loss: OffboardLoss | None = None
+    #: How the mission mode flies the stored mission.
+    mission_rules: MissionRules = MissionRules()
 
     # --- modes ------------------------------------------------------------------
     def mode(self, name: str) -> ModeDef:

@@ -32,13 +32,29 @@ class ControlConfig:
         W_rho theta = 0`` with ``W_rho = sum rho_i (I - r_i r_i^T)``. rho1 sets
         the roll/pitch stiffness: 200 gives 14 rad/s, ~4x the position loop.
     rho2 : float
-        Weight rho_2 of the magnetic vector, 1/s^2: the yaw stiffness (with
-        ``mag_perpendicular``; 0.2 rho2 with the raw field). 50 gives 7 rad/s;
-        yaw saturates anyway on this vehicle (see ``vectors``).
+        Weight rho_2 of the magnetic vector in eq. (28), 1/s^2, with
+        ``attitude_law: paper`` (the yaw stiffness there, with
+        ``mag_perpendicular``; 0.2 rho2 with the raw field). The default
+        decoupled law derives its yaw stiffness instead (``yaw_*`` below).
     alpha : float
-        Angular-velocity damping alpha of eqs. (27) and (35), 1/s. 12 damps
-        roll/pitch at ~0.4 while keeping the gyro noise (alpha J sigma) near
-        the small yaw torque the rotors can make.
+        Angular-velocity damping alpha of eqs. (27) and (35), 1/s: roll and
+        pitch (all three axes with ``attitude_law: paper``). 12 damps the tilt
+        at ~0.4 (``alpha / (2 sqrt(rho1))``).
+    yaw_rate_cutoff_hz : float
+        Corner (Hz) of the first-order low-pass on the yaw rate that the
+        decoupled law's yaw damping acts on (``companion.control.yaw``; PX4
+        ``MC_YAW_TQ_CUTOFF`` 2 Hz and ArduCopter ``ATC_RAT_YAW_FLTE`` 2.5 Hz
+        filter yaw for the same reason), > 0.
+    yaw_noise_fraction : float
+        The decoupled law's yaw damping is ``alpha_y = yaw_noise_fraction x
+        a_yaw / sigma_f``: the gyro noise left after the low-pass (sigma_f,
+        from ``gyro_noise_rad_s_sqrt_hz``) asks for this fraction of the yaw
+        acceleration the rotors can make at hover (a_yaw, 0.247 rad/s^2 on the
+        paper's vehicle) at 1 sigma; bounded by alpha. In (0, 1); 0.1 gives
+        alpha_y = 4.46 /s.
+    yaw_damping_ratio : float
+        Damping ratio zeta of the yaw loop: its stiffness is ``rho_y =
+        (alpha_y / (2 zeta))^2`` (7.77 /s^2, 2.79 rad/s with 0.8), > 0.
     mag_field_enu_gauss : tuple (3,)
         The Earth field in the world ENU frame: the known inertial direction
         of the magnetometer vector. Default: the bundled SITL's default
@@ -207,6 +223,9 @@ class ControlConfig:
     rho1: float = 200.0
     rho2: float = 50.0
     alpha: float = 12.0
+    yaw_rate_cutoff_hz: float = 5.0
+    yaw_noise_fraction: float = 0.1
+    yaw_damping_ratio: float = 0.8
     mag_field_enu_gauss: tuple[float, float, float] = (0.0, 0.21, -0.42)
     accel_filter_tau_s: float = 0.0
     accel_vector_gain_rad_s: float = 0.05
@@ -239,9 +258,11 @@ class ControlConfig:
     gyro_noise_rad_s_sqrt_hz: float = 1.4e-3
 
     def __post_init__(self) -> None:
-        for name in ("kx", "kv", "rho1", "rho2", "alpha"):
+        for name in ("kx", "kv", "rho1", "rho2", "alpha", "yaw_rate_cutoff_hz", "yaw_damping_ratio"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"control.{name} must be > 0")
+        if not 0 < self.yaw_noise_fraction < 1:
+            raise ValueError("control.yaw_noise_fraction must be in (0, 1)")
         for name in ("accel_filter_tau_s", "accel_vector_gain_rad_s", "mag_vector_gain_rad_s"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"control.{name} must be >= 0")
