@@ -230,22 +230,31 @@ def _graph_of(nb: np.ndarray, neighbours, edge_cells: int | None) -> csr_matrix:
     ok = nb >= 0
     step = np.array([s for _, _, s in neighbours])
     to = nb[ok]
-    w = np.broadcast_to(step, (n, k))[ok]
     if edge_cells > 0:
         inner = _rows_all(ok)
         for _ in range(edge_cells - 1):
-            inner = inner & _rows_all(np.where(ok, inner[np.where(ok, nb, 0)], False))
-        w = w * np.where(inner, 1.0, _EDGE_COST)[to]
-    # else every cell costs 1: the steps themselves (x * 1.0 is x; no (n k) float temporaries)
+            # a row that is inner has all its neighbours (no -1 among them); the
+            # others are False whatever the -1 entries pick up
+            inner &= _rows_all(inner.take(nb))
+        # step x cost of the cell stepped into, in the (n, k) layout, one mask at the end
+        w = (step * np.where(inner, 1.0, _EDGE_COST).take(nb))[ok]
+    else:
+        # every cell costs 1: the steps themselves (x * 1.0 is x; no (n k) float temporaries)
+        w = np.broadcast_to(step, (n, k))[ok]
     # int32 offsets when they fit, like the indices: scipy would otherwise copy the
     # indices to int64 to match (8 bytes an edge, 28 MB for a 10 ha transit graph)
     idx = np.int32 if n * k < 2**31 - 1 else np.int64
-    per_row = ok[:, 0].astype(idx)
-    for j in range(1, k):
-        per_row += ok[:, j]
     indptr = np.zeros(n + 1, dtype=idx)
-    np.cumsum(per_row, out=indptr[1:])
+    np.cumsum(_rows_count(ok), dtype=idx, out=indptr[1:])
     return csr_matrix((w, to.astype(idx, copy=False), indptr), shape=(n, n))
+
+
+def _rows_count(b: np.ndarray) -> np.ndarray:
+    """``b.sum(axis=1)`` for an (n, k) bool array; k = 4 or 8: the set bits of each row
+    read as one integer (each True is the byte 1)."""
+    if b.shape[1] in (4, 8) and b.flags.c_contiguous:
+        return np.bitwise_count(b.view(np.uint32 if b.shape[1] == 4 else np.uint64).ravel())
+    return b.sum(axis=1)
 
 
 def _rows_all(b: np.ndarray) -> np.ndarray:
