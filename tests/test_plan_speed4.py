@@ -138,3 +138,57 @@ def test_block_graph_is_the_same_with_the_reference_pairs(monkeypatch):
     _same_csr(got.graph, ref.graph)
     np.testing.assert_array_equal(got.component, ref.component)
     assert got.graph.nnz > 100
+
+
+# --- DEM lookups: the NODATA bookkeeping only where a corner has NODATA ---------------------------
+
+def reference_interp(dem, x, y):
+    """``ElevationModel._interp`` before: the NODATA tests for every corner."""
+    x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    z_grid = dem.heights_m
+    rows, cols = z_grid.shape
+    x_min, x_max, y_min, y_max = dem.extent_m
+    tol = 1e-9 * max(1.0, dem.cellsize_m)
+    inside = (x >= x_min - tol) & (x <= x_max + tol) & (y >= y_min - tol) & (y <= y_max + tol)
+    inside &= np.isfinite(x) & np.isfinite(y)
+    fc = np.where(inside, (x - dem.x0_m) / dem.cellsize_m, 0.0)
+    fr = np.where(inside, (y - dem.y0_m) / dem.cellsize_m, 0.0)
+
+    def axis(f, n):
+        if n == 1:
+            i0 = np.zeros(f.shape, dtype=np.intp)
+            return i0, i0, np.zeros(f.shape)
+        i0 = np.clip(np.floor(f).astype(np.intp), 0, n - 2)
+        return i0, i0 + 1, f - i0
+
+    c0, c1, tx = axis(fc, cols)
+    r0, r1, ty = axis(fr, rows)
+    w = ((1 - ty) * (1 - tx), (1 - ty) * tx, ty * (1 - tx), ty * tx)
+    v = (z_grid[r0, c0], z_grid[r0, c1], z_grid[r1, c0], z_grid[r1, c1])
+    z = np.zeros(x.shape)
+    ok = inside.copy()
+    for wi, vi in zip(w, v):
+        ok &= ~(np.isnan(vi) & (wi != 0.0))
+        z += wi * np.where(np.isnan(vi), 0.0, vi)
+    return z, ok
+
+
+def test_dem_interp_equals_the_reference_with_and_without_nodata():
+    from companion.maps.grid import ElevationModel
+    rng = np.random.default_rng(189)
+    heights = rng.normal(30.0, 2.0, (9, 13))
+    x = np.r_[rng.uniform(-2.0, 14.0, 500), 0.0, 12.0, 5.0, -0.5, 12.5, np.nan]
+    y = np.r_[rng.uniform(-2.0, 10.0, 500), 0.0, 8.0, 4.0, -0.5, 8.5, 1.0]
+    for h in (heights, np.where(rng.random(heights.shape) < 0.15, np.nan, heights), heights[:1], heights[:, :1]):
+        dem = ElevationModel(heights_m=h, x0_m=0.0, y0_m=0.0, cellsize_m=1.0)
+        z, ok = dem._interp(x, y)
+        z_ref, ok_ref = reference_interp(dem, x, y)
+        np.testing.assert_array_equal(ok, ok_ref)
+        np.testing.assert_array_equal(z, z_ref)
+        assert ok.any() and not ok.all()
+    # a point on a NODATA cell's row but with zero weight on it (exactly on a centre): covered
+    h = heights.copy()
+    h[3, 5] = np.nan
+    dem = ElevationModel(heights_m=h, x0_m=0.0, y0_m=0.0, cellsize_m=1.0)
+    z, ok = dem._interp(np.array([4.0, 4.5]), np.array([2.0, 2.5]))
+    assert ok.tolist() == [True, False] and z[0] == h[2, 4]
