@@ -192,3 +192,44 @@ def test_dem_interp_equals_the_reference_with_and_without_nodata():
     dem = ElevationModel(heights_m=h, x0_m=0.0, y0_m=0.0, cellsize_m=1.0)
     z, ok = dem._interp(np.array([4.0, 4.5]), np.array([2.0, 2.5]))
     assert ok.tolist() == [True, False] and z[0] == h[2, 4]
+
+
+# --- the default launch point: the transit room of the searched window only ---------------------
+
+def reference_transit_room(free):
+    """``sorties.transit_room`` before: the pooled mask repeated to full resolution."""
+    from companion.coverage.freespace import min_pool
+    from companion.coverage.transit import POOL_M
+    h = free.resolution_m
+    p = max(1, int(round(POOL_M / h)))
+    r0, r1, c0, c1 = free.bbox_cells
+    room = np.zeros(free.eroded.shape, dtype=bool)
+    if r1 > r0:
+        pooled = min_pool(free.eroded[r0:r1, c0:c1], p)
+        room[r0:r1, c0:c1] = np.repeat(np.repeat(pooled, p, axis=0), p, axis=1)[: r1 - r0, : c1 - c0]
+    return room
+
+
+@pytest.mark.parametrize("resolution_m", [0.05, 0.1, 0.3])
+def test_transit_room_and_its_windows_equal_the_reference(resolution_m):
+    from companion.coverage.freespace import FreeSpace
+    from companion.sorties import _pooled_room, _room_window, transit_room
+    rng = np.random.default_rng(190)
+    for shape in ((37, 53), (8, 9), (1, 1)):
+        eroded = np.zeros(shape, dtype=bool)
+        eroded[2:-3, 3:-2] = rng.random((shape[0] - 5, shape[1] - 5)) < 0.9 if min(shape) > 6 else False
+        free = FreeSpace(eroded=eroded, free=eroded, resolution_m=resolution_m, threshold_m=0.5)
+        ref = reference_transit_room(free)
+        np.testing.assert_array_equal(transit_room(free), ref)
+        pr = _pooled_room(free)
+        for a0, a1, b0, b1 in ((0, shape[0], 0, shape[1]), (1, 5, 0, 7), (3, 3, 0, 2), (0, 1, 0, 1)):
+            a1, b1 = min(a1, shape[0]), min(b1, shape[1])      # windows inside the grid, as searched
+            a0, b0 = min(a0, a1), min(b0, b1)
+            np.testing.assert_array_equal(_room_window(pr, a0, a1, b0, b1), ref[a0:a1, b0:b1])
+    # by hand: 0.1 m cells pool 2 x 2; a 4 x 5 eroded box at (1, 1) holds 2 x 2 whole blocks
+    eroded = np.zeros((7, 8), dtype=bool)
+    eroded[1:5, 1:6] = True
+    room = transit_room(FreeSpace(eroded=eroded, free=eroded, resolution_m=0.1, threshold_m=0.5))
+    expect = np.zeros_like(eroded)
+    expect[1:5, 1:5] = True         # the fifth column's block is half outside the box
+    np.testing.assert_array_equal(room, expect)
