@@ -233,3 +233,65 @@ def test_transit_room_and_its_windows_equal_the_reference(resolution_m):
     expect = np.zeros_like(eroded)
     expect[1:5, 1:5] = True         # the fifth column's block is half outside the box
     np.testing.assert_array_equal(room, expect)
+
+
+# --- visibility samples: per-segment values repeated, the floor left to the truncation ---------
+
+def reference_samples_clear(free, a, targets, n, stride=1):
+    """``gridpath._samples_clear`` before (gathers by segment index, ``Raster.sample_points``'s
+    floor-then-clip arithmetic)."""
+    m = n if stride == 1 else (n - 1) // stride + 1
+    ends = np.cumsum(m)
+    total = int(ends[-1]) if len(ends) else 0
+    if total == 0:
+        return np.zeros(0, dtype=bool)
+    first = ends - m
+    seg = np.repeat(np.arange(len(m)), m)
+    j = (np.arange(total) - first[seg]) * stride
+    s = j / np.maximum(n - 1, 1)[seg]
+    d = targets - a
+    px = s * d[:, 0].take(seg)
+    py = s * d[:, 1].take(seg)
+    if a.ndim == 1:
+        px, py = px + a[0], py + a[1]
+    else:
+        px, py = px + a[:, 0].take(seg), py + a[:, 1].take(seg)
+    r = free.raster()
+    ok = r.sample_points(px, py)
+    return np.logical_and.reduceat(ok, first)
+
+
+@pytest.mark.parametrize("stride", [1, 3, 16])
+def test_samples_clear_equals_the_reference(stride):
+    from companion.coverage.freespace import FreeSpace
+    from companion.coverage.gridpath import _sample_counts, _samples_clear
+    rng = np.random.default_rng(191)
+    eroded = rng.random((60, 80)) < 0.93
+    free = FreeSpace(eroded=eroded, free=eroded, resolution_m=0.1, threshold_m=0.5)
+    # segments inside, crossing and leaving the map (negative coordinates, beyond the far edge),
+    # zero-length ones and ones ending exactly on cell edges
+    a = np.r_[rng.uniform(-0.5, 8.5, (200, 2)), [[1.0, 1.0], [0.0, 0.0], [7.9, 5.9]]]
+    b = np.r_[rng.uniform(-0.5, 8.5, (200, 2)), [[1.0, 1.0], [0.3, 0.0], [8.0, 6.0]]]
+    n = _sample_counts(free, a, b)
+    got = _samples_clear(free, a, b, n, stride)
+    np.testing.assert_array_equal(got, reference_samples_clear(free, a, b, n, stride))
+    assert got.any() and not got.all()
+    for origin in (a[0], np.array([-0.25, 3.3])):
+        n = _sample_counts(free, origin, b)
+        np.testing.assert_array_equal(_samples_clear(free, origin, b, n, stride),
+                                      reference_samples_clear(free, origin, b, n, stride))
+    assert _samples_clear(free, a[:0], b[:0], n[:0], stride).shape == (0,)
+
+
+def test_sample_xy_is_the_floor_lookup_by_hand():
+    """0.1 m cells from G (0, 0): x = 0.05 -> column 0; -0.01 m is off the map (the padding,
+    False); 0.1 - 1e-12 is still column 0; exactly 0.1 is column 1."""
+    from companion.coverage.freespace import Raster
+    mask = np.zeros((2, 3), dtype=bool)
+    mask[0, 0] = mask[1, 2] = True
+    r = Raster(mask, 0.1, 0.0, 0.0)
+    gx = np.array([0.05, -0.01, 0.1 - 1e-12, 0.1, 0.25, 0.31, -5.0, 0.05])
+    gy = np.array([0.05, 0.05, 0.05, 0.05, 0.15, 0.15, 0.05, -0.0001])
+    expect = [True, False, True, False, True, False, False, False]
+    assert r.sample_xy(gx.copy(), gy.copy()).tolist() == expect
+    assert r.sample_points(gx, gy).tolist() == expect

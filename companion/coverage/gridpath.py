@@ -142,22 +142,22 @@ def _samples_clear(free: FreeSpace, a: np.ndarray, targets: np.ndarray, n: np.nd
     if total == 0:
         return np.zeros(0, dtype=bool)
     first = ends - m
-    seg = np.repeat(np.arange(len(m)), m)
+    # per-segment values repeated over their samples (sequential, no index array)
     j = np.arange(total)
-    j -= first[seg]
+    j -= np.repeat(first, m)
     if stride != 1:
         j *= stride
-    s = j / np.maximum(n - 1, 1)[seg]
+    s = j / np.repeat(np.maximum(n - 1, 1), m)
     # a + s (target - a) per axis (the same arithmetic as one segment at a time)
     d = targets - a
-    px = s * d[:, 0].take(seg)
-    s *= d[:, 1].take(seg)
+    px = s * np.repeat(d[:, 0], m)
+    s *= np.repeat(d[:, 1], m)
     if a.ndim == 1:
         px += a[0]
         s += a[1]
     else:                                   # one origin per segment
-        px += a[:, 0].take(seg)
-        s += a[:, 1].take(seg)
+        px += np.repeat(a[:, 0], m)
+        s += np.repeat(a[:, 1], m)
     ok = free.raster().sample_xy(px, s)
     return np.logical_and.reduceat(ok, first)
 
