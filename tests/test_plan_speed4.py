@@ -295,3 +295,62 @@ def test_sample_xy_is_the_floor_lookup_by_hand():
     expect = [True, False, True, False, True, False, False, False]
     assert r.sample_xy(gx.copy(), gy.copy()).tolist() == expect
     assert r.sample_points(gx, gy).tolist() == expect
+
+
+# --- farthest visible point: the per-query bookkeeping in arrays -----------------------------------
+
+def reference_farthest_visible_many(free, origins, targets):
+    """``gridpath.farthest_visible_many`` before (lists of survivors, one loop per query)."""
+    from companion.coverage.gridpath import _BATCH, _STRIDE, _sample_counts, _samples_clear
+    origins = np.asarray(origins, float).reshape(-1, 2)
+    targets = [np.asarray(t, float).reshape(-1, 2) for t in targets]
+    sizes = np.array([len(t) for t in targets], dtype=np.int64)
+    res = [-1] * len(targets)
+    if sizes.sum() == 0:
+        return res
+    tg = np.concatenate(targets)
+    org = np.repeat(origins, sizes, axis=0)
+    n = _sample_counts(free, org, tg)
+    coarse = _samples_clear(free, org, tg, n, _STRIDE)
+    offset = np.concatenate([[0], np.cumsum(sizes)])
+    surv = [np.flatnonzero(coarse[offset[q]: offset[q + 1]]) + offset[q] for q in range(len(targets))]
+    top = [len(x) for x in surv]
+    pending = [q for q in range(len(targets)) if top[q]]
+    while pending:
+        batch = [surv[q][max(0, top[q] - _BATCH): top[q]] for q in pending]
+        ok = _samples_clear(free, org[np.concatenate(batch)], tg[np.concatenate(batch)], n[np.concatenate(batch)])
+        nxt, at = [], 0
+        for q, bq in zip(pending, batch):
+            hit = np.flatnonzero(ok[at: at + len(bq)])
+            at += len(bq)
+            if len(hit):
+                res[q] = int(bq[hit[-1]] - offset[q])
+            else:
+                top[q] -= _BATCH
+                if top[q] > 0:
+                    nxt.append(q)
+        pending = nxt
+    return res
+
+
+def test_farthest_visible_many_equals_the_reference_and_the_definition():
+    from companion.coverage.freespace import FreeSpace
+    from companion.coverage.gridpath import farthest_visible_many, visible_from
+    rng = np.random.default_rng(192)
+    eroded = np.ones((80, 120), dtype=bool)
+    eroded[::7, 5:110] = False                  # rows: most long segments are blocked
+    eroded &= rng.random(eroded.shape) > 0.01
+    free = FreeSpace(eroded=eroded, free=eroded, resolution_m=0.1, threshold_m=0.5)
+    cells = np.argwhere(eroded)
+    pts = (cells[:, ::-1] + 0.5) * 0.1
+    origins = pts[rng.choice(len(pts), 60)]
+    targets = [pts[rng.choice(len(pts), int(k))] for k in rng.integers(0, 40, 60)]
+    targets[3] = pts[:0]                        # no targets
+    targets[4] = origins[4][None]               # the origin itself: visible
+    got = farthest_visible_many(free, origins, targets)
+    assert got == reference_farthest_visible_many(free, origins, targets)
+    for o, t, j in zip(origins, targets, got):      # the definition
+        vis = np.flatnonzero(visible_from(free, o, t)) if len(t) else []
+        assert j == (vis[-1] if len(vis) else -1)
+    assert got[3] == -1 and got[4] == 0
+    assert sum(j >= 0 for j in got) > 20 and sum(j == -1 for j in got) > 2

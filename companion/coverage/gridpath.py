@@ -103,24 +103,26 @@ def farthest_visible_many(free: FreeSpace, origins: np.ndarray, targets: list) -
     n = _sample_counts(free, org, tg)
     coarse = _samples_clear(free, org, tg, n, _STRIDE)
     offset = np.concatenate([[0], np.cumsum(sizes)])
-    surv = [np.flatnonzero(coarse[offset[q]: offset[q + 1]]) + offset[q] for q in range(len(targets))]
-    top = [len(x) for x in surv]
-    pending = [q for q in range(len(targets)) if top[q]]
-    while pending:
-        batch = [surv[q][max(0, top[q] - _BATCH): top[q]] for q in pending]
-        idx = np.concatenate(batch)
+    # the survivors of all queries in one sorted array; query q's are surv[lo[q]:top[q]],
+    # tested in full from the top down, _BATCH at a time (the bookkeeping in arrays)
+    surv = np.flatnonzero(coarse)
+    lo = np.searchsorted(surv, offset[:-1])
+    top = np.searchsorted(surv, offset[1:])
+    pending = np.flatnonzero(top > lo)
+    while len(pending):
+        start = np.maximum(lo[pending], top[pending] - _BATCH)
+        cnt = top[pending] - start
+        first = np.cumsum(cnt) - cnt
+        idx = surv[np.arange(int(cnt.sum())) + np.repeat(start - first, cnt)]
         ok = _samples_clear(free, org[idx], tg[idx], n[idx])
-        nxt, at = [], 0
-        for q, bq in zip(pending, batch):
-            hit = np.flatnonzero(ok[at: at + len(bq)])
-            at += len(bq)
-            if len(hit):
-                res[q] = int(bq[hit[-1]] - offset[q])
-            else:
-                top[q] -= _BATCH
-                if top[q] > 0:
-                    nxt.append(q)
-        pending = nxt
+        # the last clear segment of each query's batch, -1 if none
+        last = np.maximum.reduceat(np.where(ok, np.arange(len(ok)), -1), first)
+        hit = last >= 0
+        for q, j in zip(pending[hit].tolist(), (idx[last[hit]] - offset[pending[hit]]).tolist()):
+            res[q] = j
+        miss = pending[~hit]
+        top[miss] -= _BATCH
+        pending = miss[top[miss] > lo[miss]]
     return res
 
 
