@@ -116,22 +116,37 @@ def _polyline_items(path: np.ndarray, flight) -> int:
     return int(np.sum(run_waypoints(seg, flight)))
 
 
+def _pooled_room(free):
+    """The pooled transit cells of ``free`` (``coverage.transit``'s ``min_pool`` of the eroded
+    bounding box by ``POOL_M`` blocks): (pooled, p, (r0, r1, c0, c1))."""
+    from .coverage.freespace import min_pool
+    from .coverage.transit import POOL_M
+
+    p = max(1, int(round(POOL_M / free.resolution_m)))
+    r0, r1, c0, c1 = free.bbox_cells
+    pooled = min_pool(free.eroded[r0:r1, c0:c1], p) if r1 > r0 else np.zeros((0, 0), dtype=bool)
+    return pooled, p, (r0, r1, c0, c1)
+
+
+def _room_window(pooled_room, a0: int, a1: int, b0: int, b1: int) -> np.ndarray:
+    """Rows ``a0:a1``, columns ``b0:b1`` of :func:`transit_room`, from :func:`_pooled_room`
+    (each cell reads its pooled block; no full-resolution copy of the grid)."""
+    pooled, p, (r0, r1, c0, c1) = pooled_room
+    rr, cc = np.arange(a0, a1), np.arange(b0, b1)
+    in_r, in_c = (rr >= r0) & (rr < r1), (cc >= c0) & (cc < c1)
+    out = np.zeros((len(rr), len(cc)), dtype=bool)
+    if pooled.size and in_r.any() and in_c.any():
+        pr, pc = (rr[in_r] - r0) // p, (cc[in_c] - c0) // p
+        out[np.ix_(in_r, in_c)] = pooled[np.ix_(pr, pc)]
+    return out
+
+
 def transit_room(free) -> np.ndarray:
     """(rows, cols) bool: eroded cells whose pooled transit cell is wholly eroded
     (``coverage.transit``: the blocks of ``POOL_M`` the transit tree is built on,
     aligned on the eroded space's bounding box), so a transit can start there."""
-    from .coverage.freespace import min_pool
-    from .coverage.transit import POOL_M
-
-    h = free.resolution_m
-    p = max(1, int(round(POOL_M / h)))
-    r0, r1, c0, c1 = free.bbox_cells
-    room = np.zeros(free.eroded.shape, dtype=bool)
-    if r1 > r0:
-        pooled = min_pool(free.eroded[r0:r1, c0:c1], p)
-        up = np.repeat(np.repeat(pooled, p, axis=0), p, axis=1)[: r1 - r0, : c1 - c0]
-        room[r0:r1, c0:c1] = up
-    return room
+    rows, cols = free.eroded.shape
+    return _room_window(_pooled_room(free), 0, rows, 0, cols)
 
 
 def central_launch_xy(grid, free, bg, route_start_g: np.ndarray) -> np.ndarray:
@@ -142,15 +157,19 @@ def central_launch_xy(grid, free, bg, route_start_g: np.ndarray) -> np.ndarray:
     h = free.resolution_m
     rc = np.array(mask_centroid_rc(grid.free))
     comp = bg.components_of(np.array([int(route_start_g[1] // h)]), np.array([int(route_start_g[0] // h)]))[0]
-    room = transit_room(free)
-    if not room.any():
-        room = free.eroded
-    rows, cols = room.shape
+    pooled_room = _pooled_room(free)
+    if pooled_room[0].any():        # the room of the window searched, read from the pooled cells
+        def room(a0, a1, b0, b1):
+            return _room_window(pooled_room, a0, a1, b0, b1)
+    else:
+        def room(a0, a1, b0, b1):
+            return free.eroded[a0:a1, b0:b1]
+    rows, cols = free.eroded.shape
     rad = 16
     while True:
         r0, r1 = max(0, int(rc[0]) - rad), min(rows, int(rc[0]) + rad + 1)
         c0, c1 = max(0, int(rc[1]) - rad), min(cols, int(rc[1]) + rad + 1)
-        er, ec = np.nonzero(room[r0:r1, c0:c1])
+        er, ec = np.nonzero(room(r0, r1, c0, c1))
         er, ec = er + r0, ec + c0
         ok = bg.components_of(er, ec) == comp
         if ok.any():

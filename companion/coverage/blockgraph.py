@@ -168,8 +168,15 @@ def _pairs(a: np.ndarray, b: np.ndarray, k: int) -> np.ndarray | None:
     m = (a > 0) & (b > 0) & (a != b)
     if not m.any():
         return None
-    lo = np.minimum(a[m], b[m]).astype(np.int64)
-    return np.unique(lo * (k + 1) + np.maximum(a[m], b[m]))
+    a, b = a[m], b[m]
+    key = np.minimum(a, b).astype(np.int64)
+    key *= k + 1
+    key += np.maximum(a, b)
+    # neighbouring border cells mostly join the same two pieces: drop the repeats
+    # next to each other before the (hashing) unique, the same set of keys
+    if len(key) > 1:
+        key = key[np.append(True, key[1:] != key[:-1])]
+    return np.unique(key)
 
 
 def build_block_graph(eroded: np.ndarray, bbox: tuple[int, int, int, int]) -> BlockGraph:

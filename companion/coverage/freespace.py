@@ -136,7 +136,7 @@ class Raster:
             v -= origin
             v *= 1.0 / self.cell_m
             v += 1.0
-            np.floor(v, out=v)
+            # clipped into [0, hi] first, the truncation below is the floor (hi is whole)
             np.maximum(v, 0.0, out=v)
             np.minimum(v, float(hi), out=v)
         idx = gy.astype(np.int64)

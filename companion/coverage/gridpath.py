@@ -103,24 +103,26 @@ def farthest_visible_many(free: FreeSpace, origins: np.ndarray, targets: list) -
     n = _sample_counts(free, org, tg)
     coarse = _samples_clear(free, org, tg, n, _STRIDE)
     offset = np.concatenate([[0], np.cumsum(sizes)])
-    surv = [np.flatnonzero(coarse[offset[q]: offset[q + 1]]) + offset[q] for q in range(len(targets))]
-    top = [len(x) for x in surv]
-    pending = [q for q in range(len(targets)) if top[q]]
-    while pending:
-        batch = [surv[q][max(0, top[q] - _BATCH): top[q]] for q in pending]
-        idx = np.concatenate(batch)
+    # the survivors of all queries in one sorted array; query q's are surv[lo[q]:top[q]],
+    # tested in full from the top down, _BATCH at a time (the bookkeeping in arrays)
+    surv = np.flatnonzero(coarse)
+    lo = np.searchsorted(surv, offset[:-1])
+    top = np.searchsorted(surv, offset[1:])
+    pending = np.flatnonzero(top > lo)
+    while len(pending):
+        start = np.maximum(lo[pending], top[pending] - _BATCH)
+        cnt = top[pending] - start
+        first = np.cumsum(cnt) - cnt
+        idx = surv[np.arange(int(cnt.sum())) + np.repeat(start - first, cnt)]
         ok = _samples_clear(free, org[idx], tg[idx], n[idx])
-        nxt, at = [], 0
-        for q, bq in zip(pending, batch):
-            hit = np.flatnonzero(ok[at: at + len(bq)])
-            at += len(bq)
-            if len(hit):
-                res[q] = int(bq[hit[-1]] - offset[q])
-            else:
-                top[q] -= _BATCH
-                if top[q] > 0:
-                    nxt.append(q)
-        pending = nxt
+        # the last clear segment of each query's batch, -1 if none
+        last = np.maximum.reduceat(np.where(ok, np.arange(len(ok)), -1), first)
+        hit = last >= 0
+        for q, j in zip(pending[hit].tolist(), (idx[last[hit]] - offset[pending[hit]]).tolist()):
+            res[q] = j
+        miss = pending[~hit]
+        top[miss] -= _BATCH
+        pending = miss[top[miss] > lo[miss]]
     return res
 
 
@@ -142,22 +144,22 @@ def _samples_clear(free: FreeSpace, a: np.ndarray, targets: np.ndarray, n: np.nd
     if total == 0:
         return np.zeros(0, dtype=bool)
     first = ends - m
-    seg = np.repeat(np.arange(len(m)), m)
+    # per-segment values repeated over their samples (sequential, no index array)
     j = np.arange(total)
-    j -= first[seg]
+    j -= np.repeat(first, m)
     if stride != 1:
         j *= stride
-    s = j / np.maximum(n - 1, 1)[seg]
+    s = j / np.repeat(np.maximum(n - 1, 1), m)
     # a + s (target - a) per axis (the same arithmetic as one segment at a time)
     d = targets - a
-    px = s * d[:, 0].take(seg)
-    s *= d[:, 1].take(seg)
+    px = s * np.repeat(d[:, 0], m)
+    s *= np.repeat(d[:, 1], m)
     if a.ndim == 1:
         px += a[0]
         s += a[1]
     else:                                   # one origin per segment
-        px += a[:, 0].take(seg)
-        s += a[:, 1].take(seg)
+        px += np.repeat(a[:, 0], m)
+        s += np.repeat(a[:, 1], m)
     ok = free.raster().sample_xy(px, s)
     return np.logical_and.reduceat(ok, first)
 
@@ -230,22 +232,31 @@ def _graph_of(nb: np.ndarray, neighbours, edge_cells: int | None) -> csr_matrix:
     ok = nb >= 0
     step = np.array([s for _, _, s in neighbours])
     to = nb[ok]
-    w = np.broadcast_to(step, (n, k))[ok]
     if edge_cells > 0:
         inner = _rows_all(ok)
         for _ in range(edge_cells - 1):
-            inner = inner & _rows_all(np.where(ok, inner[np.where(ok, nb, 0)], False))
-        w = w * np.where(inner, 1.0, _EDGE_COST)[to]
-    # else every cell costs 1: the steps themselves (x * 1.0 is x; no (n k) float temporaries)
+            # a row that is inner has all its neighbours (no -1 among them); the
+            # others are False whatever the -1 entries pick up
+            inner &= _rows_all(inner.take(nb))
+        # step x cost of the cell stepped into, in the (n, k) layout, one mask at the end
+        w = (step * np.where(inner, 1.0, _EDGE_COST).take(nb))[ok]
+    else:
+        # every cell costs 1: the steps themselves (x * 1.0 is x; no (n k) float temporaries)
+        w = np.broadcast_to(step, (n, k))[ok]
     # int32 offsets when they fit, like the indices: scipy would otherwise copy the
     # indices to int64 to match (8 bytes an edge, 28 MB for a 10 ha transit graph)
     idx = np.int32 if n * k < 2**31 - 1 else np.int64
-    per_row = ok[:, 0].astype(idx)
-    for j in range(1, k):
-        per_row += ok[:, j]
     indptr = np.zeros(n + 1, dtype=idx)
-    np.cumsum(per_row, out=indptr[1:])
+    np.cumsum(_rows_count(ok), dtype=idx, out=indptr[1:])
     return csr_matrix((w, to.astype(idx, copy=False), indptr), shape=(n, n))
+
+
+def _rows_count(b: np.ndarray) -> np.ndarray:
+    """``b.sum(axis=1)`` for an (n, k) bool array; k = 4 or 8: the set bits of each row
+    read as one integer (each True is the byte 1)."""
+    if b.shape[1] in (4, 8) and b.flags.c_contiguous:
+        return np.bitwise_count(b.view(np.uint32 if b.shape[1] == 4 else np.uint64).ravel())
+    return b.sum(axis=1)
 
 
 def _rows_all(b: np.ndarray) -> np.ndarray:

@@ -151,9 +151,12 @@ class ElevationModel:
         z = np.zeros(x.shape)
         ok = inside.copy()
         for wi, vi in zip(w, v):
-            bad = np.isnan(vi) & (wi != 0.0)
-            ok &= ~bad
-            z += wi * np.where(np.isnan(vi), 0.0, vi)
+            nodata = np.isnan(vi)
+            if not nodata.any():        # the usual case: no NODATA among these corners
+                z += wi * vi
+                continue
+            ok &= ~(nodata & (wi != 0.0))
+            z += wi * np.where(nodata, 0.0, vi)
         return z, ok
 
     def covers(self, x, y) -> np.ndarray:
