@@ -5,7 +5,7 @@ flight ~0.4 s of CPU to parse before it starts. ``companion plan`` then also
 writes, next to it, the same numbers in binary: an uncompressed NumPy ``.npz``
 holding
 
-- ``json_blake2b``: the BLAKE2b-256 digest of the plan.json bytes it was
+- ``json_sha256``: the SHA-256 digest of the plan.json bytes it was
   written with;
 - ``header``: the plan.json document without its arrays (UTF-8 JSON);
 - the arrays: ``path`` (K, 2); the way-points' ``wp_t`` (N,), ``wp_p``,
@@ -47,8 +47,8 @@ def twin_path(plan_path) -> str:
 
 
 def digest(data: bytes) -> np.ndarray:
-    """(32,) uint8 BLAKE2b-256 digest of ``data``."""
-    return np.frombuffer(hashlib.blake2b(data, digest_size=32).digest(), dtype=np.uint8)
+    """(32,) uint8 SHA-256 digest of ``data``."""
+    return np.frombuffer(hashlib.sha256(data).digest(), dtype=np.uint8)
 
 
 def _columns(wps: list) -> dict:
@@ -62,7 +62,7 @@ def twin_bytes(doc: dict, json_bytes: bytes) -> bytes | None:
     if len(json_bytes) < TWIN_MIN_BYTES or "samples" in doc:
         return None
     header = dict(doc)
-    arrays = {"json_blake2b": digest(json_bytes), "path": np.asarray(doc["path"], dtype=float).reshape(-1, 2)}
+    arrays = {"json_sha256": digest(json_bytes), "path": np.asarray(doc["path"], dtype=float).reshape(-1, 2)}
     wps = header.pop("waypoints")
     for k, v in _columns(wps).items():
         arrays["wp_" + k] = v
@@ -108,7 +108,7 @@ def read_twin(plan_path, json_bytes: bytes, lim=None) -> tuple[str, dict] | None
             arrays = {k: z[k] for k in z.files}
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
         raise PlanError(path, f"not a plan twin (.npz): {exc}") from None
-    stamp = arrays.get("json_blake2b")
+    stamp = arrays.get("json_sha256")
     if stamp is None or stamp.dtype != np.uint8 or not np.array_equal(stamp, digest(json_bytes)):
         return None
     header = arrays.pop("header", None)
