@@ -104,6 +104,10 @@ def read_twin(plan_path, json_bytes: bytes, lim=None) -> tuple[str, dict] | None
         return None
     data = read_bytes(path, PlanError, "plan twin", cap="plan_bytes", lim=lim)
     try:
+        # np.savez stores its entries: a compressed one (a decompression bomb) is not a twin
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            if any(i.compress_type != zipfile.ZIP_STORED or i.file_size > len(data) for i in zf.infolist()):
+                raise PlanError(path, "not a plan twin (.npz): compressed or oversized entries")
         with np.load(io.BytesIO(data), allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:

@@ -139,6 +139,18 @@ def test_a_twin_that_is_not_an_npz_is_refused(planned, tmp_path):
         load_plan(path)
 
 
+def test_a_compressed_twin_is_refused(planned, tmp_path):
+    """np.savez stores its entries; a deflated entry could expand without bound."""
+    path = _write(planned, tmp_path / "plan.json")
+    with np.load(plan_twin.twin_path(path)) as z:
+        arrays = {k: z[k] for k in z.files}
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    Path(plan_twin.twin_path(path)).write_bytes(buf.getvalue())
+    with pytest.raises(PlanError, match="compressed"):
+        load_plan(path)
+
+
 def test_companion_plan_writes_the_twin_of_a_large_plan(tmp_path):
     """The CLI: a twin next to plan.json when the text reaches the threshold (lowered to 0
     here through a sitecustomize-free wrapper), whose digest is plan.json's."""
