@@ -40,7 +40,7 @@ import orjson
 from mavcore.config import to_dict
 from mavcore.errors import PlanError
 from .format_version import check_format_version
-from mavcore.inputs import brief, parse_json, read_text
+from mavcore.inputs import brief, decode_text, parse_json, read_bytes
 from mavcore.mission import Mission
 
 MAV_CMD_NAV_WAYPOINT = 16
@@ -56,7 +56,7 @@ MAV_TYPE_QUADROTOR = 2
 #: 2.0: ``trajectory`` holds the polynomial pieces instead of samples; the samples,
 #: now optional, moved to ``samples``; ``timings_s`` gained ``write`` and ``wall``;
 #: ``margins`` (clearances from the airframe surface, acceptance radius, fence margin) added.
-PLAN_FORMAT_VERSION = "2.0"
+PLAN_FORMAT_VERSION = "2.1"
 PLAN_FORMAT_MAJOR = int(PLAN_FORMAT_VERSION.split(".")[0])
 #: The previous major version, still read (its ``trajectory`` is samples only:
 #: ``companion fly`` re-solves the LQR through its way-points).
@@ -278,7 +278,8 @@ class PlanFile:
     target_enu_m : (3,) or None
     stats, timings_s : dict
     data : dict
-        The whole document.
+        The whole document (read from its binary twin, ``companion.plan_twin``:
+        the document without the arrays the twin holds).
     source : str
     sorties : list of dict
         Per sortie: ``waypoint_t_s``, ``waypoint_p_enu_m``, ``waypoint_v_enu_m_s``,
@@ -337,15 +338,28 @@ def _waypoint_columns(wps, src: str, prefix: str) -> dict:
     if not isinstance(wps, list) or len(wps) < 2:
         raise PlanError(f"{src}: key '{prefix}'", "expected a list of at least 2 way-points")
     cols = {}
-    for k, tail in (("t", ()), ("p", (3,)), ("v", (3,)), ("a", (3,))):
+    for k in ("t", "p", "v", "a"):
         try:
-            values = [w[k] for w in wps]          # fast path; the slow one names the bad way-point
+            cols[k] = [w[k] for w in wps]          # fast path; the slow one names the bad way-point
         except (KeyError, TypeError):
-            values = [_get(w, k, src, f"{prefix}[{i}]") for i, w in enumerate(wps)]
-        cols[k] = _num_array(values, tail, src, f"{prefix}[].{k}")
-    if np.any(np.diff(cols["t"]) <= 0):
+            cols[k] = [_get(w, k, src, f"{prefix}[{i}]") for i, w in enumerate(wps)]
+    return _checked_columns(cols, src, prefix)
+
+
+def _checked_columns(cols: dict, src: str, prefix: str) -> dict:
+    """The way-point columns ``t`` (N,), ``p``, ``v``, ``a`` (N, 3) as float arrays: numbers,
+    finite, of one length N >= 2, times strictly increasing (the JSON's list or the twin's)."""
+    out = {k: _num_array(cols[k], tail, src, f"{prefix}[].{k}") for k, tail in (("t", ()), ("p", (3,)),
+                                                                               ("v", (3,)), ("a", (3,)))}
+    n = out["t"].shape[0]
+    if n < 2:
+        raise PlanError(f"{src}: key '{prefix}'", "expected a list of at least 2 way-points")
+    for k, a in out.items():
+        if a.shape[0] != n:
+            raise PlanError(f"{src}: key '{prefix}[].{k}'", f"{a.shape[0]} values for {n} way-points")
+    if np.any(np.diff(out["t"]) <= 0):
         raise PlanError(f"{src}: key '{prefix}[].t'", "times must be strictly increasing")
-    return cols
+    return out
 
 
 def _samples(tr, src: str, key: str) -> dict:
@@ -361,8 +375,9 @@ def _samples(tr, src: str, key: str) -> dict:
     return dict(arrays, t=t)
 
 
-def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, src: str):
-    """The 2.x ``trajectory`` as a ``Trajectory``, checked against the way-points."""
+def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, src: str, arrays=None):
+    """The 2.x ``trajectory`` as a ``Trajectory``, checked against the way-points.
+    ``arrays``: the twin's (``companion.plan_twin``): its knots and decoded values."""
     from .trajectory import Trajectory
     from mavcore.mission.trajectory import TrajectoryConfig
     from .trajectory.sampling import hermite_position_coefficients
@@ -377,7 +392,8 @@ def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, sr
             or (form == FORM_KNOT_STATES and degree != 7)):
         raise PlanError(f"{src}: key 'trajectory.degree'",
                         f"expected {'7' if form == FORM_KNOT_STATES else 'an integer in [4, 64]'}, got {degree!r}")
-    knots = _num_array(_get(tr, "t", src, "trajectory"), (), src, "trajectory.t")
+    knots = _num_array(arrays["traj_t"] if arrays is not None else _get(tr, "t", src, "trajectory"), (), src,
+                       "trajectory.t")
     if knots.shape[0] < 2 or np.any(np.diff(knots) <= 0):
         raise PlanError(f"{src}: key 'trajectory.t'", "expected at least 2 strictly increasing knot times")
     n = knots.shape[0]
@@ -388,15 +404,20 @@ def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, sr
     if _get(va, "shape", src, "trajectory.values") != want:
         what = "knots, [p, v, a, jerk], axes" if form == FORM_KNOT_STATES else "pieces, degree + 1, axes"
         raise PlanError(f"{src}: key 'trajectory.values.shape'", f"expected {want} ({what}), got {va['shape']!r}")
-    b64 = _get(va, "base64", src, "trajectory.values")
-    try:
-        raw = base64.b64decode(b64, validate=True) if isinstance(b64, str) else None
-    except (binascii.Error, ValueError):
-        raw = None
     count = want[0] * want[1] * want[2]
-    if raw is None or len(raw) != 8 * count:
-        raise PlanError(f"{src}: key 'trajectory.values.base64'", f"expected base64 of {count} float64 numbers")
-    values = np.frombuffer(raw, dtype=VALUES_DTYPE).astype(float).reshape(want)
+    if arrays is not None:
+        values = arrays["traj_values"]
+        if values.dtype != np.float64 or list(values.shape) != want:
+            raise PlanError(f"{src}: key 'trajectory.values'", f"the twin's values are not {count} float64 numbers")
+    else:
+        b64 = _get(va, "base64", src, "trajectory.values")
+        try:
+            raw = base64.b64decode(b64, validate=True) if isinstance(b64, str) else None
+        except (binascii.Error, ValueError):
+            raw = None
+        if raw is None or len(raw) != 8 * count:
+            raise PlanError(f"{src}: key 'trajectory.values.base64'", f"expected base64 of {count} float64 numbers")
+        values = np.frombuffer(raw, dtype=VALUES_DTYPE).astype(float).reshape(want)
     if not np.all(np.isfinite(values)):
         raise PlanError(f"{src}: key 'trajectory.values'", "non-finite value")
     wk = np.minimum(np.searchsorted(knots, wp_t), n - 1)
@@ -428,9 +449,18 @@ def load_plan(path: str | Path) -> PlanFile:
         major version, or a missing/malformed key (the message names the
         file and the key). A file without ``format_version`` is read as 1.0.
     """
+    from .plan_twin import read_twin
+
     p = Path(path)
     src = str(p)
-    data = parse_json(read_text(p, PlanError, "plan.json", cap="plan_bytes"), src, PlanError)
+    raw = read_bytes(p, PlanError, "plan.json", cap="plan_bytes")
+    twin = read_twin(p, raw)
+    if twin is None:
+        data, arrays = parse_json(decode_text(raw, p, PlanError), src, PlanError), None
+    else:
+        (header, arrays), raw = twin, None
+        data = parse_json(header, src, PlanError)
+    del raw
     if not isinstance(data, dict):
         raise PlanError(src, "expected a JSON object")
     major = check_format_version(data, (PLAN_FORMAT_MAJOR, LEGACY_PLAN_MAJOR), src, PlanError).major
@@ -439,15 +469,22 @@ def load_plan(path: str | Path) -> PlanFile:
     origin = _get(data, "origin", src)
     o = tuple(float(_num_array([_get(origin, k, src, "origin")], (), src, f"origin.{k}")[0])
               for k in ("lat", "lon", "alt_m"))
-    path_xy = _num_array(_get(data, "path", src), (2,), src, "path")
-    wps = _get(data, "waypoints", src)
-    cols = _waypoint_columns(wps, src, "waypoints")
-    try:
-        corner = [w["corner"] for w in wps]
-    except (KeyError, TypeError):
-        corner = [_get(w, "corner", src, f"waypoints[{i}]") for i, w in enumerate(wps)]
-    if not all(isinstance(c, bool) for c in corner):
-        raise PlanError(f"{src}: key 'waypoints[].corner'", "expected true or false")
+    if arrays is not None:
+        path_xy = _num_array(arrays["path"], (2,), src, "path")
+        cols = _checked_columns({k: arrays["wp_" + k] for k in ("t", "p", "v", "a")}, src, "waypoints")
+        corner = arrays["wp_corner"]
+        if corner.dtype != bool or corner.shape != cols["t"].shape:
+            raise PlanError(f"{src}: key 'waypoints[].corner'", "expected true or false")
+    else:
+        path_xy = _num_array(_get(data, "path", src), (2,), src, "path")
+        wps = _get(data, "waypoints", src)
+        cols = _waypoint_columns(wps, src, "waypoints")
+        try:
+            corner = [w["corner"] for w in wps]
+        except (KeyError, TypeError):
+            corner = [_get(w, "corner", src, f"waypoints[{i}]") for i, w in enumerate(wps)]
+        if not all(isinstance(c, bool) for c in corner):
+            raise PlanError(f"{src}: key 'waypoints[].corner'", "expected true or false")
     stats = _get(data, "stats", src)
     for k in STATS_KEYS:
         _num_array([_get(stats, k, src, "stats")], (), src, f"stats.{k}")
@@ -464,13 +501,24 @@ def load_plan(path: str | Path) -> PlanFile:
         samples = _samples(data["samples"], src, "samples") if "samples" in data else {}
         target = _num_array([_get(data, "target_enu_m", src)], (3,), src, "target_enu_m")[0]
         wp_targets = np.stack([cols["p"], cols["v"], cols["a"]], axis=1)
-        trajectory = _trajectory(data, cols["t"], wp_targets, target, src)
+        trajectory = _trajectory(data, cols["t"], wp_targets, target, src, arrays)
     sorties = []
     raw_sorties = data.get("sorties", [])
     if not isinstance(raw_sorties, list):
         raise PlanError(f"{src}: key 'sorties'", "expected a list")
+    if arrays is not None:
+        counts = arrays["so_count"]
+        if counts.dtype != np.int64 or counts.shape != (len(raw_sorties),) or np.any(counts < 0) \
+                or int(counts.sum()) != len(arrays["so_t"]):
+            raise PlanError(f"{src}: key 'sorties'", "the twin's sortie way-point counts do not match")
+        ends = np.cumsum(counts).tolist()
     for j, so in enumerate(raw_sorties):
-        cols_s = _waypoint_columns(_get(so, "waypoints", src, f"sorties[{j}]"), src, f"sorties[{j}].waypoints")
+        if arrays is not None:
+            b, e = ends[j] - int(counts[j]), ends[j]
+            cols_s = _checked_columns({k: arrays["so_" + k][b:e] for k in ("t", "p", "v", "a")}, src,
+                                      f"sorties[{j}].waypoints")
+        else:
+            cols_s = _waypoint_columns(_get(so, "waypoints", src, f"sorties[{j}]"), src, f"sorties[{j}].waypoints")
         sorties.append({"waypoint_t_s": cols_s["t"], "waypoint_p_enu_m": cols_s["p"],
                         "waypoint_v_enu_m_s": cols_s["v"], "waypoint_a_enu_m_s2": cols_s["a"]})
     return PlanFile(origin=o, path_xy_m=path_xy, waypoint_t_s=cols["t"], waypoint_p_enu_m=cols["p"],

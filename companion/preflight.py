@@ -63,7 +63,8 @@ def _first(bad: np.ndarray) -> int:
     return int(np.argmax(bad))
 
 
-def check_waypoints(where: str, key: str, t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, mission, grid, dem) -> None:
+def check_waypoints(where: str, key: str, t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, mission, grid, dem,
+                    points: bool = True) -> None:
     """Raise ``PlanError`` unless one way-point list may be flown (module rules).
 
     Parameters
@@ -77,6 +78,9 @@ def check_waypoints(where: str, key: str, t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, m
         Way-point times (s), positions (m), velocities (m/s), accelerations (m/s^2), ENU.
     mission, grid, dem
         The mission, its occupancy grid and elevation model (``load_mission_maps``).
+    points : bool
+        False: the per-point rules (map, terrain band, speed, acceleration) are known
+        to pass already (``check_plan`` checks all the sorties' points at once).
     """
     t = np.asarray(t_s, dtype=float).reshape(-1)
     cols = {"p": p_enu_m, "v": v_enu_m_s, "a": a_enu_m_s2}
@@ -97,7 +101,18 @@ def check_waypoints(where: str, key: str, t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, m
     if t[-1] - t[0] > MAX_DURATION_S:
         raise PlanError(f"{where}: key '{key}[].t'", f"the way-points span {t[-1] - t[0]:.3g} s, "
                                                      f"more than {MAX_DURATION_S:g} s")
-    _check_points(where, lambda i: f"{key}[{i}]", arr["p"], arr["v"], arr["a"], mission, grid, dem)
+    if points:
+        _check_points(where, lambda i: f"{key}[{i}]", arr["p"], arr["v"], arr["a"], mission, grid, dem)
+
+
+def _points_pass(p, v, a, mission, grid, dem) -> bool:
+    """Whether ``_check_points`` passes on these points (its rules are per point, so
+    the points of many lists are checked at once: one pass instead of one per list)."""
+    try:
+        _check_points("", lambda i: "", p, v, a, mission, grid, dem)
+    except PlanError:
+        return False
+    return True
 
 
 def _check_points(where, name, p, v, a, mission, grid, dem) -> None:
@@ -175,9 +190,15 @@ def check_plan(pf, mission, grid, dem) -> None:
                                                 f"({h.lat:g}, {h.lon:g}, {h.alt_m:g}): a plan for another field")
     check_waypoints(src, "waypoints", pf.waypoint_t_s, pf.waypoint_p_enu_m, pf.waypoint_v_enu_m_s,
                     pf.waypoint_a_enu_m_s2, mission, grid, dem)
+    # the sorties' points all at once (a 10 ha plan has ~100 sorties); only when one fails
+    # are they checked list by list, for the message naming the first bad way-point
+    ok = bool(pf.sorties) and _points_pass(*(np.concatenate([np.asarray(so[k], dtype=float).reshape(-1, 3)
+                                                             for so in pf.sorties])
+                                             for k in ("waypoint_p_enu_m", "waypoint_v_enu_m_s",
+                                                       "waypoint_a_enu_m_s2")), mission, grid, dem)
     for j, so in enumerate(pf.sorties):
         check_waypoints(src, f"sorties[{j}].waypoints", so["waypoint_t_s"], so["waypoint_p_enu_m"],
-                        so["waypoint_v_enu_m_s"], so["waypoint_a_enu_m_s2"], mission, grid, dem)
+                        so["waypoint_v_enu_m_s"], so["waypoint_a_enu_m_s2"], mission, grid, dem, points=not ok)
     if pf.pointing_enu is not None:
         s = np.linalg.norm(np.asarray(pf.pointing_enu, dtype=float), axis=1)
         if np.any(~(s > 1e-9)):

@@ -250,7 +250,12 @@ def read_bytes(path, error: type[Exception], what: str = "", cap: str = "text_by
 def read_text(path, error: type[Exception], what: str = "", *, encoding: str = "utf-8",
               unreadable: str = "cannot read", cap: str = "text_bytes", lim=None) -> str:
     """The text of a regular file within the size cap ``cap``, strictly decoded."""
-    data = read_bytes(path, error, what, cap, lim)
+    return decode_text(read_bytes(path, error, what, cap, lim), path, error, encoding=encoding, unreadable=unreadable)
+
+
+def decode_text(data: bytes, path, error: type[Exception], *, encoding: str = "utf-8",
+                unreadable: str = "cannot read") -> str:
+    """``data`` (the bytes of the file ``path``) strictly decoded, as ``read_text`` does."""
     try:
         return data.decode(encoding, errors="strict")
     except UnicodeDecodeError as exc:

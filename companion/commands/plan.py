@@ -138,6 +138,11 @@ def run(args) -> int:
             from ..html_map import html_map_text
             files[args.html] = html_map_text(layers, f"{mission.name}: plan").encode("utf-8")
     files[args.output] = plan_json_text(doc, t_render).encode("utf-8")
+    from ..plan_twin import twin_bytes, twin_path
+
+    twin = twin_bytes(doc, files[args.output])      # a large plan's binary twin (format 2.1)
+    if twin is not None:
+        files[twin_path(args.output)] = twin
     write_atomically(files)
 
     for w in plan.warnings:

@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..coverage.freespace import FreeSpace, dilate_runs, disk_half_widths, erode_free_space
+from ..coverage.freespace import FreeSpace, dilate_runs, dilate_runs_banded, disk_half_widths, erode_free_space
 from mavcore.maps.grid import ElevationModel, OccupancyGrid
 from mavcore.maps.heightfield import HeightField
 
@@ -93,7 +93,8 @@ class KnownMap:
             Classification tolerance (m, >= 0).
         """
         widths = disk_half_widths(tolerance_m / grid.resolution_m + 1.0)
-        known_rows = dilate_runs(np.asarray(grid.occupied, dtype=bool), widths, outside=False)
+        # a band of rows at a time: the temporaries are a band's, not the whole grid's
+        known_rows = dilate_runs_banded(np.asarray(grid.occupied, dtype=bool), widths, outside=False)
         # nothing added yet: a read-only view of one False (no memory; ``with_obstacle`` copies)
         empty = np.broadcast_to(np.zeros(1, dtype=bool), grid.shape)
         return cls(grid, dem, free, float(canopy_height_m), float(tolerance_m), known_rows,

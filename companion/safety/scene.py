@@ -12,9 +12,12 @@ Rows
     and the SITL render it. The distance from a point to the rows is exact
     for the nearest occupied cell: the horizontal distance ``r`` to that
     cell's square, and above the canopy ``sqrt(r^2 + (z - top)^2)``. The
-    nearest cell is found once for every cell of the grid (a Euclidean
-    distance transform with indices, ``scipy.ndimage``); a point off the grid
-    is measured to the nearest cell of the grid's edge cell.
+    nearest cell of the point's cell is the one of a Euclidean distance
+    transform with indices (``scipy.ndimage``), computed a tile of the grid
+    at a time where a query reaches (``companion.safety.nearest_cells``: the
+    same cells as the whole grid's transform, without its 180 MB table on a
+    10 ha field); a point off the grid is measured to the nearest cell of the
+    grid's edge cell.
 """
 
 from __future__ import annotations
@@ -23,9 +26,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from mavcore.maps.heightfield import HeightField
+from .nearest_cells import NearestCells
 
 
 class TerrainField:
@@ -77,12 +80,9 @@ class RowField:
         self._c, self._s = math.cos(grid.origin_yaw_rad), math.sin(grid.origin_yaw_rad)
         self.terrain = terrain
         self.canopy_height_m = float(canopy_height_m)
+        self._shape = occ.shape
         self.empty = not occ.any()
-        if self.empty:
-            self._idx = None
-        else:
-            idx = ndimage.distance_transform_edt(~occ, return_distances=False, return_indices=True)
-            self._idx = idx.astype(np.int32)        # (2, rows, cols): nearest occupied cell of each cell
+        self._near = None if self.empty else NearestCells(occ)
 
     def horizontal(self, x, y) -> np.ndarray:
         """Horizontal distance (m) from (x, y) arrays to the nearest row cell's square."""
@@ -93,10 +93,10 @@ class RowField:
         gx = self._c * dx + self._s * dy
         gy = -self._s * dx + self._c * dy
         h = self.res_m
-        rows, cols = self._idx.shape[1:]
+        rows, cols = self._shape
         r = np.clip(np.floor(gy / h).astype(np.intp), 0, rows - 1)
         c = np.clip(np.floor(gx / h).astype(np.intp), 0, cols - 1)
-        rr, cc = self._idx[0, r, c], self._idx[1, r, c]
+        rr, cc = self._near.gather(r, c)
         ex = np.maximum(np.maximum(cc * h - gx, gx - (cc + 1) * h), 0.0)
         ey = np.maximum(np.maximum(rr * h - gy, gy - (rr + 1) * h), 0.0)
         return np.hypot(ex, ey)
@@ -109,10 +109,10 @@ class RowField:
         gx = self._c * dx + self._s * dy
         gy = -self._s * dx + self._c * dy
         h = self.res_m
-        rows, cols = self._idx.shape[1:]
+        rows, cols = self._shape
         r = min(max(int(math.floor(gy / h)), 0), rows - 1)
         c = min(max(int(math.floor(gx / h)), 0), cols - 1)
-        rr, cc = int(self._idx[0, r, c]), int(self._idx[1, r, c])
+        rr, cc = self._near.at(r, c)
         ex = max(cc * h - gx, gx - (cc + 1) * h, 0.0)
         ey = max(rr * h - gy, gy - (rr + 1) * h, 0.0)
         d = math.hypot(ex, ey)

@@ -262,11 +262,20 @@ def _lookup(lut: np.ndarray, key: np.ndarray) -> np.ndarray:
         # a bool table True on one run of keys a..b (what thresholds give): two
         # comparisons per cell, the same values as the lookup, about twice as fast
         a, b = (np.asarray(x, dtype=key.dtype) for x in (true[0], true[-1]))
+        # keys index ``lut`` (0 <= key < len(lut), as the fancy index needs): a run from
+        # the first key or to the last one is a single comparison (the dark or bright shades)
+        lo, hi = bool(true[0] > 0), bool(true[-1] < len(lut) - 1)
         for r0 in range(0, key.shape[0], step):
             k = key[r0:r0 + step]
             o = out[r0:r0 + step]
-            np.greater_equal(k, a, out=o)
-            o &= k <= b
+            if lo:
+                np.greater_equal(k, a, out=o)
+                if hi:
+                    o &= k <= b
+            elif hi:
+                np.less_equal(k, b, out=o)
+            else:
+                o[...] = True
         return out
     for r0 in range(0, key.shape[0], step):
         np.take(lut, key[r0:r0 + step], out=out[r0:r0 + step])

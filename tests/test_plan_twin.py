@@ -1,0 +1,166 @@
+"""plan.json's binary twin (companion.plan_twin, format 2.1; issue 18, loading a plan in <= 0.5 s):
+read only when it is the twin of the plan.json beside it, and then giving the same plan
+as the JSON, array for array and bit for bit.
+
+The twin's threshold is lowered so that the small bundled flat-rectangle plan gets one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import companion.plan_twin as plan_twin
+from mavcore.errors import PlanError
+from mavcore.mission import load_mission
+from companion.plan_io import load_plan, plan_json_text, plan_to_json_dict
+from companion.planner import plan_mission
+
+ROOT = Path(__file__).resolve().parents[1]
+MISSION = ROOT / "missions" / "flat-rectangle" / "mission.yaml"
+TOL_M = 1e-9
+
+
+@pytest.fixture(scope="module")
+def planned():
+    mission = load_mission(MISSION)
+    return mission, plan_mission(mission)
+
+
+def _write(planned, path: Path, twin: bool = True) -> Path:
+    """plan.json and, with ``twin``, its twin (as ``companion plan`` writes them)."""
+    mission, plan = planned
+    doc = plan_to_json_dict(plan, mission)
+    data = plan_json_text(doc).encode("utf-8")
+    path.write_bytes(data)
+    if twin:
+        old = plan_twin.TWIN_MIN_BYTES
+        plan_twin.TWIN_MIN_BYTES = 0
+        try:
+            Path(plan_twin.twin_path(path)).write_bytes(plan_twin.twin_bytes(doc, data))
+        finally:
+            plan_twin.TWIN_MIN_BYTES = old
+    return path
+
+
+def _assert_same_plan(a, b) -> None:
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and np.array_equal(x, y), f.name
+    assert len(a.sorties) == len(b.sorties) > 0
+    for sa, sb in zip(a.sorties, b.sorties):
+        assert sa.keys() == sb.keys() and all(np.array_equal(sa[k], sb[k]) for k in sa)
+    ta, tb = a.trajectory, b.trajectory
+    for k in ("knot_times_s", "knot_states", "waypoint_knots", "waypoint_targets", "coefficients", "target_enu_m"):
+        assert np.array_equal(getattr(ta, k), getattr(tb, k)), k
+    assert ta.config == tb.config
+    assert (a.origin, a.stats, a.timings_s, a.format_major) == (b.origin, b.stats, b.timings_s, b.format_major)
+
+
+def test_the_twin_gives_the_json_plan_bit_for_bit(planned, tmp_path, monkeypatch):
+    with_twin = load_plan(_write(planned, tmp_path / "a.json"))
+    without = load_plan(_write(planned, tmp_path / "b.json", twin=False))
+    assert "waypoints" not in with_twin.data and "waypoints" in without.data   # the twin was read
+    _assert_same_plan(with_twin, without)
+    # the round trip plan.json (twin) -> trajectory stays within 1e-9 m of the in-memory one
+    _, plan = planned
+    t = np.linspace(plan.trajectory.t0, plan.trajectory.tf, 20001)
+    assert np.abs(with_twin.trajectory.sample(t).p - plan.trajectory.sample(t).p).max() <= TOL_M
+
+
+def test_a_twin_of_other_bytes_is_ignored(planned, tmp_path):
+    path = _write(planned, tmp_path / "plan.json")
+    text = path.read_text()
+    path.write_text(text.replace('"name":"', '"name":"edited ', 1))    # plan.json edited after planning
+    pf = load_plan(path)
+    assert "waypoints" in pf.data and pf.data["name"].startswith("edited ")
+
+
+def test_small_plans_and_plans_with_samples_get_none(planned):
+    mission, plan = planned
+    doc = plan_to_json_dict(plan, mission)
+    data = plan_json_text(doc).encode("utf-8")
+    assert len(data) < plan_twin.TWIN_MIN_BYTES and plan_twin.twin_bytes(doc, data) is None
+    sampled = plan_to_json_dict(plan, mission, 2.0)
+    assert plan_twin.twin_bytes(sampled, b"x" * plan_twin.TWIN_MIN_BYTES) is None
+    assert plan_twin.twin_path("out/plan.json") == "out/plan.json.npz"
+
+
+def _rewrite_twin(path: Path, **changes) -> None:
+    tp = plan_twin.twin_path(path)
+    with np.load(tp) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays.update(changes)
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    Path(tp).write_bytes(buf.getvalue())
+
+
+@pytest.mark.parametrize("how,key", [
+    ("nan", "waypoints[].p"), ("times", "sorties[0].waypoints[].t"), ("counts", "sorties"),
+    ("values", "trajectory.values"), ("corner", "waypoints[].corner"), ("short", "waypoints[].v"),
+])
+def test_a_bad_twin_is_one_line_naming_the_key(planned, tmp_path, how, key):
+    path = _write(planned, tmp_path / "plan.json")
+    with np.load(plan_twin.twin_path(path)) as z:
+        a = {k: z[k] for k in z.files}
+    if how == "nan":
+        p = a["wp_p"].copy()
+        p[3, 1] = np.nan
+        _rewrite_twin(path, wp_p=p)
+    elif how == "times":
+        t = a["so_t"].copy()
+        t[1] = t[0]
+        _rewrite_twin(path, so_t=t)
+    elif how == "counts":
+        _rewrite_twin(path, so_count=a["so_count"] + 1)
+    elif how == "values":
+        _rewrite_twin(path, traj_values=a["traj_values"][:-1])
+    elif how == "corner":
+        _rewrite_twin(path, wp_corner=a["wp_corner"].astype(np.int8))
+    else:
+        _rewrite_twin(path, wp_v=a["wp_v"][:-1])
+    with pytest.raises(PlanError) as exc:
+        load_plan(path)
+    assert f"key '{key}'" in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_a_twin_that_is_not_an_npz_is_refused(planned, tmp_path):
+    path = _write(planned, tmp_path / "plan.json")
+    Path(plan_twin.twin_path(path)).write_bytes(b"PK\x03\x04 not a zip")
+    with pytest.raises(PlanError, match="not a plan twin"):
+        load_plan(path)
+
+
+def test_a_compressed_twin_is_refused(planned, tmp_path):
+    """np.savez stores its entries; a deflated entry could expand without bound."""
+    path = _write(planned, tmp_path / "plan.json")
+    with np.load(plan_twin.twin_path(path)) as z:
+        arrays = {k: z[k] for k in z.files}
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    Path(plan_twin.twin_path(path)).write_bytes(buf.getvalue())
+    with pytest.raises(PlanError, match="compressed"):
+        load_plan(path)
+
+
+def test_companion_plan_writes_the_twin_of_a_large_plan(tmp_path):
+    """The CLI: a twin next to plan.json when the text reaches the threshold (lowered to 0
+    here through a sitecustomize-free wrapper), whose digest is plan.json's."""
+    out = tmp_path / "plan.json"
+    code = ("import sys, companion.plan_twin as t; t.TWIN_MIN_BYTES = 0; from companion.cli import main; "
+            "sys.exit(main(['plan', sys.argv[1], '-o', sys.argv[2]]))")
+    subprocess.run([sys.executable, "-c", code, str(MISSION), str(out)], check=True, cwd=ROOT,
+                   capture_output=True)
+    twin = Path(plan_twin.twin_path(out))
+    assert twin.exists()
+    with np.load(twin) as z:
+        assert np.array_equal(z["json_sha256"], plan_twin.digest(out.read_bytes()))
+    assert "waypoints" not in load_plan(out).data
