@@ -44,3 +44,13 @@ def test_long_functions_counts_methods_and_nested_functions():
 @pytest.mark.parametrize("path", CHECKED)
 def test_no_function_over_the_limit(path):
     assert long_functions((ROOT / path).read_text(encoding="utf-8")) == []
+
+
+def test_every_package_directory_has_an_init():
+    """setuptools' ``packages.find`` (pyproject) ships regular packages only: a directory of
+    modules without ``__init__.py`` works in an editable install and is missing from a wheel
+    (companion/flight was such a directory)."""
+    missing = [str(d.relative_to(ROOT)) for top in ("companion", "sitl", "mavcore")
+               for d in [ROOT / top, *(ROOT / top).rglob("*")]
+               if d.is_dir() and d.name != "__pycache__" and any(d.glob("*.py")) and not (d / "__init__.py").exists()]
+    assert missing == []
