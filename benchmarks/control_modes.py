@@ -17,7 +17,7 @@ same flight packet for packet as UDP (``tests/test_transport_e2e.py``).
 The rows are run interleaved: for each (mission, control, seed) every
 checkout in turn, so a change of machine load falls on all of them alike.
 
-Figures from report.json: completed, max and RMS position error after 5 s
+Figures from report.json: completed, the replanner's events, max and RMS position error after 5 s
 of settling (mm); and the process's CPU time (user + sys, ``os.wait4``) and
 peak RSS, which depend on the machine's load and are only indicative.
 Prints a markdown table of every row, then per (mission, control,
@@ -76,10 +76,11 @@ def fly(checkout: Path, mission_path: Path, control: str, seed: int | None, cut_
     row = {"rc": os.waitstatus_to_exitcode(status), "cpu_s": ru.ru_utime + ru.ru_stime, "rss_mb": ru.ru_maxrss / 1024}
     rep_path = out / "report.json"
     if not rep_path.exists():
-        return dict(row, completed=False, max_mm=float("nan"), rms_mm=float("nan"))
+        return dict(row, completed=False, max_mm=float("nan"), rms_mm=float("nan"), replans=-1, error="no report")
     rep = json.loads(rep_path.read_text())
     tr = rep["tracking"]
-    return dict(row, completed=bool(rep["completed"]), max_mm=1e3 * tr["max_error_m"], rms_mm=1e3 * tr["rms_error_m"])
+    return dict(row, completed=bool(rep["completed"]), max_mm=1e3 * tr["max_error_m"], rms_mm=1e3 * tr["rms_error_m"],
+                replans=int(rep["replanning"]["events"]), error=rep.get("error"))
 
 
 def main(argv=None) -> int:
@@ -119,11 +120,11 @@ def main(argv=None) -> int:
 
         with ThreadPoolExecutor(max_workers=args.jobs) as pool:
             rows = list(pool.map(run, jobs))
-    print("| checkout | terrain | `--control` | seed | completed | max (mm) | RMS (mm) | CPU (s) | peak RSS (MB) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| checkout | terrain | `--control` | seed | completed | replanning events | max (mm) | RMS (mm) | CPU (s) | peak RSS (MB) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['label']} | {r['mission']} | {r['control']} | {r['seed']} | {'yes' if r['completed'] else 'NO'} | "
-              f"{r['max_mm']:.2f} | {r['rms_mm']:.2f} | {r['cpu_s']:.1f} | {r['rss_mb']:.0f} |")
+              f"{r['replans']} | {r['max_mm']:.2f} | {r['rms_mm']:.2f} | {r['cpu_s']:.1f} | {r['rss_mb']:.0f} |")
     print("\n| terrain | `--control` | checkout | seeds | max, median (mm) | RMS, median (mm) |")
     print("|---|---|---|---|---|---|")
     for m, c in itertools.product(args.missions, args.controls):
