@@ -43,23 +43,12 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT / "benchmarks") not in sys.path:
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from control_modes import mission_copy  # noqa: E402
+
 MISSIONS = ("flat-rectangle", "tilted-hexagon")
-
-
-def _mission_copy(mission: str, out_dir: Path, profile: str | None) -> Path:
-    """The bundled mission with absolute map paths and, with ``profile``, ``sim.sensor_profile``."""
-    import yaml
-
-    src = ROOT / "missions" / mission / "mission.yaml"
-    data = yaml.safe_load(src.read_text())
-    for key in ("map", "dem"):
-        data[key] = str((src.parent / data[key]).resolve())
-    if profile is not None:
-        data["sim"] = dict(data.get("sim") or {}, sensor_profile=profile)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / "mission.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
 
 
 def fly(mission: str, control: str, cut_s: float | None, profile: str | None, tmp: Path) -> dict:
@@ -84,7 +73,7 @@ def fly(mission: str, control: str, cut_s: float | None, profile: str | None, tm
         return cmd
 
     out = Path(tempfile.mkdtemp(prefix=f"{mission}-{control}-", dir=tmp))
-    path = _mission_copy(mission, out / "mission", profile)
+    path = mission_copy(mission, out / "mission", profile)
     argv = ["demo", "--mission", str(path), "--control", control, "--transport", "inproc", "--out", str(out),
             "--no-plots", "--quiet"]
     if cut_s is not None:
