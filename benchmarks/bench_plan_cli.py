@@ -38,10 +38,12 @@ PREPARE = ("import sys; from mavcore.mission import load_mission; from companion
            "TrajectoryCursor(fp.trajectory).sample(fp.trajectory.t0)")
 
 
-def run(argv: list[str]) -> tuple[float, float, float]:
-    """(wall s, user + sys s, peak RSS MB) of one child process."""
+def run(argv: list[str], env: dict | None = None, cwd=None) -> tuple[float, float, float]:
+    """(wall s, user + sys s, peak RSS MB) of one child process (``env``, ``cwd``: default
+    ``ENV`` and the repository)."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(argv, env=ENV, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(argv, env=ENV if env is None else env, cwd=ROOT if cwd is None else cwd,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     err = proc.stderr.read().decode(errors="replace")

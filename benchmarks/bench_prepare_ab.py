@@ -19,13 +19,11 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_plan_cli import PREPARE  # noqa: E402
+from bench_plan_cli import PREPARE, run  # noqa: E402
 
 
 def _env(tree: str, cache_dir: str | None) -> dict:
@@ -37,19 +35,6 @@ def _env(tree: str, cache_dir: str | None) -> dict:
         env["PYTHONDONTWRITEBYTECODE"] = "1"
         env.pop("PYTHONPYCACHEPREFIX", None)
     return env
-
-
-def _run(argv: list[str], env: dict, cwd: str) -> tuple[float, float, float]:
-    """(CPU s, peak MB, wall s) of one child."""
-    t0 = time.perf_counter()
-    p = subprocess.Popen(argv, env=env, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(p.pid, 0)
-    wall = time.perf_counter() - t0
-    err = p.stderr.read().decode(errors="replace")
-    p.stderr.close()
-    if os.waitstatus_to_exitcode(status):
-        raise SystemExit(f"{' '.join(argv)}: {err}")
-    return usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024, wall
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -70,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         for name, tree in trees:
             plan = out / f"{name}-{field}.json"
             if not plan.exists():
-                _run([py, "-m", "companion", "plan", m, "-o", str(plan)], _env(tree, None), tree)
+                run([py, "-m", "companion", "plan", m, "-o", str(plan)], _env(tree, None), tree)
             twin = Path(str(plan) + ".npz")
             print(f"{name} {field}: plan.json {plan.stat().st_size / 1e6:.2f} MB"
                   + (f", twin {twin.stat().st_size / 1e6:.2f} MB" if twin.exists() else ", no twin"))
@@ -79,20 +64,20 @@ def main(argv: list[str] | None = None) -> int:
         caches = {name: (str(out / f"pyc-{name}") if warm else None) for name, _ in trees}
         if warm:
             for name, tree in trees:
-                _run([py, "-c", PREPARE, missions[0], plans[(name, missions[0])]], _env(tree, caches[name]), tree)
+                run([py, "-c", PREPARE, missions[0], plans[(name, missions[0])]], _env(tree, caches[name]), tree)
         res: dict = {}
         for _ in range(args.runs):
             for m in missions:
                 for name, tree in trees:
                     res.setdefault((m, name), []).append(
-                        _run([py, "-c", PREPARE, m, plans[(name, m)]], _env(tree, caches[name]), tree))
+                        run([py, "-c", PREPARE, m, plans[(name, m)]], _env(tree, caches[name]), tree))
         label = "warm bytecode cache" if warm else "no bytecode cache"
         for m in missions:
             for name, _ in trees:
                 rows = res[(m, name)]
-                print(f"{label}, {Path(m).parent.name}, {name}: CPU median {statistics.median(r[0] for r in rows):.3f} s "
-                      f"({', '.join(f'{r[0]:.2f}' for r in rows)}), wall median "
-                      f"{statistics.median(r[2] for r in rows):.2f} s, peak {statistics.median(r[1] for r in rows):.0f} MB",
+                print(f"{label}, {Path(m).parent.name}, {name}: CPU median {statistics.median(r[1] for r in rows):.3f} s "
+                      f"({', '.join(f'{r[1]:.2f}' for r in rows)}), wall median "
+                      f"{statistics.median(r[0] for r in rows):.2f} s, peak {statistics.median(r[2] for r in rows):.0f} MB",
                       flush=True)
     return 0
 

@@ -5,7 +5,6 @@ to a point, land. Real time (speed 1); about 20 s."""
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import pytest
@@ -20,6 +19,7 @@ from mavsdk.plugins.offboard import Offboard, PositionNedYaw   # noqa: E402
 from mavsdk.plugins.telemetry import FlightMode, LandedState, Telemetry   # noqa: E402
 
 from mavcore import frames   # noqa: E402
+from mission_flight import wait_until   # noqa: E402
 from sitl.api import SitlThread   # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,15 +27,6 @@ MISSION = ROOT / "missions" / "flat-rectangle" / "mission.yaml"
 HOME = (44.8, -0.6, 30.0)       # the mission's home: geodetic pose of the map origin
 
 pytestmark = pytest.mark.slow
-
-
-def wait_until(pred, timeout_s: float, period_s: float = 0.05) -> bool:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(period_s)
-    return pred()
 
 
 @pytest.fixture()
