@@ -55,35 +55,36 @@ def keep_completed(h: str, fraction: float) -> bool:
     return int(h[:8], 16) < fraction * 2**32
 
 
-def _position_at(tlog: Path, t_s: float | None) -> tuple[float, float] | None:
-    """ENU (x, y) of the vehicle's ground truth (the SITL's ODOMETRY) at ``t_s`` (None: the last one)."""
-    from ..link.tlog import read_tlog
+def _position_at(track, t_s: float | None) -> tuple[float, float] | None:
+    """ENU (x, y) of the vehicle's ground truth at ``t_s`` (None: the last one): the last
+    sample of ``track`` (``sight.track_of``) at or before it; None without one."""
+    import numpy as np
 
-    last = None
-    try:
-        for r in read_tlog(tlog):
-            m = r.msg
-            if m.get_type() == "ODOMETRY" and m.get_srcSystem() == 1 and m.get_srcComponent() == 1:
-                if t_s is not None and m.time_usec * 1e-6 > t_s:
-                    break
-                last = (float(m.y), float(m.x))   # NED -> ENU
-    except (OSError, ValueError):
-        return None
-    return last
+    t, p = track
+    k = len(t) - 1 if t_s is None else int(np.searchsorted(t, t_s, side="right")) - 1
+    return None if k < 0 else (float(p[k, 0]), float(p[k, 1]))
 
 
-def _sight(mission_file: Path, tlog: Path) -> dict | None:
-    """The line-of-sight columns of a flight with movers (``sight.flight_sight``); None
-    without movers, or when the flight left no track or mission to measure them on."""
-    if not (mission_file.exists() and tlog.exists()):
-        return None
+def _track_and_mission(mission_file: Path, tlog: Path, outcome: str):
+    """(track or None, mission or None) of a flight: the tlog's true track is read once, and
+    only when a column needs it (where a flight that did not complete went wrong; the
+    line-of-sight columns of a flight with movers)."""
     from mavcore.mission import load_mission
-    from .sight import flight_sight
+    from .sight import track_of
 
+    mission = None
     try:
-        return flight_sight(load_mission(str(mission_file)), tlog)
+        if mission_file.exists():
+            mission = load_mission(str(mission_file))
+    except ValueError:
+        mission = None
+    movers = mission is not None and mission.sim is not None and bool(mission.sim.movers)
+    if not tlog.exists() or (outcome == "completed" and not movers):
+        return None, mission
+    try:
+        return track_of(tlog), mission
     except (OSError, ValueError):
-        return None
+        return None, mission
 
 
 def fly_scenario(scenario: dict, out_dir: str, keep_if_completed: bool = False,
@@ -125,11 +126,18 @@ def fly_scenario(scenario: dict, out_dir: str, keep_if_completed: bool = False,
         from .results import classify
 
         outcome, _ = classify(report, error)
-        tlog = work / "out" / "flight.tlog"
-        where = None
-        if outcome != "completed" and tlog.exists():
-            where = _position_at(tlog, ((report or {}).get("crash") or {}).get("t_s"))
-        sight = _sight(work / "out" / "mission.yaml", tlog)
+        track, mission = _track_and_mission(work / "out" / "mission.yaml", work / "out" / "flight.tlog", outcome)
+        where = sight = None
+        if track is not None:
+            from .sight import flight_sight
+
+            if outcome != "completed":
+                where = _position_at(track, ((report or {}).get("crash") or {}).get("t_s"))
+            if mission is not None:
+                try:
+                    sight = flight_sight(mission, track)
+                except (OSError, ValueError):
+                    sight = None
         kept = None
         if outcome != "completed" or keep_if_completed:
             dest = Path(out_dir) / "flights" / f"{scenario['scenario']:04d}-{h}"

@@ -146,9 +146,10 @@ def track_of(tlog_path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(t, dtype=float), np.asarray(p, dtype=float).reshape(-1, 3)
 
 
-def flight_sight(mission, tlog_path) -> dict | None:
+def flight_sight(mission, track) -> dict | None:
     """The campaign's columns for a flight with movers: the figures of the mover that came
-    closest (``mover_in_sight_s``, ``mover_sighted_m``); None without movers or track."""
+    closest (``mover_in_sight_s``, ``mover_sighted_m``); None without movers or track.
+    ``track``: the flight's true track (``track_of``)."""
     sim = mission.sim
     if sim is None or not sim.movers:
         return None
@@ -157,7 +158,7 @@ def flight_sight(mission, tlog_path) -> dict | None:
     from mavcore.maps.heightfield import HeightField
     from mavcore.mission.sim import default_rangefinders, vehicle_radius_m
 
-    t, p = track_of(tlog_path)
+    t, p = track
     if not len(t):
         return None
     grid, dem = load_mission_maps(mission)
