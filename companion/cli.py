@@ -43,8 +43,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command line ``argv``; None: the process's own (``sys.argv``: the
+    ``companion`` script, ``python -m companion``), after which the process exits, so
+    a command may keep its imports out of the garbage collector (``args.process_exits``,
+    :mod:`companion.long_lived`). Returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.process_exits = argv is None
     configure(args.verbose, args.quiet)
     try:
         return int(args._run(args) or 0)

@@ -100,10 +100,13 @@ def run(args) -> int:
             # Checked up front: the final renames cannot be undone one by one.
             raise InputError(p, "cannot write: is a directory")
 
-    from mavcore.mission import load_mission
-    from ..plan_io import (field_fence, flight_items, plan_json_text, plan_to_json_dict, qgc_plan_text,
-                           qgc_wpl_text, sortie_file)
-    from ..planner import plan_mission
+    from ..long_lived import imports_kept
+
+    with imports_kept(args.process_exits):
+        from mavcore.mission import load_mission
+        from ..plan_io import (field_fence, flight_items, plan_json_text, plan_to_json_dict, qgc_plan_text,
+                               qgc_wpl_text, sortie_file)
+        from ..planner import plan_mission
 
     mission = load_mission(args.mission)
     plan = plan_mission(mission)
