@@ -4,12 +4,14 @@ A ``companion plan`` process imports numpy, scipy, pyproj and the project
 (~44 000 objects tracked by CPython's cyclic garbage collector) and keeps
 them until it exits. Collecting them is wasted work, and it is not small:
 
-* during the imports the collector runs ~100 young and ~9 middle passes
-  (~0.02-0.04 s of CPU), finding next to no garbage;
+* during the imports the collector runs ~100 young and ~9 middle passes,
+  finding next to no garbage;
 * every full pass during the planning traverses them all (the corpus
-  10 ha field triggers two, ~0.1 s; the 1 ha parcel one, ~0.04 s);
-* the interpreter's finalisation at exit runs full passes over them again
-  (~0.1 s of CPU; ``tests/test_long_lived.py`` measures it).
+  10 ha field triggers two, the 1 ha parcel one);
+* the interpreter's finalisation at exit runs full passes over them again.
+
+Together ~0.15 s of CPU on the 1 ha parcel and ~0.3 s on the 10 ha corpus
+field (``benchmarks/bench_plan_gc.py``, BENCHMARKS.md "h18-wall").
 
 :func:`imports_kept` pauses the collector while the command imports its
 libraries and then moves every object alive to the permanent generation
