@@ -118,10 +118,12 @@ from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, I
 from .battery import Battery
 from .collision_prevention import CollisionPrevention, CollisionPreventionConfig
 from . import mission_exec, mission_store
+from mavcore.services.command import CommandServer, ack_message
+from mavcore.services.mission import MissionServer, encode_reply
+from mavcore.services.params import Parameters, ParamServer
+
 from .flightstack import (
-    IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
-    Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
-    SEVERITY_INFO, SEVERITY_WARNING,
+    IDLE_MOTOR_CMD, FlightMode, FlightStack, NavState, StatusEvent, SEVERITY_INFO, SEVERITY_WARNING,
 )
 from .rate_control import hover_thrust
 from .sim import Simulation
@@ -539,6 +541,7 @@ class SitlServer:
             "SIM_LOCKSTEP": int(bool(config.lockstep)),
             "MPC_THR_HOVER": hover_thrust(mission.vehicle),
             **self._controller_param_defaults()})
+        self.param_server = ParamServer(self.params, self.autopilot.param_bytewise)
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
         self.stack = FlightStack(self.params, self.home_enu_m, self.autopilot)
@@ -608,9 +611,6 @@ class SitlServer:
             key_locked=config.signing_key is not None)
         self._intake = IntakeBudget()
 
-    #: COMMAND_INT frame of the command being handled (None: COMMAND_LONG).
-    _command_frame: int | None = None
-
 
     def _init_dispatch(self) -> None:
         """The receive tables: message type -> handler, MAV_CMD -> command handler."""
@@ -637,7 +637,7 @@ class SitlServer:
             "TIMESYNC": self._on_timesync,
             "PING": self._on_ping,
         }
-        self._commands = {
+        self.commands = CommandServer({
             mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm,
             mavlink.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
             mavlink.MAV_CMD_NAV_LAND: self._cmd_land,
@@ -650,12 +650,12 @@ class SitlServer:
             mavlink.MAV_CMD_GET_HOME_POSITION: self._cmd_home,
             mavlink.MAV_CMD_MISSION_START: self._cmd_mission_start,
             mavlink.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
-        }
+        })
 
     def _init_mission_store(self, max_items: int) -> None:
-        """The mission, fence and rally storage (``MissionProtocol``) and what
-        the transport keeps about it."""
-        self.missions = MissionProtocol(max_items, validate=mission_store.validator(self.origin, self.home_enu_m))
+        """The mission, fence and rally storage (``mavcore.services.mission.MissionServer``)
+        and what the transport keeps about it."""
+        self.missions = MissionServer(max_items, validate=mission_store.validator(self.origin, self.home_enu_m))
         self._store_version = self.missions.version
         self._flown_items = self.missions.items       # the mission list the flight stack has
         self._mission_current_due_us = 0
@@ -1375,32 +1375,18 @@ class SitlServer:
         self._command(link, msg, int(msg.command), params, int(msg.frame))
 
     def _command(self, link, msg, command: int, params, int_frame: int | None = None) -> None:
-        handler = self._commands.get(command)
-        result, after = mavlink.MAV_RESULT_UNSUPPORTED, None
-        why = None
-        if handler is not None:
-            landed = not self.stack.armed or self._state().landed
-            why = rules.command_problem(command, params, int_frame=int_frame, landed=landed)
-        if handler is None:
+        """One command through ``mavcore.services.command.CommandServer``: its ACK, then what follows it."""
+        landed = command in self.commands.handlers and (not self.stack.armed or self._state().landed)
+        reply = self.commands.handle(command, params, int_frame, landed)
+        if reply.unsupported:
             self.stats["unsupported"][command] += 1
-        elif why is not None:      # even from an allowed controller
-            result = mavlink.MAV_RESULT_DENIED
-            self._refuse(rules.command_name(command), why)
-        else:
-            self._command_frame = int_frame
-            try:
-                result, after = handler(params)
-            except (ValueError, OverflowError, TypeError):   # unusable parameters
-                result, after = mavlink.MAV_RESULT_DENIED, None
-            except Exception:   # a fault of ours: still exactly one ACK (command protocol)
-                result, after = mavlink.MAV_RESULT_FAILED, None
-        self._reply(link, link.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(),
-                                                      msg.get_srcComponent()))
-        if after is not None:
-            for m in after:
-                self._reply(link, m)
+        elif reply.refused is not None:
+            self._refuse(rules.command_name(command), reply.refused)
+        self._reply(link, ack_message(link.mav, command, reply, msg.get_srcSystem(), msg.get_srcComponent()))
+        for m in reply.after:
+            self._reply(link, m)
 
-    def _cmd_arm(self, p):
+    def _cmd_arm(self, p, int_frame=None):
         now, st = self.sim.time_us, self._state()
         force = p[1] == codec.ARM_FORCE_MAGIC
         if p[0] == 1.0:
@@ -1411,20 +1397,20 @@ class SitlServer:
             return mavlink.MAV_RESULT_DENIED, None
         return r.result, None
 
-    def _cmd_takeoff(self, p):
+    def _cmd_takeoff(self, p, int_frame=None):
         if self.autopilot.takeoff_alt_relative:     # ArduCopter: metres above home
             z = float(self.home_enu_m[2]) + float(p[6]) if math.isfinite(p[6]) else None
         else:
             z = codec.decode_takeoff_altitude(p[6], self.origin.alt_m)
         return self.stack.takeoff(self.sim.time_us, self._state(), z).result, None
 
-    def _cmd_land(self, p):
+    def _cmd_land(self, p, int_frame=None):
         return self.stack.land(self.sim.time_us, self._state()).result, None
 
-    def _cmd_rtl(self, p):
+    def _cmd_rtl(self, p, int_frame=None):
         return self.stack.return_to_launch(self.sim.time_us, self._state()).result, None
 
-    def _cmd_set_mode(self, p):
+    def _cmd_set_mode(self, p, int_frame=None):
         if not all(math.isfinite(x) for x in p[:3]):
             return mavlink.MAV_RESULT_DENIED, None
         if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
@@ -1437,7 +1423,7 @@ class SitlServer:
             return True
         return False
 
-    def _cmd_set_interval(self, p):
+    def _cmd_set_interval(self, p, int_frame=None):
         mid, iv = int(p[0]), p[1]
         if not math.isfinite(iv):
             return mavlink.MAV_RESULT_DENIED, None
@@ -1464,7 +1450,7 @@ class SitlServer:
         self._reschedule()
         return mavlink.MAV_RESULT_ACCEPTED, None
 
-    def _cmd_get_interval(self, p):
+    def _cmd_get_interval(self, p, int_frame=None):
         mid = int(p[0])
         if mid == self._frame_imu_id:
             iv = self._period_us
@@ -1474,7 +1460,7 @@ class SitlServer:
             return mavlink.MAV_RESULT_UNSUPPORTED, None
         return mavlink.MAV_RESULT_ACCEPTED, [self._mav().message_interval_encode(mid, iv)]
 
-    def _cmd_request_message(self, p):
+    def _cmd_request_message(self, p, int_frame=None):
         if not math.isfinite(p[0]):
             return mavlink.MAV_RESULT_DENIED, None
         mid = int(p[0])
@@ -1492,20 +1478,20 @@ class SitlServer:
             return mavlink.MAV_RESULT_FAILED, None
         return mavlink.MAV_RESULT_ACCEPTED, [m]
 
-    def _cmd_capabilities(self, p):
+    def _cmd_capabilities(self, p, int_frame=None):
         return mavlink.MAV_RESULT_ACCEPTED, [self._enc_version()]
 
-    def _cmd_home(self, p):
+    def _cmd_home(self, p, int_frame=None):
         return mavlink.MAV_RESULT_ACCEPTED, [self._enc_home()]
 
-    def _cmd_mission_start(self, p):
+    def _cmd_mission_start(self, p, int_frame=None):
         return self.stack.mission_start_command(self.sim.time_us, self._state(), p[0], p[1]).result, None
 
-    def _cmd_reposition(self, p):
+    def _cmd_reposition(self, p, int_frame=None):
         """DO_REPOSITION (MAVSDK ``goto_location``): ``mission_store.reposition_target``."""
         nav = self._state()
         target, speed, yaw = mission_store.reposition_target(self.origin, self.home_enu_m, nav.pos_enu_m, p,
-                                                             self._command_frame)
+                                                             int_frame)
         return self.stack.reposition(self.sim.time_us, nav, target, speed, yaw).result, None
 
     def _on_set_mode(self, link, msg) -> None:
@@ -1566,73 +1552,37 @@ class SitlServer:
             self._released = True
 
     # ------------------------------------------------------------------ params
-    def _param_msg(self, mav, i: int):
-        spec, value = self.params.by_index(i)
-        wire = codec.param_to_wire(value, spec.param_type) if self.autopilot.param_bytewise else float(value)
-        return mav.param_value_encode(spec.name.encode("ascii"), wire, spec.param_type, len(self.params), i)
-
     def _on_param_list(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
-        for i in range(len(self.params)):
-            link.reply(self._param_msg(link.mav, i))
+        for i in self.param_server.request_list():
+            link.reply(self.param_server.value_message(link.mav, i))
 
     def _on_param_read(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
-        idx = int(msg.param_index)
-        if idx < 0:
-            name = msg.param_id
-            if name not in self.params:
-                return   # unknown: no reply, as PX4
-            idx = self.params.index(name)
-        elif idx >= len(self.params):
-            return
-        link.reply(self._param_msg(link.mav, idx))
+        r = self.param_server.request_read(msg.param_id, msg.param_index)
+        if r.index is not None:
+            link.reply(self.param_server.value_message(link.mav, r.index))
 
     def _on_param_set(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
-        name = msg.param_id
-        if name not in self.params:
-            self._say(SEVERITY_WARNING, f"Unknown parameter {name[:30]}")
-            return
-        if name in READ_ONLY_PARAMS:
-            self._say(SEVERITY_WARNING, f"Param rejected: {name} is read-only")
-            i = self.params.index(name)
-            link.send(self._param_msg(link.mav, i))
-            return
-        spec = self.params.spec(name)
-        if (spec.param_type == PARAM_TYPE_INT32 and int(msg.param_type) == PARAM_TYPE_INT32
-                and self.autopilot.param_bytewise):
-            value = codec.param_from_wire(msg.param_value, PARAM_TYPE_INT32)
-        else:
-            value = float(msg.param_value)
-        r = self.params.set(name, value)
-        if r.ok:
+        r = self.param_server.set(msg.param_id, msg.param_value, msg.param_type)
+        if r.warning is not None:
+            self._say(SEVERITY_WARNING, r.warning)
+        if r.applied:
             self._apply_params()
-        else:
-            self._say(SEVERITY_WARNING, f"Param rejected: {r.reason}")
-        i = self.params.index(name)
-        for l in self.links:
+        if r.index is None:
+            return
+        for l in (self.links if r.to_all else (link,)):
             if l.has_peer:
-                l.send(self._param_msg(l.mav, i))
+                l.send(self.param_server.value_message(l.mav, r.index))
 
     # ------------------------------------------------------------------ missions
     def _send_mission_replies(self, link, peer, replies, addr=None) -> None:
-        ts, tc = peer
         for r in replies:
-            if isinstance(r, SendRequest):
-                m = link.mav.mission_request_int_encode(ts, tc, r.seq, r.mission_type)
-            elif isinstance(r, SendCount):
-                m = link.mav.mission_count_encode(ts, tc, r.count, r.mission_type)
-            elif isinstance(r, SendItem):
-                m = codec.mission_item_int(link.mav, ts, tc, r.item)
-            elif isinstance(r, SendAck):
-                m = link.mav.mission_ack_encode(ts, tc, r.result, r.mission_type)
-            else:   # pragma: no cover
-                continue
-            link.reply(m, addr)
+            link.reply(encode_reply(link.mav, peer[0], peer[1], r), addr)
 
     def _peer(self, msg):
         return msg.get_srcSystem(), msg.get_srcComponent()
