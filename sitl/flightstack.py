@@ -71,9 +71,9 @@ from enum import Enum
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from mavcore.codec import MissionItem, RateSetpoint  # noqa: F401 (re-exported)
+from mavcore.codec import RateSetpoint
 from mavcore.autopilot import PX4_AUTOPILOT, READ_ONLY_PARAMS, Autopilot, ParamSpec  # noqa: F401 (re-exported)
-from mavcore.services.params import Parameters, ParamSetResult  # noqa: F401 (re-exported)
+from mavcore.services.params import Parameters  # noqa: F401 (re-exported)
 
 from .collision import CrashEvent, landing_intended
 from .fence import Fence

@@ -121,6 +121,7 @@ from . import mission_exec, mission_store
 from mavcore.services.command import CommandServer, ack_message
 from mavcore.services.mission import MissionServer, encode_reply
 from mavcore.services.params import Parameters, ParamServer
+from mavcore.services.telemetry import StreamSchedule
 
 from .flightstack import (
     IDLE_MOTOR_CMD, FlightMode, FlightStack, NavState, StatusEvent, SEVERITY_INFO, SEVERITY_WARNING,
@@ -562,14 +563,11 @@ class SitlServer:
         self._text_id = 0                 # STATUSTEXT id of the last text sent in chunks
         self._last_ranges: dict = {}
         period = self.sim.sensor_period_us
-        self._intervals = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
+        defaults = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
+        intervals = dict(defaults)
         # Ground truth for the companion's tracking statistics (ODOMETRY, float32
         # metres; SIM_STATE's 1e-7 degree lat/lon is ~1 cm): off unless requested.
-        self._intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
-        self._next_due = {mid: 0 for mid in self._intervals}
-        self._period_us = period
-        self._every_frame: tuple = ()     # streams due every frame (interval <= sensor period)
-        self._due_min = 0                 # earliest due time of the other enabled streams
+        intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
         self._encoders = {
             ID.MAVLINK_MSG_ID_HEARTBEAT: self._enc_heartbeat,
             ID.MAVLINK_MSG_ID_SYS_STATUS: self._enc_sys_status,
@@ -587,9 +585,9 @@ class SitlServer:
             ID.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._enc_version,
             ID.MAVLINK_MSG_ID_ODOMETRY: self._enc_truth,
         }
-        self._frame_imu_setup()
-        self._schedule = [mid for mid in self._intervals]
-        self._reschedule()
+        self._frame_imu_setup(intervals)
+        #: The telemetry streams (``mavcore.services.telemetry``); the frame marker's interval is fixed.
+        self.streams = StreamSchedule(intervals, period, defaults, fixed_us={self._frame_imu_id: period})
         self._fast = {
             ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: (codec.PACK_LOCAL_POSITION_NED, self._lpos_args),
             ID.MAVLINK_MSG_ID_ATTITUDE: (codec.PACK_ATTITUDE, self._attitude_args),
@@ -661,14 +659,14 @@ class SitlServer:
         self._mission_current_due_us = 0
         self._mission_peer = None
 
-    def _frame_imu_setup(self) -> None:
+    def _frame_imu_setup(self, intervals: dict) -> None:
         """The sensor-frame message (the lockstep frame marker) is the personality's:
         PX4 HIGHRES_IMU; ArduCopter RAW_IMU, with SCALED_IMU2 beside it."""
         if self.autopilot.imu_message == "RAW_IMU":
             self._frame_imu_id = ID.MAVLINK_MSG_ID_RAW_IMU
             self._frame_imu_pack, self._frame_imu_args = codec.PACK_RAW_IMU, self._raw_imu_args
             s2 = ID.MAVLINK_MSG_ID_SCALED_IMU2
-            self._intervals[s2], self._next_due[s2] = int(round(1e6 / SCALED_IMU2_HZ)), 0
+            intervals[s2] = int(round(1e6 / SCALED_IMU2_HZ))
             self._encoders[s2] = self._enc_scaled_imu2
             self._encoders[ID.MAVLINK_MSG_ID_RAW_IMU] = self._enc_raw_imu
         else:
@@ -887,8 +885,7 @@ class SitlServer:
         """Tell the flight stack (STATUSTEXT, EMERGENCY) and announce the new
         system status in this frame's HEARTBEAT."""
         self.stack.crash(self.sim.time_us, event)
-        self._next_due[_HEARTBEAT_ID] = self.sim.time_us
-        self._due_min = self.sim.time_us
+        self.streams.send_now(_HEARTBEAT_ID, self.sim.time_us)
 
     def _landing_intended(self) -> bool:
         p = self.sim.plant.p
@@ -915,15 +912,6 @@ class SitlServer:
         pl = self.sim.plant
         return pl.R, pl.w
 
-    def _reschedule(self) -> None:
-        """Split the enabled streams into those due every frame (interval at
-        most the sensor period: frame times are multiples of it) and the rest,
-        whose earliest due time ``_due_min`` lets a frame skip the scan."""
-        iv, due, period = self._intervals, self._next_due, self._period_us
-        self._every_frame = tuple(m for m in self._schedule if 0 <= iv[m] <= period)
-        slow = [due[m] for m in self._schedule if iv[m] > period]
-        self._due_min = min(slow) if slow else math.inf
-
     def _send_telemetry(self, frame) -> None:
         now = frame.time_us
         self._awaited_us = now
@@ -933,11 +921,12 @@ class SitlServer:
             return
         for l in links:
             l.begin_frame()
-        if now >= self._due_min:
+        streams = self.streams
+        if now >= streams.due_min:
             self._send_due(now, links)
         else:   # only the every-frame streams: same messages, same order as the scan
             fast = self._fast
-            for mid in self._every_frame:
+            for mid in streams.every_frame:
                 f = fast.get(mid)
                 if f is not None:
                     args = f[1]()
@@ -958,29 +947,16 @@ class SitlServer:
             l.end_frame()
 
     def _send_due(self, now: int, links) -> None:
-        """Send every stream due at ``now`` in schedule order; advance its due time."""
-        due = self._next_due
-        iv = self._intervals
+        """Send every stream due at ``now`` in schedule order (``StreamSchedule.due``)."""
         fast = self._fast
-        due_min = math.inf
-        period = self._period_us
-        for mid in self._schedule:
-            interval = iv[mid]
-            if interval < 0:
-                continue
-            if now >= due[mid]:
-                nxt = due[mid] + interval
-                due[mid] = nxt if nxt > now else now + interval
-                f = fast.get(mid)
-                if f is not None:
-                    args = f[1]()
-                    for l in links:
-                        l.send_fast(f[0], args)
-                else:
-                    self._send_encoded(mid, links)
-            if interval > period and due[mid] < due_min:
-                due_min = due[mid]
-        self._due_min = due_min
+        for mid in self.streams.due(now):
+            f = fast.get(mid)
+            if f is not None:
+                args = f[1]()
+                for l in links:
+                    l.send_fast(f[0], args)
+            else:
+                self._send_encoded(mid, links)
 
     def _send_encoded(self, mid: int, links) -> None:
         if mid == _HEARTBEAT_ID:
@@ -1174,9 +1150,7 @@ class SitlServer:
             return
         for l in links:
             l.begin_frame()
-        for mid in self._schedule:
-            if self._intervals[mid] < 0:
-                continue
+        for mid in self.streams.enabled():
             f = self._fast.get(mid)
             if f is not None:
                 args = f[1]()
@@ -1418,45 +1392,22 @@ class SitlServer:
         mode = self.stack.mode_of(self.autopilot.custom_mode_from_params(p[1], p[2]))
         return self.stack.set_mode(self.sim.time_us, self._state(), mode).result, None
 
-    def _interval_target(self, mid: int):
-        if mid in self._intervals or mid in (self._frame_imu_id, ID.MAVLINK_MSG_ID_DISTANCE_SENSOR):
-            return True
-        return False
-
     def _cmd_set_interval(self, p, int_frame=None):
         mid, iv = int(p[0]), p[1]
+        if mid != ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
+            return self.streams.set_interval(mid, iv, self.sim.time_us), None
         if not math.isfinite(iv):
             return mavlink.MAV_RESULT_DENIED, None
         iv = int(iv)
-        if mid == self._frame_imu_id:
-            # Fixed: it is the lockstep frame marker.
-            return (mavlink.MAV_RESULT_ACCEPTED if iv in (0, self._period_us) else mavlink.MAV_RESULT_DENIED), None
-        if mid == ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
-            self._rng_interval_disabled = iv < 0
-            for rf in self.sim.sensors.rangefinders:
-                rf.period_us = (max(1, int(round(1e6 / rf.cfg.rate_hz))) if iv <= 0
-                                else max(self._period_us, iv))
-            return mavlink.MAV_RESULT_ACCEPTED, None
-        if mid not in self._intervals:
-            return mavlink.MAV_RESULT_UNSUPPORTED, None
-        if iv == 0:
-            iv = _default_interval_us(mid) if mid in _DEFAULT_RATES_HZ else -1
-        elif iv < 0:
-            iv = -1
-        else:
-            iv = max(iv, 1)
-        self._intervals[mid] = iv
-        self._next_due[mid] = self.sim.time_us
-        self._reschedule()
+        self._rng_interval_disabled = iv < 0
+        for rf in self.sim.sensors.rangefinders:
+            rf.period_us = max(1, int(round(1e6 / rf.cfg.rate_hz))) if iv <= 0 else max(self.streams.period_us, iv)
         return mavlink.MAV_RESULT_ACCEPTED, None
 
     def _cmd_get_interval(self, p, int_frame=None):
         mid = int(p[0])
-        if mid == self._frame_imu_id:
-            iv = self._period_us
-        elif mid in self._intervals:
-            iv = self._intervals[mid]
-        else:
+        iv = self.streams.get_interval(mid)
+        if iv is None:
             return mavlink.MAV_RESULT_UNSUPPORTED, None
         return mavlink.MAV_RESULT_ACCEPTED, [self._mav().message_interval_encode(mid, iv)]
 

@@ -78,6 +78,7 @@ from mavcore import codec
 from mavcore.services.command import COMMAND_SENDS, CommandClient, command_long
 from mavcore.services.mission import MissionUploadClient
 from mavcore.services.params import ParamReadClient
+from mavcore.services.telemetry import stream_requests
 from ..link.obstacle_distance import ObstacleDistancePublisher, encode_obstacle_distance
 from ..report import FlightReport, ReplanningStats, TrackingStats
 from ..replan.perception import propagated_pose
@@ -615,13 +616,9 @@ class FlightCore:
             for text, seq in setup_chunks(self.inputs.setup):
                 self._emit(self.enc.statustext_encode(MAV_SEVERITY_DEBUG, text, SETUP_TEXT_ID, seq))
         yield lambda: self.period_us is not None
-        yield from self._set_interval(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, self.period_us)
-        if cfg.request_truth:
-            yield from self._set_interval(mavlink.MAVLINK_MSG_ID_ODOMETRY, self.period_us, optional=True)
-        for mid in cfg.mute_streams:
-            yield from self._set_interval(mid, -1, optional=True)
-        for mid, hz in cfg.low_rate_streams:
-            yield from self._set_interval(mid, 1e6 / hz, optional=True)
+        for mid, interval, optional in stream_requests(self.period_us, cfg.request_truth, cfg.mute_streams,
+                                                       cfg.low_rate_streams):
+            yield from self._set_interval(mid, interval, optional=optional)
         pv = yield from self._param_read("SIM_LOCKSTEP")
         self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv, self.autopilot.param_bytewise) == 1
         if self._rates:
