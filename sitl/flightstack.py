@@ -1,6 +1,8 @@
 """The SITL's flight-stack shell: arming, PX4-style modes, setpoint
 generation for takeoff/land/hold/return, offboard and actuator-stream
-freshness, failsafes, parameters and mission storage.
+freshness and failsafes. It reads its parameters from a
+``mavcore.services.params.Parameters`` store; the parameter and mission
+protocols themselves are ``mavcore.services``.
 
 Pure: no sockets, no clock. Everything is timed by the vehicle time handed
 in (``now_us``); the transport (``sitl.server``) turns MAVLink messages into

@@ -7,7 +7,10 @@ strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
 (``mavcore.link.pipe``), where the peer's waits run the vehicle (``service``) instead
 of ``run``. Telemetry goes to every link; replies
 (COMMAND_ACK, PARAM_VALUE on read, MISSION_*) go to the link the request
-came from, addressed to the requester.
+came from, addressed to the requester. The protocols are the server sides
+of ``mavcore.services`` (``CommandServer``, ``ParamServer``,
+``MissionServer``, ``StreamSchedule``); this module keeps the links, the
+pacing and lockstep, and the encoders of what the vehicle sends.
 
 Time and pacing
 ---------------
