@@ -131,31 +131,12 @@ from .flightstack import (
 )
 from .rate_control import hover_thrust
 from .sim import Simulation
+from .telemetry import VehicleTelemetry
 from .world import load_world
 
 SYSTEM_ID = 1
 COMPONENT_ID = 1
 _log = logging.getLogger("sitl")
-
-#: PX4 v1.14.0 release, as PX4 encodes it (major, minor, patch, type 0xFF).
-FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 0xFF
-
-CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
-
-_SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-            | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-            | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-            | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-            | mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
-            | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
-            | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY | mavlink.MAV_SYS_STATUS_AHRS
-            | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY)
-_PREARM = mavlink.MAV_SYS_STATUS_PREARM_CHECK
-_GEOFENCE = mavlink.MAV_SYS_STATUS_GEOFENCE
 
 # Message ids used for scheduling.
 ID = mavlink
@@ -176,8 +157,6 @@ _DEFAULT_RATES_HZ = {
 }
 
 _HEARTBEAT_ID = ID.MAVLINK_MSG_ID_HEARTBEAT
-#: SCALED_IMU2 rate of the ArduCopter personality (Hz; its RAW_SENS stream group).
-SCALED_IMU2_HZ = 10.0
 #: Linux's IP_RECVERR (the socket module does not export it).
 _IP_RECVERR = getattr(socket, "IP_RECVERR", 11)
 
@@ -554,13 +533,10 @@ class SitlServer:
         self.battery = Battery(mission.energy)
         self.collision_prevention = CollisionPrevention()     # fed by OBSTACLE_DISTANCE, CP_* params
         self._apply_params()
-        self._frame = None
-        self._setpoint = None
         self._onboard_flying = False
         self._rates_flying = False
         self._awaited_us: int | None = None
         self._released = True
-        self._wall_epoch_us = int(time.time() * 1e6)
         self._last_hb_wall = 0.0
         self._rng_interval_disabled = False
         self._text_id = 0                 # STATUSTEXT id of the last text sent in chunks
@@ -571,32 +547,13 @@ class SitlServer:
         # Ground truth for the companion's tracking statistics (ODOMETRY, float32
         # metres; SIM_STATE's 1e-7 degree lat/lon is ~1 cm): off unless requested.
         intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
-        self._encoders = {
-            ID.MAVLINK_MSG_ID_HEARTBEAT: self._enc_heartbeat,
-            ID.MAVLINK_MSG_ID_SYS_STATUS: self._enc_sys_status,
-            ID.MAVLINK_MSG_ID_BATTERY_STATUS: self._enc_battery,
-            ID.MAVLINK_MSG_ID_SYSTEM_TIME: self._enc_system_time,
-            ID.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self._enc_ext_state,
-            ID.MAVLINK_MSG_ID_ATTITUDE: self._enc_attitude,
-            ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: self._enc_attitude_q,
-            ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self._enc_lpos,
-            ID.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._enc_gpos,
-            ID.MAVLINK_MSG_ID_GPS_RAW_INT: self._enc_gps,
-            ID.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: self._enc_target,
-            ID.MAVLINK_MSG_ID_HOME_POSITION: self._enc_home,
-            ID.MAVLINK_MSG_ID_HIGHRES_IMU: self._enc_imu,
-            ID.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._enc_version,
-            ID.MAVLINK_MSG_ID_ODOMETRY: self._enc_truth,
-        }
-        self._frame_imu_setup(intervals)
+        #: What the vehicle reports (``sitl.telemetry``); the personality's extra streams join ``intervals``.
+        self.telemetry = VehicleTelemetry(self.sim, self.stack, self.battery, self.autopilot, self.origin,
+                                          self.home_enu_m, seed, int(time.time() * 1e6), self._nav_state,
+                                          self._mav, intervals)
         #: The telemetry streams (``mavcore.services.telemetry``); the frame marker's interval is fixed.
-        self.streams = StreamSchedule(intervals, period, defaults, fixed_us={self._frame_imu_id: period})
-        self._fast = {
-            ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: (codec.PACK_LOCAL_POSITION_NED, self._lpos_args),
-            ID.MAVLINK_MSG_ID_ATTITUDE: (codec.PACK_ATTITUDE, self._attitude_args),
-            ID.MAVLINK_MSG_ID_ODOMETRY: (codec.PACK_ODOMETRY, self._odometry_args),
-            ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: (codec.PACK_ATTITUDE_QUATERNION, self._attitude_q_args),
-        }
+        self.streams = StreamSchedule(intervals, period, defaults,
+                                      fixed_us={self.telemetry.frame_imu_id: period})
         self._init_dispatch()
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
@@ -661,20 +618,6 @@ class SitlServer:
         self._flown_items = self.missions.items       # the mission list the flight stack has
         self._mission_current_due_us = 0
         self._mission_peer = None
-
-    def _frame_imu_setup(self, intervals: dict) -> None:
-        """The sensor-frame message (the lockstep frame marker) is the personality's:
-        PX4 HIGHRES_IMU; ArduCopter RAW_IMU, with SCALED_IMU2 beside it."""
-        if self.autopilot.imu_message == "RAW_IMU":
-            self._frame_imu_id = ID.MAVLINK_MSG_ID_RAW_IMU
-            self._frame_imu_pack, self._frame_imu_args = codec.PACK_RAW_IMU, self._raw_imu_args
-            s2 = ID.MAVLINK_MSG_ID_SCALED_IMU2
-            intervals[s2] = int(round(1e6 / SCALED_IMU2_HZ))
-            self._encoders[s2] = self._enc_scaled_imu2
-            self._encoders[ID.MAVLINK_MSG_ID_RAW_IMU] = self._enc_raw_imu
-        else:
-            self._frame_imu_id = ID.MAVLINK_MSG_ID_HIGHRES_IMU
-            self._frame_imu_pack, self._frame_imu_args = codec.PACK_HIGHRES_IMU, self._imu_args
 
     # ------------------------------------------------------------------ params
     @staticmethod
@@ -838,7 +781,7 @@ class SitlServer:
         now = time.monotonic()             # run(): _wait_for_answer, the clock stalled
         if now - self._last_hb_wall >= 1.0:
             self._last_hb_wall = now
-            self._broadcast(self._enc_heartbeat())
+            self._broadcast(self.telemetry.heartbeat())
         if self.missions.uploading:
             self.mission_tick()
 
@@ -848,7 +791,7 @@ class SitlServer:
         frame = self._frame if self._frame is not None else self.sim.step_frame(_ZERO4)
         now = self.sim.time_us
         out = self.stack.update(now, self._nav_state(frame))
-        self._setpoint = out.setpoint
+        self.telemetry.setpoint = out.setpoint
         sim = self.sim
         if not out.armed:
             self._onboard_flying = False
@@ -906,14 +849,14 @@ class SitlServer:
         tilt = math.acos(max(-1.0, min(1.0, R[8])))
         return NavState(pl.p, pl.v, math.atan2(R[3], R[0]), tilt, bool(pl.landed))
 
-    def _attitude_source(self):
-        """(R row-major 9-tuple, body rates FLU) reported in ATTITUDE*: the
-        estimate, or the truth with ``sim.onboard_state: truth``."""
-        e = self._frame.estimate if self._frame is not None else None
-        if e is not None:
-            return e.R, e.omega_flu_rad_s
-        pl = self.sim.plant
-        return pl.R, pl.w
+    # The current frame and the stack's setpoint are the telemetry's (it encodes from them).
+    @property
+    def _frame(self):
+        return self.telemetry.frame
+
+    @_frame.setter
+    def _frame(self, frame) -> None:
+        self.telemetry.frame = frame
 
     def _send_telemetry(self, frame) -> None:
         now = frame.time_us
@@ -928,7 +871,7 @@ class SitlServer:
         if now >= streams.due_min:
             self._send_due(now, links)
         else:   # only the every-frame streams: same messages, same order as the scan
-            fast = self._fast
+            fast = self.telemetry.fast
             for mid in streams.every_frame:
                 f = fast.get(mid)
                 if f is not None:
@@ -943,15 +886,16 @@ class SitlServer:
                 args = codec.distance_sensor_args(tb, r)
                 for l in links:
                     l.send_fast(codec.PACK_DISTANCE_SENSOR, args)
-        args = self._frame_imu_args()
-        pack = self._frame_imu_pack
+        tm = self.telemetry
+        args = tm.frame_imu_args()
+        pack = tm.frame_imu_pack
         for l in links:
             l.send_fast(pack, args)
             l.end_frame()
 
     def _send_due(self, now: int, links) -> None:
         """Send every stream due at ``now`` in schedule order (``StreamSchedule.due``)."""
-        fast = self._fast
+        fast = self.telemetry.fast
         for mid in self.streams.due(now):
             f = fast.get(mid)
             if f is not None:
@@ -964,124 +908,13 @@ class SitlServer:
     def _send_encoded(self, mid: int, links) -> None:
         if mid == _HEARTBEAT_ID:
             self._last_hb_wall = time.monotonic()
-        msg = self._encoders[mid]()
+        msg = self.telemetry.encoders[mid]()
         if msg is not None:
             for l in links:
                 l.send(msg)
 
-    # ------------------------------------------------------------------ encoders
     def _mav(self):
         return self.links[0].mav if self.links else mavlink.MAVLink(None, SYSTEM_ID, COMPONENT_ID)
-
-    def _enc_heartbeat(self):
-        st = self.stack
-        return codec.heartbeat(self._mav(), st.armed, st.custom_mode, st.system_status, self.autopilot.mav_autopilot)
-
-    def _enc_sys_status(self):
-        health = _SENSORS
-        s = self._nav_state(self._frame)
-        if s.landed and s.tilt_rad < math.radians(30.0):
-            health |= _PREARM
-        # geofence: always present (PX4), enabled with a stored fence, healthy unless breached
-        enabled = _SENSORS | _PREARM | (_GEOFENCE if self.stack.fence is not None else 0)
-        if not self.stack.fence_breached:
-            health |= _GEOFENCE
-        b = self.battery
-        return codec.sys_status(self._mav(), _SENSORS | _PREARM | _GEOFENCE, enabled, health, b.voltage_v,
-                                b.current_a, b.remaining)
-
-    def _enc_battery(self):
-        b = self.battery
-        return codec.battery_status(self._mav(), b.cells, b.voltage_v, b.current_a, b.consumed_ah,
-                                    b.consumed_wh, b.remaining)
-
-    def _enc_system_time(self):
-        t = self.sim.time_us
-        return self._mav().system_time_encode(self._wall_epoch_us + t, t // 1000)
-
-    def _enc_ext_state(self):
-        return self._mav().extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED, self.stack.landed_state)
-
-    def _enc_attitude(self):
-        return codec.attitude(self._mav(), self.sim.time_us // 1000, *self._attitude_source())
-
-    def _enc_attitude_q(self):
-        return codec.attitude_quaternion(self._mav(), self.sim.time_us // 1000, *self._attitude_source())
-
-    def _enc_lpos(self):
-        f = self._frame
-        return codec.local_position_ned(self._mav(), f.pos_time_us // 1000, f.pos_enu_m, f.vel_enu_m_s)
-
-    def _enc_gpos(self):
-        f = self._frame
-        s = self._nav_state(f)
-        return codec.global_position_int(self._mav(), f.time_us // 1000, self.origin, self.home_enu_m,
-                                         s.pos_enu_m, s.vel_enu_m_s, s.yaw_enu_rad)
-
-    def _enc_gps(self):
-        f = self._frame
-        return codec.gps_raw_int(self._mav(), f.time_us, self.origin, f.pos_enu_m, f.vel_enu_m_s)
-
-    def _enc_target(self):
-        if self._setpoint is None:
-            return None
-        return codec.position_target_local_ned(self._mav(), self.sim.time_us // 1000, self._setpoint)
-
-    def _enc_home(self):
-        return codec.home_position(self._mav(), self.origin, self.home_enu_m, self.sim.time_us)
-
-    # The per-frame argument builders read float tuples: the frame's
-    # measurement slots and the plant's state (= ``self._frame.truth``, see
-    # ``_nav_state``), not the arrays ``SensorFrame``/``TrueState`` build lazily.
-    def _imu_args(self):
-        f = self._frame
-        return codec.highres_imu_args(f.time_us, f._acc, f._gyro, f._mag,
-                                      self.origin.alt_m + self.sim.plant.p[2])
-
-    def _enc_imu(self):
-        return mavlink.MAVLink_highres_imu_message(*self._imu_args())
-
-    def _raw_imu_args(self):
-        f = self._frame
-        return codec.raw_imu_args(f.time_us, f._acc, f._gyro, f._mag)
-
-    def _enc_raw_imu(self):
-        return mavlink.MAVLink_raw_imu_message(*self._raw_imu_args())
-
-    def _enc_scaled_imu2(self):
-        f = self._frame
-        return codec.scaled_imu2(self._mav(), f.time_us // 1000, f._acc, f._gyro, f._mag)
-
-    def _lpos_args(self):
-        f = self._frame
-        return codec.local_position_ned_args(f.pos_time_us // 1000, f._pos, f._vel)
-
-    def _attitude_q_args(self):
-        return codec.attitude_quaternion_args(self.sim.time_us // 1000, *self._attitude_source())
-
-    def _odometry_args(self):
-        pl = self.sim.plant
-        return codec.odometry_truth_args(self._frame.time_us, pl.p, pl.v, pl.R, pl.w)
-
-    def _enc_odometry(self):
-        return mavlink.MAVLink_odometry_message(*self._odometry_args())
-
-    def _attitude_args(self):
-        return codec.attitude_args(self.sim.time_us // 1000, *self._attitude_source())
-
-    def _enc_truth(self):
-        t = self._frame.truth
-        return codec.odometry_truth(self._mav(), self._frame.time_us, t.pos_enu_m, t.vel_enu_m_s, t.R,
-                                    t.omega_flu_rad_s)
-
-    def _enc_version(self):
-        uid = (0x5A17 << 32) | (self.seed & 0xFFFFFFFF)
-        ap = self.autopilot
-        caps = CAPABILITIES if ap.param_bytewise else (
-            CAPABILITIES & ~mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-            | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
-        return self._mav().autopilot_version_encode(
-            caps, ap.flight_sw_version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid)
 
     # ------------------------------------------------------------------ pacing
     def _pace_reset(self) -> None:
@@ -1127,7 +960,7 @@ class SitlServer:
                 return
             if now - self._last_hb_wall >= 1.0:
                 self._last_hb_wall = now
-                self._broadcast(self._enc_heartbeat())
+                self._broadcast(self.telemetry.heartbeat())
             self._poll(min(0.05, timeout - (now - start) + 1e-3), until_released=True)
 
     def _wait_for_first_peer(self) -> None:
@@ -1154,18 +987,19 @@ class SitlServer:
         for l in links:
             l.begin_frame()
         for mid in self.streams.enabled():
-            f = self._fast.get(mid)
+            f = self.telemetry.fast.get(mid)
             if f is not None:
                 args = f[1]()
                 for l in links:
                     l.send_fast(f[0], args)
                 continue
-            msg = self._encoders[mid]()
+            msg = self.telemetry.encoders[mid]()
             if msg is not None:
                 for l in links:
                     l.send(msg)
-        args = self._frame_imu_args()
-        pack = self._frame_imu_pack
+        tm = self.telemetry
+        args = tm.frame_imu_args()
+        pack = tm.frame_imu_pack
         for l in links:
             l.send_fast(pack, args)
             l.end_frame()
@@ -1424,7 +1258,7 @@ class SitlServer:
             tb = self.sim.time_us // 1000
             msgs = [codec.distance_sensor(self._mav(), tb, r) for _, r in sorted(self._last_ranges.items())]
             return (mavlink.MAV_RESULT_ACCEPTED if msgs else mavlink.MAV_RESULT_FAILED), msgs or None
-        enc = self._encoders.get(mid)
+        enc = self.telemetry.encoders.get(mid)
         if enc is None or self._frame is None:
             return mavlink.MAV_RESULT_UNSUPPORTED, None
         m = enc()
@@ -1433,10 +1267,10 @@ class SitlServer:
         return mavlink.MAV_RESULT_ACCEPTED, [m]
 
     def _cmd_capabilities(self, p, int_frame=None):
-        return mavlink.MAV_RESULT_ACCEPTED, [self._enc_version()]
+        return mavlink.MAV_RESULT_ACCEPTED, [self.telemetry.version()]
 
     def _cmd_home(self, p, int_frame=None):
-        return mavlink.MAV_RESULT_ACCEPTED, [self._enc_home()]
+        return mavlink.MAV_RESULT_ACCEPTED, [self.telemetry.home()]
 
     def _cmd_mission_start(self, p, int_frame=None):
         return self.stack.mission_start_command(self.sim.time_us, self._state(), p[0], p[1]).result, None
