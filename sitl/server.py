@@ -131,6 +131,7 @@ from .flightstack import (
 )
 from .rate_control import hover_thrust
 from .sim import Simulation
+from .commands import VehicleCommands
 from .telemetry import VehicleTelemetry
 from .world import load_world
 
@@ -538,9 +539,7 @@ class SitlServer:
         self._awaited_us: int | None = None
         self._released = True
         self._last_hb_wall = 0.0
-        self._rng_interval_disabled = False
         self._text_id = 0                 # STATUSTEXT id of the last text sent in chunks
-        self._last_ranges: dict = {}
         period = self.sim.sensor_period_us
         defaults = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
         intervals = dict(defaults)
@@ -554,6 +553,10 @@ class SitlServer:
         #: The telemetry streams (``mavcore.services.telemetry``); the frame marker's interval is fixed.
         self.streams = StreamSchedule(intervals, period, defaults,
                                       fixed_us={self.telemetry.frame_imu_id: period})
+        #: The command protocol (``mavcore.services.command``) over the vehicle's commands (``sitl.commands``).
+        self.commands = CommandServer(VehicleCommands(self.sim, self.stack, self.autopilot, self.origin,
+                                                      self.home_enu_m, self.streams, self.telemetry, self._state,
+                                                      self._mav).table())
         self._init_dispatch()
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
@@ -571,7 +574,7 @@ class SitlServer:
 
 
     def _init_dispatch(self) -> None:
-        """The receive tables: message type -> handler, MAV_CMD -> command handler."""
+        """The receive table: message type -> handler (commands: ``self.commands``)."""
         self._handlers = {
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
@@ -595,20 +598,6 @@ class SitlServer:
             "TIMESYNC": self._on_timesync,
             "PING": self._on_ping,
         }
-        self.commands = CommandServer({
-            mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm,
-            mavlink.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
-            mavlink.MAV_CMD_NAV_LAND: self._cmd_land,
-            mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._cmd_rtl,
-            mavlink.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
-            mavlink.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_interval,
-            mavlink.MAV_CMD_GET_MESSAGE_INTERVAL: self._cmd_get_interval,
-            mavlink.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
-            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_capabilities,
-            mavlink.MAV_CMD_GET_HOME_POSITION: self._cmd_home,
-            mavlink.MAV_CMD_MISSION_START: self._cmd_mission_start,
-            mavlink.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
-        })
 
     def _init_mission_store(self, max_items: int) -> None:
         """The mission, fence and rally storage (``mavcore.services.mission.MissionServer``)
@@ -823,7 +812,7 @@ class SitlServer:
             self._on_crash(sim.crash)
         if frame.ranges:
             for r in frame.ranges:
-                self._last_ranges[r.sensor_id] = r
+                self.telemetry.last_ranges[r.sensor_id] = r
         self._flush_events()
         self._send_telemetry(frame)
 
@@ -880,7 +869,7 @@ class SitlServer:
                         l.send_fast(f[0], args)
                 else:
                     self._send_encoded(mid, links)
-        if frame.ranges and not self._rng_interval_disabled:
+        if frame.ranges and not self.telemetry.ranges_off:
             tb = now // 1000
             for r in frame.ranges:
                 args = codec.distance_sensor_args(tb, r)
@@ -1196,91 +1185,6 @@ class SitlServer:
         self._reply(link, ack_message(link.mav, command, reply, msg.get_srcSystem(), msg.get_srcComponent()))
         for m in reply.after:
             self._reply(link, m)
-
-    def _cmd_arm(self, p, int_frame=None):
-        now, st = self.sim.time_us, self._state()
-        force = p[1] == codec.ARM_FORCE_MAGIC
-        if p[0] == 1.0:
-            r = self.stack.arm(now, st, force)
-        elif p[0] == 0.0:
-            r = self.stack.disarm(now, st, force)
-        else:
-            return mavlink.MAV_RESULT_DENIED, None
-        return r.result, None
-
-    def _cmd_takeoff(self, p, int_frame=None):
-        if self.autopilot.takeoff_alt_relative:     # ArduCopter: metres above home
-            z = float(self.home_enu_m[2]) + float(p[6]) if math.isfinite(p[6]) else None
-        else:
-            z = codec.decode_takeoff_altitude(p[6], self.origin.alt_m)
-        return self.stack.takeoff(self.sim.time_us, self._state(), z).result, None
-
-    def _cmd_land(self, p, int_frame=None):
-        return self.stack.land(self.sim.time_us, self._state()).result, None
-
-    def _cmd_rtl(self, p, int_frame=None):
-        return self.stack.return_to_launch(self.sim.time_us, self._state()).result, None
-
-    def _cmd_set_mode(self, p, int_frame=None):
-        if not all(math.isfinite(x) for x in p[:3]):
-            return mavlink.MAV_RESULT_DENIED, None
-        if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            return mavlink.MAV_RESULT_DENIED, None
-        mode = self.stack.mode_of(self.autopilot.custom_mode_from_params(p[1], p[2]))
-        return self.stack.set_mode(self.sim.time_us, self._state(), mode).result, None
-
-    def _cmd_set_interval(self, p, int_frame=None):
-        mid, iv = int(p[0]), p[1]
-        if mid != ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
-            return self.streams.set_interval(mid, iv, self.sim.time_us), None
-        if not math.isfinite(iv):
-            return mavlink.MAV_RESULT_DENIED, None
-        iv = int(iv)
-        self._rng_interval_disabled = iv < 0
-        for rf in self.sim.sensors.rangefinders:
-            rf.period_us = max(1, int(round(1e6 / rf.cfg.rate_hz))) if iv <= 0 else max(self.streams.period_us, iv)
-        return mavlink.MAV_RESULT_ACCEPTED, None
-
-    def _cmd_get_interval(self, p, int_frame=None):
-        mid = int(p[0])
-        iv = self.streams.get_interval(mid)
-        if iv is None:
-            return mavlink.MAV_RESULT_UNSUPPORTED, None
-        return mavlink.MAV_RESULT_ACCEPTED, [self._mav().message_interval_encode(mid, iv)]
-
-    def _cmd_request_message(self, p, int_frame=None):
-        if not math.isfinite(p[0]):
-            return mavlink.MAV_RESULT_DENIED, None
-        mid = int(p[0])
-        if mid == ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
-            # the latest reading of each rangefinder (no extra ray cast: that
-            # would draw noise from the simulation's generator)
-            tb = self.sim.time_us // 1000
-            msgs = [codec.distance_sensor(self._mav(), tb, r) for _, r in sorted(self._last_ranges.items())]
-            return (mavlink.MAV_RESULT_ACCEPTED if msgs else mavlink.MAV_RESULT_FAILED), msgs or None
-        enc = self.telemetry.encoders.get(mid)
-        if enc is None or self._frame is None:
-            return mavlink.MAV_RESULT_UNSUPPORTED, None
-        m = enc()
-        if m is None:
-            return mavlink.MAV_RESULT_FAILED, None
-        return mavlink.MAV_RESULT_ACCEPTED, [m]
-
-    def _cmd_capabilities(self, p, int_frame=None):
-        return mavlink.MAV_RESULT_ACCEPTED, [self.telemetry.version()]
-
-    def _cmd_home(self, p, int_frame=None):
-        return mavlink.MAV_RESULT_ACCEPTED, [self.telemetry.home()]
-
-    def _cmd_mission_start(self, p, int_frame=None):
-        return self.stack.mission_start_command(self.sim.time_us, self._state(), p[0], p[1]).result, None
-
-    def _cmd_reposition(self, p, int_frame=None):
-        """DO_REPOSITION (MAVSDK ``goto_location``): ``mission_store.reposition_target``."""
-        nav = self._state()
-        target, speed, yaw = mission_store.reposition_target(self.origin, self.home_enu_m, nav.pos_enu_m, p,
-                                                             int_frame)
-        return self.stack.reposition(self.sim.time_us, nav, target, speed, yaw).result, None
 
     def _on_set_mode(self, link, msg) -> None:
         if msg.target_system != SYSTEM_ID:

@@ -80,6 +80,10 @@ class VehicleTelemetry:
         self.mav = mav
         self.frame = None
         self.setpoint = None
+        #: The latest reading of each rangefinder (sensor id -> reading), for REQUEST_MESSAGE.
+        self.last_ranges: dict = {}
+        #: DISTANCE_SENSOR turned off (SET_MESSAGE_INTERVAL -1).
+        self.ranges_off = False
         self.encoders = {
             ID.MAVLINK_MSG_ID_HEARTBEAT: self.heartbeat,
             ID.MAVLINK_MSG_ID_SYS_STATUS: self._enc_sys_status,
