@@ -9,8 +9,9 @@ of ``run``. Telemetry goes to every link; replies
 (COMMAND_ACK, PARAM_VALUE on read, MISSION_*) go to the link the request
 came from, addressed to the requester. The protocols are the server sides
 of ``mavcore.services`` (``CommandServer``, ``ParamServer``,
-``MissionServer``, ``StreamSchedule``); this module keeps the links, the
-pacing and lockstep, and the encoders of what the vehicle sends.
+``MissionServer``, ``StreamSchedule``), the commands ``sitl.commands`` and
+the encoders of what the vehicle sends ``sitl.telemetry``; this module keeps
+the links, the pacing and lockstep, and routes received messages.
 
 Time and pacing
 ---------------
