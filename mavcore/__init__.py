@@ -7,6 +7,9 @@ that no package-level import cycle exists). It holds:
 - the MAVLink wire: ``codec`` (framing, CRC, fast pack/unpack, every message
   both ends encode or decode, the mission-item codec), ``link`` (datagram
   pipes, sockets, signing, the command/setpoint rules);
+- the MAVLink services (``services``): the command, parameter, mission and
+  telemetry-interval protocols as pure state machines, each with its
+  vehicle (server) and companion (client) side;
 - the autopilot personalities (``autopilot``: PX4, ArduCopter);
 - the model of the vehicle and its world: ``vehicle``, ``energy``,
   ``geometry``, ``movers``, ``maps``, ``so3`` (the SO(3) helpers), ``frames``

@@ -1,7 +1,7 @@
 """From the stored MISSION_INT lists to what the flight stack flies (pure).
 
 The transport (``sitl.server``) stores three lists with
-``flightstack.MissionProtocol``; this module checks a fence or rally list at
+``mavcore.services.mission.MissionServer``; this module checks a fence or rally list at
 the end of its upload (``validator``), turns the stored lists into the
 flight stack's ``MissionExecutor``, ``Fence`` and rally points
 (``flight_objects``), and says what MISSION_CURRENT reports
@@ -41,7 +41,7 @@ def item_enu_function(origin: codec.GeoOrigin, home_enu_m):
 
 
 def validator(origin: codec.GeoOrigin, home_enu_m):
-    """``validate(mission_type, items)`` for ``MissionProtocol``: a fence or
+    """``validate(mission_type, items)`` for ``MissionServer``: a fence or
     rally list that is not usable is refused with MAV_MISSION_ERROR."""
     to_enu = item_enu_function(origin, home_enu_m)
 
@@ -60,7 +60,7 @@ def validator(origin: codec.GeoOrigin, home_enu_m):
 
 def flight_objects(stored: dict, origin: codec.GeoOrigin, home_enu_m, params,
                    rules: MissionRules = MissionRules()) -> FlightObjects:
-    """``MissionProtocol.stored`` -> the executor (flying by the personality's
+    """``MissionServer.stored`` -> the executor (flying by the personality's
     ``rules``), the fence and the rally points."""
     to_enu = item_enu_function(origin, home_enu_m)
     items = stored[mavlink.MAV_MISSION_TYPE_MISSION]

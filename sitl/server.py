@@ -7,7 +7,11 @@ strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
 (``mavcore.link.pipe``), where the peer's waits run the vehicle (``service``) instead
 of ``run``. Telemetry goes to every link; replies
 (COMMAND_ACK, PARAM_VALUE on read, MISSION_*) go to the link the request
-came from, addressed to the requester.
+came from, addressed to the requester. The protocols are the server sides
+of ``mavcore.services`` (``CommandServer``, ``ParamServer``,
+``MissionServer``, ``StreamSchedule``), the commands ``sitl.commands`` and
+the encoders of what the vehicle sends ``sitl.telemetry``; this module keeps
+the links, the pacing and lockstep, and routes received messages.
 
 Time and pacing
 ---------------
@@ -118,38 +122,23 @@ from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, I
 from .battery import Battery
 from .collision_prevention import CollisionPrevention, CollisionPreventionConfig
 from . import mission_exec, mission_store
+from mavcore.services.command import CommandServer, ack_message
+from mavcore.services.mission import MissionServer, encode_reply
+from mavcore.services.params import Parameters, ParamServer
+from mavcore.services.telemetry import StreamSchedule
+
 from .flightstack import (
-    IDLE_MOTOR_CMD, PARAM_TYPE_INT32, FlightMode, FlightStack, MissionProtocol, NavState,
-    Parameters, READ_ONLY_PARAMS, SendAck, SendCount, SendItem, SendRequest, StatusEvent,
-    SEVERITY_INFO, SEVERITY_WARNING,
+    IDLE_MOTOR_CMD, FlightMode, FlightStack, NavState, StatusEvent, SEVERITY_INFO, SEVERITY_WARNING,
 )
 from .rate_control import hover_thrust
 from .sim import Simulation
+from .commands import VehicleCommands
+from .telemetry import VehicleTelemetry
 from .world import load_world
 
 SYSTEM_ID = 1
 COMPONENT_ID = 1
 _log = logging.getLogger("sitl")
-
-#: PX4 v1.14.0 release, as PX4 encodes it (major, minor, patch, type 0xFF).
-FLIGHT_SW_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 0xFF
-
-CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
-
-_SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-            | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-            | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-            | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-            | mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
-            | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
-            | mavlink.MAV_SYS_STATUS_SENSOR_PROXIMITY | mavlink.MAV_SYS_STATUS_AHRS
-            | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY)
-_PREARM = mavlink.MAV_SYS_STATUS_PREARM_CHECK
-_GEOFENCE = mavlink.MAV_SYS_STATUS_GEOFENCE
 
 # Message ids used for scheduling.
 ID = mavlink
@@ -170,8 +159,6 @@ _DEFAULT_RATES_HZ = {
 }
 
 _HEARTBEAT_ID = ID.MAVLINK_MSG_ID_HEARTBEAT
-#: SCALED_IMU2 rate of the ArduCopter personality (Hz; its RAW_SENS stream group).
-SCALED_IMU2_HZ = 10.0
 #: Linux's IP_RECVERR (the socket module does not export it).
 _IP_RECVERR = getattr(socket, "IP_RECVERR", 11)
 
@@ -539,6 +526,7 @@ class SitlServer:
             "SIM_LOCKSTEP": int(bool(config.lockstep)),
             "MPC_THR_HOVER": hover_thrust(mission.vehicle),
             **self._controller_param_defaults()})
+        self.param_server = ParamServer(self.params, self.autopilot.param_bytewise)
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
         self.stack = FlightStack(self.params, self.home_enu_m, self.autopilot)
@@ -547,52 +535,29 @@ class SitlServer:
         self.battery = Battery(mission.energy)
         self.collision_prevention = CollisionPrevention()     # fed by OBSTACLE_DISTANCE, CP_* params
         self._apply_params()
-        self._frame = None
-        self._setpoint = None
         self._onboard_flying = False
         self._rates_flying = False
         self._awaited_us: int | None = None
         self._released = True
-        self._wall_epoch_us = int(time.time() * 1e6)
         self._last_hb_wall = 0.0
-        self._rng_interval_disabled = False
         self._text_id = 0                 # STATUSTEXT id of the last text sent in chunks
-        self._last_ranges: dict = {}
         period = self.sim.sensor_period_us
-        self._intervals = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
+        defaults = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
+        intervals = dict(defaults)
         # Ground truth for the companion's tracking statistics (ODOMETRY, float32
         # metres; SIM_STATE's 1e-7 degree lat/lon is ~1 cm): off unless requested.
-        self._intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
-        self._next_due = {mid: 0 for mid in self._intervals}
-        self._period_us = period
-        self._every_frame: tuple = ()     # streams due every frame (interval <= sensor period)
-        self._due_min = 0                 # earliest due time of the other enabled streams
-        self._encoders = {
-            ID.MAVLINK_MSG_ID_HEARTBEAT: self._enc_heartbeat,
-            ID.MAVLINK_MSG_ID_SYS_STATUS: self._enc_sys_status,
-            ID.MAVLINK_MSG_ID_BATTERY_STATUS: self._enc_battery,
-            ID.MAVLINK_MSG_ID_SYSTEM_TIME: self._enc_system_time,
-            ID.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self._enc_ext_state,
-            ID.MAVLINK_MSG_ID_ATTITUDE: self._enc_attitude,
-            ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: self._enc_attitude_q,
-            ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self._enc_lpos,
-            ID.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._enc_gpos,
-            ID.MAVLINK_MSG_ID_GPS_RAW_INT: self._enc_gps,
-            ID.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: self._enc_target,
-            ID.MAVLINK_MSG_ID_HOME_POSITION: self._enc_home,
-            ID.MAVLINK_MSG_ID_HIGHRES_IMU: self._enc_imu,
-            ID.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._enc_version,
-            ID.MAVLINK_MSG_ID_ODOMETRY: self._enc_truth,
-        }
-        self._frame_imu_setup()
-        self._schedule = [mid for mid in self._intervals]
-        self._reschedule()
-        self._fast = {
-            ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: (codec.PACK_LOCAL_POSITION_NED, self._lpos_args),
-            ID.MAVLINK_MSG_ID_ATTITUDE: (codec.PACK_ATTITUDE, self._attitude_args),
-            ID.MAVLINK_MSG_ID_ODOMETRY: (codec.PACK_ODOMETRY, self._odometry_args),
-            ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: (codec.PACK_ATTITUDE_QUATERNION, self._attitude_q_args),
-        }
+        intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
+        #: What the vehicle reports (``sitl.telemetry``); the personality's extra streams join ``intervals``.
+        self.telemetry = VehicleTelemetry(self.sim, self.stack, self.battery, self.autopilot, self.origin,
+                                          self.home_enu_m, seed, int(time.time() * 1e6), self._nav_state,
+                                          self._mav, intervals)
+        #: The telemetry streams (``mavcore.services.telemetry``); the frame marker's interval is fixed.
+        self.streams = StreamSchedule(intervals, period, defaults,
+                                      fixed_us={self.telemetry.frame_imu_id: period})
+        #: The command protocol (``mavcore.services.command``) over the vehicle's commands (``sitl.commands``).
+        self.commands = CommandServer(VehicleCommands(self.sim, self.stack, self.autopilot, self.origin,
+                                                      self.home_enu_m, self.streams, self.telemetry, self._state,
+                                                      self._mav).table())
         self._init_dispatch()
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
@@ -608,12 +573,9 @@ class SitlServer:
             key_locked=config.signing_key is not None)
         self._intake = IntakeBudget()
 
-    #: COMMAND_INT frame of the command being handled (None: COMMAND_LONG).
-    _command_frame: int | None = None
-
 
     def _init_dispatch(self) -> None:
-        """The receive tables: message type -> handler, MAV_CMD -> command handler."""
+        """The receive table: message type -> handler (commands: ``self.commands``)."""
         self._handlers = {
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
@@ -637,43 +599,15 @@ class SitlServer:
             "TIMESYNC": self._on_timesync,
             "PING": self._on_ping,
         }
-        self._commands = {
-            mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm,
-            mavlink.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
-            mavlink.MAV_CMD_NAV_LAND: self._cmd_land,
-            mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._cmd_rtl,
-            mavlink.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
-            mavlink.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_interval,
-            mavlink.MAV_CMD_GET_MESSAGE_INTERVAL: self._cmd_get_interval,
-            mavlink.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
-            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_capabilities,
-            mavlink.MAV_CMD_GET_HOME_POSITION: self._cmd_home,
-            mavlink.MAV_CMD_MISSION_START: self._cmd_mission_start,
-            mavlink.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
-        }
 
     def _init_mission_store(self, max_items: int) -> None:
-        """The mission, fence and rally storage (``MissionProtocol``) and what
-        the transport keeps about it."""
-        self.missions = MissionProtocol(max_items, validate=mission_store.validator(self.origin, self.home_enu_m))
+        """The mission, fence and rally storage (``mavcore.services.mission.MissionServer``)
+        and what the transport keeps about it."""
+        self.missions = MissionServer(max_items, validate=mission_store.validator(self.origin, self.home_enu_m))
         self._store_version = self.missions.version
         self._flown_items = self.missions.items       # the mission list the flight stack has
         self._mission_current_due_us = 0
         self._mission_peer = None
-
-    def _frame_imu_setup(self) -> None:
-        """The sensor-frame message (the lockstep frame marker) is the personality's:
-        PX4 HIGHRES_IMU; ArduCopter RAW_IMU, with SCALED_IMU2 beside it."""
-        if self.autopilot.imu_message == "RAW_IMU":
-            self._frame_imu_id = ID.MAVLINK_MSG_ID_RAW_IMU
-            self._frame_imu_pack, self._frame_imu_args = codec.PACK_RAW_IMU, self._raw_imu_args
-            s2 = ID.MAVLINK_MSG_ID_SCALED_IMU2
-            self._intervals[s2], self._next_due[s2] = int(round(1e6 / SCALED_IMU2_HZ)), 0
-            self._encoders[s2] = self._enc_scaled_imu2
-            self._encoders[ID.MAVLINK_MSG_ID_RAW_IMU] = self._enc_raw_imu
-        else:
-            self._frame_imu_id = ID.MAVLINK_MSG_ID_HIGHRES_IMU
-            self._frame_imu_pack, self._frame_imu_args = codec.PACK_HIGHRES_IMU, self._imu_args
 
     # ------------------------------------------------------------------ params
     @staticmethod
@@ -837,7 +771,7 @@ class SitlServer:
         now = time.monotonic()             # run(): _wait_for_answer, the clock stalled
         if now - self._last_hb_wall >= 1.0:
             self._last_hb_wall = now
-            self._broadcast(self._enc_heartbeat())
+            self._broadcast(self.telemetry.heartbeat())
         if self.missions.uploading:
             self.mission_tick()
 
@@ -847,7 +781,7 @@ class SitlServer:
         frame = self._frame if self._frame is not None else self.sim.step_frame(_ZERO4)
         now = self.sim.time_us
         out = self.stack.update(now, self._nav_state(frame))
-        self._setpoint = out.setpoint
+        self.telemetry.setpoint = out.setpoint
         sim = self.sim
         if not out.armed:
             self._onboard_flying = False
@@ -879,7 +813,7 @@ class SitlServer:
             self._on_crash(sim.crash)
         if frame.ranges:
             for r in frame.ranges:
-                self._last_ranges[r.sensor_id] = r
+                self.telemetry.last_ranges[r.sensor_id] = r
         self._flush_events()
         self._send_telemetry(frame)
 
@@ -887,8 +821,7 @@ class SitlServer:
         """Tell the flight stack (STATUSTEXT, EMERGENCY) and announce the new
         system status in this frame's HEARTBEAT."""
         self.stack.crash(self.sim.time_us, event)
-        self._next_due[_HEARTBEAT_ID] = self.sim.time_us
-        self._due_min = self.sim.time_us
+        self.streams.send_now(_HEARTBEAT_ID, self.sim.time_us)
 
     def _landing_intended(self) -> bool:
         p = self.sim.plant.p
@@ -906,23 +839,14 @@ class SitlServer:
         tilt = math.acos(max(-1.0, min(1.0, R[8])))
         return NavState(pl.p, pl.v, math.atan2(R[3], R[0]), tilt, bool(pl.landed))
 
-    def _attitude_source(self):
-        """(R row-major 9-tuple, body rates FLU) reported in ATTITUDE*: the
-        estimate, or the truth with ``sim.onboard_state: truth``."""
-        e = self._frame.estimate if self._frame is not None else None
-        if e is not None:
-            return e.R, e.omega_flu_rad_s
-        pl = self.sim.plant
-        return pl.R, pl.w
+    # The current frame and the stack's setpoint are the telemetry's (it encodes from them).
+    @property
+    def _frame(self):
+        return self.telemetry.frame
 
-    def _reschedule(self) -> None:
-        """Split the enabled streams into those due every frame (interval at
-        most the sensor period: frame times are multiples of it) and the rest,
-        whose earliest due time ``_due_min`` lets a frame skip the scan."""
-        iv, due, period = self._intervals, self._next_due, self._period_us
-        self._every_frame = tuple(m for m in self._schedule if 0 <= iv[m] <= period)
-        slow = [due[m] for m in self._schedule if iv[m] > period]
-        self._due_min = min(slow) if slow else math.inf
+    @_frame.setter
+    def _frame(self, frame) -> None:
+        self.telemetry.frame = frame
 
     def _send_telemetry(self, frame) -> None:
         now = frame.time_us
@@ -933,11 +857,12 @@ class SitlServer:
             return
         for l in links:
             l.begin_frame()
-        if now >= self._due_min:
+        streams = self.streams
+        if now >= streams.due_min:
             self._send_due(now, links)
         else:   # only the every-frame streams: same messages, same order as the scan
-            fast = self._fast
-            for mid in self._every_frame:
+            fast = self.telemetry.fast
+            for mid in streams.every_frame:
                 f = fast.get(mid)
                 if f is not None:
                     args = f[1]()
@@ -945,164 +870,41 @@ class SitlServer:
                         l.send_fast(f[0], args)
                 else:
                     self._send_encoded(mid, links)
-        if frame.ranges and not self._rng_interval_disabled:
+        if frame.ranges and not self.telemetry.ranges_off:
             tb = now // 1000
             for r in frame.ranges:
                 args = codec.distance_sensor_args(tb, r)
                 for l in links:
                     l.send_fast(codec.PACK_DISTANCE_SENSOR, args)
-        args = self._frame_imu_args()
-        pack = self._frame_imu_pack
+        tm = self.telemetry
+        args = tm.frame_imu_args()
+        pack = tm.frame_imu_pack
         for l in links:
             l.send_fast(pack, args)
             l.end_frame()
 
     def _send_due(self, now: int, links) -> None:
-        """Send every stream due at ``now`` in schedule order; advance its due time."""
-        due = self._next_due
-        iv = self._intervals
-        fast = self._fast
-        due_min = math.inf
-        period = self._period_us
-        for mid in self._schedule:
-            interval = iv[mid]
-            if interval < 0:
-                continue
-            if now >= due[mid]:
-                nxt = due[mid] + interval
-                due[mid] = nxt if nxt > now else now + interval
-                f = fast.get(mid)
-                if f is not None:
-                    args = f[1]()
-                    for l in links:
-                        l.send_fast(f[0], args)
-                else:
-                    self._send_encoded(mid, links)
-            if interval > period and due[mid] < due_min:
-                due_min = due[mid]
-        self._due_min = due_min
+        """Send every stream due at ``now`` in schedule order (``StreamSchedule.due``)."""
+        fast = self.telemetry.fast
+        for mid in self.streams.due(now):
+            f = fast.get(mid)
+            if f is not None:
+                args = f[1]()
+                for l in links:
+                    l.send_fast(f[0], args)
+            else:
+                self._send_encoded(mid, links)
 
     def _send_encoded(self, mid: int, links) -> None:
         if mid == _HEARTBEAT_ID:
             self._last_hb_wall = time.monotonic()
-        msg = self._encoders[mid]()
+        msg = self.telemetry.encoders[mid]()
         if msg is not None:
             for l in links:
                 l.send(msg)
 
-    # ------------------------------------------------------------------ encoders
     def _mav(self):
         return self.links[0].mav if self.links else mavlink.MAVLink(None, SYSTEM_ID, COMPONENT_ID)
-
-    def _enc_heartbeat(self):
-        st = self.stack
-        return codec.heartbeat(self._mav(), st.armed, st.custom_mode, st.system_status, self.autopilot.mav_autopilot)
-
-    def _enc_sys_status(self):
-        health = _SENSORS
-        s = self._nav_state(self._frame)
-        if s.landed and s.tilt_rad < math.radians(30.0):
-            health |= _PREARM
-        # geofence: always present (PX4), enabled with a stored fence, healthy unless breached
-        enabled = _SENSORS | _PREARM | (_GEOFENCE if self.stack.fence is not None else 0)
-        if not self.stack.fence_breached:
-            health |= _GEOFENCE
-        b = self.battery
-        return codec.sys_status(self._mav(), _SENSORS | _PREARM | _GEOFENCE, enabled, health, b.voltage_v,
-                                b.current_a, b.remaining)
-
-    def _enc_battery(self):
-        b = self.battery
-        return codec.battery_status(self._mav(), b.cells, b.voltage_v, b.current_a, b.consumed_ah,
-                                    b.consumed_wh, b.remaining)
-
-    def _enc_system_time(self):
-        t = self.sim.time_us
-        return self._mav().system_time_encode(self._wall_epoch_us + t, t // 1000)
-
-    def _enc_ext_state(self):
-        return self._mav().extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED, self.stack.landed_state)
-
-    def _enc_attitude(self):
-        return codec.attitude(self._mav(), self.sim.time_us // 1000, *self._attitude_source())
-
-    def _enc_attitude_q(self):
-        return codec.attitude_quaternion(self._mav(), self.sim.time_us // 1000, *self._attitude_source())
-
-    def _enc_lpos(self):
-        f = self._frame
-        return codec.local_position_ned(self._mav(), f.pos_time_us // 1000, f.pos_enu_m, f.vel_enu_m_s)
-
-    def _enc_gpos(self):
-        f = self._frame
-        s = self._nav_state(f)
-        return codec.global_position_int(self._mav(), f.time_us // 1000, self.origin, self.home_enu_m,
-                                         s.pos_enu_m, s.vel_enu_m_s, s.yaw_enu_rad)
-
-    def _enc_gps(self):
-        f = self._frame
-        return codec.gps_raw_int(self._mav(), f.time_us, self.origin, f.pos_enu_m, f.vel_enu_m_s)
-
-    def _enc_target(self):
-        if self._setpoint is None:
-            return None
-        return codec.position_target_local_ned(self._mav(), self.sim.time_us // 1000, self._setpoint)
-
-    def _enc_home(self):
-        return codec.home_position(self._mav(), self.origin, self.home_enu_m, self.sim.time_us)
-
-    # The per-frame argument builders read float tuples: the frame's
-    # measurement slots and the plant's state (= ``self._frame.truth``, see
-    # ``_nav_state``), not the arrays ``SensorFrame``/``TrueState`` build lazily.
-    def _imu_args(self):
-        f = self._frame
-        return codec.highres_imu_args(f.time_us, f._acc, f._gyro, f._mag,
-                                      self.origin.alt_m + self.sim.plant.p[2])
-
-    def _enc_imu(self):
-        return mavlink.MAVLink_highres_imu_message(*self._imu_args())
-
-    def _raw_imu_args(self):
-        f = self._frame
-        return codec.raw_imu_args(f.time_us, f._acc, f._gyro, f._mag)
-
-    def _enc_raw_imu(self):
-        return mavlink.MAVLink_raw_imu_message(*self._raw_imu_args())
-
-    def _enc_scaled_imu2(self):
-        f = self._frame
-        return codec.scaled_imu2(self._mav(), f.time_us // 1000, f._acc, f._gyro, f._mag)
-
-    def _lpos_args(self):
-        f = self._frame
-        return codec.local_position_ned_args(f.pos_time_us // 1000, f._pos, f._vel)
-
-    def _attitude_q_args(self):
-        return codec.attitude_quaternion_args(self.sim.time_us // 1000, *self._attitude_source())
-
-    def _odometry_args(self):
-        pl = self.sim.plant
-        return codec.odometry_truth_args(self._frame.time_us, pl.p, pl.v, pl.R, pl.w)
-
-    def _enc_odometry(self):
-        return mavlink.MAVLink_odometry_message(*self._odometry_args())
-
-    def _attitude_args(self):
-        return codec.attitude_args(self.sim.time_us // 1000, *self._attitude_source())
-
-    def _enc_truth(self):
-        t = self._frame.truth
-        return codec.odometry_truth(self._mav(), self._frame.time_us, t.pos_enu_m, t.vel_enu_m_s, t.R,
-                                    t.omega_flu_rad_s)
-
-    def _enc_version(self):
-        uid = (0x5A17 << 32) | (self.seed & 0xFFFFFFFF)
-        ap = self.autopilot
-        caps = CAPABILITIES if ap.param_bytewise else (
-            CAPABILITIES & ~mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-            | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
-        return self._mav().autopilot_version_encode(
-            caps, ap.flight_sw_version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid)
 
     # ------------------------------------------------------------------ pacing
     def _pace_reset(self) -> None:
@@ -1148,7 +950,7 @@ class SitlServer:
                 return
             if now - self._last_hb_wall >= 1.0:
                 self._last_hb_wall = now
-                self._broadcast(self._enc_heartbeat())
+                self._broadcast(self.telemetry.heartbeat())
             self._poll(min(0.05, timeout - (now - start) + 1e-3), until_released=True)
 
     def _wait_for_first_peer(self) -> None:
@@ -1174,21 +976,20 @@ class SitlServer:
             return
         for l in links:
             l.begin_frame()
-        for mid in self._schedule:
-            if self._intervals[mid] < 0:
-                continue
-            f = self._fast.get(mid)
+        for mid in self.streams.enabled():
+            f = self.telemetry.fast.get(mid)
             if f is not None:
                 args = f[1]()
                 for l in links:
                     l.send_fast(f[0], args)
                 continue
-            msg = self._encoders[mid]()
+            msg = self.telemetry.encoders[mid]()
             if msg is not None:
                 for l in links:
                     l.send(msg)
-        args = self._frame_imu_args()
-        pack = self._frame_imu_pack
+        tm = self.telemetry
+        args = tm.frame_imu_args()
+        pack = tm.frame_imu_pack
         for l in links:
             l.send_fast(pack, args)
             l.end_frame()
@@ -1375,138 +1176,16 @@ class SitlServer:
         self._command(link, msg, int(msg.command), params, int(msg.frame))
 
     def _command(self, link, msg, command: int, params, int_frame: int | None = None) -> None:
-        handler = self._commands.get(command)
-        result, after = mavlink.MAV_RESULT_UNSUPPORTED, None
-        why = None
-        if handler is not None:
-            landed = not self.stack.armed or self._state().landed
-            why = rules.command_problem(command, params, int_frame=int_frame, landed=landed)
-        if handler is None:
+        """One command through ``mavcore.services.command.CommandServer``: its ACK, then what follows it."""
+        landed = command in self.commands.handlers and (not self.stack.armed or self._state().landed)
+        reply = self.commands.handle(command, params, int_frame, landed)
+        if reply.unsupported:
             self.stats["unsupported"][command] += 1
-        elif why is not None:      # even from an allowed controller
-            result = mavlink.MAV_RESULT_DENIED
-            self._refuse(rules.command_name(command), why)
-        else:
-            self._command_frame = int_frame
-            try:
-                result, after = handler(params)
-            except (ValueError, OverflowError, TypeError):   # unusable parameters
-                result, after = mavlink.MAV_RESULT_DENIED, None
-            except Exception:   # a fault of ours: still exactly one ACK (command protocol)
-                result, after = mavlink.MAV_RESULT_FAILED, None
-        self._reply(link, link.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(),
-                                                      msg.get_srcComponent()))
-        if after is not None:
-            for m in after:
-                self._reply(link, m)
-
-    def _cmd_arm(self, p):
-        now, st = self.sim.time_us, self._state()
-        force = p[1] == codec.ARM_FORCE_MAGIC
-        if p[0] == 1.0:
-            r = self.stack.arm(now, st, force)
-        elif p[0] == 0.0:
-            r = self.stack.disarm(now, st, force)
-        else:
-            return mavlink.MAV_RESULT_DENIED, None
-        return r.result, None
-
-    def _cmd_takeoff(self, p):
-        if self.autopilot.takeoff_alt_relative:     # ArduCopter: metres above home
-            z = float(self.home_enu_m[2]) + float(p[6]) if math.isfinite(p[6]) else None
-        else:
-            z = codec.decode_takeoff_altitude(p[6], self.origin.alt_m)
-        return self.stack.takeoff(self.sim.time_us, self._state(), z).result, None
-
-    def _cmd_land(self, p):
-        return self.stack.land(self.sim.time_us, self._state()).result, None
-
-    def _cmd_rtl(self, p):
-        return self.stack.return_to_launch(self.sim.time_us, self._state()).result, None
-
-    def _cmd_set_mode(self, p):
-        if not all(math.isfinite(x) for x in p[:3]):
-            return mavlink.MAV_RESULT_DENIED, None
-        if not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            return mavlink.MAV_RESULT_DENIED, None
-        mode = self.stack.mode_of(self.autopilot.custom_mode_from_params(p[1], p[2]))
-        return self.stack.set_mode(self.sim.time_us, self._state(), mode).result, None
-
-    def _interval_target(self, mid: int):
-        if mid in self._intervals or mid in (self._frame_imu_id, ID.MAVLINK_MSG_ID_DISTANCE_SENSOR):
-            return True
-        return False
-
-    def _cmd_set_interval(self, p):
-        mid, iv = int(p[0]), p[1]
-        if not math.isfinite(iv):
-            return mavlink.MAV_RESULT_DENIED, None
-        iv = int(iv)
-        if mid == self._frame_imu_id:
-            # Fixed: it is the lockstep frame marker.
-            return (mavlink.MAV_RESULT_ACCEPTED if iv in (0, self._period_us) else mavlink.MAV_RESULT_DENIED), None
-        if mid == ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
-            self._rng_interval_disabled = iv < 0
-            for rf in self.sim.sensors.rangefinders:
-                rf.period_us = (max(1, int(round(1e6 / rf.cfg.rate_hz))) if iv <= 0
-                                else max(self._period_us, iv))
-            return mavlink.MAV_RESULT_ACCEPTED, None
-        if mid not in self._intervals:
-            return mavlink.MAV_RESULT_UNSUPPORTED, None
-        if iv == 0:
-            iv = _default_interval_us(mid) if mid in _DEFAULT_RATES_HZ else -1
-        elif iv < 0:
-            iv = -1
-        else:
-            iv = max(iv, 1)
-        self._intervals[mid] = iv
-        self._next_due[mid] = self.sim.time_us
-        self._reschedule()
-        return mavlink.MAV_RESULT_ACCEPTED, None
-
-    def _cmd_get_interval(self, p):
-        mid = int(p[0])
-        if mid == self._frame_imu_id:
-            iv = self._period_us
-        elif mid in self._intervals:
-            iv = self._intervals[mid]
-        else:
-            return mavlink.MAV_RESULT_UNSUPPORTED, None
-        return mavlink.MAV_RESULT_ACCEPTED, [self._mav().message_interval_encode(mid, iv)]
-
-    def _cmd_request_message(self, p):
-        if not math.isfinite(p[0]):
-            return mavlink.MAV_RESULT_DENIED, None
-        mid = int(p[0])
-        if mid == ID.MAVLINK_MSG_ID_DISTANCE_SENSOR:
-            # the latest reading of each rangefinder (no extra ray cast: that
-            # would draw noise from the simulation's generator)
-            tb = self.sim.time_us // 1000
-            msgs = [codec.distance_sensor(self._mav(), tb, r) for _, r in sorted(self._last_ranges.items())]
-            return (mavlink.MAV_RESULT_ACCEPTED if msgs else mavlink.MAV_RESULT_FAILED), msgs or None
-        enc = self._encoders.get(mid)
-        if enc is None or self._frame is None:
-            return mavlink.MAV_RESULT_UNSUPPORTED, None
-        m = enc()
-        if m is None:
-            return mavlink.MAV_RESULT_FAILED, None
-        return mavlink.MAV_RESULT_ACCEPTED, [m]
-
-    def _cmd_capabilities(self, p):
-        return mavlink.MAV_RESULT_ACCEPTED, [self._enc_version()]
-
-    def _cmd_home(self, p):
-        return mavlink.MAV_RESULT_ACCEPTED, [self._enc_home()]
-
-    def _cmd_mission_start(self, p):
-        return self.stack.mission_start_command(self.sim.time_us, self._state(), p[0], p[1]).result, None
-
-    def _cmd_reposition(self, p):
-        """DO_REPOSITION (MAVSDK ``goto_location``): ``mission_store.reposition_target``."""
-        nav = self._state()
-        target, speed, yaw = mission_store.reposition_target(self.origin, self.home_enu_m, nav.pos_enu_m, p,
-                                                             self._command_frame)
-        return self.stack.reposition(self.sim.time_us, nav, target, speed, yaw).result, None
+        elif reply.refused is not None:
+            self._refuse(rules.command_name(command), reply.refused)
+        self._reply(link, ack_message(link.mav, command, reply, msg.get_srcSystem(), msg.get_srcComponent()))
+        for m in reply.after:
+            self._reply(link, m)
 
     def _on_set_mode(self, link, msg) -> None:
         if msg.target_system != SYSTEM_ID:
@@ -1566,73 +1245,37 @@ class SitlServer:
             self._released = True
 
     # ------------------------------------------------------------------ params
-    def _param_msg(self, mav, i: int):
-        spec, value = self.params.by_index(i)
-        wire = codec.param_to_wire(value, spec.param_type) if self.autopilot.param_bytewise else float(value)
-        return mav.param_value_encode(spec.name.encode("ascii"), wire, spec.param_type, len(self.params), i)
-
     def _on_param_list(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
-        for i in range(len(self.params)):
-            link.reply(self._param_msg(link.mav, i))
+        for i in self.param_server.request_list():
+            link.reply(self.param_server.value_message(link.mav, i))
 
     def _on_param_read(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
-        idx = int(msg.param_index)
-        if idx < 0:
-            name = msg.param_id
-            if name not in self.params:
-                return   # unknown: no reply, as PX4
-            idx = self.params.index(name)
-        elif idx >= len(self.params):
-            return
-        link.reply(self._param_msg(link.mav, idx))
+        r = self.param_server.request_read(msg.param_id, msg.param_index)
+        if r.index is not None:
+            link.reply(self.param_server.value_message(link.mav, r.index))
 
     def _on_param_set(self, link, msg) -> None:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
-        name = msg.param_id
-        if name not in self.params:
-            self._say(SEVERITY_WARNING, f"Unknown parameter {name[:30]}")
-            return
-        if name in READ_ONLY_PARAMS:
-            self._say(SEVERITY_WARNING, f"Param rejected: {name} is read-only")
-            i = self.params.index(name)
-            link.send(self._param_msg(link.mav, i))
-            return
-        spec = self.params.spec(name)
-        if (spec.param_type == PARAM_TYPE_INT32 and int(msg.param_type) == PARAM_TYPE_INT32
-                and self.autopilot.param_bytewise):
-            value = codec.param_from_wire(msg.param_value, PARAM_TYPE_INT32)
-        else:
-            value = float(msg.param_value)
-        r = self.params.set(name, value)
-        if r.ok:
+        r = self.param_server.set(msg.param_id, msg.param_value, msg.param_type)
+        if r.warning is not None:
+            self._say(SEVERITY_WARNING, r.warning)
+        if r.applied:
             self._apply_params()
-        else:
-            self._say(SEVERITY_WARNING, f"Param rejected: {r.reason}")
-        i = self.params.index(name)
-        for l in self.links:
+        if r.index is None:
+            return
+        for l in (self.links if r.to_all else (link,)):
             if l.has_peer:
-                l.send(self._param_msg(l.mav, i))
+                l.send(self.param_server.value_message(l.mav, r.index))
 
     # ------------------------------------------------------------------ missions
     def _send_mission_replies(self, link, peer, replies, addr=None) -> None:
-        ts, tc = peer
         for r in replies:
-            if isinstance(r, SendRequest):
-                m = link.mav.mission_request_int_encode(ts, tc, r.seq, r.mission_type)
-            elif isinstance(r, SendCount):
-                m = link.mav.mission_count_encode(ts, tc, r.count, r.mission_type)
-            elif isinstance(r, SendItem):
-                m = codec.mission_item_int(link.mav, ts, tc, r.item)
-            elif isinstance(r, SendAck):
-                m = link.mav.mission_ack_encode(ts, tc, r.result, r.mission_type)
-            else:   # pragma: no cover
-                continue
-            link.reply(m, addr)
+            link.reply(encode_reply(link.mav, peer[0], peer[1], r), addr)
 
     def _peer(self, msg):
         return msg.get_srcSystem(), msg.get_srcComponent()

@@ -60,7 +60,7 @@ def snapshot(server, gcs, z0) -> dict:
     assert -lp.z - z0 == pytest.approx(HOLD_Z_M, abs=0.3)
     return {"mode": st.mode.label, "armed": st.armed, "failsafe": st.failsafe, "override": st.override_active,
             "params": tuple(server.params.by_index(i)[1] for i in range(len(server.params))),
-            "intervals": dict(server._intervals), "mission": server.missions.items}
+            "intervals": dict(server.streams.intervals), "mission": server.missions.items}
 
 
 def long_(cmd, *p):

@@ -203,7 +203,8 @@ def test_sitl_reports_the_battery_and_refuses_a_mission_it_cannot_hold():
 
     from companion.link import Connection
     from mavcore import codec
-    from companion.link.mission_upload import MissionRejected, upload_mission
+    from mavcore.services.mission import MissionRejected, MissionUploadClient
+    from service_driver import drive
     from sitl.api import SitlThread
 
     with SitlThread(FLAT, speed=4.0) as sitl:
@@ -234,7 +235,8 @@ def test_sitl_reports_the_battery_and_refuses_a_mission_it_cannot_hold():
             items = [codec.encode_mission_item_int(conn.mav, i, (0.0, 0.0, 2.0), 44.8, -0.6, 30.0)
                      for i in range(2001)]
             with pytest.raises(MissionRejected) as exc:
-                upload_mission(conn, items, capacity=load_mission(FLAT).energy.max_mission_items)
+                drive(conn, MissionUploadClient(conn.mav, conn.target_system, conn.target_component, items,
+                                                capacity=load_mission(FLAT).energy.max_mission_items))
             assert exc.value.result == mavlink.MAV_MISSION_NO_SPACE
             assert "no space: 2001 items, vehicle holds 2000" in str(exc.value)
         finally:

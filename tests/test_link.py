@@ -17,7 +17,9 @@ from mavcore import frames
 from mavcore.errors import CommandRejected, InputError, LinkError
 from mavcore import codec
 from companion.link.connection import Connection, check_connection_string
-from companion.link.mission_upload import MissionRejected, upload_mission
+from mavcore.services.command import CommandClient
+from mavcore.services.mission import MissionRejected, MissionUploadClient
+from service_driver import drive
 from companion.link.tlog import TlogWriter, read_tlog
 
 
@@ -367,7 +369,17 @@ class _ScriptedVehicle(threading.Thread):
         self.sock.close()
 
 
+def command(conn, cmd, params=(), **kw):
+    return CommandClient(conn.mav, conn.target_system, conn.target_component, cmd, params, **kw)
+
+
+def upload(conn, items, **kw):
+    return MissionUploadClient(conn.mav, conn.target_system, conn.target_component, items, **kw)
+
+
 def test_heartbeat_command_and_mission_upload_over_udp():
+    """The companion's client state machines (``mavcore.services``) over real UDP with a
+    scripted vehicle that drops the first MISSION_COUNT: the count is re-sent."""
     port = _free_udp_port()
     veh = _ScriptedVehicle(port, drop_first_count=True, reject_cmd=mavlink.MAV_CMD_NAV_TAKEOFF)
     veh.start()
@@ -377,15 +389,15 @@ def test_heartbeat_command_and_mission_upload_over_udp():
     try:
         hb = conn.wait_heartbeat(timeout_s=5.0)
         assert hb.get_srcSystem() == 1 and hb.get_srcComponent() == 1
-        ack = conn.command_long(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1,), timeout_s=1.0)
+        ack = drive(conn, command(conn, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1,), timeout_s=1.0))
         assert ack.result == mavlink.MAV_RESULT_ACCEPTED
         with pytest.raises(CommandRejected) as exc:
-            conn.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, timeout_s=1.0)
+            drive(conn, command(conn, mavlink.MAV_CMD_NAV_TAKEOFF, timeout_s=1.0))
         assert exc.value.result == 4
         home = (44.8, -0.6, 30.0)
         wps = [(float(i), 2.0 * i, 1.5) for i in range(7)]
         items = [codec.encode_mission_item_int(conn.mav, i, p, *home) for i, p in enumerate(wps)]
-        assert upload_mission(conn, items, timeout_s=0.3) == 7
+        assert drive(conn, upload(conn, items, timeout_s=0.3)) == 7
         got = [codec.decode_mission_item_int(veh.items[i], *home) for i in range(7)]
         np.testing.assert_allclose(got, wps, atol=0.012)
         assert any(m.get_type() == "HEARTBEAT" for m in seen)   # others went to the handler
@@ -402,15 +414,15 @@ def test_mission_rejected_and_link_timeout():
     try:
         # nobody answers: a LinkError, not a hang
         with pytest.raises(LinkError):
-            conn.command_long(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1,), timeout_s=0.05, retries=2)
+            drive(conn, command(conn, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1,), timeout_s=0.05, sends=2))
         # the vehicle NACKs the count
         mav = _vehicle_mav()
         _, peer = rx.recvfrom(4096)
         rx.sendto(mav.heartbeat_encode(2, 12, 0, 0, 3).pack(mav), peer)   # binds the vehicle's address
         rx.sendto(mav.mission_ack_encode(191, 1, mavlink.MAV_MISSION_NO_SPACE, 0).pack(mav), peer)
         with pytest.raises(MissionRejected) as exc:
-            upload_mission(conn, [codec.encode_mission_item_int(conn.mav, 0, (0, 0, 1), 0.0, 0.0, 0.0)],
-                           timeout_s=0.5)
+            drive(conn, upload(conn, [codec.encode_mission_item_int(conn.mav, 0, (0, 0, 1), 0.0, 0.0, 0.0)],
+                               timeout_s=0.5))
         assert exc.value.result == mavlink.MAV_MISSION_NO_SPACE
     finally:
         rx.close()

@@ -43,7 +43,7 @@ def test_every_handled_message_is_classified():
               mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_MISSION_START, mavlink.MAV_CMD_DO_REPOSITION}
     reads = {mavlink.MAV_CMD_GET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE,
              mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, mavlink.MAV_CMD_GET_HOME_POSITION}
-    assert set(server._commands) == writes | reads
+    assert set(server.commands.handlers) == writes | reads
     for cmd in writes:
         assert is_control("COMMAND_LONG", cmd) and is_control("COMMAND_INT", cmd)
     for cmd in READ_ONLY_COMMANDS:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 
 import math
 
@@ -13,8 +12,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from mavcore.codec import PositionTarget
 from sitl.flightstack import (
     IDLE_MOTOR_CMD, PARAM_SPECS, RESULT_ACCEPTED, RESULT_DENIED, RESULT_TEMPORARILY_REJECTED,
-    FlightMode, FlightStack, MissionItem, MissionProtocol, NavState, Parameters, SendAck, SendCount,
-    SendItem, SendRequest,
+    FlightMode, FlightStack, NavState, Parameters,
 )
 
 S = 1_000_000   # us per second
@@ -252,66 +250,6 @@ def test_parameters_typed_and_bounded():
     assert all(len(s.name) <= 16 for s in PARAM_SPECS)
     with pytest.raises(ValueError):
         Parameters(initial={"SIM_VEC_VAR": -1.0})
-
-
-def item(seq, lat=448000000):
-    return MissionItem(seq, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mavlink.MAV_CMD_NAV_WAYPOINT, 0, 1,
-                       0.0, 0.0, 0.0, 0.0, lat + seq, -6000000, 2.0)
-
-
-def test_mission_upload_download_clear():
-    mp = MissionProtocol()
-    assert mp.handle_count(3, 0, 0.0) == [SendRequest(0, 0)]
-    assert mp.handle_item(item(0), 0.1) == [SendRequest(1, 0)]
-    assert mp.handle_item(item(0), 0.1) == [SendRequest(1, 0)]          # duplicate: ask again
-    assert mp.handle_item(item(2), 0.1) == [SendRequest(1, 0)]          # skipped: ask for the gap
-    assert mp.handle_item(item(1), 0.2) == [SendRequest(2, 0)]
-    assert mp.handle_item(item(2), 0.3) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 0)]
-    assert mp.items == (item(0), item(1), item(2))
-    assert mp.handle_request_list(0) == [SendCount(3, 0)]
-    assert mp.handle_request(1, 0) == [SendItem(item(1))]
-    assert mp.handle_request(3, 0) == [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, 0)]
-    assert mp.handle_request_list(1) == [SendCount(0, 1)]               # fence: empty
-    # the fence list is stored apart from the mission (issue 17); unknown types are refused
-    fence = [dataclasses.replace(item(i), command=5001, param1=3.0, mission_type=1) for i in range(3)]
-    assert mp.handle_count(3, 1, 0.0) == [SendRequest(0, 1)]
-    assert mp.handle_item(item(0), 0.1) == [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, 0)]  # wrong type
-    for f in fence[:2]:
-        mp.handle_item(f, 0.1)
-    assert mp.handle_item(fence[2], 0.1) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 1)]
-    assert mp.stored[1] == tuple(fence) and mp.items == (item(0), item(1), item(2))
-    assert mp.handle_request_list(1) == [SendCount(3, 1)]
-    assert mp.handle_count(2, 7, 0.0) == [SendAck(mavlink.MAV_MISSION_UNSUPPORTED, 7)]
-    assert mp.handle_clear_all(0) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 0)]
-    assert mp.items == () and mp.stored[1] == tuple(fence)
-    assert mp.handle_clear_all(mavlink.MAV_MISSION_TYPE_ALL) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 255)]
-    assert mp.stored[1] == ()
-
-
-def test_mission_lost_ack_duplicate_last_item_is_acked_again():
-    # PX4 (PR #9547): the peer re-sends the last item when our ACCEPTED got lost.
-    mp = MissionProtocol()
-    mp.handle_count(2, 0, 0.0)
-    mp.handle_item(item(0), 0.1)
-    assert mp.handle_item(item(1), 0.2) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 0)]
-    assert mp.handle_item(item(1), 0.3) == [SendAck(mavlink.MAV_MISSION_ACCEPTED, 0)]
-    assert mp.items == (item(0), item(1))
-    # any other stray item, or the last one after another transfer, is still an error
-    assert mp.handle_item(item(0), 0.4) == [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, 0)]
-    mp.handle_request_list(0)
-    assert mp.handle_item(item(1), 0.5) == [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, 0)]
-
-
-def test_mission_upload_retries_then_gives_up():
-    mp = MissionProtocol()
-    mp.handle_count(2, 0, 0.0)
-    t, replies = 0.0, []
-    for _ in range(MissionProtocol.MAX_RETRIES):
-        t += MissionProtocol.RETRY_S
-        replies = mp.tick(t)
-        assert replies == [SendRequest(0, 0)]
-    assert mp.tick(t + MissionProtocol.RETRY_S) == [SendAck(mavlink.MAV_MISSION_OPERATION_CANCELLED, 0)]
-    assert not mp.uploading and mp.handle_item(item(0), t) == [SendAck(mavlink.MAV_MISSION_INVALID_SEQUENCE, 0)]
 
 
 def test_idle_constant_is_below_hover():

@@ -115,10 +115,10 @@ def test_command_results(gcs):
 
 def test_command_fault_still_acked_failed(sitl, gcs):
     # A handler that breaks must not leave the sender waiting: one ACK, FAILED.
-    cmds = sitl.server._commands
+    cmds = sitl.server.commands.handlers
     orig = cmds[mavlink.MAV_CMD_GET_HOME_POSITION]
 
-    def broken(p):
+    def broken(p, int_frame):
         raise RuntimeError("boom")
     cmds[mavlink.MAV_CMD_GET_HOME_POSITION] = broken
     try:

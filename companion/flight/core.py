@@ -75,6 +75,10 @@ from ..control.observer import heading_from_accel_mag
 from ..control.rates import normalised_thrust, vehicle_hover_thrust
 from mavcore.errors import CommandRejected, LinkError
 from mavcore import codec
+from mavcore.services.command import COMMAND_SENDS, CommandClient, command_long
+from mavcore.services.mission import MissionUploadClient
+from mavcore.services.params import ParamReadClient
+from mavcore.services.telemetry import stream_requests
 from ..link.obstacle_distance import ObstacleDistancePublisher, encode_obstacle_distance
 from ..report import FlightReport, ReplanningStats, TrackingStats
 from ..replan.perception import propagated_pose
@@ -113,10 +117,6 @@ _NAN3 = (math.nan, math.nan, math.nan)
 _NAN9 = (math.nan,) * 9
 _NAN_CTRL = (math.nan,) * 10
 _Z3 = (0.0, 0.0, 0.0)
-#: Sends of a COMMAND_LONG without an answer before the flight stops (one per
-#: ``command_timeout_s``): on a link losing 20 % each way a command and its ACK
-#: both pass with p = 0.64, so 3 sends fail 4.7 % of the time, 8 sends 0.03 %.
-COMMAND_SENDS = 8
 #: Frames of reference kept to match late position measurements (0.5 s at 250 Hz).
 REF_HISTORY_FRAMES = 128
 #: A replanned trajectory phase longer than this factor times the plan's, plus
@@ -392,11 +392,7 @@ class FlightCore:
 
     def _init_protocol(self) -> None:
         """The command / mission / parameter protocol plumbing of the procedure and the receive table."""
-        self._ack = None
-        self._ack_for = None
-        self._mission_msg = None
-        self._param = None
-        self._param_for = None
+        self._client = None             # the service transaction under way (``_run``)
         #: The vehicle waits for every answer (the bundled SITL's SIM_LOCKSTEP = 1):
         #: link delay then costs wall time, not control (``companion.flight.health``).
         self.vehicle_lockstep = False
@@ -412,11 +408,11 @@ class FlightCore:
             "EXTENDED_SYS_STATE": self._on_ext_state,
             "DISTANCE_SENSOR": self._on_distance,
             "STATUSTEXT": self._on_statustext,
-            "COMMAND_ACK": self._on_command_ack,
-            "MISSION_REQUEST_INT": self._on_mission_msg,
-            "MISSION_REQUEST": self._on_mission_msg,
-            "MISSION_ACK": self._on_mission_msg,
-            "PARAM_VALUE": self._on_param_value,
+            "COMMAND_ACK": self._on_service_msg,
+            "MISSION_REQUEST_INT": self._on_service_msg,
+            "MISSION_REQUEST": self._on_service_msg,
+            "MISSION_ACK": self._on_service_msg,
+            "PARAM_VALUE": self._on_service_msg,
         }
 
     # --- the runner's face ----------------------------------------------------------
@@ -501,9 +497,7 @@ class FlightCore:
                 # OFFBOARD and the arming may be on their way with no answer yet:
                 # a disarm (once; a disarmed vehicle just refuses it) so that
                 # the vehicle is not left armed on the ground without setpoints.
-                self._emit(self.enc.command_long_encode(self.ts, self.tc,
-                                                        mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0,
-                                                        0, 0, 0, 0, 0, 0, 0))
+                self._emit(command_long(self.enc, self.ts, self.tc, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (0,)))
             self._stop("end")
         # landing, holding, released: what is under way goes on
 
@@ -533,6 +527,9 @@ class FlightCore:
     def _emit(self, msg) -> None:
         self.outbox.append(msg)
 
+    def _emit_all(self, msgs) -> None:
+        self.outbox.extend(msgs)
+
     def _drive(self) -> None:
         while self._proc is not None:
             w = self._waiting
@@ -559,12 +556,27 @@ class FlightCore:
         self.monitor.fail(self.t_s, kind, detail, action, **values)
         self._stop(self.cfg.on_failure if action == "land" else action)
 
-    def _elapsed(self, t0: float) -> float:
-        return (self.t_s - t0) if (self.t_s is not None and t0 is not None) else 0.0
+    def _run(self, client, effect=None):
+        """Drive a client state machine of ``mavcore.services`` on the vehicle clock
+        (generator; returns its outcome, raises its error). Its answers come in
+        through ``_on_service_msg``; ``effect``: a predicate on the vehicle's
+        reported state that ends a command without its ACK."""
+        seen = (lambda: False) if effect is None else effect
+        self._client = client
+        try:
+            self._emit_all(client.start(self.t_s))
+            while not client.done:
+                yield lambda: client.done or client.due(self.t_s, seen())
+                self._emit_all(client.tick(self.t_s, seen()))
+        finally:   # also when the procedure is closed (``_stop``) while it waits
+            if self._client is client:
+                self._client = None
+        return client.outcome()
 
     def _command(self, command: int, params=(), what: str = "", retries: int | None = None, temp_retries: int = 0,
                  optional: bool = False, effect=None):
-        """Send COMMAND_LONG, wait for its COMMAND_ACK (generator; returns the ACK or None).
+        """COMMAND_LONG until its COMMAND_ACK (generator; returns the ACK or None):
+        ``mavcore.services.command.CommandClient``.
 
         ``effect``: a predicate on the vehicle's reported state that shows the
         command was carried out (say AUTO.LAND in HEARTBEAT). When it holds
@@ -575,99 +587,20 @@ class FlightCore:
         Raises CommandRejected on a final refusal, LinkError when unanswered
         after ``retries`` sends (unless ``optional``: then returns None).
         """
-        p = [float(x) for x in params]
-        p += [0.0] * (7 - len(p))
-        if retries is None:
-            retries = COMMAND_SENDS
-        sends = temps = 0
-        timeout = self.cfg.command_timeout_s
-        while True:
-            self._ack = None
-            self._ack_for = command
-            self._emit(self.enc.command_long_encode(self.ts, self.tc, command, min(sends, 255), *p[:7]))
-            sends += 1
-            t0 = self.t_s
-            while True:
-                yield lambda: (self._ack is not None or self._elapsed(t0) > timeout
-                               or (effect is not None and effect()))
-                ack = self._ack
-                if ack is None and effect is not None and effect():
-                    self._ack_for = None
-                    return None
-                if ack is not None and ack.result == mavlink.MAV_RESULT_IN_PROGRESS:
-                    self._ack = None
-                    t0 = self.t_s
-                    continue
-                break
-            self._ack_for = None
-            if ack is None:
-                if sends >= retries:
-                    if optional:
-                        return None
-                    raise LinkError(f"no COMMAND_ACK for command {command}{' (' + what + ')' if what else ''} "
-                                    f"after {sends} tries")
-                continue
-            if ack.result == mavlink.MAV_RESULT_ACCEPTED:
-                return ack
-            if ack.result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED and temps < temp_retries:
-                temps += 1
-                t1 = self.t_s
-                yield lambda: self._elapsed(t1) >= 0.5
-                continue
-            if optional:
-                return None
-            raise CommandRejected(command, int(ack.result), what)
+        client = CommandClient(self.enc, self.ts, self.tc, command, params, what, self.cfg.command_timeout_s,
+                               COMMAND_SENDS if retries is None else retries, temp_retries, optional)
+        return (yield from self._run(client, effect))
 
     def _upload(self, items: list, mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION, retries: int = 5):
-        """The MISSION_INT upload protocol (generator; https://mavlink.io/en/services/mission.html)."""
-        from ..link.mission_upload import MissionRejected
-
-        n = len(items)
-        count = self.enc.mission_count_encode(self.ts, self.tc, n, mission_type)
-        self._mission_msg = None
-        self._emit(count)
-        last_sent = None
-        misses = 0
-        timeout = self.cfg.command_timeout_s
-        while True:
-            t0 = self.t_s
-            yield lambda: self._mission_msg is not None or self._elapsed(t0) > timeout
-            m = self._mission_msg
-            self._mission_msg = None
-            if m is None:
-                misses += 1
-                if misses > retries:
-                    raise LinkError("mission upload stalled "
-                                    f"({'no request' if last_sent is None else f'after item {last_sent}'})")
-                self._emit(count if last_sent is None else items[last_sent])
-                continue
-            if getattr(m, "mission_type", mission_type) != mission_type:
-                continue
-            misses = 0
-            if m.get_type() == "MISSION_ACK":
-                if m.type == mavlink.MAV_MISSION_ACCEPTED and (n == 0 or last_sent == n - 1):
-                    return n
-                if m.type != mavlink.MAV_MISSION_ACCEPTED:
-                    raise MissionRejected(int(m.type))
-                continue   # a stale ACK of an earlier transaction
-            seq = int(m.seq)
-            if not 0 <= seq < n:
-                raise MissionRejected(mavlink.MAV_MISSION_INVALID_SEQUENCE)
-            self._emit(items[seq])
-            last_sent = seq
+        """The MISSION_INT upload (generator): ``mavcore.services.mission.MissionUploadClient``."""
+        return (yield from self._run(MissionUploadClient(self.enc, self.ts, self.tc, items, mission_type,
+                                                         self.cfg.command_timeout_s, retries)))
 
     def _param_read(self, name: str, tries: int = 2):
-        """PARAM_REQUEST_READ (generator): the PARAM_VALUE, or None when the vehicle has no such parameter."""
-        self._param_for = name
-        for _ in range(tries):
-            self._param = None
-            self._emit(self.enc.param_request_read_encode(self.ts, self.tc, name.encode(), -1))
-            t0 = self.t_s
-            yield lambda: self._param is not None or self._elapsed(t0) > self.cfg.command_timeout_s
-            if self._param is not None:
-                break
-        self._param_for = None
-        return self._param
+        """PARAM_REQUEST_READ (generator): the PARAM_VALUE, or None when the vehicle has no such
+        parameter (``mavcore.services.params.ParamReadClient``)."""
+        return (yield from self._run(ParamReadClient(self.enc, self.ts, self.tc, name, self.cfg.command_timeout_s,
+                                                     tries)))
 
     def _set_interval(self, msg_id: int, interval_us: float, optional: bool = False):
         return (yield from self._command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, interval_us),
@@ -683,13 +616,9 @@ class FlightCore:
             for text, seq in setup_chunks(self.inputs.setup):
                 self._emit(self.enc.statustext_encode(MAV_SEVERITY_DEBUG, text, SETUP_TEXT_ID, seq))
         yield lambda: self.period_us is not None
-        yield from self._set_interval(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, self.period_us)
-        if cfg.request_truth:
-            yield from self._set_interval(mavlink.MAVLINK_MSG_ID_ODOMETRY, self.period_us, optional=True)
-        for mid in cfg.mute_streams:
-            yield from self._set_interval(mid, -1, optional=True)
-        for mid, hz in cfg.low_rate_streams:
-            yield from self._set_interval(mid, 1e6 / hz, optional=True)
+        for mid, interval, optional in stream_requests(self.period_us, cfg.request_truth, cfg.mute_streams,
+                                                       cfg.low_rate_streams):
+            yield from self._set_interval(mid, interval, optional=optional)
         pv = yield from self._param_read("SIM_LOCKSTEP")
         self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv, self.autopilot.param_bytewise) == 1
         if self._rates:
@@ -1019,16 +948,10 @@ class FlightCore:
         if v is not None:
             self._react(v)
 
-    def _on_command_ack(self, m) -> None:
-        if self._ack_for is not None and m.command == self._ack_for:
-            self._ack = m
-
-    def _on_mission_msg(self, m) -> None:
-        self._mission_msg = m
-
-    def _on_param_value(self, m) -> None:
-        if self._param_for is not None and m.param_id == self._param_for:
-            self._param = m
+    def _on_service_msg(self, m) -> None:
+        """A command, mission or parameter answer: to the transaction under way."""
+        if self._client is not None and self._proc is not None:
+            self._emit_all(self._client.on_message(m, self.t_s))
 
     def _react(self, v: Violation) -> None:
         if v.action == "land":

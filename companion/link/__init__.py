@@ -1,9 +1,7 @@
-"""MAVLink link of the companion: codec (the only NED/FRD module), connection,
-.tlog recorder/reader and the mission upload protocol."""
+"""MAVLink link of the companion: connection and .tlog recorder/reader (the
+protocols it speaks are ``mavcore.services``)."""
 
 from .connection import Connection, check_connection_string
-from .mission_upload import MissionRejected, upload_mission
 from .tlog import TlogRecord, TlogWriter, read_tlog
 
-__all__ = ["Connection", "check_connection_string", "MissionRejected", "upload_mission",
-           "TlogRecord", "TlogWriter", "read_tlog"]
+__all__ = ["Connection", "check_connection_string", "TlogRecord", "TlogWriter", "read_tlog"]

@@ -29,11 +29,11 @@ from __future__ import annotations
 import os
 import select
 import time
-from typing import Callable, Iterable
+from typing import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from mavcore.errors import CommandRejected, InputError, LinkError, UnsafeMessage
+from mavcore.errors import InputError, LinkError, UnsafeMessage
 from mavcore import codec
 from mavcore.link.command_rules import actuator_problem, outgoing_problem
 from .auth import FRAME_TYPES, LinkStats, VehicleFilter
@@ -522,48 +522,3 @@ class Connection:
     def _is_vehicle_heartbeat(self, m) -> bool:
         return (m.get_type() == "HEARTBEAT" and m.get_srcSystem() == self.target_system
                 and m.get_srcComponent() == self.target_component)
-
-    # --- commands ---------------------------------------------------------------
-
-    def command_long(self, command: int, params: Iterable[float] = (), timeout_s: float = 5.0,
-                     retries: int = 3, what: str = ""):
-        """Send COMMAND_LONG and wait for its COMMAND_ACK.
-
-        Other messages received meanwhile go to ``self.handler`` (the runner
-        keeps answering lockstep frames while it waits).
-
-        Returns
-        -------
-        The COMMAND_ACK message (result MAV_RESULT_ACCEPTED).
-
-        Raises
-        ------
-        CommandRejected
-            The vehicle answered with another MAV_RESULT.
-        LinkError
-            No COMMAND_ACK after ``retries`` sends, ``timeout_s`` each.
-        """
-        p = [float(x) for x in params]
-        p += [0.0] * (7 - len(p))
-        for confirmation in range(max(1, retries)):
-            self.send(self._mav.command_long_encode(self.target_system, self.target_component, command,
-                                                    confirmation, *p[:7]))
-            try:
-                ack = self.wait_for(lambda m: m.get_type() == "COMMAND_ACK" and m.command == command,
-                                    timeout_s, f"COMMAND_ACK for command {command}")
-            except LinkError:
-                continue
-            if ack.result == mavlink.MAV_RESULT_IN_PROGRESS:
-                ack = self.wait_for(lambda m: m.get_type() == "COMMAND_ACK" and m.command == command
-                                    and m.result != mavlink.MAV_RESULT_IN_PROGRESS, timeout_s,
-                                    f"final COMMAND_ACK for command {command}")
-            if ack.result != mavlink.MAV_RESULT_ACCEPTED:
-                raise CommandRejected(command, int(ack.result), what)
-            return ack
-        raise LinkError(f"{self.url}: no COMMAND_ACK for command {command}{' (' + what + ')' if what else ''} "
-                        f"after {max(1, retries)} tries")
-
-    def set_message_interval(self, msg_id: int, interval_us: int, **kw):
-        """MAV_CMD_SET_MESSAGE_INTERVAL (interval in microseconds; -1 disables)."""
-        return self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, interval_us), what="set message interval",
-                                 **kw)
