@@ -140,3 +140,30 @@ def test_distance_never_exceeds_the_true_one_and_exact_mode_is_exact():
     fast = m.distance(q)
     assert np.all(fast <= truth + 1e-12)
     assert np.all(fast >= truth - math.sqrt(3.0) * V / 2 - 1e-12)
+
+
+def test_a_small_query_is_brute_force_and_gives_the_k_d_trees_numbers():
+    """Few (point, voxel) pairs (the guard's two points a frame) skip the k-d tree; the
+    answer is the same number, bit for bit, as the tree's (a batch too large for the
+    brute path), within the true distance's bounds, and exact for a hand-worked box."""
+    from companion.replan.voxmap import K_NEAR, SMALL_PAIRS
+
+    rng = np.random.default_rng(11)
+    for n in (1, K_NEAR, K_NEAR + 1, 40, SMALL_PAIRS // 2):
+        m = ObstacleMap(V)
+        while len(m) < n:
+            a, z = rng.uniform(0.0, 2.0 * math.pi), rng.uniform(0.0, 2.0)
+            m.add((10.0 + 0.4 * math.cos(a), 5.0 + 0.4 * math.sin(a), z))
+        q = rng.uniform([8.0, 3.0, -0.5], [12.0, 7.0, 2.5], (SMALL_PAIRS + 1, 3))   # tree: > SMALL_PAIRS pairs
+        tree = m.distance(q)
+        small = np.concatenate([m.distance(q[i:i + 2]) for i in range(0, len(q), 2)])
+        assert len(m) * 2 <= SMALL_PAIRS
+        np.testing.assert_array_equal(small, tree)
+        centres = (m.keys() + 0.5) * V
+        truth = _box_distance(q[:, None, :], centres[None], V / 2).min(axis=1)
+        assert np.all(small <= truth + 1e-12)
+        assert np.all(small >= truth - math.sqrt(3.0) * V / 2 - 1e-12)
+    m = ObstacleMap(V)
+    m.add((0.05, 0.05, 0.05))                         # the box [0, 0.1]^3, brute path
+    np.testing.assert_allclose(m.distance(np.array([[0.5, 0.05, 0.05], [-0.3, -0.4, 0.05]])), [0.4, 0.5],
+                               atol=1e-12)
