@@ -8,6 +8,8 @@ column 0 the westernmost, so ``row`` grows with the map's y (north) and
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -158,6 +160,43 @@ class ElevationModel:
             ok &= ~(nodata & (wi != 0.0))
             z += wi * np.where(nodata, 0.0, vi)
         return z, ok
+
+    def height_one(self, x: float, y: float) -> float:
+        """``float(height_at(x, y))`` of one point in plain floats: the same operations in
+        the same order (so the same number, bit for bit), ~20x cheaper than the arrays for
+        a per-frame query. Points outside the extent, non-finite ones and those whose
+        corners hold NODATA take the array path (and its error)."""
+        x, y = float(x), float(y)
+        x_min, x_max, y_min, y_max = self.extent_m
+        tol = 1e-9 * max(1.0, self.cellsize_m)
+        if not (x_min - tol <= x <= x_max + tol and y_min - tol <= y <= y_max + tol):
+            return float(self.height_at(x, y))
+        rows, cols = self.heights_m.shape
+        fc = (x - self.x0_m) / self.cellsize_m
+        fr = (y - self.y0_m) / self.cellsize_m
+        if cols == 1:
+            c0 = c1 = 0
+            tx = 0.0
+        else:
+            c0 = min(max(math.floor(fc), 0), cols - 2)
+            c1, tx = c0 + 1, fc - c0
+        if rows == 1:
+            r0 = r1 = 0
+            ty = 0.0
+        else:
+            r0 = min(max(math.floor(fr), 0), rows - 2)
+            r1, ty = r0 + 1, fr - r0
+        z_grid = self.heights_m
+        v0, v1, v2, v3 = (float(z_grid[r0, c0]), float(z_grid[r0, c1]), float(z_grid[r1, c0]),
+                          float(z_grid[r1, c1]))
+        if v0 != v0 or v1 != v1 or v2 != v2 or v3 != v3:      # NODATA among the corners
+            return float(self.height_at(x, y))
+        z = 0.0
+        z += (1 - ty) * (1 - tx) * v0
+        z += (1 - ty) * tx * v1
+        z += ty * (1 - tx) * v2
+        z += ty * tx * v3
+        return z
 
     def covers(self, x, y) -> np.ndarray:
         """True where ``height_at`` is defined: inside the extent, no NODATA used.
