@@ -131,7 +131,7 @@ class ObstacleMap:
             self._keys = np.array(list(self._l.keys()), dtype=np.int64).reshape(-1, 3)
             self._centres = (self._keys + 0.5) * self.voxel_m
             self._points = np.array([self._first[k] for k in self._l], dtype=float).reshape(-1, 3)
-            self._tree = cKDTree(self._centres)
+            self._tree = None          # built on the first query that needs it (``distance``)
             self._conf = np.fromiter((k in self._confirmed for k in self._l), dtype=bool, count=len(self._l))
             self._box = (*self._points.min(axis=0).tolist(), *self._points.max(axis=0).tolist())
         else:
@@ -268,6 +268,8 @@ class ObstacleMap:
         todo = np.arange(len(P))
         for k in (K_NEAR, *_K_EXACT) if exact else (K_NEAR,):
             k = min(k, n)
+            if self._tree is None:
+                self._tree = cKDTree(self._centres)
             dc, ii = self._tree.query(P[todo], k=k)
             dc, ii = dc.reshape(len(todo), k), ii.reshape(len(todo), k)
             b = _box_distance(P[todo][:, None, :], self._centres[ii], h).min(axis=1)
