@@ -218,11 +218,14 @@ class Rangefinder:
             oz += r20 * bx + r21 * by + r22 * bz
         lim = self.cfg.max_m
         best = math.inf
+        # one origin for the whole fan: its ground height and the obstacles within reach, once
+        ground = world.terrain.height(ox, oy)
+        near = world.near_obstacles(ox, oy, oz, lim)
         for bx, by, bz in self.rays:
             dx = r00 * bx + r01 * by + r02 * bz
             dy = r10 * bx + r11 * by + r12 * bz
             dz = r20 * bx + r21 * by + r22 * bz
-            t = world.raycast(ox, oy, oz, dx, dy, dz, lim)
+            t = world.raycast(ox, oy, oz, dx, dy, dz, lim, ground, near)
             if t < best:
                 best = t
                 lim = t
