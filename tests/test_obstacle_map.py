@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from companion.replan.perception import BeamEvidence
 from companion.replan.voxmap import (CANDIDATE_LIFETIME_S, L_CANDIDATE, L_HIT, L_MAX, L_MISS, ObstacleMap,
@@ -167,3 +168,25 @@ def test_a_small_query_is_brute_force_and_gives_the_k_d_trees_numbers():
     m.add((0.05, 0.05, 0.05))                         # the box [0, 0.1]^3, brute path
     np.testing.assert_allclose(m.distance(np.array([[0.5, 0.05, 0.05], [-0.3, -0.4, 0.05]])), [0.4, 0.5],
                                atol=1e-12)
+
+
+def test_points_lower_bound_never_exceeds_a_points_distance():
+    """The bounding box's distance (the replanner skips its per-point threat and
+    closest-range scans with it): hand-worked outside the box, 0 inside, inf empty,
+    and never above the distance to any point, however the distance is summed."""
+    m = ObstacleMap(V)
+    assert m.points_lower_bound((0.0, 0.0, 0.0)) == math.inf
+    m.add((1.05, 2.05, 1.05))
+    m.add((3.05, 2.55, 1.45))
+    # the box of the points: x 1.05..3.05, y 2.05..2.55, z 1.05..1.45
+    assert m.points_lower_bound((0.05, 2.3, 1.2)) == pytest.approx(1.0, abs=1e-8)
+    assert m.points_lower_bound((4.05, 0.05, 2.45)) == pytest.approx(math.sqrt(1.0 + 4.0 + 1.0), abs=1e-8)
+    assert m.points_lower_bound((2.0, 2.3, 1.2)) < 0.0           # inside the box
+    rng = np.random.default_rng(2)
+    for _ in range(30):
+        m.add(rng.uniform(0.0, 3.0, 3))
+    pts = m.points()
+    for p in rng.uniform(-3.0, 6.0, (500, 3)):
+        rel = pts - p
+        assert m.points_lower_bound(p) <= np.sqrt(np.einsum("ki,ki->k", rel, rel)).min()
+        assert m.points_lower_bound(p) <= np.linalg.norm(rel, axis=1).min()

@@ -740,6 +740,10 @@ class Replanner:
         pts = self._points()
         if not len(pts):
             return None
+        speed = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+        reach = self._trigger_m(speed) + extra_m
+        if self.memory.points_lower_bound(p) > reach:
+            return None                     # every point is out of the trigger range
         rel = pts - np.asarray(p)
         dist = np.sqrt(np.einsum("ki,ki->k", rel, rel))
         vh = math.hypot(v[0], v[1])
@@ -748,8 +752,7 @@ class Replanner:
         else:
             u = leg_u() if callable(leg_u) else leg_u
         along = rel[:, :2] @ u
-        speed = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
-        ok = (dist <= self._trigger_m(speed) + extra_m) & (along >= -self._keep_m - extra_m)
+        ok = (dist <= reach) & (along >= -self._keep_m - extra_m)
         if ok.any():
             idx = np.flatnonzero(ok)
             ok[idx[self._behind_row(p, pts[idx])]] = False
@@ -1269,7 +1272,7 @@ class Replanner:
             self._flown += math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
         self._p_prev = p
         pts = self._points()
-        if len(pts):
+        if len(pts) and (self._min_range is None or self.memory.points_lower_bound(p) < self._min_range):
             d = float(np.sqrt(np.min(np.einsum("ki,ki->k", pts - p, pts - p))))
             if self._min_range is None or d < self._min_range:
                 self._min_range = d

@@ -148,6 +148,21 @@ class ObstacleMap:
         self._refresh()
         return self._points
 
+    def points_lower_bound(self, p) -> float:
+        """A lower bound (m) on the distance from the ENU point ``p`` to every point of
+        ``points()`` (inf when the map is empty): its distance to their bounding box, less
+        a nanometre. Each coordinate difference to a point is at least the one to the box
+        (rounding is monotone), so the bound holds for distances computed in any order."""
+        self._refresh()
+        if not self._l:
+            return math.inf
+        x0, y0, z0, x1, y1, z1 = self._box
+        x, y, z = float(p[0]), float(p[1]), float(p[2])
+        ex = x0 - x if x < x0 else (x - x1 if x > x1 else 0.0)
+        ey = y0 - y if y < y0 else (y - y1 if y > y1 else 0.0)
+        ez = z0 - z if z < z0 else (z - z1 if z > z1 else 0.0)
+        return math.sqrt(ex * ex + ey * ey + ez * ez) - 1e-9
+
     def keys(self) -> np.ndarray:
         """(k, 3) int voxel indices of the occupied voxels, in the order of ``points``."""
         self._refresh()
