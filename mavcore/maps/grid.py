@@ -174,18 +174,8 @@ class ElevationModel:
         rows, cols = self.heights_m.shape
         fc = (x - self.x0_m) / self.cellsize_m
         fr = (y - self.y0_m) / self.cellsize_m
-        if cols == 1:
-            c0 = c1 = 0
-            tx = 0.0
-        else:
-            c0 = min(max(math.floor(fc), 0), cols - 2)
-            c1, tx = c0 + 1, fc - c0
-        if rows == 1:
-            r0 = r1 = 0
-            ty = 0.0
-        else:
-            r0 = min(max(math.floor(fr), 0), rows - 2)
-            r1, ty = r0 + 1, fr - r0
+        c0, c1, tx = _axis_one(fc, cols)
+        r0, r1, ty = _axis_one(fr, rows)
         z_grid = self.heights_m
         v0, v1, v2, v3 = (float(z_grid[r0, c0]), float(z_grid[r0, c1]), float(z_grid[r1, c0]),
                           float(z_grid[r1, c1]))
@@ -240,3 +230,11 @@ class ElevationModel:
                            f"(first at x={xb.ravel()[i]:.2f}, y={yb.ravel()[i]:.2f} m; DEM covers "
                            f"x {x_min:.2f}..{x_max:.2f}, y {y_min:.2f}..{y_max:.2f} m, NODATA excluded)")
         return z
+
+
+def _axis_one(f: float, n: int) -> tuple[int, int, float]:
+    """One point's (i0, i1, fraction) along an axis of n cell centres (``_interp``'s ``axis``)."""
+    if n == 1:
+        return 0, 0, 0.0
+    i0 = min(max(math.floor(f), 0), n - 2)
+    return i0, i0 + 1, f - i0
