@@ -190,3 +190,39 @@ def test_points_lower_bound_never_exceeds_a_points_distance():
         rel = pts - p
         assert m.points_lower_bound(p) <= np.sqrt(np.einsum("ki,ki->k", rel, rel)).min()
         assert m.points_lower_bound(p) <= np.linalg.norm(rel, axis=1).min()
+
+
+def test_the_grouped_broad_phase_clears_what_one_box_clears(monkeypatch):
+    """``clear_beam`` skips a beam that reaches no group's box of points (GROUP_M squares);
+    beams through a map of three obstacles far apart clear exactly what the same beams
+    clear with the whole map as one group (the box test alone)."""
+    import companion.replan.voxmap as vm
+
+    rng = np.random.default_rng(8)
+
+    def build():
+        m = ObstacleMap(V, clear_margin_m=0.15)
+        for cx, cy in ((2.0, 2.0), (9.0, 2.5), (5.5, 8.0)):
+            for _ in range(40):
+                m.add((cx + rng.uniform(-0.3, 0.3), cy + rng.uniform(-0.3, 0.3), rng.uniform(0.5, 2.0)))
+        return m
+
+    state = rng.bit_generator.state
+    grouped = build()
+    rng.bit_generator.state = state
+    whole = build()
+    beams = []
+    for _ in range(400):
+        o = (rng.uniform(0.0, 11.0), rng.uniform(0.0, 10.0), rng.uniform(0.8, 1.8))
+        a = rng.uniform(0.0, 2.0 * math.pi)
+        beams.append(_beam(o, (math.cos(a), math.sin(a), 0.0), rng.uniform(0.5, 5.0), rng.choice([0.0, 0.2])))
+    gone_g = gone_w = 0
+    for ev in beams:
+        monkeypatch.setattr(vm, "GROUP_M", 1.0)
+        gone_g += grouped.clear_beam(ev)
+        monkeypatch.setattr(vm, "GROUP_M", 1e9)
+        gone_w += whole.clear_beam(ev)
+        assert grouped._l == whole._l
+    assert gone_g == gone_w > 0
+    monkeypatch.setattr(vm, "GROUP_M", 1.0)
+    assert len(vm._group_boxes(grouped.points())) >= 3

@@ -70,6 +70,8 @@ MAX_VOXELS = 200_000
 K_NEAR = 8
 #: With ``exact=True``, further stages for the points the previous did not settle.
 _K_EXACT = (64, 1 << 62)
+#: Side (m) of the horizontal squares whose points' boxes ``clear_beam`` tests a beam against.
+GROUP_M = 1.0
 #: ``distance`` of at most this many (point, voxel) pairs is brute force (``_distance_small``):
 #: the k-d tree's query costs ~50 us whatever its size, the guard's per-frame two points
 #: against a few hundred voxels ~10-40 us this way.
@@ -109,6 +111,7 @@ class ObstacleMap:
         self._keys = np.zeros((0, 3), dtype=np.int64)
         self._tree: cKDTree | None = None
         self._conf = np.zeros(0, dtype=bool)
+        self._groups: list[tuple] | None = None
 
     # --- contents ----------------------------------------------------------------------
 
@@ -134,6 +137,7 @@ class ObstacleMap:
             self._tree = None          # built on the first query that needs it (``distance``)
             self._conf = np.fromiter((k in self._confirmed for k in self._l), dtype=bool, count=len(self._l))
             self._box = (*self._points.min(axis=0).tolist(), *self._points.max(axis=0).tolist())
+            self._groups = None           # built by the first beam that reaches the box (``_group_boxes``)
         else:
             self._conf = np.zeros(0, dtype=bool)
             self._keys = np.zeros((0, 3), dtype=np.int64)
@@ -210,10 +214,24 @@ class ObstacleMap:
         # (its axis, widened by the cone at its reach and a voxel) against the voxels'
         w = reach * math.tan(max(ev.half_h_rad, ev.half_v_rad)) + 2.0 * self.voxel_m
         box = self._box
+        lo, hi = [], []
         for i in range(3):
             a, b = ev.origin[i], ev.origin[i] + reach * ev.axis[i]
             if min(a, b) - w > box[3 + i] or max(a, b) + w < box[i]:
                 return 0
+            lo.append(min(a, b) - w)
+            hi.append(max(a, b) + w)
+        # ... and the same test against the boxes of the points in each GROUP_M column: a map
+        # of several obstacles spans the corridors between them, where most beams pass
+        if self._groups is None:
+            self._groups = _group_boxes(self._points)
+        x0, y0, z0 = lo
+        x1, y1, z1 = hi
+        for g in self._groups:
+            if not (x0 > g[3] or x1 < g[0] or y0 > g[4] or y1 < g[1] or z0 > g[5] or z1 < g[2]):
+                break
+        else:
+            return 0
         o = np.asarray(ev.origin, dtype=float)
         h = 0.5 * self.voxel_m
         hit = _segment_hits_boxes(o, np.asarray(ev.axis, dtype=float), reach, self._centres, h)
@@ -317,6 +335,20 @@ def _distance_small(P: np.ndarray, c: np.ndarray, h: float, s: float) -> np.ndar
     c2 = d[..., 0] + d[..., 1] + d[..., 2]
     ck = np.sqrt(np.partition(c2, K_NEAR - 1, axis=1)[:, K_NEAR - 1])
     return np.minimum(b, ck - s)
+
+
+def _group_boxes(points: np.ndarray) -> list[tuple]:
+    """Bounding boxes (x0, y0, z0, x1, y1, z1) of the points in each horizontal
+    ``GROUP_M`` square (``clear_beam``'s broad phase)."""
+    g = np.floor(points[:, :2] / GROUP_M).astype(np.int64)
+    _, inv = np.unique(g, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    k = int(inv.max()) + 1
+    lo = np.full((k, 3), np.inf)
+    hi = np.full((k, 3), -np.inf)
+    np.minimum.at(lo, inv, points)
+    np.maximum.at(hi, inv, points)
+    return [(*a, *b) for a, b in zip(lo.tolist(), hi.tolist())]
 
 
 def _box_distance(p: np.ndarray, c: np.ndarray, h: float) -> np.ndarray:
