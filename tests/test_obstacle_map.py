@@ -193,14 +193,16 @@ def test_points_lower_bound_never_exceeds_a_points_distance():
 
 
 def test_the_grouped_broad_phase_clears_what_one_box_clears(monkeypatch):
-    """``clear_beam`` skips a beam that reaches no group's box of points (GROUP_M squares);
-    beams through a map of three obstacles far apart clear exactly what the same beams
-    clear with the whole map as one group (the box test alone)."""
+    """``clear_beam`` skips a beam that reaches no box of the points stored in a GROUP_M
+    square; beams through a map of three obstacles far apart clear exactly what the same
+    beams clear with the whole map as one square (the box test alone), and the squares'
+    boxes stay a cover of the points as voxels come and go."""
     import companion.replan.voxmap as vm
 
     rng = np.random.default_rng(8)
 
-    def build():
+    def build(group_m):
+        monkeypatch.setattr(vm, "GROUP_M", group_m)
         m = ObstacleMap(V, clear_margin_m=0.15)
         for cx, cy in ((2.0, 2.0), (9.0, 2.5), (5.5, 8.0)):
             for _ in range(40):
@@ -208,21 +210,25 @@ def test_the_grouped_broad_phase_clears_what_one_box_clears(monkeypatch):
         return m
 
     state = rng.bit_generator.state
-    grouped = build()
+    grouped = build(1.0)
     rng.bit_generator.state = state
-    whole = build()
-    beams = []
-    for _ in range(400):
+    whole = build(1e9)
+    assert len(grouped._groups) >= 3 and len(whole._groups) == 1
+    gone_g = gone_w = 0
+    for k in range(600):
         o = (rng.uniform(0.0, 11.0), rng.uniform(0.0, 10.0), rng.uniform(0.8, 1.8))
         a = rng.uniform(0.0, 2.0 * math.pi)
-        beams.append(_beam(o, (math.cos(a), math.sin(a), 0.0), rng.uniform(0.5, 5.0), rng.choice([0.0, 0.2])))
-    gone_g = gone_w = 0
-    for ev in beams:
-        monkeypatch.setattr(vm, "GROUP_M", 1.0)
+        ev = _beam(o, (math.cos(a), math.sin(a), 0.0), rng.uniform(0.5, 5.0), rng.choice([0.0, 0.2]))
         gone_g += grouped.clear_beam(ev)
-        monkeypatch.setattr(vm, "GROUP_M", 1e9)
         gone_w += whole.clear_beam(ev)
         assert grouped._l == whole._l
+        if k % 50 == 0:                     # new voxels between beams: both maps alike
+            q = (rng.uniform(0.0, 11.0), rng.uniform(0.0, 10.0), rng.uniform(0.5, 2.0))
+            monkeypatch.setattr(vm, "GROUP_M", 1.0)
+            grouped.add(q)
+            monkeypatch.setattr(vm, "GROUP_M", 1e9)
+            whole.add(q)
     assert gone_g == gone_w > 0
-    monkeypatch.setattr(vm, "GROUP_M", 1.0)
-    assert len(vm._group_boxes(grouped.points())) >= 3
+    for p in grouped.points():              # every point lies in its square's box
+        b = grouped._groups[(math.floor(p[0] / 1.0), math.floor(p[1] / 1.0))]
+        assert all(b[i] <= p[i] <= b[3 + i] for i in range(3))

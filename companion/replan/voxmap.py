@@ -111,7 +111,10 @@ class ObstacleMap:
         self._keys = np.zeros((0, 3), dtype=np.int64)
         self._tree: cKDTree | None = None
         self._conf = np.zeros(0, dtype=bool)
-        self._groups: list[tuple] | None = None
+        #: clear_beam's broad phase: per GROUP_M square (x, y index), the box [x0, y0, z0, x1, y1, z1]
+        #: of the points ever stored in it (grown by ``add``, never shrunk: a cover of the
+        #: points, however many were deleted since; bounded by the area flown, as the voxels)
+        self._groups: dict[tuple[int, int], list[float]] = {}
 
     # --- contents ----------------------------------------------------------------------
 
@@ -137,7 +140,6 @@ class ObstacleMap:
             self._tree = None          # built on the first query that needs it (``distance``)
             self._conf = np.fromiter((k in self._confirmed for k in self._l), dtype=bool, count=len(self._l))
             self._box = (*self._points.min(axis=0).tolist(), *self._points.max(axis=0).tolist())
-            self._groups = None           # built by the first beam that reaches the box (``_group_boxes``)
         else:
             self._conf = np.zeros(0, dtype=bool)
             self._keys = np.zeros((0, 3), dtype=np.int64)
@@ -190,7 +192,17 @@ class ObstacleMap:
                 self.dropped += 1
                 return
             self.version += 1
-            self._first[key] = (float(point[0]), float(point[1]), float(point[2]))
+            q = self._first[key] = (float(point[0]), float(point[1]), float(point[2]))
+            g = (math.floor(q[0] / GROUP_M), math.floor(q[1] / GROUP_M))
+            b = self._groups.get(g)
+            if b is None:
+                self._groups[g] = [*q, *q]
+            else:
+                for i in range(3):
+                    if q[i] < b[i]:
+                        b[i] = q[i]
+                    if q[i] > b[3 + i]:
+                        b[3 + i] = q[i]
         self._l[key] = min(L_MAX, (old or 0.0) + float(weight))
         if weight >= L_HIT:
             if key not in self._confirmed:
@@ -209,29 +221,29 @@ class ObstacleMap:
         reach = ev.free_m - self.clear_margin_m
         if reach <= 0.0:
             return 0
-        self._refresh()
         # most beams pass far from every voxel: a scalar test of the beam's bounding box
-        # (its axis, widened by the cone at its reach and a voxel) against the voxels'
+        # (its axis, widened by the cone at its reach and a voxel) against the boxes of
+        # the points in each GROUP_M square (kept by ``add``: no refresh of the arrays,
+        # which the map's changes would otherwise rebuild for every beam), then against
+        # the box of all the points
         w = reach * math.tan(max(ev.half_h_rad, ev.half_v_rad)) + 2.0 * self.voxel_m
-        box = self._box
         lo, hi = [], []
         for i in range(3):
             a, b = ev.origin[i], ev.origin[i] + reach * ev.axis[i]
-            if min(a, b) - w > box[3 + i] or max(a, b) + w < box[i]:
-                return 0
             lo.append(min(a, b) - w)
             hi.append(max(a, b) + w)
-        # ... and the same test against the boxes of the points in each GROUP_M column: a map
-        # of several obstacles spans the corridors between them, where most beams pass
-        if self._groups is None:
-            self._groups = _group_boxes(self._points)
         x0, y0, z0 = lo
         x1, y1, z1 = hi
-        for g in self._groups:
+        for g in self._groups.values():
             if not (x0 > g[3] or x1 < g[0] or y0 > g[4] or y1 < g[1] or z0 > g[5] or z1 < g[2]):
                 break
         else:
             return 0
+        self._refresh()
+        box = self._box
+        for i in range(3):
+            if lo[i] > box[3 + i] or hi[i] < box[i]:
+                return 0
         o = np.asarray(ev.origin, dtype=float)
         h = 0.5 * self.voxel_m
         hit = _segment_hits_boxes(o, np.asarray(ev.axis, dtype=float), reach, self._centres, h)
@@ -335,20 +347,6 @@ def _distance_small(P: np.ndarray, c: np.ndarray, h: float, s: float) -> np.ndar
     c2 = d[..., 0] + d[..., 1] + d[..., 2]
     ck = np.sqrt(np.partition(c2, K_NEAR - 1, axis=1)[:, K_NEAR - 1])
     return np.minimum(b, ck - s)
-
-
-def _group_boxes(points: np.ndarray) -> list[tuple]:
-    """Bounding boxes (x0, y0, z0, x1, y1, z1) of the points in each horizontal
-    ``GROUP_M`` square (``clear_beam``'s broad phase)."""
-    g = np.floor(points[:, :2] / GROUP_M).astype(np.int64)
-    _, inv = np.unique(g, axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
-    k = int(inv.max()) + 1
-    lo = np.full((k, 3), np.inf)
-    hi = np.full((k, 3), -np.inf)
-    np.minimum.at(lo, inv, points)
-    np.maximum.at(hi, inv, points)
-    return [(*a, *b) for a, b in zip(lo.tolist(), hi.tolist())]
 
 
 def _box_distance(p: np.ndarray, c: np.ndarray, h: float) -> np.ndarray:
