@@ -8,7 +8,9 @@ Usage::
 Flies each scenario file (``companion demo --scenario FILE --transport inproc
 --no-plots -q``, as a campaign worker does, in a fresh process per flight)
 ``--runs`` times with the code of each ``--tree`` (default: this checkout),
-interleaved: run 1 of every scenario on every tree, then run 2, ... Each
+interleaved: run 1 of every scenario on every tree, then run 2, ...
+(``--parallel``: the trees' flights of a scenario at the same time, so that
+on a shared machine they see the same load) Each
 flight reports the CPU time (``time.process_time`` of the child, not wall
 time) of the whole demo (planning, SITL start-up, flight, report, map) and of
 the flight alone (``companion.commands.fly.execute``), the frames flown, the
@@ -75,11 +77,14 @@ def _child(scenario: str) -> int:
     return 0
 
 
-def fly(tree: Path, scenario: str) -> dict:
+def start(tree: Path, scenario: str) -> subprocess.Popen:
     """One flight in a fresh process running ``tree``'s code."""
     env = dict(os.environ, PYTHONPATH=str(tree))
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(Path(scenario).resolve())]
-    p = subprocess.Popen(cmd, cwd=tree, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(cmd, cwd=tree, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def result(p: subprocess.Popen, tree: Path, scenario: str) -> dict:
     out, err = p.communicate()
     if p.returncode != 0:
         raise RuntimeError(f"{tree}: {scenario}: exit {p.returncode}: {err.strip()[-500:]}")
@@ -93,6 +98,9 @@ def main() -> int:
     ap.add_argument("scenarios", nargs="*")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--tree", action="append", default=None, help="a checkout whose code to fly (repeatable)")
+    ap.add_argument("--parallel", action="store_true",
+                    help="fly each scenario on every tree at the same time (a shared, loaded machine: the trees "
+                         "then see the same load) instead of one after the other")
     ap.add_argument("--json", default=None, metavar="FILE", help="also write every flight's record here")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -102,9 +110,13 @@ def main() -> int:
     rows = []
     for k in range(args.runs):
         for sc in args.scenarios:
-            for tree in trees:
-                load = os.getloadavg()[0]
-                r = fly(tree, sc)
+            load = os.getloadavg()[0]
+            if args.parallel:       # one flight per tree at once: the same load on both
+                procs = [(tree, start(tree, sc)) for tree in trees]
+                done = [result(p, tree, sc) for tree, p in procs]
+            else:
+                done = [result(start(tree, sc), tree, sc) for tree in trees]
+            for tree, r in zip(trees, done):
                 r["load"] = load
                 rows.append(r)
                 us = r["flight_cpu_s"] / r["n_frames"] * 1e6
