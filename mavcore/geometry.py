@@ -478,7 +478,8 @@ def scene_from_maps(grid: OccupancyGrid | None, dem, obstacles: tuple[ObstacleCo
             return dem.height_at(np.clip(xs, x_min, x_max), np.clip(ys, y_min, y_max))
 
         def height(x: float, y: float) -> float:
-            return float(height_xy(x, y))
+            # one point: the same number as float(height_xy(x, y)) in plain floats
+            return dem.height_one(min(max(x, x_min), x_max), min(max(y, y_min), y_max))
     rows = None
     if grid is not None:
         rows = ExtrudedCells(grid, cell_centre_heights(grid, height_xy, np.float32), canopy_height_m)

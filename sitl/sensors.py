@@ -218,19 +218,25 @@ class Rangefinder:
             oz += r20 * bx + r21 * by + r22 * bz
         lim = self.cfg.max_m
         best = math.inf
+        # one origin for the whole fan: its ground height and the obstacles within reach, once
+        ground = world.terrain.height(ox, oy)
+        near = world.near_obstacles(ox, oy, oz, lim)
         for bx, by, bz in self.rays:
             dx = r00 * bx + r01 * by + r02 * bz
             dy = r10 * bx + r11 * by + r12 * bz
             dz = r20 * bx + r21 * by + r22 * bz
-            t = world.raycast(ox, oy, oz, dx, dy, dz, lim)
+            t = world.raycast(ox, oy, oz, dx, dy, dz, lim, ground, near)
             if t < best:
                 best = t
                 lim = t
         if not self._wide:
             return best
-        return self._in_view(world, (ox, oy, oz), R, best)
+        return self._in_view(world, (ox, oy, oz), R, best, near)
 
-    def _in_view(self, world: World, o, R, best: float) -> float:
+    def _in_view(self, world: World, o, R, best: float, near=None) -> float:
+        """``best`` lowered to the nearest obstacle point in the field of view. ``near``:
+        the obstacles within the sensor's reach (``World.near_obstacles``; default all:
+        the broad phase below drops the others anyway)."""
         m0, m1, m2, m3, m4, m5, m6, m7, m8 = self.mount_rotation_flu
         r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
         M = (r0 * m0 + r1 * m3 + r2 * m6, r0 * m1 + r1 * m4 + r2 * m7, r0 * m2 + r1 * m5 + r2 * m8,
@@ -244,7 +250,7 @@ class Rangefinder:
                 best = t
         ox, oy, oz = o
         edges = None
-        for ob in world.obstacles_now:
+        for ob in (world.obstacles_now if near is None else near):
             # broad phase: the bounding sphere must reach into the field of view within range
             cx, cy, cz = ob.x - ox, ob.y - oy, ob.zc - oz
             if math.sqrt(cx * cx + cy * cy + cz * cz) - ob.bound_r >= min(best, self.cfg.max_m):

@@ -50,6 +50,8 @@ _INF = math.inf
 _EPS_T = 1e-9          # nudge (m) past a cell boundary during the traversal
 _HIT_EPS_M = 1e-6      # terrain sphere tracing stops this close to the ground
 _MAX_TERRAIN_ITERS = 200
+#: ``World.near_obstacles`` keeps an obstacle whose bounding sphere is within reach plus this (m)
+_BROAD_MARGIN_M = 1e-6
 
 
 class Terrain:
@@ -90,9 +92,10 @@ class Terrain:
     def _flat_height(self, x: float, y: float) -> float:
         return self.z
 
-    def raycast(self, ox, oy, oz, dx, dy, dz, max_m) -> float:
-        """Distance along the unit ray to the ground (inf if none within max_m)."""
-        hz = oz - self.height(ox, oy)
+    def raycast(self, ox, oy, oz, dx, dy, dz, max_m, ground_z=None) -> float:
+        """Distance along the unit ray to the ground (inf if none within max_m).
+        ``ground_z``: ``height(ox, oy)`` when the caller has it (a fan of rays from one origin)."""
+        hz = oz - (self.height(ox, oy) if ground_z is None else ground_z)
         if hz <= 0.0:
             if hz < 0.0 or dz <= 0.0:
                 return 0.0               # under the ground, or on it looking into it
@@ -440,18 +443,33 @@ class World:
         """Terrain height (m, ENU z) under (x, y)."""
         return self.terrain.height(x, y)
 
-    def raycast(self, ox, oy, oz, dx, dy, dz, max_m: float) -> float:
+    def near_obstacles(self, ox, oy, oz, reach_m: float) -> tuple:
+        """The obstacles now (``obstacles_now``) that a ray of length ``reach_m`` from
+        (ox, oy, oz) may reach: every point of a solid lies within its bounding sphere,
+        so one whose sphere is farther (by a micrometre, for rounding) cannot be hit
+        before ``reach_m`` and its ``raycast`` would return inf."""
+        lim = reach_m + _BROAD_MARGIN_M
+        out = []
+        for ob in self.obstacles_now:
+            cx, cy, cz = ob.x - ox, ob.y - oy, ob.zc - oz
+            if math.sqrt(cx * cx + cy * cy + cz * cz) - ob.bound_r <= lim:
+                out.append(ob)
+        return tuple(out)
+
+    def raycast(self, ox, oy, oz, dx, dy, dz, max_m: float, ground_z=None, obstacles=None) -> float:
         """Distance (m) along the unit ray (dx, dy, dz) from (ox, oy, oz) to the
         first surface of terrain, rows or obstacles; ``math.inf`` if none
-        within ``max_m``. Plain floats in and out (hot path)."""
-        best = self.terrain.raycast(ox, oy, oz, dx, dy, dz, max_m)
+        within ``max_m``. Plain floats in and out (hot path). A fan of rays from
+        one origin may pass the terrain height under it (``ground_z``) and the
+        obstacles within its reach (``near_obstacles``; default all of them)."""
+        best = self.terrain.raycast(ox, oy, oz, dx, dy, dz, max_m, ground_z)
         lim = best if best < max_m else max_m
         if self.rows is not None:
             t = self.rows.raycast(ox, oy, oz, dx, dy, dz, lim)
             if t < best:
                 best = t
                 lim = t
-        for ob in self.obstacles_now:
+        for ob in (self.obstacles_now if obstacles is None else obstacles):
             t = ob.raycast(ox, oy, oz, dx, dy, dz, lim)
             if t < best:
                 best = t

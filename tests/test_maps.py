@@ -362,3 +362,31 @@ def test_generator_tilted_dem_slope(tmp_path):
     cx, cy = g.cell_to_world(fr.mean(), fc.mean())
     vc = -cx * math.sin(a) + cy * math.cos(a) - gen.row_offset(spec)
     assert abs(vc - round(vc / 2.5) * 2.5) < 0.2
+
+
+def test_height_one_is_height_at_bit_for_bit():
+    """The scalar lookup (per-frame truth clearance of the movers) gives the array
+    path's number exactly, a plane is reproduced to the last digit of the plane's own
+    formula's tolerance, and the array path's errors are kept (outside, NODATA)."""
+    rng = np.random.default_rng(5)
+    xs, ys = np.meshgrid(np.arange(7) * 0.5 + 0.25, np.arange(5) * 0.5 + 0.25)
+    plane = 2.0 + 0.3 * xs - 0.7 * ys                          # a sloped plane on the cell centres
+    bumpy = plane + rng.normal(0.0, 0.2, plane.shape)
+    for h in (plane, bumpy, np.array([[1.0, 3.0]]), np.array([[4.0], [2.0]])):
+        dem = ElevationModel(heights_m=h, x0_m=0.25, y0_m=0.25, cellsize_m=0.5)
+        x_min, x_max, y_min, y_max = dem.extent_m
+        px = np.concatenate([rng.uniform(x_min, x_max, 400), [x_min, x_max, 0.25, x_max]])
+        py = np.concatenate([rng.uniform(y_min, y_max, 400), [y_min, y_max, 0.25, y_min]])
+        ref = dem.height_at(px, py)
+        one = np.array([dem.height_one(x, y) for x, y in zip(px.tolist(), py.tolist())])
+        np.testing.assert_array_equal(one, ref)
+    dem = ElevationModel(heights_m=plane, x0_m=0.25, y0_m=0.25, cellsize_m=0.5)
+    assert dem.height_one(1.1, 0.9) == pytest.approx(2.0 + 0.3 * 1.1 - 0.7 * 0.9, abs=1e-12)
+    with pytest.raises(MapError):
+        dem.height_one(-1.0, 0.5)
+    holed = plane.copy()
+    holed[2, 3] = np.nan
+    dem = ElevationModel(heights_m=holed, x0_m=0.25, y0_m=0.25, cellsize_m=0.5)
+    with pytest.raises(MapError):
+        dem.height_one(1.85, 1.3)                                # a corner is NODATA
+    assert dem.height_one(0.4, 0.4) == float(dem.height_at(0.4, 0.4))

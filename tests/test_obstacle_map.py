@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from companion.replan.perception import BeamEvidence
 from companion.replan.voxmap import (CANDIDATE_LIFETIME_S, L_CANDIDATE, L_HIT, L_MAX, L_MISS, ObstacleMap,
@@ -140,3 +141,94 @@ def test_distance_never_exceeds_the_true_one_and_exact_mode_is_exact():
     fast = m.distance(q)
     assert np.all(fast <= truth + 1e-12)
     assert np.all(fast >= truth - math.sqrt(3.0) * V / 2 - 1e-12)
+
+
+def test_a_small_query_is_brute_force_and_gives_the_k_d_trees_numbers():
+    """Few (point, voxel) pairs (the guard's two points a frame) skip the k-d tree; the
+    answer is the same number, bit for bit, as the tree's (a batch too large for the
+    brute path), within the true distance's bounds, and exact for a hand-worked box."""
+    from companion.replan.voxmap import K_NEAR, SMALL_PAIRS
+
+    rng = np.random.default_rng(11)
+    for n in (1, K_NEAR, K_NEAR + 1, 40, SMALL_PAIRS // 2):
+        m = ObstacleMap(V)
+        while len(m) < n:
+            a, z = rng.uniform(0.0, 2.0 * math.pi), rng.uniform(0.0, 2.0)
+            m.add((10.0 + 0.4 * math.cos(a), 5.0 + 0.4 * math.sin(a), z))
+        q = rng.uniform([8.0, 3.0, -0.5], [12.0, 7.0, 2.5], (SMALL_PAIRS + 1, 3))   # tree: > SMALL_PAIRS pairs
+        tree = m.distance(q)
+        small = np.concatenate([m.distance(q[i:i + 2]) for i in range(0, len(q), 2)])
+        assert len(m) * 2 <= SMALL_PAIRS
+        np.testing.assert_array_equal(small, tree)
+        centres = (m.keys() + 0.5) * V
+        truth = _box_distance(q[:, None, :], centres[None], V / 2).min(axis=1)
+        assert np.all(small <= truth + 1e-12)
+        assert np.all(small >= truth - math.sqrt(3.0) * V / 2 - 1e-12)
+    m = ObstacleMap(V)
+    m.add((0.05, 0.05, 0.05))                         # the box [0, 0.1]^3, brute path
+    np.testing.assert_allclose(m.distance(np.array([[0.5, 0.05, 0.05], [-0.3, -0.4, 0.05]])), [0.4, 0.5],
+                               atol=1e-12)
+
+
+def test_points_lower_bound_never_exceeds_a_points_distance():
+    """The bounding box's distance (the replanner skips its per-point threat and
+    closest-range scans with it): hand-worked outside the box, 0 inside, inf empty,
+    and never above the distance to any point, however the distance is summed."""
+    m = ObstacleMap(V)
+    assert m.points_lower_bound((0.0, 0.0, 0.0)) == math.inf
+    m.add((1.05, 2.05, 1.05))
+    m.add((3.05, 2.55, 1.45))
+    # the box of the points: x 1.05..3.05, y 2.05..2.55, z 1.05..1.45
+    assert m.points_lower_bound((0.05, 2.3, 1.2)) == pytest.approx(1.0, abs=1e-8)
+    assert m.points_lower_bound((4.05, 0.05, 2.45)) == pytest.approx(math.sqrt(1.0 + 4.0 + 1.0), abs=1e-8)
+    assert m.points_lower_bound((2.0, 2.3, 1.2)) < 0.0           # inside the box
+    rng = np.random.default_rng(2)
+    for _ in range(30):
+        m.add(rng.uniform(0.0, 3.0, 3))
+    pts = m.points()
+    for p in rng.uniform(-3.0, 6.0, (500, 3)):
+        rel = pts - p
+        assert m.points_lower_bound(p) <= np.sqrt(np.einsum("ki,ki->k", rel, rel)).min()
+        assert m.points_lower_bound(p) <= np.linalg.norm(rel, axis=1).min()
+
+
+def test_the_grouped_broad_phase_clears_what_one_box_clears(monkeypatch):
+    """``clear_beam`` skips a beam that reaches no box of the points stored in a GROUP_M
+    square; beams through a map of three obstacles far apart clear exactly what the same
+    beams clear with the whole map as one square (the box test alone), and the squares'
+    boxes stay a cover of the points as voxels come and go."""
+    import companion.replan.voxmap as vm
+
+    rng = np.random.default_rng(8)
+
+    def build(group_m):
+        monkeypatch.setattr(vm, "GROUP_M", group_m)
+        m = ObstacleMap(V, clear_margin_m=0.15)
+        for cx, cy in ((2.0, 2.0), (9.0, 2.5), (5.5, 8.0)):
+            for _ in range(40):
+                m.add((cx + rng.uniform(-0.3, 0.3), cy + rng.uniform(-0.3, 0.3), rng.uniform(0.5, 2.0)))
+        return m
+
+    state = rng.bit_generator.state
+    grouped = build(1.0)
+    rng.bit_generator.state = state
+    whole = build(1e9)
+    assert len(grouped._groups) >= 3 and len(whole._groups) == 1
+    gone_g = gone_w = 0
+    for k in range(600):
+        o = (rng.uniform(0.0, 11.0), rng.uniform(0.0, 10.0), rng.uniform(0.8, 1.8))
+        a = rng.uniform(0.0, 2.0 * math.pi)
+        ev = _beam(o, (math.cos(a), math.sin(a), 0.0), rng.uniform(0.5, 5.0), rng.choice([0.0, 0.2]))
+        gone_g += grouped.clear_beam(ev)
+        gone_w += whole.clear_beam(ev)
+        assert grouped._l == whole._l
+        if k % 50 == 0:                     # new voxels between beams: both maps alike
+            q = (rng.uniform(0.0, 11.0), rng.uniform(0.0, 10.0), rng.uniform(0.5, 2.0))
+            monkeypatch.setattr(vm, "GROUP_M", 1.0)
+            grouped.add(q)
+            monkeypatch.setattr(vm, "GROUP_M", 1e9)
+            whole.add(q)
+    assert gone_g == gone_w > 0
+    for p in grouped.points():              # every point lies in its square's box
+        b = grouped._groups[(math.floor(p[0] / 1.0), math.floor(p[1] / 1.0))]
+        assert all(b[i] <= p[i] <= b[3 + i] for i in range(3))

@@ -499,3 +499,30 @@ def test_a_remembered_point_behind_a_row_is_no_threat():
     rp.memory.add((3.5, 0.5, 1.5))
     assert rp._threat((3.0, 1.0, 1.5), (0.0, 0.0, 0.0), np.array([1.0, 0.0])) == pytest.approx(
         math.dist((3.0, 1.0, 1.5), rp.memory.points()[1]))
+
+
+def test_the_threat_looks_the_leg_up_only_when_hovering():
+    """``_threat``'s leg direction may come as a callable: it is called only at rest (the
+    direction of travel decides otherwise), and gives the same answer as the vector."""
+    from companion.replan import GlobalPlan, Replanner
+    from companion.trajectory import generate_trajectory
+    from mavcore.mission.trajectory import TrajectoryConfig
+    from mavcore.mission.schema import FlightConfig
+    t = np.array([0.0, 10.0])
+    p = np.array([[0.5, 1.0, 1.8], [5.5, 1.0, 1.8]])
+    plan = GlobalPlan.from_waypoints(generate_trajectory(t, p), t, p, np.zeros((2, 3)), np.zeros((2, 3)),
+                                     np.array([True, True]), None, None, FlightConfig(), TrajectoryConfig(), 1.0)
+    rp = Replanner(ReplanConfig(), _known(), plan)
+    rp.memory.add((3.5, 0.5, 1.5))
+    calls = []
+
+    def leg_u():
+        calls.append(1)
+        return np.array([1.0, 0.0])
+
+    moving = rp._threat((3.0, 1.0, 1.5), (0.5, 0.0, 0.0), leg_u)
+    assert calls == [] and moving == rp._threat((3.0, 1.0, 1.5), (0.5, 0.0, 0.0), np.array([1.0, 0.0]))
+    # hovering: the leg decides what is behind, so it is looked up (once)
+    assert rp._threat((3.0, 1.0, 1.5), (0.0, 0.0, 0.0), leg_u) == pytest.approx(math.dist((3.0, 1.0, 1.5),
+                                                                                          (3.5, 0.5, 1.5)))
+    assert calls == [1]

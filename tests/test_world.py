@@ -170,3 +170,30 @@ def test_ray_starting_on_a_cell_boundary_moving_down_index_terminates():
     assert w.raycast(2.0, 1.0, 0.5, -3.9e-21, 1.0, 0.0, 10.0) == pytest.approx(2.0)
     assert w.raycast(2.0, 1.0, 0.5, 1e-300, 1.0, 0.0, 10.0) == pytest.approx(2.0)
     assert w.raycast(2.0, 3.5, 0.5, -3.9e-21, -1.0, 0.0, 10.0) == pytest.approx(0.4)
+
+
+def test_a_fan_with_its_ground_and_near_obstacles_casts_the_same_rays():
+    """``near_obstacles`` drops only solids whose bounding sphere is out of reach (a
+    cylinder 6 m away from a 5 m fan; the one 2 m away stays), and casting with the
+    fan's ground height and that subset gives every ray's distance bit for bit."""
+    dem = _plane_dem()
+    obs = (ObstacleConfig("cylinder", x=2.0, y=1.0, height=1.5, radius=0.3),
+           ObstacleConfig("box", x=0.5, y=-1.0, height=2.0, size_x=0.8, size_y=0.4, yaw_deg=30.0),
+           ObstacleConfig("cylinder", x=6.0, y=0.0, height=1.0, radius=0.2))
+    w = World.build(dem=dem, obstacles=obs)
+    o = (0.0, 0.0, 1.0 + 0.8)                                  # 0.8 m above the plane's height at the origin
+    near = w.near_obstacles(*o, 5.0)
+    assert near == w.obstacles[:2]
+    # the far cylinder's sphere: centre ~6.0 m away, radius hypot(0.2, 0.5) = 0.54 m: out of a 5 m reach,
+    # within a 5.5 m one
+    assert w.obstacles[2] in w.near_obstacles(*o, 5.5)
+    ground = w.terrain.height(o[0], o[1])
+    assert ground == pytest.approx(1.0, abs=1e-12)
+    rng = np.random.default_rng(4)
+    hits = 0
+    for d in rng.normal(size=(500, 3)):
+        d = d / np.linalg.norm(d)
+        full = w.raycast(*o, *d, 5.0)
+        assert w.raycast(*o, *d, 5.0, ground, near) == full
+        hits += math.isfinite(full)
+    assert hits > 100

@@ -711,7 +711,7 @@ class Replanner:
         if self._dev_leg is not None:
             self._deviation(s.p)
         if len(self.memory):
-            rng = self._threat(s.p, s.v, self._leg_frame(self.plan.leg_near(s.p, s.v[:2]))[2])
+            rng = self._threat(s.p, s.v, lambda: self._leg_frame(self.plan.leg_near(s.p, s.v[:2]))[2])
             if rng is not None:
                 self._enter_avoid(tau, s, rng, events)
                 if self.cfg.give_way:
@@ -734,17 +734,25 @@ class Replanner:
         the leg ``follow`` will use) allows the rejoin, so the two cannot
         alternate. A point behind a row (the straight line to it crosses an
         occupied cell below the canopy) is in another corridor: the map remembers
-        obstacles for good, and one seen from the next corridor is no threat here."""
+        obstacles for good, and one seen from the next corridor is no threat here.
+        ``leg_u`` may be a callable returning it: the leg is then looked up only when
+        it is needed (hovering, with points remembered), not every frame."""
         pts = self._points()
         if not len(pts):
             return None
+        speed = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+        reach = self._trigger_m(speed) + extra_m
+        if self.memory.points_lower_bound(p) > reach:
+            return None                     # every point is out of the trigger range
         rel = pts - np.asarray(p)
         dist = np.sqrt(np.einsum("ki,ki->k", rel, rel))
         vh = math.hypot(v[0], v[1])
-        u = np.array([v[0] / vh, v[1] / vh]) if vh > 0.05 else leg_u
+        if vh > 0.05:
+            u = np.array([v[0] / vh, v[1] / vh])
+        else:
+            u = leg_u() if callable(leg_u) else leg_u
         along = rel[:, :2] @ u
-        speed = math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
-        ok = (dist <= self._trigger_m(speed) + extra_m) & (along >= -self._keep_m - extra_m)
+        ok = (dist <= reach) & (along >= -self._keep_m - extra_m)
         if ok.any():
             idx = np.flatnonzero(ok)
             ok[idx[self._behind_row(p, pts[idx])]] = False
@@ -810,7 +818,7 @@ class Replanner:
                                         self.closing.approach_m_s(self._t_s))
         v = self.shaper.v
         if tau >= self._next_rejoin and self._calm() and self._threat(
-                P, v, self._leg_frame(self.plan.leg_near(P, v[:2]))[2], REJOIN_HYSTERESIS_M) is None:
+                P, v, lambda: self._leg_frame(self.plan.leg_near(P, v[:2]))[2], REJOIN_HYSTERESIS_M) is None:
             ref = self._try_rejoin(tau, events)
             if ref is not None:
                 return ref
@@ -1264,7 +1272,7 @@ class Replanner:
             self._flown += math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
         self._p_prev = p
         pts = self._points()
-        if len(pts):
+        if len(pts) and (self._min_range is None or self.memory.points_lower_bound(p) < self._min_range):
             d = float(np.sqrt(np.min(np.einsum("ki,ki->k", pts - p, pts - p))))
             if self._min_range is None or d < self._min_range:
                 self._min_range = d

@@ -70,6 +70,12 @@ MAX_VOXELS = 200_000
 K_NEAR = 8
 #: With ``exact=True``, further stages for the points the previous did not settle.
 _K_EXACT = (64, 1 << 62)
+#: Side (m) of the horizontal squares whose points' boxes ``clear_beam`` tests a beam against.
+GROUP_M = 1.0
+#: ``distance`` of at most this many (point, voxel) pairs is brute force (``_distance_small``):
+#: the k-d tree's query costs ~50 us whatever its size, the guard's per-frame two points
+#: against a few hundred voxels ~10-40 us this way.
+SMALL_PAIRS = 512
 
 
 class ObstacleMap:
@@ -105,6 +111,10 @@ class ObstacleMap:
         self._keys = np.zeros((0, 3), dtype=np.int64)
         self._tree: cKDTree | None = None
         self._conf = np.zeros(0, dtype=bool)
+        #: clear_beam's broad phase: per GROUP_M square (x, y index), the box [x0, y0, z0, x1, y1, z1]
+        #: of the points ever stored in it (grown by ``add``, never shrunk: a cover of the
+        #: points, however many were deleted since; bounded by the area flown, as the voxels)
+        self._groups: dict[tuple[int, int], list[float]] = {}
 
     # --- contents ----------------------------------------------------------------------
 
@@ -127,7 +137,7 @@ class ObstacleMap:
             self._keys = np.array(list(self._l.keys()), dtype=np.int64).reshape(-1, 3)
             self._centres = (self._keys + 0.5) * self.voxel_m
             self._points = np.array([self._first[k] for k in self._l], dtype=float).reshape(-1, 3)
-            self._tree = cKDTree(self._centres)
+            self._tree = None          # built on the first query that needs it (``distance``)
             self._conf = np.fromiter((k in self._confirmed for k in self._l), dtype=bool, count=len(self._l))
             self._box = (*self._points.min(axis=0).tolist(), *self._points.max(axis=0).tolist())
         else:
@@ -143,6 +153,21 @@ class ObstacleMap:
         it; a cached array, do not modify)."""
         self._refresh()
         return self._points
+
+    def points_lower_bound(self, p) -> float:
+        """A lower bound (m) on the distance from the ENU point ``p`` to every point of
+        ``points()`` (inf when the map is empty): its distance to their bounding box, less
+        a nanometre. Each coordinate difference to a point is at least the one to the box
+        (rounding is monotone), so the bound holds for distances computed in any order."""
+        self._refresh()
+        if not self._l:
+            return math.inf
+        x0, y0, z0, x1, y1, z1 = self._box
+        x, y, z = float(p[0]), float(p[1]), float(p[2])
+        ex = x0 - x if x < x0 else (x - x1 if x > x1 else 0.0)
+        ey = y0 - y if y < y0 else (y - y1 if y > y1 else 0.0)
+        ez = z0 - z if z < z0 else (z - z1 if z > z1 else 0.0)
+        return math.sqrt(ex * ex + ey * ey + ez * ez) - 1e-9
 
     def keys(self) -> np.ndarray:
         """(k, 3) int voxel indices of the occupied voxels, in the order of ``points``."""
@@ -167,7 +192,17 @@ class ObstacleMap:
                 self.dropped += 1
                 return
             self.version += 1
-            self._first[key] = (float(point[0]), float(point[1]), float(point[2]))
+            q = self._first[key] = (float(point[0]), float(point[1]), float(point[2]))
+            g = (math.floor(q[0] / GROUP_M), math.floor(q[1] / GROUP_M))
+            b = self._groups.get(g)
+            if b is None:
+                self._groups[g] = [*q, *q]
+            else:
+                for i in range(3):
+                    if q[i] < b[i]:
+                        b[i] = q[i]
+                    if q[i] > b[3 + i]:
+                        b[3 + i] = q[i]
         self._l[key] = min(L_MAX, (old or 0.0) + float(weight))
         if weight >= L_HIT:
             if key not in self._confirmed:
@@ -186,14 +221,28 @@ class ObstacleMap:
         reach = ev.free_m - self.clear_margin_m
         if reach <= 0.0:
             return 0
-        self._refresh()
         # most beams pass far from every voxel: a scalar test of the beam's bounding box
-        # (its axis, widened by the cone at its reach and a voxel) against the voxels'
+        # (its axis, widened by the cone at its reach and a voxel) against the boxes of
+        # the points in each GROUP_M square (kept by ``add``: no refresh of the arrays,
+        # which the map's changes would otherwise rebuild for every beam), then against
+        # the box of all the points
         w = reach * math.tan(max(ev.half_h_rad, ev.half_v_rad)) + 2.0 * self.voxel_m
-        box = self._box
+        lo, hi = [], []
         for i in range(3):
             a, b = ev.origin[i], ev.origin[i] + reach * ev.axis[i]
-            if min(a, b) - w > box[3 + i] or max(a, b) + w < box[i]:
+            lo.append(min(a, b) - w)
+            hi.append(max(a, b) + w)
+        x0, y0, z0 = lo
+        x1, y1, z1 = hi
+        for g in self._groups.values():
+            if not (x0 > g[3] or x1 < g[0] or y0 > g[4] or y1 < g[1] or z0 > g[5] or z1 < g[2]):
+                break
+        else:
+            return 0
+        self._refresh()
+        box = self._box
+        for i in range(3):
+            if lo[i] > box[3 + i] or hi[i] < box[i]:
                 return 0
         o = np.asarray(ev.origin, dtype=float)
         h = 0.5 * self.voxel_m
@@ -258,10 +307,14 @@ class ObstacleMap:
             return np.full(len(P), math.inf)
         h = 0.5 * self.voxel_m
         s = math.sqrt(3.0) * h
+        if not exact and n * len(P) <= SMALL_PAIRS:
+            return _distance_small(P, self._centres, h, s)
         out = np.full(len(P), math.inf)
         todo = np.arange(len(P))
         for k in (K_NEAR, *_K_EXACT) if exact else (K_NEAR,):
             k = min(k, n)
+            if self._tree is None:
+                self._tree = cKDTree(self._centres)
             dc, ii = self._tree.query(P[todo], k=k)
             dc, ii = dc.reshape(len(todo), k), ii.reshape(len(todo), k)
             b = _box_distance(P[todo][:, None, :], self._centres[ii], h).min(axis=1)
@@ -276,6 +329,24 @@ class ObstacleMap:
             if len(todo) == 0:
                 return out
         return out
+
+
+def _distance_small(P: np.ndarray, c: np.ndarray, h: float, s: float) -> np.ndarray:
+    """``ObstacleMap.distance`` (not exact) by brute force over all n voxels, the same
+    numbers: every voxel beyond the k nearest centres is at least c_k - s from the point,
+    so the minimum over all boxes and c_k - s is the minimum over the k nearest boxes and
+    c_k - s; c_k is the k-th smallest centre distance, summed in the k-d tree's order
+    (x, y, z) and rooted as it does."""
+    d = P[:, None, :] - c[None, :, :]
+    q = np.maximum(np.abs(d) - h, 0.0)
+    q *= q
+    b = np.sqrt(q[..., 0] + q[..., 1] + q[..., 2]).min(axis=1)
+    if len(c) <= K_NEAR:
+        return b
+    d *= d
+    c2 = d[..., 0] + d[..., 1] + d[..., 2]
+    ck = np.sqrt(np.partition(c2, K_NEAR - 1, axis=1)[:, K_NEAR - 1])
+    return np.minimum(b, ck - s)
 
 
 def _box_distance(p: np.ndarray, c: np.ndarray, h: float) -> np.ndarray:

@@ -8,6 +8,8 @@ column 0 the westernmost, so ``row`` grows with the map's y (north) and
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -159,6 +161,33 @@ class ElevationModel:
             z += wi * np.where(nodata, 0.0, vi)
         return z, ok
 
+    def height_one(self, x: float, y: float) -> float:
+        """``float(height_at(x, y))`` of one point in plain floats: the same operations in
+        the same order (so the same number, bit for bit), ~20x cheaper than the arrays for
+        a per-frame query. Points outside the extent, non-finite ones and those whose
+        corners hold NODATA take the array path (and its error)."""
+        x, y = float(x), float(y)
+        x_min, x_max, y_min, y_max = self.extent_m
+        tol = 1e-9 * max(1.0, self.cellsize_m)
+        if not (x_min - tol <= x <= x_max + tol and y_min - tol <= y <= y_max + tol):
+            return float(self.height_at(x, y))
+        rows, cols = self.heights_m.shape
+        fc = (x - self.x0_m) / self.cellsize_m
+        fr = (y - self.y0_m) / self.cellsize_m
+        c0, c1, tx = _axis_one(fc, cols)
+        r0, r1, ty = _axis_one(fr, rows)
+        z_grid = self.heights_m
+        v0, v1, v2, v3 = (float(z_grid[r0, c0]), float(z_grid[r0, c1]), float(z_grid[r1, c0]),
+                          float(z_grid[r1, c1]))
+        if v0 != v0 or v1 != v1 or v2 != v2 or v3 != v3:      # NODATA among the corners
+            return float(self.height_at(x, y))
+        z = 0.0
+        z += (1 - ty) * (1 - tx) * v0
+        z += (1 - ty) * tx * v1
+        z += ty * (1 - tx) * v2
+        z += ty * tx * v3
+        return z
+
     def covers(self, x, y) -> np.ndarray:
         """True where ``height_at`` is defined: inside the extent, no NODATA used.
 
@@ -201,3 +230,11 @@ class ElevationModel:
                            f"(first at x={xb.ravel()[i]:.2f}, y={yb.ravel()[i]:.2f} m; DEM covers "
                            f"x {x_min:.2f}..{x_max:.2f}, y {y_min:.2f}..{y_max:.2f} m, NODATA excluded)")
         return z
+
+
+def _axis_one(f: float, n: int) -> tuple[int, int, float]:
+    """One point's (i0, i1, fraction) along an axis of n cell centres (``_interp``'s ``axis``)."""
+    if n == 1:
+        return 0, 0, 0.0
+    i0 = min(max(math.floor(f), 0), n - 2)
+    return i0, i0 + 1, f - i0
