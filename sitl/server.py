@@ -109,8 +109,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from mavcore.mission.schema import Mission
 
 from mavcore import codec
-from mavcore.link.signing import (SignatureVerifier, disable_outgoing_signing, enable_outgoing_signing,
-                                  signing_timestamp)
+from mavcore.link.signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
 from mavcore.link import command_rules as rules
 from mavcore.link.sockets import is_datagram_url, open_pipe
 
@@ -130,6 +129,8 @@ from .sim import Simulation
 from .commands import VehicleCommands
 from .mission_link import VehicleMission
 from .params_link import VehicleParams, vehicle_parameters
+from .setpoints import VehicleSetpoints
+from .signing_link import SigningSetup
 from .telemetry import VehicleTelemetry
 from .vehicle_id import COMPONENT_ID, SYSTEM_ID
 from .world import load_world
@@ -554,7 +555,6 @@ class SitlServer:
         self.commands = CommandServer(VehicleCommands(self.sim, self.stack, self.autopilot, self.origin,
                                                       self.home_enu_m, self.streams, self.telemetry, self._state,
                                                       self._mav).table())
-        self._init_dispatch()
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
         self.stats = {"bad_packets": 0, "ignored": collections.Counter(), "unsupported": collections.Counter(),
@@ -568,6 +568,12 @@ class SitlServer:
             None if config.signing_key is None else SignatureVerifier(config.signing_key),
             key_locked=config.signing_key is not None)
         self._intake = IntakeBudget()
+        #: SET_MODE, the offboard setpoints and the obstacle sectors (``sitl.setpoints``).
+        self.setpoints = VehicleSetpoints(self.sim, self.stack, self.collision_prevention, self._state,
+                                          self._refuse)
+        #: SETUP_SIGNING (``sitl.signing_link``).
+        self.signing = SigningSetup(self.auth, lambda: self.links, self._say)
+        self._init_dispatch()
 
 
     def _init_dispatch(self) -> None:
@@ -575,14 +581,11 @@ class SitlServer:
         self._handlers = {
             "COMMAND_LONG": self._on_command_long,
             "COMMAND_INT": self._on_command_int,
-            "SET_MODE": self._on_set_mode,
-            "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
             "HIL_ACTUATOR_CONTROLS": self._on_actuators,
-            "SET_ATTITUDE_TARGET": self._on_attitude_target,
             **self.param_link.handlers(),
-            "OBSTACLE_DISTANCE": self._on_obstacle_distance,
+            **self.setpoints.handlers(),
             **self.mission_link.handlers(),
-            "SETUP_SIGNING": self._on_setup_signing,
+            **self.signing.handlers(),
             "TIMESYNC": self._on_timesync,
             "PING": self._on_ping,
         }
@@ -1137,47 +1140,7 @@ class SitlServer:
         for m in reply.after:
             self._reply(link, m)
 
-    def _on_set_mode(self, link, msg) -> None:
-        if msg.target_system != SYSTEM_ID:
-            return
-        if not int(msg.base_mode) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            self._refuse("SET_MODE", f"base_mode {int(msg.base_mode)} without CUSTOM_MODE_ENABLED")
-            return
-        mode = self.stack.mode_of(msg.custom_mode)
-        if mode is None:
-            self._refuse("SET_MODE", f"unknown custom mode {int(msg.custom_mode)}")
-            return
-        self.stack.set_mode(self.sim.time_us, self._state(), mode)
-
-    # ------------------------------------------------------------------ setpoints
-    def _on_position_target(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        why = rules.position_target_problem(
-            msg.coordinate_frame, msg.type_mask,
-            (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, msg.afx, msg.afy, msg.afz), msg.yaw, msg.yaw_rate)
-        if why is not None:
-            self._refuse("SET_POSITION_TARGET_LOCAL_NED", why)
-            return
-        nav = self._state()   # the flight stack's own heading and position (estimate or truth)
-        target = codec.decode_position_target(msg, nav.yaw_enu_rad, nav.pos_enu_m)
-        if target is not None:
-            self.stack.offboard_setpoint(self.sim.time_us, target)
-
-    def _on_obstacle_distance(self, link, msg) -> None:
-        sectors = codec.decode_obstacle_distance(msg)
-        if sectors is not None:
-            self.collision_prevention.on_sectors(sectors, self.sim.time_us)
-
-    def _on_attitude_target(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        sp, why = codec.decode_attitude_rates(msg)
-        if why is not None:
-            self._refuse("SET_ATTITUDE_TARGET", why)
-            return
-        self.stack.rate_setpoint(self.sim.time_us, sp)
-
+    # ------------------------------------------------------------------ lockstep answer
     def _on_actuators(self, link, msg) -> None:
         self._on_answer(codec.decode_actuator_controls(msg))
 
@@ -1195,23 +1158,6 @@ class SitlServer:
             self._released = True
 
     # ------------------------------------------------------------------ misc
-    def _on_setup_signing(self, link, msg) -> None:
-        # Reaches here only from a controller, and never with a key from the
-        # command line (``sitl.auth``). From now on control must be signed.
-        if msg.target_system != SYSTEM_ID or self.auth.key_locked:
-            return
-        key = bytes(msg.secret_key)
-        if not any(key):
-            self.auth.set_signing(None)
-            for l in self.links:
-                disable_outgoing_signing(l.mav)
-        else:
-            ts = int(msg.initial_timestamp) or signing_timestamp(time.time())
-            self.auth.set_signing(SignatureVerifier(key, ts))
-            for i, l in enumerate(self.links):
-                enable_outgoing_signing(l.mav, key, i, ts)
-        self._say(SEVERITY_INFO, "Signing " + ("disabled" if not any(key) else "key stored"))
-
     def _on_timesync(self, link, msg) -> None:
         if int(msg.tc1) != 0:
             return   # an answer to someone else's request
