@@ -7,11 +7,21 @@ strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
 (``mavcore.link.pipe``), where the peer's waits run the vehicle (``service``) instead
 of ``run``. Telemetry goes to every link; replies
 (COMMAND_ACK, PARAM_VALUE on read, MISSION_*) go to the link the request
-came from, addressed to the requester. The protocols are the server sides
-of ``mavcore.services`` (``CommandServer``, ``ParamServer``,
-``MissionServer``, ``StreamSchedule``), the commands ``sitl.commands`` and
-the encoders of what the vehicle sends ``sitl.telemetry``; this module keeps
-the links, the pacing and lockstep, and routes received messages.
+came from, addressed to the requester.
+
+This module keeps the links, the pacing and lockstep (and the
+HIL_ACTUATOR_CONTROLS answer that releases a frame), the frame step with its
+telemetry send, and the dispatch: who may send a message (``sitl.auth``),
+then the handler of the part that owns it. The parts, each over the server
+side of a ``mavcore.services`` protocol or the flight stack:
+``sitl.command_link`` (COMMAND_LONG/INT through ``CommandServer``; what each
+command does is ``sitl.commands``), ``sitl.params_link`` (PARAM_* through
+``ParamServer`` and what a value changes), ``sitl.mission_link`` (MISSION_*
+through ``MissionServer``, the stored lists handed to the flight stack,
+MISSION_CURRENT and MISSION_ITEM_REACHED), ``sitl.setpoints`` (SET_MODE, the
+offboard setpoints, OBSTACLE_DISTANCE), ``sitl.signing_link``
+(SETUP_SIGNING) and ``sitl.telemetry`` (the encoders of what the vehicle
+sends, scheduled by ``StreamSchedule``). TIMESYNC and PING are answered here.
 
 Time and pacing
 ---------------
@@ -110,7 +120,6 @@ from mavcore.mission.schema import Mission
 
 from mavcore import codec
 from mavcore.link.signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
-from mavcore.link import command_rules as rules
 from mavcore.link.sockets import is_datagram_url, open_pipe
 
 from mavcore.link.pipe import MEMORY_SCHEME
@@ -119,13 +128,14 @@ from mavcore import autopilot as autopilots
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .battery import Battery
 from .collision_prevention import CollisionPrevention
-from mavcore.services.command import CommandServer, ack_message
+from mavcore.services.command import CommandServer
 from mavcore.services.telemetry import StreamSchedule
 
 from .flightstack import (
     IDLE_MOTOR_CMD, FlightStack, NavState, StatusEvent, SEVERITY_INFO, SEVERITY_WARNING,
 )
 from .sim import Simulation
+from .command_link import CommandLink
 from .commands import VehicleCommands
 from .mission_link import VehicleMission
 from .params_link import VehicleParams, vehicle_parameters
@@ -568,6 +578,9 @@ class SitlServer:
             None if config.signing_key is None else SignatureVerifier(config.signing_key),
             key_locked=config.signing_key is not None)
         self._intake = IntakeBudget()
+        #: COMMAND_LONG / COMMAND_INT through ``self.commands`` (``sitl.command_link``).
+        self.command_link = CommandLink(self.commands, self.stack, self._state, self.stats["unsupported"],
+                                        self._refuse)
         #: SET_MODE, the offboard setpoints and the obstacle sectors (``sitl.setpoints``).
         self.setpoints = VehicleSetpoints(self.sim, self.stack, self.collision_prevention, self._state,
                                           self._refuse)
@@ -575,12 +588,10 @@ class SitlServer:
         self.signing = SigningSetup(self.auth, lambda: self.links, self._say)
         self._init_dispatch()
 
-
     def _init_dispatch(self) -> None:
-        """The receive table: message type -> handler (commands: ``self.commands``)."""
+        """The receive table: message type -> ``(link, msg)`` handler, most of them the parts'."""
         self._handlers = {
-            "COMMAND_LONG": self._on_command_long,
-            "COMMAND_INT": self._on_command_int,
+            **self.command_link.handlers(),
             "HIL_ACTUATOR_CONTROLS": self._on_actuators,
             **self.param_link.handlers(),
             **self.setpoints.handlers(),
@@ -1076,9 +1087,6 @@ class SitlServer:
             self._say(SEVERITY_WARNING if not v.accepted else SEVERITY_INFO, v.report)
         return v.accepted
 
-    def _reply(self, link: _Link, msg) -> None:
-        link.reply(msg)
-
     def _broadcast(self, msg) -> None:
         for l in self.links:
             if l.has_peer:
@@ -1114,31 +1122,6 @@ class SitlServer:
         if now - self._refusal_said_s >= self.REFUSAL_TEXT_S:
             self._refusal_said_s = now
             self._say(SEVERITY_WARNING, f"Refused {kind}: {why}")
-
-    # ------------------------------------------------------------------ commands
-    def _on_command_long(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
-        self._command(link, msg, int(msg.command), params)
-
-    def _on_command_int(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
-        self._command(link, msg, int(msg.command), params, int(msg.frame))
-
-    def _command(self, link, msg, command: int, params, int_frame: int | None = None) -> None:
-        """One command through ``mavcore.services.command.CommandServer``: its ACK, then what follows it."""
-        landed = command in self.commands.handlers and (not self.stack.armed or self._state().landed)
-        reply = self.commands.handle(command, params, int_frame, landed)
-        if reply.unsupported:
-            self.stats["unsupported"][command] += 1
-        elif reply.refused is not None:
-            self._refuse(rules.command_name(command), reply.refused)
-        self._reply(link, ack_message(link.mav, command, reply, msg.get_srcSystem(), msg.get_srcComponent()))
-        for m in reply.after:
-            self._reply(link, m)
 
     # ------------------------------------------------------------------ lockstep answer
     def _on_actuators(self, link, msg) -> None:
