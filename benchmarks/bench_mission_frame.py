@@ -61,7 +61,7 @@ def fly(mission_path: Path, items: tuple, mode: str, seconds: float) -> float:
         srv.missions.stored[0], srv.missions.stored[1] = tuple(items[0]), tuple(items[1])
         srv.missions.version += 1
     srv.step_once()
-    srv._sync_store()
+    srv.mission_link.sync_store()
     now, st = srv.sim.time_us, srv._state()
     if mode == "mission":
         assert srv.stack.start_mission(now, st, None).accepted
@@ -86,7 +86,7 @@ def executor_alone(mission_path: Path, items: tuple, seconds: float) -> float:
     srv.missions.stored[0], srv.missions.stored[1] = tuple(items[0]), tuple(items[1])
     srv.missions.version += 1
     srv.step_once()
-    srv._sync_store()
+    srv.mission_link.sync_store()
     ex, fence = srv.stack.mission, srv.stack.fence
     st = srv._state()
     ex.start(st, None)

@@ -7,11 +7,21 @@ strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
 (``mavcore.link.pipe``), where the peer's waits run the vehicle (``service``) instead
 of ``run``. Telemetry goes to every link; replies
 (COMMAND_ACK, PARAM_VALUE on read, MISSION_*) go to the link the request
-came from, addressed to the requester. The protocols are the server sides
-of ``mavcore.services`` (``CommandServer``, ``ParamServer``,
-``MissionServer``, ``StreamSchedule``), the commands ``sitl.commands`` and
-the encoders of what the vehicle sends ``sitl.telemetry``; this module keeps
-the links, the pacing and lockstep, and routes received messages.
+came from, addressed to the requester.
+
+This module keeps the links, the pacing and lockstep (and the
+HIL_ACTUATOR_CONTROLS answer that releases a frame), the frame step with its
+telemetry send, and the dispatch: who may send a message (``sitl.auth``),
+then the handler of the part that owns it. The parts, each over the server
+side of a ``mavcore.services`` protocol or the flight stack:
+``sitl.command_link`` (COMMAND_LONG/INT through ``CommandServer``; what each
+command does is ``sitl.commands``), ``sitl.params_link`` (PARAM_* through
+``ParamServer`` and what a value changes), ``sitl.mission_link`` (MISSION_*
+through ``MissionServer``, the stored lists handed to the flight stack,
+MISSION_CURRENT and MISSION_ITEM_REACHED), ``sitl.setpoints`` (SET_MODE, the
+offboard setpoints, OBSTACLE_DISTANCE), ``sitl.signing_link``
+(SETUP_SIGNING) and ``sitl.telemetry`` (the encoders of what the vehicle
+sends, scheduled by ``StreamSchedule``). TIMESYNC and PING are answered here.
 
 Time and pacing
 ---------------
@@ -91,7 +101,6 @@ all-zero key, sent signed, turns signing off again).
 from __future__ import annotations
 
 import collections
-import dataclasses
 import errno
 import logging
 import math
@@ -110,9 +119,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from mavcore.mission.schema import Mission
 
 from mavcore import codec
-from mavcore.link.signing import (SignatureVerifier, disable_outgoing_signing, enable_outgoing_signing,
-                                  signing_timestamp)
-from mavcore.link import command_rules as rules
+from mavcore.link.signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
 from mavcore.link.sockets import is_datagram_url, open_pipe
 
 from mavcore.link.pipe import MEMORY_SCHEME
@@ -120,24 +127,24 @@ from mavcore import autopilot as autopilots
 
 from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
 from .battery import Battery
-from .collision_prevention import CollisionPrevention, CollisionPreventionConfig
-from . import mission_exec, mission_store
-from mavcore.services.command import CommandServer, ack_message
-from mavcore.services.mission import MissionServer, encode_reply
-from mavcore.services.params import Parameters, ParamServer
+from .collision_prevention import CollisionPrevention
+from mavcore.services.command import CommandServer
 from mavcore.services.telemetry import StreamSchedule
 
 from .flightstack import (
-    IDLE_MOTOR_CMD, FlightMode, FlightStack, NavState, StatusEvent, SEVERITY_INFO, SEVERITY_WARNING,
+    IDLE_MOTOR_CMD, FlightStack, NavState, StatusEvent, SEVERITY_INFO, SEVERITY_WARNING,
 )
-from .rate_control import hover_thrust
 from .sim import Simulation
+from .command_link import CommandLink
 from .commands import VehicleCommands
+from .mission_link import VehicleMission
+from .params_link import VehicleParams, vehicle_parameters
+from .setpoints import VehicleSetpoints
+from .signing_link import SigningSetup
 from .telemetry import VehicleTelemetry
+from .vehicle_id import COMPONENT_ID, SYSTEM_ID
 from .world import load_world
 
-SYSTEM_ID = 1
-COMPONENT_ID = 1
 _log = logging.getLogger("sitl")
 
 # Message ids used for scheduling.
@@ -517,23 +524,23 @@ class SitlServer:
         self.sim = Simulation(mission, np.random.default_rng(seed), physics_hz=config.physics_hz,
                               sensor_hz=config.sensor_hz, world=world, start_enu_m=start_xy,
                               start_yaw_rad=start_yaw)
-        md = self.sim.sensors.model
         self.autopilot = autopilots.get(config.autopilot or mission.sim.autopilot)
-        self.params = Parameters.for_autopilot(self.autopilot, initial={
-            "SIM_VEC_VAR": md.accel_rel_std ** 2, "SIM_GYRO_VAR": md.gyro_std_rad_s ** 2,
-            "SIM_POS_STD": md.position_std_xy_m, "SIM_POSZ_STD": md.position_std_z_m,
-            "SIM_VEL_STD": md.velocity_std_m_s, "SIM_RNG_STD": md.range_std_m,
-            "SIM_LOCKSTEP": int(bool(config.lockstep)),
-            "MPC_THR_HOVER": hover_thrust(mission.vehicle),
-            **self._controller_param_defaults()})
-        self.param_server = ParamServer(self.params, self.autopilot.param_bytewise)
+        self.params = vehicle_parameters(self.autopilot, mission, self.sim, config.lockstep)
         self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
         self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
         self.stack = FlightStack(self.params, self.home_enu_m, self.autopilot)
         self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
-        self._init_mission_store(mission.energy.max_mission_items)
+        #: The mission, fence and rally storage and the mission progress (``sitl.mission_link``).
+        self.mission_link = VehicleMission(
+            mission.energy.max_mission_items, self.sim, self.stack, self.params, self.autopilot, self.origin,
+            self.home_enu_m, lambda: self._state() if self._frame is not None else None, self._mav,
+            self._broadcast, self._say, self._refuse)
+        self.missions = self.mission_link.server     # the protocol (``mavcore.services.mission``)
         self.battery = Battery(mission.energy)
         self.collision_prevention = CollisionPrevention()     # fed by OBSTACLE_DISTANCE, CP_* params
+        #: The PARAM_* handlers and what the values change (``sitl.params_link``).
+        self.param_link = VehicleParams(self.params, self.autopilot, self.sim, self.collision_prevention,
+                                        lambda: self.links, self._say, self._apply_params)
         self._apply_params()
         self._onboard_flying = False
         self._rates_flying = False
@@ -558,7 +565,6 @@ class SitlServer:
         self.commands = CommandServer(VehicleCommands(self.sim, self.stack, self.autopilot, self.origin,
                                                       self.home_enu_m, self.streams, self.telemetry, self._state,
                                                       self._mav).table())
-        self._init_dispatch()
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
         self.stats = {"bad_packets": 0, "ignored": collections.Counter(), "unsupported": collections.Counter(),
@@ -572,78 +578,36 @@ class SitlServer:
             None if config.signing_key is None else SignatureVerifier(config.signing_key),
             key_locked=config.signing_key is not None)
         self._intake = IntakeBudget()
-
+        #: COMMAND_LONG / COMMAND_INT through ``self.commands`` (``sitl.command_link``).
+        self.command_link = CommandLink(self.commands, self.stack, self._state, self.stats["unsupported"],
+                                        self._refuse)
+        #: SET_MODE, the offboard setpoints and the obstacle sectors (``sitl.setpoints``).
+        self.setpoints = VehicleSetpoints(self.sim, self.stack, self.collision_prevention, self._state,
+                                          self._refuse)
+        #: SETUP_SIGNING (``sitl.signing_link``).
+        self.signing = SigningSetup(self.auth, lambda: self.links, self._say)
+        self._init_dispatch()
 
     def _init_dispatch(self) -> None:
-        """The receive table: message type -> handler (commands: ``self.commands``)."""
+        """The receive table: message type -> ``(link, msg)`` handler, most of them the parts'."""
         self._handlers = {
-            "COMMAND_LONG": self._on_command_long,
-            "COMMAND_INT": self._on_command_int,
-            "SET_MODE": self._on_set_mode,
-            "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
+            **self.command_link.handlers(),
             "HIL_ACTUATOR_CONTROLS": self._on_actuators,
-            "SET_ATTITUDE_TARGET": self._on_attitude_target,
-            "PARAM_REQUEST_LIST": self._on_param_list,
-            "PARAM_REQUEST_READ": self._on_param_read,
-            "PARAM_SET": self._on_param_set,
-            "OBSTACLE_DISTANCE": self._on_obstacle_distance,
-            "MISSION_COUNT": self._on_mission_count,
-            "MISSION_ITEM_INT": self._on_mission_item_int,
-            "MISSION_ITEM": self._on_mission_item,
-            "MISSION_REQUEST_LIST": self._on_mission_request_list,
-            "MISSION_REQUEST_INT": self._on_mission_request,
-            "MISSION_REQUEST": self._on_mission_request,
-            "MISSION_CLEAR_ALL": self._on_mission_clear,
-            "MISSION_SET_CURRENT": self._on_mission_set_current,
-            "SETUP_SIGNING": self._on_setup_signing,
+            **self.param_link.handlers(),
+            **self.setpoints.handlers(),
+            **self.mission_link.handlers(),
+            **self.signing.handlers(),
             "TIMESYNC": self._on_timesync,
             "PING": self._on_ping,
         }
 
-    def _init_mission_store(self, max_items: int) -> None:
-        """The mission, fence and rally storage (``mavcore.services.mission.MissionServer``)
-        and what the transport keeps about it."""
-        self.missions = MissionServer(max_items, validate=mission_store.validator(self.origin, self.home_enu_m))
-        self._store_version = self.missions.version
-        self._flown_items = self.missions.items       # the mission list the flight stack has
-        self._mission_current_due_us = 0
-        self._mission_peer = None
-
     # ------------------------------------------------------------------ params
-    @staticmethod
-    def _controller_param_defaults() -> dict:
-        from .onboard import OnboardGains
-        g = OnboardGains()
-        return {"MPC_XY_VEL_MAX": g.max_speed_xy_m_s, "MPC_Z_VEL_MAX_UP": g.max_speed_up_m_s,
-                "MPC_Z_VEL_MAX_DN": g.max_speed_down_m_s,
-                "MPC_TILTMAX_AIR": math.degrees(g.max_tilt_rad)}
-
     def _apply_params(self) -> None:
-        """Push parameter values into the onboard controller and the sensors."""
-        p = self.params
-        ctl = self.sim.onboard
-        ctl.gains = dataclasses.replace(
-            ctl.gains, max_speed_xy_m_s=p["MPC_XY_VEL_MAX"], max_speed_up_m_s=p["MPC_Z_VEL_MAX_UP"],
-            max_speed_down_m_s=p["MPC_Z_VEL_MAX_DN"], max_tilt_rad=math.radians(p["MPC_TILTMAX_AIR"]))
-        cp = self.collision_prevention
-        cp.configure(CollisionPreventionConfig(p["CP_DIST"], p["CP_DELAY"], bool(p["CP_GO_NO_DATA"]),
-                                               p["MPC_ACC_HOR"]))
-        ctl.velocity_limit = cp.limit if cp.cfg.enabled else None
-        self.sim.thrust_model_factor = float(p["THR_MDL_FAC"])
-        s = self.sim.sensors
-        s.acc_rel_std = math.sqrt(p["SIM_VEC_VAR"])
-        s.mag_std = math.sqrt(p["SIM_VEC_VAR"]) * float(np.linalg.norm(s.mag_earth))
-        s.gyro_std = math.sqrt(p["SIM_GYRO_VAR"])
-        s.gnss.pos_std_xy_m = p["SIM_POS_STD"]
-        s.gnss.pos_std_z_m = p["SIM_POSZ_STD"]
-        s.gnss.vel_std_m_s = p["SIM_VEL_STD"]
-        s.range_std = p["SIM_RNG_STD"]
-        if p["SIM_RNG_HZ"] > 0:   # 0 leaves the configured (or SET_MESSAGE_INTERVAL) rates alone
-            for rf in s.rangefinders:
-                rf.period_us = max(self.sim.sensor_period_us, int(round(1e6 / p["SIM_RNG_HZ"])))
+        """Push parameter values into the simulation (``VehicleParams.apply``) and the links' spin budget."""
+        self.param_link.apply()
         # Spinning for the lockstep answer only pays when the peer runs on
         # another core; on one core it would only delay the peer.
-        self._spin_s = p["SIM_LS_SPIN"] * 1e-6 if self.config.spin and (os.cpu_count() or 1) >= 2 else 0.0
+        self._spin_s = self.params["SIM_LS_SPIN"] * 1e-6 if self.config.spin and (os.cpu_count() or 1) >= 2 else 0.0
         for link in self.links:
             if link.pipe is not None and not link.memory:
                 link.pipe.spin.max_s = self._spin_s
@@ -716,7 +680,7 @@ class SitlServer:
             if max_frames is not None and n >= max_frames:
                 break
             if self.missions.uploading:
-                self.mission_tick()
+                self.mission_link.tick()
             if self.lockstep_engaged:
                 self._wait_for_answer()
             else:
@@ -766,14 +730,14 @@ class SitlServer:
         if self._released:
             self.step_once()
             if self.missions.uploading:
-                self.mission_tick()
+                self.mission_link.tick()
             return
         now = time.monotonic()             # run(): _wait_for_answer, the clock stalled
         if now - self._last_hb_wall >= 1.0:
             self._last_hb_wall = now
             self._broadcast(self.telemetry.heartbeat())
         if self.missions.uploading:
-            self.mission_tick()
+            self.mission_link.tick()
 
     # ------------------------------------------------------------------ one frame
     def step_once(self) -> None:
@@ -806,7 +770,7 @@ class SitlServer:
         self._rates_flying = out.rates is not None
         self._frame = frame
         if self.stack.mission is not None:
-            self._mission_progress()
+            self.mission_link.progress()
         self.battery.drain(sim.plant.f, sim.dt_frame_s)
         self.frames += 1
         if sim.crash is not None and not self.stack.crashed:
@@ -1123,9 +1087,6 @@ class SitlServer:
             self._say(SEVERITY_WARNING if not v.accepted else SEVERITY_INFO, v.report)
         return v.accepted
 
-    def _reply(self, link: _Link, msg) -> None:
-        link.reply(msg)
-
     def _broadcast(self, msg) -> None:
         for l in self.links:
             if l.has_peer:
@@ -1162,72 +1123,7 @@ class SitlServer:
             self._refusal_said_s = now
             self._say(SEVERITY_WARNING, f"Refused {kind}: {why}")
 
-    # ------------------------------------------------------------------ commands
-    def _on_command_long(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
-        self._command(link, msg, int(msg.command), params)
-
-    def _on_command_int(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
-        self._command(link, msg, int(msg.command), params, int(msg.frame))
-
-    def _command(self, link, msg, command: int, params, int_frame: int | None = None) -> None:
-        """One command through ``mavcore.services.command.CommandServer``: its ACK, then what follows it."""
-        landed = command in self.commands.handlers and (not self.stack.armed or self._state().landed)
-        reply = self.commands.handle(command, params, int_frame, landed)
-        if reply.unsupported:
-            self.stats["unsupported"][command] += 1
-        elif reply.refused is not None:
-            self._refuse(rules.command_name(command), reply.refused)
-        self._reply(link, ack_message(link.mav, command, reply, msg.get_srcSystem(), msg.get_srcComponent()))
-        for m in reply.after:
-            self._reply(link, m)
-
-    def _on_set_mode(self, link, msg) -> None:
-        if msg.target_system != SYSTEM_ID:
-            return
-        if not int(msg.base_mode) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            self._refuse("SET_MODE", f"base_mode {int(msg.base_mode)} without CUSTOM_MODE_ENABLED")
-            return
-        mode = self.stack.mode_of(msg.custom_mode)
-        if mode is None:
-            self._refuse("SET_MODE", f"unknown custom mode {int(msg.custom_mode)}")
-            return
-        self.stack.set_mode(self.sim.time_us, self._state(), mode)
-
-    # ------------------------------------------------------------------ setpoints
-    def _on_position_target(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        why = rules.position_target_problem(
-            msg.coordinate_frame, msg.type_mask,
-            (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, msg.afx, msg.afy, msg.afz), msg.yaw, msg.yaw_rate)
-        if why is not None:
-            self._refuse("SET_POSITION_TARGET_LOCAL_NED", why)
-            return
-        nav = self._state()   # the flight stack's own heading and position (estimate or truth)
-        target = codec.decode_position_target(msg, nav.yaw_enu_rad, nav.pos_enu_m)
-        if target is not None:
-            self.stack.offboard_setpoint(self.sim.time_us, target)
-
-    def _on_obstacle_distance(self, link, msg) -> None:
-        sectors = codec.decode_obstacle_distance(msg)
-        if sectors is not None:
-            self.collision_prevention.on_sectors(sectors, self.sim.time_us)
-
-    def _on_attitude_target(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        sp, why = codec.decode_attitude_rates(msg)
-        if why is not None:
-            self._refuse("SET_ATTITUDE_TARGET", why)
-            return
-        self.stack.rate_setpoint(self.sim.time_us, sp)
-
+    # ------------------------------------------------------------------ lockstep answer
     def _on_actuators(self, link, msg) -> None:
         self._on_answer(codec.decode_actuator_controls(msg))
 
@@ -1244,169 +1140,7 @@ class SitlServer:
         if ans.time_usec == self._awaited_us:
             self._released = True
 
-    # ------------------------------------------------------------------ params
-    def _on_param_list(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        for i in self.param_server.request_list():
-            link.reply(self.param_server.value_message(link.mav, i))
-
-    def _on_param_read(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        r = self.param_server.request_read(msg.param_id, msg.param_index)
-        if r.index is not None:
-            link.reply(self.param_server.value_message(link.mav, r.index))
-
-    def _on_param_set(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        r = self.param_server.set(msg.param_id, msg.param_value, msg.param_type)
-        if r.warning is not None:
-            self._say(SEVERITY_WARNING, r.warning)
-        if r.applied:
-            self._apply_params()
-        if r.index is None:
-            return
-        for l in (self.links if r.to_all else (link,)):
-            if l.has_peer:
-                l.send(self.param_server.value_message(l.mav, r.index))
-
-    # ------------------------------------------------------------------ missions
-    def _send_mission_replies(self, link, peer, replies, addr=None) -> None:
-        for r in replies:
-            link.reply(encode_reply(link.mav, peer[0], peer[1], r), addr)
-
-    def _peer(self, msg):
-        return msg.get_srcSystem(), msg.get_srcComponent()
-
-    def _on_mission_count(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        self._mission_peer = (link, self._peer(msg), link.last_addr)
-        replies = self.missions.handle_count(int(msg.count), int(getattr(msg, "mission_type", 0)),
-                                             time.monotonic())
-        self._sync_store()
-        self._send_mission_replies(link, self._peer(msg), replies)
-
-    def _on_mission_item_int(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        self._mission_item(link, msg, codec.mission_item_from_int(msg))
-
-    def _on_mission_item(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        item = codec.mission_item_from_float(msg)
-        if item is None:
-            self._refuse("MISSION_ITEM", "x or y not finite or beyond the int32 of MISSION_ITEM_INT")
-            return
-        self._mission_item(link, msg, item)
-
-    def _mission_item(self, link, msg, item) -> None:
-        was = self.missions.uploading
-        replies = self.missions.handle_item(item, time.monotonic())
-        if self.missions.refused is not None:
-            self._refuse(msg.get_type(), self.missions.refused)
-        stored = was and not self.missions.uploading and self.missions.version != self._store_version
-        self._sync_store()      # the flight stack has the new list before the peer has the ACK
-        self._send_mission_replies(link, self._peer(msg), replies)
-        if stored:
-            n = len(self.missions.stored[item.mission_type])
-            what = {mavlink.MAV_MISSION_TYPE_FENCE: "Geofence", mavlink.MAV_MISSION_TYPE_RALLY: "Rally points"}
-            self._say(SEVERITY_INFO, f"{what.get(item.mission_type, 'Mission')} stored: {n} items")
-
-    def _on_mission_request_list(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        replies = self.missions.handle_request_list(int(getattr(msg, "mission_type", 0)))
-        self._send_mission_replies(link, self._peer(msg), replies)
-
-    def _on_mission_request(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        replies = self.missions.handle_request(int(msg.seq), int(getattr(msg, "mission_type", 0)))
-        self._send_mission_replies(link, self._peer(msg), replies)
-
-    def _on_mission_clear(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        replies = self.missions.handle_clear_all(int(getattr(msg, "mission_type", 0)))
-        self._sync_store()
-        self._send_mission_replies(link, self._peer(msg), replies)
-
-    def _on_mission_set_current(self, link, msg) -> None:
-        if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
-            return
-        if self.missions.handle_set_current(int(msg.seq)):
-            m = self.stack.mission
-            if m is not None:
-                m.set_current(int(msg.seq))
-            self._send_mission_current()
-
-    def _sync_store(self) -> None:
-        """A stored list changed: hand the flight stack its new mission, fence and rally points."""
-        if self.missions.version == self._store_version:
-            return
-        self._store_version = self.missions.version
-        objs = mission_store.flight_objects(self.missions.stored, self.origin, self.home_enu_m, self.params,
-                                            self.autopilot.mission_rules)
-        self.stack.fence = objs.fence
-        self.stack.rally_points = objs.rally_points
-        if objs.fence is None:
-            self.stack.fence_breached = False
-        if self.missions.items is not self._flown_items:   # a fence or rally upload leaves the mission flying
-            self._flown_items = self.missions.items
-            self.stack.set_mission(objs.mission, self._state() if self._frame is not None else None)
-            self._send_mission_current()
-
-    def _send_mission_current(self) -> None:
-        m = self.stack.mission
-        seq = m.current if m is not None else self.missions.current_seq
-        state = mission_store.mission_state(m, self.stack.mode is FlightMode.MISSION)
-        self._broadcast(self._mav().mission_current_encode(seq, len(self.missions.items), state))
-        self._mission_current_due_us = self.sim.time_us + 1_000_000
-
-    def _mission_progress(self) -> None:
-        """MISSION_ITEM_REACHED for each item completed; MISSION_CURRENT on a
-        change and once a second of vehicle time while a mission is stored (PX4)."""
-        m = self.stack.mission
-        if m.events:
-            for seq in m.pop_events():
-                self._broadcast(self._mav().mission_item_reached_encode(seq))
-                if m.rules.reached_text and m.items[seq].command in mission_exec.ANNOUNCED_COMMANDS:
-                    self._say(SEVERITY_INFO, f"Reached command #{seq}")   # ArduCopter verify_nav_wp
-        if m.current_changed or self.sim.time_us >= self._mission_current_due_us:
-            m.current_changed = False
-            self._send_mission_current()
-
-    def mission_tick(self) -> None:
-        """Resend or abandon a stalled upload (wall-clock timeouts)."""
-        if self._mission_peer is None or not self.missions.uploading:
-            return
-        replies = self.missions.tick(time.monotonic())
-        if replies:
-            link, peer, addr = self._mission_peer
-            self._send_mission_replies(link, peer, replies, addr)
-
     # ------------------------------------------------------------------ misc
-    def _on_setup_signing(self, link, msg) -> None:
-        # Reaches here only from a controller, and never with a key from the
-        # command line (``sitl.auth``). From now on control must be signed.
-        if msg.target_system != SYSTEM_ID or self.auth.key_locked:
-            return
-        key = bytes(msg.secret_key)
-        if not any(key):
-            self.auth.set_signing(None)
-            for l in self.links:
-                disable_outgoing_signing(l.mav)
-        else:
-            ts = int(msg.initial_timestamp) or signing_timestamp(time.time())
-            self.auth.set_signing(SignatureVerifier(key, ts))
-            for i, l in enumerate(self.links):
-                enable_outgoing_signing(l.mav, key, i, ts)
-        self._say(SEVERITY_INFO, "Signing " + ("disabled" if not any(key) else "key stored"))
-
     def _on_timesync(self, link, msg) -> None:
         if int(msg.tc1) != 0:
             return   # an answer to someone else's request

@@ -72,7 +72,7 @@ def test_a_fence_upload_during_a_mission_leaves_it_flying_a_new_mission_stops_it
         srv.missions.handle_count(len(items), mission_type, 0.0)
         for it in items:
             srv.missions.handle_item(it, 0.0)
-        srv._sync_store()                              # what the server does before its MISSION_ACK
+        srv.mission_link.sync_store()                  # what the server does before its MISSION_ACK
 
     h = srv.home_enu_m
     lat, lon, _ = ll(h[0] + 5.0, h[1])
