@@ -19,7 +19,7 @@ from companion.replan.heading_bias import MIN_EVIDENCE, PERIOD_S, STEP_RAD, Head
 from companion.replan.perception import BeamEvidence
 
 WALL_Y = 1.8          # a long wall (a row's face) along x
-TOL = 0.03
+TOL = 0.1           # an interval of turns 2 TOL / d wide: >= 1.9 deg up to 6 m, above the coarse step (1 deg)
 
 
 def _ev(o, theta, d):
