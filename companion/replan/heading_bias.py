@@ -35,8 +35,10 @@ The offsets whose score is within ``TIE_RETURNS`` of the best explain the
 returns equally well: they form the interval the returns pin the error
 down to (about a degree wide in a corridor). The estimate is the middle of
 that run of offsets (of several runs, the one nearest 0), once the evidence
-weight reaches ``MIN_EVIDENCE``. Before that, and wherever the heading is
-right (a run symmetric about 0), it is 0, and nothing changes.
+weight reaches ``MIN_EVIDENCE``; but while that run holds 0 (the heading as
+estimated explains the returns as well as any turn) it is 0. Before that,
+and wherever the heading is right, nothing changes: flights on exact or
+paper-model sensors are the same, bit for bit.
 
 Safety: the estimate only rotates the evidence by the error the rows
 measured; a return is then explained at that one rotation, never at a band
@@ -178,4 +180,5 @@ class HeadingBias:
                 start = None
         mid = len(self.offsets) // 2              # the offset 0
         a, b = min(runs, key=lambda r: 0 if r[0] <= mid <= r[1] else min(abs(r[0] - mid), abs(r[1] - mid)))
-        self.estimate_rad = 0.5 * (self.offsets[a] + self.offsets[b])
+        # the estimator's own heading stands while it explains the returns as well as any
+        self.estimate_rad = 0.0 if a <= mid <= b else 0.5 * (self.offsets[a] + self.offsets[b])
