@@ -92,6 +92,7 @@ from ..trajectory.reference import RefSample
 from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
 from .globalplan import GlobalPlan
+from .heading_bias import HeadingBias, rotate_evidence
 from .knownmap import UNKNOWN, KnownMap
 from .lift import WALL_MARGIN_M as LIFT_WALL_MARGIN_M, Over
 from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
@@ -497,6 +498,7 @@ class Replanner:
         self._known0 = known                   # the map before any re-route added cells to it
         self._active_conf = np.zeros(0, dtype=bool)
         self.poses = PoseHistory()
+        self.heading = HeadingBias()
         self.fresh = BeamFreshness()
         self.closing = ClosingSpeed()       # movers: the governor bounds the closing speed
         self.shaper = ReferenceShaper(cfg.accel_m_s2, cfg.jerk_m_s3)
@@ -585,6 +587,10 @@ class Replanner:
         if ev is None:
             self.n_ignored += 1
             return
+        # the rows measure the estimate's heading error (``heading_bias``): the beam is turned by it
+        self.heading.observe(t_s, ev, self._explained)
+        if self.heading.estimate_rad:
+            ev = rotate_evidence(ev, self.heading.estimate_rad)
         self.fresh.on_evidence(t_s, reading.sensor_id, reading.R_flu_sensor, reading.hfov_rad, reading.vfov_rad)
         mem = self.memory
         if len(mem):
