@@ -441,10 +441,24 @@ def test_position_target_echo_roundtrip(mav):
 # --- 4. DISTANCE_SENSOR orientations and ray directions --------------------------------
 
 
-class _Walls:
-    """Hand-placed world: walls x = 10 (east) and y = 20 (north), ground z = 0."""
+class _FlatGround:
+    @staticmethod
+    def height(x, y):
+        return 0.0
 
-    def raycast(self, ox, oy, oz, dx, dy, dz, max_m):
+
+class _Walls:
+    """Hand-placed world: walls x = 10 (east) and y = 20 (north), ground z = 0 (the part of
+    ``sitl.world.World``'s interface a rangefinder reads: the terrain's height, the obstacles
+    within reach, and the ray cast given both)."""
+
+    terrain = _FlatGround()
+
+    @staticmethod
+    def near_obstacles(ox, oy, oz, reach_m):
+        return ()
+
+    def raycast(self, ox, oy, oz, dx, dy, dz, max_m, ground_z=None, obstacles=None):
         best = math.inf
         for o, d, plane in ((ox, dx, 10.0), (oy, dy, 20.0), (oz, dz, 0.0)):
             if abs(d) > 1e-12:
