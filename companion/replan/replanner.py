@@ -1078,21 +1078,23 @@ class Replanner:
             # stopped inside a clearance (the map grew round the vehicle), every route leaves
             # it first, straight out, and starts from there (docs/replan.md "Candidates that
             # start inside"): from inside, a route that closes on anything is refused
-            exit_leg = self._exit_leg(st.p)
+            # (judged on the map the route is flown on: the blocking obstacle's cells, columns
+            # of unknown height, can put a vehicle stopped over its side inside their clearance)
             for others in (*tiers, None):
-                if exit_leg is None:
-                    res = reroute(self.plan, known0, st, tau, self._wp_leave, blocking, travel,
-                                  self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
-                                  self._keep_m + ROUTE_MARGIN_M, others, over)
-                else:
+                res = reroute(self.plan, known0, st, tau, self._wp_leave, blocking, travel,
+                              self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
+                              self._keep_m + ROUTE_MARGIN_M, others, over)
+                # the guard reads the map the route is flown on: the obstacle added (its cells)
+                self.known = res.known
+                exit_leg = self._exit_leg(st.p)
+                if exit_leg is not None:
                     scene = RouteScene(known0, self.memory, self._keep_m, self.cfg.floor_agl_m,
                                        self.cfg.ceiling_agl_m)
                     res = reroute_3d(self.plan, scene, exit_leg[1:], st, tau, self._wp_leave, blocking, travel,
                                      self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
                                      self._keep_m + ROUTE_MARGIN_M, others, over,
                                      route=Route3D(exit_leg, 0, float(np.linalg.norm(exit_leg[1] - exit_leg[0]))))
-                # the guard reads the map the route is flown on: the obstacle added (its cells)
-                self.known = res.known
+                    self.known = res.known
                 plan, verdict, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st)
                 if plan is not None:
                     break
@@ -1108,9 +1110,14 @@ class Replanner:
                 for margin in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M) if len(goals) else ():
                     scene = RouteScene(known0, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
                                        self.cfg.ceiling_agl_m)
-                    route = find_route(scene, np.asarray(st.p, float), goals)   # one lattice search per margin
+                    # from inside a clearance, out first (the lattice route starts where the leg ends)
+                    start = np.asarray(st.p, float) if exit_leg is None else exit_leg[1]
+                    route = find_route(scene, start, goals)   # one lattice search per margin
                     if route is None:
                         continue              # no 3-D route to any coverage end with this margin
+                    if exit_leg is not None:
+                        route = Route3D(np.vstack([exit_leg[:1], route.path_enu_m]), route.goal_index,
+                                        route.length_m + float(np.linalg.norm(exit_leg[1] - exit_leg[0])))
                     for others in (*tiers, None):
                         res3 = reroute_3d(self.plan, scene, goals, st, tau, self._wp_leave, blocking, travel,
                                           self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,

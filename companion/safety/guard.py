@@ -260,8 +260,12 @@ class Guard:
         """(M,) the largest speed (m/s) at (M, 3) points ``p`` moving along (M, 3) unit
         directions ``u`` that the speed rule passes: ``v_max(d - req)`` (the stopping law) over
         the approach per unit speed along ``u`` (a finite difference over ``STEP_M``), the
-        least over the terrain and the obstacles; inf where ``u`` closes on neither. The same
-        law as ``_judge``'s, for planning a speed rather than judging one."""
+        least over the terrain and the obstacles; inf where ``u`` closes on neither, and
+        inside a clearance (d < req), where no speed mends a closing path: the margin rule
+        judges it (slowing a stopped vehicle's way out there made the LQR, its way-points far
+        apart in time, drift toward the obstacle on its initial state: obstacles-wide seed
+        20261127, flight 16). The same law as ``_judge``'s, for planning a speed rather than
+        judging one."""
         p = np.asarray(p_enu_m, float).reshape(-1, 3)
         u = np.asarray(u_enu, float).reshape(-1, 3)
         d_all = self.distances(np.vstack([p, p + STEP_M * u]))
@@ -271,7 +275,7 @@ class Guard:
             with np.errstate(invalid="ignore"):
                 closing = np.where(np.isfinite(d0), (d0 - d1) / STEP_M, 0.0)
             allowed = stopping_speed_m_s(d0 - self._req[kind], self.cfg.accel_m_s2, self.cfg.delay_s)
-            lim = np.where(closing > 1e-6, allowed / np.maximum(closing, 1e-6), np.inf)
+            lim = np.where((closing > 1e-6) & ~(d0 < self._req[kind]), allowed / np.maximum(closing, 1e-6), np.inf)
             out = np.minimum(out, lim)
         return out
 
