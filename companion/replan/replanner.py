@@ -647,6 +647,13 @@ class Replanner:
         return ReplanStep(ref, self.mode, self.mode == "done", self.mode == "hold", tuple(events))
 
     @property
+    def plan_end_s(self) -> float:
+        """Vehicle time (s) at which the plan being flown (the last installed: the plan, a
+        re-route, a rejoin) ends."""
+        offset = 0.0 if self._offset is None else self._offset
+        return offset + float(self.plan.trajectory.tf)
+
+    @property
     def stats(self) -> ReplanStats:
         """Statistics so far (report.json ``replanning``)."""
         return ReplanStats(self._n_events, tuple(self._events), self._max_lat,
