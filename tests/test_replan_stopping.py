@@ -124,3 +124,28 @@ def test_no_way_out_through_the_ceiling_or_closer_to_something_else():
     # the end is the first 5 cm step 1.2 m out: horizontal offset h from the face with
     # h^2 + 0.5^2 >= 1.2^2, h >= 1.091 m, so |dy| = 0.5 + 1.10 = 1.60 m
     assert abs(end[1] - 6.5) == pytest.approx(1.60, abs=1e-9) and end[0] == pytest.approx(6.0)
+
+
+def test_inside_its_margin_the_reference_may_creep_to_the_clearance_not_into_it():
+    # at rest 2 cm inside the stopping point's margin (0.87 m from the face; the band is
+    # 0.85-0.90 m), the command asks 0.02 m/s toward the row and 0.3 m/s along it for 3 s:
+    # judged afresh every frame, a closing allowed per frame adds up (5 mm a frame let a climb
+    # creep 0.15 m into a row's clearance); it may close to the clearance, never into it
+    rp = _shaping(_guard())
+    rp.shaper.reset((FACE_X - (REQ_ROW + 0.02), 1.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    p = np.array([rp._shape(DT, (0.02, 0.3, 0.0)).p for _ in range(int(3.0 / DT))])
+    # (the 2 mm: the brake predicted every 0.05 s runs a little short of the frame-stepped
+    # one that is flown)
+    assert (FACE_X - p[:, 0]).min() >= REQ_ROW - 0.002
+    assert p[-1, 1] - p[0, 1] > 0.5                       # along the row it goes on
+
+
+def test_inside_the_clearance_the_reference_does_not_close():
+    # 2 cm inside the row's clearance itself (the map grew, or a mode handed over there): the
+    # same command; closer only by the prediction's millimetres. (It brakes rather than
+    # slides along there: the state's last 1 mm/s toward the face fails every candidate
+    # that keeps it, and at rest the stop's re-route leaves the clearance first.)
+    rp = _shaping(_guard())
+    rp.shaper.reset((FACE_X - (REQ_ROW - 0.02), 1.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    p = np.array([rp._shape(DT, (0.02, 0.3, 0.0)).p for _ in range(int(3.0 / DT))])
+    assert (FACE_X - p[:, 0]).min() >= REQ_ROW - 0.02 - 0.003

@@ -48,7 +48,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .margin_rule import MarginRule, margin_violations
+from .margin_rule import CLOSING_TOL_M, MarginRule, margin_violations
 from .stopping import stopping_distance_m, stopping_speed_m_s
 
 #: Sensing and control delay (s) of the stopping law (PX4 CP_DELAY). The fallback's
@@ -369,17 +369,19 @@ class Guard:
         bad = {kind: margin_violations(d[kind], self._req[kind], R) for kind in KINDS}
         return self._judge(p, v_enu_m_s, t_s, terrain, bad)
 
-    def check_path(self, points_enu_m, margin_m: float = 0.0) -> Verdict:
+    def check_path(self, points_enu_m, margin_m: float = 0.0, tol_m: float | None = None) -> Verdict:
         """The margin rule (``margin_rule``) along a path of (M, 3) ENU points, in order,
-        against every surface, with the distance to keep raised by ``margin_m``: the
-        reference shaper's predicted brake (``companion.safety.brake``). The failing
-        verdict's ``point_enu_m`` is the first point that breaks it."""
+        against every surface, with the distance to keep raised by ``margin_m`` and the
+        closing allowed inside it ``tol_m`` (default ``CLOSING_TOL_M``): the reference
+        shaper's predicted brake (``companion.safety.brake``). The failing verdict's
+        ``point_enu_m`` is the first point that breaks it."""
         p = np.asarray(points_enu_m, float).reshape(-1, 3)
         d = self.distances(p)
         R = self.cfg.airframe_radius_m
+        tol = CLOSING_TOL_M if tol_m is None else float(tol_m)
         for kind in KINDS:
             req = self._req[kind] + margin_m
-            bad = margin_violations(d[kind], req, R)
+            bad = margin_violations(d[kind], req, R, tol)
             if bad.any():
                 k = int(np.argmax(bad))
                 q = tuple(float(c) for c in p[k])
