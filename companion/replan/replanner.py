@@ -1026,9 +1026,7 @@ class Replanner:
             path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh)])
             # the brake keeps STOP_MARGIN_M beyond the clearance (the prediction's error at
             # speed), and never enters the clearance itself nor closes inside it
-            verdict = self.guard.check_path(path, STOP_MARGIN_M)
-            if verdict.ok:
-                verdict = self.guard.check_path(path, 0.0, STOP_TOL_M)
+            verdict = self.guard.check_path(path, STOP_MARGIN_M, inner_tol_m=STOP_TOL_M)
             if verdict.ok:
                 return sh.commit(st)
             # its approach along the normal there goes, and as much away as the state still

@@ -369,18 +369,22 @@ class Guard:
         bad = {kind: margin_violations(d[kind], self._req[kind], R) for kind in KINDS}
         return self._judge(p, v_enu_m_s, t_s, terrain, bad)
 
-    def check_path(self, points_enu_m, margin_m: float = 0.0, tol_m: float | None = None) -> Verdict:
+    def check_path(self, points_enu_m, margin_m: float = 0.0, tol_m: float | None = None,
+                   inner_tol_m: float | None = None) -> Verdict:
         """The margin rule (``margin_rule``) along a path of (M, 3) ENU points, in order,
         against every surface, with the distance to keep raised by ``margin_m`` and the
-        closing allowed inside it ``tol_m`` (default ``CLOSING_TOL_M``): the reference
-        shaper's predicted brake (``companion.safety.brake``). The failing verdict's
-        ``point_enu_m`` is the first point that breaks it."""
+        closing allowed inside it ``tol_m`` (default ``CLOSING_TOL_M``); with
+        ``inner_tol_m``, the rule at the clearance itself too (no margin), closing inside it
+        at most that: the reference shaper's predicted brake (``companion.safety.brake``).
+        The failing verdict's ``point_enu_m`` is the first point that breaks it."""
         p = np.asarray(points_enu_m, float).reshape(-1, 3)
         d = self.distances(p)
         R = self.cfg.airframe_radius_m
-        tol = CLOSING_TOL_M if tol_m is None else float(tol_m)
-        for kind in KINDS:
-            req = self._req[kind] + margin_m
+        rules = [(margin_m, CLOSING_TOL_M if tol_m is None else float(tol_m))]
+        if inner_tol_m is not None:
+            rules.append((0.0, float(inner_tol_m)))
+        for (margin, tol), kind in ((r, k) for r in rules for k in KINDS):
+            req = self._req[kind] + margin
             bad = margin_violations(d[kind], req, R, tol)
             if bad.any():
                 k = int(np.argmax(bad))
