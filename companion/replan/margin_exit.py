@@ -24,8 +24,6 @@ import math
 
 import numpy as np
 
-from ..safety.margin_rule import margin_violations
-
 #: Level directions tried.
 N_DIRS = 16
 #: Spacing (m) of the points along a leg.
@@ -67,8 +65,7 @@ def margin_exit(guard, p_enu_m, floor_z: float, ceiling_z: float, margin_m: floa
         k = int(np.argmax(out))
         if not inside_band[:k + 1].all():
             continue
-        R = guard.cfg.airframe_radius_m
-        if any(margin_violations(dk[:k + 2], guard.required_m(kind) + margin_m, R).any() for kind, dk in d.items()):
+        if not guard.check_path(np.vstack([p, pts[:k + 1]]), margin_m).ok:
             continue
         if best is None or s[k] < best[0]:
             best = (float(s[k]), pts[k])

@@ -88,7 +88,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mavcore.mission.replan import ReplanConfig
-from ..safety.brake import brake_path
+from .brake import brake_path
 from ..trajectory.reference import RefSample
 from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
@@ -117,7 +117,7 @@ _FOLLOWING = ("follow", "rejoin", "reroute")
 GOVERNOR_MARGIN_M = 0.1
 #: The stopping point of every avoiding reference (``_shape``) keeps this much (m) beyond
 #: the guard's clearances: the brake is predicted every ``brake.BRAKE_DT_S``, within
-#: 4.5 cm of the frame-stepped brake (``tests/test_safety_brake.py``).
+#: 4.5 cm of the frame-stepped brake (``tests/test_replan_brake.py``).
 STOP_MARGIN_M = 0.05
 #: Closing (m) allowed to a stopping point inside the guard's clearance itself: float noise
 #: only. The rule is judged afresh every frame, from where the reference is, so an allowance

@@ -40,7 +40,7 @@ def axis_snap(v_cmd: float, v: float, a: float, j: float, dt_s: float, a_max: fl
               s_max: float, k_v: float, k_a: float, k_j: float) -> float:
     """The snap (m/s^4) one axis of the reference model applies over a frame of ``dt_s``
     toward the command ``v_cmd`` from (v, a, j) (module doc's nested saturations). The
-    shaper and the prediction of its own brake (``companion.safety.brake``) both use it."""
+    shaper and the prediction of its own brake (``companion.replan.brake``) both use it."""
     # the speed error left once a is ramped to zero at j_max: braking on it
     # keeps the speed from overshooting while the acceleration unwinds
     e = v_cmd - v - a * abs(a) / (2.0 * j_max)

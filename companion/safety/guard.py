@@ -33,7 +33,7 @@ the airframe radius of a surface (contact); a candidate that starts inside a
 clearance never gets closer than it has been until it is out (moving away is
 always allowed, closing never is); once out, it stays out.
 ``check_path`` applies the margin rule to a path of points alone: the
-reference shaper's predicted brake (``companion.safety.brake``), so the
+reference shaper's predicted brake (``companion.replan.brake``), so the
 avoiding modes keep the stopping point of the reference they fly outside the
 clearance (docs/replan.md "The stopping point").
 A landing is checked as the column under the vehicle's braking footprint
@@ -375,7 +375,7 @@ class Guard:
         against every surface, with the distance to keep raised by ``margin_m`` and the
         closing allowed inside it ``tol_m`` (default ``CLOSING_TOL_M``); with
         ``inner_tol_m``, the rule at the clearance itself too (no margin), closing inside it
-        at most that: the reference shaper's predicted brake (``companion.safety.brake``).
+        at most that: the reference shaper's predicted brake (``companion.replan.brake``).
         The failing verdict's ``point_enu_m`` is the first point that breaks it."""
         p = np.asarray(points_enu_m, float).reshape(-1, 3)
         d = self.distances(p)

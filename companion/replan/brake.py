@@ -22,11 +22,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..replan.shaper import axis_snap
+from .shaper import axis_snap
 
 #: Step (s) of the predicted brake: coarser than a frame (4 ms) for its cost; the
 #: stopping point agrees with the frame-stepped brake within 1 cm
-#: (``tests/test_safety_brake.py``), well inside the 0.1 m the replanner keeps.
+#: (``tests/test_replan_brake.py``), well inside the 0.1 m the replanner keeps.
 BRAKE_DT_S = 0.05
 #: An axis is at rest below these speed (m/s), acceleration (m/s^2) and jerk (m/s^3).
 REST_V_M_S, REST_A_M_S2, REST_J_M_S3 = 2e-3, 1e-2, 5e-2

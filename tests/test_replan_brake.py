@@ -1,4 +1,4 @@
-"""The reference shaper's predicted brake (``companion.safety.brake``): the stopping point
+"""The reference shaper's predicted brake (``companion.replan.brake``): the stopping point
 the avoiding modes keep outside the clearance (docs/replan.md "The stopping point").
 
 The prediction steps the shaper's own law every ``BRAKE_DT_S``; the truth it is compared
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from companion.replan.shaper import ReferenceShaper
-from companion.safety.brake import brake_path
+from companion.replan.brake import brake_path
 
 A, J = 1.0, 2.0
 
