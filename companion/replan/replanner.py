@@ -1010,7 +1010,9 @@ class Replanner:
         ``STOP_MARGIN_M`` more, from where the reference is now, and never enter the
         clearance itself nor close inside it (``STOP_TOL_M``). If not, the command loses its approach to the surface that
         failed (the normal there, at most twice), and failing that it is zero: the state
-        then moves along the brake predicted from the last one, which passed. The command
+        then moves along the brake predicted from the last one, which passed. When even the
+        brake fails (the state already closes inside a clearance), the candidate whose path
+        comes least close wins, braking included. The command
         governors (``_govern``, ``_govern_rows``) limit the command; this limits the
         reference actually flown (a row's end closed on at 0.11-0.20 m/s for over a
         second while the command moved away, and the guard refused the sample:
@@ -1020,6 +1022,7 @@ class Replanner:
             return sh.step(dt, v_cmd)
         cmd = np.asarray(v_cmd, dtype=float)
         here = np.asarray(sh.p, dtype=float)[None, :]
+        tried = []
         for _ in range(3):
             st = sh.preview(dt, cmd.tolist())
             # from where the reference is now, through the frame's step, to its stopping point
@@ -1029,6 +1032,7 @@ class Replanner:
             verdict = self.guard.check_path(path, STOP_MARGIN_M, inner_tol_m=STOP_TOL_M)
             if verdict.ok:
                 return sh.commit(st)
+            tried.append((st, path))
             # its approach along the normal there goes, and as much away as the state still
             # closes (the shaper then turns that round first: motion along the surface is kept)
             n = self.guard.normal(verdict.surface, verdict.point_enu_m)
@@ -1038,7 +1042,23 @@ class Replanner:
                 break
             cmd = cmd + approach * n
         self.n_stop_limited += 1
-        return sh.step(dt, (0.0, 0.0, 0.0))
+        st = sh.preview(dt, (0.0, 0.0, 0.0))
+        path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh)])
+        if self.guard.check_path(path, STOP_MARGIN_M, inner_tol_m=STOP_TOL_M).ok:
+            return sh.commit(st)
+        # even braking closes (the state already closes inside a clearance: the map grew round
+        # it): the candidate whose path comes least close, braking included, the earliest of
+        # equals (moving away, or on along the surface, is never worse than braking; a zero
+        # command here also stopped every climb, which then timed out: obstacles-wide seed
+        # 20261127, flight 11)
+        tried.append((st, path))
+        rooms = [self._least_room(p) for _, p in tried]
+        return sh.commit(tried[int(np.argmax(rooms))][0])
+
+    def _least_room(self, path) -> float:
+        """Least (distance - the guard's clearance) (m) along (M, 3) points, over every surface."""
+        d = self.guard.distances(path)
+        return min(float(np.min(d[k])) - self.guard.required_m(k) for k in d)
 
     def _give_way(self, P, pts) -> np.ndarray:
         """Velocity (ENU, m/s) of a stop: zero, or backing away (level) from an obstacle
