@@ -51,7 +51,7 @@ def _shaping(guard):
     a plan); braking at half the 1 m/s^2 limit, as the replanner's governor does."""
     rp = types.SimpleNamespace(guard=guard, shaper=ReferenceShaper(1.0, 2.0), n_stop_limited=0, _brake=0.5,
                                cfg=types.SimpleNamespace(clearance_governor=True))
-    for name in ("_shape", "_govern_rows", "_allowed_speed"):
+    for name in ("_shape", "_govern_rows", "_allowed_speed", "_least_room"):
         setattr(rp, name, types.MethodType(getattr(Replanner, name), rp))
     return rp
 
