@@ -142,10 +142,11 @@ def test_inside_its_margin_the_reference_may_creep_to_the_clearance_not_into_it(
 
 def test_inside_the_clearance_the_reference_does_not_close():
     # 2 cm inside the row's clearance itself (the map grew, or a mode handed over there): the
-    # same command; closer only by the prediction's millimetres. (It brakes rather than
-    # slides along there: the state's last 1 mm/s toward the face fails every candidate
-    # that keeps it, and at rest the stop's re-route leaves the clearance first.)
+    # same command; closer only by the prediction's millimetres, and along the row it goes on
+    # (every candidate keeping the state's last 1 mm/s toward the face fails the rule, even
+    # braking: the one that comes least close is flown, never a stall)
     rp = _shaping(_guard())
     rp.shaper.reset((FACE_X - (REQ_ROW - 0.02), 1.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
     p = np.array([rp._shape(DT, (0.02, 0.3, 0.0)).p for _ in range(int(3.0 / DT))])
     assert (FACE_X - p[:, 0]).min() >= REQ_ROW - 0.02 - 0.003
+    assert p[-1, 1] - p[0, 1] > 0.5
