@@ -94,6 +94,11 @@ def test_speed_limits_follow_the_stopping_law():
     assert lim == pytest.approx(math.sqrt(2 * A_BRAKE * 1.1 + (A_BRAKE * TAU) ** 2) - A_BRAKE * TAU, abs=1e-6)
     # flying away from it, or along the ground at a height with room: no limit
     assert np.isinf(g.speed_limits(np.array([[6.0, 7.5, 1.5]]), np.array([[-1.0, 0.0, 0.0]]))[0])
+    # 0.95 m from the face: room 0.05 m, a small limit; 0.85 m (inside the clearance): none,
+    # no pace mends a path that closes there (the margin rule judges it)
+    near = g.speed_limits(np.array([[7.05, 7.5, 1.5]]), np.array([[1.0, 0.0, 0.0]]))[0]
+    assert near == pytest.approx(math.sqrt(2 * A_BRAKE * 0.05 + (A_BRAKE * TAU) ** 2) - A_BRAKE * TAU, abs=1e-6)
+    assert np.isinf(g.speed_limits(np.array([[7.15, 7.5, 1.5]]), np.array([[1.0, 0.0, 0.0]]))[0])
 
 
 def _worst_law_excess(traj, t0: float) -> float:

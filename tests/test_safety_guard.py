@@ -167,13 +167,68 @@ def test_candidate_checked_whole_not_its_first_seconds():
     assert not v.ok and v.t_s == pytest.approx(59.0, abs=1.5)
 
 
-def test_candidate_starting_inside_may_only_leave():
+def test_candidate_starting_inside_may_leave_and_never_close():
+    # the box's face y = 7; the candidate starts 0.6 m from it (inside the 0.9 m clearance)
     g = _guard(_box((4.0, 6.0, 0.0), (8.0, 7.0, 3.0)))
-    # starts 0.5 m from the face y = 7 and moves straight away: out of the clearance in 0.4 s
-    assert g.check_trajectory(_Line((4.5, 7.5, 1.5), (0.0, 1.0, 0.0), 5.0)).ok
-    # starts 0.5 m from the face and runs along it for 5 s: still inside after ESCAPE_S
-    v = g.check_trajectory(_Line((4.5, 7.5, 1.5), (0.3, 0.0, 0.0), 5.0))
-    assert not v.ok and v.t_s == pytest.approx(2.0, abs=0.051)
+    # straight away: out of the clearance after 0.3 m (1 s at 0.3 m/s), then stays out
+    assert g.check_trajectory(_Line((4.5, 7.6, 1.5), (0.0, 0.3, 0.0), 5.0)).ok
+    # along the face for 5 s: never closer, never out; no time limit on that
+    assert g.check_trajectory(_Line((4.5, 7.6, 1.5), (0.3, 0.0, 0.0), 5.0)).ok
+    # closing at 0.02 m/s (under the old per-sample tolerance of 0.05 m/s): 0.1 m closer in
+    # 5 s; the rule allows 5 mm of closing, so the sample 0.25 s after 5 mm fails
+    v = g.check_trajectory(_Line((4.5, 7.6, 1.5), (0.0, -0.02, 0.0), 5.0))
+    assert not v.ok and v.rule == "clearance" and v.surface == "obstacle"
+    assert v.t_s == pytest.approx(0.3, abs=0.051) and v.distance_m < 0.6 - 0.005
+
+
+def test_candidate_out_of_a_clearance_may_not_go_back_in():
+    g = _guard(_box((4.0, 6.0, 0.0), (8.0, 7.0, 3.0)))
+    # from 0.6 m out to 1.2 m (2 s at 0.3 m/s), then back toward the face at 0.04 m/s
+    # (under both per-sample rules' tolerance): 0.9 m from it at t = 2 + 0.3 / 0.04 = 9.5 s
+    # (rounding puts that sample on either side), the next (0.898 m) fails
+    line = _Line((4.5, 7.6, 1.5), (0.0, 0.3, 0.0), 2.0)
+    back = _Line((4.5, 8.2, 1.5), (0.0, -0.04, 0.0), 10.0)
+
+    class _Out:
+        t0, tf = 0.0, 12.0
+
+        def sample(self, t):
+            t = np.atleast_1d(np.asarray(t, float))
+            a, b = line.sample(np.minimum(t, 2.0)), back.sample(np.maximum(t - 2.0, 0.0))
+            first = (t <= 2.0)[:, None]
+            return _Samples(np.where(first, a.p, b.p), np.where(first, a.v, b.v))
+    v = g.check_trajectory(_Out())
+    assert not v.ok and v.rule == "clearance" and v.t_s == pytest.approx(9.525, abs=0.03)
+
+
+def test_contact_is_a_hard_floor_even_when_leaving():
+    # starts 0.35 m from the face, inside the airframe radius (0.4 m): refused although it
+    # moves straight away; from 0.45 m the same leg passes
+    g = _guard(_box((4.0, 6.0, 0.0), (8.0, 7.0, 3.0)))
+    v = g.check_trajectory(_Line((4.5, 7.35, 1.5), (0.0, 0.3, 0.0), 4.0))
+    assert not v.ok and v.t_s == pytest.approx(0.0) and "contact" in v.detail
+    assert g.check_trajectory(_Line((4.5, 7.45, 1.5), (0.0, 0.3, 0.0), 4.0)).ok
+
+
+def test_the_rule_carries_across_chunks(monkeypatch):
+    # the same closing candidate, judged in chunks of 7 samples: the same verdict
+    import companion.safety.guard as guard_mod
+    g = _guard(_box((4.0, 6.0, 0.0), (8.0, 7.0, 3.0)))
+    line = _Line((4.5, 7.6, 1.5), (0.0, -0.02, 0.0), 5.0)
+    whole = g.check_trajectory(line)
+    monkeypatch.setattr(guard_mod, "CHUNK", 7)
+    assert g.check_trajectory(line).t_s == pytest.approx(whole.t_s)
+
+
+def test_check_path_is_the_margin_rule_with_a_margin():
+    g = _guard(_box((4.0, 6.0, 0.0), (8.0, 7.0, 3.0)))
+    toward = np.column_stack([np.full(11, 4.5), np.linspace(8.2, 7.9, 11), np.full(11, 1.5)])
+    # the path ends 0.9 m from the face: keeps the clearance, not 0.05 m more
+    assert g.check_path(toward).ok
+    v = g.check_path(toward, 0.05)
+    assert not v.ok and v.surface == "obstacle" and v.point_enu_m[1] == pytest.approx(7.93, abs=1e-9)
+    # leaving from inside: passes however deep it starts (above the airframe radius)
+    assert g.check_path(toward[::-1] - [0.0, 0.4, 0.0], 0.05).ok
 
 
 # --- landing: never down onto what is below -----------------------------------------------

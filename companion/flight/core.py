@@ -119,10 +119,20 @@ _NAN_CTRL = (math.nan,) * 10
 _Z3 = (0.0, 0.0, 0.0)
 #: Frames of reference kept to match late position measurements (0.5 s at 250 Hz).
 REF_HISTORY_FRAMES = 128
-#: A replanned trajectory phase longer than this factor times the plan's, plus
-#: ``REPLAN_TIME_EXTRA_S``, is a failure (the replanner's own escape is time-bounded).
+#: A replanned trajectory phase that the plan being flown (the first, or the last re-route or
+#: rejoin installed) has not finished this factor times its duration left when installed, plus
+#: ``REPLAN_TIME_EXTRA_S``, after it was installed is a failure (``replan_deadline``; the
+#: replanner's own escape is time-bounded).
 REPLAN_TIME_FACTOR = 3.0
 REPLAN_TIME_EXTRA_S = 120.0
+
+
+def replan_deadline(t_s: float, left_s: float, deadline_s: float = -math.inf) -> float:
+    """Vehicle time (s) by which the trajectory phase must have finished, the plan being
+    flown having ``left_s`` seconds left at ``t_s``: ``REPLAN_TIME_FACTOR`` times that plus
+    ``REPLAN_TIME_EXTRA_S``, never earlier than ``deadline_s`` (the deadline before a
+    re-route or a rejoin installed it: a new plan extends the deadline, never shortens it)."""
+    return max(deadline_s, t_s + REPLAN_TIME_FACTOR * max(left_s, 0.0) + REPLAN_TIME_EXTRA_S)
 #: STATUSTEXT prefix of the replanner's events (``companion.replay.metrics`` counts them).
 REPLAN_PREFIX = "companion: replan "
 #: STATUSTEXT prefix of the guard's refusals (docs/replan.md "The guard").
@@ -1114,7 +1124,7 @@ class FlightCore:
             self.phase = ph = "trajectory"
             if self.replanner is not None:
                 self.replanner.start(self._t_traj)
-                self._traj_deadline = self._t_traj + REPLAN_TIME_FACTOR * self._window.duration_s + REPLAN_TIME_EXTRA_S
+                self._traj_deadline = replan_deadline(self._t_traj, self._window.duration_s)
         if ph == "trajectory" and t >= self._t_hover and self.replanner is None:
             self.phase = ph = "hover"
         if ph == "hover" and t >= self._t_land:
@@ -1190,6 +1200,12 @@ class FlightCore:
             self.replan_events += 1
             self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_NOTICE,
                                                   replan_text(e.action, e.obstacle_range_m, e.detail).encode()))
+            if e.action in ("reroute", "rejoin"):
+                # the deadline follows the plan being flown: a re-route may plan more than the
+                # plan it replaces had left (the coverage left, round what blocks it), and the
+                # timeout stopped such a plan being flown normally (obstacles-wide seed
+                # 20261127, flight 10: 263 s after the start of a 45 s cut, 3 s before its end)
+                self._traj_deadline = replan_deadline(t, rp.plan_end_s - t, self._traj_deadline)
         ref = st.ref
         if st.finished:
             # the (re)planned coverage is flown: hover at its end, then land

@@ -88,6 +88,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mavcore.mission.replan import ReplanConfig
+from .brake import brake_path
 from ..trajectory.reference import RefSample
 from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
@@ -95,6 +96,7 @@ from .globalplan import GlobalPlan
 from .heading_bias import HeadingBias, rotate_evidence
 from .knownmap import UNKNOWN, KnownMap
 from .lift import WALL_MARGIN_M as LIFT_WALL_MARGIN_M, Over
+from .margin_exit import margin_exit
 from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
@@ -103,7 +105,7 @@ from .rejoin import converged_from, rejoin
 from .reroute import reroute
 from .reroute3d import reroute_3d
 from .shaper import ReferenceShaper
-from .route3d import RouteScene, find_route
+from .route3d import Route3D, RouteScene, find_route
 from .routecheck import route_exists
 from .voxmap import L_CANDIDATE, ObstacleMap
 
@@ -114,6 +116,16 @@ _FOLLOWING = ("follow", "rejoin", "reroute")
 
 #: The governor keeps the reference this much (m) beyond the clearance while braking.
 GOVERNOR_MARGIN_M = 0.1
+#: The stopping point of every avoiding reference (``_shape``) keeps this much (m) beyond
+#: the guard's clearances: the brake is predicted every ``brake.BRAKE_DT_S``, within
+#: 4.5 cm of the frame-stepped brake (``tests/test_replan_brake.py``).
+STOP_MARGIN_M = 0.05
+#: Closing (m) allowed to a stopping point inside the guard's clearance itself: float noise
+#: only. The rule is judged afresh every frame, from where the reference is, so an allowance
+#: is a ratchet (5 mm a frame let a climb creep 0.15 m into a row's clearance at 0.02 m/s).
+#: Within ``STOP_MARGIN_M`` of the clearance the margin rule's own 5 mm holds (a slow creep
+#: there, whose brake is predicted exactly enough, ends at the clearance).
+STOP_TOL_M = 1e-6
 #: The governor's braking law allows for this lag (s) of the shaped reference: with the
 #: default limits (1 m/s^2, 2 m/s^3) the shaper stops from 1 m/s in 0.97 m, from
 #: 0.5 m/s in 0.37 m; v^2 / (2 a_b) + v t_lag gives 1.6 m and 0.55 m.
@@ -528,6 +540,8 @@ class Replanner:
         self._vel = (0.0, 0.0, 0.0)
         self._next_rejoin = -math.inf
         self._dev_leg: tuple | None = None
+        #: frames whose command ``_shape`` cut so that the reference's stopping point keeps clear
+        self.n_stop_limited = 0
         #: the guard (``companion.safety.Guard``; set by the flight's builder): a re-route or
         #: a rejoin is paced to its stopping law and checked whole before it is installed
         #: (``pace``); None: installed as planned
@@ -643,6 +657,13 @@ class Replanner:
             ref = self._static
         self._account(ref)
         return ReplanStep(ref, self.mode, self.mode == "done", self.mode == "hold", tuple(events))
+
+    @property
+    def plan_end_s(self) -> float:
+        """Vehicle time (s) at which the plan being flown (the last installed: the plan, a
+        re-route, a rejoin) ends."""
+        offset = 0.0 if self._offset is None else self._offset
+        return offset + float(self.plan.trajectory.tf)
 
     @property
     def stats(self) -> ReplanStats:
@@ -876,7 +897,7 @@ class Replanner:
                 xy = A[:2] + (s_goal - float(A[:2] @ u)) * u
                 goal = np.array([xy[0], xy[1], z_goal])
         v_cmd = self._apf_velocity(P, pts[near], dist[near], goal, A, u, n, ground)
-        st = self.shaper.step(dt, v_cmd)
+        st = self._shape(dt, v_cmd)
         prog = float((np.asarray(st.p[:2]) - A[:2]) @ u)
         if prog > self._progress + PROGRESS_M:
             self._progress = prog
@@ -994,6 +1015,65 @@ class Replanner:
             v = v + (approach - allow) * nrm
         return v
 
+    def _shape(self, dt: float, v_cmd):
+        """The shaper's step toward ``v_cmd``: the one exit of every avoiding mode's reference
+        (avoid, climb, stop, the look, giving way; docs/replan.md "The stopping point").
+        The state it reaches must be able to stop in time: the shaper's own brake from it
+        (``brake_path``: zero command, the jerk ramp and any acceleration still toward a
+        surface included) passes the guard's margin rule (``Guard.check_path``) with
+        ``STOP_MARGIN_M`` more, from where the reference is now, and never enter the
+        clearance itself nor close inside it (``STOP_TOL_M``). If not, the command loses its approach to the surface that
+        failed (the normal there, at most twice), and failing that it is zero: the state
+        then moves along the brake predicted from the last one, which passed. When even the
+        brake fails (the state already closes inside a clearance), the candidate whose path
+        comes least close wins, braking included. The command
+        governors (``_govern``, ``_govern_rows``) limit the command; this limits the
+        reference actually flown (a row's end closed on at 0.11-0.20 m/s for over a
+        second while the command moved away, and the guard refused the sample:
+        obstacles-wide seed 20261127, flight 15). No guard, or no governor: as commanded."""
+        sh = self.shaper
+        if self.guard is None or dt <= 0.0 or not self.cfg.clearance_governor:
+            return sh.step(dt, v_cmd)
+        cmd = np.asarray(v_cmd, dtype=float)
+        here = np.asarray(sh.p, dtype=float)[None, :]
+        tried = []
+        for _ in range(3):
+            st = sh.preview(dt, cmd.tolist())
+            # from where the reference is now, through the frame's step, to its stopping point
+            path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh)])
+            # the brake keeps STOP_MARGIN_M beyond the clearance (the prediction's error at
+            # speed), and never enters the clearance itself nor closes inside it
+            verdict = self.guard.check_path(path, STOP_MARGIN_M, inner_tol_m=STOP_TOL_M)
+            if verdict.ok:
+                return sh.commit(st)
+            tried.append((st, path))
+            # its approach along the normal there goes, and as much away as the state still
+            # closes (the shaper then turns that round first: motion along the surface is kept)
+            n = self.guard.normal(verdict.surface, verdict.point_enu_m)
+            closing = max(0.0, -float(n @ np.asarray(st.v)))
+            approach = -float(n @ cmd) + closing
+            if approach <= 1e-9:
+                break
+            cmd = cmd + approach * n
+        self.n_stop_limited += 1
+        st = sh.preview(dt, (0.0, 0.0, 0.0))
+        path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh)])
+        if self.guard.check_path(path, STOP_MARGIN_M, inner_tol_m=STOP_TOL_M).ok:
+            return sh.commit(st)
+        # even braking closes (the state already closes inside a clearance: the map grew round
+        # it): the candidate whose path comes least close, braking included, the earliest of
+        # equals (moving away, or on along the surface, is never worse than braking; a zero
+        # command here also stopped every climb, which then timed out: obstacles-wide seed
+        # 20261127, flight 11)
+        tried.append((st, path))
+        rooms = [self._least_room(p) for _, p in tried]
+        return sh.commit(tried[int(np.argmax(rooms))][0])
+
+    def _least_room(self, path) -> float:
+        """Least (distance - the guard's clearance) (m) along (M, 3) points, over every surface."""
+        d = self.guard.distances(path)
+        return min(float(np.min(d[k])) - self.guard.required_m(k) for k in d)
+
     def _give_way(self, P, pts) -> np.ndarray:
         """Velocity (ENU, m/s) of a stop: zero, or backing away (level) from an obstacle
         that comes closer than the vehicle could stop for (``companion.replan.closing``)."""
@@ -1024,7 +1104,7 @@ class Replanner:
         P = np.array(self.shaper.p)
         pts = self._points()
         v = self._give_way(P, pts)
-        st = self.shaper.step(dt, v.tolist())
+        st = self._shape(dt, v.tolist())
         self._deviation(st.p)
         at_rest = math.sqrt(sum(x * x for x in st.v)) < REST_V_M_S and \
             math.sqrt(sum(x * x for x in st.a)) < REST_A_M_S2
@@ -1051,12 +1131,26 @@ class Replanner:
             tiers = [self._at_route_height(), self._too_tall_to_lift()]
             if not 0 < len(tiers[1]) < len(tiers[0]):
                 tiers.pop()               # the same columns as a tier beside it: the same route
+            # stopped inside a clearance (the map grew round the vehicle), every route leaves
+            # it first, straight out, and starts from there (docs/replan.md "Candidates that
+            # start inside"): from inside, a route that closes on anything is refused
+            # (judged on the map the route is flown on: the blocking obstacle's cells, columns
+            # of unknown height, can put a vehicle stopped over its side inside their clearance)
             for others in (*tiers, None):
                 res = reroute(self.plan, known0, st, tau, self._wp_leave, blocking, travel,
                               self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
                               self._keep_m + ROUTE_MARGIN_M, others, over)
                 # the guard reads the map the route is flown on: the obstacle added (its cells)
                 self.known = res.known
+                exit_leg = self._exit_leg(st.p)
+                if exit_leg is not None:
+                    scene = RouteScene(known0, self.memory, self._keep_m, self.cfg.floor_agl_m,
+                                       self.cfg.ceiling_agl_m)
+                    res = reroute_3d(self.plan, scene, exit_leg[1:], st, tau, self._wp_leave, blocking, travel,
+                                     self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
+                                     self._keep_m + ROUTE_MARGIN_M, others, over,
+                                     route=Route3D(exit_leg, 0, float(np.linalg.norm(exit_leg[1] - exit_leg[0]))))
+                    self.known = res.known
                 plan, verdict, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st)
                 if plan is not None:
                     break
@@ -1072,9 +1166,14 @@ class Replanner:
                 for margin in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M) if len(goals) else ():
                     scene = RouteScene(known0, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
                                        self.cfg.ceiling_agl_m)
-                    route = find_route(scene, np.asarray(st.p, float), goals)   # one lattice search per margin
+                    # from inside a clearance, out first (the lattice route starts where the leg ends)
+                    start = np.asarray(st.p, float) if exit_leg is None else exit_leg[1]
+                    route = find_route(scene, start, goals)   # one lattice search per margin
                     if route is None:
                         continue              # no 3-D route to any coverage end with this margin
+                    if exit_leg is not None:
+                        route = Route3D(np.vstack([exit_leg[:1], route.path_enu_m]), route.goal_index,
+                                        route.length_m + float(np.linalg.norm(exit_leg[1] - exit_leg[0])))
                     for others in (*tiers, None):
                         res3 = reroute_3d(self.plan, scene, goals, st, tau, self._wp_leave, blocking, travel,
                                           self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
@@ -1108,6 +1207,23 @@ class Replanner:
         self._static = self._rest(st.p)
         self._event(events, "hold", self._nearest(dist), detail)
         return self._static
+
+    def _exit_leg(self, p):
+        """(2, 3) the straight leg out of the guard's clearances from ``p`` (``margin_exit``),
+        to the route's margin where one reaches it, else the governor's; None when ``p``
+        keeps them (or there is no guard, or no way out)."""
+        if self.guard is None:
+            return None
+        ground = self.known.ground_z(float(p[0]), float(p[1]))
+        lo = ground + self.cfg.floor_agl_m + WALL_MARGIN_M
+        hi = ground + self.cfg.ceiling_agl_m - WALL_MARGIN_M
+        if margin_exit(self.guard, p, lo, hi, 0.0) is None:
+            return None                   # not inside any clearance
+        for margin in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M):
+            leg = margin_exit(self.guard, p, lo, hi, margin)
+            if leg is not None:
+                return leg
+        return None
 
     def _look(self, tau: float, st, at_rest: bool, events: list) -> RefSample:
         """The look (``give_way``): at rest, with the vehicle still, for ``LOOK_S`` with no

@@ -36,6 +36,23 @@ def _sat(x: float, limit: float) -> float:
     return limit if x > limit else (-limit if x < -limit else x)
 
 
+def axis_snap(v_cmd: float, v: float, a: float, j: float, dt_s: float, a_max: float, j_max: float,
+              s_max: float, k_v: float, k_a: float, k_j: float) -> float:
+    """The snap (m/s^4) one axis of the reference model applies over a frame of ``dt_s``
+    toward the command ``v_cmd`` from (v, a, j) (module doc's nested saturations). The
+    shaper and the prediction of its own brake (``companion.replan.brake``) both use it."""
+    # the speed error left once a is ramped to zero at j_max: braking on it
+    # keeps the speed from overshooting while the acceleration unwinds
+    e = v_cmd - v - a * abs(a) / (2.0 * j_max)
+    a_des = _sat(k_v * e, a_max)
+    j_des = _sat(k_a * (a_des - a), j_max)
+    si = _sat(k_j * (j_des - j), s_max)
+    # do not let the jerk overshoot its target within one frame
+    if abs(si) * dt_s > abs(j_des - j):
+        si = (j_des - j) / dt_s
+    return si
+
+
 @dataclass(frozen=True, slots=True)
 class ShapedState:
     """Reference state (ENU, float 3-tuples): p m, v m/s, a m/s^2, jerk m/s^3, snap m/s^4."""
@@ -83,27 +100,27 @@ class ReferenceShaper:
     def state(self) -> ShapedState:
         return ShapedState(tuple(self.p), tuple(self.v), tuple(self.a), tuple(self.j), tuple(self.s))
 
+    def preview(self, dt_s: float, v_cmd) -> ShapedState:
+        """The state ``step(dt_s, v_cmd)`` would reach, without moving there."""
+        if dt_s <= 0.0:
+            return self.state()
+        p, v, a, j = self.p, self.v, self.a, self.j
+        s = [axis_snap(v_cmd[i], v[i], a[i], j[i], dt_s, self.a_max, self.j_max, self.s_max,
+                       self.k_v, self.k_a, self.k_j) for i in range(3)]
+        h, h2, h3, h4 = dt_s, dt_s * dt_s / 2.0, dt_s ** 3 / 6.0, dt_s ** 4 / 24.0
+        return ShapedState(tuple(p[i] + v[i] * h + a[i] * h2 + j[i] * h3 + s[i] * h4 for i in range(3)),
+                           tuple(v[i] + a[i] * h + j[i] * h2 + s[i] * h3 for i in range(3)),
+                           tuple(a[i] + j[i] * h + s[i] * h2 for i in range(3)),
+                           tuple(j[i] + s[i] * h for i in range(3)), tuple(s))
+
+    def commit(self, state: ShapedState) -> ShapedState:
+        """Move to a state ``preview`` gave (the frame's step)."""
+        self.p, self.v, self.a, self.j, self.s = (list(state.p), list(state.v), list(state.a),
+                                                  list(state.jerk), list(state.snap))
+        return state
+
     def step(self, dt_s: float, v_cmd) -> ShapedState:
         """Advance by ``dt_s`` toward the velocity command ``v_cmd`` (ENU m/s); the new state."""
         if dt_s <= 0.0:
             return self.state()
-        p, v, a, j = self.p, self.v, self.a, self.j
-        s = [0.0, 0.0, 0.0]
-        for i in range(3):
-            # the speed error left once a is ramped to zero at j_max: braking on it
-            # keeps the speed from overshooting while the acceleration unwinds
-            e = v_cmd[i] - v[i] - a[i] * abs(a[i]) / (2.0 * self.j_max)
-            a_des = _sat(self.k_v * e, self.a_max)
-            j_des = _sat(self.k_a * (a_des - a[i]), self.j_max)
-            si = _sat(self.k_j * (j_des - j[i]), self.s_max)
-            # do not let the jerk overshoot its target within one frame
-            if abs(si) * dt_s > abs(j_des - j[i]):
-                si = (j_des - j[i]) / dt_s
-            s[i] = si
-        h, h2, h3, h4 = dt_s, dt_s * dt_s / 2.0, dt_s ** 3 / 6.0, dt_s ** 4 / 24.0
-        self.p = [p[i] + v[i] * h + a[i] * h2 + j[i] * h3 + s[i] * h4 for i in range(3)]
-        self.v = [v[i] + a[i] * h + j[i] * h2 + s[i] * h3 for i in range(3)]
-        self.a = [a[i] + j[i] * h + s[i] * h2 for i in range(3)]
-        self.j = [j[i] + s[i] * h for i in range(3)]
-        self.s = s
-        return self.state()
+        return self.commit(self.preview(dt_s, v_cmd))

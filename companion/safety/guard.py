@@ -27,10 +27,15 @@ shrinks along ``v`` (a finite difference of ``d`` over ``STEP_M``):
                known in advance, and a whole trajectory is checked against them.
 
 A whole candidate trajectory is sampled every ``SAMPLE_DT_S`` from its start
-to its end (not its first seconds) and every sample must pass both rules; in
-addition, once a sample has kept the clearance of a surface, or ``ESCAPE_S``
-after the candidate's start, no sample may be within it (a candidate that
-starts inside may move out, or along the surface, for that long).
+to its end (not its first seconds) and every sample must pass both rules and
+the margin rule of its path (``companion.safety.margin_rule``): never within
+the airframe radius of a surface (contact); a candidate that starts inside a
+clearance never gets closer than it has been until it is out (moving away is
+always allowed, closing never is); once out, it stays out.
+``check_path`` applies the margin rule to a path of points alone: the
+reference shaper's predicted brake (``companion.replan.brake``), so the
+avoiding modes keep the stopping point of the reference they fly outside the
+clearance (docs/replan.md "The stopping point").
 A landing is checked as the column under the vehicle's braking footprint
 (from where it is to where it stops), from its height down to the ground:
 every point keeps the clearance of the rows and obstacles (``check_landing``).
@@ -43,6 +48,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .margin_rule import CLOSING_TOL_M, MarginRule, margin_violations
 from .stopping import stopping_distance_m, stopping_speed_m_s
 
 #: Sensing and control delay (s) of the stopping law (PX4 CP_DELAY). The fallback's
@@ -54,8 +60,6 @@ DELAY_S = 0.5
 SPEED_TOLERANCE_M_S = 0.05
 #: Length (m) of the finite-difference step along the velocity.
 STEP_M = 0.02
-#: A candidate that starts within a clearance must be out of it this soon (s).
-ESCAPE_S = 2.0
 #: Candidate trajectories are sampled this often (s): 5 cm at 1 m/s.
 SAMPLE_DT_S = 0.05
 #: Samples per chunk of a long trajectory (bounded memory).
@@ -187,6 +191,11 @@ class Guard:
         # centres, so a plan keeps its margin to within half a cell (vineyard-1ha: 6 mm short)
         self._req["row"] -= 0.5 * scene.rows.res_m
 
+    def required_m(self, kind: str) -> float:
+        """Distance (m) the vehicle's centre keeps from the surfaces of ``kind`` (the rows'
+        less half an OGM cell, class doc)."""
+        return self._req[kind]
+
     # --- distances -----------------------------------------------------------------------
 
     def distances(self, points_enu_m: np.ndarray, terrain: bool = True) -> dict:
@@ -202,10 +211,10 @@ class Guard:
 
     # --- rules ------------------------------------------------------------------------------
 
-    def _judge(self, p, v, t=None, terrain: bool = True, strict_after: dict | None = None) -> Verdict:
+    def _judge(self, p, v, t=None, terrain: bool = True, margin_bad: dict | None = None) -> Verdict:
         """The rules on (K, 3) samples p with velocities v (first failing sample, or PASS).
-        ``strict_after[kind]``: index from which a sample within the clearance fails
-        whatever its approach (a candidate trajectory's samples after it kept the clearance)."""
+        ``margin_bad[kind]``: (K,) bool, the samples that break the margin rule of the
+        candidate's path (``margin_rule``; they fail the clearance rule whatever their approach)."""
         p = np.asarray(p, float).reshape(-1, 3)
         v = np.asarray(v, float).reshape(-1, 3)
         speed = np.sqrt(np.einsum("ki,ki->k", v, v))
@@ -222,8 +231,8 @@ class Guard:
             with np.errstate(invalid="ignore"):
                 approach = np.where(moving & np.isfinite(d0), (d0 - d1) / np.where(moving, dt, 1.0), 0.0)
             bad_c = (d0 < req) & (approach > SPEED_TOLERANCE_M_S)
-            if strict_after is not None:
-                bad_c |= (d0 < req) & (np.arange(len(p)) >= strict_after.get(kind, len(p)))
+            if margin_bad is not None and kind in margin_bad:
+                bad_c |= margin_bad[kind]
             allowed = np.full(len(p), np.inf)
             bad_s = np.zeros(len(p), bool)
             if kind != "row":
@@ -242,6 +251,8 @@ class Guard:
         tk = None if t is None else float(np.asarray(t, float).reshape(-1)[first])
         what = (f"{d - req:+.2f} m from its clearance" if rule == "clearance"
                 else f"approach {app:.2f} m/s > {allow:.2f} m/s")
+        if rule == "clearance" and d < self.cfg.airframe_radius_m:
+            what += " (contact)"
         where = f" at t={tk:.2f} s" if tk is not None else ""
         return Verdict(False, rule, kind, f"{kind} {rule}: {what}{where}", tk, q, d, req, app, allow)
 
@@ -249,8 +260,12 @@ class Guard:
         """(M,) the largest speed (m/s) at (M, 3) points ``p`` moving along (M, 3) unit
         directions ``u`` that the speed rule passes: ``v_max(d - req)`` (the stopping law) over
         the approach per unit speed along ``u`` (a finite difference over ``STEP_M``), the
-        least over the terrain and the obstacles; inf where ``u`` closes on neither. The same
-        law as ``_judge``'s, for planning a speed rather than judging one."""
+        least over the terrain and the obstacles; inf where ``u`` closes on neither, and
+        inside a clearance (d < req), where no speed mends a closing path: the margin rule
+        judges it (slowing a stopped vehicle's way out there made the LQR, its way-points far
+        apart in time, drift toward the obstacle on its initial state: obstacles-wide seed
+        20261127, flight 16). The same law as ``_judge``'s, for planning a speed rather than
+        judging one."""
         p = np.asarray(p_enu_m, float).reshape(-1, 3)
         u = np.asarray(u_enu, float).reshape(-1, 3)
         d_all = self.distances(np.vstack([p, p + STEP_M * u]))
@@ -260,7 +275,7 @@ class Guard:
             with np.errstate(invalid="ignore"):
                 closing = np.where(np.isfinite(d0), (d0 - d1) / STEP_M, 0.0)
             allowed = stopping_speed_m_s(d0 - self._req[kind], self.cfg.accel_m_s2, self.cfg.delay_s)
-            lim = np.where(closing > 1e-6, allowed / np.maximum(closing, 1e-6), np.inf)
+            lim = np.where((closing > 1e-6) & ~(d0 < self._req[kind]), allowed / np.maximum(closing, 1e-6), np.inf)
             out = np.minimum(out, lim)
         return out
 
@@ -347,14 +362,50 @@ class Guard:
 
     def check_points(self, p_enu_m, v_enu_m_s, t_s=None, terrain: bool = True) -> Verdict:
         """The samples of a candidate (K, 3) positions and velocities at times ``t_s`` (K,):
-        the rules at every sample, and no return into a clearance once kept (module doc)."""
+        the rules at every sample, and the margin rule along them (module doc)."""
         p = np.asarray(p_enu_m, float).reshape(-1, 3)
         d = self.distances(p, terrain)
-        strict = {}
-        for kind in KINDS:
-            ok = d[kind] >= self._req[kind]
-            strict[kind] = int(np.argmax(ok)) if ok.any() else len(p)
-        return self._judge(p, v_enu_m_s, t_s, terrain, strict)
+        R = self.cfg.airframe_radius_m
+        bad = {kind: margin_violations(d[kind], self._req[kind], R) for kind in KINDS}
+        return self._judge(p, v_enu_m_s, t_s, terrain, bad)
+
+    def check_path(self, points_enu_m, margin_m: float = 0.0, tol_m: float | None = None,
+                   inner_tol_m: float | None = None) -> Verdict:
+        """The margin rule (``margin_rule``) along a path of (M, 3) ENU points, in order,
+        against every surface, with the distance to keep raised by ``margin_m`` and the
+        closing allowed inside it ``tol_m`` (default ``CLOSING_TOL_M``); with
+        ``inner_tol_m``, the rule at the clearance itself too (no margin), closing inside it
+        at most that: the reference shaper's predicted brake (``companion.replan.brake``).
+        The failing verdict's ``point_enu_m`` is the first point that breaks it."""
+        p = np.asarray(points_enu_m, float).reshape(-1, 3)
+        d = self.distances(p)
+        R = self.cfg.airframe_radius_m
+        rules = [(margin_m, CLOSING_TOL_M if tol_m is None else float(tol_m))]
+        if inner_tol_m is not None:
+            rules.append((0.0, float(inner_tol_m)))
+        for (margin, tol), kind in ((r, k) for r in rules for k in KINDS):
+            req = self._req[kind] + margin
+            bad = margin_violations(d[kind], req, R, tol)
+            if bad.any():
+                k = int(np.argmax(bad))
+                q = tuple(float(c) for c in p[k])
+                return Verdict(False, "clearance", kind,
+                               f"{kind} clearance: stopping point {d[kind][k] - req:+.2f} m from its clearance",
+                               None, q, float(d[kind][k]), req)
+        return PASS
+
+    def normal(self, kind: str, p_enu_m) -> np.ndarray:
+        """(3,) unit direction in which the distance to the surfaces of ``kind`` grows fastest
+        at ``p`` (central differences of ``STEP_M``; zeros where flat or infinite)."""
+        p = np.asarray(p_enu_m, float).reshape(3)
+        e = STEP_M
+        q = np.vstack([p + e * np.eye(3), p - e * np.eye(3)])
+        d = self.distances(q)[kind]
+        if not np.isfinite(d).all():
+            return np.zeros(3)
+        g = (d[:3] - d[3:]) / (2.0 * e)
+        n = float(np.linalg.norm(g))
+        return g / n if n > 1e-9 else np.zeros(3)
 
     def check_trajectory(self, trajectory, t_from_s: float | None = None, t_to_s: float | None = None,
                          terrain: bool = True) -> Verdict:
@@ -364,9 +415,8 @@ class Guard:
         t0 = float(trajectory.t0 if t_from_s is None else max(t_from_s, trajectory.t0))
         tf = float(trajectory.tf if t_to_s is None else min(t_to_s, trajectory.tf))
         n = int(math.floor(max(tf - t0, 0.0) / SAMPLE_DT_S)) + 1
-        req = self._req
-        kept = {k: False for k in KINDS}
-        k_escape = int(math.ceil(ESCAPE_S / SAMPLE_DT_S))
+        R = self.cfg.airframe_radius_m
+        rules = {k: MarginRule(self._req[k], R) for k in KINDS}
         for k0 in range(0, n, CHUNK):
             t = t0 + SAMPLE_DT_S * np.arange(k0, min(k0 + CHUNK, n))
             if k0 + CHUNK >= n and tf - t[-1] > 1e-9:
@@ -374,13 +424,7 @@ class Guard:
             s = trajectory.sample(t)
             p, v = np.asarray(s.p, float).reshape(-1, 3), np.asarray(s.v, float).reshape(-1, 3)
             d = self.distances(p, terrain)
-            strict = {}
-            for kind in KINDS:
-                ok = d[kind] >= req[kind]
-                first_ok = 0 if kept[kind] else (int(np.argmax(ok)) if ok.any() else len(p))
-                strict[kind] = min(first_ok, max(k_escape - k0, 0))
-                kept[kind] = kept[kind] or bool(ok.any())
-            verdict = self._judge(p, v, t, terrain, strict)
+            verdict = self._judge(p, v, t, terrain, {kind: rules[kind].step(d[kind]) for kind in KINDS})
             if not verdict.ok:
                 return verdict
         return PASS
