@@ -58,7 +58,7 @@ def _feed(hb, evs, t0=0.0):
 
 
 @pytest.mark.parametrize("err_deg", [2.0, -1.5, 3.0])
-def test_the_estimate_is_the_smallest_turn_that_puts_every_return_on_the_wall(err_deg):
+def test_the_estimate_is_the_middle_of_the_turns_that_put_every_return_on_the_wall(err_deg):
     err = math.radians(err_deg)
     evs = _returns(err)
     lo = max(i[0] for _, i in evs)

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import common as mavlink
 
 from companion.commands.demo import launch_pose
 from companion.bundled import missions_dir
@@ -108,8 +109,8 @@ def _landed_state_gap_s(recs) -> float:
         m = r.msg
         if hasattr(m, "time_boot_ms"):
             t = m.time_boot_ms * 1e-3
-        if m.get_type() == "HEARTBEAT" and m.autopilot != 8:   # MAV_AUTOPILOT_INVALID: not the vehicle
-            armed = bool(m.base_mode & 128)
+        if m.get_type() == "HEARTBEAT" and m.autopilot != mavlink.MAV_AUTOPILOT_INVALID:   # the vehicle's
+            armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         if m.get_type() == "EXTENDED_SYS_STATE" and t is not None and (armed or seen):
             seen.append(t)
     assert len(seen) >= 2

@@ -101,7 +101,6 @@ class HeadingBias:
                  tau_s: float = TAU_S, min_evidence: float = MIN_EVIDENCE) -> None:
         n = int(round(span_rad / step_rad))
         self.offsets = tuple(k * step_rad for k in range(-n, n + 1))
-        self.step_rad = float(step_rad)
         self.period_s = float(period_s)
         self.tau_s = float(tau_s)
         self.min_evidence = float(min_evidence)
