@@ -1036,14 +1036,18 @@ class Replanner:
             return sh.step(dt, v_cmd)
         cmd = np.asarray(v_cmd, dtype=float)
         here = np.asarray(sh.p, dtype=float)[None, :]
+
+        def judged(st):
+            # from where the reference is now, through the frame's step, to its stopping point;
+            # the brake keeps STOP_MARGIN_M beyond the clearance (the prediction's error at
+            # speed), and never enters the clearance itself nor closes inside it
+            path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh)])
+            return path, self.guard.check_path(path, STOP_MARGIN_M, inner_tol_m=STOP_TOL_M)
+
         tried = []
         for _ in range(3):
             st = sh.preview(dt, cmd.tolist())
-            # from where the reference is now, through the frame's step, to its stopping point
-            path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh)])
-            # the brake keeps STOP_MARGIN_M beyond the clearance (the prediction's error at
-            # speed), and never enters the clearance itself nor closes inside it
-            verdict = self.guard.check_path(path, STOP_MARGIN_M, inner_tol_m=STOP_TOL_M)
+            path, verdict = judged(st)
             if verdict.ok:
                 return sh.commit(st)
             tried.append((st, path))
@@ -1057,8 +1061,8 @@ class Replanner:
             cmd = cmd + approach * n
         self.n_stop_limited += 1
         st = sh.preview(dt, (0.0, 0.0, 0.0))
-        path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh)])
-        if self.guard.check_path(path, STOP_MARGIN_M, inner_tol_m=STOP_TOL_M).ok:
+        path, verdict = judged(st)
+        if verdict.ok:
             return sh.commit(st)
         # even braking closes (the state already closes inside a clearance: the map grew round
         # it): the candidate whose path comes least close, braking included, the earliest of
