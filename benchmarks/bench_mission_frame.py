@@ -54,6 +54,11 @@ def plan_items(plan_path: Path) -> tuple[list, list]:
     return mission, fence
 
 
+def _state(srv):
+    """The flight stack's view of the current frame (``Vehicle.state``; ``SitlServer._state`` before h17-split)."""
+    return srv.vehicle.state() if hasattr(srv, "vehicle") else srv._state()
+
+
 def fly(mission_path: Path, items: tuple, mode: str, seconds: float) -> float:
     """Microseconds of process time per ``step_once``, flying ``seconds``."""
     srv = SitlServer(load_mission(mission_path), ServerConfig())
@@ -62,20 +67,21 @@ def fly(mission_path: Path, items: tuple, mode: str, seconds: float) -> float:
         srv.missions.version += 1
     srv.step_once()
     srv.mission_link.sync_store()
-    now, st = srv.sim.time_us, srv._state()
+    veh = getattr(srv, "vehicle", srv)        # the vehicle's parts (``sitl.vehicle``; the server before h17-split)
+    now, st = veh.sim.time_us, _state(srv)
     if mode == "mission":
-        assert srv.stack.start_mission(now, st, None).accepted
+        assert veh.stack.start_mission(now, st, None).accepted
     else:
-        srv.stack.takeoff(now, st, None)
-    assert srv.stack.arm(now, st).accepted
-    n = int(seconds * 1e6 / srv.sim.sensor_period_us)
+        veh.stack.takeoff(now, st, None)
+    assert veh.stack.arm(now, st).accepted
+    n = int(seconds * 1e6 / veh.sim.sensor_period_us)
     t0 = time.process_time()
     for _ in range(n):
         srv.step_once()
     dt = time.process_time() - t0
     if mode == "mission":
-        assert srv.stack.mode in (FlightMode.MISSION, FlightMode.RTL), srv.stack.mode
-        assert not srv.stack.fence_breached
+        assert veh.stack.mode in (FlightMode.MISSION, FlightMode.RTL), veh.stack.mode
+        assert not veh.stack.fence_breached
     return dt / n * 1e6
 
 
@@ -87,10 +93,11 @@ def executor_alone(mission_path: Path, items: tuple, seconds: float) -> float:
     srv.missions.version += 1
     srv.step_once()
     srv.mission_link.sync_store()
-    ex, fence = srv.stack.mission, srv.stack.fence
-    st = srv._state()
+    veh = getattr(srv, "vehicle", srv)
+    ex, fence = veh.stack.mission, veh.stack.fence
+    st = _state(srv)
     ex.start(st, None)
-    dt = srv.sim.sensor_period_us * 1e-6
+    dt = veh.sim.sensor_period_us * 1e-6
     n = int(seconds / dt)
     p = list(st.pos_enu_m)
     t0 = time.process_time()

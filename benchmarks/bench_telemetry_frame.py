@@ -44,7 +44,7 @@ class _Link:
 
 srv = SitlServer(load_mission(f"{root}/missions/flat-rectangle/mission.yaml"))
 srv.links = [_Link()]
-period = srv.sim.sensor_period_us
+period = srv.vehicle.sim.sensor_period_us
 for mid in (mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mavlink.MAVLINK_MSG_ID_ODOMETRY):
     srv._command(srv.links[0], srv.links[0].mav.command_long_encode(1, 1, 511, 0, mid, period, 0, 0, 0, 0, 0),
                  mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (mid, period, 0, 0, 0, 0, 0))

@@ -252,7 +252,7 @@ def _run(args) -> int:
         raise InputError(args.mission, str(exc)) from None
     xy = start[:2] if start is not None else mission.sim.start_enu_m
     if xy is not None:
-        why = start_off_map(server.sim.world, float(xy[0]), float(xy[1]))
+        why = start_off_map(server.vehicle.sim.world, float(xy[0]), float(xy[1]))
         if why:
             raise InputError(f"--start {args.start}" if start is not None else f"{args.mission}: key 'sim.start_enu_m'",
                              why)

@@ -1,5 +1,5 @@
-"""MAVLink transport of the SITL: ``Simulation`` + ``FlightStack`` behind
-pymavlink connections (docs/mavlink.md).
+"""MAVLink transport of the SITL: the simulated vehicle (``sitl.vehicle``)
+behind its MAVLink links (``sitl.link``; docs/mavlink.md).
 
 The vehicle is system 1, component 1, MAVLink 2, common dialect. Connection
 strings are pymavlink's (``udpin:127.0.0.1:14540``, ``udpout:...``,
@@ -10,9 +10,11 @@ of ``run``. Telemetry goes to every link; replies
 came from, addressed to the requester.
 
 This module keeps the links, the pacing and lockstep (and the
-HIL_ACTUATOR_CONTROLS answer that releases a frame), the frame step with its
-telemetry send, and the dispatch: who may send a message (``sitl.auth``),
-then the handler of the part that owns it. The parts, each over the server
+HIL_ACTUATOR_CONTROLS answer that releases a frame), the frame's telemetry
+send, and the dispatch: who may send a message (``sitl.auth``),
+then the handler of the part that owns it. The vehicle itself (simulation,
+flight stack, parameters, battery, collision prevention) is ``sitl.vehicle.Vehicle``,
+stepped once per frame (``step_once``). The parts, each over the server
 side of a ``mavcore.services`` protocol or the flight stack:
 ``sitl.command_link`` (COMMAND_LONG/INT through ``CommandServer``; what each
 command does is ``sitl.commands``), ``sitl.params_link`` (PARAM_* through
@@ -48,7 +50,7 @@ answers: the same flight). From then on each frame is
    engages it again (from the frame being sent then).
 
 A frame's telemetry goes out as one UDP datagram holding several whole
-MAVLink packets in order (``_Link.BATCH_BYTES``), so the peer is woken once
+MAVLink packets in order (``Link.BATCH_BYTES``), so the peer is woken once
 per frame; every MAVLink parser (pymavlink, MAVSDK, MAVProxy, QGC) reads
 several packets from one datagram.
 
@@ -101,49 +103,36 @@ all-zero key, sent signed, turns signing off again).
 from __future__ import annotations
 
 import collections
-import errno
 import logging
 import math
-import select
-import socket
-from struct import error as struct_error
-import threading
 import os
+import select
+import threading
 import time
 from dataclasses import dataclass
 
-import numpy as np
-from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from mavcore.mission.schema import Mission
-
-from mavcore import codec
-from mavcore.link.signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
-from mavcore.link.sockets import is_datagram_url, open_pipe
-
-from mavcore.link.pipe import MEMORY_SCHEME
 from mavcore import autopilot as autopilots
-
-from .auth import DEFAULT_CONTROLLERS, ClientTable, ControlPolicy, Controller, IntakeBudget
-from .battery import Battery
-from .collision_prevention import CollisionPrevention
+from mavcore import codec
+from mavcore.link.pipe import MEMORY_SCHEME
+from mavcore.link.signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
+from mavcore.mission.schema import Mission
 from mavcore.services.command import CommandServer
 from mavcore.services.telemetry import StreamSchedule
 
-from .flightstack import (
-    IDLE_MOTOR_CMD, FlightStack, NavState, StatusEvent, SEVERITY_INFO, SEVERITY_WARNING,
-)
-from .sim import Simulation
+from .auth import DEFAULT_CONTROLLERS, ControlPolicy, Controller, IntakeBudget
 from .command_link import CommandLink
 from .commands import VehicleCommands
+from .flightstack import SEVERITY_INFO, SEVERITY_WARNING, StatusEvent
+from .link import Link
 from .mission_link import VehicleMission
-from .params_link import VehicleParams, vehicle_parameters
+from .params_link import VehicleParams
 from .setpoints import VehicleSetpoints
 from .signing_link import SigningSetup
 from .telemetry import VehicleTelemetry
+from .vehicle import Vehicle
 from .vehicle_id import COMPONENT_ID, SYSTEM_ID
-from .world import load_world
 
 _log = logging.getLogger("sitl")
 
@@ -166,15 +155,11 @@ _DEFAULT_RATES_HZ = {
 }
 
 _HEARTBEAT_ID = ID.MAVLINK_MSG_ID_HEARTBEAT
-#: Linux's IP_RECVERR (the socket module does not export it).
-_IP_RECVERR = getattr(socket, "IP_RECVERR", 11)
 
 
 def _default_interval_us(mid: int) -> int:
     hz = _DEFAULT_RATES_HZ[mid]
     return int(round(1e6 / hz)) if hz > 0 else -1
-_ZERO4 = (0.0, 0.0, 0.0, 0.0)
-_IDLE4 = (IDLE_MOTOR_CMD,) * 4
 
 
 @dataclass(frozen=True)
@@ -259,245 +244,8 @@ class ServerConfig:
             object.__setattr__(self, "start", st)
 
 
-class _Link:
-    """One MAVLink link with our own common-dialect MAVLink 2 encoder.
-
-    UDP links are our own sockets (``mavcore.link.sockets.open_udp``: a
-    ``udpin`` port in use is an error, ``udpout`` is connected to its peer so
-    nobody else can write to it), read and written directly (one
-    ``recvfrom`` per datagram; one ``sendto`` per client for a frame's
-    telemetry, see ``BATCH_BYTES``, and per reply): mavutil's per-message
-    bookkeeping costs more than the rest of a frame's telemetry. A ``udpin``
-    link serves the addresses that sent it something, at most
-    ``max_clients`` of them, expiring after ``client_timeout_s`` of silence
-    (``sitl.auth.ClientTable``); replies go to the requester only. Other
-    link types (TCP, serial) go through mavutil.
-
-    Incoming packets are parsed by a ``MAVLink`` object without a key
-    (``parser``): signatures are checked by ``sitl.auth`` with our rules;
-    ``mav`` packs (and signs, when signing is on).
-    """
-
-    def __init__(self, url: str, control: bool = True, max_clients: int = 8,
-                 client_timeout_s: float = 10.0, option: str = "--listen") -> None:
-        self.url = url
-        self.control = control
-        #: A datagram link (UDP or in-process, ``mavcore.link.pipe``): read datagram by datagram.
-        self.udp = is_datagram_url(url)
-        self.conn = None
-        self.pipe = None
-        self.clients = ClientTable(max_clients, client_timeout_s)
-        if self.udp:
-            self.pipe = open_pipe(url, option, listen=True)
-            self.memory = self.pipe.memory
-            self.sock = None if self.memory else self.pipe.sock
-            self.server = self.pipe.server
-            self.peer = self.pipe.peer
-            self.fd = None if self.memory else self.sock.fileno()
-            self.mav = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
-        else:
-            self.memory = False
-            self.conn = mavutil.mavlink_connection(url, source_system=SYSTEM_ID,
-                                                   source_component=COMPONENT_ID, retries=0)
-            # Replace the module-global-dialect encoder by our own (common, v2):
-            # independent of MAVLINK20/MAVLINK_DIALECT and of other users of mavutil.
-            self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
-            self.conn.WIRE_PROTOCOL_VERSION = "2.0"
-            self.conn.first_byte = False
-            self.mav = self.conn.mav
-            self.sock = None
-            self.server = False
-            self.peer = None
-            port = getattr(self.conn, "port", None)
-            self.fd = port.fileno() if isinstance(port, socket.socket) else self.conn.fd
-        self.mav.robust_parsing = True
-        #: Peers the kernel reported unreachable, for the server to forget (``collect_unreachable``).
-        self.gone: list = []
-        self._recverr = False
-        if self.server:
-            try:   # ICMP errors with the address they concern: a closed peer is noticed at once
-                self.sock.setsockopt(socket.IPPROTO_IP, _IP_RECVERR, 1)
-                self._recverr = hasattr(socket, "MSG_ERRQUEUE")
-            except OSError:
-                pass
-        self.parser = mavlink.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
-        self.parser.robust_parsing = True
-        self.last_addr = None
-        self._batch: list | None = None
-        self._batch_len = 0
-
-    @property
-    def has_peer(self) -> bool:
-        return bool(self.clients) if self.server else True
-
-    #: A frame's telemetry is sent as few datagrams of at most this many
-    #: bytes (several whole MAVLink packets each, in order): on loopback one
-    #: ``sendto`` costs as much as encoding several messages, mostly by waking
-    #: the receiver, so a frame is one wake-up instead of four or five.
-    BATCH_BYTES = 1200
-
-    def begin_frame(self) -> None:
-        self._batch = []
-        self._batch_len = 0
-
-    def end_frame(self) -> None:
-        if self._batch:
-            self._transmit_now(b"".join(self._batch))
-        self._batch = None
-
-    def transmit(self, buf: bytes) -> None:
-        batch = self._batch
-        if batch is None:
-            self._transmit_now(buf)
-            return
-        if self._batch_len + len(buf) > self.BATCH_BYTES and batch:
-            self._transmit_now(b"".join(batch))
-            batch.clear()
-            self._batch_len = 0
-        batch.append(buf)
-        self._batch_len += len(buf)
-
-    def _transmit_now(self, buf: bytes) -> None:
-        if self.server:
-            for addr in self.clients:   # one failing client must not cost the others their telemetry
-                self._sendto(buf, addr)
-            return
-        try:
-            if self.pipe is not None:
-                self.pipe.send(buf)
-            else:
-                self.conn.write(buf)
-        except OSError:
-            pass
-
-    def _sendto(self, buf: bytes, addr) -> None:
-        """``sendto`` on the server socket. With IP_RECVERR the kernel reports a
-        pending ICMP error (about any peer) on the next call and drops that
-        datagram: collect the error and send once more."""
-        try:
-            self.sock.sendto(buf, addr)
-        except OSError as exc:
-            if exc.errno == errno.ECONNREFUSED and self._recverr:
-                self.collect_unreachable()
-                try:
-                    self.sock.sendto(buf, addr)
-                except OSError:
-                    pass
-
-    def collect_unreachable(self) -> None:
-        """Move the addresses the kernel reported unreachable (ICMP port
-        unreachable: the peer's socket is closed) from the error queue to
-        ``gone`` (``IP_RECVERR``, Linux; elsewhere nothing is reported)."""
-        if not self._recverr:
-            return
-        for _ in range(64):
-            try:
-                _, _, _, addr = self.sock.recvmsg(1, 512, socket.MSG_ERRQUEUE | socket.MSG_DONTWAIT)
-            except OSError:
-                return
-            if addr and addr not in self.gone:
-                self.gone.append(addr)
-
-    def send(self, msg) -> None:
-        """Pack (signing if set up) and send a pymavlink message."""
-        try:
-            buf = msg.pack(self.mav)
-        except (struct_error, ValueError, TypeError, OverflowError):
-            return
-        self.mav.seq = (self.mav.seq + 1) & 0xFF
-        self.transmit(buf)
-
-    def reply(self, msg, addr=None) -> None:
-        """Send to ``addr`` or the peer whose datagram is being handled (UDP
-        server), else like ``send``."""
-        addr = addr or self.last_addr
-        if not self.server or addr is None:
-            self.send(msg)
-            return
-        try:
-            buf = msg.pack(self.mav)
-        except (struct_error, ValueError, TypeError, OverflowError):
-            return
-        self.mav.seq = (self.mav.seq + 1) & 0xFF
-        self._sendto(buf, addr)
-
-    def send_fast(self, packer, args: tuple) -> None:
-        """Send through a ``codec.FastPacker``."""
-        try:
-            buf = packer.pack(self.mav, args)
-        except (struct_error, ValueError, TypeError, OverflowError):
-            return
-        self.transmit(buf)
-
-    def recv_datagram(self, wait_s: float = 0.0, spin: bool = False) -> bytes | None:
-        """Next datagram, waiting up to ``wait_s`` seconds (0: only what is
-        queued now), or None (datagram links only).
-
-        ``spin``: busy-poll before sleeping in the kernel, for the pipe's
-        adaptive budget (``mavcore.link.pipe.AdaptiveSpin``, at most SIM_LS_SPIN). A
-        lockstep answer from a peer on another core comes back within tens of
-        microseconds, less than a process wake-up costs; on a loaded machine
-        it comes late and the spin backs off."""
-        got = self.pipe.recv(wait_s, spin)
-        if got is None:
-            if self.pipe.error == errno.ECONNREFUSED:
-                self.pipe.error = 0
-                self.collect_unreachable()
-            return None
-        data, addr = got
-        if self.server:
-            self.clients.admit(addr, time.monotonic())
-        self.last_addr = addr
-        return data
-
-    def parse(self, data: bytes) -> list:
-        """Every message in the datagram ``data`` (BAD_DATA objects for garbage).
-
-        A datagram holds whole packets: the parser starts afresh on each, so a
-        truncated packet can never swallow the next datagram.
-        """
-        mav = self.parser
-        mav.buf = bytearray()
-        mav.buf_index = 0
-        try:
-            return mav.parse_buffer(data) or []
-        except Exception:   # pymavlink raised on garbage: drop the buffer
-            mav.buf = bytearray()
-            mav.buf_index = 0
-            return []
-
-    def receive(self):
-        """Messages of the next datagram or packet (list, maybe empty), or
-        None when nothing is waiting."""
-        if self.udp:
-            data = self.recv_datagram()
-            return None if data is None else self.parse(data)
-        # A stream (TCP, serial): packets may span reads, so the parser keeps its buffer.
-        try:
-            data = self.conn.recv(4096)
-        except OSError:
-            return None
-        if not data:
-            return None
-        try:
-            return self.parser.parse_buffer(data) or []
-        except Exception:   # pymavlink raised on garbage: drop the buffer
-            self.parser.buf = bytearray()
-            self.parser.buf_index = 0
-            return []
-
-    def close(self) -> None:
-        try:
-            if self.pipe is not None:
-                self.pipe.close()
-            else:
-                self.conn.close()
-        except OSError:
-            pass
-
-
 class SitlServer:
-    """The SITL: simulation + flight stack + MAVLink links.
+    """The SITL: the simulated vehicle (``self.vehicle``) behind MAVLink links.
 
     Constructing it does no I/O; ``open()`` binds the links, ``run()`` loops
     until ``stop()`` (thread-safe) and ``close()`` releases the sockets.
@@ -512,59 +260,16 @@ class SitlServer:
         self.mission = mission
         self.config = config
         self._stop = threading.Event()
-        self.links: list[_Link] = []
-        self.frames = 0
+        self.links: list[Link] = []
         self.lockstep_engaged = False
-        seed = mission.sim.seed if config.seed is None else int(config.seed)
-        self.seed = seed
-        world = load_world(mission)
-        start_xy, start_yaw = None, 0.0
-        if config.start is not None:
-            start_xy, start_yaw = config.start[:2], math.radians(config.start[2])
-        self.sim = Simulation(mission, np.random.default_rng(seed), physics_hz=config.physics_hz,
-                              sensor_hz=config.sensor_hz, world=world, start_enu_m=start_xy,
-                              start_yaw_rad=start_yaw)
-        self.autopilot = autopilots.get(config.autopilot or mission.sim.autopilot)
-        self.params = vehicle_parameters(self.autopilot, mission, self.sim, config.lockstep)
-        self.origin = codec.GeoOrigin(mission.home.lat, mission.home.lon, mission.home.alt_m)
-        self.home_enu_m = np.array(self.sim.truth.pos_enu_m, dtype=float)
-        self.stack = FlightStack(self.params, self.home_enu_m, self.autopilot)
-        self.sim.landing_intent = self._landing_intended   # asked at touchdowns (crash rules)
-        #: The mission, fence and rally storage and the mission progress (``sitl.mission_link``).
-        self.mission_link = VehicleMission(
-            mission.energy.max_mission_items, self.sim, self.stack, self.params, self.autopilot, self.origin,
-            self.home_enu_m, lambda: self._state() if self._frame is not None else None, self._mav,
-            self._broadcast, self._say, self._refuse)
-        self.missions = self.mission_link.server     # the protocol (``mavcore.services.mission``)
-        self.battery = Battery(mission.energy)
-        self.collision_prevention = CollisionPrevention()     # fed by OBSTACLE_DISTANCE, CP_* params
-        #: The PARAM_* handlers and what the values change (``sitl.params_link``).
-        self.param_link = VehicleParams(self.params, self.autopilot, self.sim, self.collision_prevention,
-                                        lambda: self.links, self._say, self._apply_params)
-        self._apply_params()
-        self._onboard_flying = False
-        self._rates_flying = False
+        #: The simulated vehicle (``sitl.vehicle``): its state and its step on the vehicle clock.
+        self.vehicle = Vehicle(mission, seed=mission.sim.seed if config.seed is None else int(config.seed),
+                               physics_hz=config.physics_hz, sensor_hz=config.sensor_hz, start=config.start,
+                               autopilot=config.autopilot or mission.sim.autopilot, lockstep=config.lockstep)
         self._awaited_us: int | None = None
         self._released = True
         self._last_hb_wall = 0.0
         self._text_id = 0                 # STATUSTEXT id of the last text sent in chunks
-        period = self.sim.sensor_period_us
-        defaults = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
-        intervals = dict(defaults)
-        # Ground truth for the companion's tracking statistics (ODOMETRY, float32
-        # metres; SIM_STATE's 1e-7 degree lat/lon is ~1 cm): off unless requested.
-        intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
-        #: What the vehicle reports (``sitl.telemetry``); the personality's extra streams join ``intervals``.
-        self.telemetry = VehicleTelemetry(self.sim, self.stack, self.battery, self.autopilot, self.origin,
-                                          self.home_enu_m, seed, int(time.time() * 1e6), self._nav_state,
-                                          self._mav, intervals)
-        #: The telemetry streams (``mavcore.services.telemetry``); the frame marker's interval is fixed.
-        self.streams = StreamSchedule(intervals, period, defaults,
-                                      fixed_us={self.telemetry.frame_imu_id: period})
-        #: The command protocol (``mavcore.services.command``) over the vehicle's commands (``sitl.commands``).
-        self.commands = CommandServer(VehicleCommands(self.sim, self.stack, self.autopilot, self.origin,
-                                                      self.home_enu_m, self.streams, self.telemetry, self._state,
-                                                      self._mav).table())
         #: Link diagnostics: garbage seen, and what peers asked for that the
         #: SITL does not do (message types ignored, commands answered UNSUPPORTED).
         self.stats = {"bad_packets": 0, "ignored": collections.Counter(), "unsupported": collections.Counter(),
@@ -578,15 +283,44 @@ class SitlServer:
             None if config.signing_key is None else SignatureVerifier(config.signing_key),
             key_locked=config.signing_key is not None)
         self._intake = IntakeBudget()
+        self._init_parts(self.vehicle)
+        self._init_dispatch()
+
+    def _init_parts(self, v: Vehicle) -> None:
+        """The protocol parts over the vehicle's pieces: what it reports and what its peers may ask."""
+        state = v.state
+        #: The mission, fence and rally storage and the mission progress (``sitl.mission_link``).
+        self.mission_link = VehicleMission(
+            self.mission.energy.max_mission_items, v.sim, v.stack, v.params, v.autopilot, v.origin,
+            v.home_enu_m, lambda: state() if v.frame is not None else None, self._mav,
+            self._broadcast, self._say, self._refuse)
+        self.missions = self.mission_link.server     # the protocol (``mavcore.services.mission``)
+        #: The PARAM_* handlers and what the values change (``sitl.params_link``).
+        self.param_link = VehicleParams(v.params, v.autopilot, v.sim, v.collision_prevention,
+                                        lambda: self.links, self._say, self._apply_params)
+        self._apply_params()
+        period = v.sim.sensor_period_us
+        defaults = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
+        intervals = dict(defaults)
+        # Ground truth for the companion's tracking statistics (ODOMETRY, float32
+        # metres; SIM_STATE's 1e-7 degree lat/lon is ~1 cm): off unless requested.
+        intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
+        #: What the vehicle reports (``sitl.telemetry``); the personality's extra streams join ``intervals``.
+        self.telemetry = VehicleTelemetry(v.sim, v.stack, v.battery, v.autopilot, v.origin,
+                                          v.home_enu_m, v.seed, int(time.time() * 1e6), v.nav_state,
+                                          self._mav, intervals)
+        #: The telemetry streams (``mavcore.services.telemetry``); the frame marker's interval is fixed.
+        self.streams = StreamSchedule(intervals, period, defaults,
+                                      fixed_us={self.telemetry.frame_imu_id: period})
+        #: The command protocol (``mavcore.services.command``) over the vehicle's commands (``sitl.commands``).
+        self.commands = CommandServer(VehicleCommands(v.sim, v.stack, v.autopilot, v.origin, v.home_enu_m,
+                                                      self.streams, self.telemetry, state, self._mav).table())
         #: COMMAND_LONG / COMMAND_INT through ``self.commands`` (``sitl.command_link``).
-        self.command_link = CommandLink(self.commands, self.stack, self._state, self.stats["unsupported"],
-                                        self._refuse)
+        self.command_link = CommandLink(self.commands, v.stack, state, self.stats["unsupported"], self._refuse)
         #: SET_MODE, the offboard setpoints and the obstacle sectors (``sitl.setpoints``).
-        self.setpoints = VehicleSetpoints(self.sim, self.stack, self.collision_prevention, self._state,
-                                          self._refuse)
+        self.setpoints = VehicleSetpoints(v.sim, v.stack, v.collision_prevention, state, self._refuse)
         #: SETUP_SIGNING (``sitl.signing_link``).
         self.signing = SigningSetup(self.auth, lambda: self.links, self._say)
-        self._init_dispatch()
 
     def _init_dispatch(self) -> None:
         """The receive table: message type -> ``(link, msg)`` handler, most of them the parts'."""
@@ -607,7 +341,7 @@ class SitlServer:
         self.param_link.apply()
         # Spinning for the lockstep answer only pays when the peer runs on
         # another core; on one core it would only delay the peer.
-        self._spin_s = self.params["SIM_LS_SPIN"] * 1e-6 if self.config.spin and (os.cpu_count() or 1) >= 2 else 0.0
+        self._spin_s = self.vehicle.params["SIM_LS_SPIN"] * 1e-6 if self.config.spin and (os.cpu_count() or 1) >= 2 else 0.0
         for link in self.links:
             if link.pipe is not None and not link.memory:
                 link.pipe.spin.max_s = self._spin_s
@@ -620,7 +354,7 @@ class SitlServer:
                  + [(u, True, "--control-out") for u in cfg.control_outs])
         try:
             for url, control, option in specs:
-                self.links.append(_Link(url, control, cfg.max_clients, cfg.client_timeout_s, option))
+                self.links.append(Link(url, control, cfg.max_clients, cfg.client_timeout_s, option))
         except BaseException:
             self.close()
             raise
@@ -645,7 +379,7 @@ class SitlServer:
 
     @property
     def time_us(self) -> int:
-        return self.sim.time_us
+        return self.vehicle.sim.time_us
 
     def link_report(self) -> dict:
         """JSON-ready link statistics: who controlled the vehicle and what was
@@ -666,9 +400,8 @@ class SitlServer:
 
     def run(self, max_frames: int | None = None) -> None:
         """The main loop (see the module docstring). Returns on ``stop()``."""
-        if self._frame is None:
-            self._frame = self.sim.step_frame(_ZERO4)
-            self._send_telemetry(self._frame)
+        if self.vehicle.frame is None:
+            self._send_telemetry(self._start_clock())
             if self.config.lockstep:
                 self._wait_for_first_peer()
         self._pace_reset()
@@ -704,12 +437,11 @@ class SitlServer:
         """
         if self._stop.is_set():
             return
-        if self._frame is None:
+        if self.vehicle.frame is None:
             # As run() over UDP: frame 0's telemetry reaches nobody (the peer's
             # address is not known yet, so no stream's schedule advances) and
             # the peer gets the frame re-sent (``_wait_for_first_peer``).
-            self._frame = self.sim.step_frame(_ZERO4)
-            self._awaited_us = self._frame.time_us
+            self._awaited_us = self._start_clock().time_us
             self._released = False
             self._coop_clock_runs = False
             self._coop_resent = time.monotonic()
@@ -741,76 +473,27 @@ class SitlServer:
 
     # ------------------------------------------------------------------ one frame
     def step_once(self) -> None:
-        """Compute the command, step one sensor frame, send its telemetry."""
-        frame = self._frame if self._frame is not None else self.sim.step_frame(_ZERO4)
-        now = self.sim.time_us
-        out = self.stack.update(now, self._nav_state(frame))
-        self.telemetry.setpoint = out.setpoint
-        sim = self.sim
-        if not out.armed:
-            self._onboard_flying = False
-            frame = sim.step_frame(_ZERO4)
-        elif out.motor_override is not None:
-            self._onboard_flying = False
-            frame = sim.step_frame(out.motor_override)
-        elif out.rates is not None:
-            if not self._rates_flying:
-                sim.rates.reset()       # the inner rate loop takes over: a clean integrator
-            self._onboard_flying = False
-            frame = sim.step_rates(out.rates)
-        elif out.idle or out.setpoint is None:
-            self._onboard_flying = False
-            frame = sim.step_frame(_IDLE4)
-        else:
-            if out.reset_controller or not self._onboard_flying:
-                sim.onboard.reset()
-            self._onboard_flying = True
-            self.collision_prevention.set_time(now)
-            frame = sim.step_onboard(out.setpoint)
-        self._rates_flying = out.rates is not None
-        self._frame = frame
-        if self.stack.mission is not None:
+        """Step the vehicle one sensor frame (``Vehicle.step``), report it: the
+        mission's progress, a crash, the frame's telemetry."""
+        v = self.vehicle
+        frame = v.step()
+        tm = self.telemetry
+        tm.setpoint = v.setpoint
+        tm.frame = frame
+        if v.stack.mission is not None:
             self.mission_link.progress()
-        self.battery.drain(sim.plant.f, sim.dt_frame_s)
-        self.frames += 1
-        if sim.crash is not None and not self.stack.crashed:
-            self._on_crash(sim.crash)
+        if v.check_crash():        # announce the new system status in this frame's HEARTBEAT
+            self.streams.send_now(_HEARTBEAT_ID, v.sim.time_us)
         if frame.ranges:
             for r in frame.ranges:
-                self.telemetry.last_ranges[r.sensor_id] = r
+                tm.last_ranges[r.sensor_id] = r
         self._flush_events()
         self._send_telemetry(frame)
 
-    def _on_crash(self, event) -> None:
-        """Tell the flight stack (STATUSTEXT, EMERGENCY) and announce the new
-        system status in this frame's HEARTBEAT."""
-        self.stack.crash(self.sim.time_us, event)
-        self.streams.send_now(_HEARTBEAT_ID, self.sim.time_us)
-
-    def _landing_intended(self) -> bool:
-        p = self.sim.plant.p
-        return self.stack.landing_intended(self.sim.world.ground_height(p[0], p[1]))
-
-    def _nav_state(self, frame) -> NavState:
-        # Floats, not arrays: the truth is read from the plant (it only moves
-        # in ``step_frame``, so between frames it is ``frame.truth``).
-        # Ground contact stands for the land detector in both modes.
-        pl = self.sim.plant
-        e = frame.estimate
-        if e is not None:
-            return NavState(e.pos_enu_m, e.vel_enu_m_s, e.yaw_enu_rad, e.tilt_rad, bool(pl.landed))
-        R = pl.R   # row-major 9-tuple, body FLU -> world ENU
-        tilt = math.acos(max(-1.0, min(1.0, R[8])))
-        return NavState(pl.p, pl.v, math.atan2(R[3], R[0]), tilt, bool(pl.landed))
-
-    # The current frame and the stack's setpoint are the telemetry's (it encodes from them).
-    @property
-    def _frame(self):
-        return self.telemetry.frame
-
-    @_frame.setter
-    def _frame(self, frame) -> None:
-        self.telemetry.frame = frame
+    def _start_clock(self):
+        """Frame 0 (``Vehicle.start``), the telemetry's current frame."""
+        frame = self.telemetry.frame = self.vehicle.start()
+        return frame
 
     def _send_telemetry(self, frame) -> None:
         now = frame.time_us
@@ -873,7 +556,7 @@ class SitlServer:
     # ------------------------------------------------------------------ pacing
     def _pace_reset(self) -> None:
         self._t0_wall = time.monotonic()
-        self._t0_sim_us = self.sim.time_us
+        self._t0_sim_us = self.vehicle.sim.time_us
 
     def _pace(self) -> None:
         """Free-running: process input until frame k's wall-clock release."""
@@ -881,7 +564,7 @@ class SitlServer:
         self._poll(0.0)
         if speed <= 0:
             return
-        deadline = self._t0_wall + (self.sim.time_us - self._t0_sim_us) * 1e-6 / speed
+        deadline = self._t0_wall + (self.vehicle.sim.time_us - self._t0_sim_us) * 1e-6 / speed
         while not self._stop.is_set() and not self.lockstep_engaged:
             now = time.monotonic()
             if now >= deadline:
@@ -904,7 +587,7 @@ class SitlServer:
             self.lockstep_engaged = False
             self._pace_reset()
             return
-        timeout = self.params["SIM_LS_TMO"]
+        timeout = self.vehicle.params["SIM_LS_TMO"]
         while not self._released and not self._stop.is_set():
             now = time.monotonic()
             if now - start > timeout:
@@ -936,7 +619,7 @@ class SitlServer:
     def _resend_frame(self) -> None:
         """Send every enabled stream of the current frame once, HIGHRES_IMU last."""
         links = [l for l in self.links if l.has_peer]
-        if not links or self._frame is None:
+        if not links or self.vehicle.frame is None:
             return
         for l in links:
             l.begin_frame()
@@ -993,7 +676,7 @@ class SitlServer:
                 if self._dispatch(link, ans, msgs, until_released):
                     return
 
-    def _poll_one(self, link: _Link, timeout_s: float, until_released: bool, spin: bool = False) -> None:
+    def _poll_one(self, link: Link, timeout_s: float, until_released: bool, spin: bool = False) -> None:
         """``_poll`` for a single datagram link: the first read blocks in the
         kernel (SO_RCVTIMEO) instead of in select(), after the adaptive spin
         (``spin``, ``mavcore.link.pipe.AdaptiveSpin``); later reads do not wait."""
@@ -1013,7 +696,7 @@ class SitlServer:
             if self._dispatch(link, ans, msgs, until_released):
                 return
 
-    def _decode_datagram(self, link: _Link, data: bytes):
+    def _decode_datagram(self, link: Link, data: bytes):
         """(lockstep answer or None, messages) of one UDP datagram: the answer
         (one packet per frame) is decoded without pymavlink's parser when it
         is alone in its datagram (and dropped unless its sender may control)."""
@@ -1024,12 +707,12 @@ class SitlServer:
         if ans is None:
             return None, link.parse(data)
         v = self.auth.authorize(link.url, link.last_addr, "HIL_ACTUATOR_CONTROLS", None, data[5], data[6],
-                                data, time.monotonic(), self.sim.time_us * 1e-6)
+                                data, time.monotonic(), self.vehicle.sim.time_us * 1e-6)
         if (v.bindings_changed or v.report or not v.accepted) and not self._verdict(v):
             return None, ()
         return ans, ()
 
-    def _dispatch(self, link: _Link, ans, msgs, until_released: bool) -> bool:
+    def _dispatch(self, link: Link, ans, msgs, until_released: bool) -> bool:
         """Act on a decoded datagram; True when the caller should stop reading
         (``until_released`` and the lockstep answer has released the frame)."""
         if ans is not None:
@@ -1039,13 +722,13 @@ class SitlServer:
         return until_released and self._released
 
     # ------------------------------------------------------------------ dispatch
-    def _handle(self, link: _Link, msg) -> None:
+    def _handle(self, link: Link, msg) -> None:
         mtype = msg.get_type()
         if mtype == "BAD_DATA":
             self.stats["bad_packets"] += 1
             return
         sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
-        now, vehicle_s = time.monotonic(), self.sim.time_us * 1e-6
+        now, vehicle_s = time.monotonic(), self.vehicle.sim.time_us * 1e-6
         self.auth.observe(link.url, link.last_addr, sysid, compid, now, vehicle_s)
         handler = self._handlers.get(mtype)
         if handler is None:
@@ -1065,7 +748,7 @@ class SitlServer:
             self.stats["bad_packets"] += 1
         self._flush_events()
 
-    def _forget_gone(self, link: _Link) -> None:
+    def _forget_gone(self, link: Link) -> None:
         """Peers whose socket closed (ICMP port unreachable): no more telemetry
         to them, and a controller bound there is free for its next address at
         once (a restarted companion re-attaches without waiting for the
@@ -1093,22 +776,19 @@ class SitlServer:
                 l.send(msg)
 
     def _say(self, severity: int, text: str) -> None:
-        self.stack.events.append(StatusEvent(severity, text))
+        self.vehicle.stack.events.append(StatusEvent(severity, text))
         self._flush_events()
 
     def _flush_events(self) -> None:
-        if self.stack.events:
-            for ev in self.stack.pop_events():
-                _log.info("t=%.3f s: %s", self.sim.time_us * 1e-6, ev.text)
+        if self.vehicle.stack.events:
+            for ev in self.vehicle.stack.pop_events():
+                _log.info("t=%.3f s: %s", self.vehicle.sim.time_us * 1e-6, ev.text)
                 if len(ev.text) <= codec.STATUSTEXT_CHUNK:
                     self._broadcast(codec.statustext(self._mav(), ev.severity, ev.text))
                 else:
                     self._text_id = self._text_id % 65535 + 1
                     for m in codec.statustext_chunks(self._mav(), ev.severity, ev.text, self._text_id):
                         self._broadcast(m)
-
-    def _state(self) -> NavState:
-        return self._nav_state(self._frame)
 
     #: Wall seconds between two STATUSTEXTs about refused inputs (a flood of
     #: bad messages must not become a flood of texts to every link).
@@ -1128,10 +808,10 @@ class SitlServer:
         self._on_answer(codec.decode_actuator_controls(msg))
 
     def _on_answer(self, ans: codec.ActuatorAnswer) -> None:
-        now = self.sim.time_us
+        now = self.vehicle.sim.time_us
         if ans.refused is not None:       # unusable controls: still a lockstep answer
             self._refuse("HIL_ACTUATOR_CONTROLS", ans.refused)
-        self.stack.actuator_controls(now, ans.motor_cmd)
+        self.vehicle.stack.actuator_controls(now, ans.motor_cmd)
         if not (ans.lockstep and self.config.lockstep):
             return
         if not self.lockstep_engaged:
@@ -1144,7 +824,7 @@ class SitlServer:
     def _on_timesync(self, link, msg) -> None:
         if int(msg.tc1) != 0:
             return   # an answer to someone else's request
-        link.reply(link.mav.timesync_encode(self.sim.time_us * 1000, int(msg.ts1)))
+        link.reply(link.mav.timesync_encode(self.vehicle.sim.time_us * 1000, int(msg.ts1)))
 
     def _on_ping(self, link, msg) -> None:
         if int(msg.target_system) != 0 or int(msg.target_component) != 0:

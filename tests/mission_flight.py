@@ -216,12 +216,12 @@ def record_flight(srv, done, timeout_s: float) -> FlownPath:
     path, nav_err, breached = [], 0.0, False
     end = time.monotonic() + timeout_s
     while not done() and time.monotonic() < end:
-        p, est = srv.sim.plant.p, srv._frame.estimate
+        p, est = srv.vehicle.sim.plant.p, srv.vehicle.frame.estimate
         path.append(tuple(p))
         nav_err = max(nav_err, math.hypot(est.pos_enu_m[0] - p[0], est.pos_enu_m[1] - p[1]))
-        breached |= srv.stack.fence_breached
+        breached |= srv.vehicle.stack.fence_breached
         time.sleep(0.002)
-    path.append(tuple(srv.sim.plant.p))
+    path.append(tuple(srv.vehicle.sim.plant.p))
     assert done(), "the mission did not complete"
     return FlownPath(np.array(path), nav_err, breached)
 

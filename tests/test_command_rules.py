@@ -55,11 +55,11 @@ def flying():
 def snapshot(server, gcs, z0) -> dict:
     """What a hostile message could change, read from the SITL; the height (over
     MAVLink) must stay at the hold height."""
-    st = server.stack
+    st = server.vehicle.stack
     lp = gcs.recv("LOCAL_POSITION_NED", 3.0)
     assert -lp.z - z0 == pytest.approx(HOLD_Z_M, abs=0.3)
     return {"mode": st.mode.label, "armed": st.armed, "failsafe": st.failsafe, "override": st.override_active,
-            "params": tuple(server.params.by_index(i)[1] for i in range(len(server.params))),
+            "params": tuple(server.vehicle.params.by_index(i)[1] for i in range(len(server.vehicle.params))),
             "intervals": dict(server.streams.intervals), "mission": server.missions.items}
 
 
@@ -216,7 +216,7 @@ def test_a_hostile_parameter_is_refused_with_a_statustext(kind, value, flying):
     before = snapshot(server, gcs, z0)
     said = sum(t.startswith("Param rejected: MPC_XY_VEL_MAX") for t in gcs.texts)
     m = gcs.set_param("MPC_XY_VEL_MAX", value)               # the PARAM_VALUE as it stands comes back
-    assert m is not None and m.param_value == pytest.approx(server.params["MPC_XY_VEL_MAX"])
+    assert m is not None and m.param_value == pytest.approx(server.vehicle.params["MPC_XY_VEL_MAX"])
     gcs.pump(0.1)
     assert sum(t.startswith("Param rejected: MPC_XY_VEL_MAX") for t in gcs.texts) == said + 1
     assert snapshot(server, gcs, z0) == before
@@ -233,7 +233,7 @@ def test_the_legal_forms_are_still_accepted(flying):
     gcs.mav.command_int_send(1, 1, mavlink.MAV_FRAME_GLOBAL_INT, INTERVAL, 0, 0, LPOS, 0, 0, 0, 0, 0, 0)
     assert gcs.recv("COMMAND_ACK", 3.0, lambda m: m.command == INTERVAL).result == mavlink.MAV_RESULT_ACCEPTED
     m = gcs.set_param("MPC_XY_VEL_MAX", 4.0)
-    assert m.param_value == pytest.approx(4.0) and server.params["MPC_XY_VEL_MAX"] == pytest.approx(4.0)
+    assert m.param_value == pytest.approx(4.0) and server.vehicle.params["MPC_XY_VEL_MAX"] == pytest.approx(4.0)
     # a take-off in flight below the vehicle (1 m AMSL-above-home, it holds at 2 m):
     # PX4 accepts it and does not descend
     assert gcs.command(TAKEOFF, 0, 0, 0, NAN, NAN, NAN, HOME_ALT_M + 1.0) == mavlink.MAV_RESULT_ACCEPTED

@@ -106,17 +106,17 @@ def _fly_toward_wall(tmp_path, cp_dist_m):
     plan = plan_mission(mission)
     sitl = SitlInProcess(path, seed=1, start=launch_pose(plan.trajectory, plan.target_enu_m)).start()
     server = sitl.server
-    assert server.params.set("CP_DIST", cp_dist_m).ok
+    assert server.vehicle.params.set("CP_DIST", cp_dist_m).ok
     server._apply_params()                          # as a PARAM_SET would
     xs = []
-    step = server.sim.step_frame
+    step = server.vehicle.sim.step_frame
 
     def watched(cmd):                               # the true position, every frame
         frame = step(cmd)
-        xs.append(float(server.sim.plant.p[0]))
+        xs.append(float(server.vehicle.sim.plant.p[0]))
         return frame
 
-    server.sim.step_frame = watched
+    server.vehicle.sim.step_frame = watched
     try:
         result = execute(mission, FlightPlan.from_plan(plan), sitl.url, "vehicle", None, cut_s=12.0)
     finally:
@@ -131,8 +131,8 @@ def test_sitl_stops_cp_dist_short_of_a_wall_the_companion_does_not_avoid(tmp_pat
     cp_dist = 0.7
     result, x_min, server = _fly_toward_wall(tmp_path, cp_dist)
     face = WALL_X + WALL_HALF
-    assert server.collision_prevention.n_messages > 50          # the companion published at ~10 Hz
-    assert server.sim.crash is None and not result.report.crashed
+    assert server.vehicle.collision_prevention.n_messages > 50          # the companion published at ~10 Hz
+    assert server.vehicle.sim.crash is None and not result.report.crashed
     # the plan runs 4 m past the wall; the vehicle stopped CP_DIST short of its face, within
     # the sensors' 0.1 m offset from the centre, the 1 cm rounding and the braking lag
     assert cp_dist - 0.15 <= x_min - face <= cp_dist + 0.3

@@ -15,7 +15,7 @@ GCS = (255, 190)
 
 
 class FakeLink:
-    """What a part uses of ``sitl.server._Link``: its encoder, the requester's
+    """What a part uses of ``sitl.link.Link``: its encoder, the requester's
     address and ``reply``; ``send`` for the value a PARAM_SET leaves."""
 
     def __init__(self):
@@ -53,12 +53,12 @@ def test_a_two_item_upload_is_requested_item_by_item_acked_and_flown(srv):
     from sitl.mission_link import VehicleMission
 
     out, said, refused = [], [], []
-    part = VehicleMission(10, srv.sim, srv.stack, srv.params, srv.autopilot, srv.origin, srv.home_enu_m,
-                          srv._state, srv._mav, out.append, lambda sev, text: said.append(text),
+    part = VehicleMission(10, srv.vehicle.sim, srv.vehicle.stack, srv.vehicle.params, srv.vehicle.autopilot, srv.vehicle.origin, srv.vehicle.home_enu_m,
+                          srv.vehicle.state, srv._mav, out.append, lambda sev, text: said.append(text),
                           lambda kind, why: refused.append(kind))
     link = FakeLink()
-    o = srv.origin
-    h = srv.home_enu_m
+    o = srv.vehicle.origin
+    h = srv.vehicle.home_enu_m
     points = [enu2geodetic(h[0] + 5.0 * k, h[1], 0.0, o.lat_deg, o.lon_deg, o.alt_m) for k in (1, 2)]
     part.on_count(link, received(lambda m: m.mission_count_encode(1, 1, 2, 0)))
     for seq, (lat, lon, _) in enumerate(points):
@@ -69,7 +69,7 @@ def test_a_two_item_upload_is_requested_item_by_item_acked_and_flown(srv):
     assert kinds == [("MISSION_REQUEST_INT", 0), ("MISSION_REQUEST_INT", 1), ("MISSION_ACK", None)]
     assert all((m.target_system, m.target_component) == GCS for m, _ in link.replies)
     assert link.replies[-1][0].type == mavlink.MAV_MISSION_ACCEPTED
-    assert len(srv.stack.mission.items) == 2 and refused == []
+    assert len(srv.vehicle.stack.mission.items) == 2 and refused == []
     assert said == ["Mission stored: 2 items"]
     current = [m for m in out if m.get_type() == "MISSION_CURRENT"]
     assert [(m.seq, m.total) for m in current] == [(0, 2)]      # the new mission, at its first item
@@ -79,13 +79,13 @@ def test_param_set_applies_and_sends_the_value_held_to_every_link(srv):
     from sitl.params_link import VehicleParams
 
     links, changed = [FakeLink(), FakeLink()], []
-    part = VehicleParams(srv.params, srv.autopilot, srv.sim, srv.collision_prevention, lambda: links,
+    part = VehicleParams(srv.vehicle.params, srv.vehicle.autopilot, srv.vehicle.sim, srv.vehicle.collision_prevention, lambda: links,
                          lambda sev, text: None, lambda: changed.append(True))
     part.on_set(links[0], received(lambda m: m.param_set_encode(
         1, 1, b"MPC_XY_VEL_MAX", 3.5, mavlink.MAV_PARAM_TYPE_REAL32)))
-    assert srv.params["MPC_XY_VEL_MAX"] == 3.5 and changed == [True]
+    assert srv.vehicle.params["MPC_XY_VEL_MAX"] == 3.5 and changed == [True]
     part.apply()
-    assert srv.sim.onboard.gains.max_speed_xy_m_s == 3.5          # pushed into the onboard controller
+    assert srv.vehicle.sim.onboard.gains.max_speed_xy_m_s == 3.5          # pushed into the onboard controller
     for link in links:
         assert [(m.param_id, m.param_value) for m in link.sent] == [("MPC_XY_VEL_MAX", 3.5)]
 
@@ -93,8 +93,8 @@ def test_param_set_applies_and_sends_the_value_held_to_every_link(srv):
 def test_set_mode_without_the_custom_flag_is_refused(srv):
     refused = []
     from sitl.setpoints import VehicleSetpoints
-    part = VehicleSetpoints(srv.sim, srv.stack, srv.collision_prevention, srv._state,
+    part = VehicleSetpoints(srv.vehicle.sim, srv.vehicle.stack, srv.vehicle.collision_prevention, srv.vehicle.state,
                             lambda kind, why: refused.append(kind))
-    mode = srv.stack.mode
+    mode = srv.vehicle.stack.mode
     part.on_set_mode(FakeLink(), received(lambda m: m.set_mode_encode(1, 0, 0)))
-    assert refused == ["SET_MODE"] and srv.stack.mode is mode
+    assert refused == ["SET_MODE"] and srv.vehicle.stack.mode is mode

@@ -537,9 +537,9 @@ def test_launch_pose_option(capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "--start" in err
     with SitlThread(MISSION, speed=0.0, start=(6.5, 4.25, 90.0)) as s:
-        t = s.server.sim.truth
+        t = s.server.vehicle.sim.truth
         assert tuple(t.pos_enu_m[:2]) == pytest.approx((6.5, 4.25), abs=1e-12)
-        assert t.landed and t.pos_enu_m[2] == pytest.approx(s.server.sim.world.ground_height(6.5, 4.25))
+        assert t.landed and t.pos_enu_m[2] == pytest.approx(s.server.vehicle.sim.world.ground_height(6.5, 4.25))
         # body x (first column of R_enu_flu) points north for a heading of 90 deg
         assert np.asarray(t.R)[:, 0] == pytest.approx([0.0, 1.0, 0.0], abs=1e-12)
     p = SitlProcess(MISSION, start=(-1.5, 2.0))
@@ -557,7 +557,7 @@ def test_rangefinder_rate_parameter(sitl, gcs):
                 t.setdefault(m.id, []).append(m.time_boot_ms)
         return {i: float(np.median(np.diff(v))) for i, v in t.items() if len(v) > 3}
 
-    configured = {rf.cfg.id: 1000.0 / rf.cfg.rate_hz for rf in sitl.server.sim.sensors.rangefinders}
+    configured = {rf.cfg.id: 1000.0 / rf.cfg.rate_hz for rf in sitl.server.vehicle.sim.sensors.rangefinders}
     assert gcs.set_param("SIM_RNG_HZ", 50.0).param_value == pytest.approx(50.0)
     periods = median_period_ms()
     assert periods and all(p == pytest.approx(20.0, abs=4.0) for p in periods.values())

@@ -89,14 +89,14 @@ def test_mavproxy_flies_the_exported_mission_in_auto(autopilot, exported, tmp_pa
                 if ardupilot:
                     mp.send(f"param set WPNAV_RADIUS {radius * 100.0:.1f}")   # cm
                     mp.send("param set DISARM_DELAY 0")   # no auto-disarm while a loaded machine is slow
-                    assert wait_until(lambda: abs(srv.params["NAV_ACC_RAD"] - radius) < 1e-4, 30.0)
+                    assert wait_until(lambda: abs(srv.vehicle.params["NAV_ACC_RAD"] - radius) < 1e-4, 30.0)
                     mp.send("mode guided")
                     mp.expect(r"Mode GUIDED", timeout_s=30)
                     mp.send("arm throttle")
-                    assert wait_until(lambda: srv.stack.armed, 30.0)
+                    assert wait_until(lambda: srv.vehicle.stack.armed, 30.0)
                     mp.send("mode auto")
                     mp.expect(r"Mode AUTO", timeout_s=30)
-                    assert srv.sim.plant.landed                     # armed in AUTO, waiting for the release
+                    assert srv.vehicle.sim.plant.landed                     # armed in AUTO, waiting for the release
                     mp.send("long MISSION_START")
                 else:
                     # MAVProxy 1.8's ``mode MISSION`` sends PX4's mode tuple as one float and fails
@@ -104,9 +104,9 @@ def test_mavproxy_flies_the_exported_mission_in_auto(autopilot, exported, tmp_pa
                     mp.send("long MISSION_START")
                     mp.expect(r"Mode AUTO.MISSION", timeout_s=30)
                     mp.send("arm throttle")
-                assert wait_until(lambda: srv.stack.armed and not srv.sim.plant.landed, 30.0)
-                assert srv.stack.mode is FlightMode.MISSION
-                flown = record_flight(srv, lambda: not srv.stack.armed, 90.0)
+                assert wait_until(lambda: srv.vehicle.stack.armed and not srv.vehicle.sim.plant.landed, 30.0)
+                assert srv.vehicle.stack.mode is FlightMode.MISSION
+                flown = record_flight(srv, lambda: not srv.vehicle.stack.armed, 90.0)
                 assert wait_until(lambda: len(listener.reached) >= len(items) - first, 3.0), listener.reached
             finally:
                 mp.close()
@@ -121,7 +121,7 @@ def test_mavproxy_flies_the_exported_mission_in_auto(autopilot, exported, tmp_pa
             [f"Reached command #{s}" for s in wp_seqs]
         assert "Disarmed (mission complete)" in listener.texts
     # landed where it took off (home), within the return's acceptance (RTL_ACCEPT_RADIUS_M / WPNAV_RADIUS)
-    assert math.dist(flown.path[-1][:2], srv.home_enu_m[:2]) <= max(radius, 0.5) + flown.nav_err_m
+    assert math.dist(flown.path[-1][:2], srv.vehicle.home_enu_m[:2]) <= max(radius, 0.5) + flown.nav_err_m
     home = load_mission(MISSION).home
     wps = [(it.seq, np.array(geodetic2enu(it.lat_deg, it.lon_deg, it.alt_m, home.lat, home.lon, home.alt_m)),
             radius if ardupilot else it.params[1])

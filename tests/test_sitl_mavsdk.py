@@ -49,7 +49,7 @@ def test_mavsdk_offboard_flight(vehicle):
     assert wait_until(lambda: tel.health().is_armable and tel.health().is_home_position_ok, 5.0)
 
     # position, attitude, mode as the SITL knows them (its true start point)
-    start = sitl.server.home_enu_m
+    start = sitl.server.vehicle.home_enu_m
     lat, lon, alt = frames.enu2geodetic(start[0], start[1], start[2], *HOME)
     pos = tel.position()
     assert pos.latitude_deg == pytest.approx(lat, abs=2e-7) and pos.longitude_deg == pytest.approx(lon, abs=2e-7)
@@ -101,18 +101,18 @@ def test_mavsdk_takes_off_and_lands_the_ardupilot_personality():
             assert system is not None, "MAVSDK did not discover the autopilot"
             tel, action = Telemetry(system), Action(system)
             assert wait_until(lambda: tel.flight_mode() == FlightMode.STABILIZED, 5.0)   # ArduCopter boots there
-            z0 = float(sitl.server.home_enu_m[2])
+            z0 = float(sitl.server.vehicle.home_enu_m[2])
             action.set_takeoff_altitude(2.0)
             action.arm()
             assert wait_until(tel.armed, 3.0)
             action.takeoff()
             # GUIDED (4) by ArduCopter's number, and the climb to 2 m above home
-            assert wait_until(lambda: sitl.server.stack.custom_mode == 4, 3.0)
-            assert wait_until(lambda: sitl.server.sim.truth.pos_enu_m[2] > z0 + 1.6, 10.0)
+            assert wait_until(lambda: sitl.server.vehicle.stack.custom_mode == 4, 3.0)
+            assert wait_until(lambda: sitl.server.vehicle.sim.truth.pos_enu_m[2] > z0 + 1.6, 10.0)
             assert wait_until(tel.in_air, 3.0)
             action.land()
             assert wait_until(lambda: tel.landed_state() == LandedState.ON_GROUND, 15.0)
-            assert sitl.server.stack.custom_mode == 9          # LAND
+            assert sitl.server.vehicle.stack.custom_mode == 9          # LAND
         finally:
             drone.destroy()
 

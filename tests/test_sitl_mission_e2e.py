@@ -102,11 +102,11 @@ def test_mavsdk_flies_the_exported_plan_in_auto_mission(exported, record_propert
             items = cut(data.mission_items)
             raw.upload_mission(items)
             raw.upload_geofence(data.geofence_items)
-            assert srv.stack.fence is not None and len(srv.missions.stored[1]) == len(data.geofence_items)
+            assert srv.vehicle.stack.fence is not None and len(srv.missions.stored[1]) == len(data.geofence_items)
             raw.start_mission()              # AUTO.MISSION while disarmed; arming then takes off
-            assert wait_until(lambda: srv.stack.mode is FlightMode.MISSION, 5.0)
+            assert wait_until(lambda: srv.vehicle.stack.mode is FlightMode.MISSION, 5.0)
             action.arm()
-            done = lambda: srv.stack.mode is FlightMode.RTL or srv.stack.mission.finished   # noqa: E731
+            done = lambda: srv.vehicle.stack.mode is FlightMode.RTL or srv.vehicle.stack.mission.finished   # noqa: E731
             flown = record_flight(srv, done, 60.0)
             assert wait_until(lambda: len(reached) >= len(items), 3.0), f"MISSION_ITEM_REACHED: {reached}"
         finally:
@@ -146,14 +146,14 @@ def test_mavsdk_flies_the_exported_plan_in_auto_on_ardupilot(exported, record_pr
             assert len(srv.missions.stored[1]) == len(data.geofence_items)
             param.set_param_float("WPNAV_RADIUS", radius * 100.0)   # cm
             param.set_param_int("DISARM_DELAY", 0)   # no auto-disarm while a loaded machine is slow to take off
-            assert srv.params["NAV_ACC_RAD"] == pytest.approx(radius, abs=1e-4)
+            assert srv.vehicle.params["NAV_ACC_RAD"] == pytest.approx(radius, abs=1e-4)
             action.arm()
             action.takeoff()
-            assert wait_until(lambda: srv.sim.plant.p[2] > srv.home_enu_m[2] + 1.0, 20.0)
+            assert wait_until(lambda: srv.vehicle.sim.plant.p[2] > srv.vehicle.home_enu_m[2] + 1.0, 20.0)
             raw.start_mission()
-            assert wait_until(lambda: srv.stack.mode is FlightMode.MISSION, 5.0)
-            assert srv.stack.custom_mode == 3                         # ArduCopter AUTO
-            flown = record_flight(srv, lambda: not srv.stack.armed, 60.0)
+            assert wait_until(lambda: srv.vehicle.stack.mode is FlightMode.MISSION, 5.0)
+            assert srv.vehicle.stack.custom_mode == 3                         # ArduCopter AUTO
+            flown = record_flight(srv, lambda: not srv.vehicle.stack.armed, 60.0)
             assert wait_until(lambda: len(reached) >= len(items) - 1, 3.0), f"MISSION_ITEM_REACHED: {reached}"
         finally:
             drone.destroy()
@@ -161,7 +161,7 @@ def test_mavsdk_flies_the_exported_plan_in_auto_on_ardupilot(exported, record_pr
     assert not flown.breached
     # every item but home reached, in order, the RTL item last (on touchdown, near home)
     assert reached[:len(items) - 1] == list(range(1, len(items)))
-    assert math.dist(flown.path[-1][:2], srv.home_enu_m[:2]) <= radius + flown.nav_err_m
+    assert math.dist(flown.path[-1][:2], srv.vehicle.home_enu_m[:2]) <= radius + flown.nav_err_m
     v = max(m.param2 for m in items if m.command == DO_CHANGE_SPEED)
     for name, value in check_flown_path(flown, planned_waypoints(items, home, 1, radius), v).items():
         record_property(name, round(float(value), 4))
@@ -184,19 +184,19 @@ def test_mavsdk_goto_location_is_do_reposition_in_hold():
             system = drone.first_autopilot(10.0)
             assert system is not None
             action, tel = Action(system), Telemetry(system)
-            s = srv.home_enu_m
+            s = srv.vehicle.home_enu_m
             target = (s[0] + 6.0, s[1] + 6.0, s[2] + 3.0)
             lat, lon, alt = enu2geodetic(*target, home.lat, home.lon, home.alt_m)
             action.arm()
             action.takeoff()
-            assert wait_until(lambda: srv.stack.mode is FlightMode.LOITER and srv.sim.plant.p[2] > s[2] + 2.0,
+            assert wait_until(lambda: srv.vehicle.stack.mode is FlightMode.LOITER and srv.vehicle.sim.plant.p[2] > s[2] + 2.0,
                               10.0)
             action.goto_location(lat, lon, alt, 135.0)
-            near = lambda: math.dist(srv.sim.plant.p, target) < 0.2   # noqa: E731
-            assert wait_until(near, 15.0), f"at {tuple(srv.sim.plant.p)}, target {target}"
+            near = lambda: math.dist(srv.vehicle.sim.plant.p, target) < 0.2   # noqa: E731
+            assert wait_until(near, 15.0), f"at {tuple(srv.vehicle.sim.plant.p)}, target {target}"
             assert wait_until(lambda: tel.flight_mode() == MavsdkMode.HOLD, 3.0)
-            yaw_deg = lambda: math.degrees(math.atan2(srv.sim.plant.R[3], srv.sim.plant.R[0]))   # noqa: E731
+            yaw_deg = lambda: math.degrees(math.atan2(srv.vehicle.sim.plant.R[3], srv.vehicle.sim.plant.R[0]))   # noqa: E731
             assert wait_until(lambda: abs(yaw_deg() + 45.0) < 3.0, 10.0), f"yaw {yaw_deg():.1f} deg"
-            assert near() and srv.stack.mode is FlightMode.LOITER
+            assert near() and srv.vehicle.stack.mode is FlightMode.LOITER
         finally:
             drone.destroy()

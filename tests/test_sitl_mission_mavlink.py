@@ -36,7 +36,7 @@ def link():
 def geo(sitl, de, dn):
     """(lat e7, lon e7) of the point ``de`` m east and ``dn`` m north of the vehicle's start."""
     h = load_mission(MISSION).home
-    s = sitl.server.home_enu_m
+    s = sitl.server.vehicle.home_enu_m
     lat, lon, _ = enu2geodetic(s[0] + de, s[1] + dn, 0.0, h.lat, h.lon, h.alt_m)
     return round(lat * 1e7), round(lon * 1e7)
 
@@ -51,7 +51,7 @@ def upload(c, items, mission_type=0):
 
 
 def horizontal_from_start(sitl):
-    p, s = sitl.server.sim.plant.p, sitl.server.home_enu_m
+    p, s = sitl.server.vehicle.sim.plant.p, sitl.server.vehicle.home_enu_m
     return p[0] - s[0], p[1] - s[1]
 
 
@@ -83,7 +83,7 @@ def test_mission_start_flies_the_items_and_reports_them_as_px4(link):
     # landed at the way-point: 6 m east of the start, within its 0.3 m acceptance radius
     de, dn = horizontal_from_start(sitl)
     assert math.hypot(de - 6.0, dn) < 0.3 + 0.05
-    assert sitl.server.stack.mission.finished
+    assert sitl.server.vehicle.stack.mission.finished
 
 
 def test_do_reposition_in_hold_then_return_to_the_closest_rally_point(link):
@@ -109,7 +109,7 @@ def test_do_reposition_in_hold_then_return_to_the_closest_rally_point(link):
     c.pump(1.0)
     de, dn = horizontal_from_start(sitl)
     assert math.hypot(de, dn - 4.0) < 0.2
-    assert sitl.server.stack.mode is FlightMode.LOITER
+    assert sitl.server.vehicle.stack.mode is FlightMode.LOITER
     # from 4 m north: home is 4 m away, the rally point 6 m north 2 m, the other one 30 m
     assert c.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH) == mavlink.MAV_RESULT_ACCEPTED
     assert c.recv("STATUSTEXT", 15.0, lambda m: "rally point reached" in m.text) is not None

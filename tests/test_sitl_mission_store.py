@@ -74,20 +74,20 @@ def test_a_fence_upload_during_a_mission_leaves_it_flying_a_new_mission_stops_it
             srv.missions.handle_item(it, 0.0)
         srv.mission_link.sync_store()                  # what the server does before its MISSION_ACK
 
-    h = srv.home_enu_m
+    h = srv.vehicle.home_enu_m
     lat, lon, _ = ll(h[0] + 5.0, h[1])
     wp = MissionItem(0, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 16, 1, 1, 0.0, 0.0, 0.0, math.nan,
                      round(lat * 1e7), round(lon * 1e7), 2.0)
     upload(0, [wp])
-    assert srv.stack.start_mission(srv.sim.time_us, srv._state(), None).accepted
-    assert srv.stack.arm(srv.sim.time_us, srv._state()).accepted
+    assert srv.vehicle.stack.start_mission(srv.vehicle.sim.time_us, srv.vehicle.state(), None).accepted
+    assert srv.vehicle.stack.arm(srv.vehicle.sim.time_us, srv.vehicle.state()).accepted
     for _ in range(100):
         srv.step_once()
-    flying = srv.stack.mission
+    flying = srv.vehicle.stack.mission
     fence = [MissionItem(i, mavlink.MAV_FRAME_GLOBAL_INT, 5001, 0, 1, 3.0, 0.0, 0.0, 0.0, x, y, 0.0, 1)
              for i, (x, y) in enumerate(((447900000, -6100000), (448100000, -6100000), (448000000, -5900000)))]
     upload(1, fence)
-    assert srv.stack.fence is not None
-    assert srv.stack.mode is FlightMode.MISSION and srv.stack.mission is flying
+    assert srv.vehicle.stack.fence is not None
+    assert srv.vehicle.stack.mode is FlightMode.MISSION and srv.vehicle.stack.mission is flying
     upload(0, [wp])
-    assert srv.stack.mode is FlightMode.LOITER and srv.stack.mission is not flying
+    assert srv.vehicle.stack.mode is FlightMode.LOITER and srv.vehicle.stack.mission is not flying

@@ -89,7 +89,7 @@ def test_a_pending_icmp_error_does_not_drop_the_next_datagram():
     """IP_RECVERR makes the kernel report a closed peer's ICMP error on the
     next sendto, about any peer, and drop that datagram: the SITL's link
     collects the error (the closed address goes to ``gone``) and sends again."""
-    from sitl.server import _Link
+    from sitl.link import Link as _Link
 
     link = _Link(f"udpin:127.0.0.1:{free_udp_port()}")
     live = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

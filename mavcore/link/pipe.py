@@ -1,6 +1,6 @@
 """Datagram pipes: the transport seam under both ends of a MAVLink link.
 
-The SITL's links (``sitl.server._Link``) and the companion's
+The SITL's links (``sitl.link.Link``) and the companion's
 (``companion.link.connection.Connection``) read and write whole datagrams
 through a pipe; which pipe a connection string gives is decided in one place,
 ``mavcore.link.sockets.open_pipe``:
