@@ -98,7 +98,7 @@ def core_only(msgs: list, make_core) -> tuple[float, int]:
         core.handle(m)
         if core.outbox:
             core.take_outbox()
-    return time.process_time() - c0, core.n_frames
+    return time.process_time() - c0, (core.view if hasattr(core, "view") else core).n_frames
 
 
 def full_replay(data: bytes, make_core) -> tuple[float, float]:

@@ -34,6 +34,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
+def _t_s(core) -> float:
+    """The flight core's vehicle time (s; NaN before the first frame or the core)."""
+    t = None if core is None else (core.view if hasattr(core, "view") else core).t_s
+    return float("nan") if t is None else t
+
+
 def rss_mb() -> float:
     for line in Path("/proc/self/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
@@ -82,7 +88,7 @@ def main() -> int:
             while not stop.is_set():
                 core = holder.get("core")
                 samples.append((time.monotonic(), rss_mb(), core.phase if core else "init",
-                                core.t_s if core and core.t_s is not None else float("nan")))
+                                _t_s(core)))
                 time.sleep(0.25)
 
         # Let the sampler see the core: wrap the runner class the command builds.

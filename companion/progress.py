@@ -43,7 +43,7 @@ class Progress:
     def format(phase: str, fraction: float, error_m: float | None, events: int, sim_time_s: float,
                coverage: float | None = None, control: str | None = None) -> str:
         """The line. ``fraction``: of the trajectory's time; ``coverage``: the
-        coverage flown so far (``FlightCore.coverage_flown``, report.json's
+        coverage flown so far (``FlightRecorder.coverage_flown``, report.json's
         ``coverage_fraction``); ``control``: who flies the inner loop now."""
         err = "  -  " if error_m is None or not math.isfinite(error_m) else f"{error_m * 1000:7.1f} mm"
         pct = max(0.0, min(1.0, fraction)) * 100.0

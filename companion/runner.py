@@ -44,6 +44,7 @@ from .flight.core import (LAUNCH_TOLERANCE_M, PHASES, UNUSED_STREAMS, ActuatorOu
                           FlightCore, FlightInputs)
 from .flight.health import LinkHealth
 from .flight.log import FlightLog  # noqa: F401  (re-export)
+from .flight.reporting import flight_report
 from .trajectory.reference import RefSample, climb_duration_s, pointing_at, setpoint_yaw_enu, smooth_segment
 from .progress import Progress
 from .report import FlightReport
@@ -95,7 +96,7 @@ class MissionRunner:
 
     # --- the vehicle clock for the .tlog -----------------------------------------------
     def _stamp_us(self) -> int:
-        t_us = self.core.t_us
+        t_us = self.core.view.t_us
         if t_us is None:
             return int(time.time() * 1e6)
         if self._clock_offset_us is None:
@@ -107,7 +108,7 @@ class MissionRunner:
         conn = self.conn
         for out in self.core.take_outbox():
             if self._debug and type(out) is not ActuatorOut and out.get_type() == "COMMAND_LONG":
-                _log.debug("t=%.3f s: command %s %s", self.core.t_s or 0.0, command_name(out.command),
+                _log.debug("t=%.3f s: command %s %s", self.core.view.t_s or 0.0, command_name(out.command),
                            [out.param1, out.param2, out.param3, out.param4, out.param5, out.param6, out.param7])
             try:
                 if type(out) is ActuatorOut:
@@ -169,12 +170,12 @@ class MissionRunner:
                         core.handle(m)
                         if core.outbox:
                             self._send_outbox()
-                    t = core.t_s
+                    t = core.view.t_s
                     if t is not None and t != last_t:
                         last_t, last_clock = t, now
-                        if cfg.control == "companion" and core.period_us:
+                        if cfg.control == "companion" and core.view.period_us:
                             if health is None:
-                                health = LinkHealth(core.period_us * 1e-6, lockstep=core.vehicle_lockstep)
+                                health = LinkHealth(core.view.period_us * 1e-6, lockstep=core.vehicle_lockstep)
                             health.lockstep = core.vehicle_lockstep
                             why = health.observe(now, t)
                             if why is not None and core.phase in ("takeoff", "hold", "trajectory", "hover"):
@@ -183,7 +184,7 @@ class MissionRunner:
                 if now - last_msg > cfg.link_timeout_s:
                     core.link_lost(f"{conn.url}: vehicle silent for {cfg.link_timeout_s:g} s "
                                    f"while in phase {core.phase}")
-                elif core.t_s is not None and now - last_clock > cfg.link_timeout_s:
+                elif core.view.t_s is not None and now - last_clock > cfg.link_timeout_s:
                     core.link_lost(f"{conn.url}: vehicle clock stopped for {cfg.link_timeout_s:g} s "
                                    f"while in phase {core.phase}")
                 if tlog is not None and not core.faults:
@@ -195,12 +196,12 @@ class MissionRunner:
                         self._send_outbox()
                 if now >= next_show or core.phase != shown:   # 20 updates a second are enough
                     if core.phase != shown:
-                        _log.info("t=%.3f s: phase %s", core.t_s or 0.0, core.phase)
-                    if core.autopilot is not autopilot:
-                        autopilot = core.autopilot
+                        _log.info("t=%.3f s: phase %s", core.view.t_s or 0.0, core.phase)
+                    if core.view.autopilot is not autopilot:
+                        autopilot = core.view.autopilot
                         _log.info("vehicle: %s (from its HEARTBEAT)", autopilot.key)
-                    while n_texts < len(core.statustext):
-                        _log.info("vehicle says: %s", core.statustext[n_texts])
+                    while n_texts < len(core.view.statustext):
+                        _log.info("vehicle says: %s", core.view.statustext[n_texts])
                         n_texts += 1
                     next_show, shown = now + 0.05, core.phase
                     self._show()
@@ -222,20 +223,21 @@ class MissionRunner:
                 conn._flush_rx()
             if tlog.check() is not None and not core.faults:
                 core.output_fault("tlog", tlog.fault)
-        return FlightResult(core.report(wall, str(tlog.path) if tlog is not None else None, stats), core.log)
+        return FlightResult(flight_report(core, wall, str(tlog.path) if tlog is not None else None, stats),
+                            core.recorder.log)
 
     def _show(self, force: bool = False) -> None:
         core = self.core
         frac = 0.0
-        if core.phase == "trajectory" and core.t_s is not None:
-            frac = min((core.t_s - core._t_traj) / max(core._window.duration_s, 1e-9), 0.999)
+        if core.phase == "trajectory" and core.view.t_s is not None:
+            frac = min((core.view.t_s - core._t_traj) / max(core._window.duration_s, 1e-9), 0.999)
         elif core.phase in ("hover", "landing", "done"):
             frac = 1.0
-        err = core._last_err
+        err = core.recorder.last_err
         phase = core.phase
         if phase == "trajectory" and core.replan_mode not in (None, "follow"):
             phase = core.replan_mode          # avoid, climb, stop, reroute, rejoin, hold
         self.progress.update(phase, frac, err if err is not None and math.isfinite(err) else None,
                              core.replan_events,
-                             core.t_s or 0.0, force=force, coverage=core.coverage_flown(),
+                             core.view.t_s or 0.0, force=force, coverage=core.recorder.coverage_flown(),
                              control=core.control_mode)

@@ -164,7 +164,7 @@ def test_raw_imu_units_by_hand_and_back():
     (FLU y, z negated), int16 saturating; the companion reads it back within a count."""
     from types import SimpleNamespace
 
-    from companion.flight.core import _SiImu
+    from companion.flight.inbox import SiImu as _SiImu
     from mavcore.codec import raw_imu_args
 
     a = raw_imu_args(123, (0.0, 0.0, 9.80665), (0.1, 0.2, -0.3), (0.2, 0.0, -0.4))

@@ -330,7 +330,7 @@ class TruthPeeker:
 
     def command(self, *args):
         cmd = self.ctrl.command(*args)
-        R = self.core._R
+        R = self.core.view.R
         if R is None:
             return cmd
         return tuple(c + 1e-4 * R[0] for c in cmd)
@@ -418,7 +418,7 @@ def _event_at(t_s: float, event: str):
 
         def handle_then_event(m):
             handle(m)
-            if m.get_type() == "HIGHRES_IMU" and core.t_s >= t_s and not getattr(core, "_event_done", False):
+            if m.get_type() == "HIGHRES_IMU" and core.view.t_s >= t_s and not getattr(core, "_event_done", False):
                 core._event_done = True
                 if event == "interrupt":
                     core.interrupt("SIGTERM")
@@ -618,7 +618,7 @@ def test_the_flight_core_flies_through_unusable_imu_samples(corrupt, kind, tlogs
     assert said == [f"{OBSERVER_PREFIX}{OBSERVER_FAULT_TEXT[kind]}"[:50]]
     assert core.observer_faults[kind] >= 100            # 0.5 s at 250 Hz, every frame counted
     frames = [o for o in out if type(o) is ActuatorOut]
-    assert len(frames) == healthy.n_frames == core.n_frames
+    assert len(frames) == healthy.view.n_frames == core.view.n_frames
     assert core.phase == healthy.phase == "trajectory" and core.error is None
     Ra, Rb = np.array(core.ctrl.observer.R).reshape(3, 3), np.array(healthy.ctrl.observer.R).reshape(3, 3)
     assert math.acos(min(1.0, (np.trace(Ra.T @ Rb) - 1.0) / 2.0)) < 0.03

@@ -364,11 +364,11 @@ def _core_beside(obstacle_distance, pos):
     gate = GuardGate(_guard(obstacle_distance), 2.0)
     inputs = FlightInputs(None, np.zeros((1, 3)), (44.8, -0.6, 30.0), (0.0, 0.0, 0.0), guard=gate)
     core = FlightCore(inputs, RunnerConfig(control="vehicle"), VehicleConfig())
-    core.armed, core.phase, core.t_s = True, "trajectory", 100.0
+    core.view.armed, core.phase, core.view.t_s = True, "trajectory", 100.0
     from mavcore import autopilot as autopilots
 
-    core.autopilot = autopilots.PX4_AUTOPILOT          # as detected from a PX4 HEARTBEAT
-    core._pos, core._vel, core._proc = pos, (0.0, 0.0, 0.0), None
+    core.view.autopilot = autopilots.PX4_AUTOPILOT          # as detected from a PX4 HEARTBEAT
+    core.view.pos, core.view.vel, core._proc = pos, (0.0, 0.0, 0.0), None
     return core, gate
 
 

@@ -54,6 +54,12 @@ reaction it names (``end``, ``release``, ``land``/hold) and the flight is not
 from outside. ``degrade`` hands the inner loop back to the vehicle's
 controller (setpoints only) when the link can no longer carry it.
 
+What the vehicle's messages say of it (clock, arming, mode, position, attitude,
+truth) is ``companion.flight.inbox.VehicleView``, whose handlers the core's
+``handle`` dispatches to; the error statistics, coverage, clearance, log and
+report.json are ``companion.flight.reporting``. The core itself is the
+procedure.
+
 Truth: ODOMETRY (the SITL's ground truth) is decoded only after the frame's
 answer is queued and only feeds the report's error statistics (and the
 monitor's error bound); nothing the controller or the replanner sees comes
@@ -63,13 +69,11 @@ from it.
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from ..control.geometric import Measurements, Reference
-from mavcore import autopilot as autopilots
 
 from ..control.observer import heading_from_accel_mag
 from ..control.rates import normalised_thrust, vehicle_hover_thrust
@@ -79,14 +83,12 @@ from mavcore.services.command import COMMAND_SENDS, CommandClient, command_long
 from mavcore.services.mission import MissionUploadClient
 from mavcore.services.params import ParamReadClient
 from mavcore.services.telemetry import stream_requests
-from ..link.obstacle_distance import ObstacleDistancePublisher, encode_obstacle_distance
-from ..report import FlightReport, ReplanningStats, TrackingStats
 from ..replan.perception import propagated_pose
 from mavcore.vehicle import VehicleConfig
 from .config import RunnerConfig
-from .coverage import PathCoverage
-from .log import ErrorStats, FlightLog
+from .inbox import VehicleView
 from .monitor import FlightMonitor, MonitorConfig, Violation
+from .reporting import FlightRecorder
 from .setup_record import MAV_SEVERITY_DEBUG, SETUP_TEXT_ID, setup_chunks
 from ..trajectory.reference import (RefSample, TrajectoryWindow, at_rest, climb_duration_s, pointing_at,
                                     setpoint_yaw_enu, smooth_segment)
@@ -104,7 +106,6 @@ LAUNCH_TOLERANCE_M = 0.05
 #: Streams the runner never reads (muted by ``companion demo``).
 UNUSED_STREAMS = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED)
 
-_SENSOR_DOWN = mavlink.MAV_SENSOR_ROTATION_PITCH_270
 #: Height error (m) within which an ArduCopter take-off (MAV_CMD_NAV_TAKEOFF) counts as done.
 TAKEOFF_ALT_TOLERANCE_M = 0.3
 #: Speed (m/s) under which the vehicle counts as at rest after an ArduCopter take-off: our
@@ -113,12 +114,7 @@ TAKEOFF_ALT_TOLERANCE_M = 0.3
 #: the velocity error alone made the thrust vector of eq. (23) point down (kv |v| > m g:
 #: 30 x 2.54 = 76 N against 42.6 N), i.e. a demanded flip.
 TAKEOFF_REST_SPEED_M_S = 0.2
-_NAN3 = (math.nan, math.nan, math.nan)
-_NAN9 = (math.nan,) * 9
-_NAN_CTRL = (math.nan,) * 10
 _Z3 = (0.0, 0.0, 0.0)
-#: Frames of reference kept to match late position measurements (0.5 s at 250 Hz).
-REF_HISTORY_FRAMES = 128
 #: A replanned trajectory phase that the plan being flown (the first, or the last re-route or
 #: rejoin installed) has not finished this factor times its duration left when installed, plus
 #: ``REPLAN_TIME_EXTRA_S``, after it was installed is a failure (``replan_deadline``; the
@@ -137,21 +133,6 @@ def replan_deadline(t_s: float, left_s: float, deadline_s: float = -math.inf) ->
 REPLAN_PREFIX = "companion: replan "
 #: STATUSTEXT prefix of the guard's refusals (docs/replan.md "The guard").
 GUARD_PREFIX = "companion: guard: "
-
-
-class _SiImu:
-    """RAW_IMU's fields in HIGHRES_IMU's units (m/s^2, rad/s, gauss; body FRD),
-    ArduPilot's scaling: accel * 9.80665 / 1000, gyro / 1000, mag / 1000."""
-
-    __slots__ = ("time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "xmag", "ymag", "zmag")
-    _KA = 9.80665e-3
-
-    def __init__(self, m) -> None:
-        ka = self._KA
-        self.time_usec = m.time_usec
-        self.xacc, self.yacc, self.zacc = m.xacc * ka, m.yacc * ka, m.zacc * ka
-        self.xgyro, self.ygyro, self.zgyro = m.xgyro * 1e-3, m.ygyro * 1e-3, m.zgyro * 1e-3
-        self.xmag, self.ymag, self.zmag = m.xmag * 1e-3, m.ymag * 1e-3, m.zmag * 1e-3
 
 
 def replan_text(action: str, range_m: float | None, detail: str = "") -> str:
@@ -305,38 +286,23 @@ class FlightCore:
         self.outbox: list = []
         self.monitor = FlightMonitor(MonitorConfig(cfg.max_tracking_error_m, cfg.settle_s,
                                                    max_nav_age_s=cfg.max_nav_age_s))
-        self.log = FlightLog()
-        self.errors = ErrorStats(cfg.settle_s)
-        self.coverage = None if inputs.path_xy_m is None else PathCoverage(inputs.path_xy_m)
         self.phase = "connect"
         self.error: str | None = None
         self.finished = False
-        self._init_vehicle_state()
-        #: (frame time us, reference position, phase) of the last frames: a measurement is
-        #: compared with the reference of its own time (a late datagram is not an error)
-        self._ref_hist: deque = deque(maxlen=REF_HISTORY_FRAMES)
-        self._R = None                  # attitude for the log: truth (ODOMETRY) or the vehicle's ATTITUDE
-        self._odom = None
-        self.truth_source = "estimate"
-        self.min_range_m = None         # smallest non-downward rangefinder reading
-        #: What the rangefinders see, sent on as OBSTACLE_DISTANCE for the vehicle's own
-        #: collision prevention (``companion.link.obstacle_distance``).
-        self.obstacles_out = ObstacleDistancePublisher()
         # replanning (issue 8): the replanner flies the trajectory phase
         self.replanner = inputs.replanner
-        self._R_est = None              # the vehicle's attitude estimate (ATTITUDE): poses of readings
-        self._att_t = None              # ... its time (s) and body rates (FLU rad/s)
-        self._att_w = _Z3
+        #: The vehicle as its messages tell it, and their handlers (``companion.flight.inbox``).
+        self.view = VehicleView(self.tc, self.monitor, self._react, lambda: self.phase, self._emit,
+                                self.enc, self._on_imu, self._on_service_msg, self.replanner)
+        #: Error statistics, coverage, clearance, the per-frame log (``companion.flight.reporting``).
+        self.recorder = FlightRecorder(cfg, inputs, self.monitor, self._react, self.view, PHASE_CODE, FLYING)
         self.replan_mode = None
         self.replan_events = 0
-        self.min_clearance = None       # (true clearance m, t_s, obstacle index, position) from ODOMETRY
         self._traj_deadline = math.inf
-        self.statustext: list[str] = []
         self.n_control_faults = 0
         #: The observer's degraded frames per kind (``VelocityAidedObserver.faults``), as last seen.
         self.observer_faults: dict = {}
         self.n_stale_frames = 0
-        self._last_err = None
         self._controlling = False
         self.degraded: dict | None = None
         #: Who flies the inner loop, and each change: {t_s, from, to, reason}.
@@ -366,29 +332,6 @@ class FlightCore:
         self.input_tap = None
 
 
-    def _init_vehicle_state(self) -> None:
-        """The vehicle's state as its messages tell it (nothing known yet)."""
-        self.t_us: int | None = None
-        self.t_s: float | None = None
-        self.t_first_s: float | None = None
-        self._imu_times: list[int] = []
-        self.period_us: int | None = None
-        self.n_frames = 0
-        self.armed = False
-        self.vstate = None
-        self.custom_mode: int | None = None
-        self.autopilot: autopilots.Autopilot | None = None   # the vehicle's stack, from its first HEARTBEAT
-        self.landed_state = mavlink.MAV_LANDED_STATE_UNDEFINED
-        self._pos = None
-        self._vel = None
-        self._nav_t = None
-        self._imu = None                # (accel, mag) FLU of the last frame
-        self._truth = None
-        self._truth_t_us = None
-        self._truth_new = False
-        self._pos_ms = None
-        self._pos_new = False
-
     def _init_schedule(self) -> None:
         """The procedure's schedule (vehicle seconds), set at arming."""
         self._t_arm = None
@@ -408,22 +351,7 @@ class FlightCore:
         self.vehicle_lockstep = False
         self._proc = self._procedure()
         self._waiting = None
-        self._dispatch = {
-            "HIGHRES_IMU": self._on_highres_imu,
-            "RAW_IMU": self._on_raw_imu,
-            "LOCAL_POSITION_NED": self._on_local_position,
-            "ODOMETRY": self._on_odometry,
-            "ATTITUDE": self._on_attitude,
-            "HEARTBEAT": self._on_heartbeat,
-            "EXTENDED_SYS_STATE": self._on_ext_state,
-            "DISTANCE_SENSOR": self._on_distance,
-            "STATUSTEXT": self._on_statustext,
-            "COMMAND_ACK": self._on_service_msg,
-            "MISSION_REQUEST_INT": self._on_service_msg,
-            "MISSION_REQUEST": self._on_service_msg,
-            "MISSION_ACK": self._on_service_msg,
-            "PARAM_VALUE": self._on_service_msg,
-        }
+        self._dispatch = self.view.handlers()
 
     # --- the runner's face ----------------------------------------------------------
 
@@ -464,7 +392,7 @@ class FlightCore:
         # Said on the wire (and so in the .tlog, where replay finds it).
         self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_WARNING,
                                               f"{INTERRUPT_PREFIX}{reason}"[:50].encode()))
-        self.monitor.fail(self.t_s, "interrupted", f"interrupted by {reason}", self.cfg.on_failure)
+        self.monitor.fail(self.view.t_s, "interrupted", f"interrupted by {reason}", self.cfg.on_failure)
         self._note_failure(ph)
         self._stop(self.cfg.on_failure)
 
@@ -472,7 +400,7 @@ class FlightCore:
         """The runner saw no message (or no vehicle clock) for too long: the flight ends."""
         if self.error is None:
             self.error = detail
-        self.monitor.fail(self.t_s, "link", detail, "end")
+        self.monitor.fail(self.view.t_s, "link", detail, "end")
         self._note_failure(self.phase)
         self._finish()
 
@@ -484,25 +412,25 @@ class FlightCore:
         that is done; before arming it ends on the ground; while landing (or
         after) the landing goes on. The flight is not completed either way."""
         ph = self.phase
-        self.faults.append({"t_s": self.t_s, "kind": kind, "detail": detail, "phase": ph})
+        self.faults.append({"t_s": self.view.t_s, "kind": kind, "detail": detail, "phase": ph})
         self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_CRITICAL,
                                               f"{OUTPUT_FAULT_PREFIX}{kind}"[:50].encode()))
         if self.error is None:
             self.error = detail
-        in_air = self.armed and ph in FLYING
+        in_air = self.view.armed and ph in FLYING
         if in_air:
             action = self.cfg.on_failure
-        elif ph == "landing" and self.armed and not self.finished:
+        elif ph == "landing" and self.view.armed and not self.finished:
             action = "land"           # the landing under way goes on
         else:
             action = "end"            # on the ground before arming, or the flight is over
-        self.monitor.fail(self.t_s, "output", detail, action, output=kind)
+        self.monitor.fail(self.view.t_s, "output", detail, action, output=kind)
         self._note_failure(ph)
         if self.finished:
             return
         if in_air:
             self._stop(self.cfg.on_failure)
-        elif ph in BEFORE_ARMING and not self.armed:
+        elif ph in BEFORE_ARMING and not self.view.armed:
             if ph == "preflight":
                 # OFFBOARD and the arming may be on their way with no answer yet:
                 # a disarm (once; a disarmed vehicle just refuses it) so that
@@ -515,8 +443,8 @@ class FlightCore:
         """Hand the inner loop back to the vehicle's controller (setpoints only)."""
         if self.degraded is not None or self.cfg.control != "companion":
             return
-        self.degraded = {"t_s": self.t_s, "reason": reason, **values}
-        self.control_mode_changes.append({"t_s": self.t_s, "from": self.control_mode, "to": "vehicle",
+        self.degraded = {"t_s": self.view.t_s, "reason": reason, **values}
+        self.control_mode_changes.append({"t_s": self.view.t_s, "from": self.control_mode, "to": "vehicle",
                                           "reason": reason, "phase": self.phase})
         self.control_mode = "vehicle"
         self._controlling = False
@@ -526,7 +454,7 @@ class FlightCore:
     @property
     def heartbeat_wanted(self) -> bool:
         """Before the vehicle clock runs, the runner sends our HEARTBEAT by wall clock."""
-        return self.t_s is None
+        return self.view.t_s is None
 
     def heartbeat(self):
         return self.enc.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID,
@@ -562,8 +490,8 @@ class FlightCore:
             self.error = detail
         # A failure while landing (or on the ground) ends the flight: landing
         # again would not help; in the air we land (or hold).
-        action = "land" if self.armed and self.phase in FLYING else "end"
-        self.monitor.fail(self.t_s, kind, detail, action, **values)
+        action = "land" if self.view.armed and self.phase in FLYING else "end"
+        self.monitor.fail(self.view.t_s, kind, detail, action, **values)
         self._stop(self.cfg.on_failure if action == "land" else action)
 
     def _run(self, client, effect=None):
@@ -574,10 +502,10 @@ class FlightCore:
         seen = (lambda: False) if effect is None else effect
         self._client = client
         try:
-            self._emit_all(client.start(self.t_s))
+            self._emit_all(client.start(self.view.t_s))
             while not client.done:
-                yield lambda: client.done or client.due(self.t_s, seen())
-                self._emit_all(client.tick(self.t_s, seen()))
+                yield lambda: client.done or client.due(self.view.t_s, seen())
+                self._emit_all(client.tick(self.view.t_s, seen()))
         finally:   # also when the procedure is closed (``_stop``) while it waits
             if self._client is client:
                 self._client = None
@@ -620,24 +548,24 @@ class FlightCore:
 
     def _procedure(self):
         cfg = self.cfg
-        yield lambda: self.vstate is not None
+        yield lambda: self.view.vstate is not None
         self.phase = "setup"
         if self.inputs.setup is not None:
             for text, seq in setup_chunks(self.inputs.setup):
                 self._emit(self.enc.statustext_encode(MAV_SEVERITY_DEBUG, text, SETUP_TEXT_ID, seq))
-        yield lambda: self.period_us is not None
-        for mid, interval, optional in stream_requests(self.period_us, cfg.request_truth, cfg.mute_streams,
+        yield lambda: self.view.period_us is not None
+        for mid, interval, optional in stream_requests(self.view.period_us, cfg.request_truth, cfg.mute_streams,
                                                        cfg.low_rate_streams):
             yield from self._set_interval(mid, interval, optional=optional)
         pv = yield from self._param_read("SIM_LOCKSTEP")
-        self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv, self.autopilot.param_bytewise) == 1
+        self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv, self.view.autopilot.param_bytewise) == 1
         if self._rates:
-            pv = yield from self._param_read(self.autopilot.wire_name("MPC_THR_HOVER"))
-            hover = None if pv is None else float(codec.decode_param_value(pv, self.autopilot.param_bytewise))
+            pv = yield from self._param_read(self.view.autopilot.wire_name("MPC_THR_HOVER"))
+            hover = None if pv is None else float(codec.decode_param_value(pv, self.view.autopilot.param_bytewise))
             if hover is not None and 0.0 < hover <= 1.0:
                 self.hover_thrust = hover
-        yield lambda: self._pos is not None
-        if self.armed:
+        yield lambda: self.view.pos is not None
+        if self.view.armed:
             yield from self._attach()
             return
 
@@ -647,30 +575,30 @@ class FlightCore:
         yield from self._upload(items)
 
         # Setpoints must be streaming before OFFBOARD (PX4 rule): hold the ground position.
-        self._window = TrajectoryWindow(self.inputs.trajectory, self.period_us * 1e-6, self.target)
+        self._window = TrajectoryWindow(self.inputs.trajectory, self.view.period_us * 1e-6, self.target)
         self._hold_first = at_rest(self._window.first())
         self._hold_last = at_rest(self._window.last())
-        self._preflight_ref = self._static_ref(self._pos)
+        self._preflight_ref = self._static_ref(self.view.pos)
         self.phase = "preflight"
         if not self._guard_before_flight(self.inputs.trajectory, None):
             return
-        t_ready = self.t_s + cfg.preflight_s
-        yield lambda: self.t_s >= t_ready
-        ap = self.autopilot
+        t_ready = self.view.t_s + cfg.preflight_s
+        yield lambda: self.view.t_s >= t_ready
+        ap = self.view.autopilot
         yield from self._set_offboard_mode()
         yield from self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1,), "arm", temp_retries=10)
-        self.armed = True
-        self.monitor.armed(self.t_s, ap.custom_mode(ap.offboard_mode))
+        self.view.armed = True
+        self.monitor.armed(self.view.t_s, ap.custom_mode(ap.offboard_mode))
         if ap.takeoff_by_command:
             yield from self._guided_takeoff()
-        self._schedule(self.t_s)
+        self._schedule(self.view.t_s)
         self.phase = "takeoff"
         yield lambda: self.phase == "landing"
         yield from self._land()
 
     def _set_offboard_mode(self):
         """DO_SET_MODE to the mode that tracks our setpoints (PX4 OFFBOARD, ArduCopter GUIDED)."""
-        ap = self.autopilot
+        ap = self.view.autopilot
         yield from self._command(mavlink.MAV_CMD_DO_SET_MODE, ap.set_mode_params(ap.offboard_mode),
                                  f"set {ap.offboard_mode}", temp_retries=10)
 
@@ -681,23 +609,23 @@ class FlightCore:
         it is there and at rest (``TAKEOFF_REST_SPEED_M_S``): the take-off
         reference (``_schedule``) starts at rest from the vehicle's position,
         so it must agree with the vehicle's velocity too."""
-        x, y, z = self._pos
-        seg = takeoff_segments(tuple(self._pos), self._hold_first.p, self.inputs.transit_floor_z_m,
+        x, y, z = self.view.pos
+        seg = takeoff_segments(tuple(self.view.pos), self._hold_first.p, self.inputs.transit_floor_z_m,
                                self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s)[0]
         top = float(seg[1][2])
         # Stream the climb's top meanwhile: the vehicle holds there once its take-off is done.
         self._preflight_ref = self._static_ref((x, y, top))
         yield from self._command(mavlink.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, math.nan, math.nan, math.nan, top - z),
                                  "takeoff", temp_retries=10)
-        t_limit = self.t_s + self.cfg.landing_timeout_s
+        t_limit = self.view.t_s + self.cfg.landing_timeout_s
 
         def there() -> bool:
-            v = self._vel
-            return (abs(self._pos[2] - top) <= TAKEOFF_ALT_TOLERANCE_M and v is not None
+            v = self.view.vel
+            return (abs(self.view.pos[2] - top) <= TAKEOFF_ALT_TOLERANCE_M and v is not None
                     and math.hypot(v[0], v[1], v[2]) <= TAKEOFF_REST_SPEED_M_S)
 
-        yield lambda: there() or self.t_s >= t_limit
-        if abs(self._pos[2] - top) > TAKEOFF_ALT_TOLERANCE_M:
+        yield lambda: there() or self.view.t_s >= t_limit
+        if abs(self.view.pos[2] - top) > TAKEOFF_ALT_TOLERANCE_M:
             raise LinkError(f"vehicle did not climb to {top - z:.2f} m within {self.cfg.landing_timeout_s:g} s")
         if not there():
             raise LinkError(f"vehicle did not come to rest (under {TAKEOFF_REST_SPEED_M_S:g} m/s) at {top - z:.2f} m "
@@ -708,7 +636,7 @@ class FlightCore:
         cfg = self.cfg
         first = self._hold_first
         self._t_arm = t_arm
-        self._segments = takeoff_segments(tuple(self._pos), first.p, self.inputs.transit_floor_z_m,
+        self._segments = takeoff_segments(tuple(self.view.pos), first.p, self.inputs.transit_floor_z_m,
                                           cfg.climb_speed_m_s, cfg.transfer_speed_m_s)
         self._takeoff_T = sum(seg[2] for seg in self._segments)
         self._t_hold = t_arm + self._takeoff_T
@@ -716,8 +644,8 @@ class FlightCore:
         # by the IMU (accelerometer + magnetometer); the takeoff turns it toward s0.
         s0 = first.s
         psi1 = math.atan2(s0[1], s0[0])
-        if self._imu is not None:
-            psi0 = heading_from_accel_mag(self._imu[0], self._imu[1], self.inputs.mag_field_enu_gauss) + 0.5 * math.pi
+        if self.view.imu is not None:
+            psi0 = heading_from_accel_mag(self.view.imu[0], self.view.imu[1], self.inputs.mag_field_enu_gauss) + 0.5 * math.pi
         else:
             psi0 = psi1
         self._psi_arm = psi0
@@ -725,7 +653,7 @@ class FlightCore:
         self._t_traj = self._t_hold + cfg.hold_s
         self._t_hover = self._t_traj + self._window.duration_s
         self._t_land = self._t_hover + cfg.hover_s
-        self.errors.start(self._t_traj)
+        self.recorder.errors.start(self._t_traj)
         self._controlling = cfg.control in ("companion", "rates") and self.degraded is None
 
     def _land(self):
@@ -736,27 +664,27 @@ class FlightCore:
             return
         self.phase = "landing"
         self._controlling = False
-        self.monitor.landing(self.t_s)
+        self.monitor.landing(self.view.t_s)
         yield from self._command(mavlink.MAV_CMD_NAV_LAND, (), "land", temp_retries=10, effect=self._landing_seen)
-        t_limit = self.t_s + cfg.landing_timeout_s
+        t_limit = self.view.t_s + cfg.landing_timeout_s
         t_ground = None
 
         def landed() -> bool:
             nonlocal t_ground
-            if not self.armed:
+            if not self.view.armed:
                 return True
-            if self.landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND:
+            if self.view.landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND:
                 if t_ground is None:
-                    t_ground = self.t_s
-                return self.t_s - t_ground > 3.0
-            return self.t_s >= t_limit
+                    t_ground = self.view.t_s
+                return self.view.t_s - t_ground > 3.0
+            return self.view.t_s >= t_limit
 
         yield landed
-        if self.armed and self.landed_state != mavlink.MAV_LANDED_STATE_ON_GROUND:
+        if self.view.armed and self.view.landed_state != mavlink.MAV_LANDED_STATE_ON_GROUND:
             raise LinkError(f"vehicle did not land and disarm within {cfg.landing_timeout_s:g} s of vehicle time")
-        if self.armed:
+        if self.view.armed:
             yield from self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (0,), "disarm")
-            self.armed = False
+            self.view.armed = False
         if self.phase == "landing":
             self.phase = "done"
         self._finish()
@@ -764,10 +692,10 @@ class FlightCore:
     def _landing_seen(self) -> bool:
         """The vehicle reports its landing mode (HEARTBEAT: PX4 AUTO.LAND, ArduCopter
         LAND) or a landing (EXTENDED_SYS_STATE)."""
-        ap = self.autopilot
-        return ((ap is not None and self.custom_mode is not None
-                 and ap.decode_mode(self.custom_mode) is ap.mode_for("LAND"))
-                or self.landed_state == mavlink.MAV_LANDED_STATE_LANDING)
+        ap = self.view.autopilot
+        return ((ap is not None and self.view.custom_mode is not None
+                 and ap.decode_mode(self.view.custom_mode) is ap.mode_for("LAND"))
+                or self.view.landed_state == mavlink.MAV_LANDED_STATE_LANDING)
 
     def _stop(self, action: str) -> None:
         """React to a violation or an interruption (``Violation.action``)."""
@@ -776,14 +704,14 @@ class FlightCore:
         if self._proc is not None:
             self._proc.close()
         self._waiting = None
-        in_air = self.armed and self.phase in FLYING
+        in_air = self.view.armed and self.phase in FLYING
         if action == "land" and in_air:
             self._proc = self._abort_land()
         elif action == "hold" and in_air:
             self._proc = self._abort_hold()
-        elif action == "release" and self.armed:
+        elif action == "release" and self.view.armed:
             self._proc = self._release()
-        elif self.phase == "landing" and self.armed and action != "end":
+        elif self.phase == "landing" and self.view.armed and action != "end":
             self._proc = self._land()
         else:
             self._proc = None
@@ -800,9 +728,9 @@ class FlightCore:
         where it is under its own control; we let go."""
         self._controlling = False
         self.phase = "holding"
-        self.monitor.landing(self.t_s)
-        hold = self.autopilot.mode_for("LOITER").name
-        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE, self.autopilot.set_mode_params(hold),
+        self.monitor.landing(self.view.t_s)
+        hold = self.view.autopilot.mode_for("LOITER").name
+        yield from self._command(mavlink.MAV_CMD_DO_SET_MODE, self.view.autopilot.set_mode_params(hold),
                                  f"set {hold} (hold)", temp_retries=4)
         self._finish()
 
@@ -810,22 +738,22 @@ class FlightCore:
         """Somebody else flies the vehicle: stop commanding, watch until it is disarmed."""
         self._controlling = False
         self.phase = "released"
-        self.monitor.landing(self.t_s)
-        t_limit = self.t_s + self.cfg.landing_timeout_s
-        yield lambda: not self.armed or self.t_s >= t_limit
+        self.monitor.landing(self.view.t_s)
+        t_limit = self.view.t_s + self.cfg.landing_timeout_s
+        yield lambda: not self.view.armed or self.view.t_s >= t_limit
         self._finish()
 
     def _attach(self):
         """The vehicle is already armed: refuse, land it, or resume the trajectory."""
         action = self.cfg.attach
         if action == "refuse":
-            self.monitor.fail(self.t_s, "vehicle_not_ready",
+            self.monitor.fail(self.view.t_s, "vehicle_not_ready",
                               "vehicle already armed at connection (use --attach resume|land)", "end")
             self._finish()
             return
-        self.monitor.armed(self.t_s, self.custom_mode)
+        self.monitor.armed(self.view.t_s, self.view.custom_mode)
         if action == "land":
-            self.monitor.fail(self.t_s, "attached", "attached to a flying vehicle and landed it", "land")
+            self.monitor.fail(self.view.t_s, "attached", "attached to a flying vehicle and landed it", "land")
             self.phase = "hover"
             yield from self._land()
             return
@@ -833,16 +761,16 @@ class FlightCore:
         # trajectory time, then on along the trajectory.
         import numpy as np
 
-        self._window = TrajectoryWindow(self.inputs.trajectory, self.period_us * 1e-6, self.target)
+        self._window = TrajectoryWindow(self.inputs.trajectory, self.view.period_us * 1e-6, self.target)
         traj = self.inputs.trajectory
         wt = np.asarray(traj.waypoint_times_s, dtype=float)
         wp = np.asarray(traj.waypoint_targets[:, 0, :], dtype=float)
         from ..preflight import resume_index
 
-        k = resume_index(wp, self._pos)
+        k = resume_index(wp, self.view.pos)
         if k is None or not math.isfinite(float(wt[k])):
             # no position (or a non-finite one): the nearest way-point is unknown
-            self.monitor.fail(self.t_s, "attached", "attached to a flying vehicle whose position is not "
+            self.monitor.fail(self.view.t_s, "attached", "attached to a flying vehicle whose position is not "
                               "finite: cannot resume, landed it", "land")
             self.phase = "hover"
             yield from self._land()
@@ -850,20 +778,20 @@ class FlightCore:
         t_resume = float(wt[k])
         self.resumed_from_s = t_resume - traj.t0
         # the window starts at the resume time: a trajectory truncated in time
-        self._window = TrajectoryWindow(_Shifted(traj, t_resume), self.period_us * 1e-6, self.target)
+        self._window = TrajectoryWindow(_Shifted(traj, t_resume), self.view.period_us * 1e-6, self.target)
         self._hold_first = at_rest(self._window.first())
         self._hold_last = at_rest(self._window.last())
-        self._preflight_ref = self._static_ref(self._pos)
+        self._preflight_ref = self._static_ref(self.view.pos)
         self.phase = "preflight"
         if not self._guard_before_flight(traj, t_resume):
             self.phase = "hover"
             yield from self._land()
             return
-        t_ready = self.t_s + self.cfg.preflight_s
-        yield lambda: self.t_s >= t_ready
+        t_ready = self.view.t_s + self.cfg.preflight_s
+        yield lambda: self.view.t_s >= t_ready
         yield from self._set_offboard_mode()
-        self.monitor.expect_mode(self.autopilot.custom_mode(self.autopilot.offboard_mode))
-        self._schedule(self.t_s)
+        self.monitor.expect_mode(self.view.autopilot.custom_mode(self.view.autopilot.offboard_mode))
+        self._schedule(self.view.t_s)
         if self.ctrl is not None:
             self.ctrl.reset()
         self.phase = "takeoff"
@@ -876,92 +804,12 @@ class FlightCore:
         self._proc = None
         self._waiting = None
 
-    # --- message handlers ---------------------------------------------------------------
-
-    def _on_local_position(self, m) -> None:
-        self._pos = (m.y, m.x, -m.z)          # NED -> ENU (codec.decode_local_position_ned, inlined)
-        self._vel = (m.vy, m.vx, -m.vz)
-        self._nav_t = m.time_boot_ms * 1e-3
-        self._pos_ms = int(m.time_boot_ms)
-        self._pos_new = True
-
-    def _on_odometry(self, m) -> None:
-        if m.get_srcComponent() != self.tc:
-            return
-        # Decoded when used (``_truth_update``, after the frame's answer was
-        # queued): the controller never reads the true state.
-        self._odom = m
-        self.truth_source = "sim_truth"
-
-    def _truth_update(self) -> None:
-        m = self._odom
-        if m is not None:
-            self._odom = None
-            self._truth, self._R = codec.decode_odometry_pose(m)
-            self._truth_t_us = int(m.time_usec)
-            self._truth_new = True
-
-    def _on_attitude(self, m) -> None:
-        if self.truth_source != "sim_truth" or self.replanner is not None:
-            R = tuple(codec.decode_attitude(m).R_enu_flu.ravel().tolist())
-            self._R_est = R
-            self._att_t = m.time_boot_ms * 1e-3
-            self._att_w = (m.rollspeed, -m.pitchspeed, -m.yawspeed)     # FRD -> FLU
-            if self.truth_source != "sim_truth":
-                self._R = R
-
-    def _on_heartbeat(self, m) -> None:
-        if m.get_srcComponent() != self.tc:
-            return
-        vs = codec.decode_heartbeat(m)
-        if self.autopilot is None:
-            # The vehicle's flight stack decides the dialect (an unknown one is spoken to as PX4).
-            self.autopilot = autopilots.from_heartbeat(m.autopilot) or autopilots.PX4_AUTOPILOT
-            self.monitor.mode_name = self.autopilot.mode_name
-        self.vstate = vs
-        self.armed = vs.armed
-        self.custom_mode = int(m.custom_mode)
-        v = self.monitor.on_heartbeat(self.t_s, vs.armed, self.custom_mode, vs.system_status)
-        if v is not None:
-            self._react(v)
-
-    def _on_ext_state(self, m) -> None:
-        self.landed_state = int(m.landed_state)
-        if self.t_s is not None:
-            v = self.monitor.on_landed_state(self.t_s, self.landed_state)
-            if v is not None:
-                self._react(v)
-
-    def _on_distance(self, m) -> None:
-        if self.t_s is None:
-            return
-        try:
-            r = codec.decode_distance_sensor(m)
-        except (ValueError, ZeroDivisionError, OverflowError):
-            return          # a malformed reading (e.g. a zero CUSTOM quaternion) is no evidence
-        sectors = self.obstacles_out.on_range(self.t_s, r)
-        if sectors is not None:
-            self._emit(encode_obstacle_distance(self.enc, self.t_us, sectors))
-        if self.phase not in ("trajectory", "hover", "hold"):
-            return
-        if (m.orientation != _SENSOR_DOWN and math.isfinite(r.distance_m)
-                and (self.min_range_m is None or r.distance_m < self.min_range_m)):
-            self.min_range_m = r.distance_m
-        if self.replanner is not None:
-            self.replanner.on_range(self.t_s, r)
-
-    def _on_statustext(self, m) -> None:
-        text = str(m.text)
-        if len(self.statustext) < 200:   # bounded: the .tlog has them all
-            self.statustext.append(text)
-        v = self.monitor.on_statustext(self.t_s, int(m.severity), text)
-        if v is not None:
-            self._react(v)
+    # --- what the procedure takes from the inbox (``companion.flight.inbox``) ----------------
 
     def _on_service_msg(self, m) -> None:
         """A command, mission or parameter answer: to the transaction under way."""
         if self._client is not None and self._proc is not None:
-            self._emit_all(self._client.on_message(m, self.t_s))
+            self._emit_all(self._client.on_message(m, self.view.t_s))
 
     def _react(self, v: Violation) -> None:
         if v.action == "land":
@@ -969,34 +817,12 @@ class FlightCore:
         else:
             self._stop(v.action)
 
-    def _on_highres_imu(self, m) -> None:
-        ap = self.autopilot
-        if ap is None or ap.imu_message == "HIGHRES_IMU":
-            self._on_imu(m)
-
-    def _on_raw_imu(self, m) -> None:
-        """ArduCopter's sensor frame: RAW_IMU in milli-g, mrad/s, milligauss -> SI."""
-        ap = self.autopilot
-        if ap is not None and ap.imu_message == "RAW_IMU":
-            self._on_imu(_SiImu(m))
-
     def _on_imu(self, m) -> None:
+        """One sensor frame: heartbeat, phase, reference, setpoints, the controller's
+        answer (``ActuatorOut``), the recorder."""
         # The per-frame path (250 Hz, lockstep: the vehicle waits for our answer).
-        t_us = int(m.time_usec)
-        t = t_us * 1e-6
-        if self.period_us is None:
-            self._imu_times.append(t_us)
-            if len(self._imu_times) >= 2 and self._imu_times[-1] > self._imu_times[-2]:
-                self.period_us = self._imu_times[-1] - self._imu_times[-2]
-        if self.t_first_s is None:
-            self.t_first_s = t
-        self.t_us = t_us
-        self.t_s = t
-        self.n_frames += 1
-        gyro = (m.xgyro, -m.ygyro, -m.zgyro)      # FRD -> FLU: y, z negated
-        acc = (m.xacc, -m.yacc, -m.zacc)
-        mag = (m.xmag, -m.ymag, -m.zmag)
-        self._imu = (acc, mag)
+        vw = self.view
+        t_us, t, gyro, acc, mag = vw.frame(m)
         hb = self._hb_t
         if hb is None or t - hb >= 1.0 or t < hb:
             self._hb_t = t
@@ -1012,13 +838,13 @@ class FlightCore:
                 self._next_sp_t = t + self._sp_dt - 1e-9
                 self._emit(codec.encode_set_position_target(
                     self.enc, t_us // 1000, ref.p, ref.v, ref.a, setpoint_yaw_enu(ref.s, ref.a), self.ts, self.tc))
-            if self._controlling and self._pos is not None:
+            if self._controlling and vw.pos is not None:
                 ctrl = self.ctrl
                 tap = self.input_tap
                 if tap is not None:
-                    tap(t, gyro, acc, mag, self._pos, self._vel, self._nav_t)
+                    tap(t, gyro, acc, mag, vw.pos, vw.vel, vw.nav_t)
                 try:
-                    cmd = ctrl.command(t, Measurements(gyro, acc, mag, self._pos, self._vel, self._nav_t),
+                    cmd = ctrl.command(t, Measurements(gyro, acc, mag, vw.pos, vw.vel, vw.nav_t),
                                        Reference(ref.p, ref.v, ref.a, ref.jerk, ref.snap, ref.target))
                     out = ctrl.last_desired
                     if self._rates:
@@ -1029,19 +855,19 @@ class FlightCore:
                 except (ValueError, ZeroDivisionError, OverflowError):
                     # a non-finite or degenerate measurement: let the vehicle fly this frame
                     self.n_control_faults += 1
-        if cmd is None and self.ctrl is not None and self._pos is not None and self.degraded is None:
+        if cmd is None and self.ctrl is not None and vw.pos is not None and self.degraded is None:
             # Not flying the inner loop (yet): the observer still learns the gyro
             # bias and the fixes' noise, so control starts from a settled estimate.
             try:
-                self.ctrl.observe(t, gyro, acc, mag, self._pos, self._vel, self._nav_t)
+                self.ctrl.observe(t, gyro, acc, mag, vw.pos, vw.vel, vw.nav_t)
             except (ValueError, ZeroDivisionError, OverflowError):
                 self.n_control_faults += 1      # never out of the flight loop (the observer degrades itself)
         obs = self.ctrl.observer if self.ctrl is not None else None
         if obs is not None and obs.faults != self.observer_faults:
             self._observer_faults(obs.faults)
-        self.outbox.append(ActuatorOut(t_us, None if self._rates else cmd, self.armed))
+        self.outbox.append(ActuatorOut(t_us, None if self._rates else cmd, vw.armed))
         if ref is not None:
-            self._record(t, ref, out)
+            self.recorder.record(t, self.phase, ref, out, self._t_traj)
 
     def _observer_faults(self, faults: dict) -> None:
         """Say on the wire, once per kind, that the observer skipped a measurement it could not use
@@ -1051,68 +877,6 @@ class FlightCore:
                 self._emit(self.enc.statustext_encode(mavlink.MAV_SEVERITY_NOTICE,
                                                       f"{OBSERVER_PREFIX}{OBSERVER_FAULT_TEXT[kind]}"[:50].encode()))
         self.observer_faults = dict(faults)
-
-    def _matched_ref(self, t_us: int | None, by_ms: bool):
-        """(frame time s, reference position, phase) of the frame at ``t_us`` (or its
-        millisecond); None when it is not among the last ``REF_HISTORY_FRAMES``."""
-        if t_us is None:
-            return None
-        for tf, p, ph in reversed(self._ref_hist):
-            if (tf // 1000 == t_us // 1000) if by_ms else (tf == t_us):
-                return tf * 1e-6, p, ph
-            if tf < t_us - 1000:
-                break
-        return None
-
-    def _record(self, t: float, ref: RefSample, out) -> None:
-        """Error statistics, monitor checks, coverage and one (decimated) FlightLog row.
-
-        The error compares each new measurement of the position (ODOMETRY, else
-        LOCAL_POSITION_NED) with the reference of the frame it was taken at: in
-        lockstep the same frame; on a real-time link a late or reordered
-        datagram would otherwise count the vehicle's travel during the delay."""
-        phase = self.phase
-        self._ref_hist.append((self.t_us, ref.p, phase))
-        if self._odom is not None:
-            self._truth_update()
-        if self._truth is not None:
-            truth, new, t_meas, by_ms = self._truth, self._truth_new, self._truth_t_us, False
-            self._truth_new = False
-        else:
-            truth, new, by_ms = self._pos, self._pos_new, True
-            t_meas = None if self._pos_ms is None else self._pos_ms * 1000
-        self._pos_new = False
-        if truth is not None and new:
-            match = self._matched_ref(t_meas, by_ms)
-            if match is not None:
-                t_m, p, ph = match
-                err = math.sqrt((truth[0] - p[0]) ** 2 + (truth[1] - p[1]) ** 2 + (truth[2] - p[2]) ** 2)
-                self._last_err = err
-                if ph == "trajectory":
-                    self.errors.add(t_m, err)
-                    if self.coverage is not None and self.n_frames % 4 == 0:
-                        self.coverage.visit(truth[0], truth[1])
-                    v = self.monitor.on_tracking(t_m, self._t_traj, err, self.truth_source)
-                    if v is not None:
-                        self._react(v)
-        if self.inputs.obstacle_clearance is not None and self.truth_source == "sim_truth" and phase in FLYING \
-                and self._truth is not None and self.n_frames % 2 == 0:
-            c, k = self.inputs.obstacle_clearance(self._truth, self._truth_t_us)
-            mc = self.min_clearance
-            if mc is None or c < mc[0]:
-                self.min_clearance = (float(c), t, k, tuple(float(x) for x in self._truth))
-        if phase in FLYING:
-            v = self.monitor.on_nav_age(t, self._nav_t)
-            if v is not None:
-                self._react(v)
-        log = self.log
-        if log.wants():
-            est = self._pos if self._pos is not None else _NAN3
-            R = self._R
-            log.append((t, PHASE_CODE[phase]), ref.p, truth if truth is not None else _NAN3, est,
-                       _NAN9 if R is None else R, _NAN_CTRL if out is None else out, ref.s)
-        else:
-            log.n_offered += 1
 
     # --- the reference, by phase ----------------------------------------------------------
 
@@ -1173,27 +937,27 @@ class FlightCore:
         position carried with its velocity (``propagated_pose``). Without the
         observer the raw pairs' degree of noise put returns from the rows off
         the rows, and over a lossy link an attitude 80 ms old did the same."""
-        if self._pos is None:
+        if self.view.pos is None:
             return
         ctrl = self.ctrl
         est = ctrl.attitude_estimate() if self._controlling else None
         dt_R, w = 0.0, _Z3
         if est is not None and ctrl.observer is not None:
             R = est.R_enu_flu
-        elif self._R_est is not None:
-            R, dt_R, w = self._R_est, t - self._att_t, self._att_w
+        elif self.view.R_est is not None:
+            R, dt_R, w = self.view.R_est, t - self.view.att_t, self.view.att_w
         else:
             # no observer and no ATTITUDE: the rotation the two raw vector pairs
             # define (noisy: about a degree at the paper's noise)
             R = None if est is None else est.R_enu_flu
         if R is not None:
-            p, R = propagated_pose(t - self._nav_t, self._pos, self._vel, dt_R, R, w)
+            p, R = propagated_pose(t - self.view.nav_t, self.view.pos, self.view.vel, dt_R, R, w)
             self.replanner.on_pose(t, p, R)
 
     def _replan_step(self, t: float) -> RefSample:
         rp = self.replanner
-        pos = self._pos if self._pos is not None else self._hold_first.p
-        vel = self._vel if self._vel is not None else _Z3
+        pos = self.view.pos if self.view.pos is not None else self._hold_first.p
+        vel = self.view.vel if self.view.vel is not None else _Z3
         st = rp.step(t, pos, vel)
         self.replan_mode = st.mode
         for e in st.events:
@@ -1273,10 +1037,10 @@ class FlightCore:
         g = self.guard
         if g is None:
             return True
-        v = g.check_trajectory(self.t_s, trajectory, t_from_s)
+        v = g.check_trajectory(self.view.t_s, trajectory, t_from_s)
         if v.ok:
             first = self._hold_first.p
-            v = g.check_takeoff(self.t_s, takeoff_segments(tuple(self._pos), first, self.inputs.transit_floor_z_m,
+            v = g.check_takeoff(self.view.t_s, takeoff_segments(tuple(self.view.pos), first, self.inputs.transit_floor_z_m,
                                                            self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s))
         rp = self.replanner
         if rp is not None:
@@ -1285,9 +1049,9 @@ class FlightCore:
         if v.ok:
             return True
         self._guard_say(v)
-        self.monitor.fail(self.t_s, "guard", f"guard refused the plan before arming: {v.detail}",
-                          "land" if self.armed else "end")
-        if not self.armed:
+        self.monitor.fail(self.view.t_s, "guard", f"guard refused the plan before arming: {v.detail}",
+                          "land" if self.view.armed else "end")
+        if not self.view.armed:
             self._finish()
         return False
 
@@ -1296,13 +1060,13 @@ class FlightCore:
         landing is refused (said on the wire, counted in report ``guard``), the
         vehicle hovers instead (AUTO.LOITER) and the flight is not completed."""
         g = self.guard
-        if g is None or self._pos is None or not self.armed:
+        if g is None or self.view.pos is None or not self.view.armed:
             return True
-        v = g.check_landing(self.t_s, self._pos, self._vel if self._vel is not None else _Z3)
+        v = g.check_landing(self.view.t_s, self.view.pos, self.view.vel if self.view.vel is not None else _Z3)
         if v.ok:
             return True
         self._guard_say(v)
-        self.monitor.fail(self.t_s, "guard", v.detail, "hold")
+        self.monitor.fail(self.view.t_s, "guard", v.detail, "hold")
         return False
 
     def _takeoff_pointing(self, dt: float) -> tuple:
@@ -1316,87 +1080,6 @@ class FlightCore:
     def _static_ref(self, p) -> RefSample:
         p = tuple(float(c) for c in p)
         return RefSample(p, _Z3, _Z3, _Z3, _Z3, pointing_at(p, self.target))
-
-    # --- the report --------------------------------------------------------------------------
-
-    def report(self, wall_s: float, tlog: str | None, link_stats: dict | None = None) -> FlightReport:
-        es = self.errors
-        tr = TrackingStats(es.max_m, es.rms_m, self.cfg.settle_s, es.n, self.truth_source)
-        sim_s = (self.t_s - self.t_first_s) if self.t_s is not None and self.t_first_s is not None else 0.0
-        completed = self.phase == "done" and self.monitor.ok and self.error is None
-        cov = self.inputs.coverage_fraction
-        flown = None
-        if self.coverage is not None:
-            flown = self.coverage.fraction()
-        v = self.monitor.first
-        if completed:
-            phase = self.phase
-        else:
-            phase = self.failed_phase if self.failed_phase is not None else self.phase
-        return FlightReport(
-            completed=completed,
-            control=self.cfg.control,
-            sim_time_s=float(sim_s),
-            wall_time_s=float(wall_s),
-            tracking=tr,
-            replanning=self._replanning_stats(),
-            coverage_fraction=self.coverage_flown(completed),
-            tlog=tlog,
-            mission=self.inputs.mission_name,
-            phase=phase,
-            end_phase=self.phase,
-            error=self.error if self.error is not None else (v.detail if v is not None else None),
-            real_time_factor=(sim_s / wall_s) if wall_s > 0 else None,
-            n_frames=self.n_frames,
-            trajectory_duration_s=float(self.inputs.trajectory.tf - self.inputs.trajectory.t0),
-            crashed=self.monitor.crash is not None,
-            crash=self.monitor.crash,
-            violation=None if v is None else v.to_dict(),
-            planned_coverage_fraction=cov,
-            path_flown_fraction=flown,
-            degraded=self.degraded,
-            interrupted=self.interrupted,
-            link=link_stats,
-            resumed_from_s=self.resumed_from_s,
-            control_in_use=self.control_mode,
-            control_mode_changes=tuple(dict(c) for c in self.control_mode_changes),
-            faults=tuple(dict(f) for f in self.faults),
-            guard=None if self.guard is None else self.guard.to_dict(),
-            sensor_coverage=self.sensor_coverage,
-        )
-
-    def coverage_flown(self, completed: bool = False) -> float | None:
-        """Coverage flown so far: the plan's coverage times the fraction of its
-        coverage path flown (``PathCoverage``); without a path, the plan's
-        coverage if the flight completed, else None. The one source of the
-        figure: report.json, the progress line and the summaries read it."""
-        cov = self.inputs.coverage_fraction
-        if cov is None:
-            return None
-        if self.coverage is not None:
-            return cov * self.coverage.fraction()
-        return cov if completed else None
-
-
-    def _replanning_stats(self) -> ReplanningStats:
-        mc = self.min_clearance
-        clearance = dict(min_clearance_m=None if mc is None else mc[0],
-                         clearance_source=None if mc is None else "sim_truth",
-                         min_clearance_t_s=None if mc is None else mc[1],
-                         min_clearance_obstacle=None if mc is None else mc[2],
-                         min_range_m=self.min_range_m)
-        rp = self.replanner
-        if rp is None:
-            return ReplanningStats(enabled=False, **clearance)
-        st = rp.stats
-        d = st.to_dict()
-        return ReplanningStats(enabled=True, events=st.events, max_lateral_deviation_m=st.max_lateral_deviation_m,
-                               extra_path_m=st.extra_path_m, max_climb_m=st.max_climb_m,
-                               min_obstacle_range_m=st.min_obstacle_range_m, event_list=tuple(d["event_list"]),
-                               readings=st.readings, unknown_hits=st.unknown_hits,
-                               ignored_readings=st.ignored_readings, mode=self.replan_mode,
-                               coverage_skipped=tuple(d["coverage_skipped"]), **clearance)
-
 
 class _Shifted:
     """A trajectory seen from ``t_start`` on (for resuming mid-flight)."""

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import common as mavlink
 
 from ..flight.log import FlightLog
+from ..flight.reporting import flight_report
 from ..link.connection import COMPANION_COMPONENT_ID, COMPANION_SYSTEM_ID
 from ..link.tlog_scan import ScanSummary, TlogScanner, decode_record, new_decoder
 from .metrics import FlightMetrics, MetricsAccumulator
@@ -116,7 +117,7 @@ def replay_chunks(chunks, core=None, tolerance: float = 0.0, withhold=(), settle
         session.feed(scanner.feed(chunk))
     session.feed(scanner.close())
     comparison = session.finish()
-    flight = core.report(0.0, None) if core is not None else None
+    flight = flight_report(core, 0.0, None) if core is not None else None
     col = session.setup_collector
     return ReplayResult(scanner.summary, metrics.result(), comparison, flight,
-                        core.log if core is not None else log, col.setup if col.complete else None)
+                        core.recorder.log if core is not None else log, col.setup if col.complete else None)

@@ -292,17 +292,17 @@ class ReplaySession:
             pending.extend(core.take_outbox())
         index = self.comparer.n_compared
         if not pending:
-            self._diverged(Divergence(core.t_s, rec.offset, index, message_name(rec.msgid), None))
+            self._diverged(Divergence(core.view.t_s, rec.offset, index, message_name(rec.msgid), None))
             return
         out = pending.popleft()
         diff = self.comparer.compare(out, rec)
         if diff is None:
             return
         if diff.field is None:        # another message type: the values are the type names
-            self._diverged(Divergence(core.t_s, rec.offset, index, diff.recorded_value, diff.computed_value))
+            self._diverged(Divergence(core.view.t_s, rec.offset, index, diff.recorded_value, diff.computed_value))
         else:
             name = message_name(rec.msgid)
-            self._diverged(Divergence(core.t_s, rec.offset, index, name, name, diff.field, diff.recorded_value,
+            self._diverged(Divergence(core.view.t_s, rec.offset, index, name, name, diff.field, diff.recorded_value,
                                       diff.computed_value))
 
     def _injected(self, text: str) -> None:
@@ -328,10 +328,10 @@ class ReplaySession:
             if self.pending:
                 out = self.pending[0]
                 msgid, _ = computed_payload(out, self.comparer.mav)
-                self._diverged(Divergence(core.t_s, None, self.comparer.n_compared, None, message_name(msgid)))
+                self._diverged(Divergence(core.view.t_s, None, self.comparer.n_compared, None, message_name(msgid)))
             for ex in self.comparer.drift_excess():
                 name, field = ex["field"].split(".", 1)
-                self._diverged(Divergence(core.t_s, None, ex["n_outputs"], name, name, field, ex["mean_abs_diff"],
+                self._diverged(Divergence(core.view.t_s, None, ex["n_outputs"], name, name, field, ex["mean_abs_diff"],
                                           ex["bound"], kind="drift"))
         c = self.comparer
         return Comparison(
