@@ -54,3 +54,95 @@ def test_every_package_directory_has_an_init():
                for d in [ROOT / top, *(ROOT / top).rglob("*")]
                if d.is_dir() and d.name != "__pycache__" and any(d.glob("*.py")) and not (d / "__init__.py").exists()]
     assert missing == []
+
+
+# --- the two former god objects stay split (issue 17, deliverable 5; BENCHMARKS "h17-split") ---------------
+
+#: Methods (``def`` in the class body, properties included) each class may have. The limits are the counts
+#: after the split, so that a new duty has to go where it belongs instead of regrowing the class:
+#: ``SitlServer`` (94 methods when issue 17 was filed, 41 before the split) keeps its lifecycle and the parts'
+#: wiring (12), the frame's telemetry send over the links (4), pacing (2), lockstep (5), reading, checking and
+#: dispatching input (12) and TIMESYNC/PING (2): a new protocol is a part in ``sitl/`` (its ``handlers()``), a
+#: new vehicle behaviour goes in ``sitl/vehicle.py`` or the simulation. ``FlightCore`` (64 before the split)
+#: keeps the runner's face (10), the procedure's plumbing and its clients (12), the procedure (13), the
+#: per-frame step with its reference, replanning and guard (13): a new message handler goes in
+#: ``companion/flight/inbox.py``, a new figure of the report in ``companion/flight/reporting.py``.
+METHOD_LIMITS = {("sitl/server.py", "SitlServer"): 37, ("companion/flight/core.py", "FlightCore"): 48}
+
+
+def class_methods(source: str, name: str) -> list:
+    """Names of the methods defined in the body of class ``name`` of ``source``."""
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.ClassDef) and node.name == name:
+            return [c.name for c in node.body if isinstance(c, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    raise LookupError(name)
+
+
+def self_attributes(source: str, name: str) -> set:
+    """Attribute names class ``name`` of ``source`` assigns on ``self`` (``self.x = ...``, ``self.x: T = ...``)."""
+    cls = next(n for n in ast.parse(source).body if isinstance(n, ast.ClassDef) and n.name == name)
+    out = set()
+    for node in ast.walk(cls):
+        targets = node.targets if isinstance(node, ast.Assign) else \
+            [node.target] if isinstance(node, (ast.AnnAssign, ast.AugAssign)) else []
+        for t in targets:
+            for e in ast.walk(t):
+                if isinstance(e, ast.Attribute) and isinstance(e.value, ast.Name) and e.value.id == "self":
+                    out.add(e.attr)
+    return out
+
+
+def test_class_helpers_count_methods_and_self_attributes():
+    src = ("class A:\n    def f(self):\n        self.x = 1\n        self.y: int = 2\n        self.z += 1\n"
+           "        self.p, self.q = 3, 4\n        other.w = 5\n    @property\n    def g(self):\n        return 1\n"
+           "class B:\n    def h(self):\n        self.v = 0\n")
+    assert class_methods(src, "A") == ["f", "g"]
+    assert self_attributes(src, "A") == {"x", "y", "z", "p", "q"}
+    with pytest.raises(LookupError):
+        class_methods(src, "C")
+
+
+@pytest.mark.parametrize("path,name", sorted(METHOD_LIMITS))
+def test_former_god_objects_do_not_regrow(path, name):
+    methods = class_methods((ROOT / path).read_text(encoding="utf-8"), name)
+    assert len(methods) <= METHOD_LIMITS[(path, name)], methods
+
+
+def test_sitl_server_holds_no_vehicle_state():
+    """The simulation, flight stack, parameters, battery and collision prevention are the
+    ``Vehicle``'s: the server reaches them through ``self.vehicle`` only."""
+    from mavcore.mission import load_mission
+    from mavcore.services.params import Parameters
+    from sitl.battery import Battery
+    from sitl.collision_prevention import CollisionPrevention
+    from sitl.flightstack import FlightStack
+    from sitl.server import SitlServer
+    from sitl.sim import Simulation
+    from sitl.vehicle import Vehicle
+
+    srv = SitlServer(load_mission(ROOT / "missions/flat-rectangle/mission.yaml"))   # no I/O
+    assert isinstance(srv.vehicle, Vehicle)
+    vehicle_state = (Simulation, FlightStack, Parameters, Battery, CollisionPrevention)
+    held = {k: type(v).__name__ for k, v in vars(srv).items() if isinstance(v, vehicle_state)}
+    assert held == {}
+    v = srv.vehicle
+    assert all(isinstance(x, t) for x, t in zip((v.sim, v.stack, v.params, v.battery, v.collision_prevention),
+                                                 vehicle_state))
+
+
+def test_flight_core_keeps_no_message_handler_or_report():
+    """The per-message updates are ``VehicleView``'s (companion/flight/inbox.py) and the
+    measurements and report ``FlightRecorder``'s (reporting.py): the core defines no
+    handler but the procedure's two hooks and none of their state."""
+    core_src = (ROOT / "companion/flight/core.py").read_text(encoding="utf-8")
+    methods = class_methods(core_src, "FlightCore")
+    assert sorted(m for m in methods if m.startswith("_on_")) == ["_on_imu", "_on_service_msg"]
+    assert not {"report", "coverage_flown", "_record", "_replanning_stats"} & set(methods)
+    # collaborators handed to the view and the recorder, not state of their own
+    shared = {"tc", "monitor", "react", "phase", "emit", "enc", "on_frame", "on_service", "replanner", "inputs",
+              "view", "phase_code", "flying"}
+    view = self_attributes((ROOT / "companion/flight/inbox.py").read_text(encoding="utf-8"), "VehicleView")
+    recorder = self_attributes((ROOT / "companion/flight/reporting.py").read_text(encoding="utf-8"),
+                               "FlightRecorder")
+    assert {"pos", "t_s", "armed", "truth"} <= view and {"log", "errors", "min_clearance"} <= recorder
+    assert self_attributes(core_src, "FlightCore") & ((view | recorder) - shared) == set()
