@@ -341,7 +341,8 @@ class SitlServer:
         self.param_link.apply()
         # Spinning for the lockstep answer only pays when the peer runs on
         # another core; on one core it would only delay the peer.
-        self._spin_s = self.vehicle.params["SIM_LS_SPIN"] * 1e-6 if self.config.spin and (os.cpu_count() or 1) >= 2 else 0.0
+        spin_us = self.vehicle.params["SIM_LS_SPIN"]
+        self._spin_s = spin_us * 1e-6 if self.config.spin and (os.cpu_count() or 1) >= 2 else 0.0
         for link in self.links:
             if link.pipe is not None and not link.memory:
                 link.pipe.spin.max_s = self._spin_s

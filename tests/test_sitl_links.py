@@ -53,7 +53,8 @@ def test_a_two_item_upload_is_requested_item_by_item_acked_and_flown(srv):
     from sitl.mission_link import VehicleMission
 
     out, said, refused = [], [], []
-    part = VehicleMission(10, srv.vehicle.sim, srv.vehicle.stack, srv.vehicle.params, srv.vehicle.autopilot, srv.vehicle.origin, srv.vehicle.home_enu_m,
+    v = srv.vehicle
+    part = VehicleMission(10, v.sim, v.stack, v.params, v.autopilot, v.origin, v.home_enu_m,
                           srv.vehicle.state, srv._mav, out.append, lambda sev, text: said.append(text),
                           lambda kind, why: refused.append(kind))
     link = FakeLink()
@@ -79,7 +80,8 @@ def test_param_set_applies_and_sends_the_value_held_to_every_link(srv):
     from sitl.params_link import VehicleParams
 
     links, changed = [FakeLink(), FakeLink()], []
-    part = VehicleParams(srv.vehicle.params, srv.vehicle.autopilot, srv.vehicle.sim, srv.vehicle.collision_prevention, lambda: links,
+    v = srv.vehicle
+    part = VehicleParams(v.params, v.autopilot, v.sim, v.collision_prevention, lambda: links,
                          lambda sev, text: None, lambda: changed.append(True))
     part.on_set(links[0], received(lambda m: m.param_set_encode(
         1, 1, b"MPC_XY_VEL_MAX", 3.5, mavlink.MAV_PARAM_TYPE_REAL32)))

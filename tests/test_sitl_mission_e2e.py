@@ -189,13 +189,13 @@ def test_mavsdk_goto_location_is_do_reposition_in_hold():
             lat, lon, alt = enu2geodetic(*target, home.lat, home.lon, home.alt_m)
             action.arm()
             action.takeoff()
-            assert wait_until(lambda: srv.vehicle.stack.mode is FlightMode.LOITER and srv.vehicle.sim.plant.p[2] > s[2] + 2.0,
-                              10.0)
+            veh = srv.vehicle
+            assert wait_until(lambda: veh.stack.mode is FlightMode.LOITER and veh.sim.plant.p[2] > s[2] + 2.0, 10.0)
             action.goto_location(lat, lon, alt, 135.0)
             near = lambda: math.dist(srv.vehicle.sim.plant.p, target) < 0.2   # noqa: E731
             assert wait_until(near, 15.0), f"at {tuple(srv.vehicle.sim.plant.p)}, target {target}"
             assert wait_until(lambda: tel.flight_mode() == MavsdkMode.HOLD, 3.0)
-            yaw_deg = lambda: math.degrees(math.atan2(srv.vehicle.sim.plant.R[3], srv.vehicle.sim.plant.R[0]))   # noqa: E731
+            yaw_deg = lambda: math.degrees(math.atan2(veh.sim.plant.R[3], veh.sim.plant.R[0]))   # noqa: E731
             assert wait_until(lambda: abs(yaw_deg() + 45.0) < 3.0, 10.0), f"yaw {yaw_deg():.1f} deg"
             assert near() and srv.vehicle.stack.mode is FlightMode.LOITER
         finally:

@@ -644,8 +644,9 @@ class FlightCore:
         # by the IMU (accelerometer + magnetometer); the takeoff turns it toward s0.
         s0 = first.s
         psi1 = math.atan2(s0[1], s0[0])
-        if self.view.imu is not None:
-            psi0 = heading_from_accel_mag(self.view.imu[0], self.view.imu[1], self.inputs.mag_field_enu_gauss) + 0.5 * math.pi
+        imu = self.view.imu
+        if imu is not None:
+            psi0 = heading_from_accel_mag(imu[0], imu[1], self.inputs.mag_field_enu_gauss) + 0.5 * math.pi
         else:
             psi0 = psi1
         self._psi_arm = psi0
@@ -1040,8 +1041,9 @@ class FlightCore:
         v = g.check_trajectory(self.view.t_s, trajectory, t_from_s)
         if v.ok:
             first = self._hold_first.p
-            v = g.check_takeoff(self.view.t_s, takeoff_segments(tuple(self.view.pos), first, self.inputs.transit_floor_z_m,
-                                                           self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s))
+            v = g.check_takeoff(self.view.t_s, takeoff_segments(tuple(self.view.pos), first,
+                                                                self.inputs.transit_floor_z_m,
+                                                                self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s))
         rp = self.replanner
         if rp is not None:
             self._guard_plan = rp.plan
