@@ -130,9 +130,10 @@ def test_rangefinders_against_hand_placed_geometry():
     assert all(len(set(v)) == 1 for v in got.values())          # noise off: identical readings
 
 
-def test_default_suite_is_a_closed_horizontal_ring_and_a_down_beam():
+def test_default_suite_is_a_closed_ring_pitched_down_and_a_down_beam():
     # every horizontal direction lies inside some ring beam: 16 beams 22.5 deg
-    # apart, each 24 deg wide; with the companion's own reading of the mounting
+    # apart, each 24 deg wide, their axes 6 deg below the horizon (+2 to -14 deg:
+    # mavcore.mission.sim); with the companion's own reading of the mounting
     suite = SimConfig().rangefinders_or_default
     ring = [orientation_direction_flu(25)]
     dirs = [fan_directions_flu(c)[0] for c in suite[:-1]]
@@ -140,7 +141,8 @@ def test_default_suite_is_a_closed_horizontal_ring_and_a_down_beam():
         off = min(abs(math.degrees(math.atan2(math.sin(az - math.atan2(d[1], d[0])),
                                                math.cos(az - math.atan2(d[1], d[0]))))) for d in dirs)
         assert off <= 12.0
-    assert all(abs(d[2]) < 1e-12 for d in dirs)
+    assert all(abs(d[2] + math.sin(math.radians(6.0))) < 1e-12 for d in dirs)
+    assert all(c.vfov_deg == 16.0 for c in suite[:-1])
     assert fan_directions_flu(suite[-1])[0] == ring[0]
 
 
