@@ -117,9 +117,15 @@ class HeadingBias:
             return False
         return abs(ev.axis[2]) <= math.sin(MAX_TILT_RAD)
 
-    def observe(self, t_s: float, ev, explain) -> None:
-        """Evaluate the return of ``ev`` (``wants`` first) with ``explain(evidence) -> bool``."""
+    def observe(self, t_s: float, ev, explain, on_terrain=None) -> None:
+        """Evaluate the return of ``ev`` (``wants`` first) with ``explain(evidence) -> bool``.
+        ``on_terrain(evidence) -> bool``: a point of the return lies on the terrain. Such a
+        return is explained at every turn (a turn about the vertical moves it along the
+        ground), so it says nothing about the heading and does not spend the period: with a
+        ring pitched down, ground returns would otherwise take the turns of the row returns."""
         if not self.wants(t_s, ev):
+            return
+        if on_terrain is not None and on_terrain(ev):
             return
         self._t_last = t_s
         self.n_evaluated += 1
