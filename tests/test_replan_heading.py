@@ -225,21 +225,3 @@ def test_without_fresh_evidence_the_estimate_returns_to_zero():
     quiet = TAU_S * math.log(hb.weight / (MIN_EVIDENCE - 1.5)) + PERIOD_S
     _feed(hb, _returns(math.radians(2.0), n=1, seed=5), t0=t + quiet)
     assert hb.weight < MIN_EVIDENCE and hb.estimate_rad == 0.0
-
-
-def test_each_heading_sector_keeps_its_own_error():
-    # the error follows the heading (a hard-iron residual): +2 deg while heading east,
-    # -2 deg while heading north; each sector's estimate turns its own returns back, and a
-    # sector 90 deg away from both (its neighbours empty too) has no evidence: 0
-    hb = HeadingBias()
-    t = 0.0
-    for (ev, _), (ev2, _) in zip(_returns(math.radians(2.0)), _returns(math.radians(-2.0), seed=4)):
-        hb.observe(t, ev, _on_wall, heading_rad=0.0)
-        hb.observe(t + PERIOD_S, ev2, _on_wall, heading_rad=0.5 * math.pi)
-        t += 2 * PERIOD_S
-    east, north = hb.at(t, 0.0), hb.at(t, 0.5 * math.pi)
-    assert east < 0 < north
-    assert abs(east + math.radians(2.0)) <= math.radians(0.75) and abs(north - math.radians(2.0)) <= math.radians(0.75)
-    assert hb.at(t, math.pi) == 0.0
-    # the sector beside one with votes reads them (15 deg sectors, the estimate pools three)
-    assert hb.at(t, math.radians(16.0)) == east

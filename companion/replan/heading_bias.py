@@ -73,18 +73,13 @@ MAX_TILT_RAD = math.radians(30.0)
 #: ground and the rows' feet, and such returns voted for a wrong heading (a ring pitched 6 deg
 #: down, sloped field, realistic profile: 2.1 deg off for 40 s).
 MIN_HALF_V_RAD = math.radians(2.0)
-#: Heading sectors (rad): the votes of a return go to the sector of the vehicle's heading, and
-#: the estimate for a heading reads its sector and the two beside it (45 deg). The realistic
-#: profile's error follows the heading (the hard-iron residual turns with the body): 2-3 deg
-#: of change over a 45 deg turn, which the pointing law makes in a few seconds. One pool for
-#: all headings (fading in 10 s) lagged a turn and stood 1.5-2.2 deg off the error for 20 s
-#: (tilted-hexagon, realistic profile, seed 1); fading in 2.5 s instead lost the evidence
-#: between corridors and left 3.5 deg uncorrected (flat-rectangle, seed 3).
-SECTOR_RAD = math.radians(15.0)
-#: Fading time constant of a sector's scores (s): the part of the error that does not follow
-#: the heading (the motor currents' field) drifts slowly; a corridor flown the other way
-#: comes back to a sector within a minute.
-TAU_S = 20.0
+#: Fading time constant of the scores (s). The realistic profile's error follows the vehicle's
+#: heading (the hard-iron residual turns with the body): 2-3 deg of change over a 45 deg turn,
+#: which the pointing law makes in a few seconds. With 10 s the estimate lagged a turn and stood
+#: 1.5-2.2 deg off the error for 20 s (tilted-hexagon, realistic profile, seed 1); at the rate
+#: returns are evaluated (``PERIOD_S``, about half of them informative in a corridor) 2.5 s
+#: still holds about 12 returns, above ``MIN_EVIDENCE``.
+TAU_S = 2.5
 #: Evidence weight (informative returns, faded) before an estimate is made.
 MIN_EVIDENCE = 10.0
 #: Offsets whose score is within this many returns of the best explain the returns as well.
@@ -110,30 +105,22 @@ def rotate_evidence(ev, eps_rad: float):
 
 
 class HeadingBias:
-    """The heading error the known map measures (module doc), per sector of the vehicle's
-    heading: ``at(t_s, heading_rad)`` is added to the estimated heading of every beam;
-    ``estimate_rad`` is the last estimate made (of the sectors the last vote went to)."""
+    """The heading error the known map measures (module doc); ``estimate_rad`` is added to the
+    estimated heading of every beam."""
 
     def __init__(self, step_rad: float = STEP_RAD, span_rad: float = SPAN_RAD, period_s: float = PERIOD_S,
-                 tau_s: float = TAU_S, min_evidence: float = MIN_EVIDENCE, sector_rad: float = SECTOR_RAD) -> None:
+                 tau_s: float = TAU_S, min_evidence: float = MIN_EVIDENCE) -> None:
         n = int(round(span_rad / step_rad))
         self.offsets = tuple(k * step_rad for k in range(-n, n + 1))
         self.period_s = float(period_s)
         self.tau_s = float(tau_s)
         self.min_evidence = float(min_evidence)
-        self.n_sectors = max(1, int(round(2.0 * math.pi / sector_rad)))
-        self._sectors: dict[int, list] = {}       # sector -> [scores, weight, time of the scores]
-        self._cache: dict[int, tuple] = {}        # sector -> (time, estimate)
+        self.scores = [0.0] * len(self.offsets)
+        self.weight = 0.0
         self.estimate_rad = 0.0
-        self.weight = 0.0                          # evidence of the last estimate made (faded)
         self.n_evaluated = self.n_informative = 0
         self._t_last = -math.inf
-
-    def sector(self, heading_rad) -> int:
-        """The heading sector of ``heading_rad`` (0 when None: one sector for all)."""
-        if heading_rad is None:
-            return 0
-        return int(math.floor((heading_rad % (2.0 * math.pi)) / (2.0 * math.pi) * self.n_sectors)) % self.n_sectors
+        self._t_fade = None
 
     def wants(self, t_s: float, ev) -> bool:
         """Whether the return of ``ev`` at vehicle time ``t_s`` is evaluated (the period, range and tilt)."""
@@ -141,11 +128,10 @@ class HeadingBias:
             return False
         return abs(ev.axis[2]) <= math.sin(min(MAX_TILT_RAD, max(ev.half_v_rad, MIN_HALF_V_RAD)))
 
-    def observe(self, t_s: float, ev, explain, on_terrain=None, heading_rad=None) -> None:
-        """Evaluate the return of ``ev`` (``wants`` first) with ``explain(evidence) -> bool``;
-        ``heading_rad``: the vehicle's estimated heading (its sector gets the vote; None: one
-        sector). ``on_terrain(evidence) -> bool``: a point of the return lies on the terrain.
-        Such a return is explained at every turn (a turn about the vertical moves it along the
+    def observe(self, t_s: float, ev, explain, on_terrain=None) -> None:
+        """Evaluate the return of ``ev`` (``wants`` first) with ``explain(evidence) -> bool``.
+        ``on_terrain(evidence) -> bool``: a point of the return lies on the terrain. Such a
+        return is explained at every turn (a turn about the vertical moves it along the
         ground), so it says nothing about the heading and does not spend the period: with a
         ring pitched down, ground returns would otherwise take the turns of the row returns."""
         if not self.wants(t_s, ev):
@@ -159,39 +145,10 @@ class HeadingBias:
         if k == 0.0 or k == len(e):
             return
         self.n_informative += 1
-        b = self.sector(heading_rad)
-        sec = self._sectors.get(b)
-        if sec is None:
-            sec = self._sectors[b] = [[0.0] * len(self.offsets), 0.0, t_s]
-        f = math.exp(-(t_s - sec[2]) / self.tau_s) if t_s > sec[2] else 1.0
-        sec[0] = [sc * f + x for sc, x in zip(sec[0], e)]
-        sec[1] = sec[1] * f + 1.0
-        sec[2] = t_s
-        for d in (-1, 0, 1):
-            self._cache.pop((b + d) % self.n_sectors, None)
-        self.estimate_rad = self.at(t_s, heading_rad)
-
-    def at(self, t_s: float, heading_rad=None) -> float:
-        """The estimate (rad) for the vehicle's heading ``heading_rad`` at ``t_s``: from the
-        votes of its sector and the two beside it, faded to ``t_s`` (recomputed at most every
-        ``period_s``)."""
-        b = self.sector(heading_rad)
-        hit = self._cache.get(b)
-        if hit is not None and t_s - hit[0] < self.period_s:
-            return hit[1]
-        scores = [0.0] * len(self.offsets)
-        weight = 0.0
-        for d in ((-1, 0, 1) if self.n_sectors >= 3 else (0,)):
-            sec = self._sectors.get((b + d) % self.n_sectors)
-            if sec is None:
-                continue
-            f = math.exp(-(t_s - sec[2]) / self.tau_s) if t_s > sec[2] else 1.0
-            scores = [x + f * y for x, y in zip(scores, sec[0])]
-            weight += f * sec[1]
-        self.weight = weight
-        est = self._estimate(scores, weight)
-        self._cache[b] = (t_s, est)
-        return est
+        self._fade(t_s)
+        self.scores = [s + x for s, x in zip(self.scores, e)]
+        self.weight += 1.0
+        self._estimate()
 
     def _explained_at(self, ev, explain) -> list:
         """1.0 / 0.0 per offset: every ``COARSE``-th offset is tested, and those between two
@@ -218,11 +175,19 @@ class HeadingBias:
                     at(k)
         return e
 
-    def _estimate(self, scores: list, weight: float) -> float:
-        if weight < self.min_evidence:
-            return 0.0                    # too little fresh evidence: the estimator's own heading
-        top = max(scores)
-        good = [sc >= top - TIE_RETURNS for sc in scores]
+    def _fade(self, t_s: float) -> None:
+        if self._t_fade is not None and t_s > self._t_fade:
+            f = math.exp(-(t_s - self._t_fade) / self.tau_s)
+            self.scores = [s * f for s in self.scores]
+            self.weight *= f
+        self._t_fade = t_s
+
+    def _estimate(self) -> None:
+        if self.weight < self.min_evidence:
+            self.estimate_rad = 0.0       # too little fresh evidence: the estimator's own heading
+            return
+        top = max(self.scores)
+        good = [sc >= top - TIE_RETURNS for sc in self.scores]
         runs, start = [], None
         for i, g in enumerate(good + [False]):
             if g and start is None:
@@ -233,4 +198,4 @@ class HeadingBias:
         mid = len(self.offsets) // 2              # the offset 0
         a, b = min(runs, key=lambda r: 0 if r[0] <= mid <= r[1] else min(abs(r[0] - mid), abs(r[1] - mid)))
         # the estimator's own heading stands while it explains the returns as well as any
-        return 0.0 if a <= mid <= b else 0.5 * (self.offsets[a] + self.offsets[b])
+        self.estimate_rad = 0.0 if a <= mid <= b else 0.5 * (self.offsets[a] + self.offsets[b])

@@ -602,11 +602,9 @@ class Replanner:
             self.n_ignored += 1
             return
         # the rows measure the estimate's heading error (``heading_bias``): the beam is turned by it
-        yaw = math.atan2(pose.R[3], pose.R[0])          # the heading: body x, ENU (row-major R)
-        self.heading.observe(t_s, ev, self._explained, self._on_terrain, yaw)
-        turn = self.heading.at(t_s, yaw)
-        if turn:
-            ev = rotate_evidence(ev, turn)
+        self.heading.observe(t_s, ev, self._explained, self._on_terrain)
+        if self.heading.estimate_rad:
+            ev = rotate_evidence(ev, self.heading.estimate_rad)
         self.fresh.on_evidence(t_s, reading.sensor_id, reading.R_flu_sensor, reading.hfov_rad, reading.vfov_rad)
         mem = self.memory
         if len(mem):
