@@ -212,16 +212,3 @@ def test_only_beams_that_see_the_horizon_vote_and_terrain_returns_spend_nothing(
     assert hb.n_evaluated == 0 and hb.wants(0.0, far)
     hb.observe(0.0, far, _on_wall, on_terrain=lambda ev: False)
     assert hb.n_evaluated == 1 and not hb.wants(0.5 * PERIOD_S, far)
-
-
-def test_without_fresh_evidence_the_estimate_returns_to_zero():
-    # the scores fade with TAU_S: after a silence of TAU_S ln(w / MIN_EVIDENCE) the weight
-    # is below MIN_EVIDENCE, and the next informative return leaves the estimate at 0
-    from companion.replan.heading_bias import MIN_EVIDENCE, TAU_S
-
-    hb = HeadingBias()
-    t = _feed(hb, _returns(math.radians(2.0)))
-    assert hb.estimate_rad < 0 and hb.weight > MIN_EVIDENCE
-    quiet = TAU_S * math.log(hb.weight / (MIN_EVIDENCE - 1.5)) + PERIOD_S
-    _feed(hb, _returns(math.radians(2.0), n=1, seed=5), t0=t + quiet)
-    assert hb.weight < MIN_EVIDENCE and hb.estimate_rad == 0.0

@@ -26,17 +26,16 @@ holds the horizon (nearer or steeper returns hold little of the heading) is rota
 the known map (``explain(evidence) -> bool``, the replanner's own test). A
 return explained at some offsets but not at all is *informative*; its
 explanation vector ``e_k`` (0/1) is added to scores that fade with the time
-constant ``TAU_S`` (the error drifts as the motor currents change and
-follows the heading), as is 1 to the evidence weight. A return no offset
-explains (an unknown obstacle) or that every offset explains (the ground, a row face met head on) says
+constant ``TAU_S`` (the error drifts as the motor currents change), as is 1
+to the evidence weight. A return no offset explains (an unknown obstacle) or
+that every offset explains (the ground, a row face met head on) says
 nothing about the heading and is left out.
 
 The offsets whose score is within ``TIE_RETURNS`` of the best explain the
 returns equally well: they form the interval the returns pin the error
 down to (about a degree wide in a corridor). The estimate is the middle of
-that run of offsets (of several runs, the one nearest 0) while the evidence
-weight is at least ``MIN_EVIDENCE`` (0 below it: no fresh evidence, no
-turn); but while that run holds 0 (the heading as
+that run of offsets (of several runs, the one nearest 0), once the evidence
+weight reaches ``MIN_EVIDENCE``; but while that run holds 0 (the heading as
 estimated explains the returns as well as any turn) it is 0. Before that,
 and wherever the heading is right, nothing changes: flights on exact or
 paper-model sensors are the same, bit for bit.
@@ -73,13 +72,8 @@ MAX_TILT_RAD = math.radians(30.0)
 #: ground and the rows' feet, and such returns voted for a wrong heading (a ring pitched 6 deg
 #: down, sloped field, realistic profile: 2.1 deg off for 40 s).
 MIN_HALF_V_RAD = math.radians(2.0)
-#: Fading time constant of the scores (s). The realistic profile's error follows the vehicle's
-#: heading (the hard-iron residual turns with the body): 2-3 deg of change over a 45 deg turn,
-#: which the pointing law makes in a few seconds. With 10 s the estimate lagged a turn and stood
-#: 1.5-2.2 deg off the error for 20 s (tilted-hexagon, realistic profile, seed 1); at the rate
-#: returns are evaluated (``PERIOD_S``, about half of them informative in a corridor) 2.5 s
-#: still holds about 12 returns, above ``MIN_EVIDENCE``.
-TAU_S = 2.5
+#: Fading time constant of the scores (s).
+TAU_S = 10.0
 #: Evidence weight (informative returns, faded) before an estimate is made.
 MIN_EVIDENCE = 10.0
 #: Offsets whose score is within this many returns of the best explain the returns as well.
@@ -184,7 +178,6 @@ class HeadingBias:
 
     def _estimate(self) -> None:
         if self.weight < self.min_evidence:
-            self.estimate_rad = 0.0       # too little fresh evidence: the estimator's own heading
             return
         top = max(self.scores)
         good = [sc >= top - TIE_RETURNS for sc in self.scores]
