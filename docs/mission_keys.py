@@ -210,7 +210,7 @@ NOTES: dict[str, tuple[str, str, str]] = {
                                "accepted for older missions."),
     "replan.voxel_m": ("m", "> 0, at most clearance_m", "Voxel edge of the obstacle map."),
     "replan.stall_s": ("s", "> 0", "No progress for this long while avoiding starts the vertical escape."),
-    "replan.escape_timeout_s": ("s", "> 0", "The escape must get past within this time, else hold."),
+    "replan.escape_timeout_s": ("s", "> 0", "The escape must get past the obstacle it met within this time, else stop and re-route."),
     "replan.obstacle_depth_m": ("m", ">= 0", "Assumed depth behind the face seen, when an obstacle is "
                                 "added to the map for a re-route."),
     "replan.clearance_governor": ("", "", "Limit the approach speed to obstacles (false: ablation only)."),

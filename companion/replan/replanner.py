@@ -49,17 +49,20 @@ Modes (``ReplanStep.mode``)
             the escape did not pass the obstacle within
             ``escape_timeout_s``: the velocity command is zero until the
             reference is at rest (the governor's braking law left the room
-            for it).
-``reroute`` after a stop for a tall obstacle, ``reroute.reroute`` re-plans
-            the remaining coverage from the current state; this mode lasts
-            until the new plan's second way-point, then ``follow``.
+            for it), then ``reroute`` (``STOP_THEN``).
+``reroute`` after a stop (a tall obstacle, or an escape that timed out),
+            ``reroute.reroute`` re-plans the remaining coverage from the current
+            state; this mode lasts until the new plan's second way-point, then
+            ``follow``.
 ``rejoin``  when no remembered point within d_o is ahead of (or beside)
             the vehicle, the LQR is re-solved from the reference state
             through the way-points still ahead (``rejoin.rejoin``, checked
             for jerk and clearance; retried every ``REJOIN_RETRY_S``); this
             mode lasts until its first way-point, then ``follow``.
-``hold``    no route after a stop, or the escape timed out: hold the
-            position and report (``ReplanStep.hold``).
+``hold``    only when the re-route after a stop finds no route (or the guard
+            refuses it): hold the position and report (``ReplanStep.hold``),
+            the event's detail adding the independent route check's verdict
+            (``_hold``, the one way into this mode).
 ``done``    the (re)planned coverage trajectory reached its end.
 
 Never pressing on: in every mode but ``follow``/``rejoin``/``reroute``
@@ -110,6 +113,9 @@ from .routecheck import route_exists
 from .voxmap import L_CANDIDATE, ObstacleMap
 
 MODES = ("follow", "avoid", "climb", "stop", "reroute", "rejoin", "hold", "done")
+#: What a ``stop`` hands over to once at rest: the look (give way), or the re-route. Never a
+#: bare hold: only a re-route that finds no route holds, with the route check's verdict.
+STOP_THEN = ("look", "reroute")
 #: Event actions (``ReplanEvent.action``); ``skip``: coverage of the plan left out (``coverage_skipped``).
 ACTIONS = ("avoid", "climb", "stop", "reroute", "rejoin", "hold", "skip")
 _FOLLOWING = ("follow", "rejoin", "reroute")
@@ -864,7 +870,7 @@ class Replanner:
         ground = self.known.ground_z(float(P[0]), float(P[1]))
         z_ceiling = ground + cfg.ceiling_agl_m
         if tau - self._t_avoid > cfg.escape_timeout_s and self.mode == "avoid" and not cfg.vertical_escape:
-            return self._enter_stop(tau, events, "hold", f"no way past in {cfg.escape_timeout_s:g} s "
+            return self._enter_stop(tau, events, "reroute", f"no way past in {cfg.escape_timeout_s:g} s "
                                     "(vertical escape off)")
         if self.mode == "avoid" and (not passable or stalled) and cfg.vertical_escape:
             self.mode = "climb"
@@ -885,8 +891,17 @@ class Replanner:
                     return self._enter_stop(tau, events, "reroute", f"obstacle top above {z_top - ground:.2f} m, "
                                             f"ceiling {cfg.ceiling_agl_m:g} m")
                 self._far_along = float(along[ahead].max()) + float(P[:2] @ u)
+            elif not stalled:
+                # nothing ahead and moving on: what this escape met is passed, and its clock
+                # restarts; the next obstacle gets its own escape_timeout_s (a climb over a
+                # phantom flew on at the pass height for 18 s, the rejoin refused by a post
+                # further on, and met that post with 1 s left: obstacles-wide seed 20261128,
+                # flight 0)
+                self._t_climb = tau
             if tau - self._t_climb > cfg.escape_timeout_s:
-                return self._enter_stop(tau, events, "hold", f"escape not through in {cfg.escape_timeout_s:g} s")
+                # not a hold: the way ahead is blocked for this escape, not for every route
+                # (docs/replan.md "Every hold is justified")
+                return self._enter_stop(tau, events, "reroute", f"escape not through in {cfg.escape_timeout_s:g} s")
             z_goal = min(self._z_pass, z_ceiling - WALL_MARGIN_M)
             if self._climb_phase == "rise" and passable and P[2] >= z_goal - RISE_TOL_M:
                 self._climb_phase = "over"
@@ -1101,9 +1116,13 @@ class Replanner:
         return self._govern(P, v, pts, np.linalg.norm(pts - P, axis=1), scale_only=True, movers=False)
 
     def _enter_stop(self, tau: float, events: list, then: str, detail: str) -> RefSample:
+        """Brake to rest (the ``stop`` event says ``detail``), then ``then``: ``look`` (give
+        way) or ``reroute``. Nothing stops into a bare hold: a hold comes only from a
+        re-route that finds no route, with the independent route check's words (``_hold``)."""
+        if then not in STOP_THEN:
+            raise ValueError(f"a stop ends in one of {STOP_THEN}, not {then!r}")
         self.mode = "stop"
         self._stop_then = then
-        self._stop_detail = detail
         pts = self._points()
         P = np.array(self.shaper.p)
         self._event(events, "stop", self._nearest(np.linalg.norm(pts - P, axis=1)), detail)
@@ -1209,12 +1228,18 @@ class Replanner:
                 s = self._cursor.sample(tau)
                 return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
             why = res.reason if res.plan is None else f"guard refused the re-route: {verdict.detail}"
-            detail = f"{why}; {self._route_check(st.p)}"
-        else:
-            detail = self._stop_detail
+            return self._hold(st.p, dist, events, why)
+        raise AssertionError(f"stop then {self._stop_then!r}")     # ``_enter_stop`` admits no other
+
+    def _hold(self, p, dist: np.ndarray, events: list, why: str) -> RefSample:
+        """The one way into ``hold``: at rest at ``p``, the ``hold`` event saying ``why`` the
+        re-route found no route and what the independent route check (``_route_check``)
+        finds on the same map. (A climb's timeout once held here bare: "escape not through
+        in 20 s", no re-route tried, nothing checked; 4 of 8 holds of obstacles-wide seed
+        20261128.)"""
         self.mode = "hold"
-        self._static = self._rest(st.p)
-        self._event(events, "hold", self._nearest(dist), detail)
+        self._static = self._rest(p)
+        self._event(events, "hold", self._nearest(dist), f"{why}; {self._route_check(p)}")
         return self._static
 
     def _exit_leg(self, p):

@@ -87,7 +87,8 @@ class ReplanConfig:
         No progress along the path for this long while avoiding is a local
         minimum: the vertical escape starts (s).
     escape_timeout_s : float
-        The escape must pass the obstacle within this time, else hold (s).
+        The escape must pass the obstacle it met within this time, else stop
+        and re-route (s; the clock restarts once nothing is ahead).
     obstacle_depth_m : float
         Assumed depth of an obstacle behind the face the sensors saw (m),
         when it is added to the map for a re-route.
@@ -98,7 +99,7 @@ class ReplanConfig:
     vertical_escape : bool
         Climb over an obstacle the corridor does not let the vehicle pass
         (our escape from the APF's local minimum); False only for the
-        ablation (the vehicle then holds after ``escape_timeout_s``).
+        ablation (the vehicle then stops and re-routes after ``escape_timeout_s``).
     give_way : bool
         Bound the closing speed to obstacles that move toward the vehicle,
         measured from successive returns (``companion.replan.closing``).
