@@ -17,9 +17,9 @@ the first part of this.
 
 Each run is a fresh ``python -c START MISSION --plan P ...`` with
 ``OMP_NUM_THREADS=1`` and a warm bytecode cache (``PYTHONPYCACHEPREFIX``, as
-an installed package): ``START`` replaces ``MissionRunner.run`` (the flight
-itself: heartbeat, arming, the setpoints) by an immediate ``os._exit(0)``
-and runs ``companion fly`` (``--connect udpout:127.0.0.1:PORT``: nothing
+an installed package): ``START`` runs ``companion fly`` with
+``MissionRunner.run`` (the flight itself: heartbeat, arming, the setpoints)
+replaced by an immediate ``os._exit(0)`` when ``companion fly`` imports it (``--connect udpout:127.0.0.1:PORT``: nothing
 listens, nothing is awaited). CPU time (user + sys) and peak RSS from
 ``os.wait4``, wall time from the parent's clock. Each tree flies the plan it
 wrote (``companion plan`` into ``--plans``, kept between runs). Prints the
@@ -37,9 +37,26 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_plan_cli import run  # noqa: E402
 
-START = ("import os, sys; import companion.runner as r; "
-         "r.MissionRunner.run = lambda self: os._exit(0); "
-         "from companion.cli import main; sys.argv = ['companion', 'fly'] + sys.argv[1:]; sys.exit(main())")
+START = """
+import importlib.machinery, os, sys
+class Stop(importlib.machinery.PathFinder):
+    # companion.runner, once loaded where companion fly loads it: MissionRunner.run exits at once
+    @classmethod
+    def find_spec(cls, name, path=None, target=None):
+        if name != "companion.runner":
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(name, path, target)
+        run_module = spec.loader.exec_module
+        def exec_module(module):
+            run_module(module)
+            module.MissionRunner.run = lambda self: os._exit(0)
+        spec.loader.exec_module = exec_module
+        return spec
+sys.meta_path.insert(0, Stop)
+from companion.cli import main
+sys.argv = ["companion", "fly"] + sys.argv[1:]
+sys.exit(main())
+"""
 
 
 def _env(tree: str, cache_dir: str | None) -> dict:

@@ -507,6 +507,17 @@ def run(args) -> int:
     overrides = safety_overrides(args)
     if args.sortie is not None and args.sortie < 1:
         raise InputError("--sortie", f"sorties are numbered from 1, got {args.sortie}")
+    from ..long_lived import imports_kept
+
+    with imports_kept(args.process_exits):
+        # The flight's modules, imported together: kept out of the collector's passes (the
+        # two collections of ``release_freed_memory`` before the flight walk only what the
+        # flight's preparation made; the runner freezes that too when it starts).
+        from .. import assembly, plan_io, preflight, runner  # noqa: F401
+        from ..flight import environment  # noqa: F401
+        from ..replan import coverage_check  # noqa: F401
+        from ..trajectory import extrema  # noqa: F401
+        from mavcore.maps import field  # noqa: F401
     mission = load_mission(args.mission)
     # The link first: a bad --connect (unknown host, port in use, refused) fails before any planning.
     conn = open_link(args.connect, args.tlog, key)
