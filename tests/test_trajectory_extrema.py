@@ -78,7 +78,7 @@ def test_batched_zeros_are_the_per_piece_polyroots_bit_for_bit():
     # length group of the batch is exercised
     from mavcore.mission import load_mission
     from companion.planner import plan_mission
-    from companion.trajectory.extrema import stationary_times
+    from companion.trajectory.extrema import _roots_by_length, _squared_speed_derivatives, stationary_times
     from pathlib import Path
 
     m = load_mission(Path(__file__).resolve().parents[1] / "missions" / "flat-rectangle" / "mission.yaml")
@@ -94,5 +94,6 @@ def test_batched_zeros_are_the_per_piece_polyroots_bit_for_bit():
         got, ref = stationary_times(t), _stationary_times_piece_by_piece(t)
         assert got.shape == ref.shape and np.array_equal(got.view(np.int64), ref.view(np.int64))
     # the hand-worked piece: |v|^2 = 16 s^2 (1 - s)^2 is stationary at s = 1/2 only, inside (0, 1)
+    assert list(_roots_by_length(_squared_speed_derivatives(np.zeros((0, 3, 8))))) == []   # no pieces
     st = stationary_times(small)
     assert np.any(np.abs(st - (2.5 + 0.5 * 1.5)) < 1e-9) and not np.any((st > 1.0) & (st < 2.5))

@@ -31,7 +31,8 @@ def _squared_speed_derivatives(V: np.ndarray) -> np.ndarray:
     derivative is ``P.polyder``'s ``j * c[j]``, for all pieces at once.
     """
     # np.convolve keeps every length at 2 deg + 1 (P.polymul trims trailing zeros)
-    q = np.array([sum(np.convolve(row, row) for row in piece) for piece in V]).reshape(V.shape[0], -1)
+    q = np.array([sum(np.convolve(row, row) for row in piece) for piece in V])
+    q = q.reshape(V.shape[0], 2 * V.shape[2] - 1)     # (0, 2 deg + 1) for no pieces
     return q[:, 1:] * np.arange(1, q.shape[1])
 
 
