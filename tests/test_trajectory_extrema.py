@@ -97,3 +97,25 @@ def test_batched_zeros_are_the_per_piece_polyroots_bit_for_bit():
     assert list(_roots_by_length(_squared_speed_derivatives(np.zeros((0, 3, 8))))) == []   # no pieces
     st = stationary_times(small)
     assert np.any(np.abs(st - (2.5 + 0.5 * 1.5)) < 1e-9) and not np.any((st > 1.0) & (st < 2.5))
+
+
+def test_derivatives_are_sample_bit_for_bit_and_feed_the_speed_bound():
+    """``Trajectory.derivatives`` (no pointing) gives ``sample``'s p, v, a, jerk, snap bit for bit,
+    times outside [t0, tf] clamped alike, unsorted and past the gather threshold (> 4096 samples:
+    the per-interval products); ``max_speed_on_intervals`` with the caller's velocities equals it
+    without them."""
+    from mavcore.mission import load_mission
+    from companion.planner import plan_mission
+    from pathlib import Path
+
+    m = load_mission(Path(__file__).resolve().parents[1] / "missions" / "flat-rectangle" / "mission.yaml")
+    tr = plan_mission(m).trajectory
+    rng = np.random.default_rng(4)
+    for t in (rng.uniform(tr.t0 - 5.0, tr.tf + 5.0, 300), np.linspace(tr.t0, tr.tf, 6000)):
+        s, d = tr.sample(t), tr.derivatives(t)
+        for k, x in enumerate((s.p, s.v, s.a, s.jerk, s.snap)):
+            assert np.array_equal(x.view(np.int64), d[:, k, :].view(np.int64))
+    t = np.linspace(tr.t0, tr.tf, 500)
+    a = max_speed_on_intervals(tr, t)
+    b = max_speed_on_intervals(tr, t, tr.sample(t).v)
+    assert np.array_equal(a.view(np.int64), b.view(np.int64))

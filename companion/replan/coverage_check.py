@@ -321,5 +321,5 @@ def mission_coverage(mission, trajectory, body_radius_m: float) -> SensorCoverag
     s = trajectory.sample(t)
     target = trajectory.target_enu_m if trajectory.target_enu_m is not None else s.p[0] + np.array([0.0, 1.0, 0.0])
     rp = mission.replan
-    vmax = max_speed_on_intervals(trajectory, t)
+    vmax = max_speed_on_intervals(trajectory, t, s.v)
     return check_coverage(t, s.p, s.v, target, beams, rp.accel_m_s2, rp.clearance_m + body_radius_m, vmax)

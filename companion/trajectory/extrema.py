@@ -75,7 +75,7 @@ def stationary_times(trajectory) -> np.ndarray:
     return np.sort(np.concatenate(out)) if out else np.empty(0)
 
 
-def max_speed_on_intervals(trajectory, t_s) -> np.ndarray:
+def max_speed_on_intervals(trajectory, t_s, v_enu_m_s=None) -> np.ndarray:
     """Largest speed |v| (m/s) of ``trajectory`` on each [t_i, t_{i+1}].
 
     Parameters
@@ -83,6 +83,9 @@ def max_speed_on_intervals(trajectory, t_s) -> np.ndarray:
     trajectory : companion.trajectory.Trajectory
     t_s : (n,) array
         Times (s), increasing, n >= 2, within [t0, tf].
+    v_enu_m_s : (n, 3) array, optional
+        ``trajectory.sample(t_s).v`` where the caller has it already (else
+        evaluated here, without the pointing directions).
 
     Returns
     -------
@@ -96,9 +99,10 @@ def max_speed_on_intervals(trajectory, t_s) -> np.ndarray:
     inner = knots[(knots > t[0]) & (knots < t[-1])]
     cand = np.concatenate([stationary_times(trajectory), inner])
     cand = cand[(cand > t[0]) & (cand < t[-1])]
-    speed_ends = np.linalg.norm(trajectory.sample(t).v, axis=1)
+    v = trajectory.derivatives(t)[:, 1, :] if v_enu_m_s is None else np.asarray(v_enu_m_s, dtype=float)
+    speed_ends = np.linalg.norm(v, axis=1)
     best = np.maximum(speed_ends[:-1], speed_ends[1:])
     if cand.size:
         idx = np.clip(np.searchsorted(t, cand, side="right") - 1, 0, t.size - 2)
-        np.maximum.at(best, idx, np.linalg.norm(trajectory.sample(cand).v, axis=1))
+        np.maximum.at(best, idx, np.linalg.norm(trajectory.derivatives(cand)[:, 1, :], axis=1))
     return best
