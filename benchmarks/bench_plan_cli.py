@@ -13,7 +13,8 @@ wall, plan.json <= 10 MB, peak <= 300 MB for 10 ha). The child's CPU time
 parent's clock. Also times ``companion --help`` and, on the plan just
 written, loading it and preparing the flight (``companion.commands.fly.prepare``:
 plan.json, the map and DEM for the preflight checks, the trajectory), the
-work ``companion fly --plan`` does before its first setpoint. Prints
+first part of what ``companion fly --plan`` does before its first message to the
+vehicle (the rest: ``benchmarks/bench_fly_start.py``). Prints
 medians (and all runs) per mission. On a loaded machine report the CPU
 time beside the wall time: it is the part the program controls.
 """

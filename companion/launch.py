@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from mavcore.errors import MissionError
-from mavcore.geodesy import geodetic2enu
+from mavcore.geodesy import tangent_plane_enu
 from mavcore.inputs import parse_json, read_text
 
 
@@ -78,8 +78,8 @@ def launch_enu_xy(mission) -> np.ndarray | None:
         doc = parse_json(read_text(p, MissionError, "GeoJSON"), str(p), MissionError)
         lon, lat = _point_of_geojson(doc, src)
     h = mission.home
-    x, y, _ = geodetic2enu(lat, lon, h.alt_m, h.lat, h.lon, h.alt_m)
-    return np.array([x, y])
+    x, y, _ = tangent_plane_enu(lat, lon, h.alt_m, h.lat, h.lon, h.alt_m)
+    return np.array([float(x), float(y)])
 
 
 def launch_key(mission) -> str:

@@ -73,3 +73,33 @@ def test_plan_freezes_its_imports_only_as_the_process_command_line(tmp_path):
     assert _freeze_count_after(repr(["companion", "plan", str(MISSION), "-o", str(plan)])) > 10_000
     # main(argv) from a caller (a test, a tool): nothing frozen
     assert _freeze_count_after(repr(["tool", "plan", str(MISSION), "-o", str(plan)])) == 0
+
+
+def _fly_freeze_count(argv_literal: str, plan: Path) -> tuple[int, bool]:
+    """(frozen objects, collector enabled) when ``companion fly --plan`` reaches the runner
+    (``MissionRunner.run`` replaced by a report of the collector's state: nothing is flown)."""
+    code = ("import gc, sys\nimport companion.commands.fly as fly\n"
+            "real = fly.execute\n"
+            "def execute(*a, **k):\n"
+            "    print(gc.get_freeze_count(), gc.isenabled()); sys.stdout.flush(); raise SystemExit(0)\n"
+            "fly.execute = execute\n"
+            f"from companion.cli import main\nsys.argv = {argv_literal}\n"
+            "main() if sys.argv[0] == 'companion' else main(sys.argv[1:])\n")
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT,
+                         timeout=300, check=True).stdout.split()
+    return int(out[0]), out[1] == "True"
+
+
+def test_fly_freezes_its_imports_only_as_the_process_command_line(tmp_path):
+    plan = tmp_path / "plan.json"
+    subprocess.run([sys.executable, "-m", "companion", "plan", str(MISSION), "-o", str(plan)], check=True,
+                   capture_output=True, env=dict(os.environ, PYTHONPATH=str(ROOT)), cwd=ROOT, timeout=300)
+    args = ["fly", str(MISSION), "--plan", str(plan), "--connect", "udpout:127.0.0.1:14999",
+            "--tlog", str(tmp_path / "f.tlog"), "--report", str(tmp_path / "r.json"), "-q"]
+    # the flight's modules (the runner, the replanner, the guard, numpy, scipy) are frozen
+    # before the mission and the plan are read; the collector runs again for the rest
+    frozen, enabled = _fly_freeze_count(repr(["companion"] + args), plan)
+    assert frozen > 10_000 and enabled
+    frozen, enabled = _fly_freeze_count(repr(["tool"] + args), plan)
+    assert frozen == 0 and enabled

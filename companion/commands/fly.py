@@ -451,7 +451,7 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
             flight_plan = flight_plan.cut(cut_s, mission.trajectory)
         maps = (maps or MissionMaps(mission)).get()
         check_flight_plan(flight_plan.source or str(plan_path or mission.source), flight_plan, mission, *maps)
-        flight_plan, coverage_doc = sensor_coverage_gate(mission, flight_plan, sensor_gap)
+        flight_plan, coverage_doc = sensor_coverage_gate(mission, flight_plan, sensor_gap, maps[1])
         mission = slowed_mission(mission, coverage_doc["time_scale"])
         traj = flight_plan.trajectory
         outputs = []
@@ -507,6 +507,17 @@ def run(args) -> int:
     overrides = safety_overrides(args)
     if args.sortie is not None and args.sortie < 1:
         raise InputError("--sortie", f"sorties are numbered from 1, got {args.sortie}")
+    from ..long_lived import imports_kept
+
+    with imports_kept(args.process_exits):
+        # The flight's modules, imported together: kept out of the collector's passes (the
+        # two collections of ``release_freed_memory`` before the flight walk only what the
+        # flight's preparation made; the runner freezes that too when it starts).
+        from .. import assembly, plan_io, preflight, runner  # noqa: F401
+        from ..flight import environment  # noqa: F401
+        from ..replan import coverage_check  # noqa: F401
+        from ..trajectory import extrema  # noqa: F401
+        from mavcore.maps import field  # noqa: F401
     mission = load_mission(args.mission)
     # The link first: a bad --connect (unknown host, port in use, refused) fails before any planning.
     conn = open_link(args.connect, args.tlog, key)

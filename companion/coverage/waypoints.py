@@ -32,13 +32,16 @@ Times (first way-point at t = 0)
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mavcore.errors import PlanError
 from mavcore.maps.grid import ElevationModel
 from mavcore.mission.schema import FlightConfig
-from .plan import CoveragePlan
+
+if TYPE_CHECKING:       # the planner's modules stay out of the flight's imports
+    from .plan import CoveragePlan
 
 #: reference peak acceleration of the speed ramps (m/s^2)
 A_REF_M_S2 = 0.5

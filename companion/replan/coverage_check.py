@@ -357,14 +357,14 @@ def mission_coverage(mission, trajectory, body_radius_m: float, dem=None) -> Sen
     cfgs = default_rangefinders() if sim is None else sim.rangefinders_or_default
     beams = tuple(beam_from_config(c) for c in cfgs)
     t = sample_times(float(trajectory.t0), float(trajectory.tf))
-    s = trajectory.sample(t)
-    target = trajectory.target_enu_m if trajectory.target_enu_m is not None else s.p[0] + np.array([0.0, 1.0, 0.0])
+    d = trajectory.derivatives(t)                 # sample(t)'s p and v (the pointing is not needed)
+    p, v = d[:, 0, :], d[:, 1, :]
+    target = trajectory.target_enu_m if trajectory.target_enu_m is not None else p[0] + np.array([0.0, 1.0, 0.0])
     rp = mission.replan
-    vmax = max_speed_on_intervals(trajectory, t)
+    vmax = max_speed_on_intervals(trajectory, t, v)
     if dem is None:
         from mavcore.maps.field import load_mission_dem
 
         dem = load_mission_dem(mission)
-    terrain = terrain_profile(s.p, s.v, dem, max(b.max_m for b in beams))
-    return check_coverage(t, s.p, s.v, target, beams, rp.accel_m_s2, rp.clearance_m + body_radius_m, vmax,
-                          terrain)
+    terrain = terrain_profile(p, v, dem, max(b.max_m for b in beams))
+    return check_coverage(t, p, v, target, beams, rp.accel_m_s2, rp.clearance_m + body_radius_m, vmax, terrain)

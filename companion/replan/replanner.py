@@ -366,7 +366,7 @@ def path_length_m(trajectory, dt_s: float = 0.05, chunk: int = 20000) -> float:
         t = t0 + dt_s * np.arange(k, min(k + chunk, n))
         if k + chunk >= n:
             t = np.append(t, tf)
-        p = trajectory.sample(t).p
+        p = trajectory.derivatives(t)[:, 0, :]      # positions only: sample(t).p without the pointing
         if prev is not None:
             p = np.vstack([prev, p])
         total += float(np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1)))

@@ -258,6 +258,13 @@ class Trajectory:
         return TrajectorySample(t_arr.reshape(-1), p, v, a, jerk, snap,
                                 pointing, pointing_dot, pointing_ddot)
 
+    def derivatives(self, t: np.ndarray) -> np.ndarray:
+        """(n, 5, 3) p, v, a, jerk, snap (ENU m, m/s, ...) at times ``t`` (s, (n,), clamped to
+        [t0, tf] as by :meth:`sample`): ``sample``'s values bit for bit, without the pointing
+        directions (``pointing_derivatives``, as costly as the rest), for callers that need
+        only positions or velocities."""
+        return self._evaluate(np.clip(np.asarray(t, dtype=float).reshape(-1), self.t0, self.tf))
+
     def _evaluate(self, times: np.ndarray) -> np.ndarray:
         """(n, 5, 3) derivatives 0..4 of p at clamped ``times``."""
         knots = self.knot_times_s

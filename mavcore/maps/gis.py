@@ -50,8 +50,9 @@ def enu_to_lonlat(x_m: np.ndarray, y_m: np.ndarray, home: tuple[float, float, fl
 
 
 def lonlat_to_enu(lon_deg, lat_deg, home: tuple[float, float, float]):
-    """(lon_deg, lat_deg) at the home's altitude -> ENU (x_m, y_m) arrays (``mavcore.geodesy``)."""
-    x, y, _ = geodesy.geodetic2enu(np.asarray(lat_deg, float), np.asarray(lon_deg, float), home[2], *home)
+    """(lon_deg, lat_deg) at the home's altitude -> ENU (x_m, y_m) arrays (``mavcore.geodesy``'s
+    closed form: reading a field does not import pyproj)."""
+    x, y, _ = geodesy.tangent_plane_enu(np.asarray(lat_deg, float), np.asarray(lon_deg, float), home[2], *home)
     return x, y
 
 
