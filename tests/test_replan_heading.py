@@ -194,10 +194,11 @@ def test_replanner_phantoms_from_a_heading_error_go_and_a_post_stays():
     assert rp.memory.distance(np.array([(2.5, 1.0, 1.5)]))[0] < 1e-9      # its voxel
 
 
-def test_only_beams_that_see_the_horizon_vote_and_terrain_returns_spend_nothing():
+def test_beams_pitched_below_their_field_do_not_vote_and_terrain_returns_spend_nothing():
     hb = HeadingBias()
-    # a beam 9 deg down with a field 10 deg tall (the default low ring) does not hold the horizon
-    # (|elevation| 9 deg > 5 deg); the same beam 20 deg tall does; a narrow one counts within 2 deg
+    # a beam 9 deg down with a field 10 deg tall (the default low ring) has its upper edge 4 deg
+    # under the horizon, more than 2 deg: not read; the same beam 20 deg tall is; a narrow one
+    # counts within 2 deg of level; a level beam counts whatever its field
     def tilted(elev_deg, half_v_deg):
         e = math.radians(elev_deg)
         ax = (math.cos(e), 0.0, -math.sin(e))
@@ -206,6 +207,7 @@ def test_only_beams_that_see_the_horizon_vote_and_terrain_returns_spend_nothing(
     assert not hb.wants(0.0, tilted(9.0, 5.0))
     assert hb.wants(0.0, tilted(9.0, 10.0))
     assert hb.wants(0.0, tilted(1.9, 0.0)) and not hb.wants(0.0, tilted(2.1, 0.0))
+    assert hb.wants(0.0, tilted(-20.0, 0.0))          # looking 20 deg up (a lean): read, as before
     # a return with a point on the terrain is not evaluated and leaves the period to the next
     far = _ev((0.0, 1.0, 1.5), 0.3, 3.0)
     hb.observe(0.0, far, _on_wall, on_terrain=lambda ev: True)

@@ -282,7 +282,7 @@ class RangefinderConfig:
 #: 6.2 m) is out of range: level flight gets no ground returns, and the 3 m/s
 #: transit stays covered. A separate ring, not the level one pitched down: the
 #: heading estimate from the rows (``companion.replan.heading_bias``) reads the
-#: beams that see the horizon, and a ring pitched down voted for a wrong heading
+#: beams not pitched down below their own field, and a ring pitched down voted for a wrong heading
 #: on the sloped field with the realistic profile.
 DEFAULT_RING_BEAMS = 16
 DEFAULT_RING_HFOV_DEG = 24.0
