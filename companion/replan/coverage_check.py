@@ -160,9 +160,9 @@ class SensorCoverage:
         return any(g.kind == "blind" for g in self.gaps)
 
 
-def allowed_speed(range_m, accel_m_s2: float, delay_s, clearance_m: float):
+def allowed_speed(range_m, accel_m_s2: float, delay_s, clearance_m):
     """Largest v (m/s) with ``v^2 / (2 a) + v tau + c <= range`` (0 if range <= c);
-    numpy-broadcast over ``range_m`` and ``delay_s``."""
+    numpy-broadcast over ``range_m``, ``delay_s`` and ``clearance_m``."""
     r = np.asarray(range_m, dtype=float) - clearance_m
     tau = np.asarray(delay_s, dtype=float)
     a = float(accel_m_s2)

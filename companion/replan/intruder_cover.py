@@ -50,6 +50,8 @@ import numpy as np
 
 from mavcore.pyramid import project_pyramid
 
+from .coverage_check import allowed_speed
+
 #: Intervals of the depth grid (0 .. keep).
 DEPTH_STEPS = 8
 
@@ -145,15 +147,6 @@ def low_allowed_speed(d_body: np.ndarray, h_m: np.ndarray, beams, accel_m_s2: fl
         best = np.zeros(n)
         for t_lo, t_hi, reach, tau in per_beam:
             far = far_distance(d1, t_lo, t_hi, h, reach)
-            best = np.maximum(best, _allowed(far, need_c, accel_m_s2, tau))
+            best = np.maximum(best, allowed_speed(far, accel_m_s2, tau, need_c))
         out = np.where(top > 0.0, np.minimum(out, best), out)
     return out
-
-
-def _allowed(range_m: np.ndarray, clearance_m: np.ndarray, accel_m_s2: float, delay_s: float) -> np.ndarray:
-    """Largest v with ``v^2 / (2 a) + v tau + c <= range`` (``coverage_check.allowed_speed``
-    with a clearance per sample); 0 where range <= c."""
-    r = range_m - clearance_m
-    a = float(accel_m_s2)
-    v = a * (-delay_s + np.sqrt(delay_s * delay_s + 2.0 * np.maximum(r, 0.0) / a))
-    return np.where(r > 0.0, v, 0.0)
