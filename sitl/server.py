@@ -511,13 +511,7 @@ class SitlServer:
         else:   # only the every-frame streams: same messages, same order as the scan
             fast = self.telemetry.fast
             for mid in streams.every_frame:
-                f = fast.get(mid)
-                if f is not None:
-                    args = f[1]()
-                    for l in links:
-                        l.send_fast(f[0], args)
-                else:
-                    self._send_encoded(mid, links)
+                _send_stream(mid, fast, links, self._send_encoded)
         if frame.ranges and not self.telemetry.ranges_off:
             tb = now // 1000
             for r in frame.ranges:
@@ -535,13 +529,7 @@ class SitlServer:
         """Send every stream due at ``now`` in schedule order (``StreamSchedule.due``)."""
         fast = self.telemetry.fast
         for mid in self.streams.due(now):
-            f = fast.get(mid)
-            if f is not None:
-                args = f[1]()
-                for l in links:
-                    l.send_fast(f[0], args)
-            else:
-                self._send_encoded(mid, links)
+            _send_stream(mid, fast, links, self._send_encoded)
 
     def _send_encoded(self, mid: int, links) -> None:
         if mid == _HEARTBEAT_ID:
@@ -832,3 +820,15 @@ class SitlServer:
             return   # a response, not a request
         link.reply(link.mav.ping_encode(int(msg.time_usec), int(msg.seq), msg.get_srcSystem(),
                                         msg.get_srcComponent()))
+
+
+def _send_stream(mid: int, fast: dict, links, send_encoded) -> None:
+    """Send stream ``mid`` to every link: by its fast packer when it has one (``fast``: the
+    telemetry's id -> (packer, argument maker)), else through ``send_encoded(mid, links)``."""
+    f = fast.get(mid)
+    if f is not None:
+        args = f[1]()
+        for l in links:
+            l.send_fast(f[0], args)
+    else:
+        send_encoded(mid, links)
