@@ -36,6 +36,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_plan_cli import run  # noqa: E402
+from bench_prepare_ab import _env  # noqa: E402
 
 START = """
 import importlib.machinery, os, sys
@@ -57,16 +58,6 @@ from companion.cli import main
 sys.argv = ["companion", "fly"] + sys.argv[1:]
 sys.exit(main())
 """
-
-
-def _env(tree: str, cache_dir: str | None) -> dict:
-    env = dict(os.environ, PYTHONPATH=tree, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    env.pop("PYTHONDONTWRITEBYTECODE", None)
-    if cache_dir:
-        env["PYTHONPYCACHEPREFIX"] = cache_dir
-    else:
-        env["PYTHONDONTWRITEBYTECODE"] = "1"
-    return env
 
 
 def main(argv: list[str] | None = None) -> int:
