@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 #: report.json format written here ("MAJOR.MINOR", docs/README.md "Versions").
-REPORT_FORMAT_VERSION = "3.1"
+REPORT_FORMAT_VERSION = "3.2"
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,10 @@ class TrackingStats:
         Where the vehicle position came from: "sim_truth" (the simulator's
         ground truth, ODOMETRY) or "estimate" (LOCAL_POSITION_NED, when the
         vehicle sends no ground truth, e.g. a real flight stack).
+    t_start_s : float or None
+        Vehicle time (s) at which the trajectory phase begins, fixed at
+        arming: the samples counted are those from ``t_start_s + settle_s``
+        on. None when the vehicle was never armed.
     """
 
     max_error_m: float | None
@@ -45,6 +49,7 @@ class TrackingStats:
     settle_s: float
     n_samples: int = 0
     truth_source: str = "sim_truth"
+    t_start_s: float | None = None
 
 
 @dataclass(frozen=True)

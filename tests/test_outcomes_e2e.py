@@ -290,12 +290,14 @@ def test_jittery_real_time_link_hands_the_inner_loop_to_the_vehicle(tmp_path, ca
 def test_lossy_real_time_link_errors_are_measured_at_matching_times(tmp_path):
     """20 % loss and 0-30 ms jitter in real time, --control vehicle: the flight
     completes, and the report's error pairs each ground-truth sample with the
-    reference of its own frame. Recomputed independently from the .tlog
-    (ODOMETRY against the setpoint the companion sent for the same vehicle
-    millisecond), the two agree; pairing a late datagram with the current
-    reference instead counts the vehicle's travel during the delay (at 1 m/s,
-    3 cm per 30 ms: over 30 s it doubled the figure, 116 mm against 52 mm,
-    ``benchmarks/bench_lossy_link.py``)."""
+    reference of its own frame. Recomputed independently from the .tlog, the
+    two agree: each ODOMETRY the companion received in the report's window
+    (``tracking.t_start_s + settle_s`` to the trajectory's end) against the
+    setpoints it sent, interpolated to that sample's vehicle time. Pairing a
+    sample with another frame's reference counts the vehicle's travel in
+    between (at 1 m/s, 3 cm per 30 ms: over 30 s a late pairing once doubled
+    the figure, 116 mm against 52 mm, ``benchmarks/bench_lossy_link.py``);
+    pairing with the frame before moves the maximum by about 17 mm here."""
     import numpy as np
 
     from sitl.api import SitlProcess
@@ -313,17 +315,32 @@ def test_lossy_real_time_link_errors_are_measured_at_matching_times(tmp_path):
     # carried to its time (an 80 ms old attitude at 12 deg/s of yaw once put a row's
     # return 13 cm into the corridor: a 0.5 m swerve, CI of 2026-11-23)
     assert rep["replanning"]["events"] == 0 and rep["replanning"]["unknown_hits"] == 0, rep["replanning"]
-    sp = {m.time_boot_ms: (m.y, m.x, -m.z) for m in msgs
-          if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.get_srcComponent() == 191}
-    odo = [(m.time_usec // 1000, (m.y, m.x, -m.z)) for m in msgs
-           if m.get_type() == "ODOMETRY" and m.get_srcSystem() == 1]
-    err = np.array([np.linalg.norm(np.subtract(p, sp[ms])) for ms, p in odo if ms in sp and sp[ms][2] > 1.0])
-    # enough pairs for the two comparisons below to cover the flight: over a 20 s cut an
-    # idle machine gave over 100, a loaded one, whose real-time SITL and companion both
-    # run late, 77 and 87; this 12 s cut (suite budget) gives about 3/5 of those, so the
-    # floor is 30
+    tr = rep["tracking"]
+    t0, t1 = tr["t_start_s"] + tr["settle_s"], tr["t_start_s"] + rep["trajectory_duration_s"]
+    sp = sorted({m.time_boot_ms: (m.y, m.x, -m.z) for m in msgs
+                 if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and m.get_srcComponent() == 191}.items())
+    ts = np.array([ms for ms, _ in sp]) * 1e-3
+    ps = np.array([p for _, p in sp])
+    err = []
+    for m in msgs:
+        if m.get_type() != "ODOMETRY" or m.get_srcSystem() != 1 or not t0 <= m.time_usec * 1e-6 <= t1:
+            continue
+        t = m.time_usec * 1e-6
+        k = int(np.searchsorted(ts, t))
+        # setpoints go out every few frames (under 50 ms apart): between two of them the
+        # reference is a straight line to a fraction of a millimetre (a h^2 / 8 with
+        # a < 1 m/s^2); the millisecond stamp adds at most 1 mm at 1 m/s
+        if 0 < k < len(ts) and ts[k] - ts[k - 1] <= 0.1:
+            a = (t - ts[k - 1]) / (ts[k] - ts[k - 1])
+            err.append(np.linalg.norm(np.subtract((m.y, m.x, -m.z), (1 - a) * ps[k - 1] + a * ps[k])))
+    err = np.array(err)
+    # the window is about 9 s of ODOMETRY, 20 % of it lost: over 70 samples on an idle
+    # machine; the floor leaves room for a loaded one
     assert len(err) > 30
-    # the report's samples are every frame's, these the setpoints' (every 5th, from take-off
-    # on): the same error, sampled a little differently
-    assert rep["tracking"]["max_error_m"] <= err.max() + 0.005
-    assert rep["tracking"]["rms_error_m"] <= 1.2 * np.sqrt(np.mean(err ** 2)) + 0.002
+    # the report counts each new sample once per frame, so no more than the tlog holds,
+    # and on this link nearly all of them
+    assert 0.8 * len(err) <= tr["n_samples"] <= len(err)
+    # the same errors, within the interpolation and stamp error (2 mm); one frame off
+    # is 4 mm of travel at 1 m/s, far more at the worst sample
+    assert abs(tr["max_error_m"] - err.max()) <= 0.002
+    assert abs(tr["rms_error_m"] - np.sqrt(np.mean(err ** 2))) <= 0.05 * tr["rms_error_m"] + 0.001

@@ -169,7 +169,7 @@ def flight_report(core, wall_s: float, tlog: str | None, link_stats: dict | None
     vw = core.view
     es = rec.errors
     cfg = core.cfg
-    tr = TrackingStats(es.max_m, es.rms_m, cfg.settle_s, es.n, vw.truth_source)
+    tr = TrackingStats(es.max_m, es.rms_m, cfg.settle_s, es.n, vw.truth_source, es.t_start_s)
     sim_s = (vw.t_s - vw.t_first_s) if vw.t_s is not None and vw.t_first_s is not None else 0.0
     completed = core.phase == "done" and core.monitor.ok and core.error is None
     flown = None
