@@ -28,14 +28,19 @@ pytestmark = pytest.mark.slow
 @pytest.mark.parametrize("control", ["vehicle", "companion"])
 def test_demo_flies_the_ardupilot_personality(tmp_path, caplog, control):
     out = tmp_path / control
+    check = ["--check-params"] if control == "vehicle" else []
     rc = main(["demo", "--mission", "flat-rectangle", "--cut", "4", "--transport", "inproc", "--autopilot",
-               "ardupilot", "--control", control, "--out", str(out), "--no-plots", "-v"])
+               "ardupilot", "--control", control, "--out", str(out), "--no-plots", "-v"] + check)
     rep = json.loads((out / "report.json").read_text())
     assert rc == 0 and rep["completed"]
     # -v: the detection and the vehicle's own account, through Python logging
     said = [(r.name, r.getMessage()) for r in caplog.records]
     assert ("companion", "vehicle: ardupilot (from its HEARTBEAT)") in said
     assert any(n == "sitl" and m.endswith("Armed in GUIDED") for n, m in said)
+    # --check-params: ArduCopter's FS_GCS_ENABLE defaults to 0 (off), docs ask for 1 (RTL) or 5 (land)
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING" and r.name == "companion"]
+    assert warned == (["parameter FS_GCS_ENABLE = 0: expected 1 or 5 (GCS failsafe: RTL or land)"] if check else [])
+    reads = []
     log = mavutil.mavlink_connection(str(out / "flight.tlog"))
     set_modes, takeoffs, modes_armed, z0, z_done = [], [], set(), None, None
     counts = {"RAW_IMU": 0, "HIGHRES_IMU": 0, "SCALED_IMU2": 0}
@@ -59,6 +64,8 @@ def test_demo_flies_the_ardupilot_personality(tmp_path, caplog, control):
                 max_tilt = max(max_tilt, abs(m.roll), abs(m.pitch))
             elif t == "STATUSTEXT" and m.text.startswith("Takeoff complete"):
                 z_done = z
+        elif t == "PARAM_REQUEST_READ":
+            reads.append(m.param_id)
         elif t == "HIL_ACTUATOR_CONTROLS" and not controlling and m.controls[0] == m.controls[0]:
             controlling, v_handover = True, speed      # our first motor commands: the hand-over
         elif t == "COMMAND_LONG":
@@ -71,6 +78,7 @@ def test_demo_flies_the_ardupilot_personality(tmp_path, caplog, control):
     # ArduCopter's message set: RAW_IMU each sensor frame (the clock the companion flew by), no HIGHRES_IMU
     assert counts["HIGHRES_IMU"] == 0 and counts["SCALED_IMU2"] > 0
     assert counts["RAW_IMU"] == pytest.approx(rep["sim_time_s"] * 250, rel=0.02)
+    assert reads == ["SIM_LOCKSTEP"] + (["FS_GCS_ENABLE"] if check else [])
     assert set_modes and set(set_modes) == {(1.0, 4.0, 0.0)}
     assert modes_armed == {ARDUCOPTER.custom_mode("GUIDED")}
     assert len(set(takeoffs)) == 1 and takeoffs[0] > 0.5
