@@ -46,8 +46,10 @@ srv = SitlServer(load_mission(f"{root}/missions/flat-rectangle/mission.yaml"))
 srv.links = [_Link()]
 period = srv.vehicle.sim.sensor_period_us
 for mid in (mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mavlink.MAVLINK_MSG_ID_ODOMETRY):
-    srv._command(srv.links[0], srv.links[0].mav.command_long_encode(1, 1, 511, 0, mid, period, 0, 0, 0, 0, 0),
-                 mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (mid, period, 0, 0, 0, 0, 0))
+    # through the command table, as a SET_MESSAGE_INTERVAL from the companion (``CommandServer.handle``;
+    # SitlServer's own ``_command`` went to sitl/command_link.py in h17-svc2, which broke this script)
+    reply = srv.commands.handle(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (mid, period, 0, 0, 0, 0, 0))
+    assert reply.result == mavlink.MAV_RESULT_ACCEPTED, reply
 send = srv._send_telemetry
 spent = [0.0]
 
