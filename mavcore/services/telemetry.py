@@ -140,8 +140,8 @@ class TelemetryServer:
     ``payload`` its argument tuple, or ``packer`` None and ``payload`` a
     pymavlink message. Order: the streams due at ``now_us`` in schedule order
     (``StreamSchedule.due``; until ``due_min`` only the every-frame ones, the
-    same list without the scan), then ``extra(frame)`` (messages of the frame
-    itself, e.g. each rangefinder reading), then the frame marker (the lockstep
+    same list without the scan), then ``extra(frame)`` (the messages of the
+    frame's rangefinder readings), then the frame marker (the lockstep
     frame's end). ``heartbeat_sent`` turns True when a HEARTBEAT was built (the
     caller resets it: its wall-clock keep-alive restarts).
 
@@ -155,7 +155,9 @@ class TelemetryServer:
     marker : (packer, () -> payload)
         The frame marker (HIGHRES_IMU, RAW_IMU).
     extra : callable, optional
-        ``frame -> list of (packer, payload)``, after the streams.
+        ``frame -> list of (packer, payload)``, after the streams: the messages of
+        the frame's rangefinder readings, asked only of a frame that has some
+        (``frame.ranges``).
     """
 
     def __init__(self, schedule: StreamSchedule, encoders: dict, fast: dict, marker: tuple, extra=None) -> None:
@@ -180,11 +182,18 @@ class TelemetryServer:
                 out.append((None, msg))
 
     def frame(self, now_us: int, frame) -> list:
-        """The telemetry of the frame at ``now_us`` (the schedule moves on)."""
+        """The telemetry of the frame at ``now_us`` (the schedule moves on). Once per sensor
+        frame: the loop of ``_append`` is written out here (one call less per frame)."""
         out: list = []
         sch = self.schedule
-        self._append(out, sch.due(now_us) if now_us >= sch.due_min else sch.every_frame)
-        if self.extra is not None:
+        fast = self.fast
+        for mid in (sch.due(now_us) if now_us >= sch.due_min else sch.every_frame):
+            f = fast.get(mid)
+            if f is not None:
+                out.append((f[0], f[1]()))
+            else:
+                self._append(out, (mid,))
+        if self.extra is not None and frame.ranges:
             out += self.extra(frame)
         m = self.marker
         out.append((m[0], m[1]()))
