@@ -467,7 +467,9 @@ class SitlServer:
         now = frame.time_us
         self._awaited_us = now
         self._released = False
-        links = [l for l in self.links if l.has_peer]
+        links = self.links
+        if len(links) != 1 or not links[0].has_peer:   # the usual one link with its peer: as it is
+            links = [l for l in links if l.has_peer]
         if links:
             self._send_frame(links, self.telemetry_server.frame(now, frame))
 
@@ -475,14 +477,12 @@ class SitlServer:
         """Hand a frame's ``(packer, payload)`` list to each link, one datagram per link."""
         for l in links:
             l.begin_frame()
-        for packer, payload in items:
-            if packer is None:
-                for l in links:
-                    l.send(payload)
-            else:
-                for l in links:
-                    l.send_fast(packer, payload)
-        for l in links:
+            send, send_fast = l.send, l.send_fast
+            for packer, payload in items:
+                if packer is None:
+                    send(payload)
+                else:
+                    send_fast(packer, payload)
             l.end_frame()
         ts = self.telemetry_server
         if ts.heartbeat_sent:

@@ -159,14 +159,15 @@ class VehicleTelemetry:
             for r in frame.ranges:
                 self.last_ranges[r.sensor_id] = r
 
-    def range_messages(self, frame) -> list:
-        """DISTANCE_SENSOR of each rangefinder reading of ``frame`` as ``(packer, payload)``
-        (none while turned off by SET_MESSAGE_INTERVAL -1)."""
-        if not frame.ranges or self.ranges_off:
-            return []
+    def range_messages(self, frame, out: list) -> None:
+        """Append DISTANCE_SENSOR of each rangefinder reading of ``frame`` to ``out`` as
+        ``(packer, payload)`` (none while turned off by SET_MESSAGE_INTERVAL -1)."""
+        if self.ranges_off:
+            return
         tb = frame.time_us // 1000
         pack = codec.PACK_DISTANCE_SENSOR
-        return [(pack, codec.distance_sensor_args(tb, r)) for r in frame.ranges]
+        for r in frame.ranges:
+            out.append((pack, codec.distance_sensor_args(tb, r)))
 
     def _attitude_source(self):
         """(R row-major 9-tuple, body rates FLU) reported in ATTITUDE*: the

@@ -95,7 +95,7 @@ def test_telemetry_server_builds_the_due_streams_then_the_frame_then_the_marker(
     encoders = {HB: lambda: built.append("hb") or "HB-msg", ATT: lambda: None, LPOS: lambda: "LPOS-msg"}
     fast = {ATT: ("att-packer", lambda: ("att-args",))}
     srv = TelemetryServer(s, encoders, fast, ("imu-packer", lambda: ("imu-args",)),
-                          extra=lambda frame: [("range-packer", frame.ranges)])
+                          extra=lambda frame, out: out.append(("range-packer", frame.ranges)))
     assert srv.frame(0, SimpleNamespace(ranges=("r0",))) == [
         (None, "HB-msg"), ("att-packer", ("att-args",)), (None, "LPOS-msg"), ("range-packer", ("r0",)),
         ("imu-packer", ("imu-args",))]

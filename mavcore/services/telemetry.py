@@ -140,7 +140,7 @@ class TelemetryServer:
     ``payload`` its argument tuple, or ``packer`` None and ``payload`` a
     pymavlink message. Order: the streams due at ``now_us`` in schedule order
     (``StreamSchedule.due``; until ``due_min`` only the every-frame ones, the
-    same list without the scan), then ``extra(frame)`` (the messages of the
+    same list without the scan), then ``extra`` (the messages of the
     frame's rangefinder readings), then the frame marker (the lockstep
     frame's end). ``heartbeat_sent`` turns True when a HEARTBEAT was built (the
     caller resets it: its wall-clock keep-alive restarts).
@@ -155,9 +155,9 @@ class TelemetryServer:
     marker : (packer, () -> payload)
         The frame marker (HIGHRES_IMU, RAW_IMU).
     extra : callable, optional
-        ``frame -> list of (packer, payload)``, after the streams: the messages of
-        the frame's rangefinder readings, asked only of a frame that has some
-        (``frame.ranges``).
+        ``(frame, out)``: appends ``(packer, payload)`` pairs to ``out`` after the
+        streams: the messages of the frame's rangefinder readings, asked only
+        of a frame that has some (``frame.ranges``).
     """
 
     def __init__(self, schedule: StreamSchedule, encoders: dict, fast: dict, marker: tuple, extra=None) -> None:
@@ -165,6 +165,7 @@ class TelemetryServer:
         self.encoders = encoders
         self.fast = fast
         self.marker = marker
+        self._marker_pack, self._marker_args = marker
         self.extra = extra
         self.heartbeat_sent = False
 
@@ -194,9 +195,8 @@ class TelemetryServer:
             else:
                 self._append(out, (mid,))
         if self.extra is not None and frame.ranges:
-            out += self.extra(frame)
-        m = self.marker
-        out.append((m[0], m[1]()))
+            self.extra(frame, out)
+        out.append((self._marker_pack, self._marker_args()))
         return out
 
     def whole_frame(self) -> list:
@@ -204,8 +204,7 @@ class TelemetryServer:
         the schedule does not move."""
         out: list = []
         self._append(out, self.schedule.enabled())
-        m = self.marker
-        out.append((m[0], m[1]()))
+        out.append((self._marker_pack, self._marker_args()))
         return out
 
 
