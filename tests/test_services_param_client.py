@@ -197,3 +197,14 @@ def test_set_and_read_back_over_udp_against_the_sitl_process(autopilot, name, va
             assert r.status is ParamStatus.REJECTED and r.value == value
         finally:
             conn.close()
+
+
+def test_declared_checks_name_listed_parameters_and_judge_the_sitl_defaults():
+    """Every checked name is one the personality lists (a read of it is answered); the SITL's
+    PX4 defaults (COM_OF_LOSS_T 1 s, COM_OBL_ACT 0 land) pass, ArduCopter's FS_GCS_ENABLE 0
+    (off, as on ArduCopter) is what docs/flying-a-real-vehicle.md asks to change."""
+    for key, bad in (("px4", []), ("ardupilot", ["FS_GCS_ENABLE"])):
+        ap = autopilots.get(key)
+        params = Parameters.for_autopilot(ap)
+        assert ap.param_checks and all(c.name in params for c in ap.param_checks)
+        assert [c.name for c in ap.param_checks if c.problem(params[c.name]) is not None] == bad
