@@ -7,11 +7,18 @@ that packs every message as the real link does (``FastPacker.pack`` / ``msg.pack
 ``step_once`` runs 5000 frames (20 s of vehicle time at 250 Hz, the default streams plus LOCAL_POSITION_NED
 and ODOMETRY every frame as ``companion demo`` asks) and only the time inside ``_send_telemetry`` is
 summed (``time.process_time``). Prints us per frame.
+
+``--opcodes`` (h17-fin): instead of timing, count the Python bytecode instructions executed and the
+Python frames entered per frame inside ``_send_telemetry`` (``--opcodes step``: the whole
+``step_once``) over 1000 frames, with ``sys.settrace`` and ``f_trace_opcodes``: a deterministic
+figure, independent of the machine's load (the trace itself is slow; nothing is timed).
 """
 import sys
 import time
 
 root = sys.argv[1]
+opcodes = sys.argv[2:3] == ["--opcodes"]
+whole_step = opcodes and sys.argv[3:4] == ["step"]
 sys.path.insert(0, root)
 from pymavlink.dialects.v20 import common as mavlink   # noqa: E402
 
@@ -46,8 +53,10 @@ srv = SitlServer(load_mission(f"{root}/missions/flat-rectangle/mission.yaml"))
 srv.links = [_Link()]
 period = srv.vehicle.sim.sensor_period_us
 for mid in (mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mavlink.MAVLINK_MSG_ID_ODOMETRY):
-    srv._command(srv.links[0], srv.links[0].mav.command_long_encode(1, 1, 511, 0, mid, period, 0, 0, 0, 0, 0),
-                 mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (mid, period, 0, 0, 0, 0, 0))
+    # through the command table, as a SET_MESSAGE_INTERVAL from the companion (``CommandServer.handle``;
+    # SitlServer's own ``_command`` went to sitl/command_link.py in h17-svc2, which broke this script)
+    reply = srv.commands.handle(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (mid, period, 0, 0, 0, 0, 0))
+    assert reply.result == mavlink.MAV_RESULT_ACCEPTED, reply
 send = srv._send_telemetry
 spent = [0.0]
 
@@ -58,8 +67,44 @@ def timed(frame):
     spent[0] += time.process_time() - c0
 
 
-srv._send_telemetry = timed
-N = 5000
-for _ in range(N):
-    srv.step_once()
-print(f"send_telemetry_us={spent[0] / N * 1e6:.3f} bytes={srv.links[0].n}")
+counts = [0, 0]    # opcodes, frames entered
+
+
+def _local(frame, event, arg):
+    frame.f_trace_opcodes = True
+    if event == "opcode":
+        counts[0] += 1
+    return _local
+
+
+def _enter(frame, event, arg):
+    frame.f_trace_opcodes = True
+    counts[1] += 1
+    return _local
+
+
+def traced(call, *args):
+    sys.settrace(_enter)
+    try:
+        call(*args)
+    finally:
+        sys.settrace(None)
+
+
+if opcodes:
+    N = 1000
+    if whole_step:
+        for _ in range(N):
+            traced(srv.step_once)
+    else:
+        srv._send_telemetry = lambda frame: traced(send, frame)
+        for _ in range(N):
+            srv.step_once()
+    where = "step_once" if whole_step else "send_telemetry"
+    print(f"{where}_opcodes={counts[0] / N:.1f} {where}_frames={counts[1] / N:.2f}")
+else:
+    srv._send_telemetry = timed
+    N = 5000
+    for _ in range(N):
+        srv.step_once()
+    print(f"send_telemetry_us={spent[0] / N * 1e6:.3f} bytes={srv.links[0].n}")

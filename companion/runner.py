@@ -147,7 +147,7 @@ class MissionRunner:
         next_hb = 0.0
         next_show, shown = 0.0, None
         self._debug = _log.isEnabledFor(logging.DEBUG)
-        n_texts, autopilot = 0, None
+        n_texts, n_param_warnings, autopilot = 0, 0, None
         tlog = conn.tlog
         next_check = time.monotonic() + TLOG_CHECK_INTERVAL_S
         try:
@@ -203,6 +203,10 @@ class MissionRunner:
                     while n_texts < len(core.view.statustext):
                         _log.info("vehicle says: %s", core.view.statustext[n_texts])
                         n_texts += 1
+                    while n_param_warnings < len(core.param_warnings):
+                        w = core.param_warnings[n_param_warnings]
+                        _log.warning("parameter %s = %s: %s (%s)", w["name"], w["value"], w["problem"], w["why"])
+                        n_param_warnings += 1
                     next_show, shown = now + 0.05, core.phase
                     self._show()
         except LinkError as exc:

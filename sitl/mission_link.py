@@ -7,16 +7,16 @@ hands the flight stack each stored list as it changes (``mission_store``:
 the mission to fly, the geofence, the rally points) and reports the flown
 mission's progress: MISSION_ITEM_REACHED per item completed, MISSION_CURRENT
 on a change and once a second of vehicle time (PX4). Replies go to the link
-a request came from; the upload's wall-clock resends (``tick``) go to the
-uploader's link and address.
+a request came from; the upload's resends (``tick``) go to the uploader's
+link and address. Every timeout runs on the vehicle clock (``sim.time_us``),
+as PX4's mission server runs on its own clock: while lockstep holds the
+clock, no item is re-requested and no upload is cancelled.
 
 No sockets of its own: the links are passed in with each message, the
 broadcast, STATUSTEXT and refusal counting are the server's (callables).
 """
 
 from __future__ import annotations
-
-import time
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -91,7 +91,7 @@ class VehicleMission:
         if not codec.addressed_to_us(msg, SYSTEM_ID, COMPONENT_ID):
             return
         self._peer = (link, self._src(msg), link.last_addr)
-        replies = self.server.handle_count(int(msg.count), int(getattr(msg, "mission_type", 0)), time.monotonic())
+        replies = self.server.handle_count(int(msg.count), int(getattr(msg, "mission_type", 0)), self.now_s())
         self.sync_store()
         self._send(link, self._src(msg), replies)
 
@@ -112,7 +112,7 @@ class VehicleMission:
     def _item(self, link, msg, item) -> None:
         srv = self.server
         was = srv.uploading
-        replies = srv.handle_item(item, time.monotonic())
+        replies = srv.handle_item(item, self.now_s())
         if srv.refused is not None:
             self.refuse(msg.get_type(), srv.refused)
         stored = was and not srv.uploading and srv.version != self._store_version
@@ -151,11 +151,15 @@ class VehicleMission:
                 m.set_current(int(msg.seq))
             self.send_current()
 
+    def now_s(self) -> float:
+        """The vehicle clock (s), what the upload's timeouts run on."""
+        return self.sim.time_us * 1e-6
+
     def tick(self) -> None:
-        """Resend or abandon a stalled upload (wall-clock timeouts)."""
+        """Resend or abandon a stalled upload (``MissionServer.RETRY_S`` of vehicle time)."""
         if self._peer is None or not self.server.uploading:
             return
-        replies = self.server.tick(time.monotonic())
+        replies = self.server.tick(self.now_s())
         if replies:
             link, peer, addr = self._peer
             self._send(link, peer, replies, addr)

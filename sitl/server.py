@@ -10,8 +10,8 @@ of ``run``. Telemetry goes to every link; replies
 came from, addressed to the requester.
 
 This module keeps the links, the pacing and lockstep (and the
-HIL_ACTUATOR_CONTROLS answer that releases a frame), the frame's telemetry
-send, and the dispatch: who may send a message (``sitl.auth``),
+HIL_ACTUATOR_CONTROLS answer that releases a frame), handing each frame's
+telemetry to the links, and the dispatch: who may send a message (``sitl.auth``),
 then the handler of the part that owns it. The vehicle itself (simulation,
 flight stack, parameters, battery, collision prevention) is ``sitl.vehicle.Vehicle``,
 stepped once per frame (``step_once``). The parts, each over the server
@@ -22,8 +22,10 @@ command does is ``sitl.commands``), ``sitl.params_link`` (PARAM_* through
 through ``MissionServer``, the stored lists handed to the flight stack,
 MISSION_CURRENT and MISSION_ITEM_REACHED), ``sitl.setpoints`` (SET_MODE, the
 offboard setpoints, OBSTACLE_DISTANCE), ``sitl.signing_link``
-(SETUP_SIGNING) and ``sitl.telemetry`` (the encoders of what the vehicle
-sends, scheduled by ``StreamSchedule``). TIMESYNC and PING are answered here.
+(SETUP_SIGNING) and the telemetry service (``mavcore.services.telemetry``: ``StreamSchedule``
+says which stream is due at which vehicle time, ``TelemetryServer`` builds
+the frame's messages with the encoders of ``sitl.telemetry``, whose
+``DEFAULT_RATES_HZ`` are the rates below). TIMESYNC and PING are answered here.
 
 Time and pacing
 ---------------
@@ -119,7 +121,6 @@ from mavcore.link.pipe import MEMORY_SCHEME
 from mavcore.link.signing import SignatureVerifier, enable_outgoing_signing, signing_timestamp
 from mavcore.mission.schema import Mission
 from mavcore.services.command import CommandServer
-from mavcore.services.telemetry import StreamSchedule
 
 from .auth import DEFAULT_CONTROLLERS, ControlPolicy, Controller, IntakeBudget
 from .command_link import CommandLink
@@ -130,36 +131,13 @@ from .mission_link import VehicleMission
 from .params_link import VehicleParams
 from .setpoints import VehicleSetpoints
 from .signing_link import SigningSetup
-from .telemetry import VehicleTelemetry
+from .telemetry import telemetry_service
 from .vehicle import Vehicle
 from .vehicle_id import COMPONENT_ID, SYSTEM_ID
 
 _log = logging.getLogger("sitl")
 
-# Message ids used for scheduling.
-ID = mavlink
-_DEFAULT_RATES_HZ = {
-    ID.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
-    ID.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
-    ID.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
-    ID.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
-    ID.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
-    ID.MAVLINK_MSG_ID_ATTITUDE: 50.0,
-    ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
-    ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 50.0,
-    ID.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
-    ID.MAVLINK_MSG_ID_GPS_RAW_INT: 5.0,
-    ID.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 10.0,
-    ID.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
-    ID.MAVLINK_MSG_ID_ODOMETRY: 0.0,        # ground truth, off unless requested
-}
-
-_HEARTBEAT_ID = ID.MAVLINK_MSG_ID_HEARTBEAT
-
-
-def _default_interval_us(mid: int) -> int:
-    hz = _DEFAULT_RATES_HZ[mid]
-    return int(round(1e6 / hz)) if hz > 0 else -1
+_HEARTBEAT_ID = mavlink.MAVLINK_MSG_ID_HEARTBEAT
 
 
 @dataclass(frozen=True)
@@ -299,19 +277,10 @@ class SitlServer:
         self.param_link = VehicleParams(v.params, v.autopilot, v.sim, v.collision_prevention,
                                         lambda: self.links, self._say, self._apply_params)
         self._apply_params()
-        period = v.sim.sensor_period_us
-        defaults = {mid: _default_interval_us(mid) for mid in _DEFAULT_RATES_HZ}
-        intervals = dict(defaults)
-        # Ground truth for the companion's tracking statistics (ODOMETRY, float32
-        # metres; SIM_STATE's 1e-7 degree lat/lon is ~1 cm): off unless requested.
-        intervals[ID.MAVLINK_MSG_ID_ODOMETRY] = -1
-        #: What the vehicle reports (``sitl.telemetry``); the personality's extra streams join ``intervals``.
-        self.telemetry = VehicleTelemetry(v.sim, v.stack, v.battery, v.autopilot, v.origin,
-                                          v.home_enu_m, v.seed, int(time.time() * 1e6), v.nav_state,
-                                          self._mav, intervals)
-        #: The telemetry streams (``mavcore.services.telemetry``); the frame marker's interval is fixed.
-        self.streams = StreamSchedule(intervals, period, defaults,
-                                      fixed_us={self.telemetry.frame_imu_id: period})
+        #: What the vehicle reports (``sitl.telemetry``: the encoders), its stream schedule and the
+        #: frame's telemetry built from both (``mavcore.services.telemetry``).
+        self.telemetry, self.streams, self.telemetry_server = telemetry_service(v, self._mav,
+                                                                                int(time.time() * 1e6))
         #: The command protocol (``mavcore.services.command``) over the vehicle's commands (``sitl.commands``).
         self.commands = CommandServer(VehicleCommands(v.sim, v.stack, v.autopilot, v.origin, v.home_enu_m,
                                                       self.streams, self.telemetry, state, self._mav).table())
@@ -478,16 +447,11 @@ class SitlServer:
         mission's progress, a crash, the frame's telemetry."""
         v = self.vehicle
         frame = v.step()
-        tm = self.telemetry
-        tm.setpoint = v.setpoint
-        tm.frame = frame
+        self.telemetry.new_frame(frame, v.setpoint)
         if v.stack.mission is not None:
             self.mission_link.progress()
         if v.check_crash():        # announce the new system status in this frame's HEARTBEAT
             self.streams.send_now(_HEARTBEAT_ID, v.sim.time_us)
-        if frame.ranges:
-            for r in frame.ranges:
-                tm.last_ranges[r.sensor_id] = r
         self._flush_events()
         self._send_telemetry(frame)
 
@@ -497,47 +461,33 @@ class SitlServer:
         return frame
 
     def _send_telemetry(self, frame) -> None:
+        """The frame's telemetry (``TelemetryServer.frame``) to every link with a peer; the
+        frame then awaits its lockstep answer. No peer: nothing is built, no stream's schedule
+        moves on."""
         now = frame.time_us
         self._awaited_us = now
         self._released = False
-        links = [l for l in self.links if l.has_peer]
-        if not links:
-            return
+        links = self.links
+        if len(links) != 1 or not links[0].has_peer:   # the usual one link with its peer: as it is
+            links = [l for l in links if l.has_peer]
+        if links:
+            self._send_frame(links, self.telemetry_server.frame(now, frame))
+
+    def _send_frame(self, links, items) -> None:
+        """Hand a frame's ``(packer, payload)`` list to each link, one datagram per link."""
         for l in links:
             l.begin_frame()
-        streams = self.streams
-        if now >= streams.due_min:
-            self._send_due(now, links)
-        else:   # only the every-frame streams: same messages, same order as the scan
-            fast = self.telemetry.fast
-            for mid in streams.every_frame:
-                _send_stream(mid, fast, links, self._send_encoded)
-        if frame.ranges and not self.telemetry.ranges_off:
-            tb = now // 1000
-            for r in frame.ranges:
-                args = codec.distance_sensor_args(tb, r)
-                for l in links:
-                    l.send_fast(codec.PACK_DISTANCE_SENSOR, args)
-        tm = self.telemetry
-        args = tm.frame_imu_args()
-        pack = tm.frame_imu_pack
-        for l in links:
-            l.send_fast(pack, args)
+            send, send_fast = l.send, l.send_fast
+            for packer, payload in items:
+                if packer is None:
+                    send(payload)
+                else:
+                    send_fast(packer, payload)
             l.end_frame()
-
-    def _send_due(self, now: int, links) -> None:
-        """Send every stream due at ``now`` in schedule order (``StreamSchedule.due``)."""
-        fast = self.telemetry.fast
-        for mid in self.streams.due(now):
-            _send_stream(mid, fast, links, self._send_encoded)
-
-    def _send_encoded(self, mid: int, links) -> None:
-        if mid == _HEARTBEAT_ID:
+        ts = self.telemetry_server
+        if ts.heartbeat_sent:
+            ts.heartbeat_sent = False
             self._last_hb_wall = time.monotonic()
-        msg = self.telemetry.encoders[mid]()
-        if msg is not None:
-            for l in links:
-                l.send(msg)
 
     def _mav(self):
         return self.links[0].mav if self.links else mavlink.MAVLink(None, SYSTEM_ID, COMPONENT_ID)
@@ -610,25 +560,7 @@ class SitlServer:
         links = [l for l in self.links if l.has_peer]
         if not links or self.vehicle.frame is None:
             return
-        for l in links:
-            l.begin_frame()
-        for mid in self.streams.enabled():
-            f = self.telemetry.fast.get(mid)
-            if f is not None:
-                args = f[1]()
-                for l in links:
-                    l.send_fast(f[0], args)
-                continue
-            msg = self.telemetry.encoders[mid]()
-            if msg is not None:
-                for l in links:
-                    l.send(msg)
-        tm = self.telemetry
-        args = tm.frame_imu_args()
-        pack = tm.frame_imu_pack
-        for l in links:
-            l.send_fast(pack, args)
-            l.end_frame()
+        self._send_frame(links, self.telemetry_server.whole_frame())
         self._last_hb_wall = time.monotonic()
 
     def _poll(self, timeout_s: float, until_released: bool = False) -> None:
@@ -821,14 +753,3 @@ class SitlServer:
         link.reply(link.mav.ping_encode(int(msg.time_usec), int(msg.seq), msg.get_srcSystem(),
                                         msg.get_srcComponent()))
 
-
-def _send_stream(mid: int, fast: dict, links, send_encoded) -> None:
-    """Send stream ``mid`` to every link: by its fast packer when it has one (``fast``: the
-    telemetry's id -> (packer, argument maker)), else through ``send_encoded(mid, links)``."""
-    f = fast.get(mid)
-    if f is not None:
-        args = f[1]()
-        for l in links:
-            l.send_fast(f[0], args)
-    else:
-        send_encoded(mid, links)

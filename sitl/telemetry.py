@@ -6,8 +6,10 @@ message id (``encoders``), and for the streams sent every frame a packer with
 its argument builder (``fast``: ``mavcore.codec`` fast packing, no message
 object). The frame marker is the personality's (PX4 HIGHRES_IMU, ArduCopter
 RAW_IMU with SCALED_IMU2 beside it): ``frame_imu_id``, ``frame_imu_pack``,
-``frame_imu_args``. When each stream goes out is ``mavcore.services.telemetry``
-(``StreamSchedule``); sending it is ``sitl.server``.
+``frame_imu_args``. The default stream rates (``DEFAULT_RATES_HZ``) and
+``telemetry_service``, which puts the encoders under the stream schedule
+(``mavcore.services.telemetry``: ``StreamSchedule``, ``TelemetryServer``) are
+here too; handing a frame's messages to the links is ``sitl.server``.
 
 No sockets, no clock: the vehicle time is the simulation's, the wall-clock
 epoch of SYSTEM_TIME is given at construction.
@@ -20,6 +22,7 @@ import math
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import codec
+from mavcore.services.telemetry import StreamSchedule, TelemetryServer, interval_us
 
 ID = mavlink
 
@@ -43,6 +46,45 @@ _GEOFENCE = mavlink.MAV_SYS_STATUS_GEOFENCE
 
 #: SCALED_IMU2 rate of the ArduCopter personality (Hz; its RAW_SENS stream group).
 SCALED_IMU2_HZ = 10.0
+
+#: Default stream rates (Hz; 0: off), in the order the streams go out within a frame
+#: (docs/mavlink.md; changeable by MAV_CMD_SET_MESSAGE_INTERVAL).
+DEFAULT_RATES_HZ = {
+    ID.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    ID.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    ID.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
+    ID.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
+    ID.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
+    ID.MAVLINK_MSG_ID_ATTITUDE: 50.0,
+    ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
+    ID.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 50.0,
+    ID.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
+    ID.MAVLINK_MSG_ID_GPS_RAW_INT: 5.0,
+    ID.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 10.0,
+    ID.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    ID.MAVLINK_MSG_ID_ODOMETRY: 0.0,        # ground truth, off unless requested
+}
+
+
+def telemetry_service(vehicle, mav, wall_epoch_us: int):
+    """The vehicle's telemetry: ``(VehicleTelemetry, StreamSchedule, TelemetryServer)``.
+
+    ``vehicle``: ``sitl.vehicle.Vehicle``; ``mav``: ``() -> MAVLink``;
+    ``wall_epoch_us``: SYSTEM_TIME's wall clock at vehicle time 0. The
+    schedule starts at ``DEFAULT_RATES_HZ`` plus the personality's streams
+    (ArduCopter's SCALED_IMU2), the frame marker's interval fixed at the
+    sensor period.
+    """
+    v = vehicle
+    period = v.sim.sensor_period_us
+    defaults = {mid: interval_us(hz) for mid, hz in DEFAULT_RATES_HZ.items()}
+    intervals = dict(defaults)
+    telemetry = VehicleTelemetry(v.sim, v.stack, v.battery, v.autopilot, v.origin, v.home_enu_m, v.seed,
+                                 wall_epoch_us, v.nav_state, mav, intervals)
+    schedule = StreamSchedule(intervals, period, defaults, fixed_us={telemetry.frame_imu_id: period})
+    server = TelemetryServer(schedule, telemetry.encoders, telemetry.fast,
+                             (telemetry.frame_imu_pack, telemetry.frame_imu_args), telemetry.range_messages)
+    return telemetry, schedule, server
 
 
 class VehicleTelemetry:
@@ -68,7 +110,7 @@ class VehicleTelemetry:
         The stream table: the personality's extra streams are added to it.
 
     ``frame`` (the current ``SensorFrame``) and ``setpoint`` (the flight
-    stack's, for POSITION_TARGET_LOCAL_NED) are set by the server each frame.
+    stack's, for POSITION_TARGET_LOCAL_NED) are set each frame (``new_frame``).
     """
 
     def __init__(self, sim, stack, battery, autopilot, origin, home_enu_m, seed: int, wall_epoch_us: int,
@@ -108,6 +150,24 @@ class VehicleTelemetry:
             ID.MAVLINK_MSG_ID_ODOMETRY: (codec.PACK_ODOMETRY, self._odometry_args),
             ID.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: (codec.PACK_ATTITUDE_QUATERNION, self._attitude_q_args),
         }
+
+    def new_frame(self, frame, setpoint) -> None:
+        """The frame just stepped (and the flight stack's setpoint): what the encoders report."""
+        self.frame = frame
+        self.setpoint = setpoint
+        if frame.ranges:
+            for r in frame.ranges:
+                self.last_ranges[r.sensor_id] = r
+
+    def range_messages(self, frame, out: list) -> None:
+        """Append DISTANCE_SENSOR of each rangefinder reading of ``frame`` to ``out`` as
+        ``(packer, payload)`` (none while turned off by SET_MESSAGE_INTERVAL -1)."""
+        if self.ranges_off:
+            return
+        tb = frame.time_us // 1000
+        pack = codec.PACK_DISTANCE_SENSOR
+        for r in frame.ranges:
+            out.append((pack, codec.distance_sensor_args(tb, r)))
 
     def _attitude_source(self):
         """(R row-major 9-tuple, body rates FLU) reported in ATTITUDE*: the

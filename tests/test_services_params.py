@@ -16,11 +16,10 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import autopilot as autopilots
-from mavcore.services.params import ParamReadClient, ParamServer, Parameters
+from mavcore.services.params import ParamServer, Parameters
 
 INT32 = mavlink.MAV_PARAM_TYPE_INT32
 VEH = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
-GCS = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
 
 
 def wire(msg, src=VEH):
@@ -70,23 +69,3 @@ def test_cast_int32_without_bytewise():
     assert srv.set("COM_OBL_ACT", 1.0, INT32).applied and srv.params["COM_OBL_ACT"] == 1
     m = wire(srv.value_message(VEH, srv.params.index("COM_OBL_ACT")))
     assert m.param_value == 1.0
-
-
-def test_read_client_happy_path_retry_and_timeout(server):
-    c = ParamReadClient(GCS, 1, 1, "COM_OBL_ACT", timeout_s=1.0, tries=2)
-    (req,) = c.start(5.0)
-    req = wire(req, GCS)
-    assert (req.get_type(), req.param_id, req.param_index) == ("PARAM_REQUEST_READ", "COM_OBL_ACT", -1)
-    other = wire(server.value_message(VEH, server.params.index("SIM_LOCKSTEP")))
-    assert c.on_message(other, 5.1) == [] and not c.done              # another parameter's value
-    assert c.tick(6.0) == []                                          # strictly after the timeout
-    assert len(c.tick(6.01)) == 1                                     # lost: asked again
-    answer = wire(server.value_message(VEH, server.request_read(req.param_id, req.param_index).index))
-    c.on_message(answer, 6.5)
-    assert c.done and c.outcome() is answer
-    silent = ParamReadClient(GCS, 1, 1, "NO_SUCH_PARAM", timeout_s=1.0, tries=2)
-    silent.start(0.0)
-    silent.tick(1.01)
-    assert not silent.done
-    silent.tick(2.02)
-    assert silent.done and silent.outcome() is None and silent.sends == 2

@@ -78,3 +78,43 @@ def test_companion_requests():
     reqs = stream_requests(PERIOD, True, mute=(ATT,), low_rate=((HB, 5.0),))
     assert reqs == [(LPOS, PERIOD, False), (ODO, PERIOD, True), (ATT, -1, True), (HB, 200_000.0, True)]
     assert stream_requests(PERIOD, False) == [(LPOS, PERIOD, False)]
+
+
+def test_telemetry_server_builds_the_due_streams_then_the_frame_then_the_marker():
+    """``TelemetryServer.frame``: the due streams in schedule order (fast packer when there is one,
+    else the encoder; an encoder with nothing to say is skipped), the frame's own messages, the
+    marker last; at 250 Hz frames with HEARTBEAT 1 Hz and ATTITUDE / LOCAL_POSITION_NED 50 Hz,
+    frame 0 carries all three, frames 1-4 none of them, frame 5 the two 50 Hz ones."""
+    from types import SimpleNamespace
+
+    from mavcore.services.telemetry import TelemetryServer
+
+    quiet = SimpleNamespace(ranges=())                 # a frame without rangefinder readings
+    s = schedule()
+    built = []
+    encoders = {HB: lambda: built.append("hb") or "HB-msg", ATT: lambda: None, LPOS: lambda: "LPOS-msg"}
+    fast = {ATT: ("att-packer", lambda: ("att-args",))}
+    srv = TelemetryServer(s, encoders, fast, ("imu-packer", lambda: ("imu-args",)),
+                          extra=lambda frame, out: out.append(("range-packer", frame.ranges)))
+    assert srv.frame(0, SimpleNamespace(ranges=("r0",))) == [
+        (None, "HB-msg"), ("att-packer", ("att-args",)), (None, "LPOS-msg"), ("range-packer", ("r0",)),
+        ("imu-packer", ("imu-args",))]
+    assert srv.heartbeat_sent and built == ["hb"]
+    srv.heartbeat_sent = False
+    for k in range(1, 5):
+        assert srv.frame(k * PERIOD, quiet) == [("imu-packer", ("imu-args",))]
+    assert srv.frame(5 * PERIOD, quiet) == [("att-packer", ("att-args",)), (None, "LPOS-msg"),
+                                           ("imu-packer", ("imu-args",))]
+    assert not srv.heartbeat_sent
+    encoders[LPOS] = lambda: None                    # nothing to report: skipped, the rest in order
+    assert srv.frame(10 * PERIOD, quiet) == [("att-packer", ("att-args",)), ("imu-packer", ("imu-args",))]
+    # every frame (interval <= period): the same list without the scan (due_min in the future)
+    s.set_interval(ODO, PERIOD, 11 * PERIOD)
+    encoders[ODO] = lambda: "ODO-msg"
+    assert s.due_min > 12 * PERIOD
+    assert srv.frame(12 * PERIOD, quiet) == [(None, "ODO-msg"), ("imu-packer", ("imu-args",))]
+    # a frame sent again whole: every enabled stream, the schedule untouched
+    due = dict(s.next_due)
+    assert srv.whole_frame() == [(None, "HB-msg"), ("att-packer", ("att-args",)), (None, "ODO-msg"),
+                                 ("imu-packer", ("imu-args",))]          # LPOS enabled, nothing to say
+    assert s.next_due == due

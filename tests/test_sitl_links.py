@@ -76,6 +76,45 @@ def test_a_two_item_upload_is_requested_item_by_item_acked_and_flown(srv):
     assert [(m.seq, m.total) for m in current] == [(0, 2)]      # the new mission, at its first item
 
 
+def test_upload_re_requests_on_the_vehicle_clock_not_the_wall_clock(srv, monkeypatch):
+    """A silent uploader is asked again for the awaited item after ``MissionServer.RETRY_S``
+    (0.5 s) of vehicle time, not before, with the wall clock frozen (so no wall time passes);
+    after ``MAX_RETRIES`` (5) re-requests the upload is cancelled. The clock is the
+    simulation's (``sim.time_us``), stepped here by hand in microseconds."""
+    import time
+
+    from mavcore.services.mission import MissionServer
+
+    frozen = time.monotonic()
+    monkeypatch.setattr(time, "monotonic", lambda: frozen)
+    monkeypatch.setattr(time, "time", lambda: 1.8e9)
+    part = srv.mission_link
+    sim = srv.vehicle.sim
+    link = FakeLink()
+    t0 = sim.time_us
+    part.on_count(link, received(lambda m: m.mission_count_encode(1, 1, 2, 0)))
+    assert [(m.get_type(), m.seq) for m, _ in link.replies] == [("MISSION_REQUEST_INT", 0)]
+    retry_us = round(MissionServer.RETRY_S * 1e6)
+    sim.time_us = t0 + retry_us - 1                 # 1 us short of the retry: nothing
+    part.tick()
+    assert len(link.replies) == 1
+    sim.time_us = t0 + retry_us                     # the retry is due
+    part.tick()
+    assert [(m.get_type(), m.seq) for m, _ in link.replies[1:]] == [("MISSION_REQUEST_INT", 0)]
+    assert link.replies[1][1] == link.last_addr     # to the uploader's address
+    part.tick()                                     # the clock did not move: no second re-request
+    assert len(link.replies) == 2
+    for k in range(2, MissionServer.MAX_RETRIES + 1):
+        sim.time_us = t0 + k * retry_us
+        part.tick()
+    assert [m.get_type() for m, _ in link.replies].count("MISSION_REQUEST_INT") == 1 + MissionServer.MAX_RETRIES
+    sim.time_us = t0 + (MissionServer.MAX_RETRIES + 1) * retry_us
+    part.tick()
+    last = link.replies[-1][0]
+    assert last.get_type() == "MISSION_ACK" and last.type == mavlink.MAV_MISSION_OPERATION_CANCELLED
+    assert not part.server.uploading
+
+
 def test_param_set_applies_and_sends_the_value_held_to_every_link(srv):
     from sitl.params_link import VehicleParams
 

@@ -61,13 +61,14 @@ def test_every_package_directory_has_an_init():
 #: Methods (``def`` in the class body, properties included) each class may have. The limits are the counts
 #: after the split, so that a new duty has to go where it belongs instead of regrowing the class:
 #: ``SitlServer`` (94 methods when issue 17 was filed, 41 before the split) keeps its lifecycle and the parts'
-#: wiring (12), the frame's telemetry send over the links (4), pacing (2), lockstep (5), reading, checking and
+#: wiring (12), handing the frame's telemetry to the links (3; which streams are due and their messages are
+#: ``mavcore.services.telemetry.TelemetryServer``'s, h17-fin), pacing (2), lockstep (5), reading, checking and
 #: dispatching input (12) and TIMESYNC/PING (2): a new protocol is a part in ``sitl/`` (its ``handlers()``), a
 #: new vehicle behaviour goes in ``sitl/vehicle.py`` or the simulation. ``FlightCore`` (64 before the split)
 #: keeps the runner's face (10), the procedure's plumbing and its clients (12), the procedure (13), the
 #: per-frame step with its reference, replanning and guard (13): a new message handler goes in
 #: ``companion/flight/inbox.py``, a new figure of the report in ``companion/flight/reporting.py``.
-METHOD_LIMITS = {("sitl/server.py", "SitlServer"): 37, ("companion/flight/core.py", "FlightCore"): 48}
+METHOD_LIMITS = {("sitl/server.py", "SitlServer"): 36, ("companion/flight/core.py", "FlightCore"): 48}
 
 
 def class_methods(source: str, name: str) -> list:
@@ -128,6 +129,18 @@ def test_sitl_server_holds_no_vehicle_state():
     v = srv.vehicle
     assert all(isinstance(x, t) for x, t in zip((v.sim, v.stack, v.params, v.battery, v.collision_prevention),
                                                  vehicle_state))
+
+
+def test_sitl_server_only_hands_telemetry_to_its_links():
+    """Which stream is due at which vehicle time and building its messages are the telemetry
+    service's (``mavcore.services.telemetry``, ``sitl.telemetry``): the server touches neither
+    the schedule's due times nor an encoder; it sends the list ``TelemetryServer`` builds."""
+    tree = ast.parse((ROOT / "sitl/server.py").read_text(encoding="utf-8"))
+    used = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
+    scheduling = {"due", "due_min", "every_frame", "enabled", "next_due", "encoders", "fast", "frame_imu_args",
+                  "frame_imu_pack", "last_ranges", "ranges_off", "distance_sensor_args"}
+    assert used & scheduling == set()
+    assert {"frame", "whole_frame"} <= used
 
 
 def test_flight_core_keeps_no_message_handler_or_report():

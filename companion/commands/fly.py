@@ -242,6 +242,9 @@ def add_safety_arguments(parser) -> None:
     parser.add_argument("--attach", choices=("refuse", "resume", "land"), default="refuse",
                         help="a vehicle already flying at connection: refuse, resume the trajectory from "
                              "the nearest way-point, or land it (default %(default)s)")
+    parser.add_argument("--check-params", action="store_true",
+                        help="at set-up, read the flight stack's offboard/guided loss parameters and warn of values "
+                             "outside what a flight needs (docs/flying-a-real-vehicle.md#parameters-to-set)")
     parser.add_argument("--sensor-gap", choices=("refuse", "slow"), default="refuse",
                         help="where the rangefinders do not see the direction of travel far enough to stop "
                              "(docs/replan.md#sensor-coverage): refuse the flight, or fly the whole plan slower "
@@ -254,7 +257,10 @@ def safety_overrides(args) -> dict:
 
     if not (math.isfinite(args.max_error) and args.max_error > 0):
         raise InputError(f"--max-error {args.max_error}", "must be a finite number > 0 (metres)")
-    return {"max_tracking_error_m": float(args.max_error), "on_failure": args.on_failure, "attach": args.attach}
+    out = {"max_tracking_error_m": float(args.max_error), "on_failure": args.on_failure, "attach": args.attach}
+    if getattr(args, "check_params", False):
+        out["check_params"] = True      # absent otherwise: the setup record stays as before
+    return out
 
 
 def _pick_sortie(count: int, sortie: int, source: str) -> int:

@@ -74,6 +74,11 @@ class RunnerConfig:
     max_nav_age_s : float
         Position/velocity older than this against the sensor frame (vehicle
         clock) is stale: the flight is stopped.
+    check_params : bool
+        At set-up, read the parameters the personality declares
+        (``Autopilot.param_checks``: offboard/guided loss timeouts and
+        actions) and warn of each value outside what a flight needs
+        (``FlightCore.param_warnings``, STATUSTEXT, the log); the flight goes on.
     """
 
     control: str = "companion"
@@ -95,6 +100,7 @@ class RunnerConfig:
     on_failure: str = "land"
     attach: str = "refuse"
     max_nav_age_s: float = 1.0
+    check_params: bool = False
 
     def __post_init__(self) -> None:
         if self.control not in CONTROL_MODES:

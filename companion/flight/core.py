@@ -81,13 +81,14 @@ from mavcore.errors import CommandRejected, LinkError
 from mavcore import codec
 from mavcore.services.command import COMMAND_SENDS, CommandClient, command_long
 from mavcore.services.mission import MissionUploadClient
-from mavcore.services.params import ParamReadClient
+from mavcore.services.param_client import ParamReadClient
 from mavcore.services.telemetry import stream_requests
 from ..replan.perception import propagated_pose
 from mavcore.vehicle import VehicleConfig
 from .config import RunnerConfig
 from .inbox import VehicleView
 from .monitor import FlightMonitor, MonitorConfig, Violation
+from .param_check import check_params
 from .reporting import FlightRecorder
 from .setup_record import MAV_SEVERITY_DEBUG, SETUP_TEXT_ID, setup_chunks
 from ..trajectory.reference import (RefSample, TrajectoryWindow, at_rest, climb_duration_s, pointing_at,
@@ -311,6 +312,8 @@ class FlightCore:
         self._rates = cfg.control == "rates"
         #: Normalised hover thrust of ``--control rates``: MPC_THR_HOVER as read at setup, else the model's.
         self.hover_thrust = vehicle_hover_thrust(vehicle)
+        #: ``--check-params``: each declared parameter outside what the flight needs: {name, value, problem, why}.
+        self.param_warnings: list[dict] = []
         #: Output faults (the .tlog, the report): {t_s, kind, detail, phase}.
         self.faults: list[dict] = []
         #: The phase in which the first violation happened (report ``phase`` of a failed flight).
@@ -535,10 +538,10 @@ class FlightCore:
                                                          self.cfg.command_timeout_s, retries)))
 
     def _param_read(self, name: str, tries: int = 2):
-        """PARAM_REQUEST_READ (generator): the PARAM_VALUE, or None when the vehicle has no such
-        parameter (``mavcore.services.params.ParamReadClient``)."""
+        """PARAM_REQUEST_READ (generator): a ``ParamResult`` (``mavcore.services.param_client``),
+        ``TIMED_OUT`` when the vehicle has no such parameter."""
         return (yield from self._run(ParamReadClient(self.enc, self.ts, self.tc, name, self.cfg.command_timeout_s,
-                                                     tries)))
+                                                     tries, self.view.autopilot.param_bytewise)))
 
     def _set_interval(self, msg_id: int, interval_us: float, optional: bool = False):
         return (yield from self._command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, interval_us),
@@ -557,13 +560,15 @@ class FlightCore:
         for mid, interval, optional in stream_requests(self.view.period_us, cfg.request_truth, cfg.mute_streams,
                                                        cfg.low_rate_streams):
             yield from self._set_interval(mid, interval, optional=optional)
-        pv = yield from self._param_read("SIM_LOCKSTEP")
-        self.vehicle_lockstep = pv is not None and codec.decode_param_value(pv, self.view.autopilot.param_bytewise) == 1
+        lockstep = yield from self._param_read("SIM_LOCKSTEP")
+        self.vehicle_lockstep = lockstep.ok and lockstep.value == 1
         if self._rates:
-            pv = yield from self._param_read(self.view.autopilot.wire_name("MPC_THR_HOVER"))
-            hover = None if pv is None else float(codec.decode_param_value(pv, self.view.autopilot.param_bytewise))
-            if hover is not None and 0.0 < hover <= 1.0:
-                self.hover_thrust = hover
+            hover = yield from self._param_read(self.view.autopilot.wire_name("MPC_THR_HOVER"))
+            if hover.ok and 0.0 < hover.value <= 1.0:
+                self.hover_thrust = float(hover.value)
+        if cfg.check_params:
+            self.param_warnings += yield from check_params(self._param_read, self.view.autopilot.param_checks,
+                                                           self.enc, self._emit)
         yield lambda: self.view.pos is not None
         if self.view.armed:
             yield from self._attach()

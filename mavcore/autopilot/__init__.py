@@ -7,7 +7,7 @@ MAV_AUTOPILOT (what the companion does on connection).
 from __future__ import annotations
 
 from .ardupilot import ARDUCOPTER, ArduCopter
-from .base import BEHAVIOURS, Autopilot, MissionRules, ModeDef, OffboardLoss, ParamAlias, ParamSpec
+from .base import BEHAVIOURS, Autopilot, MissionRules, ModeDef, OffboardLoss, ParamAlias, ParamCheck, ParamSpec
 from .px4 import PX4, PX4_AUTOPILOT
 from .sim_params import READ_ONLY_PARAMS, SIM_PARAM_SPECS
 
@@ -34,5 +34,5 @@ def from_heartbeat(mav_autopilot: int) -> Autopilot | None:
 
 
 __all__ = ["ARDUCOPTER", "ArduCopter", "Autopilot", "BEHAVIOURS", "DEFAULT", "MissionRules", "ModeDef", "NAMES", "OffboardLoss",
-           "PX4", "PX4_AUTOPILOT", "ParamAlias", "ParamSpec", "READ_ONLY_PARAMS", "REGISTRY", "SIM_PARAM_SPECS",
+           "PX4", "PX4_AUTOPILOT", "ParamAlias", "ParamCheck", "ParamSpec", "READ_ONLY_PARAMS", "REGISTRY", "SIM_PARAM_SPECS",
            "from_heartbeat", "get"]

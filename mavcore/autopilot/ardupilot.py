@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from .base import MODE_FLAG_CUSTOM_MODE_ENABLED, Autopilot, MissionRules, ModeDef, OffboardLoss, ParamAlias, ParamSpec
+from .base import MODE_FLAG_CUSTOM_MODE_ENABLED, Autopilot, MissionRules, ModeDef, OffboardLoss, ParamAlias, ParamCheck, ParamSpec
 from .sim_params import SIM_PARAM_SPECS
 
 #: MAV_AUTOPILOT_ARDUPILOTMEGA
@@ -72,6 +72,10 @@ class ArduCopter(Autopilot):
     #: ArduCopter sends no HIGHRES_IMU by default: RAW_IMU (int16: milli-g,
     #: mrad/s, milligauss) and SCALED_IMU2 in its RAW_SENS stream group.
     imu_message = "RAW_IMU"
+    #: docs/flying-a-real-vehicle.md "Parameters to set" (ArduCopter).
+    param_checks = (
+        ParamCheck("FS_GCS_ENABLE", "GCS failsafe: RTL or land", allowed=(1, 5)),
+    )
     param_specs = (
         ParamSpec("GUID_TIMEOUT", _R, 3.0, 0.1, 5.0, "guided setpoint timeout: older setpoints stop the vehicle (s)"),
         ParamSpec("FS_GCS_ENABLE", _I, 0, 0, 7, "GCS failsafe: 0 off, 1 RTL, 3 SmartRTL/RTL, 4 SmartRTL/land, 5 land"),

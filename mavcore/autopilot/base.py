@@ -58,6 +58,35 @@ class ParamAlias:
 
 
 @dataclass(frozen=True)
+class ParamCheck:
+    """A parameter the companion reads before flying (``--check-params``) and
+    the values a flight under its setpoints needs (docs/flying-a-real-vehicle.md
+    "Parameters to set"): a value outside them is a warning, not a refusal.
+
+    ``allowed``: the acceptable values (None: any in [``min``, ``max``]), in
+    the stack's units; ``why``: what the parameter guards, for the warning.
+    """
+
+    name: str
+    why: str
+    min: float = float("-inf")
+    max: float = float("inf")
+    allowed: tuple | None = None
+
+    def problem(self, value) -> str | None:
+        """None if ``value`` is acceptable, else what is expected (a short phrase)."""
+        if value is None:
+            return "not read (no PARAM_VALUE)"
+        if self.allowed is not None:
+            if value in self.allowed:
+                return None
+            return "expected " + " or ".join(f"{a:g}" for a in self.allowed)
+        if self.min <= value <= self.max:
+            return None
+        return f"expected {self.min:g}..{self.max:g}"
+
+
+@dataclass(frozen=True)
 class OffboardLoss:
     """What the stack does when offboard/guided setpoints stop.
 
@@ -162,6 +191,8 @@ class Autopilot:
     param_bytewise: bool = True
     param_specs: tuple[ParamSpec, ...] = ()
     param_aliases: tuple[ParamAlias, ...] = ()
+    #: What the companion reads and checks before flying (``--check-params``).
+    param_checks: tuple[ParamCheck, ...] = ()
     #: Internal parameters the stack has no parameter for: fixed values.
     fixed_params: dict = {}
     #: Behaviours reported as another mode (ArduCopter climbs inside GUIDED).

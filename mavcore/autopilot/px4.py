@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from .base import MODE_FLAG_CUSTOM_MODE_ENABLED, Autopilot, ModeDef, OffboardLoss, ParamSpec
+from .base import MODE_FLAG_CUSTOM_MODE_ENABLED, Autopilot, ModeDef, OffboardLoss, ParamCheck, ParamSpec
 from .sim_params import SIM_PARAM_SPECS
 
 MAIN_MODE_MANUAL = 1
@@ -81,6 +81,11 @@ class PX4(Autopilot):
     takeoff_alt_relative = False
     param_bytewise = True
     imu_message = "HIGHRES_IMU"
+    #: docs/flying-a-real-vehicle.md "Parameters to set" (PX4).
+    param_checks = (
+        ParamCheck("COM_OF_LOSS_T", "offboard loss timeout (s)", min=0.5, max=1.0),
+        ParamCheck("COM_OBL_ACT", "offboard loss action: land or return", allowed=(0, 2)),
+    )
     param_specs = (
         ParamSpec("COM_OF_LOSS_T", _R, 1.0, 0.0, 60.0, "offboard setpoint loss timeout (s)"),
         ParamSpec("COM_OBL_ACT", _I, 0, 0, 2, "offboard loss action after the hold: 0 land, 1 hold, 2 return"),

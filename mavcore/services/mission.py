@@ -89,8 +89,8 @@ class MissionServer:
     (``(MAV_MISSION_RESULT, why)``: the stored list stays as it was), e.g. a
     fence polygon with a missing vertex. ``version`` counts every change
     of a stored list. Upload timeouts are timed by the caller's clock
-    (``tick(now_s)``): the server passes wall-clock seconds, because the
-    ground station answers in wall time whatever the simulation speed.
+    (``tick(now_s)``, seconds): the SITL passes its vehicle clock, as PX4's
+    mission server runs on its own (in a lockstep simulation, simulated) time.
     An out-of-sequence item is answered by requesting the awaited one again;
     the last item re-sent after the upload's ACCEPTED (the peer lost the ACK)
     is acknowledged again, as PX4 does.

@@ -17,8 +17,8 @@ cast (ArduPilot) or its bytes copied into the float (PX4, "bytewise":
 - ``Parameters``: the vehicle's named, typed, bounded values (the store).
 - ``ParamServer`` (the SITL, ``sitl.server``): what a PARAM_* message asks
   of the store and what goes back (``ParamReply``).
-- ``ParamReadClient`` (the companion, ``companion.flight.core``): one
-  PARAM_REQUEST_READ with its timeout and retry on the caller's clock.
+- The companion's side (read and set one parameter, with their timeouts
+  and retries on the caller's clock) is ``mavcore.services.param_client``.
 
 No sockets, no clock.
 """
@@ -32,8 +32,6 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from mavcore import codec
 from mavcore.autopilot import PX4_AUTOPILOT, READ_ONLY_PARAMS, Autopilot, ParamSpec
-
-from .base import ClientTransaction, elapsed_s
 
 PARAM_TYPE_INT32 = mavlink.MAV_PARAM_TYPE_INT32
 
@@ -225,49 +223,3 @@ class ParamServer:
             value = float(wire_value)
         r = p.set(param_id, value)
         return ParamReply(i, to_all=True, applied=r.ok, warning=None if r.ok else f"Param rejected: {r.reason}")
-
-
-# --- client side (the companion) ------------------------------------------------
-
-
-class ParamReadClient(ClientTransaction):
-    """Read one parameter by name: PARAM_REQUEST_READ(name, -1), re-sent after
-    ``timeout_s`` without its PARAM_VALUE, ``tries`` sends in all.
-
-    ``outcome()``: the PARAM_VALUE message, or None when the vehicle never
-    answered (it has no such parameter: PX4 stays silent). Decode the value
-    with ``codec.decode_param_value`` and the personality's ``param_bytewise``.
-    """
-
-    def __init__(self, mav, target_system: int, target_component: int, name: str, timeout_s: float,
-                 tries: int = 2) -> None:
-        self.name = name
-        self.timeout_s = float(timeout_s)
-        self.tries = int(tries)
-        self._request = mav.param_request_read_encode(target_system, target_component, name.encode(), -1)
-        self.sends = 0
-        self._t0: float | None = None
-
-    def _send(self, now_s) -> list:
-        self.sends += 1
-        self._t0 = now_s
-        return [self._request]
-
-    def start(self, now_s: float | None) -> list:
-        return self._send(now_s)
-
-    def on_message(self, m, now_s: float | None) -> list:
-        if not self.done and m.get_type() == "PARAM_VALUE" and m.param_id == self.name:
-            self._finish(m)
-        return []
-
-    def due(self, now_s: float | None, effect_seen: bool = False) -> bool:
-        return not self.done and elapsed_s(now_s, self._t0) > self.timeout_s
-
-    def tick(self, now_s: float | None, effect_seen: bool = False) -> list:
-        if not self.due(now_s):
-            return []
-        if self.sends >= self.tries:
-            self._finish(None)
-            return []
-        return self._send(now_s)

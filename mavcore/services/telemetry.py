@@ -7,11 +7,14 @@ default rate, -1 off) and reads it back with MAV_CMD_GET_MESSAGE_INTERVAL
 (``mavcore.services.command``); this module is what the vehicle does with
 them and what the companion asks for.
 
-- ``StreamSchedule`` (the SITL, ``sitl.server``): each stream's interval and
-  next due time on the vehicle clock (microseconds), the streams due at a
-  frame in a fixed order, the split between streams sent every frame and
-  the slower ones (a frame skips the scan until ``due_min``: this runs once
-  per sensor frame). ``fixed`` streams (the frame marker) cannot be changed.
+- ``StreamSchedule`` (the SITL): each stream's interval and next due time on
+  the vehicle clock (microseconds), the streams due at a frame in a fixed
+  order, the split between streams sent every frame and the slower ones (a
+  frame skips the scan until ``due_min``: this runs once per sensor frame).
+  ``fixed`` streams (the frame marker) cannot be changed.
+- ``TelemetryServer`` (the SITL, ``sitl.server``): a frame's telemetry, the
+  schedule's due streams built by the vehicle's encoders (``sitl.telemetry``)
+  and the frame marker last, as a list the transport hands to its links.
 - ``stream_requests`` (the companion): the intervals its set-up asks for,
   each sent with a ``command.CommandClient``.
 
@@ -27,6 +30,7 @@ from pymavlink.dialects.v20 import common as mavlink
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 DENIED = mavlink.MAV_RESULT_DENIED
 UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
+HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
 
 
 def interval_us(hz: float) -> int:
@@ -126,6 +130,82 @@ class StreamSchedule:
         if mid in self.fixed:
             return self.fixed[mid]
         return self.intervals.get(mid)
+
+
+class TelemetryServer:
+    """The vehicle's side of telemetry: what a sensor frame sends, in order.
+
+    ``frame(now_us, frame)`` returns the frame's telemetry as a list of
+    ``(packer, payload)`` pairs: ``packer`` a ``mavcore.codec`` fast packer and
+    ``payload`` its argument tuple, or ``packer`` None and ``payload`` a
+    pymavlink message. Order: the streams due at ``now_us`` in schedule order
+    (``StreamSchedule.due``; until ``due_min`` only the every-frame ones, the
+    same list without the scan), then ``extra`` (the messages of the
+    frame's rangefinder readings), then the frame marker (the lockstep
+    frame's end). ``heartbeat_sent`` turns True when a HEARTBEAT was built (the
+    caller resets it: its wall-clock keep-alive restarts).
+
+    Parameters
+    ----------
+    schedule : StreamSchedule
+    encoders : dict
+        Message id -> ``() -> message or None`` (None: nothing to send now).
+    fast : dict
+        Message id -> ``(packer, () -> payload)``: preferred over ``encoders``.
+    marker : (packer, () -> payload)
+        The frame marker (HIGHRES_IMU, RAW_IMU).
+    extra : callable, optional
+        ``(frame, out)``: appends ``(packer, payload)`` pairs to ``out`` after the
+        streams: the messages of the frame's rangefinder readings, asked only
+        of a frame that has some (``frame.ranges``).
+    """
+
+    def __init__(self, schedule: StreamSchedule, encoders: dict, fast: dict, marker: tuple, extra=None) -> None:
+        self.schedule = schedule
+        self.encoders = encoders
+        self.fast = fast
+        self.marker = marker
+        self._marker_pack, self._marker_args = marker
+        self.extra = extra
+        self.heartbeat_sent = False
+
+    def _append(self, out: list, mids) -> None:
+        fast, encoders = self.fast, self.encoders
+        for mid in mids:
+            f = fast.get(mid)
+            if f is not None:
+                out.append((f[0], f[1]()))
+                continue
+            if mid == HEARTBEAT:
+                self.heartbeat_sent = True
+            msg = encoders[mid]()
+            if msg is not None:
+                out.append((None, msg))
+
+    def frame(self, now_us: int, frame) -> list:
+        """The telemetry of the frame at ``now_us`` (the schedule moves on). Once per sensor
+        frame: the loop of ``_append`` is written out here (one call less per frame)."""
+        out: list = []
+        sch = self.schedule
+        fast = self.fast
+        for mid in (sch.due(now_us) if now_us >= sch.due_min else sch.every_frame):
+            f = fast.get(mid)
+            if f is not None:
+                out.append((f[0], f[1]()))
+            else:
+                self._append(out, (mid,))
+        if self.extra is not None and frame.ranges:
+            self.extra(frame, out)
+        out.append((self._marker_pack, self._marker_args()))
+        return out
+
+    def whole_frame(self) -> list:
+        """Every enabled stream once and the marker (a frame sent again to a late peer);
+        the schedule does not move."""
+        out: list = []
+        self._append(out, self.schedule.enabled())
+        out.append((self._marker_pack, self._marker_args()))
+        return out
 
 
 # --- client side (the companion) ------------------------------------------------
