@@ -97,7 +97,7 @@ from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
 from .globalplan import GlobalPlan
 from .heading_bias import HeadingBias, rotate_evidence
-from .knownmap import UNKNOWN, KnownMap
+from .knownmap import KNOWN_GROUND, UNKNOWN, KnownMap
 from .lift import WALL_MARGIN_M as LIFT_WALL_MARGIN_M, Over
 from .margin_exit import margin_exit
 from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
@@ -608,7 +608,7 @@ class Replanner:
             self.n_ignored += 1
             return
         # the rows measure the estimate's heading error (``heading_bias``): the beam is turned by it
-        self.heading.observe(t_s, ev, self._explained)
+        self.heading.observe(t_s, ev, self._explained, self._on_terrain)
         if self.heading.estimate_rad:
             ev = rotate_evidence(ev, self.heading.estimate_rad)
         self.fresh.on_evidence(t_s, reading.sensor_id, reading.R_flu_sensor, reading.hfov_rad, reading.vfov_rad)
@@ -628,6 +628,11 @@ class Replanner:
             self.n_unknown += 1
             if self.cfg.give_way:          # else no approach is ever measured: a still world
                 self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still)
+
+    def _on_terrain(self, ev) -> bool:
+        """A point of the return (its axis hit or a field-of-view edge) is on the terrain."""
+        classify = self.known.classify
+        return classify(*ev.hit) == KNOWN_GROUND or any(classify(*q) == KNOWN_GROUND for q in ev.fan_hits)
 
     def _explained(self, ev) -> bool:
         """The known map accounts for the return along the axis or a field-of-view edge."""
