@@ -337,9 +337,10 @@ def test_lossy_real_time_link_errors_are_measured_at_matching_times(tmp_path):
     # the window is about 9 s of ODOMETRY, 20 % of it lost: over 70 samples on an idle
     # machine; the floor leaves room for a loaded one
     assert len(err) > 30
-    # the report counts each new sample once per frame, so no more than the tlog holds,
-    # and on this link nearly all of them
-    assert 0.8 * len(err) <= tr["n_samples"] <= len(err)
+    # the report counts each new sample once per frame, so no more than the tlog holds (but
+    # for one at either end of the window, where no setpoint follows it), and on this link
+    # nearly all of them
+    assert 0.8 * len(err) <= tr["n_samples"] <= len(err) + 2
     # the same errors, within the interpolation and stamp error (2 mm); one frame off
     # is 4 mm of travel at 1 m/s, far more at the worst sample
     assert abs(tr["max_error_m"] - err.max()) <= 0.002

@@ -103,6 +103,7 @@ from .margin_exit import margin_exit
 from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
+from .attitude_wait import AttitudeWait
 from .perception import PoseHistory, beam_evidence
 from .rejoin import converged_from, rejoin
 from .reroute import reroute
@@ -516,6 +517,7 @@ class Replanner:
         self._known0 = known                   # the map before any re-route added cells to it
         self._active_conf = np.zeros(0, dtype=bool)
         self.poses = PoseHistory()
+        self.attitude = AttitudeWait()      # readings wait for the attitude of their time
         self.heading = HeadingBias()
         self.fresh = BeamFreshness()
         self.closing = ClosingSpeed()       # movers: the governor bounds the closing speed
@@ -593,16 +595,34 @@ class Replanner:
         self._offset = float(t_s) - self.plan.trajectory.t0
         self._tau_prev = None
 
-    def on_pose(self, t_s: float, pos_enu_m, R_enu_flu) -> None:
-        """The estimated pose at vehicle time ``t_s`` (position ENU m, R body FLU -> ENU)."""
+    def on_pose(self, t_s: float, pos_enu_m, R_enu_flu, attitude=None) -> None:
+        """The estimated pose at vehicle time ``t_s`` (position ENU m, R body FLU -> ENU).
+        ``attitude``: (vehicle time s, R) of the vehicle's last ATTITUDE when the pose's
+        rotation is carried from it; None when it comes from the companion's observer.
+        Readings that waited for that attitude (``attitude_wait``) are placed now."""
         self.poses.add(t_s, pos_enu_m, R_enu_flu)
+        aw = self.attitude
+        aw.live = attitude is not None
+        if attitude is not None:
+            aw.measured(attitude[0], attitude[1])
+        if len(aw):
+            for arrival, reading, pose in aw.ready(t_s, self.poses):
+                self._place(arrival, reading, pose)
 
     def on_range(self, t_s: float, reading) -> None:
         """One decoded DISTANCE_SENSOR (``mavcore.codec.Range``) received at ``t_s``."""
         self.n_readings += 1
-        pose = self.poses.at(reading.time_boot_ms * 1e-3)
+        tb = reading.time_boot_ms * 1e-3
+        if self.attitude.stale(tb):
+            self.attitude.hold(t_s, reading)
+            return
+        pose = self.poses.at(tb)
         if pose is None:
             pose = self.poses.at(t_s)
+        self._place(t_s, reading, pose)
+
+    def _place(self, t_s: float, reading, pose) -> None:
+        """The evidence of ``reading`` (received at ``t_s``) placed with ``pose``."""
         ev = None if pose is None else beam_evidence(reading, pose, self.cfg.offset_of(reading.sensor_id))
         if ev is None:
             self.n_ignored += 1
