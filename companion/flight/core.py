@@ -947,7 +947,7 @@ class FlightCore:
             R = est.R_enu_flu
         elif self.view.R_est is not None:
             R, dt_R, w = self.view.R_est, t - self.view.att_t, self.view.att_w
-            att = (self.view.att_t, R)
+            att = (self.view.att_t, R, w)
         else:
             # no observer and no ATTITUDE: the rotation the two raw vector pairs
             # define (noisy: about a degree at the paper's noise)

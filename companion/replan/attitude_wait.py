@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from .perception import HISTORY_S, MAX_EXTRAPOLATION_S, MAX_PROPAGATION_S, Pose
+from .perception import HISTORY_S, MAX_EXTRAPOLATION_S, MAX_PROPAGATION_S, Pose, propagated_pose
 
 
 def interpolated_rotation(R0: tuple, R1: tuple, s: float) -> tuple:
@@ -50,10 +50,15 @@ def interpolated_rotation(R0: tuple, R1: tuple, s: float) -> tuple:
 class AttitudeWait:
     """The vehicle's attitude measurements and the readings waiting for one (module doc).
 
-    ``measured`` each new ATTITUDE (vehicle time s, row-major R body FLU -> ENU);
-    ``live`` tells whether the poses come from them (False: the companion's observer).
-    ``stale(t)`` says whether a reading of vehicle time ``t`` must wait; ``hold`` keeps
-    it; ``ready`` hands back those that can be placed now, each with its pose.
+    ``measured`` each new ATTITUDE (vehicle time s, row-major R body FLU -> ENU, body
+    rates FLU rad/s); ``live`` tells whether the poses come from them (False: the
+    companion's observer). ``stale(t)`` says whether a reading of vehicle time ``t``
+    must wait; ``hold`` keeps it; ``ready`` hands back those that can be placed now,
+    each with its pose; ``pose_at`` is the pose of a reading that need not wait.
+
+    The attitude of a reading comes from the measurements, not from the frames'
+    poses: a frame's pose carries the attitude known at that frame, which may be
+    older than one that came since.
     """
 
     def __init__(self) -> None:
@@ -62,11 +67,11 @@ class AttitudeWait:
         self.live = False
         self.n_waited = 0
 
-    def measured(self, t_s: float, R: tuple) -> None:
+    def measured(self, t_s: float, R: tuple, w=(0.0, 0.0, 0.0)) -> None:
         q = self._meas
         if q and t_s <= q[-1][0]:
             return
-        q.append((float(t_s), tuple(R)))
+        q.append((float(t_s), tuple(R), tuple(w)))
         while q[0][0] < t_s - HISTORY_S:
             q.popleft()
 
@@ -91,10 +96,26 @@ class AttitudeWait:
         i = len(q) - 1
         while i > 0 and q[i - 1][0] >= t_s:
             i -= 1
-        if i == 0:
-            return q[0][1]
-        (t0, R0), (t1, R1) = q[i - 1], q[i]
+        t1, R1 = q[i][0], q[i][1]
+        if i == 0 or t1 == t_s:
+            return R1
+        t0, R0 = q[i - 1][0], q[i - 1][1]
         return interpolated_rotation(R0, R1, (t_s - t0) / (t1 - t0))
+
+    def pose_at(self, t_s: float, pose):
+        """``pose`` (the frames' pose at ``t_s``, a ``Pose`` or None) with the attitude
+        of the measurements: interpolated between the two around ``t_s``, or the last
+        carried with its body rates (at most ``MAX_EXTRAPOLATION_S``: else the reading
+        is ``stale``). Unchanged when no measurement is live or ``t_s`` is older than
+        the measurements kept."""
+        q = self._meas
+        if pose is None or not self.live or not q or t_s < q[0][0]:
+            return pose
+        R = self._rotation_at(t_s)
+        if R is None:
+            t_l, R_l, w_l = q[-1]
+            R = propagated_pose(0.0, pose.p, (0.0, 0.0, 0.0), t_s - t_l, R_l, w_l)[1]
+        return Pose(pose.t_s, pose.p, R)
 
     def ready(self, now_s: float, poses) -> list:
         """[(arrival s, reading, Pose or None)] of the waiting readings that can be

@@ -597,14 +597,14 @@ class Replanner:
 
     def on_pose(self, t_s: float, pos_enu_m, R_enu_flu, attitude=None) -> None:
         """The estimated pose at vehicle time ``t_s`` (position ENU m, R body FLU -> ENU).
-        ``attitude``: (vehicle time s, R) of the vehicle's last ATTITUDE when the pose's
+        ``attitude``: (vehicle time s, R, body rates FLU) of the vehicle's last ATTITUDE when the pose's
         rotation is carried from it; None when it comes from the companion's observer.
         Readings that waited for that attitude (``attitude_wait``) are placed now."""
         self.poses.add(t_s, pos_enu_m, R_enu_flu)
         aw = self.attitude
         aw.live = attitude is not None
         if attitude is not None:
-            aw.measured(attitude[0], attitude[1])
+            aw.measured(*attitude)
         if len(aw):
             for arrival, reading, pose in aw.ready(t_s, self.poses):
                 self._place(arrival, reading, pose)
@@ -619,7 +619,7 @@ class Replanner:
         pose = self.poses.at(tb)
         if pose is None:
             pose = self.poses.at(t_s)
-        self._place(t_s, reading, pose)
+        self._place(t_s, reading, self.attitude.pose_at(tb, pose))
 
     def _place(self, t_s: float, reading, pose) -> None:
         """The evidence of ``reading`` (received at ``t_s``) placed with ``pose``."""
@@ -655,13 +655,18 @@ class Replanner:
         return classify(*ev.hit) == KNOWN_GROUND or any(classify(*q) == KNOWN_GROUND for q in ev.fan_hits)
 
     def _explained(self, ev) -> bool:
-        """The known map accounts for the return along the axis or a field-of-view edge."""
+        """The known map accounts for the return along the axis or a field-of-view edge,
+        or the ground is in view at the return's distance (anywhere in the field: a beam
+        rolled about its axis sees the ground first at a corner)."""
         known, o, d = self.known, ev.origin, ev.distance_m
         if known.explains(o, ev.axis, d):
             return True
         for q in ev.fan_hits:
             if known.explains(o, ((q[0] - o[0]) / d, (q[1] - o[1]) / d, (q[2] - o[2]) / d), d):
                 return True
+        if ev.half_h_rad > 0.0 or ev.half_v_rad > 0.0:
+            g = known.ground_in_view_m(o, ev.axis, ev.h_axis, ev.v_axis, ev.half_h_rad, ev.half_v_rad)
+            return d >= g - known.tolerance_m
         return False
 
     def step(self, t_s: float, pos_enu_m, vel_enu_m_s) -> ReplanStep:
