@@ -99,9 +99,10 @@ def slowed_flight_plan(fp: FlightPlan, k: float) -> FlightPlan:
                                waypoints_a_enu_m_s2=wa)
 
 
-def sensor_coverage_gate(mission, fp: FlightPlan, mode: str) -> tuple[FlightPlan, dict]:
+def sensor_coverage_gate(mission, fp: FlightPlan, mode: str, dem=None) -> tuple[FlightPlan, dict]:
     """The pre-flight sensor coverage check (``companion.replan.coverage_check``).
 
+    ``dem``: the mission's elevation model (read here when not given).
     Returns the plan to fly (``fp``, or with ``mode`` "slow" and short gaps
     only, ``fp`` slowed uniformly so that none is left) and report.json's
     ``sensor_coverage`` (``slowed_mission`` applies its ``time_scale`` to the
@@ -116,7 +117,11 @@ def sensor_coverage_gate(mission, fp: FlightPlan, mode: str) -> tuple[FlightPlan
     if not mission.replan.enabled:
         return fp, {"mode": mode, "checked": False, "gaps": [], "time_scale": 1.0}
     radius = float(mission_replan_config(mission).body_radius_m)
-    cov = mission_coverage(mission, fp.trajectory, radius)
+    if dem is None:
+        from mavcore.maps.field import load_mission_dem
+
+        dem = load_mission_dem(mission)
+    cov = mission_coverage(mission, fp.trajectory, radius, dem)
     doc = {"mode": mode, "checked": True, "gaps": [g.to_dict() for g in cov.gaps], "time_scale": 1.0}
     if not cov.gaps:
         return fp, doc
@@ -128,7 +133,7 @@ def sensor_coverage_gate(mission, fp: FlightPlan, mode: str) -> tuple[FlightPlan
         raise PlanError(source, f"{first.describe()}{more}{hint}")
     k = float(cov.time_scale)
     slow = slowed_flight_plan(fp, k)
-    again = mission_coverage(mission, slow.trajectory, radius)
+    again = mission_coverage(mission, slow.trajectory, radius, dem)
     if again.gaps:   # sampling between the samples of the first check
         k *= again.time_scale
         slow = slowed_flight_plan(fp, k)

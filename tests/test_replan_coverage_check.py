@@ -154,16 +154,21 @@ def test_gate_refuses_naming_the_gap_and_slow_flies_short_gaps_slower(tmp_path, 
     m = load_mission(_mission_dir(tmp_path, [{"id": 0, "orientation": 0}]))
     for mode in ("refuse", "slow"):
         with pytest.raises(PlanError, match=r"sensor gap from t = [0-9.]+ s to [0-9.]+ s of the plan, "
-                                            r"starting at ENU \(.*\) m: no rangefinder looks along"):
+                                            r"starting at ENU \(.*\) m: no rangefinder sees .* in time"):
             sensor_coverage_gate(m, flat_plan, mode)
-    # the default ring, 1.5 m range: v^2/2 + 0.15 v = 1.5 - 0.942 allows 0.917 m/s; the plan flies 1.04
+    # a ring 100 deg tall, 1.5 m range: from 1.5 m the ground is 1.5 / sin 50 = 1.96 m away
+    # (out of range), the lowest obstacle top (0.942 m down) is in view from 0.942 / tan 50 =
+    # 0.79 m: the range binds, v^2/2 + 0.15 v = 1.5 - 0.942 allows 0.917 m/s for a top level
+    # with the centre. Lower tops are seen at sqrt(1.5^2 - d^2) and need
+    # sqrt(0.942^2 - d^2) less; the check's depth grid (0.942 / 8 steps) takes the first
+    # step's far end with the level top's need: 1.5 -> 1.4954 m, 0.9125 m/s. The plan flies 1.04.
     short = [{"id": k, "orientation": 100, "rotation_flu_deg": [0.0, 0.0, 22.5 * k], "hfov_deg": 24.0,
-              "vfov_deg": 10.0, "rate_hz": 20.0, "max_m": 1.5} for k in range(16)]
+              "vfov_deg": 100.0, "rate_hz": 20.0, "max_m": 1.5} for k in range(16)]
     m = load_mission(_mission_dir(tmp_path, short))
-    with pytest.raises(PlanError, match="allow 0.92 m/s"):
+    with pytest.raises(PlanError, match="allow 0.91 m/s"):
         sensor_coverage_gate(m, flat_plan, "refuse")
     slow, doc = sensor_coverage_gate(m, flat_plan, "slow")
-    v_ok = -0.15 + math.sqrt(0.15 ** 2 + 2.0 * (1.5 - 0.942))
+    v_ok = -0.15 + math.sqrt(0.15 ** 2 + 2.0 * (math.sqrt(1.5 ** 2 - (0.942 / 8) ** 2) - 0.942))
     tr0, tr1 = flat_plan.trajectory, slow.trajectory
     t0 = np.linspace(tr0.t0, tr0.tf, 4001)
     vmax0 = np.linalg.norm(tr0.sample(t0).v, axis=1).max()

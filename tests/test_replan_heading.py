@@ -192,3 +192,25 @@ def test_replanner_phantoms_from_a_heading_error_go_and_a_post_stays():
     assert rp.memory.distance(np.array([(2.5, 1.0, 1.5)]))[0] > 0.5
     rp.on_range(6.0, reading(150, 6.0))
     assert rp.memory.distance(np.array([(2.5, 1.0, 1.5)]))[0] < 1e-9      # its voxel
+
+
+def test_beams_pitched_below_their_field_do_not_vote_and_terrain_returns_spend_nothing():
+    hb = HeadingBias()
+    # a beam 9 deg down with a field 10 deg tall (the default low ring) has its upper edge 4 deg
+    # under the horizon, more than 2 deg: not read; the same beam 20 deg tall is; a narrow one
+    # counts within 2 deg of level; a level beam counts whatever its field
+    def tilted(elev_deg, half_v_deg):
+        e = math.radians(elev_deg)
+        ax = (math.cos(e), 0.0, -math.sin(e))
+        return BeamEvidence((0.0, 1.0, 1.5), ax, (0.0, 1.0, 0.0), (math.sin(e), 0.0, math.cos(e)), 0.0,
+                            math.radians(half_v_deg), 3.0, (3 * ax[0], 1.0, 1.5 + 3 * ax[2]), 3.0, ())
+    assert not hb.wants(0.0, tilted(9.0, 5.0))
+    assert hb.wants(0.0, tilted(9.0, 10.0))
+    assert hb.wants(0.0, tilted(1.9, 0.0)) and not hb.wants(0.0, tilted(2.1, 0.0))
+    assert hb.wants(0.0, tilted(-20.0, 0.0))          # looking 20 deg up (a lean): read, as before
+    # a return with a point on the terrain is not evaluated and leaves the period to the next
+    far = _ev((0.0, 1.0, 1.5), 0.3, 3.0)
+    hb.observe(0.0, far, _on_wall, on_terrain=lambda ev: True)
+    assert hb.n_evaluated == 0 and hb.wants(0.0, far)
+    hb.observe(0.0, far, _on_wall, on_terrain=lambda ev: False)
+    assert hb.n_evaluated == 1 and not hb.wants(0.5 * PERIOD_S, far)

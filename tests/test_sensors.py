@@ -130,18 +130,21 @@ def test_rangefinders_against_hand_placed_geometry():
     assert all(len(set(v)) == 1 for v in got.values())          # noise off: identical readings
 
 
-def test_default_suite_is_a_closed_horizontal_ring_and_a_down_beam():
-    # every horizontal direction lies inside some ring beam: 16 beams 22.5 deg
-    # apart, each 24 deg wide; with the companion's own reading of the mounting
+def test_default_suite_is_two_closed_rings_and_a_down_beam():
+    # every horizontal direction lies inside some beam of each ring: 16 beams 22.5 deg
+    # apart, each 24 deg wide; the level ring's axes level, the low ring's 9 deg down
+    # (mavcore.mission.sim); with the companion's own reading of the mounting
     suite = SimConfig().rangefinders_or_default
-    ring = [orientation_direction_flu(25)]
-    dirs = [fan_directions_flu(c)[0] for c in suite[:-1]]
-    for az in np.radians(np.arange(0.0, 360.0, 0.5)):
-        off = min(abs(math.degrees(math.atan2(math.sin(az - math.atan2(d[1], d[0])),
-                                               math.cos(az - math.atan2(d[1], d[0]))))) for d in dirs)
-        assert off <= 12.0
-    assert all(abs(d[2]) < 1e-12 for d in dirs)
-    assert fan_directions_flu(suite[-1])[0] == ring[0]
+    assert [c.id for c in suite] == list(range(33))
+    level, down, low = suite[:16], suite[16], suite[17:]
+    for ring, elevation in ((level, 0.0), (low, -9.0)):
+        dirs = [fan_directions_flu(c)[0] for c in ring]
+        for az in np.radians(np.arange(0.0, 360.0, 0.5)):
+            off = min(abs(math.degrees(math.atan2(math.sin(az - math.atan2(d[1], d[0])),
+                                                   math.cos(az - math.atan2(d[1], d[0]))))) for d in dirs)
+            assert off <= 12.0
+        assert all(abs(d[2] - math.sin(math.radians(elevation))) < 1e-12 for d in dirs)
+    assert fan_directions_flu(down)[0] == orientation_direction_flu(25)
 
 
 def test_rangefinder_below_min_clamps_and_noise_is_seeded():

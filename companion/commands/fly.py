@@ -457,7 +457,7 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
             flight_plan = flight_plan.cut(cut_s, mission.trajectory)
         maps = (maps or MissionMaps(mission)).get()
         check_flight_plan(flight_plan.source or str(plan_path or mission.source), flight_plan, mission, *maps)
-        flight_plan, coverage_doc = sensor_coverage_gate(mission, flight_plan, sensor_gap)
+        flight_plan, coverage_doc = sensor_coverage_gate(mission, flight_plan, sensor_gap, maps[1])
         mission = slowed_mission(mission, coverage_doc["time_scale"])
         traj = flight_plan.trajectory
         outputs = []

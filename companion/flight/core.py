@@ -947,18 +947,19 @@ class FlightCore:
             return
         ctrl = self.ctrl
         est = ctrl.attitude_estimate() if self._controlling else None
-        dt_R, w = 0.0, _Z3
+        dt_R, w, att = 0.0, _Z3, None
         if est is not None and ctrl.observer is not None:
             R = est.R_enu_flu
         elif self.view.R_est is not None:
             R, dt_R, w = self.view.R_est, t - self.view.att_t, self.view.att_w
+            att = (self.view.att_t, R, w)
         else:
             # no observer and no ATTITUDE: the rotation the two raw vector pairs
             # define (noisy: about a degree at the paper's noise)
             R = None if est is None else est.R_enu_flu
         if R is not None:
             p, R = propagated_pose(t - self.view.nav_t, self.view.pos, self.view.vel, dt_R, R, w)
-            self.replanner.on_pose(t, p, R)
+            self.replanner.on_pose(t, p, R, att)
 
     def _replan_step(self, t: float) -> RefSample:
         rp = self.replanner

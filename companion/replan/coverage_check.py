@@ -102,7 +102,8 @@ class CoverageGap:
     ``kind``: "blind" (no beam sees the direction) or "short" (beams see it,
     not far enough to stop from the planned speed). ``p_enu_m``: the
     position where it starts (ENU m); speeds in m/s (the largest planned,
-    the smallest allowed within the gap).
+    the smallest allowed within the gap). ``low_obstacles``: the gap comes
+    from obstacles lower than the vehicle's centre (``intruder_cover``).
     """
 
     t_start_s: float
@@ -111,16 +112,19 @@ class CoverageGap:
     kind: str
     planned_speed_m_s: float
     allowed_speed_m_s: float
+    low_obstacles: bool = False
 
     def to_dict(self) -> dict:
         return {"t_start_s": self.t_start_s, "t_end_s": self.t_end_s, "p_enu_m": list(self.p_enu_m),
                 "kind": self.kind, "planned_speed_m_s": self.planned_speed_m_s,
-                "allowed_speed_m_s": self.allowed_speed_m_s}
+                "allowed_speed_m_s": self.allowed_speed_m_s, "low_obstacles": self.low_obstacles}
 
     def describe(self) -> str:
         x, y, z = self.p_enu_m
-        what = ("no rangefinder looks along the direction of travel" if self.kind == "blind" else
-                f"the rangefinders along the direction of travel allow {self.allowed_speed_m_s:.2f} m/s, "
+        where = ("below the vehicle's centre along the direction of travel (obstacles lower than the "
+                 "vehicle)" if self.low_obstacles else "along the direction of travel")
+        what = (f"no rangefinder sees {where} in time" if self.kind == "blind" else
+                f"the rangefinders {where} allow {self.allowed_speed_m_s:.2f} m/s, "
                 f"the plan flies {self.planned_speed_m_s:.2f} m/s")
         return (f"sensor gap from t = {self.t_start_s:.1f} s to {self.t_end_s:.1f} s of the plan, "
                 f"starting at ENU ({x:.2f}, {y:.2f}, {z:.2f}) m: {what}")
@@ -156,9 +160,9 @@ class SensorCoverage:
         return any(g.kind == "blind" for g in self.gaps)
 
 
-def allowed_speed(range_m, accel_m_s2: float, delay_s, clearance_m: float):
+def allowed_speed(range_m, accel_m_s2: float, delay_s, clearance_m):
     """Largest v (m/s) with ``v^2 / (2 a) + v tau + c <= range`` (0 if range <= c);
-    numpy-broadcast over ``range_m`` and ``delay_s``."""
+    numpy-broadcast over ``range_m``, ``delay_s`` and ``clearance_m``."""
     r = np.asarray(range_m, dtype=float) - clearance_m
     tau = np.asarray(delay_s, dtype=float)
     a = float(accel_m_s2)
@@ -194,7 +198,7 @@ def level_body_axes(p_enu_m: np.ndarray, target_enu_m) -> np.ndarray:
 
 
 def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...], accel_m_s2: float,
-                   clearance_m: float, interval_max_speed_m_s=None) -> SensorCoverage:
+                   clearance_m: float, interval_max_speed_m_s=None, terrain=None) -> SensorCoverage:
     """Where the direction of travel is covered, and at what speed.
 
     Parameters
@@ -216,6 +220,12 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
         an interval is held to the smaller allowed speed of its two ends
         (the directions between two samples are those of the samples), so
         ``time_scale`` bounds the speed everywhere, not only at the samples.
+    terrain : ``terrain_profile``'s ``(h, (s, drop))``, optional
+        The terrain under and ahead of each sample. Given, obstacles lower
+        than the centre must be seen in time too
+        (``companion.replan.intruder_cover``; ``clearance_m`` is then the
+        clearance sphere's radius): a sample's allowed speed is the smaller
+        of the two, and a gap they limit says "low obstacles".
 
     Returns
     -------
@@ -242,6 +252,14 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
         better = seen & (vb > allowed)
         allowed[better] = vb
         best[better] = beam.sensor_id
+    low_limited = np.zeros(t.shape, dtype=bool)
+    if terrain is not None:
+        from .intruder_cover import low_allowed_speed
+
+        low = low_allowed_speed(d, np.asarray(terrain[0], dtype=float).reshape(-1), beams, accel_m_s2,
+                                clearance_m, CONTROL_DELAY_S, terrain[1])
+        low_limited = moving & (low < allowed)
+        allowed = np.minimum(allowed, low)
     allowed = np.where(moving, allowed, np.inf)
     uncovered = moving & (speed > allowed * (1.0 + 1e-9))
     peak = speed.copy()                          # the largest speed at or next to a sample
@@ -265,10 +283,11 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
         splits = np.flatnonzero(np.diff(idx) > 1) + 1
         for run in np.split(idx, splits):
             i0, i1 = int(run[0]), int(run[-1])
-            blind = bool(np.any(best[run] < 0))
+            blind = bool(np.any(best[run] < 0) or np.any(allowed[run] <= 0.0))
             gaps.append(CoverageGap(float(t[i0]), float(t[i1]), tuple(float(c) for c in p[i0]),
                                     "blind" if blind else "short", float(peak[run].max()),
-                                    float(np.min(np.where(np.isfinite(allowed[run]), allowed[run], np.inf)))))
+                                    float(np.min(np.where(np.isfinite(allowed[run]), allowed[run], np.inf))),
+                                    bool(np.any(low_limited[run]))))
     if any(g.kind == "blind" for g in gaps):
         scale = math.inf
     elif gaps:
@@ -305,12 +324,32 @@ def beam_from_config(cfg) -> Beam:
                 math.tan(math.radians(0.5 * cfg.vfov_deg)), float(cfg.max_m), 1.0 / float(cfg.rate_hz))
 
 
-def mission_coverage(mission, trajectory, body_radius_m: float) -> SensorCoverage:
+def terrain_profile(p_enu_m, v_enu_m_s, dem, reach_m: float, step_m: float = 0.25):
+    """The terrain ahead of each sample: ``(h, (s, drop))`` with ``h`` (n,) the centres'
+    heights above the terrain under them, ``s`` (m,) the distances ahead (m) and
+    ``drop`` (n, m) the centres' heights above the terrain that far along the
+    horizontal velocity (-inf beyond the DEM: nothing to hit)."""
+    p = np.asarray(p_enu_m, dtype=float).reshape(-1, 3)
+    v = np.asarray(v_enu_m_s, dtype=float).reshape(-1, 3)
+    vh = np.hypot(v[:, 0], v[:, 1])
+    u = np.where(vh[:, None] > 1e-9, v[:, :2] / np.maximum(vh, 1e-12)[:, None], 0.0)
+    s = np.arange(step_m, reach_m + 0.5 * step_m, step_m)
+    x = p[:, 0:1] + s[None, :] * u[:, 0:1]
+    y = p[:, 1:2] + s[None, :] * u[:, 1:2]
+    ok = dem.covers(x, y)
+    g = np.full(x.shape, np.inf)
+    g[ok] = dem.height_at(x[ok], y[ok])
+    under = p[:, 2] - dem.height_at(p[:, 0], p[:, 1])
+    return under, (s, p[:, 2:3] - g)
+
+
+def mission_coverage(mission, trajectory, body_radius_m: float, dem=None) -> SensorCoverage:
     """``check_coverage`` of a trajectory (``companion.trajectory.Trajectory``
     with its pointing target) with the mission's rangefinders
     (``sim.rangefinders``, else the default suite), braking at
     ``replan.accel_m_s2`` and stopping ``replan.clearance_m + body_radius_m``
-    from what they see."""
+    from what they see, obstacles lower than the centre included over the
+    terrain of ``dem`` (the mission's, read here when not given)."""
     from mavcore.mission.sim import default_rangefinders
     from ..trajectory.extrema import max_speed_on_intervals
 
@@ -323,4 +362,9 @@ def mission_coverage(mission, trajectory, body_radius_m: float) -> SensorCoverag
     target = trajectory.target_enu_m if trajectory.target_enu_m is not None else p[0] + np.array([0.0, 1.0, 0.0])
     rp = mission.replan
     vmax = max_speed_on_intervals(trajectory, t, v)
-    return check_coverage(t, p, v, target, beams, rp.accel_m_s2, rp.clearance_m + body_radius_m, vmax)
+    if dem is None:
+        from mavcore.maps.field import load_mission_dem
+
+        dem = load_mission_dem(mission)
+    terrain = terrain_profile(p, v, dem, max(b.max_m for b in beams))
+    return check_coverage(t, p, v, target, beams, rp.accel_m_s2, rp.clearance_m + body_radius_m, vmax, terrain)

@@ -21,8 +21,8 @@ How
 ---
 Candidate offsets ``eps_k = k * STEP_RAD``, ``|eps_k| <= SPAN_RAD``. At most
 every ``PERIOD_S`` of vehicle time, one return at least ``MIN_RANGE_M`` away
-on a beam within ``MAX_TILT_RAD`` of the horizontal (nearer or steeper
-returns hold little of the heading) is rotated by each offset and asked of
+on a beam within ``MAX_TILT_RAD`` of the horizontal and not pitched down below
+its own vertical field (nearer or steeper returns hold little of the heading) is rotated by each offset and asked of
 the known map (``explain(evidence) -> bool``, the replanner's own test). A
 return explained at some offsets but not at all is *informative*; its
 explanation vector ``e_k`` (0/1) is added to scores that fade with the time
@@ -67,6 +67,12 @@ PERIOD_S = 0.1
 MIN_RANGE_M = 2.0
 #: Beams steeper than this from the horizontal (rad) are not evaluated.
 MAX_TILT_RAD = math.radians(30.0)
+#: ... and not pitched down below its own vertical field (its upper edge at most this far
+#: under the horizon; a narrow beam within this of level): the rows' faces pin the heading
+#: down at the horizon, a beam pitched down meets the ground and the rows' feet, and such
+#: returns voted for a wrong heading (a ring pitched 6 deg down, sloped field, realistic
+#: profile: 2.1 deg off for 40 s). Level beams count while the vehicle leans, as before.
+MIN_HALF_V_RAD = math.radians(2.0)
 #: Fading time constant of the scores (s).
 TAU_S = 10.0
 #: Evidence weight (informative returns, faded) before an estimate is made.
@@ -115,11 +121,17 @@ class HeadingBias:
         """Whether the return of ``ev`` at vehicle time ``t_s`` is evaluated (the period, range and tilt)."""
         if t_s - self._t_last < self.period_s - 1e-9 or ev.hit is None or not ev.distance_m >= MIN_RANGE_M:
             return False
-        return abs(ev.axis[2]) <= math.sin(MAX_TILT_RAD)
+        return abs(ev.axis[2]) <= math.sin(MAX_TILT_RAD) and ev.axis[2] >= -math.sin(ev.half_v_rad + MIN_HALF_V_RAD)
 
-    def observe(self, t_s: float, ev, explain) -> None:
-        """Evaluate the return of ``ev`` (``wants`` first) with ``explain(evidence) -> bool``."""
+    def observe(self, t_s: float, ev, explain, on_terrain=None) -> None:
+        """Evaluate the return of ``ev`` (``wants`` first) with ``explain(evidence) -> bool``.
+        ``on_terrain(evidence) -> bool``: a point of the return lies on the terrain. Such a
+        return is explained at every turn (a turn about the vertical moves it along the
+        ground), so it says nothing about the heading and does not spend the period: with a
+        ring pitched down, ground returns would otherwise take the turns of the row returns."""
         if not self.wants(t_s, ev):
+            return
+        if on_terrain is not None and on_terrain(ev):
             return
         self._t_last = t_s
         self.n_evaluated += 1

@@ -30,6 +30,7 @@ import numpy as np
 from ..coverage.freespace import FreeSpace, dilate_runs, dilate_runs_banded, disk_half_widths, erode_free_space
 from mavcore.maps.grid import ElevationModel, OccupancyGrid
 from mavcore.maps.heightfield import HeightField
+from mavcore.pyramid import project_pyramid
 
 KNOWN_GROUND, KNOWN_ROW, KNOWN_ADDED, UNKNOWN = "ground", "row", "added", "unknown"
 #: ``explains``: a ray enters a row within this distance (m) beyond the return ...
@@ -42,6 +43,8 @@ SURFACE_BEHIND_M = 0.5
 #: A return beside a row (within a cell of it) is the row when the beam was
 #: outside the rows this far (m) before it.
 GRAZE_BACK_M = 1.0
+#: Steps of ``ground_in_view_m`` on uneven ground (each takes the tangent plane where the last one landed).
+GROUND_IN_VIEW_STEPS = 5
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,6 +137,53 @@ class KnownMap:
     def ground_z(self, x: float, y: float) -> float:
         """Terrain height (m) under (x, y) (clamped outside the DEM)."""
         return self.height(x, y)
+
+    def ground_in_view_m(self, origin, axis, h_axis, v_axis, half_h_rad: float, half_v_rad: float) -> float:
+        """Nearest distance (m) from ``origin`` to the terrain inside a beam's field of
+        view: the pyramid of half angles ``half_h_rad`` about ``h_axis`` and
+        ``half_v_rad`` about ``v_axis`` around ``axis`` (ENU unit vectors: the beam and
+        the directions in which its fields open).
+
+        A rangefinder returns the nearest surface anywhere in its field, so a return
+        at or beyond this distance may be the ground (nothing beyond the nearest ground
+        in view can be told from it). For a plane with upward normal n at height h
+        above the origin's foot, the nearest point in the pyramid lies along the unit
+        direction of the projection of -n onto it (``mavcore.pyramid``), at
+        ``h / |that projection|``: exact for flat ground. On uneven ground the plane is
+        the terrain's tangent plane where the last step landed, for a few steps.
+        inf when the field of view does not reach the ground."""
+        a, b = math.tan(half_h_rad), math.tan(half_v_rad)
+        ox, oy, oz = origin
+        x, y = ox, oy
+        nx = ny = 0.0
+        nz = 1.0
+        t = math.inf
+        for _ in range(GROUND_IN_VIEW_STEPS):
+            zq = self.height(x, y)
+            # -n in the sensor frame, projected onto the pyramid
+            sx = -(axis[0] * nx + axis[1] * ny + axis[2] * nz)
+            sy = -(h_axis[0] * nx + h_axis[1] * ny + h_axis[2] * nz)
+            sz = -(v_axis[0] * nx + v_axis[1] * ny + v_axis[2] * nz)
+            gx, gy, gz = project_pyramid(sx, sy, sz, a, b)
+            g = math.sqrt(gx * gx + gy * gy + gz * gz)
+            h = nx * (ox - x) + ny * (oy - y) + nz * (oz - zq)     # the origin's height above the plane
+            if h <= 0.0:
+                return 0.0
+            if not g > 1e-12:
+                return math.inf
+            t_new = h / g
+            ux = (axis[0] * gx + h_axis[0] * gy + v_axis[0] * gz) / g
+            uy = (axis[1] * gx + h_axis[1] * gy + v_axis[1] * gz) / g
+            if abs(t_new - t) < 1e-3:
+                return t_new
+            t = t_new
+            x, y = ox + t * ux, oy + t * uy
+            e = 0.5 * self.grid.resolution_m
+            dzx = (self.height(x + e, y) - self.height(x - e, y)) / (2 * e)
+            dzy = (self.height(x, y + e) - self.height(x, y - e)) / (2 * e)
+            k = 1.0 / math.sqrt(dzx * dzx + dzy * dzy + 1.0)
+            nx, ny, nz = -dzx * k, -dzy * k, k
+        return t
 
     def classify(self, x: float, y: float, z: float) -> str:
         """``"ground"``, ``"row"``, ``"added"`` or ``"unknown"`` for a hit at (x, y, z) (module doc)."""

@@ -97,12 +97,13 @@ from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
 from .globalplan import GlobalPlan
 from .heading_bias import HeadingBias, rotate_evidence
-from .knownmap import UNKNOWN, KnownMap
+from .knownmap import KNOWN_GROUND, UNKNOWN, KnownMap
 from .lift import WALL_MARGIN_M as LIFT_WALL_MARGIN_M, Over
 from .margin_exit import margin_exit
 from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
+from .attitude_wait import AttitudeWait
 from .perception import PoseHistory, beam_evidence
 from .rejoin import converged_from, rejoin
 from .reroute import reroute
@@ -516,6 +517,7 @@ class Replanner:
         self._known0 = known                   # the map before any re-route added cells to it
         self._active_conf = np.zeros(0, dtype=bool)
         self.poses = PoseHistory()
+        self.attitude = AttitudeWait()      # readings wait for the attitude of their time
         self.heading = HeadingBias()
         self.fresh = BeamFreshness()
         self.closing = ClosingSpeed()       # movers: the governor bounds the closing speed
@@ -593,22 +595,40 @@ class Replanner:
         self._offset = float(t_s) - self.plan.trajectory.t0
         self._tau_prev = None
 
-    def on_pose(self, t_s: float, pos_enu_m, R_enu_flu) -> None:
-        """The estimated pose at vehicle time ``t_s`` (position ENU m, R body FLU -> ENU)."""
+    def on_pose(self, t_s: float, pos_enu_m, R_enu_flu, attitude=None) -> None:
+        """The estimated pose at vehicle time ``t_s`` (position ENU m, R body FLU -> ENU).
+        ``attitude``: (vehicle time s, R, body rates FLU) of the vehicle's last ATTITUDE when the pose's
+        rotation is carried from it; None when it comes from the companion's observer.
+        Readings that waited for that attitude (``attitude_wait``) are placed now."""
         self.poses.add(t_s, pos_enu_m, R_enu_flu)
+        aw = self.attitude
+        aw.live = attitude is not None
+        if attitude is not None:
+            aw.measured(*attitude)
+        if len(aw):
+            for arrival, reading, pose in aw.ready(t_s, self.poses):
+                self._place(arrival, reading, pose)
 
     def on_range(self, t_s: float, reading) -> None:
         """One decoded DISTANCE_SENSOR (``mavcore.codec.Range``) received at ``t_s``."""
         self.n_readings += 1
-        pose = self.poses.at(reading.time_boot_ms * 1e-3)
+        tb = reading.time_boot_ms * 1e-3
+        if self.attitude.stale(tb):
+            self.attitude.hold(t_s, reading)
+            return
+        pose = self.poses.at(tb)
         if pose is None:
             pose = self.poses.at(t_s)
+        self._place(t_s, reading, self.attitude.pose_at(tb, pose))
+
+    def _place(self, t_s: float, reading, pose) -> None:
+        """The evidence of ``reading`` (received at ``t_s``) placed with ``pose``."""
         ev = None if pose is None else beam_evidence(reading, pose, self.cfg.offset_of(reading.sensor_id))
         if ev is None:
             self.n_ignored += 1
             return
         # the rows measure the estimate's heading error (``heading_bias``): the beam is turned by it
-        self.heading.observe(t_s, ev, self._explained)
+        self.heading.observe(t_s, ev, self._explained, self._on_terrain)
         if self.heading.estimate_rad:
             ev = rotate_evidence(ev, self.heading.estimate_rad)
         self.fresh.on_evidence(t_s, reading.sensor_id, reading.R_flu_sensor, reading.hfov_rad, reading.vfov_rad)
@@ -629,14 +649,24 @@ class Replanner:
             if self.cfg.give_way:          # else no approach is ever measured: a still world
                 self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still)
 
+    def _on_terrain(self, ev) -> bool:
+        """A point of the return (its axis hit or a field-of-view edge) is on the terrain."""
+        classify = self.known.classify
+        return classify(*ev.hit) == KNOWN_GROUND or any(classify(*q) == KNOWN_GROUND for q in ev.fan_hits)
+
     def _explained(self, ev) -> bool:
-        """The known map accounts for the return along the axis or a field-of-view edge."""
+        """The known map accounts for the return along the axis or a field-of-view edge,
+        or the ground is in view at the return's distance (anywhere in the field: a beam
+        rolled about its axis sees the ground first at a corner)."""
         known, o, d = self.known, ev.origin, ev.distance_m
         if known.explains(o, ev.axis, d):
             return True
         for q in ev.fan_hits:
             if known.explains(o, ((q[0] - o[0]) / d, (q[1] - o[1]) / d, (q[2] - o[2]) / d), d):
                 return True
+        if ev.half_h_rad > 0.0 or ev.half_v_rad > 0.0:
+            g = known.ground_in_view_m(o, ev.axis, ev.h_axis, ev.v_axis, ev.half_h_rad, ev.half_v_rad)
+            return d >= g - known.tolerance_m
         return False
 
     def step(self, t_s: float, pos_enu_m, vel_enu_m_s) -> ReplanStep:

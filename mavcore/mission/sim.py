@@ -257,33 +257,54 @@ class RangefinderConfig:
 
 
 #: The default suite (a mission that lists no ``sim.rangefinders``): a closed
-#: ring of ``DEFAULT_RING_BEAMS`` horizontal beams, ``DEFAULT_RING_HFOV_DEG``
-#: wide (the ring overlaps by 1.5 deg) and ``DEFAULT_RING_VFOV_DEG`` tall, plus
-#: one looking down. The pointing law turns body y toward the pointing target,
-#: so the direction of travel can lie anywhere round the body; a ring sees it
-#: whatever the heading (``companion.replan.coverage_check``, docs/replan.md).
-#: +-5 deg vertically and 6 m of range: from 1.5 m over flat ground the lower
-#: edge meets it beyond the range even with the vehicle pitched 8 deg, and a
-#: beam whose edge runs nearly along a corridor sees the row face only where
-#: it is at least asin(1 / 6) = 10 deg off it (nearer grazing returns, placed
-#: with a slightly stale attitude over a lossy link, read as phantom obstacles
-#: in the companion); 6 m still covers stopping from the 3 m/s transit speed
-#: (``coverage_check``: 3.03 m/s allowed).
+#: level ring of ``DEFAULT_RING_BEAMS`` beams, ``DEFAULT_RING_HFOV_DEG`` wide
+#: (the ring overlaps by 1.5 deg) and ``DEFAULT_RING_VFOV_DEG`` tall, one beam
+#: looking down, and a closed low ring like the level one pitched
+#: ``DEFAULT_LOW_PITCH_DEG`` down. The pointing law turns body y toward the
+#: pointing target, so the direction of travel can lie anywhere round the
+#: body; a ring sees it whatever the heading (``companion.replan.coverage_check``,
+#: docs/replan.md).
+#: +-5 deg vertically and 6 m of range for the level ring: from 1.5 m over
+#: flat ground the lower edge meets it beyond the range even with the vehicle
+#: pitched 8 deg, and a beam whose edge runs nearly along a corridor sees the
+#: row face only where it is at least asin(1 / 6) = 10 deg off it (nearer
+#: grazing returns, placed with a slightly stale attitude over a lossy link,
+#: read as phantom obstacles in the companion); 6 m still covers stopping from
+#: the 3 m/s transit speed (``coverage_check``: 3.03 m/s allowed).
+#: The low ring: obstacles stand on the ground, and one lower than the
+#: vehicle's centre still enters its clearance sphere (0.942 m: 0.5 m clearance
+#: + the 0.442 m airframe). The level ring never sees a top 0.6-0.9 m below the
+#: centre within its range, and saw a 1.5 m post on a descending slope only
+#: 1.3 m away (fresh-seed flight 7 of seed 20261128: 0.13 m of true
+#: clearance; ``intruder_cover``). From -4 to -14 deg, the deepest such top
+#: (0.942 m down) is in view from 0.942 / tan 14 = 3.8 m, and over flat ground
+#: from the 1.5 m flight height the nearest ground in view (1.5 / sin 14 =
+#: 6.2 m) is out of range: level flight gets no ground returns, and the 3 m/s
+#: transit stays covered. A separate ring, not the level one pitched down: the
+#: heading estimate from the rows (``companion.replan.heading_bias``) reads the
+#: beams not pitched down below their own field, and a ring pitched down voted for a wrong heading
+#: on the sloped field with the realistic profile.
 DEFAULT_RING_BEAMS = 16
 DEFAULT_RING_HFOV_DEG = 24.0
 DEFAULT_RING_VFOV_DEG = 10.0
 DEFAULT_RING_MAX_M = 6.0
+DEFAULT_LOW_PITCH_DEG = 9.0
 
 
 def default_rangefinders() -> tuple[RangefinderConfig, ...]:
-    """The default suite: ids 0..15 the ring (id k looks 22.5 k deg left of
-    forward, ``MAV_SENSOR_ROTATION_CUSTOM``), id 16 down (20 m)."""
+    """The default suite: ids 0..15 the level ring (id k looks 22.5 k deg left of
+    forward, ``MAV_SENSOR_ROTATION_CUSTOM``), id 16 down (20 m), ids 17..32 the
+    low ring (id 17 + k looks 22.5 k deg left of forward and 9 deg down)."""
     step = 360.0 / DEFAULT_RING_BEAMS
-    ring = tuple(RangefinderConfig(id=k, orientation=SENSOR_ROTATION_CUSTOM, rotation_flu_deg=(0.0, 0.0, step * k),
-                                   hfov_deg=DEFAULT_RING_HFOV_DEG, vfov_deg=DEFAULT_RING_VFOV_DEG, rate_hz=20.0,
-                                   max_m=DEFAULT_RING_MAX_M)
-                 for k in range(DEFAULT_RING_BEAMS))
-    return ring + (RangefinderConfig(id=DEFAULT_RING_BEAMS, orientation=25, max_m=20.0),)
+
+    def ring(first: int, pitch_deg: float):
+        return tuple(RangefinderConfig(id=first + k, orientation=SENSOR_ROTATION_CUSTOM,
+                                       rotation_flu_deg=(0.0, pitch_deg, step * k), hfov_deg=DEFAULT_RING_HFOV_DEG,
+                                       vfov_deg=DEFAULT_RING_VFOV_DEG, rate_hz=20.0, max_m=DEFAULT_RING_MAX_M)
+                     for k in range(DEFAULT_RING_BEAMS))
+
+    down = RangefinderConfig(id=DEFAULT_RING_BEAMS, orientation=25, max_m=20.0)
+    return ring(0, 0.0) + (down,) + ring(DEFAULT_RING_BEAMS + 1, DEFAULT_LOW_PITCH_DEG)
 
 
 @dataclass(frozen=True)
