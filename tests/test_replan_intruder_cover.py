@@ -64,6 +64,14 @@ def test_the_ground_hides_what_is_beyond_it():
     assert v[0] == pytest.approx(_v(3.0 * math.cos(math.radians(20.0)), KEEP), rel=1e-9)
 
 
+def test_returns_near_the_ground_are_the_ground():
+    # the replanner takes a return within 0.2 m of the nearest ground in view for the
+    # ground: the view ends 0.2 m short of the 3 m, D / cos 20 < 2.8
+    v = low_allowed_speed(FORWARD, np.array([1.5]), (_beam(25.0, 10.0),), 1.0, KEEP, CONTROL_DELAY_S,
+                          ground_band_m=0.2)
+    assert v[0] == pytest.approx(_v(2.8 * math.cos(math.radians(20.0)), KEEP), rel=1e-9)
+
+
 def test_terrain_rising_ahead_closes_the_view():
     # the slope rises 0.25 m per m ahead: the steepest ray (14 deg down) meets it at
     # s = 1.5 / (tan 14 + 0.25) = 3.0 m, nearer than where the lowest top comes into view (3.78 m)

@@ -198,7 +198,8 @@ def level_body_axes(p_enu_m: np.ndarray, target_enu_m) -> np.ndarray:
 
 
 def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...], accel_m_s2: float,
-                   clearance_m: float, interval_max_speed_m_s=None, terrain=None) -> SensorCoverage:
+                   clearance_m: float, interval_max_speed_m_s=None, terrain=None,
+                   ground_band_m: float = 0.0) -> SensorCoverage:
     """Where the direction of travel is covered, and at what speed.
 
     Parameters
@@ -226,6 +227,10 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
         (``companion.replan.intruder_cover``; ``clearance_m`` is then the
         clearance sphere's radius): a sample's allowed speed is the smaller
         of the two, and a gap they limit says "low obstacles".
+    ground_band_m : float
+        A return within this distance of the nearest ground in a beam's view
+        is taken for the ground in flight (the known map's tolerance,
+        ``replan.known_tolerance_m``): that band is hidden (``low_allowed_speed``).
 
     Returns
     -------
@@ -257,7 +262,7 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
         from .intruder_cover import low_allowed_speed
 
         low = low_allowed_speed(d, np.asarray(terrain[0], dtype=float).reshape(-1), beams, accel_m_s2,
-                                clearance_m, CONTROL_DELAY_S, terrain[1])
+                                clearance_m, CONTROL_DELAY_S, terrain[1], ground_band_m)
         low_limited = moving & (low < allowed)
         allowed = np.minimum(allowed, low)
     allowed = np.where(moving, allowed, np.inf)
@@ -367,4 +372,5 @@ def mission_coverage(mission, trajectory, body_radius_m: float, dem=None) -> Sen
 
         dem = load_mission_dem(mission)
     terrain = terrain_profile(p, v, dem, max(b.max_m for b in beams))
-    return check_coverage(t, p, v, target, beams, rp.accel_m_s2, rp.clearance_m + body_radius_m, vmax, terrain)
+    return check_coverage(t, p, v, target, beams, rp.accel_m_s2, rp.clearance_m + body_radius_m, vmax, terrain,
+                          rp.known_tolerance_m)

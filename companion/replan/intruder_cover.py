@@ -116,14 +116,17 @@ def ground_hit(t_lo: np.ndarray, t_hi: np.ndarray, s_m: np.ndarray, drop_m: np.n
 
 
 def low_allowed_speed(d_body: np.ndarray, h_m: np.ndarray, beams, accel_m_s2: float, keep_m: float,
-                      control_delay_s: float, profile=None) -> np.ndarray:
+                      control_delay_s: float, profile=None, ground_band_m: float = 0.0) -> np.ndarray:
     """(n,) speeds (m/s) at which every obstacle lower than the centre along the
     horizontal body directions ``d_body`` ((n, 3), unit) is seen in time;
     ``h_m``: the centre's height above the ground under it (module doc);
     ``beams``: ``coverage_check.Beam`` s; ``profile``: optional ``(s_m, drop_m)``,
     the terrain ahead (``ground_hit``): where it rises into a beam's view
-    nearer than the flat ground would, it hides what is beyond. inf where
-    nothing lower than the centre fits (h <= 0)."""
+    nearer than the flat ground would, it hides what is beyond; ``ground_band_m``:
+    a return within this distance of the nearest ground in view is taken for the
+    ground (the replanner's rule, ``KnownMap.ground_in_view_m`` and the known map's
+    tolerance), so what lies in that band is hidden too. inf where nothing lower
+    than the centre fits (h <= 0)."""
     h = np.asarray(h_m, dtype=float)
     n = h.shape[0]
     top = np.minimum(keep_m, np.maximum(h, 0.0))
@@ -136,7 +139,8 @@ def low_allowed_speed(d_body: np.ndarray, h_m: np.ndarray, beams, accel_m_s2: fl
         t_lo, t_hi = depression_interval(u_s, z_s, beam.tan_half_h, beam.tan_half_v)
         g = ground_tangent(z_s, beam.tan_half_h, beam.tan_half_v)
         with np.errstate(divide="ignore"):
-            ground = np.where(g > 0.0, np.maximum(h, 0.0) / max(g, 1e-300), np.inf)
+            ground = np.where(g > 0.0, np.maximum(np.maximum(h, 0.0) / max(g, 1e-300) - ground_band_m, 0.0),
+                              np.inf)
         reach = np.minimum(beam.max_m, ground)
         if profile is not None:
             reach = np.minimum(reach, ground_hit(t_lo, t_hi, *profile))
