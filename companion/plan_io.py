@@ -310,6 +310,8 @@ class PlanFile:
     sorties: list = dataclasses.field(default_factory=list)
     trajectory: object = None
     format_major: int = PLAN_FORMAT_MAJOR
+    #: SHA-256 (hex) of the plan.json bytes read (the flight's setup record names the plan by it).
+    sha256_hex: str | None = None
 
 
 def _num_array(value, shape_tail: tuple[int, ...], src: str, key: str) -> np.ndarray:
@@ -449,12 +451,13 @@ def load_plan(path: str | Path) -> PlanFile:
         major version, or a missing/malformed key (the message names the
         file and the key). A file without ``format_version`` is read as 1.0.
     """
-    from .plan_twin import read_twin
+    from .plan_twin import digest, read_twin
 
     p = Path(path)
     src = str(p)
     raw = read_bytes(p, PlanError, "plan.json", cap="plan_bytes")
-    twin = read_twin(p, raw)
+    sha = digest(raw)             # the twin's stamp is checked against it, and the flight names the plan by it
+    twin = read_twin(p, raw, json_digest=sha)
     if twin is None:
         data, arrays = parse_json(decode_text(raw, p, PlanError), src, PlanError), None
     else:
@@ -527,7 +530,7 @@ def load_plan(path: str | Path) -> PlanFile:
                     p_enu_m=samples.get("p"), v_enu_m_s=samples.get("v"), a_enu_m_s2=samples.get("a"),
                     pointing_enu=samples.get("pointing"), target_enu_m=target, stats=dict(stats),
                     timings_s=dict(timings), data=data, source=src, sorties=sorties,
-                    trajectory=trajectory, format_major=major)
+                    trajectory=trajectory, format_major=major, sha256_hex=sha.tobytes().hex())
 
 
 # --- QGroundControl exports ------------------------------------------------------

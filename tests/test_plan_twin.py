@@ -164,3 +164,26 @@ def test_companion_plan_writes_the_twin_of_a_large_plan(tmp_path):
     with np.load(twin) as z:
         assert np.array_equal(z["json_sha256"], plan_twin.digest(out.read_bytes()))
     assert "waypoints" not in load_plan(out).data
+
+
+def test_the_plan_is_named_by_the_digest_of_the_bytes_read(planned, tmp_path):
+    # the digest the twin is checked against is the one the flight's setup record names the
+    # plan by (computed once): SHA-256 of the plan.json file, with or without a twin
+    import hashlib
+
+    from companion.commands.fly import MissionMaps, flight_setup, prepare
+
+    mission, _ = planned
+    for name, twin in (("a.json", True), ("b.json", False)):
+        path = _write(planned, tmp_path / name, twin=twin)
+        want = hashlib.sha256(path.read_bytes()).hexdigest()
+        assert load_plan(path).sha256_hex == want
+        for sortie in (None, 1):
+            fp = prepare(mission, str(path), sortie, MissionMaps(mission))
+            assert fp.plan_sha256_hex == want
+        read = flight_setup(mission, str(path), "companion", None, {})["plan_sha"]
+        assert read == want[:16]
+        # given the digest, the file is not read again: a path that no longer exists still gets it
+        gone = str(tmp_path / "moved.json")
+        assert flight_setup(mission, gone, "companion", None, {}, plan_sha256_hex=want)["plan_sha"] == read
+        assert flight_setup(mission, gone, "companion", None, {})["plan_sha"] is None
