@@ -315,7 +315,8 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None,
                                   source=f"{mission.source} (planned) --sortie {sortie}")
     from ..plan_io import load_plan
 
-    pf = load_plan(plan_path)
+    # a sortie is solved through its own way-points: the whole route's pieces are checked, not rebuilt
+    pf = load_plan(plan_path, rebuild_trajectory=sortie is None)
     # the document's tree of Python objects (~60 MB for a 10 ha plan) is not needed
     # past the loader's arrays: freed before the maps are read on top of it
     pf = dataclasses.replace(pf, data={})
