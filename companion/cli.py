@@ -25,10 +25,17 @@ COMMANDS = {
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The ``companion`` parser. ``only``: the subcommand the command line names
+    (``command_named``): its module alone is imported and given its arguments, the
+    others are listed by name and help text (the parser is only asked to parse that
+    command line); None: every subcommand in full (``--help``, tests, the campaigns)."""
     parser = argparse.ArgumentParser(prog="companion", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, help_text in COMMANDS.items():
+        if only is not None and name != only:
+            sub.add_parser(name, help=help_text, description=help_text)
+            continue
         try:
             module = importlib.import_module(f"companion.commands.{name}")
         except ModuleNotFoundError as exc:
@@ -42,12 +49,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def command_named(argv: list[str]) -> str | None:
+    """The subcommand ``argv`` (without the program name) runs: its first word when
+    that is one of ``COMMANDS`` (the parser has no option before it), else None."""
+    return argv[0] if argv and argv[0] in COMMANDS else None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line ``argv``; None: the process's own (``sys.argv``: the
     ``companion`` script, ``python -m companion``), after which the process exits, so
     a command may keep its imports out of the garbage collector (``args.process_exits``,
     :mod:`companion.long_lived`). Returns the exit code."""
-    parser = build_parser()
+    # only the command named is imported: ``companion fly`` starts without the planner's modules
+    parser = build_parser(command_named(sys.argv[1:] if argv is None else list(argv)))
     args = parser.parse_args(argv)
     args.process_exits = argv is None
     configure(args.verbose, args.quiet)

@@ -30,6 +30,9 @@ class FlightPlan:
     main_segments_xy: np.ndarray | None = None
     #: Where it comes from, for the preflight check's messages (plan file, mission, option).
     source: str = ""
+    #: SHA-256 (hex) of the plan.json it was read from (``PlanFile.sha256_hex``), for the
+    #: flight's setup record; None when planned here, or unknown.
+    plan_sha256_hex: str | None = None
 
     @classmethod
     def from_plan(cls, plan, source: str = "") -> "FlightPlan":

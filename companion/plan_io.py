@@ -286,7 +286,8 @@ class PlanFile:
         ``waypoint_a_enu_m_s2`` arrays (empty list for a plan.json without sorties).
     trajectory : Trajectory or None
         2.x: the trajectory rebuilt from its pieces (exact, carrying
-        ``target_enu_m``); None for a 1.x plan (re-solve through the way-points).
+        ``target_enu_m``); None for a 1.x plan (re-solve through the way-points),
+        or when ``load_plan`` was asked not to rebuild it (its pieces checked all the same).
     format_major : int
     """
 
@@ -310,6 +311,8 @@ class PlanFile:
     sorties: list = dataclasses.field(default_factory=list)
     trajectory: object = None
     format_major: int = PLAN_FORMAT_MAJOR
+    #: SHA-256 (hex) of the plan.json bytes read (the flight's setup record names the plan by it).
+    sha256_hex: str | None = None
 
 
 def _num_array(value, shape_tail: tuple[int, ...], src: str, key: str) -> np.ndarray:
@@ -375,9 +378,11 @@ def _samples(tr, src: str, key: str) -> dict:
     return dict(arrays, t=t)
 
 
-def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, src: str, arrays=None):
+def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, src: str, arrays=None,
+                rebuild: bool = True):
     """The 2.x ``trajectory`` as a ``Trajectory``, checked against the way-points.
-    ``arrays``: the twin's (``companion.plan_twin``): its knots and decoded values."""
+    ``arrays``: the twin's (``companion.plan_twin``): its knots and decoded values.
+    ``rebuild=False``: checked only, None returned."""
     from .trajectory import Trajectory
     from mavcore.mission.trajectory import TrajectoryConfig
     from .trajectory.sampling import hermite_position_coefficients
@@ -434,13 +439,17 @@ def _trajectory(data: dict, wp_t: np.ndarray, wp_targets: np.ndarray, target, sr
         if any(config.q_diag):
             raise PlanError(f"{src}: key 'trajectory.form'",
                             f"{FORM_KNOT_STATES!r} needs q_* = 0 in trajectory_weights (degree-7 pieces)")
+        if not rebuild:
+            return None
         return Trajectory.from_pieces(knots, hermite_position_coefficients(knots, values), wk, wp_targets,
                                       config, target, knot_states=values)
-    return Trajectory.from_pieces(knots, values, wk, wp_targets, config, target)
+    return Trajectory.from_pieces(knots, values, wk, wp_targets, config, target) if rebuild else None
 
 
-def load_plan(path: str | Path) -> PlanFile:
+def load_plan(path: str | Path, rebuild_trajectory: bool = True) -> PlanFile:
     """Read and validate a plan.json written by ``companion plan`` (format 2.x or 1.x).
+    ``rebuild_trajectory=False``: the whole route's trajectory is checked but not rebuilt
+    (``PlanFile.trajectory`` None; a sortie flight solves its own, ``companion fly --sortie``).
 
     Raises
     ------
@@ -449,12 +458,13 @@ def load_plan(path: str | Path) -> PlanFile:
         major version, or a missing/malformed key (the message names the
         file and the key). A file without ``format_version`` is read as 1.0.
     """
-    from .plan_twin import read_twin
+    from .plan_twin import digest, read_twin
 
     p = Path(path)
     src = str(p)
     raw = read_bytes(p, PlanError, "plan.json", cap="plan_bytes")
-    twin = read_twin(p, raw)
+    sha = digest(raw)             # the twin's stamp is checked against it, and the flight names the plan by it
+    twin = read_twin(p, raw, json_digest=sha)
     if twin is None:
         data, arrays = parse_json(decode_text(raw, p, PlanError), src, PlanError), None
     else:
@@ -501,7 +511,7 @@ def load_plan(path: str | Path) -> PlanFile:
         samples = _samples(data["samples"], src, "samples") if "samples" in data else {}
         target = _num_array([_get(data, "target_enu_m", src)], (3,), src, "target_enu_m")[0]
         wp_targets = np.stack([cols["p"], cols["v"], cols["a"]], axis=1)
-        trajectory = _trajectory(data, cols["t"], wp_targets, target, src, arrays)
+        trajectory = _trajectory(data, cols["t"], wp_targets, target, src, arrays, rebuild_trajectory)
     sorties = []
     raw_sorties = data.get("sorties", [])
     if not isinstance(raw_sorties, list):
@@ -527,7 +537,7 @@ def load_plan(path: str | Path) -> PlanFile:
                     p_enu_m=samples.get("p"), v_enu_m_s=samples.get("v"), a_enu_m_s2=samples.get("a"),
                     pointing_enu=samples.get("pointing"), target_enu_m=target, stats=dict(stats),
                     timings_s=dict(timings), data=data, source=src, sorties=sorties,
-                    trajectory=trajectory, format_major=major)
+                    trajectory=trajectory, format_major=major, sha256_hex=sha.tobytes().hex())
 
 
 # --- QGroundControl exports ------------------------------------------------------

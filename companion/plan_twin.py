@@ -88,9 +88,11 @@ def twin_bytes(doc: dict, json_bytes: bytes) -> bytes | None:
     return buf.getvalue()
 
 
-def read_twin(plan_path, json_bytes: bytes, lim=None) -> tuple[str, dict] | None:
+def read_twin(plan_path, json_bytes: bytes, lim=None, json_digest: np.ndarray | None = None) \
+        -> tuple[str, dict] | None:
     """(header JSON text, arrays) of the twin of the plan.json at ``plan_path`` whose
     bytes are ``json_bytes``; None without a twin, or with one of other bytes.
+    ``json_digest``: ``digest(json_bytes)`` when the caller has it already.
 
     Raises
     ------
@@ -113,7 +115,9 @@ def read_twin(plan_path, json_bytes: bytes, lim=None) -> tuple[str, dict] | None
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
         raise PlanError(path, f"not a plan twin (.npz): {exc}") from None
     stamp = arrays.get("json_sha256")
-    if stamp is None or stamp.dtype != np.uint8 or not np.array_equal(stamp, digest(json_bytes)):
+    if json_digest is None:
+        json_digest = digest(json_bytes)
+    if stamp is None or stamp.dtype != np.uint8 or not np.array_equal(stamp, json_digest):
         return None
     header = arrays.pop("header", None)
     if header is None or header.dtype != np.uint8 or header.ndim != 1:

@@ -164,3 +164,57 @@ def test_companion_plan_writes_the_twin_of_a_large_plan(tmp_path):
     with np.load(twin) as z:
         assert np.array_equal(z["json_sha256"], plan_twin.digest(out.read_bytes()))
     assert "waypoints" not in load_plan(out).data
+
+
+def test_the_plan_is_named_by_the_digest_of_the_bytes_read(planned, tmp_path):
+    # the digest the twin is checked against is the one the flight's setup record names the
+    # plan by (computed once): SHA-256 of the plan.json file, with or without a twin
+    import hashlib
+
+    from companion.commands.fly import MissionMaps, flight_setup, prepare
+
+    mission, _ = planned
+    for name, twin in (("a.json", True), ("b.json", False)):
+        path = _write(planned, tmp_path / name, twin=twin)
+        want = hashlib.sha256(path.read_bytes()).hexdigest()
+        assert load_plan(path).sha256_hex == want
+        for sortie in (None, 1):
+            fp = prepare(mission, str(path), sortie, MissionMaps(mission))
+            assert fp.plan_sha256_hex == want
+        read = flight_setup(mission, str(path), "companion", None, {})["plan_sha"]
+        assert read == want[:16]
+        # given the digest, the file is not read again: a path that no longer exists still gets it
+        gone = str(tmp_path / "moved.json")
+        assert flight_setup(mission, gone, "companion", None, {}, plan_sha256_hex=want)["plan_sha"] == read
+        assert flight_setup(mission, gone, "companion", None, {})["plan_sha"] is None
+
+
+def test_a_sortie_flight_checks_the_whole_route_without_rebuilding_it(planned, tmp_path):
+    # load_plan(rebuild_trajectory=False): the same plan but for the trajectory, which is
+    # checked (a damaged one is still refused) and not rebuilt; companion fly --sortie uses it
+    import json
+
+    from companion.commands.fly import MissionMaps, prepare
+
+    mission, _ = planned
+    for name, twin in (("a.json", True), ("b.json", False)):
+        path = _write(planned, tmp_path / name, twin=twin)
+        full, light = load_plan(path), load_plan(path, rebuild_trajectory=False)
+        assert full.trajectory is not None and light.trajectory is None
+        for f in dataclasses.fields(full):
+            x, y = getattr(full, f.name), getattr(light, f.name)
+            if isinstance(x, np.ndarray):
+                assert np.array_equal(x, y), f.name
+        # the sortie flown is the same either way (it is solved through its own way-points)
+        fp = prepare(mission, str(path), 1, MissionMaps(mission))
+        so = full.sorties[0]
+        assert np.array_equal(fp.waypoints_t_s, so["waypoint_t_s"])
+        assert fp.trajectory.t0 == so["waypoint_t_s"][0] and fp.trajectory.tf == so["waypoint_t_s"][-1]
+    # a damaged trajectory is refused without the rebuild too
+    doc = json.loads((tmp_path / "b.json").read_text())
+    doc["trajectory"]["t"][1] = doc["trajectory"]["t"][0]
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    for rebuild in (True, False):
+        with pytest.raises(PlanError, match="trajectory.t"):
+            load_plan(bad, rebuild_trajectory=rebuild)

@@ -321,7 +321,8 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None,
                                   source=f"{mission.source} (planned) --sortie {sortie}")
     from ..plan_io import load_plan
 
-    pf = load_plan(plan_path)
+    # a sortie is solved through its own way-points: the whole route's pieces are checked, not rebuilt
+    pf = load_plan(plan_path, rebuild_trajectory=sortie is None)
     # the document's tree of Python objects (~60 MB for a 10 ha plan) is not needed
     # past the loader's arrays: freed before the maps are read on top of it
     pf = dataclasses.replace(pf, data={})
@@ -339,9 +340,10 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None,
         target = pointing_target_from_rays(pf.p_enu_m, pf.pointing_enu, str(plan_path))
     if sortie is not None:
         so = pf.sorties[_pick_sortie(len(pf.sorties), sortie, str(plan_path))]
-        return sortie_flight_plan(so["waypoint_t_s"], so["waypoint_p_enu_m"], so["waypoint_v_enu_m_s"],
-                                  so["waypoint_a_enu_m_s2"], target, mission.trajectory,
-                                  source=f"{plan_path} --sortie {sortie}")
+        fp = sortie_flight_plan(so["waypoint_t_s"], so["waypoint_p_enu_m"], so["waypoint_v_enu_m_s"],
+                                so["waypoint_a_enu_m_s2"], target, mission.trajectory,
+                                source=f"{plan_path} --sortie {sortie}")
+        return dataclasses.replace(fp, plan_sha256_hex=pf.sha256_hex)
     traj = pf.trajectory
     if traj is None:
         # a 1.x plan stores samples only: the LQR solution through its way-points is exact
@@ -353,7 +355,7 @@ def prepare(mission, plan_path: str | None, sortie: int | None = None,
     return FlightPlan(traj, pf.waypoint_p_enu_m, np.asarray(target, dtype=float),
                       None if cov is None else float(cov), pf.waypoint_t_s, pf.waypoint_v_enu_m_s,
                       pf.waypoint_a_enu_m_s2, pf.path_xy_m if len(pf.path_xy_m) else None, pf.waypoint_corner,
-                      source=str(plan_path))
+                      source=str(plan_path), plan_sha256_hex=pf.sha256_hex)
 
 
 def pointing_target_from_rays(p_enu_m, s_enu, source: str) -> np.ndarray:
@@ -398,11 +400,12 @@ def open_link(connect: str, tlog_path: str | None, signing_key: bytes | None = N
 
 
 def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | None, overrides: dict,
-                 sensor_gap: str = "refuse") -> dict:
+                 sensor_gap: str = "refuse", plan_sha256_hex: str | None = None) -> dict:
     """The flight's setup record (``companion.flight.setup_record``): what ``companion replay``
     needs to rebuild this flight from its .tlog and the same mission (and plan) files, and the
     numeric environment it ran in (``companion.flight.environment``: bit-for-bit replay is
-    promised only in the same one)."""
+    promised only in the same one). ``plan_sha256_hex``: the SHA-256 of the plan bytes the
+    flight was prepared from (``PlanFile.sha256_hex``), else the file at ``plan_path`` is read."""
     import hashlib
 
     from .. import __version__
@@ -423,7 +426,7 @@ def flight_setup(mission, plan_path: str | None, control: str, cut_s: float | No
         "mission_sha": digest(mission.source),
         "map_sha": digest(mission.map_path if mission.map is not None else mission.field_path),
         "dem_sha": digest(mission.dem_path),
-        "plan_sha": digest(plan_path) if plan_path else None,
+        "plan_sha": (plan_sha256_hex[:16] if plan_sha256_hex else digest(plan_path)) if plan_path else None,
         "control": control,
         "cut_s": cut_s,
         "runner": {k: (list(v) if isinstance(v, tuple) else v) for k, v in sorted(overrides.items())},
@@ -452,6 +455,7 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
     from ..preflight import check_flight_plan
     from ..runner import MissionRunner, RunnerConfig
 
+    plan_sha = flight_plan.plan_sha256_hex   # of the plan file read (taken before a cut re-solves the plan)
     try:
         if cut_s is not None:
             flight_plan = flight_plan.cut(cut_s, mission.trajectory)
@@ -469,7 +473,8 @@ def execute(mission, flight_plan: FlightPlan, connect: str, control: str, tlog_p
         check_writable([o[:2] for o in outputs])
         cfg = RunnerConfig(control=control, **(runner_overrides or {}))
         core = build_flight_core(mission, flight_plan, cfg,
-                                 flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}, sensor_gap),
+                                 flight_setup(mission, plan_path, control, cut_s, runner_overrides or {}, sensor_gap,
+                                              plan_sha),
                                  maps)
         core.sensor_coverage = coverage_doc
     except BaseException:
