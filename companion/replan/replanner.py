@@ -105,7 +105,7 @@ from .nodata import BeamFreshness, block_no_data
 from .pace import pace
 from .perception import PoseHistory, beam_evidence
 from .rejoin import converged_from, rejoin
-from .reroute import reroute
+from .reroute import reroute, with_blocking
 from .reroute3d import reroute_3d
 from .shaper import ReferenceShaper
 from .route3d import Route3D, RouteScene, find_route
@@ -1162,17 +1162,18 @@ class Replanner:
             for others in (*tiers, None):
                 res = reroute(self.plan, known0, st, tau, self._wp_leave, blocking, travel,
                               self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
-                              self._keep_m + ROUTE_MARGIN_M, others, over)
+                              self._keep_m + ROUTE_MARGIN_M, others, over, voxel_m=self.cfg.voxel_m)
                 # the guard reads the map the route is flown on: the obstacle added (its cells)
                 self.known = res.known
                 exit_leg = self._exit_leg(st.p)
                 if exit_leg is not None:
-                    scene = RouteScene(known0, self.memory, self._keep_m, self.cfg.floor_agl_m,
+                    scene = RouteScene(res.known, self.memory, self._keep_m, self.cfg.floor_agl_m,
                                        self.cfg.ceiling_agl_m)
                     res = reroute_3d(self.plan, scene, exit_leg[1:], st, tau, self._wp_leave, blocking, travel,
                                      self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
                                      self._keep_m + ROUTE_MARGIN_M, others, over,
-                                     route=Route3D(exit_leg, 0, float(np.linalg.norm(exit_leg[1] - exit_leg[0]))))
+                                     route=Route3D(exit_leg, 0, float(np.linalg.norm(exit_leg[1] - exit_leg[0]))),
+                                     voxel_m=self.cfg.voxel_m)
                     self.known = res.known
                 plan, verdict, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st)
                 if plan is not None:
@@ -1186,8 +1187,11 @@ class Replanner:
                 # can, else the governor's: a route on the clearance itself leaves the stopping
                 # law no speed at all, and the guard refuses it)
                 goals = self._coverage_goals(st.p)
+                # the search reads the guard's picture: the blocking obstacle's columns added
+                seen = with_blocking(known0, blocking, st.p, travel, self.cfg.obstacle_depth_m,
+                                     self._keep_m + ROUTE_MARGIN_M, self.cfg.voxel_m)
                 for margin in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M) if len(goals) else ():
-                    scene = RouteScene(known0, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
+                    scene = RouteScene(seen, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
                                        self.cfg.ceiling_agl_m)
                     # from inside a clearance, out first (the lattice route starts where the leg ends)
                     start = np.asarray(st.p, float) if exit_leg is None else exit_leg[1]
@@ -1200,7 +1204,8 @@ class Replanner:
                     for others in (*tiers, None):
                         res3 = reroute_3d(self.plan, scene, goals, st, tau, self._wp_leave, blocking, travel,
                                           self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
-                                          self._keep_m + ROUTE_MARGIN_M, others, over, route=route)
+                                          self._keep_m + ROUTE_MARGIN_M, others, over, route=route,
+                                          voxel_m=self.cfg.voxel_m)
                         if res3.plan is not None:
                             self.known = res3.known
                             plan3, v3, add3 = self._paced(res3.plan, st)
