@@ -1,0 +1,147 @@
+"""Repairing a re-route the guard refused (pure; docs/replan.md "One picture, and a repair").
+
+A re-route's search keeps the clearance along its route's polyline (the 2-D
+route on the eroded free space, the 3-D route on the lattice); what the
+vehicle flies is the LQR fitted through way-points along that polyline
+(``coverage.waypoints``, ``reroute3d.prefix_waypoints``), which tracks them
+softly: where the way-points are sparse and the route turns, the fit cuts the
+corner the polyline went round. The guard judges the fit, so a route the search
+found clear could be refused, and the vehicle held although the route existed.
+
+``repair`` answers a refusal of the guard (its ``Verdict``, first failing
+sample ``t_s``) on a candidate plan:
+
+1. The way-point intervals round the refused sample, ``REACH`` either side of
+   the interval holding it, are the piece to repair.
+2. The piece's *polyline* (its way-points joined by straight segments, sampled
+   every ``STEP_M``) is judged against the same guard: the margin rule of its
+   path (``Guard.check_path``: never closer than it has been inside a
+   clearance, never within the airframe radius, out of a clearance it stays
+   out). If it fails, the route itself is too close (the search did not see
+   what the guard sees): no repair here, ``None`` (the caller adds the
+   conflict to the search's obstacles, or gives up).
+3. Else the fit cut what the polyline kept: the piece gets way-points every
+   ``DENSE_M`` along its straight segments (times in proportion to the length,
+   velocity the segment's mean, acceleration 0) and is flown ``SLOWER`` times
+   slower; the LQR is re-solved from the same initial state. The result is
+   checked again by the caller (paced and judged whole like the first).
+
+Each call densifies and slows one piece; the caller repeats it at most
+``MAX_REPAIRS`` times before it gives up on the candidate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..trajectory import generate_trajectory
+from .globalplan import GlobalPlan
+
+#: Repairs of one candidate before it is given up.
+MAX_REPAIRS = 3
+#: Way-point intervals repaired either side of the one holding the refused sample.
+REACH = 1
+#: Spacing (m) of the way-points put into a repaired piece.
+DENSE_M = 0.25
+#: A repaired piece is flown this many times slower.
+SLOWER = 1.5
+#: Spacing (m) of the samples of a piece's polyline.
+STEP_M = 0.05
+
+
+@dataclass(frozen=True)
+class Repair:
+    """Outcome of ``repair``.
+
+    Attributes
+    ----------
+    plan : GlobalPlan or None
+        The repaired candidate (None: not repairable by the fit).
+    reason : str
+        What was done, or why not (one line).
+    piece : tuple of int
+        The way-point interval range [j0, j1) repaired or judged.
+    """
+
+    plan: GlobalPlan | None
+    reason: str
+    piece: tuple = ()
+
+
+def _piece(plan: GlobalPlan, t_s: float) -> tuple[int, int]:
+    """[j0, j1): the way-point intervals within ``REACH`` of the one holding ``t_s``."""
+    n = len(plan.t_s) - 1
+    j = int(np.clip(np.searchsorted(plan.t_s, t_s, side="right") - 1, 0, n - 1))
+    return max(0, j - REACH), min(n, j + REACH + 1)
+
+
+def polyline(p_enu_m: np.ndarray, step_m: float = STEP_M) -> np.ndarray:
+    """(m, 3) the straight segments between the (k, 3) points, sampled every ``step_m``
+    at most (each segment's ends included once)."""
+    p = np.asarray(p_enu_m, float).reshape(-1, 3)
+    out = [p[:1]]
+    for a, b in zip(p[:-1], p[1:]):
+        n = max(1, int(np.ceil(np.linalg.norm(b - a) / step_m)))
+        out.append(a + np.linspace(0.0, 1.0, n + 1)[1:, None] * (b - a))
+    return np.vstack(out)
+
+
+def densified(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, corner, j0: int, j1: int,
+              dense_m: float = DENSE_M, slower: float = SLOWER) -> tuple:
+    """(t, p, v, a, corner) with the intervals [j0, j1) cut into pieces of at most
+    ``dense_m`` (inserted way-points on the straight segment, times in proportion,
+    velocity the segment's mean over its stretched time, acceleration 0, not
+    corners) and ``slower`` times longer; the way-points at the piece's ends keep
+    their positions, their velocities and accelerations scaled to the slower pace
+    (those inside it: divided by ``slower``, by its square); later times shifted."""
+    t = np.asarray(t_s, float)
+    P, V, A = (np.asarray(x, float) for x in (p_enu_m, v_enu_m_s, a_enu_m_s2))
+    C = np.asarray(corner, bool)
+    nt, nP, nV, nA, nC = [t[0]], [P[0]], [V[0]], [A[0]], [C[0]]
+    shift = 0.0
+    for j in range(len(t) - 1):
+        dt = float(t[j + 1] - t[j])
+        if j0 <= j < j1:
+            d = P[j + 1] - P[j]
+            n = max(1, int(np.ceil(np.linalg.norm(d) / dense_m)))
+            dt_new = slower * dt
+            v_mean = d / dt_new
+            for k in range(1, n):
+                f = k / n
+                nt.append(t[j] + shift + f * dt_new)
+                nP.append(P[j] + f * d)
+                nV.append(v_mean)
+                nA.append(np.zeros(3))
+                nC.append(False)
+            shift += dt_new - dt
+        scale = slower if (j0 <= j < j1 or j0 <= j + 1 < j1) else 1.0     # way-point j + 1 joins j, j + 1
+        nt.append(t[j + 1] + shift)
+        nP.append(P[j + 1])
+        nV.append(V[j + 1] / scale)
+        nA.append(A[j + 1] / (scale * scale))
+        nC.append(C[j + 1])
+    return np.array(nt), np.array(nP), np.array(nV), np.array(nA), np.array(nC)
+
+
+def repair(plan: GlobalPlan, x0: np.ndarray, verdict, guard) -> Repair:
+    """The candidate ``plan`` (its trajectory from state ``x0``, (4, 3)) repaired where the
+    guard's ``verdict`` refused it (module doc)."""
+    if verdict is None or verdict.ok or verdict.t_s is None or len(plan.t_s) < 2:
+        return Repair(None, "nothing to repair")
+    j0, j1 = _piece(plan, float(verdict.t_s))
+    P = np.asarray(plan.p_enu_m, float).copy()
+    P[0] = np.asarray(x0, float)[0]
+    line = polyline(P[j0:j1 + 1])
+    if not guard.check_path(line).ok:
+        return Repair(None, f"the route itself breaks the {verdict.surface} clearance between way-points "
+                            f"{j0} and {j1}", (j0, j1))
+    t, p, v, a, corner = densified(plan.t_s, P, plan.v_enu_m_s, plan.a_enu_m_s2, plan.corner, j0, j1)
+    traj = generate_trajectory(t, p, v, a, plan.trajectory_config, initial_state=np.asarray(x0, float),
+                               target_enu_m=plan.target_enu_m)
+    segs = np.array([[s.start_xy, s.end_xy] for s in plan.segments], dtype=float).reshape(-1, 2, 2)
+    new = GlobalPlan.from_waypoints(traj, t, p, v, a, corner, segs, plan.target_enu_m, plan.flight,
+                                    plan.trajectory_config, plan.min_segment_m, plan.final_xy)
+    new = replace(new, new_until_s=plan.new_until_s)
+    return Repair(new, f"way-points {j0}-{j1} every {DENSE_M:g} m, {SLOWER:g} x slower", (j0, j1))
