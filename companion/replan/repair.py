@@ -21,8 +21,9 @@ sample ``t_s``) on a candidate plan:
    what the guard sees): no repair here, ``None`` (the caller adds the
    conflict to the search's obstacles, or gives up).
 3. Else the fit cut what the polyline kept: the piece gets way-points every
-   ``DENSE_M`` along its straight segments (times in proportion to the length,
-   velocity the segment's mean, acceleration 0) and is flown ``SLOWER`` times
+   ``DENSE_M`` along its straight segments (moving along each as a cubic
+   Hermite between its end way-points' speeds: into a turn at rest it slows
+   down instead of arriving at the mean speed) and is flown ``SLOWER`` times
    slower; the LQR is re-solved from the same initial state. The result is
    checked again by the caller (paced and judged whole like the first).
 
@@ -90,37 +91,49 @@ def polyline(p_enu_m: np.ndarray, step_m: float = STEP_M) -> np.ndarray:
 
 def densified(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, corner, j0: int, j1: int,
               dense_m: float = DENSE_M, slower: float = SLOWER) -> tuple:
-    """(t, p, v, a, corner) with the intervals [j0, j1) cut into pieces of at most
-    ``dense_m`` (inserted way-points on the straight segment, times in proportion,
-    velocity the segment's mean over its stretched time, acceleration 0, not
-    corners) and ``slower`` times longer; the way-points at the piece's ends keep
-    their positions, their velocities and accelerations scaled to the slower pace
-    (those inside it: divided by ``slower``, by its square); later times shifted."""
+    """(t, p, v, a, corner) with the intervals [j0, j1) flown ``slower`` times longer and
+    cut into pieces of at most ``dense_m``: way-points inserted on the straight segment,
+    moving along it as the cubic Hermite s(tau) from the segment's start to its end
+    with the end way-points' speeds along it (so that an interval ending at rest, a
+    turn, slows down into it instead of arriving at the mean speed), not corners. The
+    way-points inside the piece and at its ends keep their positions, their velocities
+    divided by ``slower``, their accelerations by its square; later times shifted."""
     t = np.asarray(t_s, float)
     P, V, A = (np.asarray(x, float) for x in (p_enu_m, v_enu_m_s, a_enu_m_s2))
     C = np.asarray(corner, bool)
-    nt, nP, nV, nA, nC = [t[0]], [P[0]], [V[0]], [A[0]], [C[0]]
+    piece = [j0 <= j < j1 for j in range(len(t) - 1)]
+    # way-point i joins intervals i - 1 and i: slower where either is in the piece
+    scale = np.array([slower if (i > 0 and piece[i - 1]) or (i < len(piece) and piece[i]) else 1.0
+                      for i in range(len(t))])
+    nt, nP, nV, nA, nC = [t[0]], [P[0]], [V[0] / scale[0]], [A[0] / scale[0] ** 2], [C[0]]
     shift = 0.0
     for j in range(len(t) - 1):
         dt = float(t[j + 1] - t[j])
-        if j0 <= j < j1:
+        if piece[j]:
             d = P[j + 1] - P[j]
-            n = max(1, int(np.ceil(np.linalg.norm(d) / dense_m)))
-            dt_new = slower * dt
-            v_mean = d / dt_new
-            for k in range(1, n):
-                f = k / n
-                nt.append(t[j] + shift + f * dt_new)
-                nP.append(P[j] + f * d)
-                nV.append(v_mean)
-                nA.append(np.zeros(3))
-                nC.append(False)
-            shift += dt_new - dt
-        scale = slower if (j0 <= j < j1 or j0 <= j + 1 < j1) else 1.0     # way-point j + 1 joins j, j + 1
+            L = float(np.linalg.norm(d))
+            T = slower * dt
+            n = max(1, int(np.ceil(L / dense_m)))
+            if L > 1e-9:
+                u = d / L
+                w0, w1 = float(V[j] @ u) / scale[j], float(V[j + 1] @ u) / scale[j + 1]
+                for k in range(1, n):
+                    tau = k / n
+                    s = (tau ** 3 - 2 * tau ** 2 + tau) * T * w0 + (-2 * tau ** 3 + 3 * tau ** 2) * L \
+                        + (tau ** 3 - tau ** 2) * T * w1
+                    ds = ((3 * tau ** 2 - 4 * tau + 1) * T * w0 + (-6 * tau ** 2 + 6 * tau) * L
+                          + (3 * tau ** 2 - 2 * tau) * T * w1) / T
+                    dds = ((6 * tau - 4) * T * w0 + (-12 * tau + 6) * L + (6 * tau - 2) * T * w1) / (T * T)
+                    nt.append(t[j] + shift + tau * T)
+                    nP.append(P[j] + s * u)
+                    nV.append(ds * u)
+                    nA.append(dds * u)
+                    nC.append(False)
+            shift += T - dt
         nt.append(t[j + 1] + shift)
         nP.append(P[j + 1])
-        nV.append(V[j + 1] / scale)
-        nA.append(A[j + 1] / (scale * scale))
+        nV.append(V[j + 1] / scale[j + 1])
+        nA.append(A[j + 1] / scale[j + 1] ** 2)
         nC.append(C[j + 1])
     return np.array(nt), np.array(nP), np.array(nV), np.array(nA), np.array(nC)
 

@@ -140,6 +140,10 @@ GOVERNOR_LAG_S = 0.6
 #: A re-route keeps this much (m) beyond the clearance and body from the obstacle's
 #: footprint: the sensors saw one face of it, its sides may reach a little farther.
 ROUTE_MARGIN_M = 0.3
+#: Margins (m) beyond the clearance and body the 3-D leave's lattice keeps, tried in turn: the
+#: route's, the governor's, and last none, the independent route check's own question
+#: (``routecheck``), so that the leave finds a route whenever the check does.
+LEAVE_MARGINS_M = (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M, 0.0)
 #: A route the guard refuses for what its own polyline passes is searched again round the
 #: map's voxels within the clearance and body plus this (m) of the refused sample.
 CONFLICT_REACH_M = 0.5
@@ -1236,7 +1240,7 @@ class Replanner:
                 # the search reads the guard's picture: the blocking obstacle's columns added
                 seen = with_blocking(known0, blocking, st.p, travel, self.cfg.obstacle_depth_m,
                                      self._keep_m + ROUTE_MARGIN_M, self.cfg.voxel_m)
-                for margin in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M, 0.0) if len(goals) else ():
+                for margin in LEAVE_MARGINS_M if len(goals) else ():
                     scene = RouteScene(seen, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
                                        self.cfg.ceiling_agl_m)
                     # from inside a clearance, out first (the lattice route starts where the leg ends)
