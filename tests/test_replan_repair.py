@@ -270,3 +270,19 @@ def test_checked_proposes_the_repaired_candidate_only():
         assert Replanner._checked(host0, plan, st)[0] is None
     finally:
         rr.MAX_REPAIRS = orig
+
+
+def test_densified_piece_hand_worked():
+    # one interval of 1 m in 2 s from rest to rest, 0.25 m way-points, 1.5 x slower (3 s):
+    # the cubic Hermite between speeds 0 and 0 is s = L (3 tau^2 - 2 tau^3): at tau = 1/4
+    # 0.15625 m, at 1/2 0.5 m moving at 1.5 L / T = 0.5 m/s; the interval after it keeps
+    # its 1 s, shifted by the 1 s added; way-point 1 (joining both) at rest still
+    t = np.array([0.0, 2.0, 3.0])
+    P = np.array([[0.0, 0, 1], [1.0, 0, 1], [2.0, 0, 1]])
+    Vw = np.array([[0.0, 0, 0], [0.0, 0, 0], [0.0, 0, 0]])
+    A = np.zeros_like(P)
+    nt, nP, nV, nA, nC = repair_mod.densified(t, P, Vw, A, np.ones(3, bool), 0, 1, 0.25, 1.5)
+    assert nt.tolist() == pytest.approx([0.0, 0.75, 1.5, 2.25, 3.0, 4.0])
+    assert nP[:, 0].tolist() == pytest.approx([0.0, 0.15625, 0.5, 0.84375, 1.0, 2.0])
+    assert nV[2, 0] == pytest.approx(0.5)
+    assert nC.tolist() == [True, False, False, False, True, True]
