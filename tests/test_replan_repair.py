@@ -286,3 +286,28 @@ def test_densified_piece_hand_worked():
     assert nP[:, 0].tolist() == pytest.approx([0.0, 0.15625, 0.5, 0.84375, 1.0, 2.0])
     assert nV[2, 0] == pytest.approx(0.5)
     assert nC.tolist() == [True, False, False, False, True, True]
+
+
+def test_route_that_grazes_the_clearance_is_moved_off_it():
+    # a route at the clearance itself, 1 mm inside (a lattice route's node on it): the
+    # piece's way-points within the clearance + 2 cm are moved off the box by what they
+    # lack (at most 4 cm), and the repaired, paced candidate keeps the clearance by the
+    # box's exact distance; 0.85 m (5 cm inside, above) is not a graze
+    a = REQ - 0.001
+    plan, x0 = _l_turn(a, 3.0)
+    g = _guard()
+    paced, verdict = pace(plan, x0, g)
+    assert not verdict.ok
+    fixed = repair(paced, x0, verdict, g)
+    assert fixed.plan is not None and "moved off" in fixed.reason
+    # every way-point of the repair within 4 cm of the route's polyline (sampled every 5 mm)
+    line = polyline(paced.p_enu_m, 0.005)
+    moved = np.linalg.norm(fixed.plan.p_enu_m[1:, None, :] - line[None, :, :], axis=2).min(axis=1)
+    assert moved.max() <= repair_mod.NUDGE_MAX_M + repair_mod.NUDGE_MARGIN_M + 0.005
+    again, v2 = pace(fixed.plan, x0, g)
+    for _ in range(repair_mod.MAX_REPAIRS):
+        if v2.ok:
+            break
+        again, v2 = pace(repair(again, x0, v2, g).plan, x0, g)
+    assert v2.ok
+    assert _min_box_distance(again) >= REQ

@@ -19,7 +19,12 @@ sample ``t_s``) on a candidate plan:
    clearance, never within the airframe radius, out of a clearance it stays
    out). If it fails, the route itself is too close (the search did not see
    what the guard sees): no repair here, ``None`` (the caller adds the
-   conflict to the search's obstacles, or gives up).
+   conflict to the search's obstacles, or gives up); unless it only grazes
+   it, by at most ``NUDGE_MAX_M`` (a 3-D lattice route keeps its clearance
+   from the blocked nodes, not from the surfaces: one passed a row's end at
+   its clearance to the tenth of a millimetre, and the margin rule refused
+   it): then the piece's way-points that keep less than the clearance plus
+   ``NUDGE_MARGIN_M`` are moved off that surface (``nudge``) and judged again.
 3. Else the fit cut what the polyline kept: the piece gets way-points every
    ``DENSE_M`` along its straight segments (moving along each as a cubic
    Hermite between its end way-points' speeds: into a turn at rest it slows
@@ -48,6 +53,11 @@ REACH = 1
 DENSE_M = 0.25
 #: A repaired piece is flown this many times slower.
 SLOWER = 1.5
+#: A route that grazes a clearance by at most this (m) (a lattice route's node at the
+#: clearance itself) has the piece's way-points moved off it (``nudge``) ...
+NUDGE_MAX_M = 0.02
+#: ... to keep this much (m) more than the clearance.
+NUDGE_MARGIN_M = 0.02
 #: Spacing (m) of the samples of a piece's polyline.
 STEP_M = 0.05
 
@@ -146,15 +156,35 @@ def repair(plan: GlobalPlan, x0: np.ndarray, verdict, guard) -> Repair:
     j0, j1 = _piece(plan, float(verdict.t_s))
     P = np.asarray(plan.p_enu_m, float).copy()
     P[0] = np.asarray(x0, float)[0]
-    line = polyline(P[j0:j1 + 1])
-    if not guard.check_path(line).ok:
-        return Repair(None, f"the route itself breaks the {verdict.surface} clearance between way-points "
-                            f"{j0} and {j1}", (j0, j1))
     t, p, v, a, corner = densified(plan.t_s, P, plan.v_enu_m_s, plan.a_enu_m_s2, plan.corner, j0, j1)
+    d1 = j1 + len(t) - len(plan.t_s)                 # the piece's last way-point, densified
+    line = guard.check_path(polyline(p[j0:d1 + 1]))
+    nudged = ""
+    if not line.ok and line.distance_m is not None and line.distance_m >= line.required_m - NUDGE_MAX_M:
+        p = nudge(p, j0, d1, line.surface, guard)
+        line = guard.check_path(polyline(p[j0:d1 + 1]))
+        nudged = f", moved off the {line.surface or 'surface'}s by up to {NUDGE_MAX_M + NUDGE_MARGIN_M:g} m"
+    if not line.ok:
+        return Repair(None, f"the route itself breaks the {line.surface} clearance between way-points "
+                            f"{j0} and {j1}", (j0, j1))
     traj = generate_trajectory(t, p, v, a, plan.trajectory_config, initial_state=np.asarray(x0, float),
                                target_enu_m=plan.target_enu_m)
     segs = np.array([[s.start_xy, s.end_xy] for s in plan.segments], dtype=float).reshape(-1, 2, 2)
     new = GlobalPlan.from_waypoints(traj, t, p, v, a, corner, segs, plan.target_enu_m, plan.flight,
                                     plan.trajectory_config, plan.min_segment_m, plan.final_xy)
     new = replace(new, new_until_s=plan.new_until_s)
-    return Repair(new, f"way-points {j0}-{j1} every {DENSE_M:g} m, {SLOWER:g} x slower", (j0, j1))
+    return Repair(new, f"way-points {j0}-{j1} every {DENSE_M:g} m, {SLOWER:g} x slower{nudged}", (j0, j1))
+
+
+def nudge(P: np.ndarray, j0: int, j1: int, kind: str, guard) -> np.ndarray:
+    """(N, 3) the way-points with those of the piece [j0, j1] (not the first of the plan, the
+    vehicle's state, nor its last) that keep less than the clearance of ``kind`` plus
+    ``NUDGE_MARGIN_M`` moved that far along the direction the distance grows fastest
+    (``Guard.normal``), by at most ``NUDGE_MAX_M + NUDGE_MARGIN_M``."""
+    P = np.array(P, float)
+    req = guard.required_m(kind) + NUDGE_MARGIN_M
+    for k in range(max(j0, 1), min(j1, len(P) - 2) + 1):
+        d = float(guard.distances(P[k][None])[kind][0])
+        if d < req:
+            P[k] = P[k] + min(req - d, NUDGE_MAX_M + NUDGE_MARGIN_M) * guard.normal(kind, P[k])
+    return P

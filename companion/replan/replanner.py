@@ -610,14 +610,34 @@ class Replanner:
             fix = repair(paced, x0, verdict, self.guard) if n < MAX_REPAIRS else None
             if fix is None or fix.plan is None:
                 note = f"repaired {n} x" if fix is None else (f"repaired {n} x, then " if n else "") + fix.reason
-                conflict = None
-                if fix is not None and verdict.surface == "obstacle" and verdict.point_enu_m is not None:
-                    pts = self.memory.points()
-                    if len(pts):
-                        q = np.asarray(verdict.point_enu_m, float)
-                        conflict = pts[np.linalg.norm(pts - q, axis=1) <= self._keep_m + CONFLICT_REACH_M]
+                conflict = None if fix is None else self._conflict(verdict)
                 return None, verdict, 0.0, note, conflict
             cand, n = fix.plan, n + 1
+
+    def _conflict(self, verdict) -> np.ndarray | None:
+        """(k, 3) what the refused sample of a route that itself breaks a clearance came too
+        close to, for the 2-D search to keep from as from an obstacle: the map's voxels, or
+        the row cells (at the sample's height), within the clearance and body plus
+        ``CONFLICT_REACH_M`` of it; None for the terrain or without a point."""
+        if verdict.point_enu_m is None or verdict.surface not in ("obstacle", "row"):
+            return None
+        q = np.asarray(verdict.point_enu_m, float)
+        reach = self._keep_m + CONFLICT_REACH_M
+        if verdict.surface == "obstacle":
+            pts = self.memory.points()
+            return pts[np.linalg.norm(pts - q, axis=1) <= reach] if len(pts) else None
+        grid = self.known.grid
+        rc = self.known.cell_of(float(q[0]), float(q[1]))
+        if rc is None:
+            return None
+        k = int(np.ceil(reach / grid.resolution_m))
+        r0, c0 = max(0, rc[0] - k), max(0, rc[1] - k)
+        rows, cols = np.nonzero(np.asarray(grid.occupied)[r0:rc[0] + k + 1, c0:rc[1] + k + 1])
+        if not len(rows):
+            return None
+        x, y = grid.cell_to_world(rows + r0, cols + c0)
+        near = np.hypot(x - q[0], y - q[1]) <= reach
+        return np.column_stack([x[near], y[near], np.full(int(near.sum()), q[2])]) if near.any() else None
 
     def _leg_frame(self, k: int):
         """(A (3,), B (3,), u_t (2,), u_n (2,)) of leg k of the plan (``GlobalPlan.leg_frame``)."""
