@@ -311,3 +311,25 @@ def test_route_that_grazes_the_clearance_is_moved_off_it():
         again, v2 = pace(repair(again, x0, v2, g).plan, x0, g)
     assert v2.ok
     assert _min_box_distance(again) >= REQ
+
+
+def test_vehicle_inside_a_clearance_finds_the_route_the_check_finds():
+    # stopped 0.8 m from a box taller than the ceiling (inside its 0.942 m keep): the
+    # vehicle's own node is not free; the search and the check both start from the
+    # nearest free node within 1.5 m and both reach the goal beyond the box's side;
+    # the search's first leg from the vehicle to that node is at most 1.5 m
+    m = ObstacleMap(V)
+    for x in np.arange(5.0 + V / 2, 5.5, V):
+        for y in np.arange(4.0 + V / 2, 6.0, V):
+            m.add((x, y, 3.5))
+    known = _known()
+    start, goal = np.array([4.2, 5.0, 1.5]), [(8.0, 5.0, 1.5)]
+    scene = RouteScene(known, m, KEEP + min(LEAVE_MARGINS_M), 0.5, CEIL, 0.25)
+    r = find_route(scene, start, goal)
+    assert route_exists(scene, start, goal) == [True]
+    assert r is not None
+    assert np.linalg.norm(r.path_enu_m[1] - start) <= 1.5 + 1e-9
+    p = _dense(r.path_enu_m[1:])
+    lo, hi = np.array([5.0, 4.0, -1e9]), np.array([5.5, 6.0, 3.6])
+    e = np.maximum(np.maximum(lo - p, p - hi), 0.0)
+    assert np.sqrt((e * e).sum(axis=1)).min() >= KEEP - 1e-9
