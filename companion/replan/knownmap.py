@@ -8,7 +8,9 @@ A rangefinder hit at (x, y, z) (ENU, m) is a *known* feature when
   z <= terrain(x, y) + canopy height + tolerance (a row is a box from the
   ground to the canopy height over each occupied cell, as the SITL renders it);
 - ``added``: (x, y) lies within the tolerance of an obstacle cell added by a
-  re-route (any height: its top is unknown);
+  re-route and z is at most its column's top + tolerance (``added_top``: the
+  top of the obstacle it stands for, the upper face of the highest voxel the
+  map holds there; +inf where unknown: then any height);
 
 and *unknown* otherwise (an unknown OGM cell is not a known feature). The
 tolerance is applied on the grid as a dilation of the occupied cells by the
@@ -26,6 +28,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import ndimage
 
 from ..coverage.freespace import FreeSpace, dilate_runs, dilate_runs_banded, disk_half_widths, erode_free_space
 from mavcore.maps.grid import ElevationModel, OccupancyGrid
@@ -67,6 +70,12 @@ class KnownMap:
         ``added`` dilated by the tolerance.
     height : HeightField
         Scalar terrain lookup.
+    added_top : (rows, cols) float32
+        Top (m, map z) of the column over each added cell (-inf where none is added,
+        +inf where its top is unknown): the guard, the 3-D route search and the route
+        check read the added obstacle as the same column (docs/replan.md "One picture").
+    known_added_top : (rows, cols) float32
+        ``added_top`` dilated (greatest) by the tolerance, as ``known_added``.
     """
 
     grid: OccupancyGrid
@@ -78,6 +87,8 @@ class KnownMap:
     added: np.ndarray
     known_added: np.ndarray
     height: HeightField
+    added_top: np.ndarray | None = None
+    known_added_top: np.ndarray | None = None
 
     @classmethod
     def build(cls, grid: OccupancyGrid, dem: ElevationModel, free: FreeSpace,
@@ -100,8 +111,9 @@ class KnownMap:
         known_rows = dilate_runs_banded(np.asarray(grid.occupied, dtype=bool), widths, outside=False)
         # nothing added yet: a read-only view of one False (no memory; ``with_obstacle`` copies)
         empty = np.broadcast_to(np.zeros(1, dtype=bool), grid.shape)
+        no_top = np.broadcast_to(np.full(1, -np.inf, dtype=np.float32), grid.shape)
         return cls(grid, dem, free, float(canopy_height_m), float(tolerance_m), known_rows,
-                   empty, empty, HeightField(dem))
+                   empty, empty, HeightField(dem), no_top, no_top)
 
     @classmethod
     def from_mission(cls, mission, grid: OccupancyGrid, dem: ElevationModel,
@@ -192,11 +204,19 @@ class KnownMap:
             return KNOWN_GROUND
         cell = self.cell_of(x, y)
         if cell is not None:
-            if self.known_added[cell]:
+            if self.known_added[cell] and z <= self.added_top_at(cell, dilated=True) + self.tolerance_m:
                 return KNOWN_ADDED
             if self.known_rows[cell] and z <= ground + self.canopy_height_m + self.tolerance_m:
                 return KNOWN_ROW
         return UNKNOWN
+
+    def added_top_at(self, cell: tuple[int, int], dilated: bool = False) -> float:
+        """Top (m) of the added column over ``cell`` (-inf: none; +inf: unknown; a map
+        built without tops: +inf over every added cell)."""
+        tops = self.known_added_top if dilated else self.added_top
+        if tops is None:
+            return math.inf if (self.known_added if dilated else self.added)[cell] else -math.inf
+        return float(tops[cell])
 
     def is_known(self, x: float, y: float, z: float) -> bool:
         """True when the hit lies on a known feature (``classify`` is not ``"unknown"``)."""
@@ -259,20 +279,25 @@ class KnownMap:
 
     # --- obstacles added in flight -------------------------------------------------------
 
-    def with_obstacle(self, points_xy_m: np.ndarray, keep_m: float | None = None) -> "KnownMap":
+    def with_obstacle(self, points_xy_m: np.ndarray, keep_m: float | None = None,
+                      tops_z_m: np.ndarray | None = None) -> "KnownMap":
         """A copy with the cells under ``points_xy_m`` ((k, 2), ENU m) occupied.
 
         The eroded free space loses every cell within ``keep_m`` (at least,
         and by default, the erosion threshold) of a new cell (the disk of
         ``erode_free_space``, computed in a window around the points), the
         classification masks gain the cells dilated by the tolerance. Points
-        off the grid are ignored.
+        off the grid are ignored. ``tops_z_m`` ((k,) m, map z): the top of the
+        column each point stands for; a cell's top is the greatest of its points'
+        (None: unknown, +inf).
         """
         pts = np.asarray(points_xy_m, dtype=float).reshape(-1, 2)
-        cells = [c for c in (self.cell_of(float(x), float(y)) for x, y in pts) if c is not None]
-        if not cells:
+        tops = np.full(len(pts), np.inf) if tops_z_m is None else np.asarray(tops_z_m, dtype=float).reshape(-1)
+        on = [(c, float(t)) for c, t in ((self.cell_of(float(x), float(y)), t) for (x, y), t in zip(pts, tops))
+              if c is not None]
+        if not on:
             return self
-        rc = np.array(cells)
+        rc = np.array([c for c, _ in on])
         h = self.grid.resolution_m
         keep = max(self.free.threshold_m, keep_m if keep_m is not None else 0.0)
         erode_w = disk_half_widths(keep / h)
@@ -283,6 +308,9 @@ class KnownMap:
         c0, c1 = max(0, rc[:, 1].min() - k), min(cols, rc[:, 1].max() + k + 1)
         added = self.added.copy()
         added[rc[:, 0], rc[:, 1]] = True
+        base = self.added_top if self.added_top is not None else np.where(self.added, np.inf, -np.inf)
+        added_top = np.array(base, dtype=np.float32)
+        np.maximum.at(added_top, (rc[:, 0], rc[:, 1]), np.array([t for _, t in on], dtype=np.float32))
         win = added[r0:r1, c0:c1]
         eroded = self.free.eroded.copy()
         eroded[r0:r1, c0:c1] &= ~dilate_runs(win, erode_w, outside=False)
@@ -290,6 +318,25 @@ class KnownMap:
         free_cells[rc[:, 0], rc[:, 1]] = False
         known_added = self.known_added.copy()
         known_added[r0:r1, c0:c1] |= dilate_runs(win, known_w, outside=False)
+        known_top = np.array(self.known_added_top if self.known_added_top is not None
+                             else np.where(self.known_added, np.inf, -np.inf), dtype=np.float32)
+        disk = _disk(known_w)
+        known_top[r0:r1, c0:c1] = np.maximum(known_top[r0:r1, c0:c1], ndimage.maximum_filter(
+            added_top[r0:r1, c0:c1], footprint=disk, mode="constant", cval=-np.inf))
         free = FreeSpace(eroded=eroded, free=free_cells, resolution_m=self.free.resolution_m,
                          threshold_m=self.free.threshold_m)
-        return replace(self, free=free, added=added, known_added=known_added)
+        return replace(self, free=free, added=added, known_added=known_added, added_top=added_top,
+                       known_added_top=known_top)
+
+
+def _disk(half_widths: np.ndarray) -> np.ndarray:
+    """The bool footprint of ``dilate_runs``'s set ``{(dr, dc): |dc| <= w[K + dr]}``
+    (``disk_half_widths``: 2K + 1 entries, row offsets -K..K)."""
+    w = np.asarray(half_widths, dtype=int)
+    k = (len(w) - 1) // 2
+    p = max(k, int(w.max()) if len(w) else 0, 0)
+    out = np.zeros((2 * p + 1, 2 * p + 1), dtype=bool)
+    for i, v in enumerate(w.tolist()):
+        if v >= 0:
+            out[p + i - k, p - v:p + v + 1] = True
+    return out

@@ -106,7 +106,8 @@ from .pace import pace
 from .attitude_wait import AttitudeWait
 from .perception import PoseHistory, beam_evidence
 from .rejoin import converged_from, rejoin
-from .reroute import reroute
+from .repair import MAX_REPAIRS, repair
+from .reroute import reroute, with_blocking
 from .reroute3d import reroute_3d
 from .shaper import ReferenceShaper
 from .route3d import Route3D, RouteScene, find_route
@@ -140,6 +141,13 @@ GOVERNOR_LAG_S = 0.6
 #: A re-route keeps this much (m) beyond the clearance and body from the obstacle's
 #: footprint: the sensors saw one face of it, its sides may reach a little farther.
 ROUTE_MARGIN_M = 0.3
+#: Margins (m) beyond the clearance and body the 3-D leave's lattice keeps, tried in turn: the
+#: route's, the governor's, and last none, the independent route check's own question
+#: (``routecheck``), so that the leave finds a route whenever the check does.
+LEAVE_MARGINS_M = (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M, 0.0)
+#: A route the guard refuses for what its own polyline passes is searched again round the
+#: map's voxels within the clearance and body plus this (m) of the refused sample.
+CONFLICT_REACH_M = 0.5
 #: Extra height (m) above the top of an obstacle plus the clearance and the governor margin.
 PASS_MARGIN_M = 0.1
 #: Obstacle points closer than this (m) to a nearer one belong to the same obstacle.
@@ -583,6 +591,55 @@ class Replanner:
         if not verdict.ok:
             return None, verdict, 0.0
         return paced, verdict, float(paced.t_s[-1] - plan.t_s[-1])
+
+    def _checked(self, plan: GlobalPlan, st) -> tuple:
+        """(plan or None, verdict, seconds added, note, conflict): the one place a re-route is
+        proposed (docs/replan.md "One picture, and a repair"). The candidate is paced to the
+        guard and judged whole (``pace``); refused, it is repaired where its fit cut what its
+        route kept (``repair``: denser way-points, slower) and judged again, at most
+        ``MAX_REPAIRS`` times. ``note`` says how often it was repaired, or why not;
+        ``conflict`` ((k, 3) or None): where the route itself breaks an obstacle's clearance,
+        the map's voxels there, for the search to go round (None: not that)."""
+        if self.guard is None:
+            return plan, None, 0.0, "", None
+        x0 = np.array([st.p, st.v, st.a, st.jerk], dtype=float)
+        t_end = float(plan.t_s[-1])
+        cand, n = plan, 0
+        while True:
+            paced, verdict = pace(cand, x0, self.guard)
+            if verdict.ok:
+                return paced, verdict, float(paced.t_s[-1] - t_end), (f"repaired {n} x" if n else ""), None
+            fix = repair(paced, x0, verdict, self.guard) if n < MAX_REPAIRS else None
+            if fix is None or fix.plan is None:
+                note = f"repaired {n} x" if fix is None else (f"repaired {n} x, then " if n else "") + fix.reason
+                conflict = None if fix is None else self._conflict(verdict)
+                return None, verdict, 0.0, note, conflict
+            cand, n = fix.plan, n + 1
+
+    def _conflict(self, verdict) -> np.ndarray | None:
+        """(k, 3) what the refused sample of a route that itself breaks a clearance came too
+        close to, for the 2-D search to keep from as from an obstacle: the map's voxels, or
+        the row cells (at the sample's height), within the clearance and body plus
+        ``CONFLICT_REACH_M`` of it; None for the terrain or without a point."""
+        if verdict.point_enu_m is None or verdict.surface not in ("obstacle", "row"):
+            return None
+        q = np.asarray(verdict.point_enu_m, float)
+        reach = self._keep_m + CONFLICT_REACH_M
+        if verdict.surface == "obstacle":
+            pts = self.memory.points()
+            return pts[np.linalg.norm(pts - q, axis=1) <= reach] if len(pts) else None
+        grid = self.known.grid
+        rc = self.known.cell_of(float(q[0]), float(q[1]))
+        if rc is None:
+            return None
+        k = int(np.ceil(reach / grid.resolution_m))
+        r0, c0 = max(0, rc[0] - k), max(0, rc[1] - k)
+        rows, cols = np.nonzero(np.asarray(grid.occupied)[r0:rc[0] + k + 1, c0:rc[1] + k + 1])
+        if not len(rows):
+            return None
+        x, y = grid.cell_to_world(rows + r0, cols + c0)
+        near = np.hypot(x - q[0], y - q[1]) <= reach
+        return np.column_stack([x[near], y[near], np.full(int(near.sum()), q[2])]) if near.any() else None
 
     def _leg_frame(self, k: int):
         """(A (3,), B (3,), u_t (2,), u_n (2,)) of leg k of the plan (``GlobalPlan.leg_frame``)."""
@@ -1190,21 +1247,34 @@ class Replanner:
             # (judged on the map the route is flown on: the blocking obstacle's cells, columns
             # of unknown height, can put a vehicle stopped over its side inside their clearance)
             for others in (*tiers, None):
-                res = reroute(self.plan, known0, st, tau, self._wp_leave, blocking, travel,
-                              self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
-                              self._keep_m + ROUTE_MARGIN_M, others, over)
-                # the guard reads the map the route is flown on: the obstacle added (its cells)
-                self.known = res.known
-                exit_leg = self._exit_leg(st.p)
-                if exit_leg is not None:
-                    scene = RouteScene(known0, self.memory, self._keep_m, self.cfg.floor_agl_m,
-                                       self.cfg.ceiling_agl_m)
-                    res = reroute_3d(self.plan, scene, exit_leg[1:], st, tau, self._wp_leave, blocking, travel,
-                                     self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
-                                     self._keep_m + ROUTE_MARGIN_M, others, over,
-                                     route=Route3D(exit_leg, 0, float(np.linalg.norm(exit_leg[1] - exit_leg[0]))))
+                conflict = np.zeros((0, 3))
+                for _ in range(MAX_REPAIRS + 1):
+                    # a route the guard refuses for what its own polyline passes (the search did
+                    # not see it so) is searched again with that conflict among its obstacles
+                    seen_others = others if not len(conflict) else (
+                        conflict if others is None else np.vstack([others, conflict]))
+                    res = reroute(self.plan, known0, st, tau, self._wp_leave, blocking, travel,
+                                  self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
+                                  self._keep_m + ROUTE_MARGIN_M, seen_others, over, voxel_m=self.cfg.voxel_m)
+                    # the guard reads the map the route is flown on: the obstacle added (its cells)
                     self.known = res.known
-                plan, verdict, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st)
+                    exit_leg = self._exit_leg(st.p)
+                    if exit_leg is not None:
+                        scene = RouteScene(res.known, self.memory, self._keep_m, self.cfg.floor_agl_m,
+                                           self.cfg.ceiling_agl_m)
+                        res = reroute_3d(self.plan, scene, exit_leg[1:], st, tau, self._wp_leave, blocking,
+                                         travel, self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
+                                         self._keep_m + ROUTE_MARGIN_M, seen_others, over,
+                                         route=Route3D(exit_leg, 0, float(np.linalg.norm(exit_leg[1] - exit_leg[0]))),
+                                         voxel_m=self.cfg.voxel_m)
+                        self.known = res.known
+                    if res.plan is None:
+                        plan, verdict, added, note, more = None, None, 0.0, "", None
+                        break
+                    plan, verdict, added, note, more = self._checked(res.plan, st)
+                    if plan is not None or more is None or not len(more):
+                        break
+                    conflict = np.vstack([conflict, more])
                 if plan is not None:
                     break
             via = ""
@@ -1213,11 +1283,15 @@ class Replanner:
                 # over a low obstacle at the ceiling) to the nearest coverage end a 3-D route
                 # reaches, and re-route from there (``reroute3d``)
                 # (the lattice keeps the clearance and body plus a margin, the route's where it
-                # can, else the governor's: a route on the clearance itself leaves the stopping
-                # law no speed at all, and the guard refuses it)
+                # can, else the governor's, and last none: the independent check's own question,
+                # so that "no route" is the check's answer too; what the stopping law leaves a
+                # route on the clearance itself the guard judges, and refuses if nothing)
                 goals = self._coverage_goals(st.p)
-                for margin in (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M) if len(goals) else ():
-                    scene = RouteScene(known0, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
+                # the search reads the guard's picture: the blocking obstacle's columns added
+                seen = with_blocking(known0, blocking, st.p, travel, self.cfg.obstacle_depth_m,
+                                     self._keep_m + ROUTE_MARGIN_M, self.cfg.voxel_m)
+                for margin in LEAVE_MARGINS_M if len(goals) else ():
+                    scene = RouteScene(seen, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
                                        self.cfg.ceiling_agl_m)
                     # from inside a clearance, out first (the lattice route starts where the leg ends)
                     start = np.asarray(st.p, float) if exit_leg is None else exit_leg[1]
@@ -1230,14 +1304,16 @@ class Replanner:
                     for others in (*tiers, None):
                         res3 = reroute_3d(self.plan, scene, goals, st, tau, self._wp_leave, blocking, travel,
                                           self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
-                                          self._keep_m + ROUTE_MARGIN_M, others, over, route=route)
+                                          self._keep_m + ROUTE_MARGIN_M, others, over, route=route,
+                                          voxel_m=self.cfg.voxel_m)
                         if res3.plan is not None:
                             self.known = res3.known
-                            plan3, v3, add3 = self._paced(res3.plan, st)
+                            plan3, v3, add3, note3, _ = self._checked(res3.plan, st)
                             if plan3 is not None:
                                 res, plan, verdict, added, via = res3, plan3, v3, add3, ", leaving in 3-D"
+                                note = note3
                                 break
-                            res, verdict = res3, v3
+                            res, verdict, note = res3, v3, note3
                     if plan is not None:
                         break
             if plan is not None:
@@ -1246,13 +1322,15 @@ class Replanner:
                 self.mode = "reroute"
                 self._mode_until = float(plan.t_s[1]) if len(plan.t_s) > 1 else tau
                 paced = f", paced +{added:.1f} s" if added > 0.0 else ""
+                fixed = f", {note}" if note else ""
                 self._event(events, "reroute", self._nearest(dist),
-                            f"{res.n_pieces} coverage pieces left, {res.n_skipped} unreachable{paced}{via}")
+                            f"{res.n_pieces} coverage pieces left, {res.n_skipped} unreachable{paced}{via}{fixed}")
                 for gap in res.skipped:
                     self._skip(events, *gap)
                 s = self._cursor.sample(tau)
                 return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
-            why = res.reason if res.plan is None else f"guard refused the re-route: {verdict.detail}"
+            why = res.reason if res.plan is None else \
+                f"guard refused the re-route: {verdict.detail}" + (f" ({note})" if note else "")
             return self._hold(st.p, dist, events, why)
         raise AssertionError(f"stop then {self._stop_then!r}")     # ``_enter_stop`` admits no other
 

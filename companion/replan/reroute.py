@@ -122,6 +122,34 @@ def obstacle_footprint(points_enu_m: np.ndarray, travel_xy: np.ndarray, depth_m:
     return (xy[:, None, :] + steps[None, :, None] * u[None, None, :]).reshape(-1, 2)
 
 
+def with_blocking(known: KnownMap, obstacle_enu_m: np.ndarray, seen_from_xy, travel_xy, depth_m: float,
+                  keep_m: float | None = None, voxel_m: float | None = None) -> KnownMap:
+    """``known`` with the blocking obstacle added (step 1 of the module doc): the cells
+    under its points and under their copies up to ``depth_m`` further along the
+    direction from ``seen_from_xy`` (where the vehicle saw it from) to its nearest point
+    (``travel_xy`` when that is undefined). Each column's top is the upper face of the
+    map voxel (``voxel_m``) holding the point it comes from, the obstacle as the
+    obstacle map and the 3-D route search hold it; without ``voxel_m`` unknown (+inf).
+    (Seen from the 3-D route's far end, the assumed depth once grew toward the vehicle
+    and the columns, of any height, stood under a vehicle stopped over the obstacle's
+    top: the guard refused every route from there, "contact" at its first sample.)"""
+    obs = np.asarray(obstacle_enu_m, dtype=float).reshape(-1, 3)
+    toward = np.asarray(travel_xy, dtype=float)
+    toward = toward / max(float(np.hypot(*toward)), 1e-12)
+    p = np.asarray(seen_from_xy, dtype=float)[:2]
+    if len(obs):
+        d = obs[np.argmin(np.hypot(*(obs[:, :2] - p).T)), :2] - p
+        if np.hypot(*d) > 1e-6:
+            toward = d / np.hypot(*d)
+    step = 0.5 * known.free.resolution_m
+    foot = obstacle_footprint(obs, toward, depth_m, step)
+    tops = None
+    if voxel_m is not None and len(obs):
+        n = len(foot) // len(obs)
+        tops = np.repeat((np.floor(obs[:, 2] / voxel_m) + 1.0) * voxel_m, n)
+    return known.with_obstacle(foot, keep_m, tops)
+
+
 def free_runs(known: KnownMap, a_xy, b_xy) -> list[tuple[float, float]]:
     """Runs [s0, s1] (m from ``a_xy``) of the segment a-b inside the eroded free space.
 
@@ -303,7 +331,7 @@ def _gaps(s_from: float, L: float, runs, at) -> list[tuple]:
 def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: int,
             obstacle_enu_m: np.ndarray, travel_xy, depth_m: float, vertical_speed_m_s: float,
             keep_m: float | None = None, others_enu_m: np.ndarray | None = None,
-            over: Over | None = None) -> RerouteResult:
+            over: Over | None = None, seen_from_xy=None, voxel_m: float | None = None) -> RerouteResult:
     """Re-plan the remaining coverage around a blocking obstacle (module doc).
 
     Parameters
@@ -335,17 +363,23 @@ def reroute(plan: GlobalPlan, known: KnownMap, state, t_now_s: float, wp_index: 
         without the assumed depth).
     over : lift.Over, optional
         The known obstacles the route is lifted over where it passes them (``lift``).
+    seen_from_xy : (2,) optional
+        Where the vehicle saw the obstacle from (default ``state.p``): the assumed
+        depth extends away from it (``with_blocking``).
+    voxel_m : float, optional
+        The obstacle map's voxel: the added columns' tops (``with_blocking``).
     """
     travel = np.asarray(travel_xy, dtype=float)
     travel = travel / max(float(np.hypot(*travel)), 1e-12)
     p = np.asarray(state.p, dtype=float)
     obs = np.asarray(obstacle_enu_m, dtype=float).reshape(-1, 3)
-    toward = travel
+    toward = travel                 # from the route's start to the obstacle: the way to back off from it
     if len(obs):
         d = obs[np.argmin(np.hypot(*(obs[:, :2] - p[:2]).T)), :2] - p[:2]
         if np.hypot(*d) > 1e-6:
             toward = d / np.hypot(*d)
-    known_out = known.with_obstacle(obstacle_footprint(obs, toward, depth_m, 0.5 * known.free.resolution_m), keep_m)
+    seen = p[:2] if seen_from_xy is None else seen_from_xy
+    known_out = with_blocking(known, obs, seen, travel, depth_m, keep_m, voxel_m)
     new_known = known_out           # the map the route is planned on: with the other obstacles too
     if others_enu_m is not None and len(others_enu_m):
         new_known = known_out.with_obstacle(np.asarray(others_enu_m, dtype=float).reshape(-1, 3)[:, :2], keep_m)

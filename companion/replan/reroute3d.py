@@ -76,12 +76,14 @@ def prefix_waypoints(path_enu_m: np.ndarray, speed_m_s: float, vertical_speed_m_
 def reroute_3d(plan: GlobalPlan, scene: RouteScene, goals_enu_m: np.ndarray, state, t_now_s: float,
                wp_index: int, blocking_enu_m: np.ndarray, travel_xy, depth_m: float,
                vertical_speed_m_s: float, keep_m: float, others_enu_m=None, over=None,
-               route=None) -> RerouteResult | None:
+               route=None, voxel_m: float | None = None) -> RerouteResult | None:
     """The re-route through the nearest coverage end (``goals_enu_m`` (k, 3)) a 3-D route
     reaches (module doc); None when no 3-D route reaches one, else the 2-D re-route's
     result from there with the leg in 3-D put in front of its plan (its ``plan`` None and
     its reason when that re-route fails). ``route``: ``find_route(scene, state.p,
-    goals_enu_m)`` when the caller already has it (it depends only on those three)."""
+    goals_enu_m)`` when the caller already has it (it depends only on those three).
+    The blocking obstacle's assumed depth extends away from the vehicle, where it was
+    seen from, not from the route's far end (``reroute.with_blocking``)."""
     P0 = np.asarray(state.p, float)
     if route is None:
         route = find_route(scene, P0, goals_enu_m)
@@ -93,7 +95,7 @@ def reroute_3d(plan: GlobalPlan, scene: RouteScene, goals_enu_m: np.ndarray, sta
     z3 = (0.0, 0.0, 0.0)
     rest = ShapedState(tuple(float(x) for x in goal), z3, z3, z3, z3)
     res = reroute(plan, scene.known, rest, t_now_s + float(t_pre[-1]), wp_index, blocking_enu_m, travel_xy,
-                  depth_m, vertical_speed_m_s, keep_m, others_enu_m, over)
+                  depth_m, vertical_speed_m_s, keep_m, others_enu_m, over, seen_from_xy=P0[:2], voxel_m=voxel_m)
     if res.plan is None:
         return res
     R = res.plan

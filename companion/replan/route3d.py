@@ -9,7 +9,10 @@ window round the start and the goals. A node is *blocked* when it lies
 - over a map cell that is not free (unknown, or off the map): at any height;
 - in an obstacle column: horizontally inside an occupied voxel of the
   ``ObstacleMap`` and at or below that voxel's top (obstacles stand on the
-  ground: the beams may have seen a top edge and not the sides below it).
+  ground: the beams may have seen a top edge and not the sides below it);
+- in a column a re-route added to the map (``KnownMap.added``, up to its
+  ``added_top``): the blocking obstacle and its assumed depth, as the guard
+  reads it (``companion.safety.obstacles``).
 
 A node is *free* when it lies between terrain + ``floor_agl_m`` and terrain +
 ``ceiling_agl_m`` and every blocked node is at least ``keep_m + step_m / 2``
@@ -140,7 +143,30 @@ def blocked_nodes(scene: RouteScene, lat: Lattice) -> tuple[np.ndarray, np.ndarr
     # obstacle columns: the top of the occupied voxels over each node's (x, y)
     if len(scene.obstacles):
         blocked |= Z <= column_tops(scene.obstacles, lat, X, Y)[..., None]
+    added = added_tops(known, lat, rr, cc, on)
+    if (added > -np.inf).any():
+        blocked |= Z <= added[..., None]
     return blocked, ground
+
+
+def added_tops(known: KnownMap, lat: Lattice, rr: np.ndarray, cc: np.ndarray, on: np.ndarray) -> np.ndarray:
+    """(nx, ny) the top (m) of the column a re-route added over each lattice node's cell
+    (``rr``, ``cc``: the nodes' cells, ``on``: on the grid; -inf: none, +inf: unknown
+    top). A cell between nodes gives its top to its nearest node too (as ``column_tops``)."""
+    added = np.asarray(known.added, dtype=bool)
+    tops = getattr(known, "added_top", None)
+    if not added.any():
+        return np.full(rr.shape, -np.inf)
+    tops = np.where(added, np.inf, -np.inf) if tops is None else np.asarray(tops, dtype=float)
+    out = np.where(on, tops[rr, cc], -np.inf)
+    r, c = np.nonzero(added)
+    x, y = known.grid.cell_to_world(r, c)
+    s = lat.x[1] - lat.x[0] if len(lat.x) > 1 else 1.0
+    i = np.rint((x - lat.x[0]) / s).astype(int)
+    j = np.rint((y - lat.y[0]) / s).astype(int)
+    inside = (i >= 0) & (i < len(lat.x)) & (j >= 0) & (j < len(lat.y))
+    np.maximum.at(out, (i[inside], j[inside]), tops[r[inside], c[inside]])
+    return out
 
 
 def column_tops(obstacles: ObstacleMap, lat: Lattice, X: np.ndarray, Y: np.ndarray) -> np.ndarray:

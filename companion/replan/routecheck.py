@@ -35,6 +35,8 @@ def _blocked(scene: RouteScene, lat) -> tuple[np.ndarray, np.ndarray]:
                 blocked[i, j, :] = True
             elif grid.occupied[r, c]:
                 blocked[i, j, :] = lat.z <= g + known.canopy_height_m
+            if 0 <= r < rows and 0 <= c < cols and known.added[r, c]:
+                blocked[i, j, :] |= lat.z <= _added_top(known, r, c)
     v = scene.obstacles.voxel_m
     columns: dict[tuple[int, int], float] = {}
     for a, b, c in scene.obstacles.keys().tolist():
@@ -45,7 +47,19 @@ def _blocked(scene: RouteScene, lat) -> tuple[np.ndarray, np.ndarray]:
         cells = {(i, j) for i in np.flatnonzero(kx == a).tolist() for j in np.flatnonzero(ky == b).tolist()}
         for i, j in cells | {(nearest[0], nearest[1])}:
             blocked[i, j, :] |= lat.z <= top
+    # the columns a re-route added (the guard's picture): each also blocks its nearest node
+    for r, c in zip(*np.nonzero(np.asarray(known.added, dtype=bool))):
+        x, y = grid.cell_to_world(r, c)
+        i, j, _ = lat.index((float(x), float(y), 0.0))
+        if abs(lat.x[i] - x) <= 0.5 * scene.step_m + 1e-9 and abs(lat.y[j] - y) <= 0.5 * scene.step_m + 1e-9:
+            blocked[i, j, :] |= lat.z <= _added_top(known, int(r), int(c))
     return blocked, ground
+
+
+def _added_top(known, r: int, c: int) -> float:
+    """Top (m) of the added column over cell (r, c) (+inf: unknown)."""
+    tops = getattr(known, "added_top", None)
+    return float("inf") if tops is None else float(tops[r, c])
 
 
 def free_nodes_check(scene: RouteScene, lat) -> np.ndarray:

@@ -7,8 +7,10 @@ known. Any map can stand behind it. This module adapts the replanner's: its
 persistent ``ObstacleMap`` (``companion.replan.voxmap``: ``distance`` to the
 occupied voxels' boxes, never above the true distance), or any memory of
 surface points (``points()``; brute-force nearest point), and the obstacle cells a re-route added to its
-``KnownMap`` (``added``: their top is unknown, so each is a column of any
-height over its cell's square).
+``KnownMap`` (``added``: each a column over its cell's square from the ground
+to its top, ``added_top``, the top of the obstacle the map holds there; of any
+height where that is unknown). The 3-D route search and the route check read
+the same columns (``companion.replan.route3d``): one picture of the obstacles.
 """
 
 from __future__ import annotations
@@ -37,15 +39,17 @@ def points_distance(points_enu_m: np.ndarray, surface_pts_enu_m: np.ndarray, chu
 
 
 class _AddedCells:
-    """Horizontal distance to the cells of ``known.added`` (columns of unknown height),
+    """Distance to the columns over the cells of ``known.added`` (from the ground up to
+    ``known.added_top``; any height where it is +inf or the map has no tops),
     recomputed when the replanner's map object changes (a re-route replaces it)."""
 
     def __init__(self) -> None:
         self._known = None
         self._sq = None          # (k, 4) cell squares in grid metres: x0, x1, y0, y1
+        self._top = None         # (k,) their tops (m, map z)
         self._frame = None
 
-    def distance(self, known, x, y) -> np.ndarray:
+    def distance(self, known, x, y, z=None) -> np.ndarray:
         if known is not self._known:
             self._known = known
             added = np.asarray(known.added, dtype=bool)
@@ -53,6 +57,8 @@ class _AddedCells:
             g = known.grid
             h = float(g.resolution_m)
             self._sq = np.stack([cc * h, (cc + 1) * h, rr * h, (rr + 1) * h], axis=1).astype(float)
+            tops = getattr(known, "added_top", None)
+            self._top = np.full(len(rr), np.inf) if tops is None else np.asarray(tops, float)[rr, cc]
             self._frame = (float(g.origin_xy_m[0]), float(g.origin_xy_m[1]),
                            np.cos(g.origin_yaw_rad), np.sin(g.origin_yaw_rad))
         x = np.asarray(x, float)
@@ -65,7 +71,11 @@ class _AddedCells:
         sq = self._sq
         ex = np.maximum(np.maximum(sq[:, 0] - gx, gx - sq[:, 1]), 0.0)
         ey = np.maximum(np.maximum(sq[:, 2] - gy, gy - sq[:, 3]), 0.0)
-        return np.sqrt((ex * ex + ey * ey).min(axis=1))
+        e2 = ex * ex + ey * ey
+        if z is not None and np.isfinite(self._top).any():
+            ez = np.maximum(np.asarray(z, float)[:, None] - self._top[None, :], 0.0)   # 0 under a top of +inf
+            e2 = e2 + ez * ez
+        return np.sqrt(e2.min(axis=1))
 
 
 def known_obstacle_distance(memory, known_map: Callable[[], object] | None = None) -> ObstacleDistance:
@@ -84,6 +94,6 @@ def known_obstacle_distance(memory, known_map: Callable[[], object] | None = Non
         else:
             d = points_distance(p, memory.points())
         if known_map is not None:
-            d = np.minimum(d, cells.distance(known_map(), p[:, 0], p[:, 1]))
+            d = np.minimum(d, cells.distance(known_map(), p[:, 0], p[:, 1], p[:, 2]))
         return d
     return obstacle_distance
