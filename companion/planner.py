@@ -18,6 +18,7 @@ from .coverage import extract_waypoints, plan_coverage
 from mavcore.errors import PlanError
 from mavcore.maps import ElevationModel, OccupancyGrid
 from .launch import launch_enu_xy, launch_key
+from .polyline import densify
 from mavcore.maps.field import flat_field_warning, load_mission_maps
 from mavcore.maps.grid import mask_centroid_rc
 from .margins import PlanMargins, margin_warning, mission_airframe_radius_m, plan_margins, planning_clearance_m
@@ -142,16 +143,6 @@ def pointing_target(mission: Mission, grid: OccupancyGrid, waypoints_p_enu_m: np
         cx, cy = free_centroid_xy(grid)
         return np.array([cx, cy, float(np.mean(waypoints_p_enu_m[:, 2]))])
     return np.asarray(target, dtype=float)
-
-
-def densify(path_xy_m: np.ndarray, step_m: float) -> np.ndarray:
-    """The polyline's vertices plus points at most ``step_m`` apart along every segment, (M, 2)."""
-    seg = np.diff(path_xy_m, axis=0)
-    n = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / step_m).astype(np.intp))
-    idx = np.repeat(np.arange(len(seg)), n)
-    frac = np.arange(idx.size) - np.repeat(np.cumsum(n) - n, n)
-    pts = path_xy_m[idx] + seg[idx] * (frac / n[idx])[:, None]
-    return np.vstack([pts, path_xy_m[-1:]])
 
 
 def check_dem_covers(dem: ElevationModel, path_xy_m: np.ndarray) -> None:

@@ -25,7 +25,8 @@ from companion.replan import repair as repair_mod
 from companion.replan.globalplan import GlobalPlan
 from companion.replan.knownmap import KnownMap
 from companion.replan.pace import pace
-from companion.replan.repair import polyline, repair
+from companion.polyline import densify
+from companion.replan.repair import STEP_M, repair
 from companion.replan.replanner import LEAVE_MARGINS_M, Replanner
 from companion.replan.reroute import with_blocking
 from companion.replan.route3d import RouteScene, find_route
@@ -49,14 +50,6 @@ def _known():
     g = OccupancyGrid(occ, ~occ, 0.1, (-6.0, -6.0))
     dem = ElevationModel(np.zeros((6, 6)), -6.0, -6.0, 5.0)
     return KnownMap.build(g, dem, erode_free_space(g, 0.5), 2.0, 0.2)
-
-
-def _dense(path, ds=0.02):
-    out = [path[0]]
-    for a, b in zip(path[:-1], path[1:]):
-        n = max(1, int(np.ceil(np.linalg.norm(b - a) / ds)))
-        out.extend(a + (b - a) * t for t in np.linspace(0, 1, n + 1)[1:])
-    return np.array(out)
 
 
 # --- one picture: the added columns stand to the obstacle's top --------------------------
@@ -111,7 +104,7 @@ def test_route_search_and_check_read_the_added_columns_as_the_guard_does():
     scene = RouteScene(over, ObstacleMap(V), KEEP, 0.5, CEIL, 0.25)
     r = find_route(scene, (2.0, 5.0, 1.5), [(9.0, 5.0, 1.5)])
     assert r is not None
-    p = _dense(r.path_enu_m)
+    p = densify(r.path_enu_m, 0.02)
     # the column: x 5.0..5.3 (the face's cells and 0.2 m of depth), from the ground to 1.0 m
     lo, hi = np.array([5.0, -6.0, -1e9]), np.array([5.3, 18.0, 1.0])
     e = np.maximum(np.maximum(lo - p, p - hi), 0.0)
@@ -150,7 +143,7 @@ def test_leave_ends_with_the_checks_own_question():
     assert find_route(RouteScene(known, m, keep + 0.1, 0.5, CEIL, 0.25), start, goal) is None
     r = find_route(RouteScene(known, m, keep + min(LEAVE_MARGINS_M), 0.5, CEIL, 0.25), start, goal)
     assert r is not None
-    assert np.abs(_dense(r.path_enu_m)[:, 1][np.abs(_dense(r.path_enu_m)[:, 0] - 5.0) < 0.3] - 5.0).max() < 1e-9
+    assert np.abs(densify(r.path_enu_m, 0.02)[:, 1][np.abs(densify(r.path_enu_m, 0.02)[:, 0] - 5.0) < 0.3] - 5.0).max() < 1e-9
     assert LEAVE_MARGINS_M[-1] == 0.0
 
 
@@ -215,7 +208,7 @@ def test_fit_that_cuts_a_corner_comes_back_repaired_and_clear():
     a = 0.91                   # the route keeps 0.91 m, 1 cm more than the guard asks
     plan, x0 = _l_turn(a, 3.0)
     g = _guard()
-    assert box_distance(polyline(plan.p_enu_m)).min() == pytest.approx(a, abs=1e-9)
+    assert box_distance(densify(plan.p_enu_m, STEP_M)).min() == pytest.approx(a, abs=1e-9)
     # the fit cuts the turn the route went round: inside the clearance
     assert _min_box_distance(plan) < REQ
     # paced to the stopping law, it still leaves the route toward the box (north of the
@@ -301,7 +294,7 @@ def test_route_that_grazes_the_clearance_is_moved_off_it():
     fixed = repair(paced, x0, verdict, g)
     assert fixed.plan is not None and "moved off" in fixed.reason
     # every way-point of the repair within 4 cm of the route's polyline (sampled every 5 mm)
-    line = polyline(paced.p_enu_m, 0.005)
+    line = densify(paced.p_enu_m, 0.005)
     moved = np.linalg.norm(fixed.plan.p_enu_m[1:, None, :] - line[None, :, :], axis=2).min(axis=1)
     assert moved.max() <= repair_mod.NUDGE_MAX_M + repair_mod.NUDGE_MARGIN_M + 0.005
     again, v2 = pace(fixed.plan, x0, g)
@@ -329,7 +322,7 @@ def test_vehicle_inside_a_clearance_finds_the_route_the_check_finds():
     assert route_exists(scene, start, goal) == [True]
     assert r is not None
     assert np.linalg.norm(r.path_enu_m[1] - start) <= 1.5 + 1e-9
-    p = _dense(r.path_enu_m[1:])
+    p = densify(r.path_enu_m[1:], 0.02)
     lo, hi = np.array([5.0, 4.0, -1e9]), np.array([5.5, 6.0, 3.6])
     e = np.maximum(np.maximum(lo - p, p - hi), 0.0)
     assert np.sqrt((e * e).sum(axis=1)).min() >= KEEP - 1e-9

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from .perception import HISTORY_S, MAX_EXTRAPOLATION_S, MAX_PROPAGATION_S, Pose, propagated_pose
+from .perception import HISTORY_S, MAX_EXTRAPOLATION_S, MAX_PROPAGATION_S, Pose, propagated_pose, rotated
 
 
 def interpolated_rotation(R0: tuple, R1: tuple, s: float) -> tuple:
@@ -32,19 +32,11 @@ def interpolated_rotation(R0: tuple, R1: tuple, s: float) -> tuple:
     D = [sum(R0[3 * k + i] * R1[3 * k + j] for k in range(3)) for i in range(3) for j in range(3)]
     c = max(-1.0, min(1.0, 0.5 * (D[0] + D[4] + D[8] - 1.0)))
     th = math.acos(c)
-    if th < 1e-12:
-        return tuple(R0) if s < 0.5 else tuple(R1)
     sn = math.sin(th)
-    if sn < 1e-9:            # a half turn: no unique arc; the nearer end
+    if th < 1e-12 or sn < 1e-9:      # the same rotation, or a half turn (no unique arc): the nearer end
         return tuple(R0) if s < 0.5 else tuple(R1)
-    kx, ky, kz = (D[7] - D[5]) / (2 * sn), (D[2] - D[6]) / (2 * sn), (D[3] - D[1]) / (2 * sn)
-    a = s * th
-    sa, ca = math.sin(a), math.cos(a)
-    v = 1.0 - ca
-    E = (ca + v * kx * kx, v * kx * ky - sa * kz, v * kx * kz + sa * ky,
-         v * ky * kx + sa * kz, ca + v * ky * ky, v * ky * kz - sa * kx,
-         v * kz * kx - sa * ky, v * kz * ky + sa * kx, ca + v * kz * kz)
-    return tuple(sum(R0[3 * i + k] * E[3 * k + j] for k in range(3)) for i in range(3) for j in range(3))
+    a = s * th / (2 * sn)
+    return rotated(tuple(R0), (D[7] - D[5]) * a, (D[2] - D[6]) * a, (D[3] - D[1]) * a)
 
 
 class AttitudeWait:

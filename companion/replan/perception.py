@@ -70,10 +70,15 @@ def propagated_pose(dt_p: float, pos_enu_m, vel_enu_m_s, dt_R: float, R_enu_flu,
          pos_enu_m[2] + vel_enu_m_s[2] * tp)
     R = flat_rotation(R_enu_flu)
     tr = min(max(float(dt_R), -MAX_PROPAGATION_S), MAX_PROPAGATION_S)
-    wx, wy, wz = (rate_flu_rad_s[0] * tr, rate_flu_rad_s[1] * tr, rate_flu_rad_s[2] * tr)
+    return p, rotated(R, rate_flu_rad_s[0] * tr, rate_flu_rad_s[1] * tr, rate_flu_rad_s[2] * tr)
+
+
+def rotated(R: tuple, wx: float, wy: float, wz: float) -> tuple:
+    """``R @ exp([w]x)`` (Rodrigues) for the rotation vector w (rad, in R's own frame);
+    ``R`` (row-major 9-tuple) itself when w is below 1e-12 rad or not finite."""
     th = math.sqrt(wx * wx + wy * wy + wz * wz)
     if not th > 1e-12 or not math.isfinite(th):
-        return p, R
+        return R
     kx, ky, kz = wx / th, wy / th, wz / th
     s, c = math.sin(th), math.cos(th)
     v = 1.0 - c
@@ -85,7 +90,7 @@ def propagated_pose(dt_p: float, pos_enu_m, vel_enu_m_s, dt_R: float, R_enu_flu,
     for i in range(3):
         a, b, d = R[3 * i], R[3 * i + 1], R[3 * i + 2]
         out.extend((a * E[0] + b * E[3] + d * E[6], a * E[1] + b * E[4] + d * E[7], a * E[2] + b * E[5] + d * E[8]))
-    return p, tuple(out)
+    return tuple(out)
 
 
 @dataclass(frozen=True, slots=True)

@@ -42,6 +42,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..polyline import densify
 from ..trajectory import generate_trajectory
 from .globalplan import GlobalPlan
 
@@ -86,17 +87,6 @@ def _piece(plan: GlobalPlan, t_s: float) -> tuple[int, int]:
     n = len(plan.t_s) - 1
     j = int(np.clip(np.searchsorted(plan.t_s, t_s, side="right") - 1, 0, n - 1))
     return max(0, j - REACH), min(n, j + REACH + 1)
-
-
-def polyline(p_enu_m: np.ndarray, step_m: float = STEP_M) -> np.ndarray:
-    """(m, 3) the straight segments between the (k, 3) points, sampled every ``step_m``
-    at most (each segment's ends included once)."""
-    p = np.asarray(p_enu_m, float).reshape(-1, 3)
-    out = [p[:1]]
-    for a, b in zip(p[:-1], p[1:]):
-        n = max(1, int(np.ceil(np.linalg.norm(b - a) / step_m)))
-        out.append(a + np.linspace(0.0, 1.0, n + 1)[1:, None] * (b - a))
-    return np.vstack(out)
 
 
 def densified(t_s, p_enu_m, v_enu_m_s, a_enu_m_s2, corner, j0: int, j1: int,
@@ -158,11 +148,11 @@ def repair(plan: GlobalPlan, x0: np.ndarray, verdict, guard) -> Repair:
     P[0] = np.asarray(x0, float)[0]
     t, p, v, a, corner = densified(plan.t_s, P, plan.v_enu_m_s, plan.a_enu_m_s2, plan.corner, j0, j1)
     d1 = j1 + len(t) - len(plan.t_s)                 # the piece's last way-point, densified
-    line = guard.check_path(polyline(p[j0:d1 + 1]))
+    line = guard.check_path(densify(p[j0:d1 + 1], STEP_M))
     nudged = ""
     if not line.ok and line.distance_m is not None and line.distance_m >= line.required_m - NUDGE_MAX_M:
         p = nudge(p, j0, d1, line.surface, guard)
-        line = guard.check_path(polyline(p[j0:d1 + 1]))
+        line = guard.check_path(densify(p[j0:d1 + 1], STEP_M))
         nudged = f", moved off the {line.surface or 'surface'}s by up to {NUDGE_MAX_M + NUDGE_MARGIN_M:g} m"
     if not line.ok:
         return Repair(None, f"the route itself breaks the {line.surface} clearance between way-points "
