@@ -289,12 +289,31 @@ DEFAULT_RING_HFOV_DEG = 24.0
 DEFAULT_RING_VFOV_DEG = 10.0
 DEFAULT_RING_MAX_M = 6.0
 DEFAULT_LOW_PITCH_DEG = 9.0
+#: The down array: a multizone time-of-flight sensor looking down (as the 4x4 /
+#: 8x8-zone ToF modules of small vehicles), modelled as a 3 x 3 grid of zones,
+#: each its own DISTANCE_SENSOR id. Zone (i, j), i, j in {-1, 0, 1}, looks along
+#: (i t, j t, -1) in body FLU, t = ``DEFAULT_DOWN_ZONE_TAN``, with a square field
+#: of ``DEFAULT_DOWN_ZONE_FOV_DEG``. Together they see every direction within
+#: ``DEFAULT_DOWN_CONE_DEG`` of straight down (``tests/test_descent_sight.py``
+#: checks it on a dense grid of directions). Why: the rings look 14 deg down
+#: at most and the single down beam 2.5 deg off the vertical, so a descent came
+#: down unseen beside a box under the vehicle (0.158 m of true clearance on
+#: obstacles-under flight 10). Whatever lies within the clearance sphere's
+#: footprint below (radius r = R + c, the 0.942 m of the paper's vehicle) is in
+#: view from a depth of r / tan 45 deg = r, from the array's 4 m range down.
+DEFAULT_DOWN_ZONES = 3
+DEFAULT_DOWN_ZONE_TAN = math.tan(math.radians(30.0))
+DEFAULT_DOWN_ZONE_FOV_DEG = 36.0
+DEFAULT_DOWN_CONE_DEG = 45.0
+DEFAULT_DOWN_MAX_M = 4.0
+DEFAULT_DOWN_RATE_HZ = 10.0
 
 
 def default_rangefinders() -> tuple[RangefinderConfig, ...]:
     """The default suite: ids 0..15 the level ring (id k looks 22.5 k deg left of
     forward, ``MAV_SENSOR_ROTATION_CUSTOM``), id 16 down (20 m), ids 17..32 the
-    low ring (id 17 + k looks 22.5 k deg left of forward and 9 deg down)."""
+    low ring (id 17 + k looks 22.5 k deg left of forward and 9 deg down), ids
+    33..41 the down array (zone (i, j) is id 37 + 3 i + j)."""
     step = 360.0 / DEFAULT_RING_BEAMS
 
     def ring(first: int, pitch_deg: float):
@@ -303,8 +322,23 @@ def default_rangefinders() -> tuple[RangefinderConfig, ...]:
                                        vfov_deg=DEFAULT_RING_VFOV_DEG, rate_hz=20.0, max_m=DEFAULT_RING_MAX_M)
                      for k in range(DEFAULT_RING_BEAMS))
 
+    def down_array(first: int):
+        out = []
+        half = DEFAULT_DOWN_ZONES // 2
+        for i in range(-half, half + 1):
+            for j in range(-half, half + 1):
+                dx, dy = i * DEFAULT_DOWN_ZONE_TAN, j * DEFAULT_DOWN_ZONE_TAN
+                yaw = math.degrees(math.atan2(dy, dx)) if (i or j) else 0.0
+                pitch = math.degrees(math.atan2(1.0, math.hypot(dx, dy)))
+                out.append(RangefinderConfig(id=first + len(out), orientation=SENSOR_ROTATION_CUSTOM,
+                                             rotation_flu_deg=(0.0, pitch, yaw), hfov_deg=DEFAULT_DOWN_ZONE_FOV_DEG,
+                                             vfov_deg=DEFAULT_DOWN_ZONE_FOV_DEG, rate_hz=DEFAULT_DOWN_RATE_HZ,
+                                             max_m=DEFAULT_DOWN_MAX_M))
+        return tuple(out)
+
     down = RangefinderConfig(id=DEFAULT_RING_BEAMS, orientation=25, max_m=20.0)
-    return ring(0, 0.0) + (down,) + ring(DEFAULT_RING_BEAMS + 1, DEFAULT_LOW_PITCH_DEG)
+    return (ring(0, 0.0) + (down,) + ring(DEFAULT_RING_BEAMS + 1, DEFAULT_LOW_PITCH_DEG)
+            + down_array(2 * DEFAULT_RING_BEAMS + 1))
 
 
 @dataclass(frozen=True)
