@@ -204,6 +204,8 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "replan.canopy_height_m": ("m", "> 0", "Height of the rows above the terrain: returns from them are "
                                "known, not obstacles."),
     "replan.known_tolerance_m": ("m", ">= 0", "A return this close to the terrain or an occupied cell is known."),
+    "replan.tilt_tolerance_deg": ("deg", "[0, 10]", "Accuracy of the attitude estimate's roll and pitch: a return explained with the beam tilted by this much is known ([replan.md](replan.md#the-attitude-allowance))."),
+    "replan.heading_tolerance_deg": ("deg", "[0, 10]", "Accuracy of the attitude estimate's heading: a return explained with the beam turned by this much is known ([replan.md](replan.md#the-attitude-allowance))."),
     "replan.memory_s": ("s", "> 0", "Not used: the obstacle map forgets nothing with time "
                         "([replan.md](replan.md#the-obstacle-map)); accepted for older missions."),
     "replan.memory_radius_m": ("m", "> 0", "Not used: the obstacle map keeps what it saw of the whole area flown; "

@@ -349,3 +349,32 @@ def test_a_walker_crossing_the_beam_counts_only_while_the_vehicle_is_still():
     for k in range(20):
         post.on_hit(0.05 * k, 2, (0.0, 3.0 + 0.01 * (-1) ** k, 1.5), u, still=True)
     assert post.approach_m_s(0.95) == 0.0
+
+
+def test_a_walker_crossing_straight_at_a_stopped_vehicle_is_given_way_along_the_corridor(tmp_path):
+    """Fresh seed 20261151 of campaign obstacles-under, flight 3 (tilted-hexagon): a worker
+    stands 2.9 m from the vehicle for 12 s, then walks straight at it across the corridor
+    at 1.41 m/s. Backing away along the corridor gains no distance from a mover coming
+    across it, and the governor's slight lean along the corridor flipped sign from frame to
+    frame: the vehicle stayed put and was walked into (contact at 34.7 s). A stop now moves
+    out of a crossing mover's path along the corridor, to the side it chose first. From a
+    standstill at the accelerations allowed (1 m/s^2, 2 m/s^3) the 0.74 m the two radii
+    need cannot all be won in the 1.6 s the walker takes: no contact, not the clearance."""
+    import json
+
+    from companion.cli import main
+
+    scenario = tmp_path / "0003.yaml"
+    scenario.write_text(
+        "campaign: obstacles-under\nscenario: 3\nmission: tilted-hexagon\nseed: 1472298831\ncut_s: 45.0\n"
+        "control: companion\noverrides:\n  sim:\n    obstacles:\n"
+        "    - {type: box, x: 6.34, y: 7.884, height: 0.883, size_x: 0.875, size_y: 0.315, yaw_deg: 70.497}\n"
+        "    movers:\n    - type: walker\n      path:\n      - [12.922, 15.569]\n      - [15.8, 10.304]\n"
+        "      speed_m_s: 1.406\n      loop: false\n      start_s: 33.101\n  replan: {give_way: true}\n")
+    out = tmp_path / "out"
+    main(["demo", "--scenario", str(scenario), "--transport", "inproc", "--out", str(out), "--no-plots", "--quiet"])
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["crashed"] is False and rep["crash"] is None
+    rp = rep["replanning"]
+    assert rp["clearance_source"] == "sim_truth" and rp["min_clearance_m"] > 0.0
+    assert any(e["action"] == "stop" and "whether it moves" in e["detail"] for e in rp["event_list"])

@@ -36,7 +36,8 @@ def _readings():
         _range(1, _rot_flu(90.0), math.nan, 0.0, no_return=True),  # left, a ray: sector 54 (270 deg), free
         _range(2, _rot_flu(-22.0), 2.5, 3.0),                  # 22 deg right, 3 deg: no centre inside; nearest 4
         _range(3, _rot_flu(-5.0), 2.0, 4.0),                   # 5 deg right: sector 1, under the forward beam
-        _range(4, _rot_flu(180.0, 20.0), 4.0, 2.0),            # backward, 20 deg down: sector 36, 4 cos 20
+        _range(4, _rot_flu(180.0, 4.0), 4.0, 2.0),             # backward, 4 deg down (field +-5): sector 36, 4 cos 4
+        _range(7, _rot_flu(135.0, 9.0), 5.8, 24.0),            # back-left, 9 deg down (4-14): the ground, left out
         _range(5, sensor_rotation_flu(25), 1.5, 5.0, max_m=20.0),   # down: not in the horizontal picture
         _range(6, _rot_flu(-90.0), 5.0, 0.0, max_m=10.0, min_m=0.2),  # right, 10 m: sector 18
     ]
@@ -49,14 +50,14 @@ def _expected_cm():
     want[1] = 200                                  # the smaller of 3.00 and 2.00 m
     want[4] = 250
     want[54] = 600                                 # its own 6 m: free up to there (the message's max is 10 m)
-    want[36] = int(round(400 * math.cos(math.radians(20.0))))   # 376
+    want[36] = int(round(400 * math.cos(math.radians(4.0))))    # 399
     want[18] = 500
     return want
 
 
 def test_pack_sectors_by_hand():
     beams = [b for b in (sector_beam(r) for r in _readings()) if b is not None]
-    assert len(beams) == 6                          # the down-looking one is left out
+    assert len(beams) == 6                          # the down-looking one and the low one are left out
     s = pack_sectors(beams)
     assert list(s.distances_cm) == _expected_cm()
     assert (s.min_cm, s.max_cm) == (10, 1000)

@@ -46,7 +46,9 @@ def _reading(t_ms, distance_cm):
     return codec.decode_distance_sensor(rx.parse_buffer(m.pack(mav))[0])
 
 
-def _replanner():
+def _replanner(tilt_tolerance_deg=0.0, heading_tolerance_deg=0.0):
+    """The attitude allowance (``replan.tilt_tolerance_deg``, ``heading_tolerance_deg``) is off by default here:
+    these tests isolate the wait; ``tests/test_replan_attitude_allowance.py`` tests it."""
     from companion.replan import GlobalPlan, Replanner
     from companion.trajectory import generate_trajectory
     from mavcore.mission.schema import FlightConfig
@@ -60,7 +62,8 @@ def _replanner():
     p = np.array([[0.5, 1.0, H], [8.5, 1.0, H]])
     plan = GlobalPlan.from_waypoints(generate_trajectory(t, p), t, p, np.zeros((2, 3)), np.zeros((2, 3)),
                                      np.array([True, True]), None, None, FlightConfig(), TrajectoryConfig(), 1.0)
-    return Replanner(ReplanConfig(), km, plan)
+    return Replanner(ReplanConfig(tilt_tolerance_deg=tilt_tolerance_deg, heading_tolerance_deg=heading_tolerance_deg),
+                     km, plan)
 
 
 D_CM = round(100 * H / math.sin(math.radians(DOWN_DEG)))     # the ground's return: 439 cm

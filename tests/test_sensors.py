@@ -130,13 +130,14 @@ def test_rangefinders_against_hand_placed_geometry():
     assert all(len(set(v)) == 1 for v in got.values())          # noise off: identical readings
 
 
-def test_default_suite_is_two_closed_rings_and_a_down_beam():
+def test_default_suite_is_two_closed_rings_a_down_beam_and_a_down_array():
     # every horizontal direction lies inside some beam of each ring: 16 beams 22.5 deg
     # apart, each 24 deg wide; the level ring's axes level, the low ring's 9 deg down
-    # (mavcore.mission.sim); with the companion's own reading of the mounting
+    # (mavcore.mission.sim); with the companion's own reading of the mounting. The down
+    # array (ids 33-41) is tests/test_descent_sight.py's.
     suite = SimConfig().rangefinders_or_default
-    assert [c.id for c in suite] == list(range(33))
-    level, down, low = suite[:16], suite[16], suite[17:]
+    assert [c.id for c in suite] == list(range(42))
+    level, down, low = suite[:16], suite[16], suite[17:33]
     for ring, elevation in ((level, 0.0), (low, -9.0)):
         dirs = [fan_directions_flu(c)[0] for c in ring]
         for az in np.radians(np.arange(0.0, 360.0, 0.5)):

@@ -14,7 +14,10 @@ body-mounted sensors). ``UINT16_MAX``: unknown (no sensor looks there);
 the circle.
 
 Packing (``pack_sectors``, pure): each fresh reading of a rangefinder whose
-beam is within ``MAX_ELEVATION_RAD`` of level (the down-looking one is not
+vertical field of view holds the horizontal plane (|elevation of its axis| <=
+half its vertical field, and at most ``MAX_ELEVATION_RAD``; a beam looking
+below the horizon sees the ground ahead, which PX4's collision prevention
+would take for an obstacle: the low ring and the down-looking sensors are not
 part of the horizontal picture) fills the sectors whose centres lie within its
 horizontal field of view (the nearest one for a beam narrower than a
 sector) with its horizontal distance (range x cos(elevation), rounded to
@@ -47,8 +50,10 @@ UNKNOWN_CM = 65535
 PUBLISH_HZ = 10.0
 #: A reading older than this (s of vehicle time) is dropped from the picture.
 MAX_AGE_S = 0.5
-#: Beams further than this from level are left out (the down-looking one).
+#: Beams further than this from level are left out, whatever their field (the down-looking ones).
 MAX_ELEVATION_RAD = math.radians(30.0)
+#: Slack (rad) of the "field holds the horizontal plane" test (a level ray of no field).
+LEVEL_EPS_RAD = 1e-9
 #: MAV_FRAME_BODY_FRD, MAV_DISTANCE_SENSOR_LASER.
 FRAME_BODY_FRD = 12
 SENSOR_TYPE_LASER = 0
@@ -97,13 +102,16 @@ class ObstacleSectors:
 
 def sector_beam(r) -> SectorBeam | None:
     """A ``SectorBeam`` from a decoded DISTANCE_SENSOR (``mavcore.codec.Range``);
-    None for a beam steeper than ``MAX_ELEVATION_RAD``, an unknown mounting, or a
-    reading that is neither a range nor "no return" (too close, garbage)."""
+    None for a beam whose vertical field does not hold the horizontal plane (or steeper
+    than ``MAX_ELEVATION_RAD``), an unknown mounting, or a reading that is neither a
+    range nor "no return" (too close, garbage)."""
     if r.R_flu_sensor is None:
         return None
     bx, by, bz = r.R_flu_sensor[0], r.R_flu_sensor[3], r.R_flu_sensor[6]   # first column: the beam
     level = math.hypot(bx, by)
-    if not level > 0.0 or math.atan2(abs(bz), level) > MAX_ELEVATION_RAD:
+    half_v = 0.5 * float(r.vfov_rad) if math.isfinite(r.vfov_rad) and r.vfov_rad > 0.0 else 0.0
+    elevation = math.atan2(abs(bz), level) if level > 0.0 else math.pi / 2
+    if not level > 0.0 or elevation > MAX_ELEVATION_RAD or elevation > half_v + LEVEL_EPS_RAD:
         return None
     if not (math.isfinite(r.min_m) and math.isfinite(r.max_m) and 0.0 <= r.min_m < r.max_m):
         return None

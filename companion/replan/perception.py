@@ -267,6 +267,35 @@ def beam_evidence(reading, pose: Pose, offset_flu_m=(0.0, 0.0, 0.0)) -> BeamEvid
                         float(free), hit, d, fan)
 
 
+#: Step (rad) of the heading turns of the attitude allowance: at 5 m a 1 deg turn moves a
+#: beam's edge 9 cm, less than the 0.1 m within which the known map places a row's face.
+ALLOWANCE_STEP_RAD = math.radians(1.0)
+
+
+def attitude_perturbations(R, tilt_rad: float, heading_rad: float, step_rad: float = ALLOWANCE_STEP_RAD):
+    """Attitudes the estimate cannot tell from its own (the replanner's attitude allowance,
+    docs/replan.md): ``R`` (row-major 9-tuple body FLU -> ENU) turned about the vertical
+    by +-k step up to ``heading_rad`` (and +-heading_rad itself), and about the east and
+    the north axes by +-tilt/2 and +-tilt. Row-major 9-tuples, nearest turns first."""
+    out = []
+    angles = []
+    k = 1
+    while k * step_rad < heading_rad - 1e-12:
+        angles.append(k * step_rad)
+        k += 1
+    if heading_rad > 0.0:
+        angles.append(heading_rad)
+    tilts = (0.5 * tilt_rad, tilt_rad) if tilt_rad > 0.0 else ()
+    turns = [(2, a) for a in angles] + [(k, a) for a in tilts for k in (0, 1)]
+    turns.sort(key=lambda ka: ka[1])
+    for k, a in turns:
+        for sgn in (1.0, -1.0):
+            # exp([a e_k]x) R = R exp([R^T a e_k]x): the world axis e_k in the body frame is row k of R
+            b = sgn * a
+            out.append(rotated(R, b * R[3 * k], b * R[3 * k + 1], b * R[3 * k + 2]))
+    return out
+
+
 #: A field of view wider than this (rad) is also sampled half-way to its edges.
 WIDE_FOV_RAD = math.radians(10.0)
 

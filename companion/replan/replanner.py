@@ -104,7 +104,7 @@ from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
 from .attitude_wait import AttitudeWait
-from .perception import PoseHistory, beam_evidence
+from .perception import Pose, PoseHistory, attitude_perturbations, beam_evidence
 from .rejoin import converged_from, rejoin
 from .repair import MAX_REPAIRS, repair
 from .reroute import reroute, with_blocking
@@ -167,6 +167,9 @@ REJOIN_HYSTERESIS_M = 0.3
 REJOIN_RETRY_S = 0.25
 #: Soft-wall gain (1/s): the speed toward a wall is at most this times the distance left.
 WALL_GAIN_1_S = 2.0
+#: A give-way whose backing velocity lies less than this fraction along the corridor is a
+#: mover coming across it (``_give_way``): the vehicle moves out of its path along the corridor.
+CROSSING_FRACTION = 0.5
 #: The lateral wall sits this far (m) inside ``lateral_limit_m`` (the shaper's lag).
 WALL_MARGIN_M = 0.1
 #: Progress along the leg smaller than this (m) does not count (stall detection).
@@ -323,13 +326,27 @@ def _pointing(p, target) -> tuple:
     return (0.0, 1.0, 0.0) if n < 1e-9 else (u[0] / n, u[1] / n, u[2] / n)
 
 
-def _segment_distance(p, a, b) -> float:
-    """Horizontal distance (m) from the point p to the segment a-b (ENU xy)."""
+def _segment_distance(p, a, b, before: bool = False, beyond: bool = False) -> float:
+    """Horizontal distance (m) from the point p to the segment a-b (ENU xy); ``before`` /
+    ``beyond``: the segment runs on past a / past b (a ray or a line)."""
     ax, ay = float(a[0]), float(a[1])
     dx, dy = float(b[0]) - ax, float(b[1]) - ay
     L2 = dx * dx + dy * dy
-    t = 0.0 if L2 <= 0.0 else min(max(((p[0] - ax) * dx + (p[1] - ay) * dy) / L2, 0.0), 1.0)
+    t = 0.0 if L2 <= 0.0 else ((p[0] - ax) * dx + (p[1] - ay) * dy) / L2
+    if not before:
+        t = max(t, 0.0)
+    if not beyond:
+        t = min(t, 1.0)
     return math.hypot(p[0] - ax - t * dx, p[1] - ay - t * dy)
+
+
+def lateral_offset(p, legs) -> float:
+    """Horizontal offset (m) of p across a path of legs ((a, b), ...; ENU xy): the
+    distance to the nearest leg, the first one running on behind its start and the last
+    one on past its end. Backing along the path (a stop that gives way keeps its distance
+    by reversing down the corridor) is not a lateral deviation; leaving the line is."""
+    n = len(legs)
+    return min(_segment_distance(p, a, b, before=(i == 0), beyond=(i == n - 1)) for i, (a, b) in enumerate(legs))
 
 
 def lateral_gap(lat_m: np.ndarray, half_width_m: float, clearance_m: float, min_gap_m: float = 0.02) -> bool:
@@ -520,6 +537,9 @@ class Replanner:
         self._keep_m = cfg.clearance_m + (cfg.body_radius_m or 0.0)
         #: the persistent obstacle map (``voxmap``): cleared only by beams, never by time or a re-route
         self.memory = ObstacleMap(cfg.voxel_m, CLEAR_MARGIN_M)
+        #: (tilt, heading) tolerances (rad) of the attitude allowance; None when both are 0
+        tt, th = math.radians(cfg.tilt_tolerance_deg), math.radians(cfg.heading_tolerance_deg)
+        self._allowance = (tt, th) if (tt > 0.0 or th > 0.0) else None
         self._active_key: tuple | None = None
         self._active = np.zeros((0, 3))
         self._known0 = known                   # the map before any re-route added cells to it
@@ -543,6 +563,8 @@ class Replanner:
         self._flown = 0.0
         self._p_prev: tuple | None = None
         self._max_lat = 0.0
+        #: The side (+1 / -1 along the corridor) a stop gives way to a crossing mover (``_give_way``).
+        self._give_way_sign: float | None = None
         self._max_climb = 0.0
         self._min_range: float | None = None
         self.n_readings = self.n_unknown = self.n_ignored = 0
@@ -692,7 +714,7 @@ class Replanner:
         mem = self.memory
         if len(mem):
             mem.clear_beam(ev)
-        if ev.hit is not None and not self._explained(ev):
+        if ev.hit is not None and not self._explained(ev) and not self._explained_within_attitude(reading, pose):
             # the return may come from anywhere in the field of view: keep the edge
             # points too where they are a voxel apart and not on a known feature, as
             # candidates (``voxmap``: one beam through them clears them, and unless an
@@ -706,22 +728,43 @@ class Replanner:
             if self.cfg.give_way:          # else no approach is ever measured: a still world
                 self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still)
 
+    def _explained_within_attitude(self, reading, pose) -> bool:
+        """The attitude allowance: the known map explains the return with the beam placed by
+        an attitude within ``replan.tilt_tolerance_deg`` / ``heading_tolerance_deg`` of the
+        estimate (``perception.attitude_perturbations``; docs/replan.md "The attitude
+        allowance")."""
+        turns = self._allowance
+        if not turns:
+            return False
+        offset = self.cfg.offset_of(reading.sensor_id)
+        for R in attitude_perturbations(pose.R, *turns):
+            ev = beam_evidence(reading, Pose(pose.t_s, pose.p, R), offset)
+            if ev is None or ev.hit is None:
+                continue
+            if self.heading.estimate_rad:
+                ev = rotate_evidence(ev, self.heading.estimate_rad)
+            # the return's own points only: the nearest ground in a turned field is no
+            # evidence (on a slope a 1 deg turn brought it level with a low post's return)
+            if self._explained(ev, ground_in_view=False):
+                return True
+        return False
+
     def _on_terrain(self, ev) -> bool:
         """A point of the return (its axis hit or a field-of-view edge) is on the terrain."""
         classify = self.known.classify
         return classify(*ev.hit) == KNOWN_GROUND or any(classify(*q) == KNOWN_GROUND for q in ev.fan_hits)
 
-    def _explained(self, ev) -> bool:
+    def _explained(self, ev, ground_in_view: bool = True) -> bool:
         """The known map accounts for the return along the axis or a field-of-view edge,
-        or the ground is in view at the return's distance (anywhere in the field: a beam
-        rolled about its axis sees the ground first at a corner)."""
+        or (``ground_in_view``) the ground is in view at the return's distance (anywhere in
+        the field: a beam rolled about its axis sees the ground first at a corner)."""
         known, o, d = self.known, ev.origin, ev.distance_m
         if known.explains(o, ev.axis, d):
             return True
         for q in ev.fan_hits:
             if known.explains(o, ((q[0] - o[0]) / d, (q[1] - o[1]) / d, (q[2] - o[2]) / d), d):
                 return True
-        if ev.half_h_rad > 0.0 or ev.half_v_rad > 0.0:
+        if ground_in_view and (ev.half_h_rad > 0.0 or ev.half_v_rad > 0.0):
             g = known.ground_in_view_m(o, ev.axis, ev.h_axis, ev.v_axis, ev.half_h_rad, ev.half_v_rad)
             return d >= g - known.tolerance_m
         return False
@@ -1187,7 +1230,21 @@ class Replanner:
             return np.zeros(3)
         v = self._govern(P, np.zeros(3), pts, np.linalg.norm(pts - P, axis=1))
         u = self._leg_frame(self._avoid_leg)[2]            # along the corridor only: not into a row
-        v = float(v[:2] @ u[:2]) * np.array([u[0], u[1], 0.0])
+        along = float(v[:2] @ u[:2])
+        full = math.hypot(v[0], v[1])
+        if abs(along) < CROSSING_FRACTION * full:
+            # a mover coming across the corridor: backing along it gains no distance now, but
+            # it takes the vehicle out of the mover's path (a walker crossing straight at a
+            # stopped vehicle walked into it, fresh seed 20261151 flight 3, while the governor's
+            # slight lean along the corridor flipped sign from frame to frame): the whole
+            # backing speed, to the side chosen first in this stop (the side the governor
+            # leaned to then, forward when it leaned to neither)
+            sign = self._give_way_sign if self._give_way_sign is not None else (
+                math.copysign(1.0, along) if along != 0.0 else 1.0)
+            along = sign * full
+        if along != 0.0:
+            self._give_way_sign = math.copysign(1.0, along)
+        v = along * np.array([u[0], u[1], 0.0])
         h = math.hypot(v[0], v[1])
         cap = give_way_speed_m_s(self.speed_m_s, self.closing.approach_m_s(getattr(self, "_t_s", None)))
         v = v if h <= cap else v * (cap / h)
@@ -1205,6 +1262,7 @@ class Replanner:
             raise ValueError(f"a stop ends in one of {STOP_THEN}, not {then!r}")
         self.mode = "stop"
         self._stop_then = then
+        self._give_way_sign = None
         pts = self._points()
         P = np.array(self.shaper.p)
         self._event(events, "stop", self._nearest(np.linalg.norm(pts - P, axis=1)), detail)
@@ -1517,7 +1575,7 @@ class Replanner:
     def _deviation(self, p) -> None:
         if self._dev_leg is None:
             return
-        lat = min(_segment_distance(p, a, b) for a, b in self._dev_leg)
+        lat = lateral_offset(p, self._dev_leg)
         if lat > self._max_lat:
             self._max_lat = lat
         climb = p[2] - (self.known.ground_z(p[0], p[1]) + self.plan.flight.height_agl_m)

@@ -77,6 +77,15 @@ class ReplanConfig:
     known_tolerance_m : float
         A range hit within this distance of an occupied OGM cell (below the
         canopy) or of the terrain is a known feature (m).
+    tilt_tolerance_deg, heading_tolerance_deg : float
+        Accuracy of the attitude estimate (deg), its tilt (roll and pitch)
+        and its heading: a return the known map does not explain with the
+        estimated attitude is still the ground or a row when it explains it
+        with the beam placed by the estimate turned by up to this much about
+        a horizontal axis, or about the vertical (docs/replan.md "The
+        attitude allowance"). 0 and 0 turn the allowance off. The heading's
+        default is small on purpose: wider, it hid a low post from a wide
+        beam whose field also held a row face.
     memory_s : float
         Not used (the obstacle map forgets nothing with time); accepted for older missions (s).
     memory_radius_m : float
@@ -127,6 +136,8 @@ class ReplanConfig:
     jerk_m_s3: float = 2.0
     canopy_height_m: float = 2.0
     known_tolerance_m: float = 0.2
+    tilt_tolerance_deg: float = 1.5
+    heading_tolerance_deg: float = 2.0
     memory_s: float = 10.0
     memory_radius_m: float = 15.0
     voxel_m: float = 0.1
@@ -150,6 +161,10 @@ class ReplanConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"replan.{name} must be a finite number >= 0, got {v}")
+        for name in ("tilt_tolerance_deg", "heading_tolerance_deg"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0 <= v <= 10):
+                raise ValueError(f"replan.{name} must be in [0, 10] deg, got {v}")
         if self.body_radius_m is not None and not (math.isfinite(self.body_radius_m) and 0 <= self.body_radius_m <= 10):
             raise ValueError(f"replan.body_radius_m must be in [0, 10] m, got {self.body_radius_m}")
         if self.speed_m_s is not None and not (math.isfinite(self.speed_m_s) and self.speed_m_s > 0):
