@@ -286,12 +286,13 @@ NOTES: dict[str, tuple[str, str, str]] = {
     "sim.seed": ("", ">= 0", "Seed of the SITL's noise and wind "
                  "(`--seed` overrides it)."),
     "sim.rangefinders": ("", "", "Body-fixed rangefinders (one DISTANCE_SENSOR id each); null: the default "
-                         "suite, a closed ring of 16 beams (ids 0-15, id k looking 22.5 k deg left of "
-                         "forward and 6 deg down, orientation 100, 24 deg wide, 16 deg tall, 6 m, 20 Hz) and one "
-                         "looking down (id 16, orientation 25, 5 deg, 20 m, 25 Hz), so that the direction of "
-                         "travel and the obstacles lower than the vehicle are seen whatever heading the pointing "
-                         "law gives ([replan.md](replan.md#sensor-coverage)); "
-                         "[]: none."),
+                         "suite: a closed level ring of 16 beams (ids 0-15, id k looking 22.5 k deg left of "
+                         "forward, orientation 100, 24 deg wide, 10 deg tall, 6 m, 20 Hz), one beam looking down "
+                         "(id 16, orientation 25, 5 deg, 20 m, 25 Hz), a low ring like the level one pitched 9 deg "
+                         "down (ids 17-32) and a downward array of 3 x 3 zones of 36 deg (ids 33-41, 4 m, 10 Hz: "
+                         "every direction within 48 deg of straight down), so that the direction of travel, the "
+                         "obstacles lower than the vehicle and what is below a descent are seen whatever heading "
+                         "the pointing law gives ([replan.md](replan.md#sensor-coverage)); []: none."),
     "sim.rangefinders[].id": ("", "[0, 255]", "DISTANCE_SENSOR id, unique."),
     "sim.rangefinders[].orientation": ("", "0-7, 24, 25 or 100", "MAV_SENSOR_ORIENTATION: 0 forward, 2 right, "
                                        "4 back, 6 left (rotations about FRD axes, as PX4), odd values the "
