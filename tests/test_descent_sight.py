@@ -86,7 +86,7 @@ def test_a_box_below_and_beside_is_returned_at_its_true_range(dx, dy):
     for rf in suite.rangefinders:
         r = suite.range_reading(rf, tuple(p), tuple(np.eye(3).ravel()))
         d = r.distance_m
-        got[rf.cfg.id if hasattr(rf, "cfg") else rf.id] = math.inf if d is None else d
+        got[rf.cfg.id] = math.inf if d is None else d
     expected = _box_distance(box, p)
     nearest = min(d for k, d in got.items() if k >= FIRST and math.isfinite(d))
     assert nearest == pytest.approx(expected, abs=0.02)

@@ -958,15 +958,12 @@ class FlightCore:
         ctrl = self.ctrl
         est = ctrl.attitude_estimate() if self._controlling else None
         dt_R, w, att = 0.0, _Z3, None
-        live = self.view.R_est is not None and t - self.view.att_t <= ATTITUDE_LIVE_S
-        if live:
+        observer = est is not None and ctrl.observer is not None
+        if self.view.R_est is not None and (t - self.view.att_t <= ATTITUDE_LIVE_S or not observer):
             R, dt_R, w = self.view.R_est, t - self.view.att_t, self.view.att_w
             att = (self.view.att_t, R, w)
-        elif est is not None and ctrl.observer is not None:
+        elif observer:
             R = est.R_enu_flu
-        elif self.view.R_est is not None:
-            R, dt_R, w = self.view.R_est, t - self.view.att_t, self.view.att_w
-            att = (self.view.att_t, R, w)
         else:
             # no observer and no ATTITUDE: the rotation the two raw vector pairs
             # define (noisy: about a degree at the paper's noise)

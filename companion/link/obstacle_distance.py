@@ -110,7 +110,7 @@ def sector_beam(r) -> SectorBeam | None:
     bx, by, bz = r.R_flu_sensor[0], r.R_flu_sensor[3], r.R_flu_sensor[6]   # first column: the beam
     level = math.hypot(bx, by)
     half_v = 0.5 * float(r.vfov_rad) if math.isfinite(r.vfov_rad) and r.vfov_rad > 0.0 else 0.0
-    elevation = math.atan2(abs(bz), level) if level > 0.0 else math.pi / 2
+    elevation = math.atan2(abs(bz), level)
     if not level > 0.0 or elevation > MAX_ELEVATION_RAD or elevation > half_v + LEVEL_EPS_RAD:
         return None
     if not (math.isfinite(r.min_m) and math.isfinite(r.max_m) and 0.0 <= r.min_m < r.max_m):

@@ -328,7 +328,7 @@ def default_rangefinders() -> tuple[RangefinderConfig, ...]:
         for i in range(-half, half + 1):
             for j in range(-half, half + 1):
                 dx, dy = i * DEFAULT_DOWN_ZONE_TAN, j * DEFAULT_DOWN_ZONE_TAN
-                yaw = math.degrees(math.atan2(dy, dx)) if (i or j) else 0.0
+                yaw = math.degrees(math.atan2(dy, dx))          # 0 for the nadir zone
                 pitch = math.degrees(math.atan2(1.0, math.hypot(dx, dy)))
                 out.append(RangefinderConfig(id=first + len(out), orientation=SENSOR_ROTATION_CUSTOM,
                                              rotation_flu_deg=(0.0, pitch, yaw), hfov_deg=DEFAULT_DOWN_ZONE_FOV_DEG,
