@@ -19,6 +19,7 @@ from companion.cli import main as companion_main
 from companion.bundled import missions_dir
 from companion.plan_io import STATS_KEYS, TIMING_KEYS
 from sitl.cli import main as sitl_main
+from ports import private_link
 
 SRC = missions_dir() / "flat-rectangle"
 
@@ -314,7 +315,7 @@ def test_bad_input(case, base, held_udp_port, tmp_path, capsys, monkeypatch):
     if program == "companion":
         if argv[0] in ("fly", "demo"):
             argv = argv + ["--quiet"]
-        rc = companion_main(argv)
+        rc = companion_main(private_link(argv))
     else:
         rc = sitl_main(argv)
     out, err = capsys.readouterr()

@@ -15,6 +15,7 @@ from mavcore.energy import EnergyConfig, cruise_power_w, flight_energy, hover_po
 from mavcore.mission import load_mission
 from mavcore.vehicle import GRAVITY_M_S2, VehicleConfig
 from sitl.battery import Battery
+from ports import private_link
 
 ROOT = Path(__file__).resolve().parents[1]
 FLAT = ROOT / "missions" / "flat-rectangle" / "mission.yaml"
@@ -263,7 +264,7 @@ def test_fly_one_sortie_from_the_launch_point(tmp_path, capsys):
     first = doc["sorties"][0]["waypoints"][0]["p"]
     assert first[:2] == pytest.approx(launch, abs=1e-9)
     capsys.readouterr()
-    rc = main(["fly", str(FLAT), "--plan", str(tmp_path / "plan.json"), "--sortie", "2", "--quiet"])
+    rc = main(private_link(["fly", str(FLAT), "--plan", str(tmp_path / "plan.json"), "--sortie", "2", "--quiet"]))
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "--sortie" in err[0] and "it has 1" in err[0]
     report, tlog = tmp_path / "report.json", tmp_path / "f.tlog"

@@ -13,6 +13,7 @@ import warnings
 import pytest
 
 from companion.cli import main as companion_main
+from ports import private_link
 from hostile_corpus import CASES, SUBPROCESS_IDS, check_base, make_base, run_limited, tree
 
 #: The longest error line allowed: a file name (elided beyond 200 characters) and a short clause.
@@ -45,7 +46,7 @@ def test_hostile_input_is_one_line_and_exit_2(case, base, tmp_path, capsys, monk
     monkeypatch.chdir(tmp_path)
     for k, v in case.env.items():
         monkeypatch.setenv(k, v)
-    argv = case.build(tmp_path, base)
+    argv = private_link(case.build(tmp_path, base))
     before = tree(tmp_path)
     capsys.readouterr()
     t0 = time.perf_counter()
@@ -74,7 +75,7 @@ SUB = [c for c in CASES if c.id in SUBPROCESS_IDS]
 def test_worst_cases_as_subprocesses_in_bounded_time_and_memory(case, base, tmp_path):
     """CPU time <= 5 s (wall time depends on the machine's load: a hang is caught by a
     30 s kill), peak RSS <= 500 MB under a 1 GiB address-space limit."""
-    argv = case.build(tmp_path, base)
+    argv = private_link(case.build(tmp_path, base))
     before = tree(tmp_path)
     rc, err, wall, cpu, rss, timed_out = run_limited(argv, tmp_path, case.env, timeout_s=30.0)
     assert not timed_out, f"killed after {wall:.1f} s"

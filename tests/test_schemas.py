@@ -28,6 +28,7 @@ import pytest
 from jsonschema import Draft202012Validator
 
 from companion.cli import main
+from ports import private_link
 from companion.bundled import missions_dir
 from mavcore.errors import PlanError
 from companion.format_version import check_format_version
@@ -455,7 +456,8 @@ def test_fly_with_a_plan_of_another_major_version_exits_2_and_writes_nothing(pla
     monkeypatch.chdir(tmp_path)
     plan_doc["format_version"] = "3.0"
     Path("plan.json").write_text(json.dumps(plan_doc), encoding="utf-8")
-    rc = main(["fly", str(missions_dir() / "flat-rectangle" / "mission.yaml"), "--plan", "plan.json", "--quiet"])
+    rc = main(private_link(["fly", str(missions_dir() / "flat-rectangle" / "mission.yaml"), "--plan", "plan.json",
+                            "--quiet"]))
     err = capsys.readouterr().err
     assert rc == 2
     assert err == ("companion fly: error: plan.json: key 'format_version': version 3.0 is not supported "
