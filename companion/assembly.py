@@ -62,7 +62,8 @@ def build_guard(mission, replanner, grid, dem):
         od = known_obstacle_distance(replanner.memory, lambda: replanner.known)
     else:
         scene, od = SafetyScene.from_maps(grid, dem, mission.replan.canopy_height_m), None
-    gate = GuardGate(Guard(cfg, scene, od), mission.replan.jerk_m_s3)
+    rp = mission.replan
+    gate = GuardGate(Guard(cfg, scene, od), rp.jerk_m_s3, rp.emergency_limits())
     if replanner is not None:
         replanner.guard = gate.guard      # re-routes and rejoins are paced to it
     return gate

@@ -35,3 +35,17 @@ def test_inner_ends_are_not_extended():
     assert lateral_offset((10.0, 12.0), legs) == pytest.approx(0.0)
     # and the first runs on behind its start
     assert lateral_offset((-3.0, 0.4), legs) == pytest.approx(0.4)
+
+
+def test_the_avoided_leg_runs_on_behind_the_corner_it_began_at():
+    """The avoidance moved on to the second leg of an L (the corridor after the turn) and
+    gives way by backing along it, past the corner (obstacles-wide seed 20261152 flight 14:
+    1.74 m "lateral" that was along the leg). Measured with the avoided leg run on behind
+    its start: 0.3 m, the offset from its line; without (the first leg only): the distance
+    to the corner."""
+    legs = (((0.0, 0.0), (10.0, 0.0)), ((10.0, 0.0), (10.0, 10.0)))
+    p = (10.3, -1.5)                                    # 1.5 m back past the corner, 0.3 m off
+    assert lateral_offset(p, legs, avoided=1) == pytest.approx(0.3)
+    assert lateral_offset(p, legs) == pytest.approx(math.hypot(0.3, 1.5))
+    # leaving the line is still lateral: beside the avoided leg's line behind the corner
+    assert lateral_offset((11.2, -0.8), legs, avoided=1) == pytest.approx(1.2)

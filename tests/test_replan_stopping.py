@@ -18,6 +18,7 @@ from mavcore.maps.grid import ElevationModel, OccupancyGrid
 from companion.replan.margin_exit import margin_exit
 from companion.replan.replanner import STOP_MARGIN_M, Replanner
 from companion.replan.shaper import ReferenceShaper
+from mavcore.mission.replan import ReplanConfig
 from companion.safety import Guard, GuardConfig, SafetyScene
 
 R, C = 0.4, 0.5
@@ -50,8 +51,9 @@ def _shaping(guard):
     """What ``_shape`` and ``_govern_rows`` read, on a bare object (a whole replanner needs
     a plan); braking at half the 1 m/s^2 limit, as the replanner's governor does."""
     rp = types.SimpleNamespace(guard=guard, shaper=ReferenceShaper(1.0, 2.0), n_stop_limited=0, _brake=0.5,
-                               cfg=types.SimpleNamespace(clearance_governor=True))
-    for name in ("_shape", "_govern_rows", "_allowed_speed", "_least_room"):
+                               cfg=ReplanConfig(accel_m_s2=1.0, jerk_m_s3=2.0), emergency=False,
+                               n_emergency_brakes=0)
+    for name in ("_shape", "_govern_rows", "_allowed_speed", "_least_room", "_set_emergency", "_calm"):
         setattr(rp, name, types.MethodType(getattr(Replanner, name), rp))
     return rp
 

@@ -532,7 +532,9 @@ def test_no_way_past_stops_and_reroutes(obstacle_case):
     res = replay_chunks([data], core, 0.0, ())
     f = res.flight
     events = f.replanning.event_list
-    stops = [e for e in events if e["action"] == "stop"]
+    # (an emergency brake may come first: the counterfactual reference nears the crate as the
+    # recorded readings draw it, and its normal brake no longer stops in time)
+    stops = [e for e in events if e["action"] == "stop" and not e["detail"].startswith("emergency brake")]
     assert stops and "no way past" in stops[0]["detail"]
     t_stop = stops[0]["t_s"]
     # the escape bound: the stop comes 2 s after the avoidance that led to it

@@ -28,6 +28,10 @@ from .shaper import axis_snap
 #: stopping point agrees with the frame-stepped brake within 1 cm
 #: (``tests/test_replan_brake.py``), well inside the 0.1 m the replanner keeps.
 BRAKE_DT_S = 0.05
+#: Step (s) of the predicted emergency brake (``ReferenceShaper.set_limits`` with the emergency
+#: limits): its faster pole and jerk need a finer step for the same accuracy (2 cm;
+#: ``tests/test_replan_emergency_brake.py``).
+EMERGENCY_BRAKE_DT_S = 0.01
 #: An axis is at rest below these speed (m/s), acceleration (m/s^2) and jerk (m/s^3).
 REST_V_M_S, REST_A_M_S2, REST_J_M_S3 = 2e-3, 1e-2, 5e-2
 #: The prediction stops after this long (s) whatever the state (the shaper brakes from

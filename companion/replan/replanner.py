@@ -91,7 +91,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mavcore.mission.replan import ReplanConfig
-from .brake import brake_path
+from .brake import BRAKE_DT_S, EMERGENCY_BRAKE_DT_S, brake_path
 from ..trajectory.reference import RefSample
 from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
@@ -109,7 +109,7 @@ from .rejoin import converged_from, rejoin
 from .repair import MAX_REPAIRS, repair
 from .reroute import reroute, with_blocking
 from .reroute3d import reroute_3d
-from .shaper import ReferenceShaper
+from .shaper import EMERGENCY_OMEGA_RAD_S, ReferenceShaper
 from .route3d import Route3D, RouteScene, find_route
 from .routecheck import route_exists
 from .voxmap import L_CANDIDATE, ObstacleMap
@@ -340,13 +340,16 @@ def _segment_distance(p, a, b, before: bool = False, beyond: bool = False) -> fl
     return math.hypot(p[0] - ax - t * dx, p[1] - ay - t * dy)
 
 
-def lateral_offset(p, legs) -> float:
+def lateral_offset(p, legs, avoided: int = 0) -> float:
     """Horizontal offset (m) of p across a path of legs ((a, b), ...; ENU xy): the
-    distance to the nearest leg, the first one running on behind its start and the last
-    one on past its end. Backing along the path (a stop that gives way keeps its distance
-    by reversing down the corridor) is not a lateral deviation; leaving the line is."""
+    distance to the nearest leg, the first one and the ``avoided`` one (the leg the
+    avoidance is on) running on behind their starts and the last one on past its end.
+    Backing along the path (a stop that gives way keeps its distance by reversing down
+    the corridor, past the corner its leg began at) is not a lateral deviation; leaving
+    the line is."""
     n = len(legs)
-    return min(_segment_distance(p, a, b, before=(i == 0), beyond=(i == n - 1)) for i, (a, b) in enumerate(legs))
+    return min(_segment_distance(p, a, b, before=(i == 0 or i == avoided), beyond=(i == n - 1))
+               for i, (a, b) in enumerate(legs))
 
 
 def lateral_gap(lat_m: np.ndarray, half_width_m: float, clearance_m: float, min_gap_m: float = 0.02) -> bool:
@@ -578,8 +581,12 @@ class Replanner:
         self._vel = (0.0, 0.0, 0.0)
         self._next_rejoin = -math.inf
         self._dev_leg: tuple | None = None
+        self._dev_avoided = 0                     # index in ``_dev_leg`` of the avoided leg
         #: frames whose command ``_shape`` cut so that the reference's stopping point keeps clear
         self.n_stop_limited = 0
+        #: the shaper brakes at the emergency limits (``_shape``; docs/replan.md "The emergency brake")
+        self.emergency = False
+        self.n_emergency_brakes = 0
         #: the guard (``companion.safety.Guard``; set by the flight's builder): a re-route or
         #: a rejoin is paced to its stopping law and checked whole before it is installed
         #: (``pace``); None: installed as planned
@@ -783,6 +790,7 @@ class Replanner:
         events: list = []
         self.memory.expire_candidates(t_s)
         mode = self.mode
+        n_emergency = self.n_emergency_brakes
         if mode in _FOLLOWING:
             ref = self._follow(tau, events)
         elif mode in ("avoid", "climb"):
@@ -791,6 +799,8 @@ class Replanner:
             ref = self._stop(tau, dt, events)
         else:
             ref = self._static
+        if self.n_emergency_brakes != n_emergency:
+            self._emergency_event(events)
         self._account(ref)
         return ReplanStep(ref, self.mode, self.mode == "done", self.mode == "hold", tuple(events))
 
@@ -949,6 +959,7 @@ class Replanner:
         self._leg_wp = self._wp_leave          # the avoided leg began at or before it
         A, B, u, n = self._leg_frame(k)
         self._dev_leg = ((A[:2].copy(), B[:2].copy()),)
+        self._dev_avoided = 0
         along = float((np.asarray(s.p[:2]) - A[:2]) @ u)
         self._progress = along
         self._t_progress = tau
@@ -967,6 +978,7 @@ class Replanner:
             A, B, u, n = self._leg_frame(k)
             self._leg_wp = next_corner_visit(self.plan, A, self._leg_wp)
             self._dev_leg = (self._dev_leg[-1], (A[:2].copy(), B[:2].copy()))   # this leg and the one before
+            self._dev_avoided = 1
             self._progress = float((P[:2] - A[:2]) @ u)
             self._t_progress = tau
             # along-leg coordinates change with the leg: restart the escape's goals on it
@@ -1186,8 +1198,16 @@ class Replanner:
             # from where the reference is now, through the frame's step, to its stopping point;
             # the brake keeps STOP_MARGIN_M beyond the clearance (the prediction's error at
             # speed), and never enters the clearance itself nor closes inside it
-            path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh)])
+            dt_brake = EMERGENCY_BRAKE_DT_S if self.emergency else BRAKE_DT_S
+            path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh, dt_brake)])
             return path, self.guard.check_path(path, STOP_MARGIN_M, inner_tol_m=STOP_TOL_M)
+
+        if self.emergency and self._calm():
+            # back to the normal limits once the state is within them and their brake from here
+            # passes (the emergency brake is for what the normal one can no longer stop for)
+            self._set_emergency(False)
+            if not judged(sh.state())[1].ok:
+                self._set_emergency(True)
 
         tried = []
         for _ in range(3):
@@ -1209,6 +1229,17 @@ class Replanner:
         path, verdict = judged(st)
         if verdict.ok:
             return sh.commit(st)
+        if not self.emergency:
+            # the normal brake can no longer stop for it (it came into view inside that
+            # stopping distance: a walker out of a row, fresh seed 20261152 flight 10, met at
+            # 0.52 m/s by a brake at 1 m/s^2): the emergency brake, until calm (``_calm``)
+            tried.append((st, path))
+            self._set_emergency(True)
+            self.n_emergency_brakes += 1          # ``step`` reports it (``_emergency_event``)
+            st = sh.preview(dt, (0.0, 0.0, 0.0))
+            path, verdict = judged(st)
+            if verdict.ok:
+                return sh.commit(st)
         # even braking closes (the state already closes inside a clearance: the map grew round
         # it): the candidate whose path comes least close, braking included, the earliest of
         # equals (moving away, or on along the surface, is never worse than braking; a zero
@@ -1217,6 +1248,28 @@ class Replanner:
         tried.append((st, path))
         rooms = [self._least_room(p) for _, p in tried]
         return sh.commit(tried[int(np.argmax(rooms))][0])
+
+    def _emergency_event(self, events: list) -> None:
+        """The ``stop`` event of an emergency brake begun this frame."""
+        pts = self._points()
+        near = self._nearest(np.linalg.norm(pts - np.asarray(self.shaper.p), axis=1)) if len(pts) else None
+        self._event(events, "stop", near, f"emergency brake at {self.cfg.emergency_limits()[0]:g} m/s^2: "
+                    f"the brake at {self.cfg.accel_m_s2:g} m/s^2 cannot stop in time")
+
+    def _set_emergency(self, on: bool) -> None:
+        """The shaper's limits: the emergency brake's (``replan.emergency_accel_m_s2``,
+        ``emergency_jerk_m_s3``, pole ``EMERGENCY_OMEGA_RAD_S``) or the normal ones."""
+        self.emergency = on
+        c = self.cfg
+        if on:
+            self.shaper.set_limits(*c.emergency_limits(), omega_rad_s=EMERGENCY_OMEGA_RAD_S)
+        else:
+            self.shaper.set_limits(c.accel_m_s2, c.jerk_m_s3)
+
+    def _calm(self) -> bool:
+        """The shaper's state is within the normal limits (acceleration and jerk, per axis)."""
+        sh = self.shaper
+        return max(abs(x) for x in sh.a) <= self.cfg.accel_m_s2 and max(abs(x) for x in sh.j) <= self.cfg.jerk_m_s3
 
     def _least_room(self, path) -> float:
         """Least (distance - the guard's clearance) (m) along (M, 3) points, over every surface."""
@@ -1559,6 +1612,8 @@ class Replanner:
         w = np.asarray(res.plan.p_enu_m[1][:2], dtype=float)
         if self._dev_leg is None or min(_segment_distance(w, a, b) for a, b in self._dev_leg) > GOAL_REACHED_M:
             chord = (P[:2].copy(), w.copy())
+            if self._dev_leg is None:
+                self._dev_avoided = 0
             self._dev_leg = (chord,) if self._dev_leg is None else (*self._dev_leg, chord)
         self.mode = "rejoin"
         self._mode_until = float(res.plan.t_s[1])
@@ -1575,7 +1630,7 @@ class Replanner:
     def _deviation(self, p) -> None:
         if self._dev_leg is None:
             return
-        lat = lateral_offset(p, self._dev_leg)
+        lat = lateral_offset(p, self._dev_leg, self._dev_avoided)
         if lat > self._max_lat:
             self._max_lat = lat
         climb = p[2] - (self.known.ground_z(p[0], p[1]) + self.plan.flight.height_agl_m)

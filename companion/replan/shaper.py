@@ -30,6 +30,10 @@ from dataclasses import dataclass
 
 #: Pole of the reference model (rad/s).
 OMEGA_RAD_S = 6.0
+#: Pole (rad/s) of the emergency brake's model (``ReferenceShaper.set_limits`` with
+#: ``replan.emergency_accel_m_s2`` / ``emergency_jerk_m_s3``): the fastest that brakes to rest
+#: without reversing (9 rad/s reverses at 0.04-0.1 m/s; tests/test_replan_emergency_brake.py).
+EMERGENCY_OMEGA_RAD_S = 8.0
 
 
 def _sat(x: float, limit: float) -> float:
@@ -77,17 +81,22 @@ class ReferenceShaper:
 
     def __init__(self, accel_m_s2: float, jerk_m_s3: float, snap_m_s4: float | None = None,
                  omega_rad_s: float = OMEGA_RAD_S) -> None:
+        self.set_limits(accel_m_s2, jerk_m_s3, snap_m_s4, omega_rad_s)
+        self.p = [0.0, 0.0, 0.0]
+        self.v = [0.0, 0.0, 0.0]
+        self.a = [0.0, 0.0, 0.0]
+        self.j = [0.0, 0.0, 0.0]
+        self.s = [0.0, 0.0, 0.0]
+
+    def set_limits(self, accel_m_s2: float, jerk_m_s3: float, snap_m_s4: float | None = None,
+                   omega_rad_s: float = OMEGA_RAD_S) -> None:
+        """Limits and pole from now on; the state goes on from where it is (continuous)."""
         self.a_max = float(accel_m_s2)
         self.j_max = float(jerk_m_s3)
         self.s_max = float(snap_m_s4) if snap_m_s4 is not None else 5.0 * self.j_max
         self.k_j = 3.0 * omega_rad_s
         self.k_a = omega_rad_s
         self.k_v = omega_rad_s / 3.0
-        self.p = [0.0, 0.0, 0.0]
-        self.v = [0.0, 0.0, 0.0]
-        self.a = [0.0, 0.0, 0.0]
-        self.j = [0.0, 0.0, 0.0]
-        self.s = [0.0, 0.0, 0.0]
 
     def reset(self, p, v, a, jerk) -> None:
         """Continue from this state (ENU 3-sequences)."""

@@ -9,8 +9,10 @@ A sample that fails is still flown while the mode brakes toward that surface
 sample: a late detection gives the mode that long to start braking (the
 replanner's governor does at once; its shaper reaches the braking rate in
 0.15 s). Otherwise the gate *engages*: from then on it flies its own reference, the last
-accepted state braked to rest by a ``ReferenceShaper`` at the guard's
-acceleration limit (zero velocity command), then held there. The stopping law
+accepted state braked to rest by a ``ReferenceShaper`` (zero velocity command)
+at the emergency brake's limits when they are given (``replan.emergency_accel_m_s2``,
+``emergency_jerk_m_s3``: a refused sample is what the normal brake did not stop for),
+else at the guard's acceleration limit, then held there. The stopping law
 already held on the last accepted sample, so that braking ends before the
 clearance. The mode's reference is no longer flown; the flight core ends the
 flight once the gate is at rest (a checked landing, or a hover and report).
@@ -21,7 +23,7 @@ from __future__ import annotations
 import math
 
 from ..trajectory.reference import RefSample
-from ..replan.shaper import ReferenceShaper
+from ..replan.shaper import EMERGENCY_OMEGA_RAD_S, ReferenceShaper
 from .guard import GRACE_S, Guard, Verdict
 
 #: Refusals kept for the report (the count goes on).
@@ -39,11 +41,18 @@ class GuardGate:
     guard : Guard
     jerk_m_s3 : float
         Jerk limit of the brake (the replanner's ``jerk_m_s3``).
+    emergency : (accel m/s^2, jerk m/s^3) or None
+        The emergency brake's limits (``replan.emergency_accel_m_s2``, ``emergency_jerk_m_s3``;
+        pole ``EMERGENCY_OMEGA_RAD_S``): the brake's, instead of (the guard's acceleration
+        limit, ``jerk_m_s3``).
     """
 
-    def __init__(self, guard: Guard, jerk_m_s3: float) -> None:
+    def __init__(self, guard: Guard, jerk_m_s3: float, emergency: tuple[float, float] | None = None) -> None:
         self.guard = guard
-        self.shaper = ReferenceShaper(guard.cfg.accel_m_s2, jerk_m_s3)
+        if emergency is None:
+            self.shaper = ReferenceShaper(guard.cfg.accel_m_s2, jerk_m_s3)
+        else:
+            self.shaper = ReferenceShaper(emergency[0], emergency[1], omega_rad_s=EMERGENCY_OMEGA_RAD_S)
         self.engaged = False
         self._last: RefSample | None = None
         self._t_prev: float | None = None

@@ -71,6 +71,12 @@ class ReplanConfig:
     vertical_speed_m_s, accel_m_s2, jerk_m_s3 : float
         Vertical speed, acceleration and jerk limits of the avoidance
         reference (and the jerk bound checked on a rejoin).
+    emergency_accel_m_s2, emergency_jerk_m_s3 : float
+        Limits of the emergency brake (per axis): a surface that the
+        brake at ``accel_m_s2`` / ``jerk_m_s3`` can no longer stop for
+        (it came into view inside that stopping distance: a walker out
+        of a row), and the guard gate's braked hover; never below the
+        normal limits (``emergency_limits``).
     canopy_height_m : float
         Height of the vine canopy above the terrain (m): the occupied OGM
         cells extruded to it are known obstacles, not unknown ones.
@@ -134,6 +140,8 @@ class ReplanConfig:
     vertical_speed_m_s: float = 0.5
     accel_m_s2: float = 1.0
     jerk_m_s3: float = 2.0
+    emergency_accel_m_s2: float = 3.0
+    emergency_jerk_m_s3: float = 8.0
     canopy_height_m: float = 2.0
     known_tolerance_m: float = 0.2
     tilt_tolerance_deg: float = 1.5
@@ -175,9 +183,18 @@ class ReplanConfig:
             raise ValueError("replan.clearance_m + body_radius_m must be below replan.influence_range_m")
         if self.voxel_m > self.clearance_m:
             raise ValueError("replan.voxel_m must not exceed replan.clearance_m")
+        for name in ("emergency_accel_m_s2", "emergency_jerk_m_s3"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0 < v <= 20.0):
+                raise ValueError(f"replan.{name} must be in (0, 20], got {v}")
         ids = [s.id for s in self.sensors]
         if len(set(ids)) != len(ids):
             raise ValueError("replan.sensors ids must be unique")
+
+    def emergency_limits(self) -> tuple[float, float]:
+        """(acceleration m/s^2, jerk m/s^3) of the emergency brake: the emergency limits,
+        or the normal ones where those are higher."""
+        return max(self.emergency_accel_m_s2, self.accel_m_s2), max(self.emergency_jerk_m_s3, self.jerk_m_s3)
 
     def offset_of(self, sensor_id: int) -> tuple[float, float, float]:
         """Mounting offset (body FLU, m) of a sensor id; the centre of mass if not listed."""
