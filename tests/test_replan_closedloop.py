@@ -858,3 +858,27 @@ def test_giving_way_never_backs_into_a_still_obstacle_faster_than_it_could_stop(
     # nothing behind: it backs away faster than that (the clamp above is the post's)
     v_free = rp._give_way(P, pts[:1])
     assert -v_free[0] > v_stop + 0.1
+
+
+def test_a_rejoin_is_admitted_only_where_follow_would_not_stop_again_at_once(field):
+    """``Replanner._retriggers``: follow's own trigger, applied to a candidate's first
+    second as follow will apply it. A post on the corridor's line, remembered: a candidate
+    whose first second flies toward it from 2 m short of its face would be an avoidance
+    again at once (refused); one that flies away from it, 2.5 m past it, is quiet
+    (admitted). The trigger range at 1 m/s is d_o = 2.1 m or the braking law's, whichever
+    is farther (``_trigger_m``): 2 m from the face is inside it."""
+    from companion.trajectory.cursor import TrajectoryCursor
+
+    rp = Replanner(ReplanConfig(body_radius_m=0.442, memory_s=1e3), field.known, field.plan)
+    post = Cylinder(9.5, CORRIDOR_Y, 0.25, 1.5)
+    _boxed_in_voxels(rp.memory, (post,))
+    rp.start(0.0)
+    cur = TrajectoryCursor(field.plan.trajectory)
+    ts = np.arange(cur.t0, cur.tf, 0.05)
+    xs = np.array([cur.sample(t).p[0] for t in ts])
+    first = ts < ts[np.argmax(xs)]                          # the first leg, flown toward +x
+    t_short = float(ts[first][np.argmin(np.abs(xs[first] - (post.x - post.r - 2.0)))])
+    t_past = float(ts[first][np.argmin(np.abs(xs[first] - (post.x + post.r + 2.5)))])
+    assert rp._trigger_m(1.0) > 2.0
+    assert rp._retriggers(field.plan, t_short)
+    assert not rp._retriggers(field.plan, t_past)

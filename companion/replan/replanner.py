@@ -165,6 +165,10 @@ FLOW_TIME_S = 1.0
 REJOIN_HYSTERESIS_M = 0.3
 #: A rejoin that fails its checks is tried again after this long (s).
 REJOIN_RETRY_S = 0.25
+#: A rejoin is admitted only if the follow mode's own trigger (``_threat``) stays quiet along
+#: its first this many seconds (s), sampled every ``REJOIN_CHECK_DT_S``
+#: (``Replanner._retriggers``).
+REJOIN_QUIET_S, REJOIN_CHECK_DT_S = 1.0, 0.1
 #: Soft-wall gain (1/s): the speed toward a wall is at most this times the distance left.
 WALL_GAIN_1_S = 2.0
 #: A give-way whose backing velocity lies less than this fraction along the corridor is a
@@ -1601,7 +1605,7 @@ class Replanner:
                      self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z, self._on_free_cell,
                      self._floor_z)
         paced, _, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st, plan)
-        if paced is None:
+        if paced is None or self._retriggers(paced, tau):
             self._next_rejoin = tau + REJOIN_RETRY_S
             return None
         res = replace(res, plan=paced)
@@ -1624,6 +1628,21 @@ class Replanner:
             self._skip(events, *skip, "rejoin")
         s = self._cursor.sample(tau)
         return RefSample(s.p, s.v, s.a, s.jerk, s.snap, _pointing(s.p, self._target))
+
+    def _retriggers(self, plan: GlobalPlan, tau: float) -> bool:
+        """The follow mode's trigger, exactly as ``_follow`` will apply it to ``plan`` (its
+        samples, its legs), fires within its first ``REJOIN_QUIET_S``. Such a rejoin would be
+        an avoidance again at once: the admission's own test looked along the avoided leg,
+        while follow looks along the new plan's (fresh seed 20261152 of obstacles-wide, flight
+        0: at rest, the leg nearest was the next one, run the other way, so the post ahead
+        was "behind"; the rejoin stepped toward it, follow stopped for it, and the two
+        alternated for 116 s)."""
+        cur = TrajectoryCursor(plan.trajectory)
+        for k in range(int(round(REJOIN_QUIET_S / REJOIN_CHECK_DT_S)) + 1):
+            s = cur.sample(min(tau + k * REJOIN_CHECK_DT_S, cur.tf))
+            if self._threat(s.p, s.v, lambda s=s: plan.leg_frame(plan.leg_near(s.p, s.v[:2]))[2]) is not None:
+                return True
+        return False
 
     # --- statistics ---------------------------------------------------------------------
 
