@@ -165,6 +165,9 @@ FLOW_TIME_S = 1.0
 REJOIN_HYSTERESIS_M = 0.3
 #: A rejoin that fails its checks is tried again after this long (s).
 REJOIN_RETRY_S = 0.25
+#: The shaper leaves the emergency limits only when the normal brake keeps this much (m) more
+#: than the stopping point's margin (``Replanner._shape``): hysteresis.
+EMERGENCY_EXIT_MARGIN_M = 0.1
 #: A rejoin is admitted only if the follow mode's own trigger (``_threat``) stays quiet along
 #: its first this many seconds (s), sampled every ``REJOIN_CHECK_DT_S``
 #: (``Replanner._retriggers``).
@@ -591,6 +594,8 @@ class Replanner:
         #: the shaper brakes at the emergency limits (``_shape``; docs/replan.md "The emergency brake")
         self.emergency = False
         self.n_emergency_brakes = 0
+        self._emergency_why = ""
+        self._evading = False                     # a stop gives way to a mover coming closer
         #: the guard (``companion.safety.Guard``; set by the flight's builder): a re-route or
         #: a rejoin is paced to its stopping law and checked whole before it is installed
         #: (``pace``); None: installed as planned
@@ -791,6 +796,7 @@ class Replanner:
         self._vel = vel_enu_m_s
         self._t_s = t_s
         self._still = False                      # set by ``_look`` while at rest
+        self._evading = False                    # set by ``_stop`` while a mover comes closer
         events: list = []
         self.memory.expire_candidates(t_s)
         mode = self.mode
@@ -1198,19 +1204,21 @@ class Replanner:
         cmd = np.asarray(v_cmd, dtype=float)
         here = np.asarray(sh.p, dtype=float)[None, :]
 
-        def judged(st):
+        def judged(st, margin_m=STOP_MARGIN_M):
             # from where the reference is now, through the frame's step, to its stopping point;
             # the brake keeps STOP_MARGIN_M beyond the clearance (the prediction's error at
             # speed), and never enters the clearance itself nor closes inside it
             dt_brake = EMERGENCY_BRAKE_DT_S if self.emergency else BRAKE_DT_S
             path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh, dt_brake)])
-            return path, self.guard.check_path(path, STOP_MARGIN_M, inner_tol_m=STOP_TOL_M)
+            return path, self.guard.check_path(path, margin_m, inner_tol_m=STOP_TOL_M)
 
-        if self.emergency and self._calm():
+        if self.emergency and not self._evading and self._calm():
             # back to the normal limits once the state is within them and their brake from here
-            # passes (the emergency brake is for what the normal one can no longer stop for)
+            # passes with EMERGENCY_EXIT_MARGIN_M more (the emergency brake is for what the
+            # normal one can no longer stop for; without the margin the two alternated from
+            # frame to frame beside a post: fresh seed 20261155 of obstacles-wide, flight 2)
             self._set_emergency(False)
-            if not judged(sh.state())[1].ok:
+            if not judged(sh.state(), STOP_MARGIN_M + EMERGENCY_EXIT_MARGIN_M)[1].ok:
                 self._set_emergency(True)
 
         tried = []
@@ -1240,6 +1248,7 @@ class Replanner:
             tried.append((st, path))
             self._set_emergency(True)
             self.n_emergency_brakes += 1          # ``step`` reports it (``_emergency_event``)
+            self._emergency_why = "cannot stop in time"
             st = sh.preview(dt, (0.0, 0.0, 0.0))
             path, verdict = judged(st)
             if verdict.ok:
@@ -1258,7 +1267,7 @@ class Replanner:
         pts = self._points()
         near = self._nearest(np.linalg.norm(pts - np.asarray(self.shaper.p), axis=1)) if len(pts) else None
         self._event(events, "stop", near, f"emergency brake at {self.cfg.emergency_limits()[0]:g} m/s^2: "
-                    f"the brake at {self.cfg.accel_m_s2:g} m/s^2 cannot stop in time")
+                    f"the brake at {self.cfg.accel_m_s2:g} m/s^2 {self._emergency_why}")
 
     def _set_emergency(self, on: bool) -> None:
         """The shaper's limits: the emergency brake's (``replan.emergency_accel_m_s2``,
@@ -1328,6 +1337,15 @@ class Replanner:
     def _stop(self, tau: float, dt: float, events: list) -> RefSample:
         P = np.array(self.shaper.p)
         pts = self._points()
+        # a mover coming closer is given way to at the emergency limits: a stop is not enough
+        # when it walks on into the vehicle, and at the normal limits the vehicle cannot get
+        # out of its path in time (fresh seed 20261155 of obstacles-wide, flight 2: a worker
+        # walking at 1.3 m/s straight at the stopped vehicle, first seen 2.6 m away)
+        self._evading = len(pts) > 0 and self.closing.approach_m_s(getattr(self, "_t_s", None)) > 0.0
+        if self._evading and not self.emergency:
+            self._set_emergency(True)
+            self.n_emergency_brakes += 1
+            self._emergency_why = "cannot give way to a mover in time"
         v = self._give_way(P, pts)
         st = self._shape(dt, v.tolist())
         self._deviation(st.p)
