@@ -25,12 +25,14 @@ from companion.cli import main
 from mavcore.mission.replan import ReplanConfig
 
 
-def fly(start_s: float, emergency: bool, workdir: Path) -> dict:
+def write_mission(directory: Path, start_s: float, emergency: bool) -> Path:
+    """The step-out mission (module doc) as ``directory/m.yaml``: the worker sets off at
+    ``start_s``; ``emergency`` False sets the emergency limits to the normal ones."""
     fd = missions_dir() / "flat-rectangle"
     off = "" if emergency else (f", emergency_accel_m_s2: {ReplanConfig.accel_m_s2}, "
                                 f"emergency_jerk_m_s3: {ReplanConfig.jerk_m_s3}")
-    d = Path(tempfile.mkdtemp(dir=workdir))
-    (d / "m.yaml").write_text(
+    path = directory / "m.yaml"
+    path.write_text(
         "name: step-out\n"
         f"map: {fd / 'map.yaml'}\ndem: {fd / 'dem.asc'}\n"
         "home: {lat: 44.8, lon: -0.6, alt_m: 30.0}\n"
@@ -40,10 +42,16 @@ def fly(start_s: float, emergency: bool, workdir: Path) -> dict:
         f"replan: {{give_way: true{off}}}\n"
         "sim:\n  noise: {vector_variance: 5.0e-4, gyro_variance: 5.0e-4}\n  seed: 1\n"
         f"  movers: [{{type: walker, path: [[17.0, 6.9], [17.0, 11.5]], speed_m_s: 1.0, start_s: {start_s}}}]\n")
+    return path
+
+
+def fly(directory: Path, start_s: float, emergency: bool) -> dict:
+    """report.json of the step-out flight (``write_mission``) flown in ``directory``."""
+    mission = write_mission(directory, start_s, emergency)
     with contextlib.redirect_stdout(io.StringIO()):        # the demo's own summary table
-        main(["demo", "--mission", str(d / "m.yaml"), "--transport", "inproc", "--cut", "14", "--out",
-              str(d / "out"), "--no-plots", "--quiet"])
-    return json.loads((d / "out" / "report.json").read_text())
+        main(["demo", "--mission", str(mission), "--transport", "inproc", "--cut", "14", "--out",
+              str(directory / "out"), "--no-plots", "--quiet"])
+    return json.loads((directory / "out" / "report.json").read_text())
 
 
 def main_(argv=None) -> None:
@@ -57,7 +65,7 @@ def main_(argv=None) -> None:
             cells = []
             first = None
             for on in (True, False):
-                rep = fly(t, on, Path(tmp))
+                rep = fly(Path(tempfile.mkdtemp(dir=tmp)), t, on)
                 rp = rep["replanning"]
                 if first is None:
                     first = next(e["obstacle_range_m"] for e in rp["event_list"] if e["obstacle_range_m"] is not None)

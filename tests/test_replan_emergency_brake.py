@@ -12,8 +12,9 @@ broken) it is.
 
 from __future__ import annotations
 
-import json
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +22,9 @@ import pytest
 from companion.replan.brake import EMERGENCY_BRAKE_DT_S, brake_path
 from companion.replan.shaper import EMERGENCY_OMEGA_RAD_S, ReferenceShaper
 from mavcore.mission.replan import ReplanConfig
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import step_out_sweep  # noqa: E402
 
 A, J = ReplanConfig.emergency_accel_m_s2, ReplanConfig.emergency_jerk_m_s3
 A0, J0 = ReplanConfig.accel_m_s2, ReplanConfig.jerk_m_s3
@@ -96,35 +100,18 @@ def test_the_emergency_limits_are_never_below_the_normal_ones():
     assert ReplanConfig(emergency_accel_m_s2=0.5, emergency_jerk_m_s3=1.0).emergency_limits() == (A0, J0)
 
 
-def _step_out_flight(tmp_path, emergency: str) -> dict:
+def _step_out_flight(tmp_path, emergency: bool) -> dict:
     """flat-rectangle's first corridor, flown westward along y = 8.75 m at 1 m/s from
     x = 22 m. A worker inside the row below it (y = 6.9 m, hidden by the canopy) sets off at
     10 s across the corridor at 1 m/s: the vehicle first sees the worker 1.4 m away, nearer
     than the normal brake stops from 1 m/s (about 0.9 m) plus the 0.94 m the clearance
-    sphere needs."""
-    from companion.cli import main
-    from companion.bundled import missions_dir
-
-    fd = missions_dir() / "flat-rectangle"
-    (tmp_path / "m.yaml").write_text(
-        "name: step-out\n"
-        f"map: {fd / 'map.yaml'}\ndem: {fd / 'dem.asc'}\n"
-        "home: {lat: 44.8, lon: -0.6, alt_m: 30.0}\n"
-        "flight: {height_agl_m: 1.5, speed_m_s: 1.0, waypoint_interval_s: 4.0}\n"
-        "coverage: {line_spacing_m: 2.5, safety_margin_m: 0.45}\n"
-        "pointing: {target: centroid}\n"
-        f"replan: {{give_way: true{emergency}}}\n"
-        "sim:\n  noise: {vector_variance: 5.0e-4, gyro_variance: 5.0e-4}\n  seed: 1\n"
-        "  movers: [{type: walker, path: [[17.0, 6.9], [17.0, 11.5]], speed_m_s: 1.0, start_s: 10.0}]\n")
-    out = tmp_path / "out"
-    main(["demo", "--mission", str(tmp_path / "m.yaml"), "--transport", "inproc", "--cut", "14",
-          "--out", str(out), "--no-plots", "--quiet"])
-    return json.loads((out / "report.json").read_text())
+    sphere needs (``benchmarks/step_out_sweep.py``, which sweeps the time it sets off)."""
+    return step_out_sweep.fly(tmp_path, 10.0, emergency)
 
 
 @pytest.mark.slow
 def test_a_worker_stepping_out_of_the_row_is_braked_for_and_not_walked_into(tmp_path):
-    rep = _step_out_flight(tmp_path, "")
+    rep = _step_out_flight(tmp_path, True)
     rp = rep["replanning"]
     first = next(e for e in rp["event_list"] if e["obstacle_range_m"] is not None)
     normal_stop = brake_path((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
@@ -143,5 +130,5 @@ def test_a_worker_stepping_out_of_the_row_is_braked_for_and_not_walked_into(tmp_
 @pytest.mark.slow
 def test_with_the_emergency_brake_broken_the_same_worker_walks_into_the_vehicle(tmp_path):
     """The mutation: emergency limits equal to the normal ones."""
-    rep = _step_out_flight(tmp_path, f", emergency_accel_m_s2: {A0}, emergency_jerk_m_s3: {J0}")
+    rep = _step_out_flight(tmp_path, False)
     assert rep["replanning"]["min_clearance_m"] < 0.05
