@@ -134,14 +134,14 @@ class Field:
     plan: GlobalPlan
 
 
-def build_field(safety_margin_m: float = 0.5) -> Field:
+def build_field(safety_margin_m: float = 0.5, speed_m_s: float = 1.0) -> Field:
     rows, cols = 75, 200
     occ = np.zeros((rows, cols), dtype=bool)
     for x0, x1, y0, y1 in ROWS:
         occ[int(round(y0 / RES)):int(round(y1 / RES)), int(round(x0 / RES)):int(round(x1 / RES))] = True
     grid = OccupancyGrid(occupied=occ, free=~occ, resolution_m=RES)
     dem = ElevationModel(np.zeros((6, 12)), x0_m=-1.0, y0_m=-1.0, cellsize_m=2.0)
-    flight = FlightConfig(height_agl_m=1.5, speed_m_s=1.0, waypoint_interval_s=4.0)
+    flight = FlightConfig(height_agl_m=1.5, speed_m_s=speed_m_s, waypoint_interval_s=4.0)
     wps = waypoints_along(PATH, dem, flight)
     traj = generate_trajectory(wps.t_s, wps.p_enu_m, wps.v_enu_m_s, wps.a_enu_m_s2, TrajectoryConfig(),
                                target_enu_m=TARGET)

@@ -100,6 +100,7 @@ from .heading_bias import HeadingBias, rotate_evidence
 from .knownmap import KNOWN_GROUND, UNKNOWN, KnownMap
 from .lift import WALL_MARGIN_M as LIFT_WALL_MARGIN_M, Over
 from .margin_exit import margin_exit
+from .corner import leg_end_wall_m
 from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
@@ -1063,7 +1064,8 @@ class Replanner:
                 s_goal = min(max(self._far_along, float(P[:2] @ u)) + cfg.influence_range_m, float(B[:2] @ u))
                 xy = A[:2] + (s_goal - float(A[:2] @ u)) * u
                 goal = np.array([xy[0], xy[1], z_goal])
-        v_cmd = self._apf_velocity(P, pts[near], dist[near], goal, A, u, n, ground)
+        end_m = leg_end_wall_m(self.plan, k, P, cfg.lateral_limit_m - WALL_MARGIN_M)
+        v_cmd = self._apf_velocity(P, pts[near], dist[near], goal, A, u, n, ground, end_m)
         st = self._shape(dt, v_cmd)
         prog = float((np.asarray(st.p[:2]) - A[:2]) @ u)
         if prog > self._progress + PROGRESS_M:
@@ -1075,18 +1077,19 @@ class Replanner:
     def _nearest(self, dist: np.ndarray) -> float | None:
         return float(dist.min()) if len(dist) else None
 
-    def _apf_velocity(self, P, obs, obs_dist, goal, A, u, n, ground) -> list:
-        """Velocity command (ENU m/s) from the APF force, constrained (module doc)."""
+    def _apf_velocity(self, P, obs, obs_dist, goal, A, u, n, ground, end_m: float = math.inf) -> list:
+        """Velocity command (ENU m/s) from the APF force, constrained (module doc); ``end_m``:
+        the distance along the leg to its end corner's wall (``corner.leg_end_wall_m``)."""
         if len(obs):
             obstacles = cluster_nearest(obs, obs_dist, CLUSTER_M, MAX_OBSTACLES)
         else:
             obstacles = obs
         # gradient flow: v = F / (k_att T_FLOW), then the speed limits (in _constrain)
         v = apf_force(P, obstacles, goal, self.apf).total / (self.apf.k_att * FLOW_TIME_S)
-        v = self._constrain(P, v, A, u, n, ground)
+        v = self._constrain(P, v, A, u, n, ground, end_m)
         if len(obs) and self.cfg.clearance_governor:
             v = self._govern(P, v, obs, obs_dist)
-            v = self._constrain(P, v, A, u, n, ground)
+            v = self._constrain(P, v, A, u, n, ground, end_m)
             v = self._govern_rows(P, v)
             v = self._govern(P, v, obs, obs_dist, scale_only=True)
             if v[2] < 0.0 and self._over_points(P, v, obs):
@@ -1110,14 +1113,19 @@ class Replanner:
         d = obs[below, :2] - P[:2]
         return bool((np.einsum("ki,ki->k", d, d) < reach * reach).any())
 
-    def _constrain(self, P, v, A, u, n, ground) -> np.ndarray:
-        """Corridor walls, height band and speed limits on a velocity command."""
+    def _constrain(self, P, v, A, u, n, ground, end_m: float = math.inf) -> np.ndarray:
+        """Corridor walls, height band and speed limits on a velocity command. The walls:
+        both sides of the leg, and across it ``end_m`` ahead where the path turns at the
+        leg's end (``companion.replan.corner``: the next leg's side wall, met before the
+        switch)."""
         cfg = self.cfg
         vt, vn, vz = float(v[:2] @ u), float(v[:2] @ n), float(v[2])
         lat = float((P[:2] - A[:2]) @ n)
         L = cfg.lateral_limit_m - WALL_MARGIN_M
         wall = self._wall_speed
         vn = min(max(vn, -wall(L + lat)), wall(L - lat))
+        if math.isfinite(end_m):
+            vt = min(vt, wall(end_m))
         z_lo, z_hi = ground + cfg.floor_agl_m + WALL_MARGIN_M, ground + cfg.ceiling_agl_m - WALL_MARGIN_M
         vz = min(max(vz, -cfg.vertical_speed_m_s, -wall(P[2] - z_lo)),
                  cfg.vertical_speed_m_s, wall(z_hi - P[2]))
