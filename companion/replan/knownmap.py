@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 from scipy import ndimage
@@ -134,14 +135,21 @@ class KnownMap:
 
     # --- scalar queries (per reading) --------------------------------------------------
 
+    @cached_property
+    def _cell_frame(self) -> tuple:
+        """The grid's frame for ``cell_of``, once per map (it runs for every probe of every
+        reading): origin, cos and sin of its yaw, resolution, shape."""
+        g = self.grid
+        rows, cols = g.shape
+        return (g.origin_xy_m[0], g.origin_xy_m[1], math.cos(g.origin_yaw_rad), math.sin(g.origin_yaw_rad),
+                g.resolution_m, rows, cols)
+
     def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
         """(row, col) of the grid cell holding the ENU point (m); None off the grid."""
-        g = self.grid
-        dx, dy = x - g.origin_xy_m[0], y - g.origin_xy_m[1]
-        c, s = math.cos(g.origin_yaw_rad), math.sin(g.origin_yaw_rad)
-        col = math.floor((c * dx + s * dy) / g.resolution_m)
-        row = math.floor((-s * dx + c * dy) / g.resolution_m)
-        rows, cols = g.shape
+        ox, oy, c, s, res, rows, cols = self._cell_frame
+        dx, dy = x - ox, y - oy
+        col = math.floor((c * dx + s * dy) / res)
+        row = math.floor((-s * dx + c * dy) / res)
         if 0 <= row < rows and 0 <= col < cols:
             return row, col
         return None
