@@ -329,6 +329,44 @@ def test_a_beam_sliding_over_a_still_wall_is_no_closing_speed():
     assert c.approach_m_s(0.95) == 0.0
 
 
+def test_a_return_riding_with_the_vehicle_is_no_closing_speed():
+    """A beam tilted 19 deg down, looking back over a canopy's top while the vehicle flies
+    west at 1.8 m/s: its return keeps its place relative to the sensor, so in the world it
+    follows the vehicle along the beam. Read as a world speed that is a mover chasing at
+    1.76 m/s (the beam's level part, 0.977 of 1.8); given the sensor's position it is
+    nothing (fresh seed 20261152 of obstacles-wide, flight 0)."""
+    from companion.replan.closing import ClosingSpeed
+
+    axis = (0.93, 0.2, -0.32)
+    off = (2.6, 0.56, -0.9)                         # the return, from the sensor
+    riding, blind = ClosingSpeed(), ClosingSpeed()
+    for k in range(20):
+        t = 0.05 * k
+        o = (10.0 - 1.8 * t, 8.75, 2.9)
+        hit = tuple(a + b for a, b in zip(o, off))
+        riding.on_hit(t, 22, hit, axis, origin_enu_m=o)
+        blind.on_hit(t, 22, hit, axis)
+    assert riding.approach_m_s(0.95) == 0.0
+    uh = math.hypot(0.93, 0.2)
+    assert blind.approach_m_s(0.95) == pytest.approx(1.8 * 0.93 / uh, abs=1e-9)
+
+
+@pytest.mark.parametrize("vehicle_m_s, walker_m_s", [(0.5, 1.5), (-1.0, 1.2)], ids=("gaining", "head-on"))
+def test_a_walker_that_moves_relative_to_the_vehicle_is_measured_at_its_own_speed(vehicle_m_s, walker_m_s):
+    """A walker gaining on a vehicle flying away from it (0.5 against 1.5 m/s), or walking
+    at a vehicle flying toward it: its return moves relative to the sensor, and the world
+    speed toward the sensor is the walker's."""
+    from companion.replan.closing import ClosingSpeed
+
+    c = ClosingSpeed()
+    u = (-1.0, 0.0, 0.0)                           # looking back (-x) at the walker
+    for k in range(20):
+        t = 0.05 * k
+        o = (vehicle_m_s * t, 0.0, 1.5)
+        c.on_hit(t, 4, (-4.0 + walker_m_s * t, 0.0, 1.5), u, origin_enu_m=o)
+    assert c.approach_m_s(0.95) == pytest.approx(walker_m_s, abs=1e-9)
+
+
 def test_a_walker_crossing_the_beam_counts_only_while_the_vehicle_is_still():
     from companion.replan.closing import ClosingSpeed
 

@@ -36,6 +36,18 @@ This is how the replanner's *look* tells a still obstacle from a mover
 (``replanner``: with ``give_way`` the vehicle stops at an unknown obstacle and
 watches before it avoids it).
 
+A return that keeps its place relative to the sensor while the vehicle moves
+(its level displacement less the sensor's below ``MIN_M_S`` over the baseline)
+is not counted either: that is a beam riding over a surface with the vehicle.
+A beam tilted down onto a canopy or an obstacle's top, looking back while the
+vehicle flies on, returns from points that follow the vehicle along the beam:
+read as a world speed, a mover chasing it at its own speed. The give-way cap
+(``give_way_speed_m_s``) then let the vehicle fly faster than its cruise to
+outpace it, which made the "mover" faster still: a climb flew at 2 m/s in a
+1 m/s mission (fresh seed 20261152 of obstacles-wide, flight 0). A true
+chaser at exactly the vehicle's speed is not closing; it is counted as soon
+as it gains on the vehicle by ``MIN_M_S``.
+
 Movers move level: only the level parts count (the axis' level direction,
 the return's level displacement), and beams steeper than 60 deg (the down
 rangefinder, whose return jumps as the vehicle passes over a crate) are not
@@ -70,14 +82,17 @@ class ClosingSpeed:
     """The largest approach speed (m/s) of an unknown obstacle toward the vehicle."""
 
     def __init__(self) -> None:
-        self._hist: dict[int, list[tuple[float, tuple, tuple]]] = {}
+        self._hist: dict[int, list[tuple[float, tuple, tuple, tuple | None]]] = {}
         self._w = 0.0
         self._t_w = -math.inf
 
-    def on_hit(self, t_s: float, sensor_id: int, hit_enu_m, axis_enu, still: bool = False) -> None:
+    def on_hit(self, t_s: float, sensor_id: int, hit_enu_m, axis_enu, still: bool = False,
+               origin_enu_m=None) -> None:
         """An unknown return of ``sensor_id`` at vehicle time ``t_s``: the hit point
         (ENU, m) and the beam's unit axis (ENU, from the sensor outward); ``still``: the
-        vehicle is still, so any motion of the return is the obstacle's (module notes)."""
+        vehicle is still, so any motion of the return is the obstacle's; ``origin_enu_m``:
+        the sensor's position (a return riding with it is no approach; None: not judged)
+        (module notes)."""
         # one history for all sensors: the vehicle yaws and a mover passes from beam to beam
         h = self._hist.setdefault(0, [])
         hit = (float(hit_enu_m[0]), float(hit_enu_m[1]), float(hit_enu_m[2]))
@@ -85,12 +100,13 @@ class ClosingSpeed:
         if uh < MIN_LEVEL:
             return                   # a steep beam: its return moves as the vehicle climbs over things
         u = (float(axis_enu[0]) / uh, float(axis_enu[1]) / uh, 0.0)      # level: movers move level
+        o = None if origin_enu_m is None else (float(origin_enu_m[0]), float(origin_enu_m[1]))
         while h and t_s - h[0][0] > _STALE_S:
             h.pop(0)
         # the nearest hit (within MATCH_M: the same object) of those BASELINE_S to
         # 2 BASELINE_S old; the nearest, not the newest: a post beside a walker
         best, t0 = MATCH_M, None
-        for tk, pk, _ in reversed(h):
+        for tk, pk, _, ok in reversed(h):
             age = t_s - tk
             if age < BASELINE_S:
                 continue
@@ -98,11 +114,14 @@ class ClosingSpeed:
                 break
             dk = math.dist(hit, pk)
             if dk <= best:
-                best, t0, p0 = dk, tk, pk
+                best, t0, p0, o0 = dk, tk, pk, ok
         if t0 is not None:
             d = (hit[0] - p0[0], hit[1] - p0[1], 0.0)
             along = d[0] * u[0] + d[1] * u[1]
             moved = math.hypot(d[0], d[1])
+            if riding(d, o, o0, t_s - t0):
+                h.append((t_s, hit, u, o))
+                return
             if still:
                 # no sweep: the return moved because the obstacle did, whichever way
                 w, aligned = moved / (t_s - t0), True
@@ -115,12 +134,25 @@ class ClosingSpeed:
                 if w >= self._w or t_s - self._t_w > HOLD_S:
                     self._w = w
                 self._t_w = t_s
-        h.append((t_s, hit, u))
+        h.append((t_s, hit, u, o))
 
     def approach_m_s(self, t_s: float | None) -> float:
         """The approach speed (m/s, >= 0) that the governor allows for at time ``t_s``
         (None: before the first step, 0)."""
         return self._w if t_s is not None and t_s - self._t_w <= HOLD_S else 0.0
+
+
+def riding(d_hit, origin, origin0, dt_s: float) -> bool:
+    """The return moved with the sensor: the sensor moved at least ``MIN_M_S`` and the
+    return's level displacement ``d_hit`` less the sensor's stays below ``MIN_M_S`` over
+    ``dt_s`` (module notes). False when either origin is unknown."""
+    if origin is None or origin0 is None:
+        return False
+    ox, oy = origin[0] - origin0[0], origin[1] - origin0[1]
+    lim = MIN_M_S * dt_s
+    if math.hypot(ox, oy) < lim:
+        return False
+    return math.hypot(d_hit[0] - ox, d_hit[1] - oy) < lim
 
 
 def allowed_approach_m_s(stop_speed_m_s, approach_m_s: float):

@@ -743,7 +743,7 @@ class Replanner:
                         mem.add(q, L_CANDIDATE, t_s)
             self.n_unknown += 1
             if self.cfg.give_way:          # else no approach is ever measured: a still world
-                self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still)
+                self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still, ev.origin)
 
     def _explained_within_attitude(self, reading, pose) -> bool:
         """The attitude allowance: the known map explains the return with the beam placed by
