@@ -21,13 +21,13 @@ agree):
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
-import os
-import subprocess
 import sys
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import tree_runs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -91,33 +91,5 @@ def _child() -> int:
     return 0
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--tree", action="append", default=None)
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
-    args = ap.parse_args()
-    if args.child:
-        return _child()
-    trees = [ROOT] + [Path(t).resolve() for t in (args.tree or [])]
-    best: dict[str, dict[str, float]] = {}
-    sums: dict[str, set] = {}
-    for _ in range(args.repeat):
-        for tree in trees:
-            r = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child"], cwd=tree, check=True,
-                               env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True, text=True)
-            got = json.loads(r.stdout.strip().splitlines()[-1])
-            sums.setdefault(got.pop("checksum"), set()).add(str(tree))
-            for k, v in got.items():
-                d = best.setdefault(k, {})
-                d[str(tree)] = min(v, d.get(str(tree), float("inf")))
-    print("| part | " + " | ".join(f"{Path(t).name} (us)" for t in map(str, trees)) + " |")
-    print("|---|" + "---:|" * len(trees))
-    for k, d in best.items():
-        print(f"| {k} | " + " | ".join(f"{d[str(t)]:.2f}" for t in trees) + " |")
-    print("answers identical on every tree" if len(sums) == 1 else f"ANSWERS DIFFER: {sums}")
-    return 0 if len(sums) == 1 else 1
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(tree_runs.main(__doc__, _child, __file__, ROOT, digits=2))
