@@ -334,7 +334,7 @@ def test_a_return_riding_with_the_vehicle_is_no_closing_speed():
     west at 1.8 m/s: its return keeps its place relative to the sensor, so in the world it
     follows the vehicle along the beam. Read as a world speed that is a mover chasing at
     1.76 m/s (the beam's level part, 0.977 of 1.8); given the sensor's position it is
-    nothing (fresh seed 20261152 of obstacles-wide, flight 0)."""
+    nothing."""
     from companion.replan.closing import ClosingSpeed
 
     axis = (0.93, 0.2, -0.32)

@@ -42,11 +42,12 @@ is not counted either: that is a beam riding over a surface with the vehicle.
 A beam tilted down onto a canopy or an obstacle's top, looking back while the
 vehicle flies on, returns from points that follow the vehicle along the beam:
 read as a world speed, a mover chasing it at its own speed. The give-way cap
-(``give_way_speed_m_s``) then let the vehicle fly faster than its cruise to
-outpace it, which made the "mover" faster still: a climb flew at 2 m/s in a
-1 m/s mission (fresh seed 20261152 of obstacles-wide, flight 0). A true
-chaser at exactly the vehicle's speed is not closing; it is counted as soon
-as it gains on the vehicle by ``MIN_M_S``.
+(``give_way_speed_m_s``) would then let the vehicle fly faster than its cruise
+to outpace it, which makes the "mover" faster still. A true chaser at exactly
+the vehicle's speed is not closing; it is counted as soon as it gains on the
+vehicle by ``MIN_M_S``. (Other false movers remain: pairs of returns on two
+points of one still object, beams at two heights, returns on beams turning
+while the vehicle is at rest; docs/replan.md "Moving obstacles".)
 
 Movers move level: only the level parts count (the axis' level direction,
 the return's level displacement), and beams steeper than 60 deg (the down
