@@ -120,9 +120,6 @@ class ClosingSpeed:
             d = (hit[0] - p0[0], hit[1] - p0[1], 0.0)
             along = d[0] * u[0] + d[1] * u[1]
             moved = math.hypot(d[0], d[1])
-            if riding(d, o, o0, t_s - t0):
-                h.append((t_s, hit, u, o))
-                return
             if still:
                 # no sweep: the return moved because the obstacle did, whichever way
                 w, aligned = moved / (t_s - t0), True
@@ -130,7 +127,7 @@ class ClosingSpeed:
                 # a mover coming down the beam moves its return along the axis; a beam sweeping
                 # over a still surface (the vehicle flying past a box) slides it across
                 w, aligned = -along / (t_s - t0), -along >= ALIGN_MIN * moved
-            if MIN_M_S <= w <= MAX_M_S and aligned:
+            if MIN_M_S <= w <= MAX_M_S and aligned and not riding(d, o, o0, t_s - t0):
                 # the largest speed while the mover keeps coming (conservative), fresh again
                 if w >= self._w or t_s - self._t_w > HOLD_S:
                     self._w = w
