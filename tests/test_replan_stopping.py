@@ -52,10 +52,17 @@ def _shaping(guard):
     a plan); braking at half the 1 m/s^2 limit, as the replanner's governor does."""
     rp = types.SimpleNamespace(guard=guard, shaper=ReferenceShaper(1.0, 2.0), n_stop_limited=0, _brake=0.5,
                                cfg=ReplanConfig(accel_m_s2=1.0, jerk_m_s3=2.0), emergency=False,
-                               n_emergency_brakes=0, _evading=False, _emergency_why="")
+                               n_emergency_brakes=0, _evading=False, _emergency_why="",
+                               _gate_since=None, _t_s=0.0)
     for name in ("_shape", "_govern_rows", "_allowed_speed", "_least_room", "_set_emergency", "_calm"):
         setattr(rp, name, types.MethodType(getattr(Replanner, name), rp))
     return rp
+
+
+def _step(rp, cmd):
+    """One frame of ``_shape`` on the vehicle's clock."""
+    rp._t_s += DT
+    return rp._shape(DT, cmd)
 
 
 def _fly(rp, rows: Guard, seconds=6.0):
@@ -70,7 +77,7 @@ def _fly(rp, rows: Guard, seconds=6.0):
         rp.guard = rows
         cmd = rp._govern_rows(P, np.array([0.8, 0.6, 0.0]))
         rp.guard = rp.judge
-        out.append(rp._shape(DT, cmd).p)
+        out.append(_step(rp, cmd).p)
     return np.array(out)
 
 
@@ -98,8 +105,8 @@ def test_far_from_everything_the_command_is_flown_as_shaped():
     rp, plain = _shaping(_guard()), _shaping(None)
     for sh in (rp, plain):
         sh.shaper.reset((1.0, 8.0, 1.5), (0.5, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-    a = np.array([rp._shape(DT, (1.0, 0.2, 0.0)).p for _ in range(200)])
-    b = np.array([plain._shape(DT, (1.0, 0.2, 0.0)).p for _ in range(200)])
+    a = np.array([_step(rp, (1.0, 0.2, 0.0)).p for _ in range(200)])
+    b = np.array([_step(plain, (1.0, 0.2, 0.0)).p for _ in range(200)])
     assert np.array_equal(a, b) and rp.n_stop_limited == 0
 
 
@@ -135,7 +142,7 @@ def test_inside_its_margin_the_reference_may_creep_to_the_clearance_not_into_it(
     # creep 0.15 m into a row's clearance); it may close to the clearance, never into it
     rp = _shaping(_guard())
     rp.shaper.reset((FACE_X - (REQ_ROW + 0.02), 1.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-    p = np.array([rp._shape(DT, (0.02, 0.3, 0.0)).p for _ in range(int(3.0 / DT))])
+    p = np.array([_step(rp, (0.02, 0.3, 0.0)).p for _ in range(int(3.0 / DT))])
     # (the 2 mm: the brake predicted every 0.05 s runs a little short of the frame-stepped
     # one that is flown)
     assert (FACE_X - p[:, 0]).min() >= REQ_ROW - 0.002
@@ -149,6 +156,6 @@ def test_inside_the_clearance_the_reference_does_not_close():
     # braking: the one that comes least close is flown, never a stall)
     rp = _shaping(_guard())
     rp.shaper.reset((FACE_X - (REQ_ROW - 0.02), 1.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-    p = np.array([rp._shape(DT, (0.02, 0.3, 0.0)).p for _ in range(int(3.0 / DT))])
+    p = np.array([_step(rp, (0.02, 0.3, 0.0)).p for _ in range(int(3.0 / DT))])
     assert (FACE_X - p[:, 0]).min() >= REQ_ROW - 0.02 - 0.003
     assert p[-1, 1] - p[0, 1] > 0.5

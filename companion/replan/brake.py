@@ -39,10 +39,14 @@ REST_V_M_S, REST_A_M_S2, REST_J_M_S3 = 2e-3, 1e-2, 5e-2
 MAX_BRAKE_S = 10.0
 
 
-def axis_brake(v: float, a: float, j: float, shaper, dt_s: float = BRAKE_DT_S) -> list[float]:
+def axis_brake(v: float, a: float, j: float, shaper, dt_s: float = BRAKE_DT_S,
+               states: bool = False):
     """Displacements (m) of one axis of ``shaper``'s model braking from (v, a, j) with a
-    zero command, one per ``dt_s``, until at rest (empty when already at rest)."""
+    zero command, one per ``dt_s``, until at rest (empty when already at rest). With
+    ``states``: (displacements, speeds m/s, accelerations m/s^2), one each per step."""
     out: list[float] = []
+    vs: list[float] = []
+    acc: list[float] = []
     x = 0.0
     h, h2, h3, h4 = dt_s, dt_s * dt_s / 2.0, dt_s ** 3 / 6.0, dt_s ** 4 / 24.0
     args = (shaper.a_max, shaper.j_max, shaper.s_max, shaper.k_v, shaper.k_a, shaper.k_j)
@@ -53,19 +57,33 @@ def axis_brake(v: float, a: float, j: float, shaper, dt_s: float = BRAKE_DT_S) -
         x += v * h + a * h2 + j * h3 + s * h4
         v, a, j = v + a * h + j * h2 + s * h3, a + j * h + s * h2, j + s * h
         out.append(x)
-    return out
+        if states:
+            vs.append(v)
+            acc.append(a)
+    return (out, vs, acc) if states else out
 
 
 def brake_path(p, v, a, jerk, shaper, dt_s: float = BRAKE_DT_S) -> np.ndarray:
     """(M, 3) ENU points (m) of ``shaper``'s brake to rest from the state (p, v, a, jerk)
     (ENU 3-sequences), every ``dt_s``: the first row is ``p``, the last the stopping point
     (module doc). ``shaper``: a ``ReferenceShaper`` (its limits and gains)."""
-    axes = [axis_brake(float(v[i]), float(a[i]), float(jerk[i]), shaper, dt_s) for i in range(3)]
-    m = max(len(x) for x in axes)
-    out = np.empty((m + 1, 3))
-    for i, x in enumerate(axes):
-        out[:, i] = float(p[i])
+    return brake_states(p, v, a, jerk, shaper, dt_s)[0]
+
+
+def brake_states(p, v, a, jerk, shaper, dt_s: float = BRAKE_DT_S) -> tuple:
+    """(P, V, A): (M, 3) ENU positions (m), velocities (m/s) and accelerations (m/s^2) of
+    ``brake_path``'s points, every ``dt_s`` from the state (its first row) to rest (an axis
+    already at rest keeps its last speed and acceleration, within the rest thresholds)."""
+    axes = [axis_brake(float(v[i]), float(a[i]), float(jerk[i]), shaper, dt_s, states=True)
+            for i in range(3)]
+    m = max(len(x[0]) for x in axes)
+    P, V, A = np.empty((m + 1, 3)), np.empty((m + 1, 3)), np.empty((m + 1, 3))
+    for i, (x, vs, acc) in enumerate(axes):
+        P[:, i], V[:, i], A[:, i] = float(p[i]), float(v[i]), float(a[i])
         if x:
-            out[1:len(x) + 1, i] += x
-            out[len(x) + 1:, i] += x[-1]
-    return out
+            n = len(x)
+            P[1:n + 1, i] += x
+            P[n + 1:, i] += x[-1]
+            V[1:n + 1, i], V[n + 1:, i] = vs, vs[-1]
+            A[1:n + 1, i], A[n + 1:, i] = acc, acc[-1]
+    return P, V, A

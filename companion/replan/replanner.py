@@ -91,7 +91,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mavcore.mission.replan import ReplanConfig
-from .brake import BRAKE_DT_S, EMERGENCY_BRAKE_DT_S, brake_path
+from .brake import BRAKE_DT_S, EMERGENCY_BRAKE_DT_S, brake_states
 from ..trajectory.reference import RefSample
 from ..trajectory.cursor import TrajectoryCursor
 from .apf import ApfParams, apf_force
@@ -597,6 +597,9 @@ class Replanner:
         self.n_emergency_brakes = 0
         self._emergency_why = ""
         self._evading = False                     # a stop gives way to a mover coming closer
+        #: the start (vehicle time s) of the run of failing samples the gate is judging, as
+        #: ``_shape`` predicts it from what it commits; None: the last one passed
+        self._gate_since: float | None = None
         #: the guard (``companion.safety.Guard``; set by the flight's builder): a re-route or
         #: a rejoin is paced to its stopping law and checked whole before it is installed
         #: (``pace``); None: installed as planned
@@ -964,6 +967,7 @@ class Replanner:
 
     def _enter_avoid(self, tau: float, s, rng: float, events: list) -> None:
         self.shaper.reset(s.p, s.v, s.a, s.jerk)
+        self._gate_since = None
         k = self.plan.leg_near(s.p, s.v[:2])
         self._avoid_leg = k
         self._wp_leave = self.plan.waypoint_index_at(tau)
@@ -1212,13 +1216,31 @@ class Replanner:
         cmd = np.asarray(v_cmd, dtype=float)
         here = np.asarray(sh.p, dtype=float)[None, :]
 
+        since = None if self._gate_since is None else self._gate_since - self._t_s
+
         def judged(st, margin_m=STOP_MARGIN_M):
             # from where the reference is now, through the frame's step, to its stopping point;
             # the brake keeps STOP_MARGIN_M beyond the clearance (the prediction's error at
-            # speed), and never enters the clearance itself nor closes inside it
+            # speed), and never enters the clearance itself nor closes inside it; and the gate
+            # flies every point of it (``Guard.forecast_brake``: the speed rule, braking, the grace)
             dt_brake = EMERGENCY_BRAKE_DT_S if self.emergency else BRAKE_DT_S
-            path = np.vstack([here, brake_path(st.p, st.v, st.a, st.jerk, sh, dt_brake)])
-            return path, self.guard.check_path(path, margin_m, inner_tol_m=STOP_TOL_M)
+            P, V, A = brake_states(st.p, st.v, st.a, st.jerk, sh, dt_brake)
+            verdict, flags0 = self.guard.forecast_brake(here, P, V, A, dt_brake, since, margin_m, STOP_TOL_M)
+            first[id(st)] = (st, *flags0)
+            return np.vstack([here, P]), verdict
+
+        first: dict = {}                     # the gate's flags of each candidate judged
+
+        def commit(st):
+            # the gate's failing run, as the gate will judge this sample (``Guard.gate_run``)
+            seen = first.get(id(st))
+            ok, braking = seen[1:] if seen is not None and seen[0] is st else first_flags(st)
+            self._gate_since = self.guard.gate_run(ok, braking, self._t_s, self._gate_since)
+            return sh.commit(st)
+
+        def first_flags(st):
+            ok, braking, _ = self.guard.sample_flags([st.p], [st.v], [st.a])
+            return bool(ok[0]), bool(braking[0])
 
         if self.emergency and not self._evading and self._calm():
             # back to the normal limits once the state is within them and their brake from here
@@ -1234,7 +1256,7 @@ class Replanner:
             st = sh.preview(dt, cmd.tolist())
             path, verdict = judged(st)
             if verdict.ok:
-                return sh.commit(st)
+                return commit(st)
             tried.append((st, path))
             # its approach along the normal there goes, and as much away as the state still
             # closes (the shaper then turns that round first: motion along the surface is kept)
@@ -1248,7 +1270,7 @@ class Replanner:
         st = sh.preview(dt, (0.0, 0.0, 0.0))
         path, verdict = judged(st)
         if verdict.ok:
-            return sh.commit(st)
+            return commit(st)
         if not self.emergency:
             # the normal brake can no longer stop for it (it came into view inside that
             # stopping distance: a walker out of a row, fresh seed 20261152 flight 10, met at
@@ -1260,7 +1282,7 @@ class Replanner:
             st = sh.preview(dt, (0.0, 0.0, 0.0))
             path, verdict = judged(st)
             if verdict.ok:
-                return sh.commit(st)
+                return commit(st)
         # even braking closes (the state already closes inside a clearance: the map grew round
         # it): the candidate whose path comes least close, braking included, the earliest of
         # equals (moving away, or on along the surface, is never worse than braking; a zero
@@ -1268,7 +1290,7 @@ class Replanner:
         # 20261127, flight 11)
         tried.append((st, path))
         rooms = [self._least_room(p) for _, p in tried]
-        return sh.commit(tried[int(np.argmax(rooms))][0])
+        return commit(tried[int(np.argmax(rooms))][0])
 
     def _emergency_event(self, events: list) -> None:
         """The ``stop`` event of an emergency brake begun this frame."""

@@ -24,7 +24,7 @@ import math
 
 from ..trajectory.reference import RefSample
 from ..replan.shaper import EMERGENCY_OMEGA_RAD_S, ReferenceShaper
-from .guard import GRACE_S, Guard, Verdict
+from .guard import Guard, Verdict, grace_accepts
 
 #: Refusals kept for the report (the count goes on).
 MAX_REFUSALS_KEPT = 20
@@ -109,13 +109,11 @@ class GuardGate:
             return None, None
         self.n_samples += 1
         v = self.guard.check_sample(ref.p, ref.v, terrain, ref.a)
+        flown, self._since = grace_accepts(v.ok, v.braking, t_s, self._since)
         if v.ok:
-            self._since = None
             self._last = ref
             return ref, None
-        if self._since is None:
-            self._since = t_s
-        if v.braking or t_s - self._since <= GRACE_S:
+        if flown:
             # the mode brakes toward it, or has GRACE_S to start braking
             self.n_braking += 1
             self._last = ref

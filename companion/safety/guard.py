@@ -49,6 +49,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .margin_rule import CLOSING_TOL_M, MarginRule, margin_violations
+from . import gate_forecast
+from .grace import GRACE_S, grace_accepts  # noqa: F401  (the gate's rule; re-exported)
 from .stopping import stopping_distance_m, stopping_speed_m_s
 
 #: Sensing and control delay (s) of the stopping law (PX4 CP_DELAY). The fallback's
@@ -69,13 +71,25 @@ COLUMN_STEP_M = 0.05
 #: A reference brakes toward a surface when its approach speed falls at this fraction of
 #: the acceleration limit or faster (the shaper's brake reaches it in 0.15 s at 2 m/s^3).
 BRAKING_FRACTION = 0.3
-#: A frame sample that fails is flown for this long (s) before it is refused, unless the
-#: mode brakes (``GuardGate``): the time the reference shaper takes to reach
-#: ``BRAKING_FRACTION`` of 1 m/s^2 at 2 m/s^3 (0.15 s), with room to spare.
-GRACE_S = 0.25
 #: Speeds (m/s) below this are at rest (no approach).
 REST_M_S = 1e-3
 KINDS = ("terrain", "row", "obstacle")
+
+
+def _flag_points(p_enu_m, v_enu_m_s, a_enu_m_s2) -> tuple:
+    """(p, v, a, points, steps) of K samples: the (3K, 3) points whose distances judge them
+    (each sample, a ``STEP_M`` step along its velocity, one along its acceleration) and the
+    steps' (moving, dt, accelerating, ha) arrays (``Guard.sample_flags``)."""
+    p = np.asarray(p_enu_m, float).reshape(-1, 3)
+    v = np.asarray(v_enu_m_s, float).reshape(-1, 3)
+    a = np.asarray(a_enu_m_s2, float).reshape(-1, 3)
+    speed = np.sqrt(np.einsum("ki,ki->k", v, v))
+    moving = speed > REST_M_S
+    dt = np.where(moving, STEP_M / np.maximum(speed, REST_M_S), 0.0)
+    an = np.sqrt(np.einsum("ki,ki->k", a, a))
+    accel = an > REST_M_S
+    ha = np.where(accel, STEP_M / np.maximum(an, REST_M_S), 0.0)
+    return p, v, a, np.vstack([p, p + v * dt[:, None], p + a * ha[:, None]]), (moving, dt, accel, ha)
 
 
 @dataclass(frozen=True)
@@ -298,6 +312,105 @@ class Guard:
         decel = (d[1] - d[0]) / h           # the rate at which the approach speed falls
         return replace(v, braking=bool(decel >= BRAKING_FRACTION * self.cfg.accel_m_s2))
 
+    def sample_flags(self, p_enu_m, v_enu_m_s, a_enu_m_s2, terrain: bool = True) -> tuple:
+        """(ok (K,), braking (K,), surface (K,)) of K samples (positions, velocities,
+        accelerations (K, 3)): ``check_sample``'s verdict on each, in arrays: its ``ok``, and
+        where it fails its ``braking`` toward the surface it names and that surface (an object
+        array of str; None and False where ok). The reference shaper's predicted brake is
+        judged with it as the gate would judge it (``grace_accepts``)."""
+        p = np.asarray(p_enu_m, float).reshape(-1, 3)
+        return self._flags_at(p, v_enu_m_s, a_enu_m_s2, self.distances(p, terrain), terrain)
+
+    def check_brake(self, here_enu_m, p_enu_m, v_enu_m_s, a_enu_m_s2, margin_m: float,
+                    inner_tol_m: float) -> tuple:
+        """(``check_path`` of the path from ``here`` through the (K, 3) points ``p``, the
+        ``sample_flags`` of the K samples (p, v, a)), the points' distances queried once:
+        the reference shaper's predicted brake judged by the margin rule and as the gate
+        judges a sample."""
+        p = np.asarray(p_enu_m, float).reshape(-1, 3)
+        path = np.vstack([np.asarray(here_enu_m, float).reshape(-1, 3), p])
+        n = len(path) - len(p)
+        d = self.distances(path)
+        verdict = self._margin_verdict(path, d, margin_m, None, inner_tol_m)
+        return verdict, self._flags_at(p, v_enu_m_s, a_enu_m_s2, {k: d[k][n:] for k in KINDS}, True)
+
+    def forecast_brake(self, here_enu_m, p_enu_m, v_enu_m_s, a_enu_m_s2, dt_s: float, since_s: float | None,
+                       margin_m: float, inner_tol_m: float) -> tuple:
+        """(Verdict, (ok, braking) of the first sample) on the reference shaper's predicted
+        brake: (K, 3) positions, velocities and accelerations every ``dt_s`` from the state to
+        be committed (the first) to rest, after ``here``. It passes the margin rule
+        (``check_path`` with ``margin_m``, ``inner_tol_m``) and the gate flies every sample of
+        it, the gate's failing run begun at ``since_s`` relative to the first sample
+        (``gate_forecast``; None: no run)."""
+        verdict, flags = self.check_brake(here_enu_m, p_enu_m, v_enu_m_s, a_enu_m_s2, margin_m, inner_tol_m)
+        if verdict.ok:
+            refused = gate_forecast.brake_verdict(self, p_enu_m, v_enu_m_s, a_enu_m_s2, dt_s, since_s, flags=flags)
+            verdict = PASS if refused is None else refused
+        return verdict, (bool(flags[0][0]), bool(flags[1][0]))
+
+    @staticmethod
+    def gate_run(ok: bool, braking: bool, t_s: float, since_s: float | None) -> float | None:
+        """The start of the gate's failing run after a sample it judged (``grace_accepts``)."""
+        return grace_accepts(ok, braking, t_s, since_s)[1]
+
+    def _flags_at(self, p, v_enu_m_s, a_enu_m_s2, d0: dict, terrain: bool) -> tuple:
+        """``sample_flags`` given the samples' own distances ``d0``. The distance is
+        1-Lipschitz, so no approach exceeds the speed: a sample outside every clearance
+        whose speed the law allows passes whatever its direction, and only the others
+        need the steps along their velocity and acceleration (``_flags``)."""
+        v = np.asarray(v_enu_m_s, float).reshape(-1, 3)
+        a = np.asarray(a_enu_m_s2, float).reshape(-1, 3)
+        K = len(p)
+        speed = np.sqrt(np.einsum("ki,ki->k", v, v))
+        maybe = np.zeros(K, bool)
+        cfg = self.cfg
+        for kind in KINDS:
+            dk = d0[kind]
+            fin = np.isfinite(dk)
+            if not fin.any():
+                continue
+            req = self._req[kind]
+            m = dk < req
+            if kind != "row":
+                m |= speed > stopping_speed_m_s(dk - req, cfg.accel_m_s2, cfg.delay_s) + SPEED_TOLERANCE_M_S
+            maybe |= m & fin
+        ok = np.ones(K, bool)
+        braking = np.zeros(K, bool)
+        surface = np.full(K, None, dtype=object)
+        idx = np.flatnonzero(maybe)
+        if len(idx):
+            _, _, _, pts, steps = _flag_points(p[idx], v[idx], a[idx])
+            k = len(idx)
+            dd = self.distances(pts[k:], terrain)
+            o, b, s = self._flags({kind: np.concatenate([d0[kind][idx], dd[kind]]) for kind in KINDS}, k, steps)
+            ok[idx], braking[idx], surface[idx] = o, b, s
+        return ok, braking, surface
+
+    def _flags(self, d: dict, K: int, steps: tuple) -> tuple:
+        """``sample_flags`` from the distances of ``_flag_points``'s points."""
+        moving, dt, accel, ha = steps
+        cfg = self.cfg
+        failed = np.zeros(K, bool)
+        braking = np.zeros(K, bool)
+        surface = np.full(K, None, dtype=object)
+        for kind in KINDS:                    # the first kind that fails names the surface
+            d0, d1, d2 = d[kind][:K], d[kind][K:2 * K], d[kind][2 * K:]
+            if not np.isfinite(d0).any():
+                continue
+            req = self._req[kind]
+            with np.errstate(invalid="ignore"):
+                approach = np.where(moving & np.isfinite(d0), (d0 - d1) / np.where(moving, dt, 1.0), 0.0)
+                decel = np.where(accel & np.isfinite(d0), (d2 - d0) / np.where(accel, ha, 1.0), 0.0)
+            bad = (d0 < req) & (approach > SPEED_TOLERANCE_M_S)
+            if kind != "row":
+                allowed = stopping_speed_m_s(d0 - req, cfg.accel_m_s2, cfg.delay_s)
+                bad |= approach > allowed + SPEED_TOLERANCE_M_S
+            new = bad & ~failed
+            braking[new] = decel[new] >= BRAKING_FRACTION * cfg.accel_m_s2
+            surface[new] = kind
+            failed |= bad
+        return ~failed, braking, surface
+
     def row_room(self, p_enu_m) -> tuple[float, tuple[float, float, float]]:
         """(room m, unit normal) of a point against the rows: its distance to them less the
         distance it must keep (negative inside the clearance), and the direction in which
@@ -378,7 +491,10 @@ class Guard:
         at most that: the reference shaper's predicted brake (``companion.replan.brake``).
         The failing verdict's ``point_enu_m`` is the first point that breaks it."""
         p = np.asarray(points_enu_m, float).reshape(-1, 3)
-        d = self.distances(p)
+        return self._margin_verdict(p, self.distances(p), margin_m, tol_m, inner_tol_m)
+
+    def _margin_verdict(self, p, d: dict, margin_m: float, tol_m, inner_tol_m) -> Verdict:
+        """``check_path`` of the points ``p`` whose distances are ``d``."""
         R = self.cfg.airframe_radius_m
         rules = [(margin_m, CLOSING_TOL_M if tol_m is None else float(tol_m))]
         if inner_tol_m is not None:
