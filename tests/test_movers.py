@@ -419,3 +419,47 @@ def test_a_walker_crossing_straight_at_a_stopped_vehicle_is_given_way_along_the_
     assert rp["clearance_source"] == "sim_truth" and rp["min_clearance_m"] > 0.3
     assert any(e["action"] == "stop" and "whether it moves" in e["detail"] for e in rp["event_list"])
     assert any(e["detail"].endswith("cannot give way to a mover in time") for e in rp["event_list"])
+
+
+def test_a_still_post_seen_by_a_beam_turning_at_rest_is_no_mover():
+    from companion.replan.closing import ClosingSpeed
+
+    # the vehicle at rest yaws at 7 deg/s (the pointing law); a post 5 m away holds the
+    # return at 5 m while the beam turns, so the return placed on the axis slides across it
+    # at r w = 5 x 0.1222 = 0.61 m/s. The look's "any motion counts" rule read that as a
+    # mover; the beam turned, so the pair is judged by its motion along the axis: none.
+    w = math.radians(7.0)
+    o = (0.0, 0.0, 1.5)
+
+    def axis(t):
+        return (math.cos(w * t), math.sin(w * t), 0.0)
+
+    turning, unjudged = ClosingSpeed(), ClosingSpeed()
+    for k in range(20):
+        t = 0.05 * k
+        u = axis(t)
+        hit = (5.0 * u[0], 5.0 * u[1], 1.5)
+        turning.on_hit(t, 3, hit, u, still=True, origin_enu_m=o)
+        unjudged.on_hit(t, 3, hit, u, still=True)          # no origin: the rule cannot judge
+    assert turning.approach_m_s(0.95) == 0.0
+    assert unjudged.approach_m_s(0.95) == pytest.approx(5.0 * w, rel=0.02)
+    # a walker coming down the same turning beam at 1.2 m/s still reads its speed
+    walker = ClosingSpeed()
+    for k in range(20):
+        t = 0.05 * k
+        u = axis(t)
+        r = 5.0 - 1.2 * t
+        walker.on_hit(t, 3, (r * u[0], r * u[1], 1.5), u, still=True, origin_enu_m=o)
+    assert walker.approach_m_s(0.95) == pytest.approx(1.2, abs=0.02)
+
+
+def test_a_still_vehicle_whose_beam_does_not_turn_still_counts_a_crossing_walker():
+    from companion.replan.closing import ClosingSpeed
+
+    # the swept rule needs the beam to move: a fixed beam with its origin known keeps the
+    # look's rule (a crossing walker's whole level displacement counts)
+    u = (0.0, -1.0, 0.0)
+    c = ClosingSpeed()
+    for k in range(20):
+        c.on_hit(0.05 * k, 2, (0.9 * 0.05 * k, 0.0, 1.5), u, still=True, origin_enu_m=(0.0, 3.0, 1.5))
+    assert c.approach_m_s(0.95) == pytest.approx(0.9, abs=1e-9)

@@ -27,14 +27,20 @@ a still surface as the vehicle flies past slides its return across, at up to
 the vehicle's speed.
 
 While the vehicle is still (``still=True``: its reference at rest, its measured
-speed below ``replanner.STILL_M_S``) the beams do not sweep, so a return that
+speed below ``replanner.STILL_M_S``) and the beam that saw both returns did not
+turn (``swept``: the point at the old range along it moved less than
+``MIN_M_S`` over the baseline), the beam does not sweep, so a return that
 moves at all is something moving: then the whole level displacement counts, in
 any direction (a worker crossing the corridor moves its return across the beam,
 which the alignment rule would drop as a sweep; a crossing walker read as still
 walked into a vehicle that flew on toward it, campaign obstacles-wide scenario 7).
 This is how the replanner's *look* tells a still obstacle from a mover
 (``replanner``: with ``give_way`` the vehicle stops at an unknown obstacle and
-watches before it avoids it).
+watches before it avoids it). A vehicle at rest still yaws (the pointing law
+turns it toward its target): a return on a turning beam slides across the axis
+with the beam (7 deg/s moved returns 1.1 m in 1.75 s, read as 0.3-1.0 m/s:
+obstacles-wide seed 20261160, flight 27), so a pair from a beam that turned is
+judged as in flight, by its motion along the axis.
 
 A return that keeps its place relative to the sensor while the vehicle moves
 (its level displacement less the sensor's below ``MIN_M_S`` over the baseline)
@@ -46,8 +52,7 @@ read as a world speed, a mover chasing it at its own speed. The give-way cap
 to outpace it, which makes the "mover" faster still. A true chaser at exactly
 the vehicle's speed is not closing; it is counted as soon as it gains on the
 vehicle by ``MIN_M_S``. (Other false movers remain: pairs of returns on two
-points of one still object, beams at two heights, returns on beams turning
-while the vehicle is at rest; docs/replan.md "Moving obstacles".)
+points of one still object, beams at two heights; docs/replan.md "Moving obstacles".)
 
 Movers move level: only the level parts count (the axis' level direction,
 the return's level displacement), and beams steeper than 60 deg (the down
@@ -107,7 +112,7 @@ class ClosingSpeed:
         # the nearest hit (within MATCH_M: the same object) of those BASELINE_S to
         # 2 BASELINE_S old; the nearest, not the newest: a post beside a walker
         best, t0 = MATCH_M, None
-        for tk, pk, _, ok in reversed(h):
+        for tk, pk, uk, ok, sk in reversed(h):
             age = t_s - tk
             if age < BASELINE_S:
                 continue
@@ -115,12 +120,12 @@ class ClosingSpeed:
                 break
             dk = math.dist(hit, pk)
             if dk <= best:
-                best, t0, p0, o0 = dk, tk, pk, ok
+                best, t0, p0, u0, o0, s0 = dk, tk, pk, uk, ok, sk
         if t0 is not None:
             d = (hit[0] - p0[0], hit[1] - p0[1], 0.0)
             along = d[0] * u[0] + d[1] * u[1]
             moved = math.hypot(d[0], d[1])
-            if still:
+            if still and not (s0 == sensor_id and swept(p0, u0, o0, u, o, t_s - t0)):
                 # no sweep: the return moved because the obstacle did, whichever way
                 w, aligned = moved / (t_s - t0), True
             else:
@@ -132,12 +137,25 @@ class ClosingSpeed:
                 if w >= self._w or t_s - self._t_w > HOLD_S:
                     self._w = w
                 self._t_w = t_s
-        h.append((t_s, hit, u, o))
+        h.append((t_s, hit, u, o, sensor_id))
 
     def approach_m_s(self, t_s: float | None) -> float:
         """The approach speed (m/s, >= 0) that the governor allows for at time ``t_s``
         (None: before the first step, 0)."""
         return self._w if t_s is not None and t_s - self._t_w <= HOLD_S else 0.0
+
+
+def swept(hit0, u0, origin0, u, origin, dt_s: float) -> bool:
+    """One beam (level axes ``u0`` then ``u``, origins ``origin0`` then ``origin``) moved over
+    ``dt_s`` so that a still return at its old place ``hit0`` would have slid at least
+    ``MIN_M_S``: the point at the old level range along the beam moved that far (the vehicle
+    yawing at rest turns its beams: module notes). False when either origin is unknown."""
+    if origin is None or origin0 is None:
+        return False
+    r0 = math.hypot(hit0[0] - origin0[0], hit0[1] - origin0[1])
+    dx = origin[0] + r0 * u[0] - (origin0[0] + r0 * u0[0])
+    dy = origin[1] + r0 * u[1] - (origin0[1] + r0 * u0[1])
+    return math.hypot(dx, dy) >= MIN_M_S * dt_s
 
 
 def riding(d_hit, origin, origin0, dt_s: float) -> bool:
