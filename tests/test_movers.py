@@ -463,3 +463,32 @@ def test_a_still_vehicle_whose_beam_does_not_turn_still_counts_a_crossing_walker
     for k in range(20):
         c.on_hit(0.05 * k, 2, (0.9 * 0.05 * k, 0.0, 1.5), u, still=True, origin_enu_m=(0.0, 3.0, 1.5))
     assert c.approach_m_s(0.95) == pytest.approx(0.9, abs=1e-9)
+
+
+def test_in_flight_two_beams_on_one_still_object_are_no_mover():
+    from companion.replan.closing import ClosingSpeed
+
+    # a level beam (id 3) returns from a post's face 3 m ahead at 1.5 m; from 0.5 s on, the
+    # low ring's beam below it (id 20, same azimuth) returns from the post 0.5 m nearer and
+    # 0.5 m lower (its lower, wider part). Paired across the two beams the returns are
+    # 0.71 m apart (within the 1 m match) and 0.5 m nearer along the axis: 0.83-1.67 m/s
+    # for a still post. In flight only one beam's own returns are paired: no mover.
+    u = (1.0, 0.0, 0.0)
+
+    def feed(c, still):
+        for k in range(24):
+            t = 0.05 * k
+            o = (0.3 * t, 0.0, 1.5)                      # flying on at 0.3 m/s (or at rest)
+            if still:
+                o = (0.0, 0.0, 1.5)
+            c.on_hit(t, 3, (3.0, 0.0, 1.5), u, still=still, origin_enu_m=o)
+            if t >= 0.5:
+                c.on_hit(t, 20, (2.5, 0.0, 1.0), u, still=still, origin_enu_m=o)
+
+    flying, at_rest = ClosingSpeed(), ClosingSpeed()
+    feed(flying, False)
+    feed(at_rest, True)
+    assert flying.approach_m_s(1.15) == 0.0
+    # at rest every beam's return is compared (a crossing walker passes from beam to beam):
+    # the same returns there pair across the beams, which is what in flight no longer does
+    assert at_rest.approach_m_s(1.15) > 0.8

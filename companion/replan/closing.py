@@ -13,9 +13,8 @@ w comes from the rangefinders: a DISTANCE_SENSOR hit placed in the world
 (``companion.replan.perception``) moves only with the obstacle (the
 vehicle's own motion is already taken out), so for one sensor the approach
 speed is ``-(h(t) - h(t0)) . u / (t - t0)`` (u the beam axis, from the
-vehicle outward; h(t0) the nearest hit of any sensor, within ``MATCH_M``,
-among those ``BASELINE_S`` to twice that old: the vehicle yaws and a mover
-passes from beam to beam), taken over at least ``BASELINE_S`` (a 1 cm range noise
+vehicle outward; h(t0) the nearest earlier hit within ``MATCH_M``, among
+those ``BASELINE_S`` to twice that old), taken over at least ``BASELINE_S`` (a 1 cm range noise
 then reads as 0.03 m/s). Only hits within ``MATCH_M`` of each other are
 compared (the same object), and only unknown returns (not a row) are fed.
 The largest w counts while approaches keep being measured (each at most
@@ -51,8 +50,17 @@ read as a world speed, a mover chasing it at its own speed. The give-way cap
 (``give_way_speed_m_s``) would then let the vehicle fly faster than its cruise
 to outpace it, which makes the "mover" faster still. A true chaser at exactly
 the vehicle's speed is not closing; it is counted as soon as it gains on the
-vehicle by ``MIN_M_S``. (Other false movers remain: pairs of returns on two
-points of one still object, beams at two heights; docs/replan.md "Moving obstacles".)
+vehicle by ``MIN_M_S``. (Another false mover remains: a beam sliding over a top edge onto a nearer
+surface as the vehicle climbs or descends; docs/replan.md "Moving obstacles".)
+
+In flight the earlier hit is the same beam's: two beams see two
+different points of one still object, and a pair across them is no motion.
+Returns of two beams on one post within ``MATCH_M`` of each other read 1.6-1.9
+m/s while the vehicle climbed beside it (obstacles-wide seed 20261152, flight 0),
+and a level beam paired with the low ring's beam 9 deg below it read 2.2 m/s
+(seed 20261160, flight 27). At rest it is any beam's: a crossing walker passes
+from beam to beam, and a fixed beam's own earlier return, where it has one, is
+the nearest.
 
 Movers move level: only the level parts count (the axis' level direction,
 the return's level displacement), and beams steeper than 60 deg (the down
@@ -99,7 +107,7 @@ class ClosingSpeed:
         vehicle is still, so any motion of the return is the obstacle's; ``origin_enu_m``:
         the sensor's position (a return riding with it is no approach; None: not judged)
         (module notes)."""
-        # one history for all sensors: the vehicle yaws and a mover passes from beam to beam
+        # one history for all sensors: at rest a mover passes from beam to beam
         h = self._hist.setdefault(0, [])
         hit = (float(hit_enu_m[0]), float(hit_enu_m[1]), float(hit_enu_m[2]))
         uh = math.hypot(float(axis_enu[0]), float(axis_enu[1]))
@@ -118,6 +126,8 @@ class ClosingSpeed:
                 continue
             if age > 2.0 * BASELINE_S:
                 break
+            if not still and sk != sensor_id:
+                continue             # in flight, one beam's own returns (module notes)
             dk = math.dist(hit, pk)
             if dk <= best:
                 best, t0, p0, u0, o0, s0 = dk, tk, pk, uk, ok, sk
