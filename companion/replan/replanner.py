@@ -600,6 +600,8 @@ class Replanner:
         #: the start (vehicle time s) of the run of failing samples the gate is judging, as
         #: ``_shape`` predicts it from what it commits; None: the last one passed
         self._gate_since: float | None = None
+        #: the last predicted brake needed the guard's steps (``Guard.check_brake``'s guess)
+        self._brake_stepped = False
         #: the guard (``companion.safety.Guard``; set by the flight's builder): a re-route or
         #: a rejoin is paced to its stopping law and checked whole before it is installed
         #: (``pace``); None: installed as planned
@@ -1225,7 +1227,8 @@ class Replanner:
             # flies every point of it (``Guard.forecast_brake``: the speed rule, braking, the grace)
             dt_brake = EMERGENCY_BRAKE_DT_S if self.emergency else BRAKE_DT_S
             P, V, A = brake_states(st.p, st.v, st.a, st.jerk, sh, dt_brake)
-            verdict, flags0 = self.guard.forecast_brake(here, P, V, A, dt_brake, since, margin_m, STOP_TOL_M)
+            verdict, flags0, self._brake_stepped = self.guard.forecast_brake(
+                here, P, V, A, dt_brake, since, margin_m, STOP_TOL_M, self._brake_stepped)
             first[id(st)] = (st, *flags0)
             return np.vstack([here, P]), verdict
 

@@ -319,49 +319,47 @@ class Guard:
         array of str; None and False where ok). The reference shaper's predicted brake is
         judged with it as the gate would judge it (``grace_accepts``)."""
         p = np.asarray(p_enu_m, float).reshape(-1, 3)
-        return self._flags_at(p, v_enu_m_s, a_enu_m_s2, self.distances(p, terrain), terrain)
+        return self._flags_at(p, v_enu_m_s, a_enu_m_s2, self.distances(p, terrain), terrain)[:3]
 
     def check_brake(self, here_enu_m, p_enu_m, v_enu_m_s, a_enu_m_s2, margin_m: float,
-                    inner_tol_m: float) -> tuple:
+                    inner_tol_m: float, step_all: bool = False) -> tuple:
         """(``check_path`` of the path from ``here`` through the (K, 3) points ``p``, the
-        ``sample_flags`` of the K samples (p, v, a)), the points' distances queried once:
-        the reference shaper's predicted brake judged by the margin rule and as the gate
-        judges a sample."""
+        ``sample_flags`` of the K samples (p, v, a), whether every sample was stepped): the
+        reference shaper's predicted brake judged by the margin rule and as the gate judges a
+        sample. A distance query costs mostly per call (the terrain, the rows and the obstacle
+        map each answer once), so ``step_all`` (the caller's guess: its last brake needed the
+        steps) asks for the points and all their steps at once; otherwise the points first,
+        and the steps only of those whose bound may fail (``_flags_at``)."""
         p = np.asarray(p_enu_m, float).reshape(-1, 3)
-        path = np.vstack([np.asarray(here_enu_m, float).reshape(-1, 3), p])
-        n = len(path) - len(p)
+        here = np.asarray(here_enu_m, float).reshape(-1, 3)
+        n, K = len(here), len(p)
+        if step_all:
+            p, v, a, pts, steps = _flag_points(p, v_enu_m_s, a_enu_m_s2)
+            d = self.distances(np.vstack([here, pts]))
+            verdict = self._margin_verdict(np.vstack([here, p]), {k: d[k][:n + K] for k in KINDS}, margin_m, None,
+                                           inner_tol_m)
+            return verdict, self._flags({k: d[k][n:] for k in KINDS}, K, steps), True
+        path = np.vstack([here, p])
         d = self.distances(path)
         verdict = self._margin_verdict(path, d, margin_m, None, inner_tol_m)
-        return verdict, self._flags_at(p, v_enu_m_s, a_enu_m_s2, {k: d[k][n:] for k in KINDS}, True)
-
-    def forecast_brake(self, here_enu_m, p_enu_m, v_enu_m_s, a_enu_m_s2, dt_s: float, since_s: float | None,
-                       margin_m: float, inner_tol_m: float) -> tuple:
-        """(Verdict, (ok, braking) of the first sample) on the reference shaper's predicted
-        brake: (K, 3) positions, velocities and accelerations every ``dt_s`` from the state to
-        be committed (the first) to rest, after ``here``. It passes the margin rule
-        (``check_path`` with ``margin_m``, ``inner_tol_m``) and the gate flies every sample of
-        it, the gate's failing run begun at ``since_s`` relative to the first sample
-        (``gate_forecast``; None: no run)."""
-        verdict, flags = self.check_brake(here_enu_m, p_enu_m, v_enu_m_s, a_enu_m_s2, margin_m, inner_tol_m)
-        if verdict.ok:
-            refused = gate_forecast.brake_verdict(self, p_enu_m, v_enu_m_s, a_enu_m_s2, dt_s, since_s, flags=flags)
-            verdict = PASS if refused is None else refused
-        return verdict, (bool(flags[0][0]), bool(flags[1][0]))
-
-    @staticmethod
-    def gate_run(ok: bool, braking: bool, t_s: float, since_s: float | None) -> float | None:
-        """The start of the gate's failing run after a sample it judged (``grace_accepts``)."""
-        return grace_accepts(ok, braking, t_s, since_s)[1]
+        flags = self._flags_at(p, v_enu_m_s, a_enu_m_s2, {k: d[k][n:] for k in KINDS}, True)
+        return verdict, flags[:3], flags[3]
 
     def _flags_at(self, p, v_enu_m_s, a_enu_m_s2, d0: dict, terrain: bool) -> tuple:
-        """``sample_flags`` given the samples' own distances ``d0``. The distance is
-        1-Lipschitz, so no approach exceeds the speed: a sample outside every clearance
-        whose speed the law allows passes whatever its direction, and only the others
-        need the steps along their velocity and acceleration (``_flags``)."""
+        """``sample_flags`` given the samples' own distances ``d0``, and whether any sample
+        was stepped. A sample that cannot
+        fail is not stepped (the distance queries cost mostly per call): the approach
+        cannot exceed the speed toward the rows and the obstacles (their distances are
+        1-Lipschitz), nor the sink rate plus the level speed times the steepest slope toward
+        the terrain (``TerrainField.max_slope``). So a sample outside every clearance whose
+        bound the law allows passes; only the others need the steps along their velocity and
+        acceleration (``_flags``)."""
         v = np.asarray(v_enu_m_s, float).reshape(-1, 3)
         a = np.asarray(a_enu_m_s2, float).reshape(-1, 3)
         K = len(p)
         speed = np.sqrt(np.einsum("ki,ki->k", v, v))
+        bound = {"row": speed, "obstacle": speed,
+                 "terrain": np.maximum(-v[:, 2], 0.0) + np.hypot(v[:, 0], v[:, 1]) * self.scene.terrain.max_slope}
         maybe = np.zeros(K, bool)
         cfg = self.cfg
         for kind in KINDS:
@@ -372,7 +370,8 @@ class Guard:
             req = self._req[kind]
             m = dk < req
             if kind != "row":
-                m |= speed > stopping_speed_m_s(dk - req, cfg.accel_m_s2, cfg.delay_s) + SPEED_TOLERANCE_M_S
+                allowed = stopping_speed_m_s(dk - req, cfg.accel_m_s2, cfg.delay_s)
+                m |= bound[kind] > allowed + SPEED_TOLERANCE_M_S - 1e-9
             maybe |= m & fin
         ok = np.ones(K, bool)
         braking = np.zeros(K, bool)
@@ -384,7 +383,27 @@ class Guard:
             dd = self.distances(pts[k:], terrain)
             o, b, s = self._flags({kind: np.concatenate([d0[kind][idx], dd[kind]]) for kind in KINDS}, k, steps)
             ok[idx], braking[idx], surface[idx] = o, b, s
-        return ok, braking, surface
+        return ok, braking, surface, bool(len(idx))
+
+    def forecast_brake(self, here_enu_m, p_enu_m, v_enu_m_s, a_enu_m_s2, dt_s: float, since_s: float | None,
+                       margin_m: float, inner_tol_m: float, step_all: bool = False) -> tuple:
+        """(Verdict, (ok, braking) of the first sample, stepped) on the reference shaper's
+        predicted brake: (K, 3) positions, velocities and accelerations every ``dt_s`` from the
+        state to be committed (the first) to rest, after ``here``. It passes the margin rule
+        (``check_path`` with ``margin_m``, ``inner_tol_m``) and the gate flies every sample of
+        it, the gate's failing run begun at ``since_s`` relative to the first sample
+        (``gate_forecast``; None: no run). ``step_all``, stepped: ``check_brake``'s."""
+        verdict, flags, stepped = self.check_brake(here_enu_m, p_enu_m, v_enu_m_s, a_enu_m_s2, margin_m,
+                                                   inner_tol_m, step_all)
+        if verdict.ok:
+            refused = gate_forecast.brake_verdict(self, p_enu_m, v_enu_m_s, a_enu_m_s2, dt_s, since_s, flags=flags)
+            verdict = PASS if refused is None else refused
+        return verdict, (bool(flags[0][0]), bool(flags[1][0])), stepped
+
+    @staticmethod
+    def gate_run(ok: bool, braking: bool, t_s: float, since_s: float | None) -> float | None:
+        """The start of the gate's failing run after a sample it judged (``grace_accepts``)."""
+        return grace_accepts(ok, braking, t_s, since_s)[1]
 
     def _flags(self, d: dict, K: int, steps: tuple) -> tuple:
         """``sample_flags`` from the distances of ``_flag_points``'s points."""

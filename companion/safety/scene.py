@@ -44,6 +44,13 @@ class TerrainField:
         self._h = np.asarray(height.heights_m, dtype=float)
         self._x0, self._y0, self._cs = height._x0, height._y0, height._cs
         self.scalar = height
+        h = self._h
+        gx = float(np.abs(np.diff(h, axis=1)).max()) if h.shape[1] > 1 else 0.0
+        gy = float(np.abs(np.diff(h, axis=0)).max()) if h.shape[0] > 1 else 0.0
+        #: The steepest slope (m/m) the surface has anywhere: within a cell each partial
+        #: derivative of the bilinear surface is a blend of its edges' differences over the
+        #: cell size, and the clamped surface outside the grid is flatter still.
+        self.max_slope = math.hypot(gx, gy) / self._cs
 
     def z(self, x, y) -> np.ndarray:
         """Terrain height (m) at (x, y) arrays (m), clamped bilinear."""
