@@ -208,3 +208,60 @@ def test_a_rejoin_whose_rest_runs_into_a_known_obstacle_is_refused():
     assert not verdict.ok and verdict.surface == "obstacle" and verdict.rule == "clearance"
     assert verdict.distance_m < REQ and verdict.t_s > 2.0
     assert box_distance([verdict.point_enu_m])[0] == pytest.approx(verdict.distance_m, abs=1e-9)
+
+
+def _sparse_rejoin(T: float) -> tuple[GlobalPlan, np.ndarray]:
+    """Fresh seed 20261163 of obstacles-under, flight 16's rejoin, in this file's world: from
+    (1, 7.5, 2.66) moving at (0.98, 0, -0.36) m/s and sinking at 0.4 m/s^2, through one
+    way-point 8.1 m on at 1.5 m, reached after ``T`` s."""
+    P = np.array([[1.0, 7.5, 2.663], [9.1, 7.5, 1.5]])
+    x0 = np.array([P[0], [0.983, 0.0, -0.356], [0.0, 0.0, -0.4], [0.0, 0.0, 0.0]])
+    t = np.array([0.0, T])
+    V, A = np.zeros_like(P), np.zeros_like(P)
+    cfg = TrajectoryConfig()
+    traj = generate_trajectory(t, P, V, A, cfg, initial_state=x0)
+    corner = np.ones(2, bool)
+    return GlobalPlan.from_waypoints(traj, t, P, V, A, corner, None, None, FlightConfig(), cfg, 0.5), x0
+
+
+def test_the_lqr_between_far_way_points_leaves_the_path_so_pacing_checks_it():
+    from companion.replan.pace import PATH_TOL_M, kept_path, path_offsets_m
+
+    # the polyline distance, by hand: a point 0.3 m above the segment's middle, one beyond its end
+    seg = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    assert path_offsets_m(np.array([[1.0, 0.0, 0.3], [3.0, 0.0, 0.0]]), seg) == pytest.approx([0.3, 1.0])
+    # the same two way-points flown over 10 s and stretched to 31.5 s (the flight's pacing):
+    # the longer flight is free between them and sinks metres below the 10 s path
+    short, x0 = _sparse_rejoin(10.0)
+    long, _ = _sparse_rejoin(31.5)
+    ts = np.linspace(long.trajectory.t0, long.trajectory.tf, 400)
+    z = np.asarray(long.trajectory.sample(ts).p).reshape(-1, 3)[:, 2]
+    assert z.min() < -5.0                                  # far below the ground
+    v = kept_path(short.trajectory, long.trajectory, 0.0, None, _guard())
+    assert v is not None and not v.ok and v.rule == "path"
+    # retiming a dense plan keeps its path within the tolerance
+    plan, x0d = _plan(6.0)
+    slow = _plan(6.0)[0]
+    from companion.replan.pace import _resolve
+    stretched = _resolve(slow, x0d, np.full(len(slow.t_s) - 1, 2.0))
+    assert kept_path(plan.trajectory, stretched.trajectory, 0.0, None, _guard()) is None
+    assert PATH_TOL_M <= 0.5                               # inside the corridor's lateral bound
+
+
+def test_a_candidate_above_the_ceiling_is_refused():
+    # the flight's rejoin mirrored (rising at 0.356 m/s and 0.4 m/s^2) from 1.5 m to 1.5 m:
+    # over 31.5 s it rises to 16 m, far above a 3 m ceiling over the flat ground at 0, and is
+    # refused with the ceiling rule; over 5 s it peaks at 2.3 m and passes
+    P = np.array([[1.0, 7.5, 1.5], [9.1, 7.5, 1.5]])
+    x0 = np.array([P[0], [0.983, 0.0, 0.356], [0.0, 0.0, 0.4], [0.0, 0.0, 0.0]])
+    cfg = TrajectoryConfig()
+    g = _guard()
+    for T, refused in ((31.5, True), (5.0, False)):
+        t = np.array([0.0, T])
+        traj = generate_trajectory(t, P, np.zeros_like(P), np.zeros_like(P), cfg, initial_state=x0)
+        z = np.asarray(traj.sample(np.linspace(0.0, T, 400)).p).reshape(-1, 3)[:, 2]
+        assert (z.max() > 3.1) == refused
+        v = g.check_ceiling(traj, 0.0, None, 3.0, 0.1)
+        assert (not v.ok) == refused
+        if refused:
+            assert v.rule == "ceiling" and v.point_enu_m[2] > 3.1

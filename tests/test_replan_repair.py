@@ -35,6 +35,7 @@ from companion.replan.voxmap import ObstacleMap
 from companion.safety import Guard, GuardConfig, SafetyScene, known_obstacle_distance
 from companion.trajectory import generate_trajectory
 from mavcore.maps.grid import ElevationModel, OccupancyGrid
+from mavcore.mission.replan import ReplanConfig
 from mavcore.mission.schema import FlightConfig
 from mavcore.mission.trajectory import TrajectoryConfig
 
@@ -247,7 +248,7 @@ def test_checked_proposes_the_repaired_candidate_only():
     # closes on the box's corner faster than the stopping law allows there
     plan, x0 = _l_turn(0.91, 3.0)
     g = _guard()
-    host = SimpleNamespace(guard=g, memory=ObstacleMap(V), _keep_m=REQ)
+    host = SimpleNamespace(guard=g, memory=ObstacleMap(V), _keep_m=REQ, cfg=ReplanConfig())
     st = SimpleNamespace(p=x0[0], v=x0[1], a=x0[2], jerk=x0[3])
     assert not pace(plan, x0, g)[1].ok
     out, verdict, added, note, conflict = Replanner._checked(host, plan, st)
@@ -255,7 +256,7 @@ def test_checked_proposes_the_repaired_candidate_only():
     assert g.check_trajectory(out.trajectory).ok
     assert _min_box_distance(out) >= REQ
     # with no repair allowed, the same candidate is not proposed
-    host0 = SimpleNamespace(guard=g, memory=ObstacleMap(V), _keep_m=REQ)
+    host0 = SimpleNamespace(guard=g, memory=ObstacleMap(V), _keep_m=REQ, cfg=ReplanConfig())
     orig = repair_mod.MAX_REPAIRS
     try:
         import companion.replan.replanner as rr

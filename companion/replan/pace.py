@@ -25,7 +25,15 @@ flown as it is, and refusing it ends the flight.
    ratio over ``HEADROOM`` (at least ``MIN_STRETCH``), and so is the interval
    before it, where the deceleration starts. Repeated up to ``MAX_TRIES``
    times, until no sample is too fast.
-3. **Check.** The guard checks the whole candidate (``check_trajectory``):
+3. **Check.** Retiming must keep the candidate's path (``kept_path``: every sample
+   within ``PATH_TOL_M`` of it). The LQR tracks its way-points softly, and between
+   way-points far apart in time it is free: a rejoin through one way-point 8 m away,
+   stretched from 10 s to 31.5 s, rose to 41.6 m and came back (fresh seed 20261163 of
+   obstacles-under, flight 16: the vehicle climbed to 8.8 m before the avoidance stopped
+   it; neither the terrain nor any obstacle is up there, so the guard passed it). A
+   candidate that leaves its path is refused, and so is one that rises above the
+   ceiling (``ceiling_agl_m``: ``Guard.check_ceiling``; the climbs and the routes keep
+   under it by construction). The guard checks the whole candidate (``check_trajectory``):
    its verdict is returned with the plan. A refused candidate is not
    installed; the mode treats it as no plan. Slowing down moves a path only
    by the LQR's soft tracking (up to about 1 cm, obstacles-wide scenario 10):
@@ -58,6 +66,13 @@ MAX_TRIES = 8
 STEP_M = 0.05
 #: Pass 2 samples the candidate this often (s): the guard's ``SAMPLE_DT_S``.
 SAMPLE_DT_S = 0.05
+#: The paced trajectory stays this close (m) to the candidate's path (``kept_path``): what
+#: retiming may move it by the LQR's soft tracking is about 1 cm on way-points a second
+#: apart, and the corridor's own bound is ``replan.lateral_limit_m`` (0.5 m by default).
+PATH_TOL_M = 0.25
+#: A replanner's candidate may rise this much (m) above the ceiling (an LQR from a climbing
+#: state overshoots the level it is fitted to by centimetres).
+CEILING_TOL_M = 0.1
 
 
 def stretch(t_s: np.ndarray, v: np.ndarray, a: np.ndarray, k: np.ndarray) -> tuple:
@@ -138,13 +153,16 @@ def sampled_stretch(plan, speed_limits: Callable, dt_s: float = SAMPLE_DT_S,
     return np.maximum(k, lead)
 
 
-def pace(plan, x0: np.ndarray, guard, horizon: Callable | None = None) -> tuple:
+def pace(plan, x0: np.ndarray, guard, horizon: Callable | None = None,
+         ceiling_agl_m: float | None = None) -> tuple:
     """(plan, verdict): ``plan`` (a ``GlobalPlan`` whose trajectory starts from state
     ``x0``, (4, 3) [p, v, a, jerk]) retimed to ``guard`` (its ``speed_limits`` and
     ``check_trajectory``), and the guard's last verdict on it (module doc).
     ``horizon(plan) -> float | None``: where the plan stops being new (a rejoin,
     ``rejoin.converged_from``; None: nowhere); only that part is paced and checked, and
-    the plan returned carries it as ``new_until_s``."""
+    the plan returned carries it as ``new_until_s``. ``ceiling_agl_m``: the new part stays
+    under it (``Guard.check_ceiling``, with ``CEILING_TOL_M``)."""
+    original = plan
     until = None if horizon is None else horizon(plan)
     if len(plan.t_s) >= 2:
         dt0 = np.diff(plan.t_s)
@@ -163,4 +181,46 @@ def pace(plan, x0: np.ndarray, guard, horizon: Callable | None = None) -> tuple:
     if verdict.ok and until is not None:
         # the rest flies the installed plan: not re-paced, but never into an obstacle seen since
         verdict = guard.check_obstacle_clear(plan.trajectory, until)
+    if verdict.ok and plan.trajectory is not original.trajectory:
+        verdict = kept_path(original.trajectory, plan.trajectory, float(plan.t_s[0]), until, guard) or verdict
+    if verdict.ok and ceiling_agl_m is not None:
+        verdict = guard.check_ceiling(plan.trajectory, float(plan.t_s[0]), until, ceiling_agl_m, CEILING_TOL_M)
     return plan, verdict
+
+
+def path_offsets_m(points_enu_m: np.ndarray, path_enu_m: np.ndarray) -> np.ndarray:
+    """(M,) distance (m) of each point to the polyline ``path_enu_m`` ((N, 3), N >= 1)."""
+    q = np.asarray(points_enu_m, float).reshape(-1, 3)
+    a = np.asarray(path_enu_m, float).reshape(-1, 3)
+    if len(a) == 1:
+        return np.linalg.norm(q - a[0], axis=1)
+    b, a = a[1:], a[:-1]
+    ab = b - a
+    L2 = np.maximum(np.einsum("ni,ni->n", ab, ab), 1e-18)
+    out = np.full(len(q), np.inf)
+    for k0 in range(0, len(q), 256):                 # bounded memory
+        qq = q[k0:k0 + 256, None, :]
+        u = np.clip(np.einsum("mni,ni->mn", qq - a[None], ab) / L2[None], 0.0, 1.0)
+        d = qq - (a[None] + u[..., None] * ab[None])
+        out[k0:k0 + 256] = np.sqrt(np.einsum("mni,mni->mn", d, d).min(axis=1))
+    return out
+
+
+def kept_path(before, after, t_from_s: float, t_to_s: float | None, guard):
+    """Pacing kept the candidate's path: every sample (every ``SAMPLE_DT_S``) of the paced
+    trajectory ``after`` from ``t_from_s`` to ``t_to_s`` (None: its end) lies within
+    ``PATH_TOL_M`` of the path of ``before`` (its samples joined): None; else a ``path``
+    refusal (the guard's ``Verdict``) at the first sample that left it (module doc)."""
+    tb = np.append(np.arange(float(before.t0), float(before.tf), SAMPLE_DT_S / 2.0), float(before.tf))
+    ref = np.asarray(before.sample(tb).p, float).reshape(-1, 3)
+    t0 = float(max(t_from_s, after.t0))
+    tf = float(after.tf if t_to_s is None else min(t_to_s, after.tf))
+    ta = np.append(np.arange(t0, tf, SAMPLE_DT_S), tf)
+    p = np.asarray(after.sample(ta).p, float).reshape(-1, 3)
+    off = path_offsets_m(p, ref)
+    bad = off > PATH_TOL_M
+    if not bad.any():
+        return None
+    k = int(np.argmax(bad))
+    return guard.refusal("path", None, f"path: paced {off[k]:.2f} m off the candidate's path at t={ta[k]:.2f} s",
+                         float(ta[k]), p[k])

@@ -631,7 +631,7 @@ class Replanner:
         x0 = np.array([st.p, st.v, st.a, st.jerk], dtype=float)
         horizon = None if parent is None else \
             (lambda p: converged_from(p.trajectory, parent.trajectory, float(p.t_s[0])))
-        paced, verdict = pace(plan, x0, self.guard, horizon)
+        paced, verdict = pace(plan, x0, self.guard, horizon, self.cfg.ceiling_agl_m)
         if not verdict.ok:
             return None, verdict, 0.0
         return paced, verdict, float(paced.t_s[-1] - plan.t_s[-1])
@@ -650,7 +650,7 @@ class Replanner:
         t_end = float(plan.t_s[-1])
         cand, n = plan, 0
         while True:
-            paced, verdict = pace(cand, x0, self.guard)
+            paced, verdict = pace(cand, x0, self.guard, ceiling_agl_m=self.cfg.ceiling_agl_m)
             if verdict.ok:
                 return paced, verdict, float(paced.t_s[-1] - t_end), (f"repaired {n} x" if n else ""), None
             fix = repair(paced, x0, verdict, self.guard) if n < MAX_REPAIRS else None

@@ -140,7 +140,8 @@ class Verdict:
     ----------
     ok : bool
     rule : str or None
-        ``clearance``, ``speed`` or ``landing`` (None when ok).
+        ``clearance``, ``speed`` or ``landing`` (None when ok); a replanner's candidate also
+        ``ceiling`` or ``path`` (``companion.replan.pace``).
     surface : str or None
         ``terrain``, ``row`` or ``obstacle``.
     detail : str
@@ -563,6 +564,31 @@ class Guard:
             if not verdict.ok:
                 return verdict
         return PASS
+
+    def check_ceiling(self, trajectory, t_from_s: float, t_to_s: float | None, ceiling_agl_m: float,
+                      tol_m: float = 0.0) -> Verdict:
+        """A replanner's candidate from ``t_from_s`` to ``t_to_s`` (None: its end) stays under
+        the ceiling: the terrain plus ``ceiling_agl_m`` plus ``tol_m`` (samples every
+        ``SAMPLE_DT_S``; rule ``ceiling``, surface ``terrain``). The climbs and the routes keep
+        under it by construction; an LQR fitted through sparse way-points need not
+        (``companion.replan.pace``)."""
+        t0 = float(max(t_from_s, trajectory.t0))
+        tf = float(trajectory.tf if t_to_s is None else min(t_to_s, trajectory.tf))
+        t = np.append(np.arange(t0, tf, SAMPLE_DT_S), tf)
+        p = np.asarray(trajectory.sample(t).p, float).reshape(-1, 3)
+        over = p[:, 2] - (self.scene.terrain.z(p[:, 0], p[:, 1]) + ceiling_agl_m + tol_m)
+        if not (over > 0.0).any():
+            return PASS
+        k = int(np.argmax(over > 0.0))
+        return self.refusal("ceiling", "terrain", f"ceiling: {over[k] + tol_m:+.2f} m above the "
+                            f"{ceiling_agl_m:g} m ceiling at t={t[k]:.2f} s", float(t[k]), p[k])
+
+    @staticmethod
+    def refusal(rule: str, surface: str | None, detail: str, t_s: float | None, point_enu_m) -> Verdict:
+        """A failing verdict of a rule judged outside the guard's own (the replanner's
+        ``pace``: a ceiling, a path kept)."""
+        return Verdict(False, rule, surface, detail, t_s,
+                       None if point_enu_m is None else tuple(float(c) for c in point_enu_m))
 
     def check_obstacle_clear(self, trajectory, t_from_s: float) -> Verdict:
         """The part of a candidate from ``t_from_s`` to its end keeps out of every known
