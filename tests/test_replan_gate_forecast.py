@@ -1,7 +1,7 @@
 """The gate flies what the avoiding modes commit (``companion.safety.gate_forecast``,
 ``Replanner._shape``; docs/replan.md "The stopping point").
 
-Scene as tests/test_safety_guard.py (flat ground, one row at x in [5.0, 5.2], y in [0, 5]),
+Scene tests/test_safety_guard.py's (flat ground, one row at x in [5.0, 5.2], y in [0, 5]),
 with a thin post: a vertical cylinder of radius 0.05 m at (2.0, 8.0), 3 m tall. R = 0.4 m,
 clearance 0.5 m, so the vehicle's centre keeps 0.9 m from the post's surface; braking at
 1 m/s^2 after the guard's default delay of 0.5 s.
@@ -24,16 +24,16 @@ import types
 import numpy as np
 import pytest
 
-from mavcore.maps.grid import ElevationModel, OccupancyGrid
 from mavcore.mission.replan import ReplanConfig
 from companion.safety import gate_forecast
 from companion.replan.replanner import Replanner
 from companion.replan.shaper import ReferenceShaper
-from companion.safety import Guard, GuardConfig, SafetyScene
+from companion.safety import Guard, GuardConfig
 from companion.safety.gate import GuardGate
 from companion.safety.guard import DELAY_S, GRACE_S, grace_accepts
 from companion.safety.stopping import stopping_speed_m_s
 from companion.trajectory.reference import RefSample
+from test_safety_guard import _scene
 
 R, C = 0.4, 0.5
 REQ = R + C
@@ -53,13 +53,9 @@ def _post(points):
 
 
 def _guard() -> Guard:
-    occ = np.zeros((100, 100), bool)
-    occ[0:50, 50:52] = True
-    grid = OccupancyGrid(occ, ~occ, 0.1)
-    dem = ElevationModel(np.zeros((11, 11)), 0.0, 0.0, 1.0)
     cfg = GuardConfig(airframe_radius_m=R, terrain_clearance_m=C, row_clearance_m=C, obstacle_clearance_m=C,
                       accel_m_s2=1.0, delay_s=DELAY_S)
-    return Guard(cfg, SafetyScene.from_maps(grid, dem, 2.0), _post)
+    return Guard(cfg, _scene(), _post)
 
 
 def _ref(st) -> RefSample:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from ..polyline import segment_distances
 from .freespace import FreeSpace
 from .rows import RowStructure
 
@@ -58,16 +59,6 @@ def find_corridors(rows: RowStructure | None) -> Corridors | None:
                      t0_m=t0[ok], t1_m=t1[ok])
 
 
-def _point_segment_distance(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(nq, ns) distances from points q (nq, 2) to segments a-b (ns, 2)."""
-    ab = b - a
-    L2 = np.maximum((ab * ab).sum(axis=1), 1e-18)
-    s = ((q[:, None, :] - a[None]) * ab[None]).sum(axis=2) / L2[None]
-    s = np.clip(s, 0.0, 1.0)
-    closest = a[None] + s[..., None] * ab[None]
-    return np.hypot(*(q[:, None, :] - closest).transpose(2, 0, 1))
-
-
 def corridor_coverage(corr: Corridors, main_g: np.ndarray, line_spacing_m: float,
                       step_m: float) -> np.ndarray:
     """(k,) covered fraction of each corridor's centre line (module doc)."""
@@ -94,7 +85,7 @@ def corridor_coverage(corr: Corridors, main_g: np.ndarray, line_spacing_m: float
         n = max(2, int(np.ceil(np.hypot(*(p1 - p0)) / step_m)) + 1)
         s = np.linspace(0.0, 1.0, n)[:, None]
         q = (1 - s) * p0 + s * p1
-        dist = _point_segment_distance(q, a[near], b[near]).min(axis=1)
+        dist = segment_distances(q, a[near], b[near]).min(axis=1)
         out[i] = float(np.mean(dist <= half))
     return out
 

@@ -52,6 +52,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..polyline import segment_distances
 from ..trajectory import generate_trajectory
 
 #: Retime to this fraction of the speed the guard allows (the LQR tracks its way-points softly).
@@ -194,15 +195,9 @@ def path_offsets_m(points_enu_m: np.ndarray, path_enu_m: np.ndarray) -> np.ndarr
     a = np.asarray(path_enu_m, float).reshape(-1, 3)
     if len(a) == 1:
         return np.linalg.norm(q - a[0], axis=1)
-    b, a = a[1:], a[:-1]
-    ab = b - a
-    L2 = np.maximum(np.einsum("ni,ni->n", ab, ab), 1e-18)
     out = np.full(len(q), np.inf)
     for k0 in range(0, len(q), 256):                 # bounded memory
-        qq = q[k0:k0 + 256, None, :]
-        u = np.clip(np.einsum("mni,ni->mn", qq - a[None], ab) / L2[None], 0.0, 1.0)
-        d = qq - (a[None] + u[..., None] * ab[None])
-        out[k0:k0 + 256] = np.sqrt(np.einsum("mni,mni->mn", d, d).min(axis=1))
+        out[k0:k0 + 256] = segment_distances(q[k0:k0 + 256], a[:-1], a[1:]).min(axis=1)
     return out
 
 

@@ -1229,21 +1229,13 @@ class Replanner:
             P, V, A = brake_states(st.p, st.v, st.a, st.jerk, sh, dt_brake)
             verdict, flags0, self._brake_stepped = self.guard.forecast_brake(
                 here, P, V, A, dt_brake, since, margin_m, STOP_TOL_M, self._brake_stepped)
-            first[id(st)] = (st, *flags0)
-            return np.vstack([here, P]), verdict
+            return np.vstack([here, P]), verdict, flags0
 
-        first: dict = {}                     # the gate's flags of each candidate judged
-
-        def commit(st):
-            # the gate's failing run, as the gate will judge this sample (``Guard.gate_run``)
-            seen = first.get(id(st))
-            ok, braking = seen[1:] if seen is not None and seen[0] is st else first_flags(st)
-            self._gate_since = self.guard.gate_run(ok, braking, self._t_s, self._gate_since)
+        def commit(st, flags0):
+            # the gate's failing run, as the gate will judge this sample (``Guard.gate_run``;
+            # ``flags0``: the state's own (ok, braking), the first point of its judged brake)
+            self._gate_since = self.guard.gate_run(*flags0, self._t_s, self._gate_since)
             return sh.commit(st)
-
-        def first_flags(st):
-            ok, braking, _ = self.guard.sample_flags([st.p], [st.v], [st.a])
-            return bool(ok[0]), bool(braking[0])
 
         if self.emergency and not self._evading and self._calm():
             # back to the normal limits once the state is within them and their brake from here
@@ -1257,10 +1249,10 @@ class Replanner:
         tried = []
         for _ in range(3):
             st = sh.preview(dt, cmd.tolist())
-            path, verdict = judged(st)
+            path, verdict, flags0 = judged(st)
             if verdict.ok:
-                return commit(st)
-            tried.append((st, path))
+                return commit(st, flags0)
+            tried.append((st, path, flags0))
             # its approach along the normal there goes, and as much away as the state still
             # closes (the shaper then turns that round first: motion along the surface is kept)
             n = self.guard.normal(verdict.surface, verdict.point_enu_m)
@@ -1271,29 +1263,30 @@ class Replanner:
             cmd = cmd + approach * n
         self.n_stop_limited += 1
         st = sh.preview(dt, (0.0, 0.0, 0.0))
-        path, verdict = judged(st)
+        path, verdict, flags0 = judged(st)
         if verdict.ok:
-            return commit(st)
+            return commit(st, flags0)
         if not self.emergency:
             # the normal brake can no longer stop for it (it came into view inside that
             # stopping distance: a walker out of a row, fresh seed 20261152 flight 10, met at
             # 0.52 m/s by a brake at 1 m/s^2): the emergency brake, until calm (``_calm``)
-            tried.append((st, path))
+            tried.append((st, path, flags0))
             self._set_emergency(True)
             self.n_emergency_brakes += 1          # ``step`` reports it (``_emergency_event``)
             self._emergency_why = "cannot stop in time"
             st = sh.preview(dt, (0.0, 0.0, 0.0))
-            path, verdict = judged(st)
+            path, verdict, flags0 = judged(st)
             if verdict.ok:
-                return commit(st)
+                return commit(st, flags0)
         # even braking closes (the state already closes inside a clearance: the map grew round
         # it): the candidate whose path comes least close, braking included, the earliest of
         # equals (moving away, or on along the surface, is never worse than braking; a zero
         # command here also stopped every climb, which then timed out: obstacles-wide seed
         # 20261127, flight 11)
-        tried.append((st, path))
-        rooms = [self._least_room(p) for _, p in tried]
-        return commit(tried[int(np.argmax(rooms))][0])
+        tried.append((st, path, flags0))
+        rooms = [self._least_room(p) for _, p, _ in tried]
+        st, _, flags0 = tried[int(np.argmax(rooms))]
+        return commit(st, flags0)
 
     def _emergency_event(self, events: list) -> None:
         """The ``stop`` event of an emergency brake begun this frame."""

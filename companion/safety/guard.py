@@ -76,6 +76,15 @@ REST_M_S = 1e-3
 KINDS = ("terrain", "row", "obstacle")
 
 
+def _step(x: np.ndarray) -> tuple:
+    """(nonzero (K,), h (K,)) of (K, 3) rates ``x`` (velocities, accelerations): which exceed
+    ``REST_M_S`` and the time step that moves ``STEP_M`` along them (0 where not): the finite
+    differences of the rules (``Guard._judge``, ``_flag_points``)."""
+    n = np.sqrt(np.einsum("ki,ki->k", x, x))
+    nonzero = n > REST_M_S
+    return nonzero, np.where(nonzero, STEP_M / np.maximum(n, REST_M_S), 0.0)
+
+
 def _flag_points(p_enu_m, v_enu_m_s, a_enu_m_s2) -> tuple:
     """(p, v, a, points, steps) of K samples: the (3K, 3) points whose distances judge them
     (each sample, a ``STEP_M`` step along its velocity, one along its acceleration) and the
@@ -83,12 +92,8 @@ def _flag_points(p_enu_m, v_enu_m_s, a_enu_m_s2) -> tuple:
     p = np.asarray(p_enu_m, float).reshape(-1, 3)
     v = np.asarray(v_enu_m_s, float).reshape(-1, 3)
     a = np.asarray(a_enu_m_s2, float).reshape(-1, 3)
-    speed = np.sqrt(np.einsum("ki,ki->k", v, v))
-    moving = speed > REST_M_S
-    dt = np.where(moving, STEP_M / np.maximum(speed, REST_M_S), 0.0)
-    an = np.sqrt(np.einsum("ki,ki->k", a, a))
-    accel = an > REST_M_S
-    ha = np.where(accel, STEP_M / np.maximum(an, REST_M_S), 0.0)
+    moving, dt = _step(v)
+    accel, ha = _step(a)
     return p, v, a, np.vstack([p, p + v * dt[:, None], p + a * ha[:, None]]), (moving, dt, accel, ha)
 
 
@@ -226,33 +231,36 @@ class Guard:
 
     # --- rules ------------------------------------------------------------------------------
 
+    def _rules(self, kind: str, d0, d1, moving, dt) -> tuple:
+        """(approach, allowed, clearance broken, speed broken), (K,) each, of K samples of
+        ``kind`` at distances ``d0`` whose step ``dt`` along the velocity (``_step``) reaches
+        ``d1`` (module doc's rules; the rows have no speed rule: allowed inf)."""
+        req = self._req[kind]
+        with np.errstate(invalid="ignore"):
+            approach = np.where(moving & np.isfinite(d0), (d0 - d1) / np.where(moving, dt, 1.0), 0.0)
+        bad_c = (d0 < req) & (approach > SPEED_TOLERANCE_M_S)
+        if kind == "row":
+            return approach, np.full(len(d0), np.inf), bad_c, np.zeros(len(d0), bool)
+        allowed = stopping_speed_m_s(d0 - req, self.cfg.accel_m_s2, self.cfg.delay_s)
+        return approach, allowed, bad_c, approach > allowed + SPEED_TOLERANCE_M_S
+
     def _judge(self, p, v, t=None, terrain: bool = True, margin_bad: dict | None = None) -> Verdict:
         """The rules on (K, 3) samples p with velocities v (first failing sample, or PASS).
         ``margin_bad[kind]``: (K,) bool, the samples that break the margin rule of the
         candidate's path (``margin_rule``; they fail the clearance rule whatever their approach)."""
         p = np.asarray(p, float).reshape(-1, 3)
         v = np.asarray(v, float).reshape(-1, 3)
-        speed = np.sqrt(np.einsum("ki,ki->k", v, v))
-        moving = speed > REST_M_S
-        dt = np.where(moving, STEP_M / np.maximum(speed, REST_M_S), 0.0)
+        moving, dt = _step(v)
         d_all = self.distances(np.vstack([p, p + v * dt[:, None]]), terrain)
-        cfg = self.cfg
         first, worst = len(p), None
         for kind in KINDS:
             d0, d1 = d_all[kind][:len(p)], d_all[kind][len(p):]
             if not np.isfinite(d0).any():
                 continue
             req = self._req[kind]
-            with np.errstate(invalid="ignore"):
-                approach = np.where(moving & np.isfinite(d0), (d0 - d1) / np.where(moving, dt, 1.0), 0.0)
-            bad_c = (d0 < req) & (approach > SPEED_TOLERANCE_M_S)
+            approach, allowed, bad_c, bad_s = self._rules(kind, d0, d1, moving, dt)
             if margin_bad is not None and kind in margin_bad:
                 bad_c |= margin_bad[kind]
-            allowed = np.full(len(p), np.inf)
-            bad_s = np.zeros(len(p), bool)
-            if kind != "row":
-                allowed = stopping_speed_m_s(d0 - req, cfg.accel_m_s2, cfg.delay_s)
-                bad_s = approach > allowed + SPEED_TOLERANCE_M_S
             bad = bad_c | bad_s
             if bad.any():
                 k = int(np.argmax(bad))
@@ -409,7 +417,6 @@ class Guard:
     def _flags(self, d: dict, K: int, steps: tuple) -> tuple:
         """``sample_flags`` from the distances of ``_flag_points``'s points."""
         moving, dt, accel, ha = steps
-        cfg = self.cfg
         failed = np.zeros(K, bool)
         braking = np.zeros(K, bool)
         surface = np.full(K, None, dtype=object)
@@ -417,16 +424,12 @@ class Guard:
             d0, d1, d2 = d[kind][:K], d[kind][K:2 * K], d[kind][2 * K:]
             if not np.isfinite(d0).any():
                 continue
-            req = self._req[kind]
+            _, _, bad_c, bad_s = self._rules(kind, d0, d1, moving, dt)
             with np.errstate(invalid="ignore"):
-                approach = np.where(moving & np.isfinite(d0), (d0 - d1) / np.where(moving, dt, 1.0), 0.0)
                 decel = np.where(accel & np.isfinite(d0), (d2 - d0) / np.where(accel, ha, 1.0), 0.0)
-            bad = (d0 < req) & (approach > SPEED_TOLERANCE_M_S)
-            if kind != "row":
-                allowed = stopping_speed_m_s(d0 - req, cfg.accel_m_s2, cfg.delay_s)
-                bad |= approach > allowed + SPEED_TOLERANCE_M_S
+            bad = bad_c | bad_s
             new = bad & ~failed
-            braking[new] = decel[new] >= BRAKING_FRACTION * cfg.accel_m_s2
+            braking[new] = decel[new] >= BRAKING_FRACTION * self.cfg.accel_m_s2
             surface[new] = kind
             failed |= bad
         return ~failed, braking, surface
