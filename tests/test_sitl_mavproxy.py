@@ -59,7 +59,7 @@ def test_mavproxy_mode_params_mission(tmp_path):
             mp.send("wp list")
             assert int(mp.expect(r"Requesting (\d+) waypoints").group(1)) == len(WAYPOINTS)
             for lat, lon, alt in WAYPOINTS:
-                m = mp.expect(r"^16 6 (\S+) (\S+) (\S+)")
+                m = mp.expect(r"(?:^|> )16 6 (\S+) (\S+) (\S+)")
                 assert (float(m.group(1)), float(m.group(2)), float(m.group(3))) == \
                     pytest.approx((lat * 1e-7, lon * 1e-7, alt), abs=1e-7)
             # SYS_STATUS carries the geofence bit (present, healthy): MAVProxy's fence module
@@ -91,7 +91,7 @@ def test_mavproxy_flies_the_ardupilot_personality(tmp_path):
             mp.send("mode guided")
             mp.expect(r"Mode GUIDED", timeout_s=30)
             mp.send("arm throttle")
-            mp.expect(r"^GUIDED> ARMED|^ARMED", timeout_s=30)            # from HEARTBEAT
+            mp.expect(r"(?:^|> )ARMED$", timeout_s=30)     # from HEARTBEAT; any mode's prompt may lead the line
             mp.send("takeoff 2")
             mp.expect(r"Takeoff complete", timeout_s=30)
             mp.send("mode land")
