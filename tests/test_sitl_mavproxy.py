@@ -93,8 +93,8 @@ def test_mavproxy_flies_the_ardupilot_personality(tmp_path):
             mp.send("arm throttle")
             mp.expect(r"(?:^|> )ARMED$", timeout_s=30)     # from HEARTBEAT; any mode's prompt may lead the line
             mp.send("takeoff 2")
-            mp.expect(r"Takeoff complete", timeout_s=30)
+            mp.expect(r"Takeoff complete", timeout_s=60)
             mp.send("mode land")
-            mp.expect(r"Landing detected", timeout_s=30)
+            mp.expect(r"Landing detected", timeout_s=60)
         finally:
             mp.close()

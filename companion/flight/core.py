@@ -535,8 +535,11 @@ class FlightCore:
                                COMMAND_SENDS if retries is None else retries, temp_retries, optional)
         return (yield from self._run(client, effect))
 
-    def _upload(self, items: list, mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION, retries: int = 5):
-        """The MISSION_INT upload (generator): ``mavcore.services.mission.MissionUploadClient``."""
+    def _upload(self, items: list, mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION,
+                retries: int = COMMAND_SENDS - 1):
+        """The MISSION_INT upload (generator): ``mavcore.services.mission.MissionUploadClient``.
+        Its re-sends in a row are a command's (``COMMAND_SENDS`` sends in all): once the vehicle's
+        ACCEPTED is lost, each re-sent last item is one round trip."""
         return (yield from self._run(MissionUploadClient(self.enc, self.ts, self.tc, items, mission_type,
                                                          self.cfg.command_timeout_s, retries)))
 
