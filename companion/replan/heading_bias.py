@@ -43,7 +43,10 @@ paper-model sensors are the same, bit for bit.
 Safety: the estimate only rotates the evidence by the error the rows
 measured; a return is then explained at that one rotation, never at a band
 of them, so what it can hide is what a correct heading would hide. An
-obstacle's returns, unexplained at every offset, do not vote.
+obstacle's returns, unexplained at every offset, do not vote; but one beside
+a row is explained at the turns that bring it onto the row, so a return on an
+obstacle the vehicle already remembers (``remembered``) does not vote either
+(a walker and a box beside rows set the estimate 4 deg the wrong way).
 
 Pure: floats and the ``explain`` callable in, no I/O, vehicle time.
 """
@@ -123,15 +126,21 @@ class HeadingBias:
             return False
         return abs(ev.axis[2]) <= math.sin(MAX_TILT_RAD) and ev.axis[2] >= -math.sin(ev.half_v_rad + MIN_HALF_V_RAD)
 
-    def observe(self, t_s: float, ev, explain, on_terrain=None) -> None:
+    def observe(self, t_s: float, ev, explain, on_terrain=None, remembered=None) -> None:
         """Evaluate the return of ``ev`` (``wants`` first) with ``explain(evidence) -> bool``.
         ``on_terrain(evidence) -> bool``: a point of the return lies on the terrain. Such a
         return is explained at every turn (a turn about the vertical moves it along the
         ground), so it says nothing about the heading and does not spend the period: with a
-        ring pitched down, ground returns would otherwise take the turns of the row returns."""
+        ring pitched down, ground returns would otherwise take the turns of the row returns.
+        ``remembered(evidence) -> bool``: the return lies on an obstacle the vehicle remembers;
+        such a return does not vote either (module doc, Safety)."""
         if not self.wants(t_s, ev):
             return
         if on_terrain is not None and on_terrain(ev):
+            return
+        if remembered is not None and remembered(ev):
+            # on an obstacle the vehicle remembers: that obstacle's return, which a turn
+            # can bring onto a row (module doc, Safety)
             return
         self._t_last = t_s
         self.n_evaluated += 1

@@ -729,7 +729,7 @@ class Replanner:
             self.n_ignored += 1
             return
         # the rows measure the estimate's heading error (``heading_bias``): the beam is turned by it
-        self.heading.observe(t_s, ev, self._explained, self._on_terrain)
+        self.heading.observe(t_s, ev, self._explained, self._on_terrain, self._near_remembered)
         if self.heading.estimate_rad:
             ev = rotate_evidence(ev, self.heading.estimate_rad)
         self.fresh.on_evidence(t_s, reading.sensor_id, reading.R_flu_sensor, reading.hfov_rad, reading.vfov_rad)
@@ -770,6 +770,16 @@ class Replanner:
             if self._explained(ev, ground_in_view=False):
                 return True
         return False
+
+    def _near_remembered(self, ev) -> bool:
+        """The return's axis point lies within a voxel of an obstacle point the map remembers."""
+        mem = self.memory
+        if not len(mem):
+            return False
+        r = self.cfg.voxel_m
+        if mem.points_lower_bound(ev.hit) > r:
+            return False
+        return bool(mem.distance(np.asarray(ev.hit, dtype=float).reshape(1, 3))[0] <= r)
 
     def _on_terrain(self, ev) -> bool:
         """A point of the return (its axis hit or a field-of-view edge) is on the terrain."""
