@@ -275,3 +275,28 @@ def test_rejoin_refused_when_it_would_dip_below_the_floor():
     assert res.plan is None and res.reason == "floor"
     ok = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5, floor_z=lambda x, y: z.min() - 0.05)
     assert ok.plan is not None
+
+
+def test_a_rejoin_that_bows_off_its_chord_is_stretched_or_refused():
+    """Started on the plan's line (y = 0) moving sideways at 0.6 m/s, the LQR is free
+    until the first kept way-point (11, 0, 1.5): the candidate bows off the chord from
+    the start to it, which here is the x axis, so the bow is max |y| over that piece
+    (sampled here every 10 ms, independently of ``chord_offset_m``): 0.73 m. Held to half
+    that bow, no stretch of the time to it keeps it (a slower rejoin has longer to drift
+    sideways): refused as "path". Allowed twice the bow, it is the same candidate."""
+    plan = _plan()
+    st = ShapedState(p=(8.0, 0.0, 1.5), v=(0.6, 0.6, 0.0), a=(0.0, 0.0, 0.0), jerk=(0.0, 0.0, 0.0),
+                     snap=(0.0, 0.0, 0.0))
+
+    def bow(res):
+        t = np.arange(res.plan.t_s[0], res.plan.t_s[1] + 1e-9, 0.01)
+        return float(np.max(np.abs(res.plan.trajectory.sample(t).p[:, 1])))
+
+    free = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5)
+    assert free.plan is not None and free.plan.p_enu_m[1].tolist() == [11.0, 0.0, 1.5]
+    b = bow(free)
+    assert b > 0.3                                        # 0.6 m/s sideways: a bow, not a slip
+    held = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5, path_tol_m=0.5 * b)
+    assert held.plan is None and held.reason == "path"
+    loose = rejoin(plan, st, 14.0, 3, np.zeros((0, 3)), 0.5, 50.0, 0.5, path_tol_m=2.0 * b)
+    assert loose.plan is not None and loose.plan.t_s[1] == free.plan.t_s[1]

@@ -49,6 +49,7 @@ import numpy as np
 
 from ..coverage.waypoints import A_REF_M_S2
 from mavcore.errors import PlanError
+from ..polyline import segment_distances
 from ..trajectory import generate_trajectory
 from .globalplan import GlobalPlan, Segment
 
@@ -80,7 +81,7 @@ class RejoinResult:
     plan : GlobalPlan or None
         The re-solved plan (None: no acceptable candidate).
     reason : str
-        "" when accepted, else why not ("jerk", "clearance", "ceiling", "floor", "solver").
+        "" when accepted, else why not ("jerk", "clearance", "ceiling", "floor", "path", "solver").
     max_jerk_m_s3 : float
         Largest |jerk| over the checked horizon of the last candidate.
     min_clearance_m : float
@@ -141,6 +142,14 @@ def check_candidate(trajectory, t0_s: float, obstacles_enu_m: np.ndarray,
     return CandidateCheck(jerk, column_clearance_m(s.p, obs), above, below)
 
 
+def chord_offset_m(trajectory, t0_s: float, t1_s: float, dt_s: float = CHECK_DT_S) -> float:
+    """Largest horizontal distance (m) of ``trajectory`` over [t0_s, t1_s] from the chord
+    between its positions at the two ends (sampled every ``dt_s``, both ends included)."""
+    t = np.append(np.arange(t0_s, t1_s, dt_s), t1_s)
+    xy = trajectory.sample(t).p[:, :2]
+    return float(segment_distances(xy, xy[:1], xy[-1:]).max())
+
+
 def converged_from(trajectory, parent, t_from_s: float, dt_s: float = CHECK_DT_S) -> float | None:
     """The time (``trajectory``'s clock) after which ``trajectory`` flies ``parent``'s
     trajectory shifted by the constant that maps their ends onto each other (a rejoin
@@ -177,7 +186,8 @@ def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_e
            clearance_m: float, jerk_limit_m_s3: float, vertical_speed_m_s: float,
            ceiling_z: Callable[[float, float], float] | None = None,
            free_xy: Callable[[float, float], bool] | None = None,
-           floor_z: Callable[[float, float], float] | None = None) -> RejoinResult:
+           floor_z: Callable[[float, float], float] | None = None,
+           path_tol_m: float = math.inf) -> RejoinResult:
     """Re-solve ``plan`` from ``state`` at ``t_now_s`` through way-points ``first_kept..``.
 
     Parameters
@@ -204,6 +214,13 @@ def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_e
         one that dips below it (a rejoin started while descending re-solved into
         the ground, issue 15) is stretched like one above the ceiling, and
         refused as "floor".
+    path_tol_m : float, optional
+        How far (m, horizontally) the candidate may stray from the chord from the
+        state to the first kept way-point on the way there (``chord_offset_m``): the LQR
+        is free between way-points, and a start whose velocity and acceleration do
+        not point along the chord bowed a rejoin 0.70 m off a straight corridor
+        (obstacles-under seed 20261165 flight 10). Stretched like too much jerk, then
+        refused as "path". The replanner passes its avoid modes' lateral limit.
 
     Returns
     -------
@@ -230,7 +247,9 @@ def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_e
         jerk, clear = chk.max_jerk_m_s3, chk.min_clearance_m
         if clear < clearance_m:
             return RejoinResult(None, "clearance", jerk, clear)
-        if jerk <= jerk_limit_m_s3 and chk.above_ceiling_m <= CEILING_TOL_M and chk.below_floor_m <= 0.0:
+        bow = chord_offset_m(traj, t_now_s, times[1]) if math.isfinite(path_tol_m) else 0.0
+        if (jerk <= jerk_limit_m_s3 and chk.above_ceiling_m <= CEILING_TOL_M and chk.below_floor_m <= 0.0
+                and bow <= path_tol_m):
             corner = np.concatenate([[True], plan.corner[kept]])
             segs = tuple(replace(s, first_wp=max(0, s.first_wp - first_kept + 1),
                                  last_wp=s.last_wp - first_kept + 1)
@@ -238,7 +257,8 @@ def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_e
             new = replace(plan, trajectory=traj, t_s=times, p_enu_m=P, v_enu_m_s=V, a_enu_m_s2=A,
                           corner=corner, segments=segs)
             return RejoinResult(new, "", jerk, clear)
-        why = "jerk" if jerk > jerk_limit_m_s3 else "ceiling" if chk.above_ceiling_m > CEILING_TOL_M else "floor"
+        why = ("jerk" if jerk > jerk_limit_m_s3 else "ceiling" if chk.above_ceiling_m > CEILING_TOL_M
+               else "floor" if chk.below_floor_m > 0.0 else "path")
         result = RejoinResult(None, why, jerk, clear)
         T *= STRETCH
     return result

@@ -1657,7 +1657,7 @@ class Replanner:
         first = first_waypoint_ahead(plan, start, P, u, self.speed_m_s, self.cfg.vertical_speed_m_s)
         res = rejoin(plan, st, tau, first, self.memory.points(), self._keep_m,
                      self.cfg.jerk_m_s3, self.cfg.vertical_speed_m_s, self._ceiling_z, self._on_free_cell,
-                     self._floor_z)
+                     self._floor_z, self.cfg.lateral_limit_m)
         paced, _, added = (None, None, 0.0) if res.plan is None else self._paced(res.plan, st, plan)
         if paced is None or self._retriggers(paced, tau):
             self._next_rejoin = tau + REJOIN_RETRY_S
