@@ -28,7 +28,11 @@ import subprocess
 import sys
 
 
-def one(seed: int, n: int, loss: float, delay_s: float, retries: int) -> str:
+def lossy_upload(seed: int, items: list, loss: float = 0.2, delay_s: float = 0.03, retries: int = 7,
+                 deliver=None):
+    """One upload of ``items`` (MISSION_ITEM_INT messages) over the link model (module doc):
+    (client, server) when the client is done or 120 s have passed. ``deliver(msg, to_vehicle)``:
+    the message as the other end receives it (default: as sent)."""
     from pymavlink.dialects.v20 import common as mavlink
 
     from mavcore.codec.mission_items import mission_item_from_int
@@ -37,8 +41,6 @@ def one(seed: int, n: int, loss: float, delay_s: float, retries: int) -> str:
     rng = random.Random(seed)
     gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     veh = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
-    items = [gcs.mission_item_int_encode(1, 1, i, 3, 16, 0, 1, 0, 0, 0, 0, 448000000 + i, -6000000, 2.0, 0)
-             for i in range(n)]
     server = MissionServer()
     client = MissionUploadClient(gcs, 1, 1, items, timeout_s=1.0, retries=retries)
     queue, k = [], 0
@@ -56,6 +58,8 @@ def one(seed: int, n: int, loss: float, delay_s: float, retries: int) -> str:
         t += 0.004
         while queue and queue[0][0] <= t:
             _, _, to_vehicle, m = heapq.heappop(queue)
+            if deliver is not None:
+                m = deliver(m, to_vehicle)
             if to_vehicle:
                 replies = (server.handle_count(m.count, m.mission_type, t) if m.get_type() == "MISSION_COUNT"
                            else server.handle_item(mission_item_from_int(m), t))
@@ -68,6 +72,16 @@ def one(seed: int, n: int, loss: float, delay_s: float, retries: int) -> str:
             send(t, False, encode_reply(veh, 255, 190, r))
         for r in client.tick(t):
             send(t, True, r)
+    return client, server
+
+
+def one(seed: int, n: int, loss: float, delay_s: float, retries: int) -> str:
+    from pymavlink.dialects.v20 import common as mavlink
+
+    gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    items = [gcs.mission_item_int_encode(1, 1, i, 3, 16, 0, 1, 0, 0, 0, 0, 448000000 + i, -6000000, 2.0, 0)
+             for i in range(n)]
+    client, server = lossy_upload(seed, items, loss, delay_s, retries)
     if not client.done:
         return "not finished in 120 s"
     try:

@@ -10,6 +10,8 @@ request comes and the last item while the vehicle is silent.
 from __future__ import annotations
 
 import dataclasses
+import sys
+from pathlib import Path
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
@@ -202,45 +204,15 @@ def test_client_ends_on_accepted_after_a_late_request_moved_it_back():
     assert c.outcome() == 3
 
 
-def _lossy_upload(seed: int, n: int, loss: float = 0.2, delay_max_s: float = 0.03):
-    """One upload over a link that drops each message with probability ``loss`` and
-    delays it uniformly in [0, delay_max_s] (so it reorders), both ways, stepped
-    every 4 ms: (client, server)."""
-    import heapq
-    import random
+def _lossy_upload(seed: int, n: int):
+    """One upload of ``n`` items over ``benchmarks/bench_upload_lossy.py``'s link model (20 %
+    loss and 0-30 ms delay each way, so it reorders; 4 ms steps; the companion's 7 re-sends),
+    every message packed and parsed: (client, server, items)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_upload_lossy import lossy_upload
 
-    rng = random.Random(seed)
     items = items_msgs(n)
-    server = MissionServer()
-    client = MissionUploadClient(GCS, 1, 1, items, timeout_s=1.0, retries=7)   # the companion's re-sends
-    queue, k = [], 0
-
-    def send(t, to_vehicle, m):
-        nonlocal k
-        if rng.random() >= loss:
-            k += 1
-            heapq.heappush(queue, (t + rng.uniform(0.0, delay_max_s), k, to_vehicle, m))
-
-    t = 0.0
-    for m in client.start(t):
-        send(t, True, m)
-    while not client.done and t < 60.0:
-        t += 0.004
-        while queue and queue[0][0] <= t:
-            _, _, to_vehicle, m = heapq.heappop(queue)
-            if to_vehicle:
-                m = wire(m, GCS)
-                replies = (server.handle_count(m.count, m.mission_type, t) if m.get_type() == "MISSION_COUNT"
-                           else server.handle_item(codec.mission_item_from_int(m), t))
-                for r in replies:
-                    send(t, False, encode_reply(VEH, 255, 190, r))
-            else:
-                for r in client.on_message(wire(m), t):
-                    send(t, True, r)
-        for r in server.tick(t):
-            send(t, False, encode_reply(VEH, 255, 190, r))
-        for r in client.tick(t):
-            send(t, True, r)
+    client, server = lossy_upload(seed, items, deliver=lambda m, to_vehicle: wire(m, GCS if to_vehicle else VEH))
     return client, server, items
 
 
