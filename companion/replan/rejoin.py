@@ -247,9 +247,9 @@ def rejoin(plan: GlobalPlan, state, t_now_s: float, first_kept: int, obstacles_e
         jerk, clear = chk.max_jerk_m_s3, chk.min_clearance_m
         if clear < clearance_m:
             return RejoinResult(None, "clearance", jerk, clear)
-        bow = chord_offset_m(traj, t_now_s, times[1]) if math.isfinite(path_tol_m) else 0.0
+        # the chord's check samples the first piece: only for a candidate that passed the rest
         if (jerk <= jerk_limit_m_s3 and chk.above_ceiling_m <= CEILING_TOL_M and chk.below_floor_m <= 0.0
-                and bow <= path_tol_m):
+                and (not math.isfinite(path_tol_m) or chord_offset_m(traj, t_now_s, times[1]) <= path_tol_m)):
             corner = np.concatenate([[True], plan.corner[kept]])
             segs = tuple(replace(s, first_wp=max(0, s.first_wp - first_kept + 1),
                                  last_wp=s.last_wp - first_kept + 1)
