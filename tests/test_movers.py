@@ -330,25 +330,28 @@ def test_a_beam_sliding_over_a_still_wall_is_no_closing_speed():
 
 
 def test_a_return_riding_with_the_vehicle_is_no_closing_speed():
-    """A beam tilted 19 deg down, looking back over a canopy's top while the vehicle flies
-    west at 1.8 m/s: its return keeps its place relative to the sensor, so in the world it
-    follows the vehicle along the beam. Read as a world speed that is a mover chasing at
-    1.76 m/s (the beam's level part, 0.977 of 1.8); given the sensor's position it is
-    nothing."""
+    """A return that keeps its place relative to the sensor while the vehicle flies west at
+    1.8 m/s follows the vehicle along the beam: read as a world speed, a mover chasing at
+    1.8 m/s times the beam's level part along the flight. Given the sensor's position it is
+    nothing. With a level beam (a return at the sensor's height) only the riding rule can
+    tell; with the beam tilted 19 deg down over a canopy's top the return also keeps its
+    height where a face coming down the beam would have risen 0.34 m per metre, so the
+    level-surface rule drops it even without the sensor's position."""
     from companion.replan.closing import ClosingSpeed
 
-    axis = (0.93, 0.2, -0.32)
-    off = (2.6, 0.56, -0.9)                         # the return, from the sensor
-    riding, blind = ClosingSpeed(), ClosingSpeed()
-    for k in range(20):
-        t = 0.05 * k
-        o = (10.0 - 1.8 * t, 8.75, 2.9)
-        hit = tuple(a + b for a, b in zip(o, off))
-        riding.on_hit(t, 22, hit, axis, origin_enu_m=o)
-        blind.on_hit(t, 22, hit, axis)
-    assert riding.approach_m_s(0.95) == 0.0
     uh = math.hypot(0.93, 0.2)
-    assert blind.approach_m_s(0.95) == pytest.approx(1.8 * 0.93 / uh, abs=1e-9)
+    for axis, off, blind_expected in (
+            ((0.93 / uh, 0.2 / uh, 0.0), (2.6, 0.56, 0.0), 1.8 * 0.93 / uh),     # level beam
+            ((0.93, 0.2, -0.32), (2.6, 0.56, -0.9), 0.0)):                        # tilted over a top
+        riding, blind = ClosingSpeed(), ClosingSpeed()
+        for k in range(20):
+            t = 0.05 * k
+            o = (10.0 - 1.8 * t, 8.75, 2.9)
+            hit = tuple(a + b for a, b in zip(o, off))
+            riding.on_hit(t, 22, hit, axis, origin_enu_m=o)
+            blind.on_hit(t, 22, hit, axis)
+        assert riding.approach_m_s(0.95) == 0.0
+        assert blind.approach_m_s(0.95) == pytest.approx(blind_expected, abs=1e-9)
 
 
 @pytest.mark.parametrize("vehicle_m_s, walker_m_s", [(0.5, 1.5), (-1.0, 1.2)], ids=("gaining", "head-on"))

@@ -50,8 +50,34 @@ read as a world speed, a mover chasing it at its own speed. The give-way cap
 (``give_way_speed_m_s``) would then let the vehicle fly faster than its cruise
 to outpace it, which makes the "mover" faster still. A true chaser at exactly
 the vehicle's speed is not closing; it is counted as soon as it gains on the
-vehicle by ``MIN_M_S``. (Another false mover remains: a beam sliding over a top edge onto a nearer
-surface as the vehicle climbs or descends; docs/replan.md "Moving obstacles".)
+vehicle by ``MIN_M_S``.
+
+Movers are read only by beams within ``MOVER_TILT_MAX_DEG`` of level. A beam tilted down
+onto an obstacle's top slides its return along that top as the vehicle climbs, descends or
+pitches: level, along the beam, toward the vehicle, exactly what a mover coming down the
+beam does, and neither the riding rule nor the return's height tells them apart (the height
+of a return placed on the axis of a wide beam is off by up to its range times the sine of
+half its field). At 20 deg down, 1 deg of pitch moves a return on a top 0.8 m below by
+0.12 m; a 1.5 m post's top read as a 2.1 m/s mover behind a vehicle flying away, and a
+box's top as 1.5 m/s (45 deg beams; obstacles-wide seed 20261166, flight 20). The speed
+then pushed the vehicle through its corridor's corner wall (0.71 m off the path), and with
+that fixed, into the guard's speed rule ahead (the flight ended). Movers here stand on the
+ground with vertical faces, walkers 1.8 m tall and tractors taller: a level beam meets
+them wherever they can reach a vehicle at its flight height, and a vehicle high enough
+that no level beam meets one (0.94 m of clearance above a 1.8 m walker) is not within
+its reach. The default suite's low ring (9 deg) still reads them; the steeper rings of a
+mission's own suite see obstacles, not their speeds.
+
+A speed is read only along a continuous track: between the pair's two returns of one
+beam, no return of that beam moved level farther than any mover could in the time
+between them (``MAX_M_S`` per second, plus ``JUMP_TOL_M`` of noise). A beam that slides
+over an edge onto another surface jumps: tilted 45 deg down behind a vehicle flying away,
+it left a box's top for a still walker's head 0.7 m nearer between two 20 Hz returns,
+read as a 2.0 m/s mover chasing the vehicle (obstacles-wide seed 20261166, flight 20); the
+push away from it broke the corridor's corner wall and carried the vehicle 0.71 m off the
+path. The two surfaces are two objects, and neither moved. A mover's own returns are
+continuous, so it is measured from its third return on the beam, one baseline later.
+At rest across beams (a mover passing from beam to beam) no track is required.
 
 In flight the earlier hit is the same beam's: two beams see two
 different points of one still object, and a pair across them is no motion.
@@ -63,9 +89,9 @@ from beam to beam, and a fixed beam's own earlier return, where it has one, is
 the nearest.
 
 Movers move level: only the level parts count (the axis' level direction,
-the return's level displacement), and beams steeper than 60 deg (the down
-rangefinder, whose return jumps as the vehicle passes over a crate) are not
-used.
+the return's level displacement), and only beams within ``MOVER_TILT_MAX_DEG``
+of level are used (above; the down rangefinder's return also jumps as the
+vehicle passes over a crate).
 
 Pure: times are the vehicle clock (s), points world ENU (m); no I/O.
 """
@@ -86,10 +112,14 @@ MIN_M_S = 0.3
 MAX_M_S = 6.0
 #: The return must have moved at least this fraction of its displacement along the beam.
 ALIGN_MIN = 0.8
-#: Beams whose axis has a level part below this (|u_xy|, a beam steeper than 60 deg) are not used.
-MIN_LEVEL = 0.5
+#: Beams tilted more than this (deg) from level do not read movers (module notes).
+MOVER_TILT_MAX_DEG = 15.0
+#: ... as the level part of the unit axis: |u_xy| below this is too steep.
+MIN_LEVEL = math.cos(math.radians(MOVER_TILT_MAX_DEG))
 #: A hit older than this (s) is not compared.
 _STALE_S = 1.5
+#: Level noise (m) allowed on top of ``MAX_M_S`` between two returns of one beam on one track.
+JUMP_TOL_M = 0.1
 
 
 class ClosingSpeed:
@@ -112,7 +142,7 @@ class ClosingSpeed:
         hit = (float(hit_enu_m[0]), float(hit_enu_m[1]), float(hit_enu_m[2]))
         uh = math.hypot(float(axis_enu[0]), float(axis_enu[1]))
         if uh < MIN_LEVEL:
-            return                   # a steep beam: its return moves as the vehicle climbs over things
+            return                   # a tilted beam: its return slides over tops (module notes)
         u = (float(axis_enu[0]) / uh, float(axis_enu[1]) / uh, 0.0)      # level: movers move level
         o = None if origin_enu_m is None else (float(origin_enu_m[0]), float(origin_enu_m[1]))
         while h and t_s - h[0][0] > _STALE_S:
@@ -131,6 +161,8 @@ class ClosingSpeed:
             dk = math.dist(hit, pk)
             if dk <= best:
                 best, t0, p0, u0, o0, s0 = dk, tk, pk, uk, ok, sk
+        if t0 is not None and s0 == sensor_id and not continuous(h, sensor_id, t0, t_s, hit):
+            t0 = None                # a jump between two surfaces, no motion (module notes)
         if t0 is not None:
             d = (hit[0] - p0[0], hit[1] - p0[1], 0.0)
             along = d[0] * u[0] + d[1] * u[1]
@@ -153,6 +185,25 @@ class ClosingSpeed:
         """The approach speed (m/s, >= 0) that the governor allows for at time ``t_s``
         (None: before the first step, 0)."""
         return self._w if t_s is not None and t_s - self._t_w <= HOLD_S else 0.0
+
+
+def continuous(history, sensor_id: int, t0_s: float, t_s: float, hit) -> bool:
+    """The returns of ``sensor_id`` in ``history`` from ``t0_s`` on, then ``hit`` at ``t_s``,
+    form one track: each moved level from the one before at most ``MAX_M_S`` times the
+    time between them plus ``JUMP_TOL_M`` (module notes)."""
+    prev = None
+    for tk, pk, _uk, _ok, sk in history:
+        if sk != sensor_id or tk < t0_s:
+            continue
+        if prev is not None and not _step_ok(prev, (tk, pk)):
+            return False
+        prev = (tk, pk)
+    return prev is None or _step_ok(prev, (t_s, hit))
+
+
+def _step_ok(a, b) -> bool:
+    (ta, pa), (tb, pb) = a, b
+    return math.hypot(pb[0] - pa[0], pb[1] - pa[1]) <= MAX_M_S * (tb - ta) + JUMP_TOL_M
 
 
 def swept(hit0, u0, origin0, u, origin, dt_s: float) -> bool:

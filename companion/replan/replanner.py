@@ -1168,7 +1168,14 @@ class Replanner:
         """Clearance governor: the approach speed to each point is at most the v with
         v^2 / (2 a_b) + v t_lag = d - clearance - margin (braking at a_b after the
         shaper's lag t_lag = ``GOVERNOR_LAG_S``), less a mover's closing speed
-        (``movers`` False: every point still, the guard's own law)."""
+        (``movers`` False: every point still, the guard's own law).
+
+        ``scale_only``: the command is only ever shortened, never lengthened, so what
+        ``_constrain`` bounded (the corridor's walls, the height band, the speed cap) stays
+        bounded. Where a mover's speed asks to back away faster than the command does
+        (both speeds negative), scaling up carried the vehicle through its corner wall
+        at 1.0-1.2 m/s where 0.6-0.9 was allowed (obstacles-wide seed 20261166, flight 20:
+        0.71 m off the path); the push itself comes from the full governor before the walls."""
         d = np.maximum(obs_dist, 1e-9)
         nrm = (P - obs) / d[:, None]                        # from each point to the vehicle
         w = self.closing.approach_m_s(getattr(self, "_t_s", None)) if movers else 0.0
@@ -1177,7 +1184,7 @@ class Replanner:
             approach = -(nrm @ v)
             bad = approach > allow + 1e-12
             if bad.any():
-                v = v * max(0.0, float(np.min(allow[bad] / approach[bad])))
+                v = v * min(1.0, max(0.0, float(np.min(allow[bad] / approach[bad]))))
             return v
         v = v.copy()
         for i in np.argsort(d)[:64]:
