@@ -270,6 +270,7 @@ def test_row_ends_lie_beside_the_ends_where_the_vehicle_turns(serpentine):
     grid, _, whole = serpentine
     fields = _fields(serpentine)
     seen = [0] * len(ROW_ENDS)
+    spread = []
     for obstacles in _obstacles(_spec("row_ends"), fields):
         for o in obstacles:
             inside = []
@@ -277,12 +278,13 @@ def test_row_ends_lie_beside_the_ends_where_the_vehicle_turns(serpentine):
                 along, across = _local(o, point, u)
                 inside.append(abs(along) <= ENTRANCE + TOL and abs(across) <= ACROSS + TOL)
             assert any(inside), o         # the trajectory's own ends (the launch, the last point) are none
-            seen[inside.index(True)] += 1
+            j = inside.index(True)
+            seen[j] += 1
+            spread.append(np.abs(_local(o, *ROW_ENDS[j])))
             assert _kept_out(o, whole) and _off_the_rows(o) and footprint_free(grid, o)
     assert min(seen) >= 10
-    # off the path: the across draw reaches beyond the offset of the path placements
-    assert max(_dist_to_polyline(whole, o["x"], o["y"]) for obs in _obstacles(_spec("row_ends"), fields)
-               for o in obs) > OFFSET + 0.3
+    # the whole rectangle is used: along to nearly entrance_m, across beyond the path placements' offset
+    assert np.max(spread, axis=0)[0] > 0.8 * ENTRANCE and np.max(spread, axis=0)[1] > OFFSET + 0.3
 
 
 def test_cluster_gathers_round_the_previous_obstacle(serpentine):
