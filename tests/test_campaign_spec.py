@@ -24,6 +24,16 @@ BASE = {"name": "t", "missions": ["flat-rectangle"], "flights": 3}
     ({"sensors": {"profiles": ["bogus"]}}, "sensors.profiles[0]", "expected one of"),
     ({"sensors": {"noise": 1}}, "sensors.noise", "unknown key"),
     ({"wind": {"speed_m_s": [0.0, 1.0, 2.0]}}, "wind.speed_m_s", "expected"),
+    ({"obstacles": {"placement": ["path", "corners"]}}, "obstacles", "obstacles.placement[1]: expected one of"),
+    ({"obstacles": {"placement": []}}, "obstacles", "obstacles.placement: at least one placement"),
+    ({"obstacles": {"placement": "entrance"}}, "obstacles.placement", "expected one of"),
+    ({"obstacles": {"cluster_m": -1.0}}, "obstacles", "obstacles.cluster_m must be in (0, 100] m"),
+    ({"obstacles": {"entrance_m": 0.0}}, "obstacles", "obstacles.entrance_m must be in (0, 100] m"),
+    ({"obstacles": {"row_end_across_m": -0.5}}, "obstacles", "obstacles.row_end_across_m must be in [0, 100] m"),
+    ({"obstacles": {"entranec_m": 3.0}}, "obstacles.entranec_m", "unknown key"),
+    ({"whole_fraction": 1.5, "cut_s": 45.0}, None, "whole_fraction must be in [0, 1], got 1.5"),
+    ({"whole_fraction": -0.1, "cut_s": 45.0}, None, "whole_fraction must be in [0, 1]"),
+    ({"whole_fraction": 0.5}, None, "whole_fraction needs a cut_s"),
 ])
 def test_bad_spec_names_the_key(patch, key, problem):
     with pytest.raises(CampaignError) as e:
@@ -34,6 +44,15 @@ def test_bad_spec_names_the_key(patch, key, problem):
     if key is not None:
         assert f"key '{key}'" in msg
     assert "\n" not in msg
+
+
+def test_placement_is_a_name_or_a_list_and_whole_fraction_a_probability():
+    s = spec_from_dict({**BASE, "cut_s": 10.0, "whole_fraction": 1.0,
+                        "obstacles": {"placement": ["path", "row_ends", "path"]}}, "spec.yaml")
+    assert s.obstacles.placements == ("path", "row_ends", "path") and s.whole_fraction == 1.0
+    s = spec_from_dict({**BASE, "obstacles": {"placement": "cluster"}}, "spec.yaml")
+    assert s.obstacles.placements == ("cluster",) and s.whole_fraction == 0.0
+    assert (s.obstacles.entrance_m, s.obstacles.row_end_across_m, s.obstacles.cluster_m) == (3.0, 1.5, 2.0)
 
 
 def test_missing_required_key():

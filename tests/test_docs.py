@@ -5,6 +5,7 @@
   written there as an interval is the loader's: a value on a closed bound is
   accepted, a value on an open bound or just outside a closed one refused;
 - every hand-worked point of docs/frames.md holds for ``mavcore.frames``;
+- docs/campaign.md's spec block names every key of the campaign spec and no other;
 - every ``docs/...`` path named in the code and the pages exists, and nothing
   in the repository points to a design document outside it.
 """
@@ -160,6 +161,44 @@ def test_frames_hand_worked_point(expression, value):
     decimals = max((len(d) for d in re.findall(r"\.(\d+)", value)), default=0)
     assert got.shape == want.shape
     assert np.allclose(got, want, rtol=0.0, atol=0.5 * 10.0 ** -decimals + 1e-12), (got, want)
+
+
+# --- docs/campaign.md ----------------------------------------------------------------
+
+def _campaign_block_keys() -> list[str]:
+    """The dotted keys of the spec block of docs/campaign.md (``section.key`` under a section)."""
+    text = (DOCS / "campaign.md").read_text(encoding="utf-8")
+    block = text.split("## The spec", 1)[1].split("```yaml", 1)[1].split("```", 1)[0]
+    keys, section = [], None
+    for line in block.splitlines():
+        m = re.match(r"( *)([a-z_]+):", line)
+        if not m:
+            continue
+        if not m.group(1):
+            section = m.group(2)
+            keys.append(section)
+        else:
+            keys.append(f"{section}.{m.group(2)}")
+    return keys
+
+
+def test_campaign_spec_block_names_every_key_and_no_other():
+    import dataclasses
+    import typing
+
+    from companion.campaign.spec import CampaignSpec
+
+    want = []
+    for f in dataclasses.fields(CampaignSpec):
+        if not f.init:
+            continue
+        want.append(f.name)
+        sub = [a for a in typing.get_args(typing.get_type_hints(CampaignSpec)[f.name]) if dataclasses.is_dataclass(a)]
+        for cls in sub:
+            want += [f"{f.name}.{g.name}" for g in dataclasses.fields(cls) if g.init]
+    got = _campaign_block_keys()
+    assert len(got) == len(set(got))
+    assert sorted(got) == sorted(want)
 
 
 # --- references --------------------------------------------------------------------

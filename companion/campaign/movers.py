@@ -1,6 +1,6 @@
 """Movers of a campaign scenario (``movers:`` of the spec -> ``sim.movers``).
 
-A mover's path is placed relative to the base mission's flown (cut)
+A mover's path is placed relative to the base mission's flown (cut or whole)
 trajectory, sampled every ``STEP_S`` (``placement.flown_path``): a point c
 uniform in arc length on the corridors (the straight runs along the dominant
 direction, ``placement.segment_mask(..., "rows")``) or on the headlands (the
@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from mavcore.mission.sim import WALKER_MAX_SPEED_M_S
-from .placement import cumulative, segment_mask
+from .placement import arc_point, cumulative, segment_mask
 
 #: Sampling step (s) of the flown path (``placement.flown_path``'s default).
 STEP_S = 0.05
@@ -48,12 +48,10 @@ def random_mover(rng: np.random.Generator, path: np.ndarray, m) -> dict | None:
     lead = float(rng.uniform(lo, hi)) if hi > lo else float(lo)
     if cum[-1] <= 0.0:
         return None
-    i = int(min(np.searchsorted(cum, s, side="right") - 1, len(path) - 2))
-    d = path[i + 1, :2] - path[i, :2]
-    nd = float(np.hypot(*d))
-    if nd < 1e-9:
+    at = arc_point(path, cum, s)
+    if at is None:
         return None
-    f = (s - cum[i]) / max(cum[i + 1] - cum[i], 1e-12)
+    i, f, d, nd = at
     c = path[i, :2] + f * d
     if np.hypot(*(c - path[0, :2])) < m.keep_out_m or np.hypot(*(c - path[-1, :2])) < m.keep_out_m:
         return None

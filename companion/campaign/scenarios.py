@@ -3,7 +3,9 @@
 Scenario ``i`` draws from ``numpy.random.default_rng(SeedSequence([seed, i]))``
 (PCG64): it depends on the spec, its seed and ``i`` only, not on how many
 flights are run or in what order. Movers (``movers:``) draw from their own
-generator, ``SeedSequence([seed, i, 15])`` (``companion.campaign.movers``). Draws use float64 arithmetic on the
+generator, ``SeedSequence([seed, i, 15])`` (``companion.campaign.movers``), and
+so does the choice of the whole trajectory (``whole_fraction > 0`` only):
+``SeedSequence([seed, i, 16])``, one ``random() < whole_fraction``. Draws use float64 arithmetic on the
 generator's output (``lo + (hi - lo) * u``); the values written are rounded
 (obstacles to the millimetre, everything else to 1e-6) so that the last-bit
 differences of ``cos``/``sin`` (wind direction) or of the planned path
@@ -28,7 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from mavcore.errors import CampaignError
-from .placement import DRAWS_PER_OBSTACLE, Placement, cumulative, footprint_free, propose_obstacle, segment_mask
+from .placement import (DRAWS_PER_OBSTACLE, Placement, Sites, cumulative, footprint_free, obstacle_site,
+                        pick_placement, placement_sites, propose_obstacle)
 from .spec import CampaignSpec, StartSpec, dim_range, is_continuous
 
 #: tries of the rejection sampling of a launch point on free cells
@@ -41,12 +44,18 @@ class Field:
 
     grid : OccupancyGrid of the mission
     path : (N, 3) ENU m, the flown (cut) trajectory
-    cum : (N,) m, arc length over the segments allowed by the spec's placement rule
+    cum : (N,) m, arc length along it (the ``path`` placement's part: all of it)
+    whole : the same of the whole trajectory, when the spec flies some flights whole
+        (``whole_fraction > 0``); else None
+    sites : the other placements' parts of ``path`` (``placement.placement_sites``);
+        None: computed where needed
     """
 
     grid: object
     path: np.ndarray
     cum: np.ndarray
+    whole: Field | None = None
+    sites: Sites | None = None
 
 
 def mission_ref(name: str, base_dir: str, source: str = "<spec>") -> str:
@@ -72,9 +81,11 @@ def mission_path(ref: str) -> Path:
 
 
 def load_fields(spec: CampaignSpec) -> dict[str, Field]:
-    """The I/O edge: load and plan every base mission (needed only with ``obstacles`` or ``start``)."""
+    """The I/O edge: load and plan every base mission (needed only with ``obstacles``, ``movers``
+    or ``start``), once each: its flown path cut at ``cut_s`` and, with ``whole_fraction > 0``,
+    the whole one too."""
     from mavcore.mission import load_mission
-    from .placement import flown_path
+    from .placement import planned, sampled_path
 
     fields = {}
     for name in spec.missions:
@@ -84,10 +95,40 @@ def load_fields(spec: CampaignSpec) -> dict[str, Field]:
         if spec.obstacles is None and spec.movers is None and spec.start is None:
             fields[ref] = None
             continue
-        grid, path, _ = flown_path(load_mission(mission_path(ref)), spec.cut_s)
-        placement = spec.obstacles.placement if spec.obstacles is not None else "path"
-        fields[ref] = Field(grid, path, cumulative(path, segment_mask(path, placement)))
+        mission = load_mission(mission_path(ref))
+        grid, fp = planned(mission)
+        whole = None
+        if spec.whole_fraction > 0 and spec.cut_s is not None:
+            whole = _field(spec, grid, sampled_path(fp, mission, None)[0])
+        fields[ref] = _field(spec, grid, sampled_path(fp, mission, spec.cut_s)[0], whole)
     return fields
+
+
+def _field(spec: CampaignSpec, grid, path: np.ndarray, whole: Field | None = None) -> Field:
+    """The Field of one flown path; the placements' parts where the spec's obstacles need more than ``path``."""
+    o = spec.obstacles
+    sites = None
+    if o is not None and set(o.placements) - {"path", "cluster"}:
+        sites = placement_sites(path, o.entrance_m)
+    return Field(grid, path, cumulative(path), whole, sites)
+
+
+def flown_field(field: Field | None, whole: bool) -> Field | None:
+    """The Field of the trajectory a flight flies: the whole one, or the cut one."""
+    if field is None or not whole:
+        return field
+    if field.whole is None:
+        raise ValueError("the field has no whole trajectory (load_fields plans it when whole_fraction > 0)")
+    return field.whole
+
+
+def flies_whole(spec: CampaignSpec, index: int) -> bool:
+    """Whether flight ``index`` flies the whole trajectory: ``random() < whole_fraction`` from
+    ``SeedSequence([seed, index, 16])``, drawn only when ``whole_fraction > 0``."""
+    if spec.whole_fraction <= 0 or spec.cut_s is None:
+        return False
+    rng = np.random.default_rng(np.random.SeedSequence([spec.seed, index, 16]))
+    return bool(rng.random() < spec.whole_fraction)
 
 
 class _Draws:
@@ -111,19 +152,25 @@ def _placement(spec: CampaignSpec) -> Placement:
     o = spec.obstacles
     return Placement(kinds=tuple(o.kinds), radius_m=dim_range(o.cylinder_radius_m), side_m=dim_range(o.box_side_m),
                      yaw_deg=dim_range(o.box_yaw_deg), height_m=dim_range(o.height_m), offset_m=o.offset_m,
-                     keep_out_m=o.keep_out_m, margin_m=o.margin_m)
+                     keep_out_m=o.keep_out_m, margin_m=o.margin_m, names=o.placements, entrance_m=o.entrance_m,
+                     row_end_across_m=o.row_end_across_m, cluster_m=o.cluster_m)
 
 
 def continuous_dims(spec: CampaignSpec) -> list[str]:
     """Names of the continuous dimensions (what ``--search`` moves in [0, 1]), in a fixed order.
 
     Obstacles: ``count`` max obstacles of ``DRAWS_PER_OBSTACLE`` draws each
-    (arc length, offset, height, kind, sizes); a point whose obstacle is
-    rejected (near launch or end, not on free cells) flies without it.
+    (the placement's two, height, kind, sizes), each preceded by
+    ``obstacle{k}.placement`` (which of the spec's placements) when the spec
+    names several; a point whose obstacle is rejected (near launch or end,
+    not on free cells) flies without it.
     """
     names = []
     if spec.obstacles is not None:
-        names += [f"obstacle{k}.{j}" for k in range(spec.obstacles.count[1]) for j in range(DRAWS_PER_OBSTACLE)]
+        several = len(spec.obstacles.placements) > 1
+        for k in range(spec.obstacles.count[1]):
+            names += [f"obstacle{k}.placement"] if several else []
+            names += [f"obstacle{k}.{j}" for j in range(DRAWS_PER_OBSTACLE)]
     if spec.sensors is not None:
         for key in ("velocity_std_m_s", "position_std_m", "gyro_bias_rad_s", "range_std_m",
                     "range_dropout_probability"):
@@ -163,6 +210,37 @@ def _start_point(st: StartSpec, f: Field, dr: _Draws, search: bool, source: str)
     raise CampaignError(f"{source}: key 'start'", f"no launch point on free cells in {START_TRIES} draws")
 
 
+def _random_obstacles(rng: np.random.Generator, f: Field, p: Placement, n: int) -> list[dict]:
+    """Monte Carlo: ``n`` obstacles, each its placement (one draw, with several) then
+    rejection-sampled there (ValueError naming the placement when none fits)."""
+    from .placement import random_obstacle
+
+    obstacles: list[dict] = []
+    for _ in range(n):
+        name = pick_placement(rng.uniform, p.names)
+        site = obstacle_site(name, f.path, f.cum, f.sites, obstacles[-1] if obstacles else None, p)
+        try:
+            obstacles.append(random_obstacle(rng, f.grid, f.path, f.cum, p, site=site))
+        except ValueError as exc:
+            raise ValueError(f"placement {name}: {exc}") from None
+    return obstacles
+
+
+def _search_obstacles(dr: _Draws, f: Field, p: Placement, n: int) -> list[dict]:
+    """The search: ``n`` obstacles from the point's ``obstacle{k}.*`` coordinates; a rejected one
+    is left out (a ``cluster`` obstacle gathers round the last one kept)."""
+    obstacles: list[dict] = []
+    for k in range(n):
+        name = pick_placement(lambda lo, hi, k=k: dr.uniform(f"obstacle{k}.placement", lo, hi), p.names)
+        site = obstacle_site(name, f.path, f.cum, f.sites, obstacles[-1] if obstacles else None, p)
+        j = iter(range(DRAWS_PER_OBSTACLE))
+        ob = propose_obstacle(lambda lo, hi, k=k: dr.uniform(f"obstacle{k}.{next(j)}", lo, hi),
+                              f.grid, f.path, f.cum, p, site)
+        if ob is not None:
+            obstacles.append(ob)
+    return obstacles
+
+
 def scenario(spec: CampaignSpec, fields: dict[str, Field], index: int,
              unit: dict[str, float] | None = None) -> dict:
     """The scenario of flight ``index`` (see the module docstring).
@@ -178,32 +256,25 @@ def scenario(spec: CampaignSpec, fields: dict[str, Field], index: int,
     ref = dr.choice(refs)
     control = dr.choice(spec.control)
     sim_seed = int(rng.integers(0, 2**31 - 1))
+    whole = flies_whole(spec, index)
+    f = flown_field(fields[ref], whole)
     sim: dict = {}
     if spec.obstacles is not None:
         o = spec.obstacles
-        f = fields[ref]
         p = _placement(spec)
         if unit is None:
-            from .placement import random_obstacle
-
             n = int(rng.integers(o.count[0], o.count[1] + 1))
             try:
-                obstacles = [random_obstacle(rng, f.grid, f.path, f.cum, p) for _ in range(n)]
+                obstacles = _random_obstacles(rng, f, p, n)
             except ValueError as exc:
                 raise CampaignError(f"{spec.source}: key 'obstacles'", f"{ref}: {exc}") from None
         else:
-            obstacles = []
-            for k in range(o.count[1]):
-                j = iter(range(DRAWS_PER_OBSTACLE))
-                ob = propose_obstacle(lambda lo, hi, k=k: dr.uniform(f"obstacle{k}.{next(j)}", lo, hi),
-                                      f.grid, f.path, f.cum, p)
-                if ob is not None:
-                    obstacles.append(ob)
+            obstacles = _search_obstacles(dr, f, p, o.count[1])
         sim["obstacles"] = obstacles
     if spec.movers is not None:
         from .movers import scenario_movers
 
-        sim["movers"] = scenario_movers(spec.seed, index, fields[ref].path, spec.movers)
+        sim["movers"] = scenario_movers(spec.seed, index, f.path, spec.movers)
     if spec.sensors is not None:
         s = spec.sensors
         profile = dr.choice(s.profiles)
@@ -239,14 +310,14 @@ def scenario(spec: CampaignSpec, fields: dict[str, Field], index: int,
         jitter = round(dr.uniform("link.jitter_ms", *dim_range(L.jitter_ms)), 6)
         link = {"loss": loss, "delay_ms": [d0, round(d0 + jitter, 6)]}
     if spec.start is not None:
-        start = _start_point(spec.start, fields[ref], dr, unit is not None, spec.source)
+        start = _start_point(spec.start, f, dr, unit is not None, spec.source)
         if start is not None:
             sim["start_enu_m"] = start
     overrides = {"sim": sim} if sim else {}
     if sim.get("movers"):
         overrides["replan"] = {"give_way": True}    # people and machines move here: bound the closing speed
     out = {"campaign": spec.name, "scenario": int(index), "mission": ref, "seed": sim_seed,
-           "cut_s": spec.cut_s, "control": control, "overrides": overrides}
+           "cut_s": None if whole else spec.cut_s, "control": control, "overrides": overrides}
     if link is not None:
         out["link"] = link
     return out

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -48,17 +49,29 @@ def _check_dim(name: str, d: Dim | None, lo_ok: float, hi_ok: float) -> None:
         raise ValueError(f"{name} must lie in [{lo_ok:g}, {hi_ok:g}], got {lo:g}..{hi:g}")
 
 
+#: what ``obstacles.placement`` may name (``companion.campaign.placement`` places each)
+PlacementName = Literal["path", "rows", "headlands", "entrances", "row_ends", "cluster"]
+PLACEMENT_NAMES = typing.get_args(PlacementName)
+
+
 @dataclass(frozen=True)
 class ObstacleSpec:
     """Unknown obstacles (``sim.obstacles``) placed near the flown path.
 
-    ``placement``: ``path`` anywhere on the flown (cut) trajectory;
-    ``rows`` on its straight runs along the dominant direction (the
-    corridors between the vine rows); ``headlands`` on the rest (the turns
-    between corridors). A centre is uniform in arc length on that part,
-    moved up to ``offset_m`` across the direction of travel, at least
-    ``keep_out_m`` from the launch point and the end of the cut
-    trajectory; the footprint grown by ``margin_m`` lies in free map cells.
+    ``placement``: one name, or a list of names of which each obstacle draws
+    one, uniformly (a name twice weighs twice). ``path`` anywhere on the
+    flown trajectory (cut or whole); ``rows`` on its straight runs along the
+    dominant direction (the corridors between the vine rows); ``headlands``
+    on the rest (the turns between corridors); ``entrances`` on the first
+    ``entrance_m`` of a corridor run the vehicle turns into. A centre is
+    uniform in arc length on that part, moved up to ``offset_m`` across the
+    direction of travel. ``row_ends``: within ``entrance_m`` along a corridor
+    run of its end (or start) where the vehicle turns, and up to
+    ``row_end_across_m`` across. ``cluster``: within ``cluster_m`` of the
+    flight's previous obstacle (the first: as ``path``). Every centre is at
+    least ``keep_out_m`` from the launch point and the end of the flown
+    trajectory; the footprint grown by ``margin_m`` lies in free map cells
+    (``companion.campaign.placement``).
     """
 
     count: tuple[int, int] = (0, 3)
@@ -67,24 +80,43 @@ class ObstacleSpec:
     box_side_m: Dim = (0.3, 1.0)
     box_yaw_deg: Dim = (0.0, 90.0)
     height_m: Dim = (0.8, 4.0)
-    placement: Literal["path", "rows", "headlands"] = "path"
+    # a list tried first: a bad single name is then reported as "expected one of ..."
+    placement: tuple[str, ...] | PlacementName = "path"
     offset_m: float = 0.8
     keep_out_m: float = 2.5
     margin_m: float = 0.05
+    entrance_m: float = 3.0
+    row_end_across_m: float = 1.5
+    cluster_m: float = 2.0
+
+    @property
+    def placements(self) -> tuple[str, ...]:
+        """``placement`` as a tuple of names."""
+        return (self.placement,) if isinstance(self.placement, str) else tuple(self.placement)
 
     def __post_init__(self) -> None:
         if not 0 <= self.count[0] <= self.count[1] <= 20:
             raise ValueError(f"obstacles.count: need 0 <= min <= max <= 20, got {list(self.count)}")
         if not self.kinds:
             raise ValueError("obstacles.kinds: at least one kind")
+        if not self.placements:
+            raise ValueError("obstacles.placement: at least one placement")
+        for i, name in enumerate(self.placements):
+            if name not in PLACEMENT_NAMES:
+                raise ValueError(f"obstacles.placement[{i}]: expected one of "
+                                 f"{', '.join(repr(n) for n in PLACEMENT_NAMES)}, got {name!r}")
         _check_dim("obstacles.cylinder_radius_m", self.cylinder_radius_m, 0.01, 50.0)
         _check_dim("obstacles.box_side_m", self.box_side_m, 0.01, 500.0)
         _check_dim("obstacles.box_yaw_deg", self.box_yaw_deg, -360.0, 360.0)
         _check_dim("obstacles.height_m", self.height_m, 0.01, 100.0)
-        for name in ("offset_m", "keep_out_m", "margin_m"):
+        for name in ("offset_m", "keep_out_m", "margin_m", "row_end_across_m"):
             v = getattr(self, name)
             if not 0 <= v <= 100:
                 raise ValueError(f"obstacles.{name} must be in [0, 100] m, got {v:g}")
+        for name in ("entrance_m", "cluster_m"):
+            v = getattr(self, name)
+            if not 0 < v <= 100:
+                raise ValueError(f"obstacles.{name} must be in (0, 100] m, got {v:g}")
 
 
 @dataclass(frozen=True)
@@ -202,13 +234,19 @@ class StartSpec:
 
 @dataclass(frozen=True)
 class CampaignSpec:
-    """A campaign: base missions, the distributions, the flights and a seed."""
+    """A campaign: base missions, the distributions, the flights and a seed.
+
+    ``whole_fraction``: the probability that a flight flies the whole
+    trajectory (its scenario's ``cut_s`` null) instead of the first ``cut_s``
+    seconds, drawn from the flight's own generator (``companion.campaign.scenarios``).
+    """
 
     name: str
     missions: tuple[str, ...]
     flights: int
     seed: int = 0
     cut_s: float | None = None
+    whole_fraction: float = 0.0
     control: tuple[Literal["companion", "vehicle"], ...] = ("companion",)
     keep_completed_fraction: float = 0.1
     obstacles: ObstacleSpec | None = None
@@ -229,6 +267,10 @@ class CampaignSpec:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
         if self.cut_s is not None and not (math.isfinite(self.cut_s) and self.cut_s > 0):
             raise ValueError(f"cut_s must be > 0 s or null, got {self.cut_s}")
+        if not 0 <= self.whole_fraction <= 1:
+            raise ValueError(f"whole_fraction must be in [0, 1], got {self.whole_fraction:g}")
+        if self.whole_fraction > 0 and self.cut_s is None:
+            raise ValueError("whole_fraction needs a cut_s: with cut_s null every flight flies the whole trajectory")
         if not self.control:
             raise ValueError("control: at least one of companion, vehicle")
         if not 0 <= self.keep_completed_fraction <= 1:
