@@ -243,6 +243,50 @@ def test_land_completes_when_every_ack_is_lost_but_the_vehicle_lands(tmp_path):
     assert not hb[-1].base_mode & 128
 
 
+class _DropTruthRequests:
+    """Drop the first ``n`` SET_MESSAGE_INTERVAL requests for ODOMETRY (331) on their way to
+    the vehicle (by hand: a MAVLink 2 COMMAND_LONG, msgid 76 in header bytes 7-9; its
+    payload starts with param1, a little-endian float, and has the command at bytes 28-29)."""
+
+    def __init__(self, n: int) -> None:
+        self.n, self.dropped = n, 0
+
+    def __call__(self, direction: int, data: bytes) -> bool:
+        import struct
+
+        if (direction != 0 or len(data) < 10 + 30 or data[0] != 0xFD
+                or int.from_bytes(data[7:10], "little") != 76):
+            return False
+        param1 = struct.unpack_from("<f", data, 10)[0]
+        command = int.from_bytes(data[10 + 28:10 + 30], "little")
+        if command != 511 or param1 != 331.0 or self.dropped >= self.n:
+            return False
+        self.dropped += 1
+        return True
+
+
+def test_the_truth_stream_request_survives_a_lossy_link(tmp_path):
+    """The request for the SITL's ground truth (ODOMETRY) is optional (a real vehicle may
+    answer it with a refusal), but a request that goes unanswered is sent as often as any
+    command: with 20 % loss each way, three sends all lost 0.8 % of the time and the report
+    fell back to the estimate (CI, 2026-11-28). Here its first five sends are lost."""
+    from sitl.api import SitlProcess
+    from sitl.relay import UdpRelay
+
+    drop = _DropTruthRequests(5)
+    with SitlProcess(MISSION, lockstep=True, start=LAUNCH) as sitl:
+        host, port = sitl.url.split(":")[1:]
+        with UdpRelay((host, int(port)), drop=drop) as relay:
+            via = type("Via", (), {"url": f"udpout:127.0.0.1:{relay.port}"})
+            rc, rep, msgs = _fly(tmp_path, via, "--cut", "5", "--control", "vehicle")
+    assert drop.dropped == 5
+    sent = [m for m in msgs if m.get_type() == "COMMAND_LONG" and m.get_srcComponent() == 191
+            and m.command == 511 and m.param1 == 331.0]
+    assert len(sent) >= 6
+    assert rc == 0 and rep["completed"], rep["violation"]
+    assert rep["tracking"]["truth_source"] == "sim_truth"
+
+
 def test_attach_land_brings_a_flying_vehicle_down(tmp_path):
     from sitl.api import SitlProcess
 

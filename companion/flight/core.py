@@ -550,8 +550,13 @@ class FlightCore:
                                                      tries, self.view.autopilot.param_bytewise)))
 
     def _set_interval(self, msg_id: int, interval_us: float, optional: bool = False):
+        """SET_MESSAGE_INTERVAL (generator). ``optional``: a refusal, or no answer at all, ends
+        it with None instead of stopping the flight; it is sent as often as any command
+        (``COMMAND_SENDS``): a vehicle that answered the required request answers these, so
+        silence is loss. With three sends, 20 % loss each way lost the truth request 0.8 % of
+        the time and the report fell back to the estimate."""
         return (yield from self._command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (msg_id, interval_us),
-                                         "set message interval", retries=2 if optional else None, optional=optional))
+                                         "set message interval", optional=optional))
 
     # --- the procedure ------------------------------------------------------------------
 
