@@ -76,7 +76,8 @@ it left a box's top for a still walker's head 0.7 m nearer between two 20 Hz ret
 read as a 2.0 m/s mover chasing the vehicle (obstacles-wide seed 20261166, flight 20); the
 push away from it broke the corridor's corner wall and carried the vehicle 0.71 m off the
 path. The two surfaces are two objects, and neither moved. A mover's own returns are
-continuous, so it is measured from its third return on the beam, one baseline later.
+continuous, so it is measured once they span a baseline (``BASELINE_S`` after it came
+into the beam).
 At rest across beams (a mover passing from beam to beam) no track is required.
 
 In flight the earlier hit is the same beam's: two beams see two
