@@ -79,3 +79,23 @@ def test_outcome_table_and_self_contained_html(tmp_path):
     assert "data:image/png;base64," in page
     assert "http://" not in page and "https://" not in page and "src='f.png'" not in page
     assert "companion demo --scenario" in page and "0049.yaml" in page
+
+
+def test_one_failure_map_per_mission_each_with_its_own_flights():
+    """Two base missions have two fields in their own frames: a flight that did not complete
+    is drawn on its own mission's map only (a campaign of obstacle-low and tilted-hexagon put
+    both missions' holds on the first one's map). One mission keeps ``map_failures.png``."""
+    from companion.campaign.summary import map_groups
+
+    rows = [{"scenario": 0, "mission": "obstacle-low", "outcome": "held"},
+            {"scenario": 1, "mission": "/x/fields/my-field/mission.yaml", "outcome": "crashed"},
+            {"scenario": 2, "mission": "obstacle-low", "outcome": "completed"}]
+    fields = {"obstacle-low": "F1", "/x/fields/my-field/mission.yaml": "F2"}
+    groups = map_groups(rows, fields)
+    assert [(n, f, [r["scenario"] for r in mine]) for n, f, mine in groups] == [
+        ("map_failures_obstacle-low.png", "F1", [0, 2]),
+        ("map_failures_my-field.png", "F2", [1])]
+    one = map_groups(rows[:1] + rows[2:], {"obstacle-low": "F1"})
+    assert [(n, f, len(mine)) for n, f, mine in one] == [("map_failures.png", "F1", 2)]
+    # without fields (a spec without obstacles, or the search), still one map per mission
+    assert [n for n, _, _ in map_groups(rows, None)] == ["map_failures_obstacle-low.png", "map_failures_my-field.png"]

@@ -121,8 +121,9 @@ def markdown(name: str, rows: list[dict], out: Path, wall_s: float | None, figur
     return "\n".join(lines) + "\n"
 
 
-def write_figures(rows: list[dict], out: Path, field=None) -> list[Path]:
-    """Histograms of the figures and a map of the field with where each failure happened (PNG)."""
+def write_figures(rows: list[dict], out: Path, fields: dict | None = None) -> list[Path]:
+    """Histograms of the figures and, per base mission, a map of its field with where each
+    failure happened (PNG; ``fields``: mission reference -> ``scenarios.Field`` or None)."""
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -143,6 +144,34 @@ def write_figures(rows: list[dict], out: Path, field=None) -> list[Path]:
         fig.savefig(p, dpi=100)
         plt.close(fig)
         paths.append(p)
+    for name, field, mine in map_groups(rows, fields):
+        paths.append(_failure_map(plt, out / name, field, mine))
+    return paths
+
+
+def _mission_slug(ref: str) -> str:
+    """A file-name part for a mission reference (a bundled name, or a path: its folder's name)."""
+    p = Path(ref)
+    stem = p.parent.name if p.suffix in (".yaml", ".yml") else p.name
+    return "".join(c if c.isalnum() or c in "-_" else "-" for c in stem) or "mission"
+
+
+def map_groups(rows: list[dict], fields: dict | None) -> list[tuple[str, object, list[dict]]]:
+    """(file name, Field or None, the rows flown on it) of each failure map: one map per base
+    mission, since the missions' fields have their own frames (``map_failures.png`` when there
+    is one, ``map_failures_<mission>.png`` each when there are several); a flight's point is
+    drawn on its own mission's map only."""
+    fields = {k: v for k, v in (fields or {}).items()}
+    names = list(dict.fromkeys([*fields, *(r.get("mission") for r in rows if r.get("mission"))]))
+    if len(names) <= 1:
+        return [("map_failures.png", fields.get(names[0]) if names else None, list(rows))]
+    return [(f"map_failures_{_mission_slug(n)}.png", fields.get(n), [r for r in rows if r.get("mission") == n])
+            for n in names]
+
+
+def _failure_map(plt, p: Path, field, rows: list[dict]) -> Path:
+    """One field's map (its grid and flown plan: the whole trajectory where some flights fly it)
+    with where each of ``rows`` that did not complete ended (PNG at ``p``)."""
     fig, ax = plt.subplots(figsize=(7, 4.5))
     if field is not None:
         g = field.grid
@@ -150,28 +179,30 @@ def write_figures(rows: list[dict], out: Path, field=None) -> list[Path]:
         x0, y0 = g.origin_xy_m
         ax.imshow(~g.free, origin="lower", cmap="Greys", alpha=0.4,
                   extent=(x0, x0 + cols_ * g.resolution_m, y0, y0 + rows_ * g.resolution_m))
-        ax.plot(field.path[:, 0], field.path[:, 1], "-", color="#4477aa", lw=0.8, label="flown plan")
+        whole = getattr(field, "whole", None)
+        path = field.path if whole is None else whole.path
+        ax.plot(path[:, 0], path[:, 1], "-", color="#4477aa", lw=0.8,
+                label="flown plan" if whole is None else "flown plan (whole)")
     colours = {"crashed": "#cc3311", "failed": "#ee7733", "held": "#ccbb44"}
     for k, c in colours.items():
         pts = [(r["crash_x_m"] if r.get("crash_x_m") is not None else r.get("event_x_m"),
                 r["crash_y_m"] if r.get("crash_y_m") is not None else r.get("event_y_m"))
                for r in rows if r["outcome"] == k]
-        pts = [p for p in pts if p[0] is not None]
+        pts = [q for q in pts if q[0] is not None]
         if pts:
             a = np.array(pts)
             ax.scatter(a[:, 0], a[:, 1], s=30, color=c, label=f"{k} ({len(pts)})", zorder=3)
     ax.set_aspect("equal")
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
-    ax.set_title("where flights did not complete")
+    ax.set_title("where flights did not complete" + (f": {p.stem[len('map_failures_'):]}"
+                                                     if p.stem.startswith("map_failures_") else ""))
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
-    p = out / "map_failures.png"
     fig.savefig(p, dpi=100)
     plt.close(fig)
-    paths.append(p)
-    return paths
+    return p
 
 
 def html_page(name: str, rows: list[dict], out: Path, wall_s: float | None, figures: list[Path]) -> str:
@@ -206,9 +237,11 @@ def html_page(name: str, rows: list[dict], out: Path, wall_s: float | None, figu
     return "".join(parts)
 
 
-def write_summary(name: str, rows: list[dict], out: Path, wall_s: float | None = None, field=None) -> list[Path]:
-    """summary.md, the figures and summary.html in ``out``; returns the files written."""
-    figures = write_figures(rows, out, field)
+def write_summary(name: str, rows: list[dict], out: Path, wall_s: float | None = None,
+                  fields: dict | None = None) -> list[Path]:
+    """summary.md, the figures and summary.html in ``out``; returns the files written
+    (``fields``: mission reference -> ``scenarios.Field``, for the maps)."""
+    figures = write_figures(rows, out, fields)
     (out / "summary.md").write_text(markdown(name, rows, out, wall_s, figures), encoding="utf-8")
     (out / "summary.html").write_text(html_page(name, rows, out, wall_s, figures), encoding="utf-8")
     return [out / "summary.md", out / "summary.html", *figures]

@@ -120,10 +120,10 @@ def _fly_and_summarise(spec, fields, scenarios, out: Path, args, t0: float) -> i
             if cluster is not None:
                 cluster.close()
     write_table(rows, out)
-    field = next((f for f in fields.values() if f is not None), None)
-    if field is None:
-        field = _map_field(spec, fields)
-    files = write_summary(spec.name, rows, out, time.monotonic() - t0, field)
+    if all(f is None for f in fields.values()):
+        first = next(iter(fields), None)
+        fields = {} if first is None else {first: _map_field(spec, fields)}
+    files = write_summary(spec.name, rows, out, time.monotonic() - t0, fields)
     counts = {k: sum(1 for r in rows if r["outcome"] == k) for k in ("completed", "held", "crashed", "failed")}
     print(f"campaign {spec.name}: {len(rows)} flights: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     print(f"wrote {out}/: results.parquet, results.csv, " + ", ".join(f.name for f in files))
