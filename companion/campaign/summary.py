@@ -161,7 +161,7 @@ def map_groups(rows: list[dict], fields: dict | None) -> list[tuple[str, object,
     mission, since the missions' fields have their own frames (``map_failures.png`` when there
     is one, ``map_failures_<mission>.png`` each when there are several); a flight's point is
     drawn on its own mission's map only."""
-    fields = {k: v for k, v in (fields or {}).items()}
+    fields = fields or {}
     names = list(dict.fromkeys([*fields, *(r.get("mission") for r in rows if r.get("mission"))]))
     if len(names) <= 1:
         return [("map_failures.png", fields.get(names[0]) if names else None, list(rows))]

@@ -192,14 +192,16 @@ def continuous(history, sensor_id: int, t0_s: float, t_s: float, hit) -> bool:
     """The returns of ``sensor_id`` in ``history`` from ``t0_s`` on, then ``hit`` at ``t_s``,
     form one track: each moved level from the one before at most ``MAX_M_S`` times the
     time between them plus ``JUMP_TOL_M`` (module notes)."""
-    prev = None
-    for tk, pk, _uk, _ok, sk in history:
-        if sk != sensor_id or tk < t0_s:
+    later = (t_s, hit)
+    for tk, pk, _uk, _ok, sk in reversed(history):      # newest first: stop at t0_s
+        if tk < t0_s:
+            break
+        if sk != sensor_id:
             continue
-        if prev is not None and not _step_ok(prev, (tk, pk)):
+        if not _step_ok((tk, pk), later):
             return False
-        prev = (tk, pk)
-    return prev is None or _step_ok(prev, (t_s, hit))
+        later = (tk, pk)
+    return True
 
 
 def _step_ok(a, b) -> bool:
