@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 #: report.json format written here ("MAJOR.MINOR", docs/README.md "Versions").
-REPORT_FORMAT_VERSION = "3.2"
+REPORT_FORMAT_VERSION = "3.3"
 
 
 @dataclass(frozen=True)
@@ -91,6 +91,11 @@ class ReplanningStats:
         The replanner's last mode.
     coverage_skipped : tuple of dict
         Plan left out by rejoins and re-routes: {from_s, to_s, length_m, reason}.
+    max_height_agl_m : float or None
+        Largest height of the reference above the terrain under it while avoiding
+        and rejoining (m); None when it never did.
+    ceiling_agl_m : float or None
+        The avoiding modes' ceiling above the terrain (m); None without a replanner.
     """
 
     events: int = 0
@@ -110,6 +115,8 @@ class ReplanningStats:
     ignored_readings: int = 0
     mode: str | None = None
     coverage_skipped: tuple = ()
+    max_height_agl_m: float | None = None
+    ceiling_agl_m: float | None = None
 
     @property
     def actions(self) -> tuple[str, ...]:

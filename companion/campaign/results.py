@@ -11,6 +11,7 @@ Outcome (the rules of ``benchmarks/bench_obstacles_sitl.py``), from report.json:
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 
@@ -33,7 +34,7 @@ COLUMNS = (
     ("min_clearance_m", "float64"), ("tracking_max_error_m", "float64"), ("tracking_rms_error_m", "float64"),
     ("max_lateral_deviation_m", "float64"), ("extra_path_m", "float64"), ("replan_events", "int64"),
     ("coverage_fraction", "float64"), ("path_flown_fraction", "float64"), ("sim_time_s", "float64"),
-    ("mover_in_sight_s", "float64"), ("mover_sighted_m", "float64"),
+    ("ceiling_margin_m", "float64"), ("mover_in_sight_s", "float64"), ("mover_sighted_m", "float64"),
     ("wall_s", "float64"), ("kept", "string"),
 )
 #: wall-clock columns: not reproducible, left out when two tables are compared
@@ -65,6 +66,15 @@ def _where(report: dict) -> tuple[float | None, float | None]:
     return None, None
 
 
+def _ceiling_margin(rp: dict) -> float | None:
+    """How far (m) the avoiding reference stayed under the replan ceiling above the terrain
+    (negative: above it); None when it never avoided or the report predates the figure."""
+    h, c = rp.get("max_height_agl_m"), rp.get("ceiling_agl_m")
+    if h is None or c is None or not math.isfinite(c):
+        return None
+    return float(c) - float(h)
+
+
 def make_row(scenario: dict, report: dict | None, error: str | None, wall_s: float, kept: str | None = None,
              crash_xy: tuple[float, float] | None = None, sight: dict | None = None) -> dict:
     """The table row of one flight (plain types: it travels back from a worker as a small dict).
@@ -86,6 +96,7 @@ def make_row(scenario: dict, report: dict | None, error: str | None, wall_s: flo
            "max_lateral_deviation_m": rp.get("max_lateral_deviation_m"), "extra_path_m": rp.get("extra_path_m"),
            "replan_events": rp.get("events"), "coverage_fraction": r.get("coverage_fraction"),
            "path_flown_fraction": r.get("path_flown_fraction"), "sim_time_s": r.get("sim_time_s"),
+           "ceiling_margin_m": _ceiling_margin(rp),
            "wall_s": round(float(wall_s), 3), "kept": kept, **(sight or {})}
     return {name: row.get(name) for name, _ in COLUMNS}
 

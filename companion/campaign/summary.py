@@ -24,6 +24,7 @@ FIGURES = (
     ("tracking_rms_error_m", "tracking RMS error", 1e3, "mm"),
     ("max_lateral_deviation_m", "max lateral deviation", 1.0, "m"),
     ("extra_path_m", "extra path", 1.0, "m"),
+    ("ceiling_margin_m", "avoiding reference under the ceiling", 1.0, "m"),
 )
 
 

@@ -158,7 +158,8 @@ def replanning_stats(recorder: FlightRecorder, min_range_m, replanner, mode) -> 
                            min_obstacle_range_m=st.min_obstacle_range_m, event_list=tuple(d["event_list"]),
                            readings=st.readings, unknown_hits=st.unknown_hits,
                            ignored_readings=st.ignored_readings, mode=mode,
-                           coverage_skipped=tuple(d["coverage_skipped"]), **clearance)
+                           coverage_skipped=tuple(d["coverage_skipped"]), max_height_agl_m=st.max_height_agl_m,
+                           ceiling_agl_m=st.ceiling_agl_m, **clearance)
 
 
 def flight_report(core, wall_s: float, tlog: str | None, link_stats: dict | None = None) -> FlightReport:

@@ -320,3 +320,47 @@ def _fan_points(R, S, origin, d: float, hfov: float, vfov: float):
             ez = r20 * bx + r21 * by + r22 * bz
             k = d / math.sqrt(ex * ex + ey * ey + ez * ez)
             yield (origin[0] + k * ex, origin[1] + k * ey, origin[2] + k * ez)
+
+
+def lowest_return_z(ev: BeamEvidence, tilt_rad: float = 0.0) -> float:
+    """The lowest height (ENU z, m) the surface that returned ``ev`` can have: the
+    minimum of z over the beam's field of view at the measured distance, for any
+    attitude within ``tilt_rad`` of the estimate. A lower bound on the top of
+    whatever returned it (docs/replan.md "How high an obstacle is").
+
+    The field is the rectangular pyramid of ``_fan_points``: rays ``a + s h + t v``
+    (axis, horizontal and vertical axes of the sensor, orthonormal, ENU) with
+    ``|s| <= tan(half_h)``, ``|t| <= tan(half_v)``. The height of the unit ray,
+    ``f = (a_z + s h_z + t v_z) / sqrt(1 + s^2 + t^2)``, is stationary inside the
+    rectangle only where the ray is vertical (``f = -1``: straight down in view),
+    and on the edge ``s = s0`` at ``t* = v_z (1 + s0^2) / (a_z + s0 h_z)`` (likewise
+    for ``t = t0``), so its minimum is the least of the four corners, the edges'
+    stationary points inside them and, when the nadir is in view, -1. A turn of
+    the attitude by at most ``tilt_rad`` lowers a ray's elevation by at most that
+    much (a turn about the vertical changes no height). A reading without a field
+    (both half-angles 0) gives its axis point's height; one without a return,
+    ValueError."""
+    d = ev.distance_m
+    if ev.hit is None or not math.isfinite(d):
+        raise ValueError("a return is needed")
+    a, h, v = ev.axis, ev.h_axis, ev.v_axis
+    S, T = math.tan(ev.half_h_rad), math.tan(ev.half_v_rad)
+
+    def f(s: float, t: float) -> float:
+        return (a[2] + s * h[2] + t * v[2]) / math.sqrt(1.0 + s * s + t * t)
+
+    best = min(f(s, t) for s in (S, -S) for t in (T, -T))
+    # the edges s = +-S (stationary in t) and t = +-T (stationary in s)
+    for fixed, free, fz, gz, s_fixed in ((S, T, h[2], v[2], True), (T, S, v[2], h[2], False)):
+        for x0 in (fixed, -fixed):
+            c = a[2] + x0 * fz
+            if c != 0.0:
+                y = gz * (1.0 + x0 * x0) / c
+                if -free <= y <= free:
+                    best = min(best, f(x0, y) if s_fixed else f(y, x0))
+    # the nadir (0, 0, -1) in the sensor frame: (-a_z, -h_z, -v_z), in view when ahead
+    # and within both half-angles
+    if -a[2] > 0.0 and abs(h[2]) <= S * -a[2] and abs(v[2]) <= T * -a[2]:
+        best = -1.0
+    elev = math.asin(max(-1.0, min(1.0, best))) - max(0.0, float(tilt_rad))
+    return ev.origin[2] + d * math.sin(max(-0.5 * math.pi, elev))

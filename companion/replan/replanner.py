@@ -105,7 +105,7 @@ from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
 from .attitude_wait import AttitudeWait
-from .perception import Pose, PoseHistory, attitude_perturbations, beam_evidence
+from .perception import Pose, PoseHistory, attitude_perturbations, beam_evidence, lowest_return_z
 from .rejoin import converged_from, rejoin
 from .repair import MAX_REPAIRS, repair
 from .reroute import reroute, with_blocking
@@ -149,6 +149,8 @@ LEAVE_MARGINS_M = (ROUTE_MARGIN_M, GOVERNOR_MARGIN_M, 0.0)
 #: A route the guard refuses for what its own polyline passes is searched again round the
 #: map's voxels within the clearance and body plus this (m) of the refused sample.
 CONFLICT_REACH_M = 0.5
+#: The ground's slope under an avoiding command is taken over this distance (m) along it.
+SLOPE_STEP_M = 0.5
 #: Extra height (m) above the top of an obstacle plus the clearance and the governor margin.
 PASS_MARGIN_M = 0.1
 #: Obstacle points closer than this (m) to a nearer one belong to the same obstacle.
@@ -292,6 +294,12 @@ class ReplanStats:
         DISTANCE_SENSOR readings handled, returns classified unknown, readings without evidence.
     coverage_skipped : tuple of (from_s, to_s, length_m, reason)
         Plan left out by rejoins and re-routes (plan-clock times, s; m).
+    max_height_agl_m : float or None
+        Largest height of the reference above the terrain under it while avoiding
+        and rejoining (m; None when it never did): the height band's ceiling is
+        ``ceiling_agl_m``.
+    ceiling_agl_m : float
+        The avoiding modes' ceiling above the terrain (m, ``replan.ceiling_agl_m``).
     """
 
     events: int
@@ -304,6 +312,8 @@ class ReplanStats:
     unknown_hits: int
     ignored_readings: int
     coverage_skipped: tuple = ()
+    max_height_agl_m: float | None = None
+    ceiling_agl_m: float = math.inf
 
     def to_dict(self) -> dict:
         """Plain JSON types (report.json ``replanning``; events as {t_s, pos_enu_m, obstacle_range_m, action, detail})."""
@@ -323,6 +333,8 @@ class ReplanStats:
             "ignored_readings": int(self.ignored_readings),
             "coverage_skipped": [{"from_s": float(a), "to_s": float(b), "length_m": float(L), "reason": r}
                                  for a, b, L, r in self.coverage_skipped],
+            "max_height_agl_m": num(self.max_height_agl_m),
+            "ceiling_agl_m": float(self.ceiling_agl_m),
         }
 
 
@@ -426,9 +438,11 @@ def horizontal_clusters(points: np.ndarray, link_m: float) -> np.ndarray:
 
 
 def unpassable_points(points: np.ndarray, ground_z, ceiling_agl_m: float, keep_m: float,
-                      link_m: float = CLUSTER_M, confirmed: np.ndarray | None = None) -> np.ndarray:
+                      link_m: float = CLUSTER_M, confirmed: np.ndarray | None = None,
+                      lows: np.ndarray | None = None) -> np.ndarray:
     """The points of the obstacles (horizontal clusters) the vehicle cannot pass over:
-    ``too_tall`` (the cluster's top, from its ``confirmed`` points when it has any).
+    ``too_tall`` (the cluster's top, from its ``confirmed`` points when it has any; the
+    highest of their ``lows``, how high each surely reaches, when given, else their height).
     A re-route goes round these; a low obstacle near them is climbed over when the
     new route meets it (walling it off too sealed the vehicle into a pocket of the
     free space in the randomized SITL benchmark)."""
@@ -440,9 +454,10 @@ def unpassable_points(points: np.ndarray, ground_z, ceiling_agl_m: float, keep_m
     for c in np.unique(labels):
         m = labels == c
         sel = m & conf if (m & conf).any() else m
-        k = int(np.argmax(np.where(sel, points[:, 2], -np.inf)))
+        z = points[:, 2] if lows is None else np.asarray(lows, dtype=float)
+        k = int(np.argmax(np.where(sel, z, -np.inf)))
         top = points[k]
-        if too_tall(float(top[2]), ground_z(float(top[0]), float(top[1])) + ceiling_agl_m, keep_m):
+        if too_tall(float(z[k]), ground_z(float(top[0]), float(top[1])) + ceiling_agl_m, keep_m):
             keep |= m
     return points[keep]
 
@@ -555,6 +570,7 @@ class Replanner:
         self._active = np.zeros((0, 3))
         self._known0 = known                   # the map before any re-route added cells to it
         self._active_conf = np.zeros(0, dtype=bool)
+        self._active_sel: np.ndarray | None = None
         self.poses = PoseHistory()
         self.attitude = AttitudeWait()      # readings wait for the attitude of their time
         self.heading = HeadingBias()
@@ -577,6 +593,7 @@ class Replanner:
         #: The side (+1 / -1 along the corridor) a stop gives way to a crossing mover (``_give_way``).
         self._give_way_sign: float | None = None
         self._max_climb = 0.0
+        self._max_agl: float | None = None
         self._min_range: float | None = None
         self.n_readings = self.n_unknown = self.n_ignored = 0
         self._skipped: list[tuple] = []
@@ -741,11 +758,14 @@ class Replanner:
             # points too where they are a voxel apart and not on a known feature, as
             # candidates (``voxmap``: one beam through them clears them, and unless an
             # axis hit confirms them they lapse after ``voxmap.CANDIDATE_LIFETIME_S``)
-            mem.add(ev.hit)
+            # how low the surface can be: the climb decides on it (docs/replan.md "How high an
+            # obstacle is"); the points stay where the beam's axis puts them for every distance
+            z_low = lowest_return_z(ev, self._allowance[0] if self._allowance else 0.0)
+            mem.add(ev.hit, z_low=z_low)
             if ev.distance_m * math.tan(ev.half_max_rad) > self.cfg.voxel_m:
                 for q in ev.fan_hits:
                     if self.known.classify(*q) == UNKNOWN:
-                        mem.add(q, L_CANDIDATE, t_s)
+                        mem.add(q, L_CANDIDATE, t_s, z_low)
             self.n_unknown += 1
             if self.cfg.give_way:          # else no approach is ever measured: a still world
                 self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still, ev.origin)
@@ -842,7 +862,8 @@ class Replanner:
         """Statistics so far (report.json ``replanning``)."""
         return ReplanStats(self._n_events, tuple(self._events), self._max_lat,
                            self._flown - self._planned_length, self._max_climb, self._min_range,
-                           self.n_readings, self.n_unknown, self.n_ignored, tuple(self._skipped))
+                           self.n_readings, self.n_unknown, self.n_ignored, tuple(self._skipped),
+                           self._max_agl, float(self.cfg.ceiling_agl_m))
 
     # --- the obstacle map's views ---------------------------------------------------------
 
@@ -854,6 +875,7 @@ class Replanner:
         pts = self.memory.points()
         if not len(pts) or self.known is self._known0:
             self._active_conf = self.memory.confirmed()
+            self._active_sel = None
             return pts
         key = (self.memory.version, id(self.known))
         if self._active_key != key:
@@ -866,6 +888,7 @@ class Replanner:
             added[on] = self.known.known_added[r[on], c[on]]
             self._active = pts[~added]
             self._active_conf = self.memory.confirmed()[~added]
+            self._active_sel = ~added
             self._active_key = key
         return self._active
 
@@ -873,6 +896,13 @@ class Replanner:
         """(k,) bool, aligned with ``_points()``: the voxel was hit on a beam's axis."""
         self._points()
         return self._active_conf
+
+    def _lows(self) -> np.ndarray:
+        """(k,) aligned with ``_points()``: how high each voxel's obstacle surely reaches
+        (``ObstacleMap.lows``)."""
+        self._points()
+        lows = self.memory.lows()
+        return lows if self._active_sel is None else lows[self._active_sel]
 
     # --- modes --------------------------------------------------------------------------
 
@@ -1051,9 +1081,15 @@ class Replanner:
                 top_of = ahead & conf if (ahead & conf).any() else ahead
                 z_top = float(pts[top_of, 2].max())
                 self._z_pass = max(self._z_pass, z_top + c_pass + PASS_MARGIN_M)
-                if not passable and too_tall(z_top, z_ceiling, self._keep_m):
-                    return self._enter_stop(tau, events, "reroute", f"obstacle top above {z_top - ground:.2f} m, "
-                                            f"ceiling {cfg.ceiling_agl_m:g} m")
+                # too tall only when it surely is: on the least height the returns allow (a
+                # level beam's field reaches its top edge from up to range x tan(half field)
+                # above it, and the points placed on the axis rose with the vehicle past the
+                # climb limit: climbable boxes were re-routed round or held). The pass height
+                # stays on the points, and the beams that see over the top clear the rest.
+                z_least = float(self._lows()[top_of].max())
+                if not passable and too_tall(z_least, z_ceiling, self._keep_m):
+                    return self._enter_stop(tau, events, "reroute", f"obstacle top at least {z_least - ground:.2f} m "
+                                            f"high, ceiling {cfg.ceiling_agl_m:g} m")
                 self._far_along = float(along[ahead].max()) + float(P[:2] @ u)
             elif not stalled:
                 # nothing ahead and moving on: what this escape met is passed, and its clock
@@ -1112,12 +1148,42 @@ class Replanner:
                 v[2] = 0.0
         elif self.cfg.clearance_governor:
             v = self._govern_rows(P, v)
+        v = self._band_over_slope(P, v, ground)
         t_s = getattr(self, "_t_s", None)      # None: called outside ``step``
         if self.cfg.clearance_governor and t_s is not None:
             pose = self.poses.at(t_s)
             if pose is not None:
                 return block_no_data(v, self.fresh.has_data(t_s, pose.R, v))
         return v.tolist()
+
+    def _band_over_slope(self, P, v, ground: float) -> np.ndarray:
+        """The height band holds over sloping ground: the height above the terrain changes
+        at ``v_z - slope * v_h``, so where the ground falls away (or rises) along the
+        command faster than the vertical speed left after the governors can follow, the
+        level part is scaled down until the height above ground leaves the band no faster
+        than its walls allow (``_wall_speed``; the slope over ``SLOPE_STEP_M`` ahead). Held
+        at constant height over a walker's top, a climb crept down a slope to 0.16 m over
+        the ceiling, where no re-route could start (mix 20261200 flight 1)."""
+        v = np.asarray(v, dtype=float)
+        h = math.hypot(float(v[0]), float(v[1]))
+        if h < 1e-9:
+            return v
+        cfg = self.cfg
+        x, y = float(P[0]) + SLOPE_STEP_M * float(v[0]) / h, float(P[1]) + SLOPE_STEP_M * float(v[1]) / h
+        rise = (self.known.ground_z(x, y) - ground) / SLOPE_STEP_M * h      # m/s the ground comes up
+        vz = float(v[2])
+        k = 1.0
+        if rise < 0.0:           # falling away: the height above ground grows at vz - rise
+            room = self._wall_speed(ground + cfg.ceiling_agl_m - WALL_MARGIN_M - float(P[2]))
+            if vz - rise > room:
+                k = max(0.0, (room - vz) / -rise)
+        elif rise > 0.0:         # coming up: it shrinks at rise - vz
+            room = self._wall_speed(float(P[2]) - ground - cfg.floor_agl_m - WALL_MARGIN_M)
+            if rise - vz > room:
+                k = max(0.0, (room + vz) / rise)
+        if k >= 1.0:
+            return v
+        return np.array([float(v[0]) * k, float(v[1]) * k, vz])
 
     def _over_points(self, P, v, obs) -> bool:
         """A remembered point below the reference lies horizontally within the
@@ -1403,9 +1469,10 @@ class Replanner:
             near = pts[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else pts
             # only what cannot be climbed over blocks the corridor (a low obstacle
             # beside a tall one is climbed when the new route meets it)
-            conf = self._confirmed()[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else None
+            within = dist <= self.cfg.influence_range_m + 1.0
+            conf = self._confirmed()[within] if len(pts) else None
             blocking = unpassable_points(near, self.known.ground_z, self.cfg.ceiling_agl_m, self._keep_m,
-                                         confirmed=conf)
+                                         confirmed=conf, lows=self._lows()[within] if len(pts) else None)
             if len(blocking) == 0:
                 blocking = near
             travel = self._leg_frame(self._avoid_leg)[2]       # the leg the avoidance was on
@@ -1713,9 +1780,12 @@ class Replanner:
         lat = lateral_offset(p, self._dev_leg, self._dev_avoided)
         if lat > self._max_lat:
             self._max_lat = lat
-        climb = p[2] - (self.known.ground_z(p[0], p[1]) + self.plan.flight.height_agl_m)
+        agl = p[2] - self.known.ground_z(p[0], p[1])
+        climb = agl - self.plan.flight.height_agl_m
         if climb > self._max_climb:
             self._max_climb = climb
+        if self._max_agl is None or agl > self._max_agl:
+            self._max_agl = float(agl)
 
     def _account(self, ref: RefSample) -> None:
         p = ref.p
