@@ -134,3 +134,59 @@ def test_the_last_pass_never_lengthens_a_command():
     rp = _governor(0.0)
     out = rp._govern(P, np.array([1.0, 0.0, 0.0]), obs, np.array([1.2]), scale_only=True)
     assert out == pytest.approx([stop, 0.0, 0.0], abs=1e-9)
+
+
+# --- a level beam whose field's lower edge grazes a still top (mix 20261210 flight 14) ------
+
+VFOV_HALF = math.radians(5.0)
+
+
+def _pitching_beam(c: ClosingSpeed, surface, n: int = 12) -> None:
+    """A level-ish beam 10 deg tall (no horizontal field) at 1.5 m, hovering, pitching from
+    +1 deg to -1.2 deg over ``n`` 20 Hz returns; ``surface(t, el)`` gives the measured range.
+    The field's lowest and highest sines are those of el -+ 5 deg, worked by hand."""
+    o = (0.0, 0.0, 1.5)
+    for k in range(n):
+        t = 0.05 * k
+        el = math.radians(1.0 - 2.2 * k / (n - 1))
+        d = surface(t, el)
+        axis = (math.cos(el), 0.0, math.sin(el))
+        hit = tuple(o[i] + d * axis[i] for i in range(3))
+        c.on_hit(t, 4, hit, axis, origin_enu_m=o,
+                 field=(o[2], d, math.sin(el - VFOV_HALF), math.sin(el + VFOV_HALF)))
+
+
+def _grazed_top(t: float, el: float) -> float:
+    # a still top at z = 1.3, 0.2 m under the sensor, met first by the field's lower edge
+    return 0.2 / -math.sin(el - VFOV_HALF)
+
+
+def test_a_top_grazed_by_a_pitching_beams_lower_edge_is_no_mover(monkeypatch):
+    c = ClosingSpeed()
+    _pitching_beam(c, _grazed_top)
+    assert all(c.approach_m_s(0.05 * k) == 0.0 for k in range(12))
+    # the rule decides: without it the return slides 2.87 -> 1.96 m toward the vehicle
+    # in 0.55 s, read as a mover at over 1 m/s
+    monkeypatch.setattr(closing, "still_plane", lambda *a: False)
+    c = ClosingSpeed()
+    _pitching_beam(c, _grazed_top)
+    assert c.approach_m_s(0.55) > 1.0
+
+
+def test_a_walker_coming_down_the_same_pitching_beam_is_still_read():
+    # a vertical face walking in at 1.2 m/s from 4 m: the axis meets it at x / cos(el); no
+    # still plane gives those ranges through the field's lower or upper edge
+    c = ClosingSpeed()
+    _pitching_beam(c, lambda t, el: (4.0 - 1.2 * t) / math.cos(el))
+    assert c.approach_m_s(0.55) == pytest.approx(1.2, abs=0.05)
+
+
+def test_still_plane_hand_worked():
+    # lower edge at -4 deg meets z = 1.3 at 0.2 / sin 4 deg = 2.867 m; at -6 deg, 1.913 m
+    f0 = (1.5, 0.2 / math.sin(math.radians(4.0)), -math.sin(math.radians(4.0)), math.sin(math.radians(6.0)))
+    f1 = (1.5, 0.2 / math.sin(math.radians(6.0)), -math.sin(math.radians(6.0)), math.sin(math.radians(4.0)))
+    assert closing.still_plane(f0, f1, 0.3)
+    # 0.1 m off that range in 0.3 s is 0.33 m/s, over MIN_M_S: not the plane
+    f2 = (1.5, f1[1] - 0.1, f1[2], f1[3])
+    assert not closing.still_plane(f0, f2, 0.3)
+    assert not closing.still_plane(None, f1, 0.3) and not closing.still_plane(f0, None, 0.3)

@@ -80,6 +80,18 @@ continuous, so it is measured once they span a baseline (``BASELINE_S`` after it
 into the beam).
 At rest across beams (a mover passing from beam to beam) no track is required.
 
+A pair one still horizontal surface explains is no motion either (``still_plane``): a level
+beam whose field's lower edge grazes an obstacle's top near the vehicle's own height
+returns from where that edge meets the top, at the height difference over the sine of the
+edge's angle, so the vehicle's pitch slides the return along the beam. A box's top 0.5 m
+under a vehicle hovering 4-5 m away read as a mover at 0.4-1.4 m/s each time the vehicle
+pitched: stop, look, "no motion", avoid, rejoin, stop again, 40 times in 230 s (mix
+20261210 flight 14). The older return fixes the height where its lowest (or highest) ray
+met the surface; the newer one's lowest (highest) ray meets that height at a predicted
+range; within ``MIN_M_S`` per second of the measured one, it is that plane. A mover coming
+down the beam changes the range where the plane would not (the two agree only if the
+vehicle's height and pitch happen to follow the mover's approach, pair after pair).
+
 In flight the earlier hit is the same beam's: two beams see two
 different points of one still object, and a pair across them is no motion.
 Returns of two beams on one post within ``MATCH_M`` of each other read 1.6-1.9
@@ -127,17 +139,19 @@ class ClosingSpeed:
     """The largest approach speed (m/s) of an unknown obstacle toward the vehicle."""
 
     def __init__(self) -> None:
-        self._hist: dict[int, list[tuple[float, tuple, tuple, tuple | None]]] = {}
+        self._hist: dict[int, list[tuple]] = {}
         self._w = 0.0
         self._t_w = -math.inf
 
     def on_hit(self, t_s: float, sensor_id: int, hit_enu_m, axis_enu, still: bool = False,
-               origin_enu_m=None) -> None:
+               origin_enu_m=None, field=None) -> None:
         """An unknown return of ``sensor_id`` at vehicle time ``t_s``: the hit point
         (ENU, m) and the beam's unit axis (ENU, from the sensor outward); ``still``: the
         vehicle is still, so any motion of the return is the obstacle's; ``origin_enu_m``:
-        the sensor's position (a return riding with it is no approach; None: not judged)
-        (module notes)."""
+        the sensor's position (a return riding with it is no approach; None: not judged);
+        ``field``: (sensor height m, measured range m, lowest and highest sine of
+        elevation in its field of view; ``perception.field_sine_range``), for
+        ``still_plane`` (None: not judged) (module notes)."""
         # one history for all sensors: at rest a mover passes from beam to beam
         h = self._hist.setdefault(0, [])
         hit = (float(hit_enu_m[0]), float(hit_enu_m[1]), float(hit_enu_m[2]))
@@ -151,7 +165,7 @@ class ClosingSpeed:
         # the nearest hit (within MATCH_M: the same object) of those BASELINE_S to
         # 2 BASELINE_S old; the nearest, not the newest: a post beside a walker
         best, t0 = MATCH_M, None
-        for tk, pk, uk, ok, sk in reversed(h):
+        for tk, pk, uk, ok, sk, ek in reversed(h):
             age = t_s - tk
             if age < BASELINE_S:
                 continue
@@ -161,7 +175,7 @@ class ClosingSpeed:
                 continue             # in flight, one beam's own returns (module notes)
             dk = math.dist(hit, pk)
             if dk <= best:
-                best, t0, p0, u0, o0, s0 = dk, tk, pk, uk, ok, sk
+                best, t0, p0, u0, o0, s0, e0 = dk, tk, pk, uk, ok, sk, ek
         if t0 is not None and s0 == sensor_id and not continuous(h, sensor_id, t0, t_s, hit):
             t0 = None                # a jump between two surfaces, no motion (module notes)
         if t0 is not None:
@@ -175,12 +189,13 @@ class ClosingSpeed:
                 # a mover coming down the beam moves its return along the axis; a beam sweeping
                 # over a still surface (the vehicle flying past a box) slides it across
                 w, aligned = -along / (t_s - t0), -along >= ALIGN_MIN * moved
-            if MIN_M_S <= w <= MAX_M_S and aligned and not riding(d, o, o0, t_s - t0):
+            if MIN_M_S <= w <= MAX_M_S and aligned and not riding(d, o, o0, t_s - t0) and \
+                    not (s0 == sensor_id and still_plane(e0, field, t_s - t0)):
                 # the largest speed while the mover keeps coming (conservative), fresh again
                 if w >= self._w or t_s - self._t_w > HOLD_S:
                     self._w = w
                 self._t_w = t_s
-        h.append((t_s, hit, u, o, sensor_id))
+        h.append((t_s, hit, u, o, sensor_id, field))
 
     def approach_m_s(self, t_s: float | None) -> float:
         """The approach speed (m/s, >= 0) that the governor allows for at time ``t_s``
@@ -193,7 +208,7 @@ def continuous(history, sensor_id: int, t0_s: float, t_s: float, hit) -> bool:
     form one track: each moved level from the one before at most ``MAX_M_S`` times the
     time between them plus ``JUMP_TOL_M`` (module notes)."""
     later = (t_s, hit)
-    for tk, pk, _uk, _ok, sk in reversed(history):      # newest first: stop at t0_s
+    for tk, pk, _uk, _ok, sk, _ek in reversed(history):      # newest first: stop at t0_s
         if tk < t0_s:
             break
         if sk != sensor_id:
@@ -202,6 +217,29 @@ def continuous(history, sensor_id: int, t0_s: float, t_s: float, hit) -> bool:
             return False
         later = (tk, pk)
     return True
+
+
+def still_plane(field0, field1, dt_s: float) -> bool:
+    """Two returns of one beam (``ClosingSpeed.on_hit``'s ``field`` of each) are what one
+    still horizontal surface gives: the surface at the height where the older return's
+    lowest (or highest) ray met it, met by the newer one's lowest (highest) ray at its
+    measured range within ``MIN_M_S`` per second. A level beam whose field's lower edge
+    grazes an obstacle's top near the vehicle's own height moves its return along the beam
+    as the vehicle pitches (the range to the top through the lower edge is the height
+    difference over the sine of its angle): a box's top read as a mover coming at 1.4 m/s,
+    40 times in one flight (mix 20261210 flight 14). A mover walking down a beam whose
+    geometry stays changes the range where the plane would not. False when either is None."""
+    if field0 is None or field1 is None:
+        return False
+    oz0, d0, lo0, hi0 = field0
+    oz1, d1, lo1, hi1 = field1
+    for s0, s1 in ((lo0, lo1), (hi0, hi1)):
+        if s0 * s1 <= 0.0 or abs(s1) < 1e-6:
+            continue                 # not the same side of level: no such plane
+        pred = (oz0 + d0 * s0 - oz1) / s1
+        if pred > 0.0 and abs(pred - d1) < MIN_M_S * dt_s:
+            return True
+    return False
 
 
 def _step_ok(a, b) -> bool:

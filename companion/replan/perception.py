@@ -322,6 +322,38 @@ def _fan_points(R, S, origin, d: float, hfov: float, vfov: float):
             yield (origin[0] + k * ex, origin[1] + k * ey, origin[2] + k * ez)
 
 
+def field_sine_range(ev: BeamEvidence) -> tuple[float, float]:
+    """(lowest, highest) sine of elevation of the rays in the beam's field of view (the
+    z of the unit ray; ``lowest_return_z`` for the derivation; the highest is the lowest
+    of the field mirrored in the horizontal plane)."""
+    S, T = math.tan(ev.half_h_rad), math.tan(ev.half_v_rad)
+    lo = _lowest_sine((ev.axis[2], ev.h_axis[2], ev.v_axis[2]), S, T)
+    hi = -_lowest_sine((-ev.axis[2], -ev.h_axis[2], -ev.v_axis[2]), S, T)
+    return lo, hi
+
+
+def _lowest_sine(z: tuple, S: float, T: float) -> float:
+    az, hz, vz = z
+
+    def f(s: float, t: float) -> float:
+        return (az + s * hz + t * vz) / math.sqrt(1.0 + s * s + t * t)
+
+    best = min(f(s, t) for s in (S, -S) for t in (T, -T))
+    # the edges s = +-S (stationary in t) and t = +-T (stationary in s)
+    for fixed, free, fz, gz, s_fixed in ((S, T, hz, vz, True), (T, S, vz, hz, False)):
+        for x0 in (fixed, -fixed):
+            c = az + x0 * fz
+            if c != 0.0:
+                y = gz * (1.0 + x0 * x0) / c
+                if -free <= y <= free:
+                    best = min(best, f(x0, y) if s_fixed else f(y, x0))
+    # the nadir (0, 0, -1) in the sensor frame: (-a_z, -h_z, -v_z), in view when ahead
+    # and within both half-angles
+    if -az > 0.0 and abs(hz) <= S * -az and abs(vz) <= T * -az:
+        best = -1.0
+    return best
+
+
 def lowest_return_z(ev: BeamEvidence, tilt_rad: float = 0.0) -> float:
     """The lowest height (ENU z, m) the surface that returned ``ev`` can have: the
     minimum of z over the beam's field of view at the measured distance, for any
@@ -343,24 +375,6 @@ def lowest_return_z(ev: BeamEvidence, tilt_rad: float = 0.0) -> float:
     d = ev.distance_m
     if ev.hit is None or not math.isfinite(d):
         raise ValueError("a return is needed")
-    a, h, v = ev.axis, ev.h_axis, ev.v_axis
-    S, T = math.tan(ev.half_h_rad), math.tan(ev.half_v_rad)
-
-    def f(s: float, t: float) -> float:
-        return (a[2] + s * h[2] + t * v[2]) / math.sqrt(1.0 + s * s + t * t)
-
-    best = min(f(s, t) for s in (S, -S) for t in (T, -T))
-    # the edges s = +-S (stationary in t) and t = +-T (stationary in s)
-    for fixed, free, fz, gz, s_fixed in ((S, T, h[2], v[2], True), (T, S, v[2], h[2], False)):
-        for x0 in (fixed, -fixed):
-            c = a[2] + x0 * fz
-            if c != 0.0:
-                y = gz * (1.0 + x0 * x0) / c
-                if -free <= y <= free:
-                    best = min(best, f(x0, y) if s_fixed else f(y, x0))
-    # the nadir (0, 0, -1) in the sensor frame: (-a_z, -h_z, -v_z), in view when ahead
-    # and within both half-angles
-    if -a[2] > 0.0 and abs(h[2]) <= S * -a[2] and abs(v[2]) <= T * -a[2]:
-        best = -1.0
+    best = field_sine_range(ev)[0]
     elev = math.asin(max(-1.0, min(1.0, best))) - max(0.0, float(tilt_rad))
     return ev.origin[2] + d * math.sin(max(-0.5 * math.pi, elev))

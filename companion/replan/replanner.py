@@ -105,7 +105,8 @@ from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
 from .attitude_wait import AttitudeWait
-from .perception import Pose, PoseHistory, attitude_perturbations, beam_evidence, lowest_return_z
+from .perception import (Pose, PoseHistory, attitude_perturbations, beam_evidence, field_sine_range,
+                         lowest_return_z)
 from .rejoin import converged_from, rejoin
 from .repair import MAX_REPAIRS, repair
 from .reroute import reroute, with_blocking
@@ -768,7 +769,9 @@ class Replanner:
                         mem.add(q, L_CANDIDATE, t_s, z_low)
             self.n_unknown += 1
             if self.cfg.give_way:          # else no approach is ever measured: a still world
-                self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still, ev.origin)
+                lo, hi = field_sine_range(ev)
+                self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still, ev.origin,
+                                    (ev.origin[2], ev.distance_m, lo, hi))
 
     def _explained_within_attitude(self, reading, pose) -> bool:
         """The attitude allowance: the known map explains the return with the beam placed by
