@@ -323,9 +323,18 @@ def _fan_points(R, S, origin, d: float, hfov: float, vfov: float):
 
 
 def field_sine_range(ev: BeamEvidence) -> tuple[float, float]:
-    """(lowest, highest) sine of elevation of the rays in the beam's field of view (the
-    z of the unit ray; ``lowest_return_z`` for the derivation; the highest is the lowest
-    of the field mirrored in the horizontal plane)."""
+    """(lowest, highest) sine of elevation of the rays in the beam's field of view: the
+    z of the unit ray, ``closing.still_plane``'s input.
+
+    The field is the rectangular pyramid of ``_fan_points``: rays ``a + s h + t v``
+    (axis, horizontal and vertical axes of the sensor, orthonormal, ENU) with
+    ``|s| <= tan(half_h)``, ``|t| <= tan(half_v)``. The z of the unit ray,
+    ``f = (a_z + s h_z + t v_z) / sqrt(1 + s^2 + t^2)``, is stationary inside the
+    rectangle only where the ray is vertical (``f = -1``: straight down in view),
+    and on the edge ``s = s0`` at ``t* = v_z (1 + s0^2) / (a_z + s0 h_z)`` (likewise
+    for ``t = t0``), so its minimum is the least of the four corners, the edges'
+    stationary points inside them and, when the nadir is in view, -1; the maximum is
+    the minimum of the field mirrored in the horizontal plane, negated."""
     S, T = math.tan(ev.half_h_rad), math.tan(ev.half_v_rad)
     lo = _lowest_sine((ev.axis[2], ev.h_axis[2], ev.v_axis[2]), S, T)
     hi = -_lowest_sine((-ev.axis[2], -ev.h_axis[2], -ev.v_axis[2]), S, T)
@@ -352,29 +361,3 @@ def _lowest_sine(z: tuple, S: float, T: float) -> float:
     if -az > 0.0 and abs(hz) <= S * -az and abs(vz) <= T * -az:
         best = -1.0
     return best
-
-
-def lowest_return_z(ev: BeamEvidence, tilt_rad: float = 0.0) -> float:
-    """The lowest height (ENU z, m) the surface that returned ``ev`` can have: the
-    minimum of z over the beam's field of view at the measured distance, for any
-    attitude within ``tilt_rad`` of the estimate. A lower bound on the top of
-    whatever returned it (docs/replan.md "How high an obstacle is").
-
-    The field is the rectangular pyramid of ``_fan_points``: rays ``a + s h + t v``
-    (axis, horizontal and vertical axes of the sensor, orthonormal, ENU) with
-    ``|s| <= tan(half_h)``, ``|t| <= tan(half_v)``. The height of the unit ray,
-    ``f = (a_z + s h_z + t v_z) / sqrt(1 + s^2 + t^2)``, is stationary inside the
-    rectangle only where the ray is vertical (``f = -1``: straight down in view),
-    and on the edge ``s = s0`` at ``t* = v_z (1 + s0^2) / (a_z + s0 h_z)`` (likewise
-    for ``t = t0``), so its minimum is the least of the four corners, the edges'
-    stationary points inside them and, when the nadir is in view, -1. A turn of
-    the attitude by at most ``tilt_rad`` lowers a ray's elevation by at most that
-    much (a turn about the vertical changes no height). A reading without a field
-    (both half-angles 0) gives its axis point's height; one without a return,
-    ValueError."""
-    d = ev.distance_m
-    if ev.hit is None or not math.isfinite(d):
-        raise ValueError("a return is needed")
-    best = field_sine_range(ev)[0]
-    elev = math.asin(max(-1.0, min(1.0, best))) - max(0.0, float(tilt_rad))
-    return ev.origin[2] + d * math.sin(max(-0.5 * math.pi, elev))

@@ -105,8 +105,7 @@ from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
 from .attitude_wait import AttitudeWait
-from .perception import (Pose, PoseHistory, attitude_perturbations, beam_evidence, field_sine_range,
-                         lowest_return_z)
+from .perception import Pose, PoseHistory, attitude_perturbations, beam_evidence, field_sine_range
 from .rejoin import converged_from, rejoin
 from .repair import MAX_REPAIRS, repair
 from .reroute import reroute, with_blocking
@@ -439,11 +438,9 @@ def horizontal_clusters(points: np.ndarray, link_m: float) -> np.ndarray:
 
 
 def unpassable_points(points: np.ndarray, ground_z, ceiling_agl_m: float, keep_m: float,
-                      link_m: float = CLUSTER_M, confirmed: np.ndarray | None = None,
-                      lows: np.ndarray | None = None) -> np.ndarray:
+                      link_m: float = CLUSTER_M, confirmed: np.ndarray | None = None) -> np.ndarray:
     """The points of the obstacles (horizontal clusters) the vehicle cannot pass over:
-    ``too_tall`` (the cluster's top, from its ``confirmed`` points when it has any; the
-    highest of their ``lows``, how high each surely reaches, when given, else their height).
+    ``too_tall`` (the cluster's top, from its ``confirmed`` points when it has any).
     A re-route goes round these; a low obstacle near them is climbed over when the
     new route meets it (walling it off too sealed the vehicle into a pocket of the
     free space in the randomized SITL benchmark)."""
@@ -455,10 +452,9 @@ def unpassable_points(points: np.ndarray, ground_z, ceiling_agl_m: float, keep_m
     for c in np.unique(labels):
         m = labels == c
         sel = m & conf if (m & conf).any() else m
-        z = points[:, 2] if lows is None else np.asarray(lows, dtype=float)
-        k = int(np.argmax(np.where(sel, z, -np.inf)))
+        k = int(np.argmax(np.where(sel, points[:, 2], -np.inf)))
         top = points[k]
-        if too_tall(float(z[k]), ground_z(float(top[0]), float(top[1])) + ceiling_agl_m, keep_m):
+        if too_tall(float(top[2]), ground_z(float(top[0]), float(top[1])) + ceiling_agl_m, keep_m):
             keep |= m
     return points[keep]
 
@@ -571,7 +567,6 @@ class Replanner:
         self._active = np.zeros((0, 3))
         self._known0 = known                   # the map before any re-route added cells to it
         self._active_conf = np.zeros(0, dtype=bool)
-        self._active_sel: np.ndarray | None = None
         self.poses = PoseHistory()
         self.attitude = AttitudeWait()      # readings wait for the attitude of their time
         self.heading = HeadingBias()
@@ -759,14 +754,11 @@ class Replanner:
             # points too where they are a voxel apart and not on a known feature, as
             # candidates (``voxmap``: one beam through them clears them, and unless an
             # axis hit confirms them they lapse after ``voxmap.CANDIDATE_LIFETIME_S``)
-            # how low the surface can be: the climb decides on it (docs/replan.md "How high an
-            # obstacle is"); the points stay where the beam's axis puts them for every distance
-            z_low = lowest_return_z(ev, self._allowance[0] if self._allowance else 0.0)
-            mem.add(ev.hit, z_low=z_low)
+            mem.add(ev.hit)
             if ev.distance_m * math.tan(ev.half_max_rad) > self.cfg.voxel_m:
                 for q in ev.fan_hits:
                     if self.known.classify(*q) == UNKNOWN:
-                        mem.add(q, L_CANDIDATE, t_s, z_low)
+                        mem.add(q, L_CANDIDATE, t_s)
             self.n_unknown += 1
             if self.cfg.give_way:          # else no approach is ever measured: a still world
                 lo, hi = field_sine_range(ev)
@@ -878,7 +870,6 @@ class Replanner:
         pts = self.memory.points()
         if not len(pts) or self.known is self._known0:
             self._active_conf = self.memory.confirmed()
-            self._active_sel = None
             return pts
         key = (self.memory.version, id(self.known))
         if self._active_key != key:
@@ -891,7 +882,6 @@ class Replanner:
             added[on] = self.known.known_added[r[on], c[on]]
             self._active = pts[~added]
             self._active_conf = self.memory.confirmed()[~added]
-            self._active_sel = ~added
             self._active_key = key
         return self._active
 
@@ -899,13 +889,6 @@ class Replanner:
         """(k,) bool, aligned with ``_points()``: the voxel was hit on a beam's axis."""
         self._points()
         return self._active_conf
-
-    def _lows(self) -> np.ndarray:
-        """(k,) aligned with ``_points()``: how high each voxel's obstacle surely reaches
-        (``ObstacleMap.lows``)."""
-        self._points()
-        lows = self.memory.lows()
-        return lows if self._active_sel is None else lows[self._active_sel]
 
     # --- modes --------------------------------------------------------------------------
 
@@ -1084,15 +1067,9 @@ class Replanner:
                 top_of = ahead & conf if (ahead & conf).any() else ahead
                 z_top = float(pts[top_of, 2].max())
                 self._z_pass = max(self._z_pass, z_top + c_pass + PASS_MARGIN_M)
-                # too tall only when it surely is: on the least height the returns allow (a
-                # level beam's field reaches its top edge from up to range x tan(half field)
-                # above it, and the points placed on the axis rose with the vehicle past the
-                # climb limit: climbable boxes were re-routed round or held). The pass height
-                # stays on the points, and the beams that see over the top clear the rest.
-                z_least = float(self._lows()[top_of].max())
-                if not passable and too_tall(z_least, z_ceiling, self._keep_m):
-                    return self._enter_stop(tau, events, "reroute", f"obstacle top at least {z_least - ground:.2f} m "
-                                            f"high, ceiling {cfg.ceiling_agl_m:g} m")
+                if not passable and too_tall(z_top, z_ceiling, self._keep_m):
+                    return self._enter_stop(tau, events, "reroute", f"obstacle top above {z_top - ground:.2f} m, "
+                                            f"ceiling {cfg.ceiling_agl_m:g} m")
                 self._far_along = float(along[ahead].max()) + float(P[:2] @ u)
             elif not stalled:
                 # nothing ahead and moving on: what this escape met is passed, and its clock
@@ -1165,8 +1142,10 @@ class Replanner:
         command faster than the vertical speed left after the governors can follow, the
         level part is scaled down until the height above ground leaves the band no faster
         than its walls allow (``_wall_speed``; the slope over ``SLOPE_STEP_M`` ahead). Held
-        at constant height over a walker's top, a climb crept down a slope to 0.16 m over
-        the ceiling, where no re-route could start (mix 20261200 flight 1)."""
+        at constant height over remembered points it may not descend onto, a climb crept on
+        down a slope to 3.30 m above the ground under a 3 m ceiling (mix 20261210 flight 6;
+        3.22 m on mix 20261200 flight 0), and from above the ceiling no re-route can start
+        (the guard refuses it)."""
         v = np.asarray(v, dtype=float)
         h = math.hypot(float(v[0]), float(v[1]))
         if h < 1e-9:
@@ -1472,10 +1451,9 @@ class Replanner:
             near = pts[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else pts
             # only what cannot be climbed over blocks the corridor (a low obstacle
             # beside a tall one is climbed when the new route meets it)
-            within = dist <= self.cfg.influence_range_m + 1.0
-            conf = self._confirmed()[within] if len(pts) else None
+            conf = self._confirmed()[dist <= self.cfg.influence_range_m + 1.0] if len(pts) else None
             blocking = unpassable_points(near, self.known.ground_z, self.cfg.ceiling_agl_m, self._keep_m,
-                                         confirmed=conf, lows=self._lows()[within] if len(pts) else None)
+                                         confirmed=conf)
             if len(blocking) == 0:
                 blocking = near
             travel = self._leg_frame(self._avoid_leg)[2]       # the leg the avoidance was on

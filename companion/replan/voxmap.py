@@ -101,9 +101,6 @@ class ObstacleMap:
         #: the first return seen in each voxel (the voxel's point: it does not creep with the
         #: sensor, a beam climbing a face would otherwise drag it up to the top)
         self._first: dict[tuple[int, int, int], tuple[float, float, float]] = {}
-        #: per voxel, the highest of its returns' lowest possible surface heights
-        #: (``perception.lowest_return_z``): the obstacle there reaches at least this high
-        self._low: dict[tuple[int, int, int], float] = {}
         self._confirmed: set[tuple[int, int, int]] = set()
         self._cand_until: dict[tuple[int, int, int], float] = {}
         self.dropped = 0
@@ -111,11 +108,6 @@ class ObstacleMap:
         self._cache_v = -1
         self._centres = np.zeros((0, 3))
         self._points = np.zeros((0, 3))
-        self._lows = np.zeros(0)
-        #: (version, raised) when ``_lows`` was built: a raised bound changes no point, so it
-        #: does not touch ``version`` (the arrays and the k-d tree stay)
-        self._lows_v = (-1, -1)
-        self._raised = 0
         self._keys = np.zeros((0, 3), dtype=np.int64)
         self._tree: cKDTree | None = None
         self._conf = np.zeros(0, dtype=bool)
@@ -177,17 +169,6 @@ class ObstacleMap:
         ez = z0 - z if z < z0 else (z - z1 if z > z1 else 0.0)
         return math.sqrt(ex * ex + ey * ey + ez * ez) - 1e-9
 
-    def lows(self) -> np.ndarray:
-        """(k,) in the order of ``points``: how high the obstacle in each voxel reaches at
-        least (m, ENU z; the highest of its returns' ``z_low``, never above the voxel's
-        point). The climb decides on these (docs/replan.md "How high an obstacle is")."""
-        self._refresh()
-        v = (self.version, self._raised)
-        if self._lows_v != v:
-            self._lows = np.fromiter((self._low[k] for k in self._l), dtype=float, count=len(self._l))
-            self._lows_v = v
-        return self._lows
-
     def keys(self) -> np.ndarray:
         """(k, 3) int voxel indices of the occupied voxels, in the order of ``points``."""
         self._refresh()
@@ -201,14 +182,11 @@ class ObstacleMap:
 
     # --- evidence ----------------------------------------------------------------------
 
-    def add(self, point, weight: float = L_HIT, t_s: float = 0.0, z_low: float | None = None) -> None:
+    def add(self, point, weight: float = L_HIT, t_s: float = 0.0) -> None:
         """A return at ``point`` (ENU m): ``weight`` log-odds (``L_HIT`` on the axis,
-        ``L_CANDIDATE`` for a field-of-view edge candidate, seen at vehicle time ``t_s``).
-        ``z_low``: the lowest the surface that returned it can be (``lows``; the point's
-        own height when not given)."""
+        ``L_CANDIDATE`` for a field-of-view edge candidate, seen at vehicle time ``t_s``)."""
         key = self.key_of(point)
         old = self._l.get(key)
-        zl = float(point[2]) if z_low is None else float(z_low)
         if old is None:
             if len(self._l) >= self.max_voxels:
                 self.dropped += 1
@@ -226,12 +204,6 @@ class ObstacleMap:
                     if q[i] > b[3 + i]:
                         b[3 + i] = q[i]
         self._l[key] = min(L_MAX, (old or 0.0) + float(weight))
-        q = self._first[key]
-        low = min(zl, q[2])
-        was = self._low.get(key)
-        if was is None or low > was:
-            self._low[key] = low
-            self._raised += 1
         if weight >= L_HIT:
             if key not in self._confirmed:
                 self._confirmed.add(key)
@@ -292,7 +264,6 @@ class ObstacleMap:
             if left <= 1e-12:
                 del self._l[key]
                 del self._first[key]
-                del self._low[key]
                 self._confirmed.discard(key)
                 self._cand_until.pop(key, None)
                 gone += 1
@@ -312,7 +283,6 @@ class ObstacleMap:
             del self._cand_until[k]
             self._l.pop(k, None)
             self._first.pop(k, None)
-            self._low.pop(k, None)
         if gone:
             self.version += 1
         return len(gone)
