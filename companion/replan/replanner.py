@@ -588,7 +588,6 @@ class Replanner:
         self._max_lat = 0.0
         #: The side (+1 / -1 along the corridor) a stop gives way to a crossing mover (``_give_way``).
         self._give_way_sign: float | None = None
-        self._max_climb = 0.0
         self._max_agl: float | None = None
         self._min_range: float | None = None
         self.n_readings = self.n_unknown = self.n_ignored = 0
@@ -856,7 +855,7 @@ class Replanner:
     def stats(self) -> ReplanStats:
         """Statistics so far (report.json ``replanning``)."""
         return ReplanStats(self._n_events, tuple(self._events), self._max_lat,
-                           self._flown - self._planned_length, self._max_climb, self._min_range,
+                           self._flown - self._planned_length, self._max_climb(), self._min_range,
                            self.n_readings, self.n_unknown, self.n_ignored, tuple(self._skipped),
                            self._max_agl, float(self.cfg.ceiling_agl_m))
 
@@ -1762,11 +1761,13 @@ class Replanner:
         if lat > self._max_lat:
             self._max_lat = lat
         agl = p[2] - self.known.ground_z(p[0], p[1])
-        climb = agl - self.plan.flight.height_agl_m
-        if climb > self._max_climb:
-            self._max_climb = climb
         if self._max_agl is None or agl > self._max_agl:
             self._max_agl = float(agl)
+
+    def _max_climb(self) -> float:
+        """The reference's largest height above the planned flight height while avoiding and
+        rejoining (0 when it never rose above it; every plan, re-routes too, flies one height)."""
+        return 0.0 if self._max_agl is None else max(0.0, self._max_agl - self.plan.flight.height_agl_m)
 
     def _account(self, ref: RefSample) -> None:
         p = ref.p
