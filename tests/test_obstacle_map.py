@@ -164,6 +164,17 @@ def test_a_small_query_is_brute_force_and_gives_the_k_d_trees_numbers():
         truth = _box_distance(q[:, None, :], centres[None], V / 2).min(axis=1)
         assert np.all(small <= truth + 1e-12)
         assert np.all(small >= truth - math.sqrt(3.0) * V / 2 - 1e-12)
+    # a few points against a map too large for SMALL_PAIRS, while the tree is not built (the
+    # map changed): brute force, the tree's numbers, and no tree built for them
+    from companion.replan.voxmap import FEW_POINTS
+    m = ObstacleMap(V)
+    while len(m) < SMALL_PAIRS:
+        m.add(tuple(rng.uniform([9.0, 4.0, 0.0], [11.0, 6.0, 2.0])))
+    q = rng.uniform([8.0, 3.0, -0.5], [12.0, 7.0, 2.5], (40, 3))
+    few = np.concatenate([m.distance(q[i:i + FEW_POINTS]) for i in range(0, len(q), FEW_POINTS)])
+    assert m._tree is None
+    np.testing.assert_array_equal(few, m.distance(q))        # 40 points: the tree
+    assert m._tree is not None
     m = ObstacleMap(V)
     m.add((0.05, 0.05, 0.05))                         # the box [0, 0.1]^3, brute path
     np.testing.assert_allclose(m.distance(np.array([[0.5, 0.05, 0.05], [-0.3, -0.4, 0.05]])), [0.4, 0.5],

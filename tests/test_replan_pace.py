@@ -265,3 +265,27 @@ def test_a_candidate_above_the_ceiling_is_refused():
         assert (not v.ok) == refused
         if refused:
             assert v.rule == "ceiling" and v.point_enu_m[2] > 3.1
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_off_path_is_the_full_offset_test_exactly(seed):
+    # off_path skips the points within tolerance of a segment beside their nearest vertex;
+    # its verdict must be path_offsets_m(...) > tol for every point, whatever the path:
+    # dense or sparse vertices, repeated vertices (zero-length segments), points on,
+    # near and far from it, and points exactly at the tolerance from a vertex
+    from companion.replan.pace import PATH_TOL_M, off_path, path_offsets_m
+
+    rng = np.random.default_rng([2026_11_28, seed])
+    n = int(rng.integers(3, 120))
+    path = np.cumsum(rng.normal(0.0, rng.choice([0.05, 0.5, 3.0]), (n, 3)), axis=0)
+    path[rng.integers(1, n)] = path[rng.integers(0, n)]             # a jump back
+    path = np.insert(path, 1, path[1], axis=0)                       # a zero-length segment
+    k = int(rng.integers(1, 400))
+    base = path[rng.integers(0, len(path), k)]
+    q = base + rng.normal(0.0, rng.choice([0.05, 0.3, 2.0]), (k, 3))
+    u = rng.normal(size=(5, 3))
+    q = np.vstack([q, path[:5] + PATH_TOL_M * u / np.linalg.norm(u, axis=1)[:, None]])
+    want = path_offsets_m(q, path) > PATH_TOL_M
+    np.testing.assert_array_equal(off_path(q, path, PATH_TOL_M), want)
+    for tol in (0.0, 1e-3, 1.0):
+        np.testing.assert_array_equal(off_path(q, path, tol), path_offsets_m(q, path) > tol)

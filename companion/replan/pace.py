@@ -201,6 +201,38 @@ def path_offsets_m(points_enu_m: np.ndarray, path_enu_m: np.ndarray) -> np.ndarr
     return out
 
 
+def off_path(points_enu_m: np.ndarray, path_enu_m: np.ndarray, tol_m: float) -> np.ndarray:
+    """(M,) bool: ``path_offsets_m(points, path) > tol_m``, exactly, without measuring every
+    point against every segment: a point within ``tol_m`` of a segment that ends at its
+    nearest vertex is within ``tol_m`` of the path (its offset is the least over all
+    segments, each computed by the same formula, pair by pair); only the others are measured
+    against the whole path."""
+    q = np.asarray(points_enu_m, float).reshape(-1, 3)
+    a = np.asarray(path_enu_m, float).reshape(-1, 3)
+    if len(a) < 3 or len(q) == 0:
+        return path_offsets_m(q, a) > tol_m
+    from scipy.spatial import cKDTree
+
+    j = cKDTree(a).query(q)[1]
+    near = np.zeros(len(q), bool)
+    for seg in (np.clip(j - 1, 0, len(a) - 2), np.minimum(j, len(a) - 2)):
+        near |= _pair_distances(q, a[seg], a[seg + 1]) <= tol_m
+    out = np.zeros(len(q), bool)
+    rest = np.flatnonzero(~near)
+    if len(rest):
+        out[rest] = path_offsets_m(q[rest], a) > tol_m
+    return out
+
+
+def _pair_distances(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n,) distance of each point q[i] to the segment a[i]-b[i]: ``segment_distances``'s
+    formula, operation for operation, on pairs instead of all pairs."""
+    ab = b - a
+    L2 = np.maximum((ab * ab).sum(axis=1), 1e-18)
+    s = np.clip(((q - a) * ab).sum(axis=1) / L2, 0.0, 1.0)
+    return np.hypot.reduce(q - (a + s[:, None] * ab), axis=1)
+
+
 def kept_path(before, after, t_from_s: float, t_to_s: float | None, guard):
     """Pacing kept the candidate's path: every sample (every ``SAMPLE_DT_S``) of the paced
     trajectory ``after`` from ``t_from_s`` to ``t_to_s`` (None: its end) lies within
@@ -212,10 +244,10 @@ def kept_path(before, after, t_from_s: float, t_to_s: float | None, guard):
     tf = float(after.tf if t_to_s is None else min(t_to_s, after.tf))
     ta = np.append(np.arange(t0, tf, SAMPLE_DT_S), tf)
     p = np.asarray(after.sample(ta).p, float).reshape(-1, 3)
-    off = path_offsets_m(p, ref)
-    bad = off > PATH_TOL_M
+    bad = off_path(p, ref, PATH_TOL_M)
     if not bad.any():
         return None
     k = int(np.argmax(bad))
-    return guard.refusal("path", None, f"path: paced {off[k]:.2f} m off the candidate's path at t={ta[k]:.2f} s",
+    off_k = float(path_offsets_m(p[k:k + 1], ref)[0])
+    return guard.refusal("path", None, f"path: paced {off_k:.2f} m off the candidate's path at t={ta[k]:.2f} s",
                          float(ta[k]), p[k])

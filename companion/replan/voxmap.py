@@ -76,6 +76,11 @@ GROUP_M = 1.0
 #: the k-d tree's query costs ~50 us whatever its size, the guard's per-frame two points
 #: against a few hundred voxels ~10-40 us this way.
 SMALL_PAIRS = 512
+#: ... and so is a query of at most this many points while the tree is not built (the map
+#: changed since the last query that built it): building costs ~0.13 us a voxel (130 us for
+#: a thousand), brute force ~0.023 us a pair, so up to ~5 points brute force is cheaper
+#: whatever the map's size (a few points against 3000 voxels: 117 us against 700 us).
+FEW_POINTS = 4
 
 
 class ObstacleMap:
@@ -307,7 +312,7 @@ class ObstacleMap:
             return np.full(len(P), math.inf)
         h = 0.5 * self.voxel_m
         s = math.sqrt(3.0) * h
-        if not exact and n * len(P) <= SMALL_PAIRS:
+        if not exact and (n * len(P) <= SMALL_PAIRS or (self._tree is None and len(P) <= FEW_POINTS)):
             return _distance_small(P, self._centres, h, s)
         out = np.full(len(P), math.inf)
         todo = np.arange(len(P))

@@ -38,14 +38,49 @@ def points_distance(points_enu_m: np.ndarray, surface_pts_enu_m: np.ndarray, chu
     return cKDTree(q).query(p)[0]
 
 
+def added_rectangles(rr: np.ndarray, cc: np.ndarray, top: np.ndarray) -> tuple:
+    """The cells (rr[i], cc[i]) with tops ``top[i]`` (row-major order, as ``np.nonzero``
+    gives them) as (r0, r1, c0, c1, top) rectangles of whole cells with one top: runs
+    along a row, then runs of identical (c0, c1, top) on consecutive rows.
+
+    The distance to such a rectangle, computed as ``_AddedCells`` computes a cell's, is the
+    least of its cells' to the last bit: its x-gap ``max(c0 h - x, x - (c1 + 1) h, 0)`` is
+    the x-gap of its nearest column (0 inside one: neighbours share their edge's float; the
+    end column's own float outside), its y-gap likewise, its height gap is every cell's, and
+    the rounded sum of squares grows with each. So the minimum over the rectangles is the
+    minimum over the cells, bit for bit."""
+    runs = []                                 # [r, c0, c1, top] along rows
+    for r, c, t in zip(rr.tolist(), cc.tolist(), top.tolist()):
+        if runs and runs[-1][0] == r and runs[-1][2] == c - 1 and runs[-1][3] == t:
+            runs[-1][2] = c
+        else:
+            runs.append([r, c, c, t])
+    rects, open_ = [], {}                     # open_[(c0, c1, top)]: the rectangle last extended by that run
+    for r, c0, c1, t in runs:
+        key = (c0, c1, t)
+        i = open_.get(key)
+        if i is not None and rects[i][1] == r - 1:
+            rects[i][1] = r
+        else:
+            open_[key] = len(rects)
+            rects.append([r, r, c0, c1, t])
+    if not rects:
+        z = np.zeros(0, int)
+        return z, z, z, z, np.zeros(0)
+    a = np.array([q[:4] for q in rects], dtype=int)
+    return a[:, 0], a[:, 1], a[:, 2], a[:, 3], np.array([q[4] for q in rects], dtype=float)
+
+
 class _AddedCells:
     """Distance to the columns over the cells of ``known.added`` (from the ground up to
     ``known.added_top``; any height where it is +inf or the map has no tops),
-    recomputed when the replanner's map object changes (a re-route replaces it)."""
+    recomputed when the replanner's map object changes (a re-route replaces it). The
+    cells are taken as rectangles of one top (``added_rectangles``: the same numbers from
+    a fraction of the boxes)."""
 
     def __init__(self) -> None:
         self._known = None
-        self._sq = None          # (k, 4) cell squares in grid metres: x0, x1, y0, y1
+        self._sq = None          # (k, 4) rectangles in grid metres: x0, x1, y0, y1
         self._top = None         # (k,) their tops (m, map z)
         self._frame = None
 
@@ -56,9 +91,10 @@ class _AddedCells:
             rr, cc = np.nonzero(added) if added.any() else (np.zeros(0, int), np.zeros(0, int))
             g = known.grid
             h = float(g.resolution_m)
-            self._sq = np.stack([cc * h, (cc + 1) * h, rr * h, (rr + 1) * h], axis=1).astype(float)
             tops = getattr(known, "added_top", None)
-            self._top = np.full(len(rr), np.inf) if tops is None else np.asarray(tops, float)[rr, cc]
+            top = np.full(len(rr), np.inf) if tops is None else np.asarray(tops, float)[rr, cc]
+            r0, r1, c0, c1, self._top = added_rectangles(rr, cc, top)
+            self._sq = np.stack([c0 * h, (c1 + 1) * h, r0 * h, (r1 + 1) * h], axis=1).astype(float)
             self._frame = (float(g.origin_xy_m[0]), float(g.origin_xy_m[1]),
                            np.cos(g.origin_yaw_rad), np.sin(g.origin_yaw_rad))
         x = np.asarray(x, float)
