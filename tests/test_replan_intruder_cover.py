@@ -86,3 +86,89 @@ def test_terrain_rising_ahead_closes_the_view():
 def test_nothing_lower_fits_on_the_ground():
     v = low_allowed_speed(FORWARD, np.array([0.0]), (_beam(0.0, 10.0),), 1.0, KEEP, CONTROL_DELAY_S)
     assert v[0] == math.inf
+
+
+def _reference_low_allowed_speed(d_body, h, beams, accel, keep, delay, profile, band):
+    """The module's rule computed on every sample and every beam, whole arrays, no
+    filtering (the formulas of the module doc, as the first version computed them)."""
+    from companion.replan.coverage_check import allowed_speed
+    from companion.replan.intruder_cover import DEPTH_STEPS, far_distance, ground_hit
+
+    n = h.shape[0]
+    top = np.minimum(keep, np.maximum(h, 0.0))
+    out = np.full(n, np.inf)
+    per_beam = []
+    for beam in beams:
+        R = beam.rotation_flu
+        t_lo, t_hi = depression_interval(d_body @ R, R[2, :], beam.tan_half_h, beam.tan_half_v)
+        g = ground_tangent(R[2, :], beam.tan_half_h, beam.tan_half_v)
+        with np.errstate(divide="ignore"):
+            ground = np.where(g > 0.0, np.maximum(np.maximum(h, 0.0) / max(g, 1e-300) - band, 0.0), np.inf)
+        reach = np.minimum(beam.max_m, ground)
+        if profile is not None:
+            reach = np.minimum(reach, ground_hit(t_lo, t_hi, *profile))
+        per_beam.append((t_lo, t_hi, reach, beam.period_s + delay))
+    for k in range(DEPTH_STEPS):
+        d0, d1 = top * k / DEPTH_STEPS, top * (k + 1) / DEPTH_STEPS
+        need_c = np.sqrt(np.maximum(keep * keep - d0 * d0, 0.0))
+        best = np.zeros(n)
+        for t_lo, t_hi, reach, tau in per_beam:
+            best = np.maximum(best, allowed_speed(far_distance(d1, t_lo, t_hi, h, reach), accel, tau, need_c))
+        out = np.where(top > 0.0, np.minimum(out, best), out)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_filtered_and_chunked_rule_gives_the_whole_arrays_numbers(seed):
+    # low_allowed_speed skips the samples a beam's trace misses, and check_coverage feeds it
+    # the terrain a chunk of samples at a time: the numbers must be the whole computation's,
+    # bit for bit (a speed-up of the pre-flight gate, not a change of its verdicts)
+    from mavcore.mission.sim import default_rangefinders
+    from companion.replan.coverage_check import beam_from_config
+
+    rng = np.random.default_rng([2026_11_28, seed])
+    beams = tuple(beam_from_config(c) for c in default_rangefinders())
+    beams += (_beam(6.0, 16.0), _beam(0.0, 10.0, 12.0), _beam(-20.0, 8.0))
+    n = 700
+    yaw = rng.uniform(-math.pi, math.pi, n)
+    d = np.stack([np.cos(yaw), np.sin(yaw), np.zeros(n)], axis=1)
+    d[: n // 7] = [1.0, 0.0, 0.0]                        # straight ahead, the usual case
+    h = rng.choice([1.5, 0.3, 0.0, -0.2, 2.5], n) + rng.uniform(-0.05, 0.05, n)
+    s = np.arange(0.25, 20.0 + 0.125, 0.25)
+    slope = rng.uniform(-0.4, 0.4, n)[:, None]
+    drop = h[:, None] - slope * s[None, :] + rng.normal(0.0, 0.05, (n, len(s)))
+    drop[rng.random((n, len(s))) < 0.01] = -np.inf       # beyond the DEM
+    for profile in (None, (s, drop)):
+        want = _reference_low_allowed_speed(d, h, beams, 1.0, KEEP, CONTROL_DELAY_S, profile, 0.05)
+        got = low_allowed_speed(d, h, beams, 1.0, KEEP, CONTROL_DELAY_S, profile, 0.05)
+        np.testing.assert_array_equal(got, want)
+        assert np.isfinite(want).any() and (want < 3.0).any()     # the rule limits some samples
+
+
+def test_check_coverage_takes_the_terrain_in_chunks_with_the_same_numbers(monkeypatch):
+    # a callable terrain, fed TERRAIN_CHUNK samples at a time, against the whole profile
+    from companion.replan import coverage_check as cc
+    from mavcore.maps.grid import ElevationModel
+
+    xs = np.arange(0.0, 60.0, 0.5)
+    Z = np.broadcast_to(0.05 * xs[None, :], (len(xs), len(xs))).copy()     # rising 5 % to the east
+    dem = ElevationModel(Z, 0.0, 0.0, 0.5)
+    t = np.linspace(0.0, 30.0, 301)
+    p = np.stack([5.0 + 1.5 * t, 10.0 + 0.3 * np.sin(t), 1.5 + 0.05 * (5.0 + 1.5 * t)], axis=1)
+    v = np.gradient(p, t, axis=0)
+    from mavcore.mission.sim import default_rangefinders
+
+    beams = tuple(cc.beam_from_config(c) for c in default_rangefinders())
+    reach = max(b.max_m for b in beams)
+    whole = cc.terrain_profile(p, v, dem, reach, chunk=10 ** 9)
+    assert np.array_equal(cc.terrain_profile(p, v, dem, reach, chunk=7)[1][1], whole[1][1])
+    target = np.array([30.0, 1000.0, 1.5])
+    ref = cc.check_coverage(t, p, v, target, beams, 1.0, KEEP, None, whole, 0.05)
+    flat = cc.check_coverage(t, p, v, target, beams, 1.0, KEEP)
+    assert (ref.allowed_speed_m_s < flat.allowed_speed_m_s).any()       # the low rule limits some samples
+    monkeypatch.setattr(cc, "TERRAIN_CHUNK", 37)
+    got = cc.check_coverage(t, p, v, target, beams, 1.0, KEEP, None,
+                            lambda i0, i1: cc.terrain_profile(p[i0:i1], v[i0:i1], dem, reach), 0.05)
+    np.testing.assert_array_equal(got.allowed_speed_m_s, ref.allowed_speed_m_s)
+    np.testing.assert_array_equal(got.sensor_id, ref.sensor_id)
+    assert got.gaps == ref.gaps and got.time_scale == ref.time_scale

@@ -65,6 +65,8 @@ MIN_SPEED_M_S = 0.05
 CONTROL_DELAY_S = 0.1
 #: Samples at most (a day at SAMPLE_HZ is 864 000: bounded memory).
 MAX_SAMPLES = 1_000_000
+#: Samples whose terrain profile and low-obstacle speeds are computed at a time.
+TERRAIN_CHUNK = 4096
 #: Tolerance (on tangents) of the field-of-view test.
 _FOV_EPS = 1e-9
 
@@ -221,8 +223,9 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
         an interval is held to the smaller allowed speed of its two ends
         (the directions between two samples are those of the samples), so
         ``time_scale`` bounds the speed everywhere, not only at the samples.
-    terrain : ``terrain_profile``'s ``(h, (s, drop))``, optional
-        The terrain under and ahead of each sample. Given, obstacles lower
+    terrain : ``terrain_profile``'s ``(h, (s, drop))``, or ``f(i0, i1)`` giving it for the samples i0:i1, optional
+        The terrain under and ahead of each sample (taken ``TERRAIN_CHUNK`` samples at a
+        time: a callable keeps a long plan's profile, n x 80 points, out of memory). Given, obstacles lower
         than the centre must be seen in time too
         (``companion.replan.intruder_cover``; ``clearance_m`` is then the
         clearance sphere's radius): a sample's allowed speed is the smaller
@@ -261,8 +264,15 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
     if terrain is not None:
         from .intruder_cover import low_allowed_speed
 
-        low = low_allowed_speed(d, np.asarray(terrain[0], dtype=float).reshape(-1), beams, accel_m_s2,
-                                clearance_m, CONTROL_DELAY_S, terrain[1], ground_band_m)
+        low = np.empty(t.shape)
+        for k in range(0, t.size, TERRAIN_CHUNK):        # each sample on its own: bounded memory
+            if callable(terrain):
+                h_k, prof_k = terrain(k, k + TERRAIN_CHUNK)
+            else:
+                h_k, prof_k = terrain[0][k:k + TERRAIN_CHUNK], (terrain[1][0], terrain[1][1][k:k + TERRAIN_CHUNK])
+            low[k:k + TERRAIN_CHUNK] = low_allowed_speed(d[k:k + TERRAIN_CHUNK], np.asarray(h_k, dtype=float).reshape(-1),
+                                                         beams, accel_m_s2, clearance_m, CONTROL_DELAY_S,
+                                                         prof_k, ground_band_m)
         low_limited = moving & (low < allowed)
         allowed = np.minimum(allowed, low)
     allowed = np.where(moving, allowed, np.inf)
@@ -329,23 +339,26 @@ def beam_from_config(cfg) -> Beam:
                 math.tan(math.radians(0.5 * cfg.vfov_deg)), float(cfg.max_m), 1.0 / float(cfg.rate_hz))
 
 
-def terrain_profile(p_enu_m, v_enu_m_s, dem, reach_m: float, step_m: float = 0.25):
+def terrain_profile(p_enu_m, v_enu_m_s, dem, reach_m: float, step_m: float = 0.25, chunk: int = 2048):
     """The terrain ahead of each sample: ``(h, (s, drop))`` with ``h`` (n,) the centres'
     heights above the terrain under them, ``s`` (m,) the distances ahead (m) and
     ``drop`` (n, m) the centres' heights above the terrain that far along the
-    horizontal velocity (-inf beyond the DEM: nothing to hit)."""
+    horizontal velocity (-inf beyond the DEM: nothing to hit). Computed ``chunk``
+    samples at a time (each point on its own: the same numbers, and the look-up's
+    temporaries bounded: a whole 1 ha plan is 47 000 samples x 80 points)."""
     p = np.asarray(p_enu_m, dtype=float).reshape(-1, 3)
     v = np.asarray(v_enu_m_s, dtype=float).reshape(-1, 3)
     vh = np.hypot(v[:, 0], v[:, 1])
     u = np.where(vh[:, None] > 1e-9, v[:, :2] / np.maximum(vh, 1e-12)[:, None], 0.0)
     s = np.arange(step_m, reach_m + 0.5 * step_m, step_m)
-    x = p[:, 0:1] + s[None, :] * u[:, 0:1]
-    y = p[:, 1:2] + s[None, :] * u[:, 1:2]
-    ok = dem.covers(x, y)
-    g = np.full(x.shape, np.inf)
-    g[ok] = dem.height_at(x[ok], y[ok])
+    drop = np.empty((len(p), len(s)))
+    for k in range(0, len(p), chunk):
+        pk, uk = p[k:k + chunk], u[k:k + chunk]
+        x = pk[:, 0:1] + s[None, :] * uk[:, 0:1]
+        y = pk[:, 1:2] + s[None, :] * uk[:, 1:2]
+        drop[k:k + chunk] = pk[:, 2:3] - dem.height_or(x, y, np.inf)
     under = p[:, 2] - dem.height_at(p[:, 0], p[:, 1])
-    return under, (s, p[:, 2:3] - g)
+    return under, (s, drop)
 
 
 def mission_coverage(mission, trajectory, body_radius_m: float, dem=None) -> SensorCoverage:
@@ -371,6 +384,10 @@ def mission_coverage(mission, trajectory, body_radius_m: float, dem=None) -> Sen
         from mavcore.maps.field import load_mission_dem
 
         dem = load_mission_dem(mission)
-    terrain = terrain_profile(p, v, dem, max(b.max_m for b in beams))
+    reach = max(b.max_m for b in beams)
+
+    def terrain(i0: int, i1: int):
+        return terrain_profile(p[i0:i1], v[i0:i1], dem, reach)
+
     return check_coverage(t, p, v, target, beams, rp.accel_m_s2, rp.clearance_m + body_radius_m, vmax, terrain,
                           rp.known_tolerance_m)

@@ -115,6 +115,20 @@ def ground_hit(t_lo: np.ndarray, t_hi: np.ndarray, s_m: np.ndarray, drop_m: np.n
     return slant.min(axis=1)
 
 
+def ground_hits(t_lo: np.ndarray, t_hi: np.ndarray, tg: np.ndarray, slant: np.ndarray) -> np.ndarray:
+    """``ground_hit``'s numbers from the profile's depression tangents ``tg = drop / s``
+    and slant distances ``slant = hypot(s, drop)`` ((n, m) each, computed once for every
+    beam), for the samples whose trace is not empty (``t_lo <= t_hi``; inf elsewhere, as
+    ``ground_hit`` gives: no depression lies in an empty interval). A beam looks along
+    the direction of travel on a few of a plan's samples."""
+    out = np.full(len(t_lo), np.inf)
+    r = np.flatnonzero(t_lo <= t_hi)
+    if len(r):
+        inside = (tg[r] >= t_lo[r, None]) & (tg[r] <= t_hi[r, None])
+        out[r] = np.where(inside, slant[r], np.inf).min(axis=1)
+    return out
+
+
 def low_allowed_speed(d_body: np.ndarray, h_m: np.ndarray, beams, accel_m_s2: float, keep_m: float,
                       control_delay_s: float, profile=None, ground_band_m: float = 0.0) -> np.ndarray:
     """(n,) speeds (m/s) at which every obstacle lower than the centre along the
@@ -132,25 +146,35 @@ def low_allowed_speed(d_body: np.ndarray, h_m: np.ndarray, beams, accel_m_s2: fl
     top = np.minimum(keep_m, np.maximum(h, 0.0))
     out = np.full(n, np.inf)
     per_beam = []
+    if profile is not None:
+        s_m, drop_m = profile
+        tg = drop_m / s_m[None, :]                      # ground_hit's, once for every beam
+        slant = np.hypot(s_m[None, :], drop_m)
     for beam in beams:
         R = beam.rotation_flu
         u_s = d_body @ R
         z_s = R[2, :]                                   # R^T e_z
         t_lo, t_hi = depression_interval(u_s, z_s, beam.tan_half_h, beam.tan_half_v)
+        # only the samples whose trace is not empty: elsewhere ``far_distance`` is 0, the
+        # beam allows 0 m/s there, and no maximum below keeps a 0 (the same numbers)
+        r = np.flatnonzero(t_lo <= t_hi)
+        if not len(r):
+            continue
+        t_lo, t_hi, h_r = t_lo[r], t_hi[r], h[r]
         g = ground_tangent(z_s, beam.tan_half_h, beam.tan_half_v)
         with np.errstate(divide="ignore"):
-            ground = np.where(g > 0.0, np.maximum(np.maximum(h, 0.0) / max(g, 1e-300) - ground_band_m, 0.0),
+            ground = np.where(g > 0.0, np.maximum(np.maximum(h_r, 0.0) / max(g, 1e-300) - ground_band_m, 0.0),
                               np.inf)
         reach = np.minimum(beam.max_m, ground)
         if profile is not None:
-            reach = np.minimum(reach, ground_hit(t_lo, t_hi, *profile))
-        per_beam.append((t_lo, t_hi, reach, beam.period_s + control_delay_s))
+            reach = np.minimum(reach, ground_hits(t_lo, t_hi, tg[r], slant[r]))
+        per_beam.append((r, t_lo, t_hi, h_r, reach, beam.period_s + control_delay_s))
     for k in range(DEPTH_STEPS):
         d0, d1 = top * k / DEPTH_STEPS, top * (k + 1) / DEPTH_STEPS
         need_c = np.sqrt(np.maximum(keep_m * keep_m - d0 * d0, 0.0))
         best = np.zeros(n)
-        for t_lo, t_hi, reach, tau in per_beam:
-            far = far_distance(d1, t_lo, t_hi, h, reach)
-            best = np.maximum(best, allowed_speed(far, accel_m_s2, tau, need_c))
+        for r, t_lo, t_hi, h_r, reach, tau in per_beam:
+            far = far_distance(d1[r], t_lo, t_hi, h_r, reach)
+            best[r] = np.maximum(best[r], allowed_speed(far, accel_m_s2, tau, need_c[r]))
         out = np.where(top > 0.0, np.minimum(out, best), out)
     return out

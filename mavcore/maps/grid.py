@@ -202,6 +202,12 @@ class ElevationModel:
         """
         return self._interp(x, y)[1]
 
+    def height_or(self, x, y, fill: float) -> np.ndarray:
+        """``height_at`` where ``covers``, ``fill`` elsewhere, from one interpolation (each
+        point on its own: ``height_at(x[ok], y[ok])``'s numbers, bit for bit)."""
+        z, ok = self._interp(x, y)
+        return np.where(ok, z, fill)
+
     def height_at(self, x, y) -> np.ndarray:
         """Terrain height (m, map z) at ENU map-frame points, bilinear between cell centres.
 
