@@ -223,7 +223,7 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
         an interval is held to the smaller allowed speed of its two ends
         (the directions between two samples are those of the samples), so
         ``time_scale`` bounds the speed everywhere, not only at the samples.
-    terrain : ``terrain_profile``'s ``(h, (s, drop))``, or ``f(i0, i1)`` giving it for the samples i0:i1, optional
+    terrain : ``terrain_profile``'s ``(h, (s, drop))``, or ``f(i0, i1)`` giving it for samples i0:i1, optional
         The terrain under and ahead of each sample (taken ``TERRAIN_CHUNK`` samples at a
         time: a callable keeps a long plan's profile, n x 80 points, out of memory). Given, obstacles lower
         than the centre must be seen in time too
@@ -270,9 +270,9 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
                 h_k, prof_k = terrain(k, k + TERRAIN_CHUNK)
             else:
                 h_k, prof_k = terrain[0][k:k + TERRAIN_CHUNK], (terrain[1][0], terrain[1][1][k:k + TERRAIN_CHUNK])
-            low[k:k + TERRAIN_CHUNK] = low_allowed_speed(d[k:k + TERRAIN_CHUNK], np.asarray(h_k, dtype=float).reshape(-1),
-                                                         beams, accel_m_s2, clearance_m, CONTROL_DELAY_S,
-                                                         prof_k, ground_band_m)
+            h_k = np.asarray(h_k, dtype=float).reshape(-1)
+            low[k:k + TERRAIN_CHUNK] = low_allowed_speed(d[k:k + TERRAIN_CHUNK], h_k, beams, accel_m_s2, clearance_m,
+                                                         CONTROL_DELAY_S, prof_k, ground_band_m)
         low_limited = moving & (low < allowed)
         allowed = np.minimum(allowed, low)
     allowed = np.where(moving, allowed, np.inf)
