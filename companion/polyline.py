@@ -33,3 +33,12 @@ def segment_distances(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
     s = np.clip(s, 0.0, 1.0)
     closest = a[None] + s[..., None] * ab[None]
     return np.hypot.reduce(q[:, None, :] - closest, axis=2)
+
+
+def pair_segment_distances(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n,) distance of each point q[i] to the segment a[i]-b[i]: ``segment_distances``'s
+    formula, operation for operation (the same numbers), on pairs instead of all pairs."""
+    ab = b - a
+    L2 = np.maximum((ab * ab).sum(axis=1), 1e-18)
+    s = np.clip(((q - a) * ab).sum(axis=1) / L2, 0.0, 1.0)
+    return np.hypot.reduce(q - (a + s[:, None] * ab), axis=1)

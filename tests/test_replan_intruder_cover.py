@@ -92,7 +92,7 @@ def _reference_low_allowed_speed(d_body, h, beams, accel, keep, delay, profile, 
     """The module's rule computed on every sample and every beam, whole arrays, no
     filtering (the formulas of the module doc, as the first version computed them)."""
     from companion.replan.coverage_check import allowed_speed
-    from companion.replan.intruder_cover import DEPTH_STEPS, far_distance, ground_hit
+    from companion.replan.intruder_cover import DEPTH_STEPS, far_distance
 
     n = h.shape[0]
     top = np.minimum(keep, np.maximum(h, 0.0))
@@ -106,7 +106,10 @@ def _reference_low_allowed_speed(d_body, h, beams, accel, keep, delay, profile, 
             ground = np.where(g > 0.0, np.maximum(np.maximum(h, 0.0) / max(g, 1e-300) - band, 0.0), np.inf)
         reach = np.minimum(beam.max_m, ground)
         if profile is not None:
-            reach = np.minimum(reach, ground_hit(t_lo, t_hi, *profile))
+            s_m, drop_m = profile                            # the nearest terrain point in the trace
+            tg = drop_m / s_m[None, :]
+            inside = (tg >= t_lo[:, None]) & (tg <= t_hi[:, None])
+            reach = np.minimum(reach, np.where(inside, np.hypot(s_m[None, :], drop_m), np.inf).min(axis=1))
         per_beam.append((t_lo, t_hi, reach, beam.period_s + delay))
     for k in range(DEPTH_STEPS):
         d0, d1 = top * k / DEPTH_STEPS, top * (k + 1) / DEPTH_STEPS
@@ -160,8 +163,10 @@ def test_check_coverage_takes_the_terrain_in_chunks_with_the_same_numbers(monkey
 
     beams = tuple(cc.beam_from_config(c) for c in default_rangefinders())
     reach = max(b.max_m for b in beams)
-    whole = cc.terrain_profile(p, v, dem, reach, chunk=10 ** 9)
-    assert np.array_equal(cc.terrain_profile(p, v, dem, reach, chunk=7)[1][1], whole[1][1])
+    whole = cc.terrain_profile(p, v, dem, reach)
+    parts = [cc.terrain_profile(p[k:k + 7], v[k:k + 7], dem, reach) for k in range(0, len(p), 7)]
+    assert np.array_equal(np.vstack([q[1][1] for q in parts]), whole[1][1])
+    assert np.array_equal(np.concatenate([q[0] for q in parts]), whole[0])
     target = np.array([30.0, 1000.0, 1.5])
     ref = cc.check_coverage(t, p, v, target, beams, 1.0, KEEP, None, whole, 0.05)
     flat = cc.check_coverage(t, p, v, target, beams, 1.0, KEEP)

@@ -264,12 +264,14 @@ def check_coverage(t_s, p_enu_m, v_enu_m_s, target_enu_m, beams: tuple[Beam, ...
     if terrain is not None:
         from .intruder_cover import low_allowed_speed
 
+        if not callable(terrain):
+            h_all, (s_all, drop_all) = terrain
+
+            def terrain(i0: int, i1: int):
+                return h_all[i0:i1], (s_all, drop_all[i0:i1])
         low = np.empty(t.shape)
         for k in range(0, t.size, TERRAIN_CHUNK):        # each sample on its own: bounded memory
-            if callable(terrain):
-                h_k, prof_k = terrain(k, k + TERRAIN_CHUNK)
-            else:
-                h_k, prof_k = terrain[0][k:k + TERRAIN_CHUNK], (terrain[1][0], terrain[1][1][k:k + TERRAIN_CHUNK])
+            h_k, prof_k = terrain(k, k + TERRAIN_CHUNK)
             h_k = np.asarray(h_k, dtype=float).reshape(-1)
             low[k:k + TERRAIN_CHUNK] = low_allowed_speed(d[k:k + TERRAIN_CHUNK], h_k, beams, accel_m_s2, clearance_m,
                                                          CONTROL_DELAY_S, prof_k, ground_band_m)
@@ -339,26 +341,21 @@ def beam_from_config(cfg) -> Beam:
                 math.tan(math.radians(0.5 * cfg.vfov_deg)), float(cfg.max_m), 1.0 / float(cfg.rate_hz))
 
 
-def terrain_profile(p_enu_m, v_enu_m_s, dem, reach_m: float, step_m: float = 0.25, chunk: int = 2048):
+def terrain_profile(p_enu_m, v_enu_m_s, dem, reach_m: float, step_m: float = 0.25):
     """The terrain ahead of each sample: ``(h, (s, drop))`` with ``h`` (n,) the centres'
     heights above the terrain under them, ``s`` (m,) the distances ahead (m) and
     ``drop`` (n, m) the centres' heights above the terrain that far along the
-    horizontal velocity (-inf beyond the DEM: nothing to hit). Computed ``chunk``
-    samples at a time (each point on its own: the same numbers, and the look-up's
-    temporaries bounded: a whole 1 ha plan is 47 000 samples x 80 points)."""
+    horizontal velocity (-inf beyond the DEM: nothing to hit). Each sample on its own:
+    ``check_coverage`` asks for ``TERRAIN_CHUNK`` of them at a time (bounded memory)."""
     p = np.asarray(p_enu_m, dtype=float).reshape(-1, 3)
     v = np.asarray(v_enu_m_s, dtype=float).reshape(-1, 3)
     vh = np.hypot(v[:, 0], v[:, 1])
     u = np.where(vh[:, None] > 1e-9, v[:, :2] / np.maximum(vh, 1e-12)[:, None], 0.0)
     s = np.arange(step_m, reach_m + 0.5 * step_m, step_m)
-    drop = np.empty((len(p), len(s)))
-    for k in range(0, len(p), chunk):
-        pk, uk = p[k:k + chunk], u[k:k + chunk]
-        x = pk[:, 0:1] + s[None, :] * uk[:, 0:1]
-        y = pk[:, 1:2] + s[None, :] * uk[:, 1:2]
-        drop[k:k + chunk] = pk[:, 2:3] - dem.height_or(x, y, np.inf)
+    x = p[:, 0:1] + s[None, :] * u[:, 0:1]
+    y = p[:, 1:2] + s[None, :] * u[:, 1:2]
     under = p[:, 2] - dem.height_at(p[:, 0], p[:, 1])
-    return under, (s, drop)
+    return under, (s, p[:, 2:3] - dem.height_or(x, y, np.inf))
 
 
 def mission_coverage(mission, trajectory, body_radius_m: float, dem=None) -> SensorCoverage:

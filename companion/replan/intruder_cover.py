@@ -105,28 +105,13 @@ def far_distance(delta, t_lo: np.ndarray, t_hi: np.ndarray, h: np.ndarray, reach
     return np.where(ok, far, 0.0)
 
 
-def ground_hit(t_lo: np.ndarray, t_hi: np.ndarray, s_m: np.ndarray, drop_m: np.ndarray) -> np.ndarray:
+def ground_hit(t_lo: np.ndarray, t_hi: np.ndarray, tg: np.ndarray, slant: np.ndarray) -> np.ndarray:
     """(n,) slant distance (m) to the nearest terrain point of the profile in the
-    pyramid's trace (inf: none): ``drop_m[i, j]`` is the centre's height above the
-    terrain ``s_m[j]`` ahead (``s_m`` increasing, > 0)."""
-    tg = drop_m / s_m[None, :]
+    pyramid's trace (inf: none), from the profile's depression tangents ``tg = drop / s``
+    and slant distances ``slant = hypot(s, drop)`` ((n, m) each: ``drop[i, j]`` is the
+    centre's height above the terrain ``s[j]`` ahead; computed once for every beam)."""
     inside = (tg >= t_lo[:, None]) & (tg <= t_hi[:, None])
-    slant = np.where(inside, np.hypot(s_m[None, :], drop_m), np.inf)
-    return slant.min(axis=1)
-
-
-def ground_hits(t_lo: np.ndarray, t_hi: np.ndarray, tg: np.ndarray, slant: np.ndarray) -> np.ndarray:
-    """``ground_hit``'s numbers from the profile's depression tangents ``tg = drop / s``
-    and slant distances ``slant = hypot(s, drop)`` ((n, m) each, computed once for every
-    beam), for the samples whose trace is not empty (``t_lo <= t_hi``; inf elsewhere, as
-    ``ground_hit`` gives: no depression lies in an empty interval). A beam looks along
-    the direction of travel on a few of a plan's samples."""
-    out = np.full(len(t_lo), np.inf)
-    r = np.flatnonzero(t_lo <= t_hi)
-    if len(r):
-        inside = (tg[r] >= t_lo[r, None]) & (tg[r] <= t_hi[r, None])
-        out[r] = np.where(inside, slant[r], np.inf).min(axis=1)
-    return out
+    return np.where(inside, slant, np.inf).min(axis=1)
 
 
 def low_allowed_speed(d_body: np.ndarray, h_m: np.ndarray, beams, accel_m_s2: float, keep_m: float,
@@ -148,7 +133,7 @@ def low_allowed_speed(d_body: np.ndarray, h_m: np.ndarray, beams, accel_m_s2: fl
     per_beam = []
     if profile is not None:
         s_m, drop_m = profile
-        tg = drop_m / s_m[None, :]                      # ground_hit's, once for every beam
+        tg = drop_m / s_m[None, :]                      # ground_hit's inputs, once for every beam
         slant = np.hypot(s_m[None, :], drop_m)
     for beam in beams:
         R = beam.rotation_flu
@@ -167,7 +152,7 @@ def low_allowed_speed(d_body: np.ndarray, h_m: np.ndarray, beams, accel_m_s2: fl
                               np.inf)
         reach = np.minimum(beam.max_m, ground)
         if profile is not None:
-            reach = np.minimum(reach, ground_hits(t_lo, t_hi, tg[r], slant[r]))
+            reach = np.minimum(reach, ground_hit(t_lo, t_hi, tg[r], slant[r]))
         per_beam.append((r, t_lo, t_hi, h_r, reach, beam.period_s + control_delay_s))
     for k in range(DEPTH_STEPS):
         d0, d1 = top * k / DEPTH_STEPS, top * (k + 1) / DEPTH_STEPS

@@ -52,7 +52,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..polyline import segment_distances
+from ..polyline import pair_segment_distances, segment_distances
 from ..trajectory import generate_trajectory
 
 #: Retime to this fraction of the speed the guard allows (the LQR tracks its way-points softly).
@@ -216,21 +216,12 @@ def off_path(points_enu_m: np.ndarray, path_enu_m: np.ndarray, tol_m: float) -> 
     j = cKDTree(a).query(q)[1]
     near = np.zeros(len(q), bool)
     for seg in (np.clip(j - 1, 0, len(a) - 2), np.minimum(j, len(a) - 2)):
-        near |= _pair_distances(q, a[seg], a[seg + 1]) <= tol_m
+        near |= pair_segment_distances(q, a[seg], a[seg + 1]) <= tol_m
     out = np.zeros(len(q), bool)
     rest = np.flatnonzero(~near)
     if len(rest):
         out[rest] = path_offsets_m(q[rest], a) > tol_m
     return out
-
-
-def _pair_distances(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(n,) distance of each point q[i] to the segment a[i]-b[i]: ``segment_distances``'s
-    formula, operation for operation, on pairs instead of all pairs."""
-    ab = b - a
-    L2 = np.maximum((ab * ab).sum(axis=1), 1e-18)
-    s = np.clip(((q - a) * ab).sum(axis=1) / L2, 0.0, 1.0)
-    return np.hypot.reduce(q - (a + s[:, None] * ab), axis=1)
 
 
 def kept_path(before, after, t_from_s: float, t_to_s: float | None, guard):
