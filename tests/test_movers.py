@@ -392,6 +392,26 @@ def test_a_walker_crossing_the_beam_counts_only_while_the_vehicle_is_still():
     assert post.approach_m_s(0.95) == 0.0
 
 
+def _scenario_replanning(tmp_path, text: str) -> dict:
+    """report.json's ``replanning`` of a campaign scenario file (``text``) flown by ``demo`` in
+    process; asserts no crash, the clearance measured from SITL truth, and a stop that watched
+    the mover before anything else."""
+    import json
+
+    from companion.cli import main
+
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(text)
+    out = tmp_path / "out"
+    main(["demo", "--scenario", str(scenario), "--transport", "inproc", "--out", str(out), "--no-plots", "--quiet"])
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["crashed"] is False and rep["crash"] is None
+    rp = rep["replanning"]
+    assert rp["clearance_source"] == "sim_truth"
+    assert any(e["action"] == "stop" and "whether it moves" in e["detail"] for e in rp["event_list"])
+    return rp
+
+
 def test_a_walker_crossing_straight_at_a_stopped_vehicle_is_given_way_along_the_corridor(tmp_path):
     """Fresh seed 20261151 of campaign obstacles-under, flight 3 (tilted-hexagon): a worker
     stands 2.9 m from the vehicle for 12 s, then walks straight at it across the corridor
@@ -403,24 +423,14 @@ def test_a_walker_crossing_straight_at_a_stopped_vehicle_is_given_way_along_the_
     true clearance. At the normal limits (1 m/s^2, 2 m/s^3; the emergency limits set to them,
     the mutation) the 0.74 m the two radii need is mostly not won in the 1.6 s the walker
     takes: 0.20 m."""
-    import json
-
-    from companion.cli import main
-
-    scenario = tmp_path / "0003.yaml"
-    scenario.write_text(
+    rp = _scenario_replanning(
+        tmp_path,
         "campaign: obstacles-under\nscenario: 3\nmission: tilted-hexagon\nseed: 1472298831\ncut_s: 45.0\n"
         "control: companion\noverrides:\n  sim:\n    obstacles:\n"
         "    - {type: box, x: 6.34, y: 7.884, height: 0.883, size_x: 0.875, size_y: 0.315, yaw_deg: 70.497}\n"
         "    movers:\n    - type: walker\n      path:\n      - [12.922, 15.569]\n      - [15.8, 10.304]\n"
         "      speed_m_s: 1.406\n      loop: false\n      start_s: 33.101\n  replan: {give_way: true}\n")
-    out = tmp_path / "out"
-    main(["demo", "--scenario", str(scenario), "--transport", "inproc", "--out", str(out), "--no-plots", "--quiet"])
-    rep = json.loads((out / "report.json").read_text())
-    assert rep["crashed"] is False and rep["crash"] is None
-    rp = rep["replanning"]
-    assert rp["clearance_source"] == "sim_truth" and rp["min_clearance_m"] > 0.3
-    assert any(e["action"] == "stop" and "whether it moves" in e["detail"] for e in rp["event_list"])
+    assert rp["min_clearance_m"] > 0.3
     assert any(e["detail"].endswith("cannot give way to a mover in time") for e in rp["event_list"])
 
 
@@ -495,3 +505,30 @@ def test_in_flight_two_beams_on_one_still_object_are_no_mover():
     # at rest every beam's return is compared (a crossing walker passes from beam to beam):
     # the same returns there pair across the beams, which is what in flight no longer does
     assert at_rest.approach_m_s(1.15) > 0.8
+
+
+def test_a_walker_coming_up_behind_a_slow_vehicle_is_given_way_at_the_escape_speed(tmp_path):
+    """Campaign obstacles-mix (seed 20261126), scenario 84 (tilted-hexagon, the realistic sensor
+    profile): after a rejoin the vehicle moves at 0.1 m/s when a worker walks up at 0.96 m/s
+    from behind it, across the corridor. Two rules broke there:
+
+    - the avoidance passed over points behind the vehicle, so the measured approach (1.0 m/s
+      from 36.0 s) started nothing until the walker was 1.1 m away: 0.26 m of true clearance.
+      Behind is safe only in a still world (``Replanner._threat``);
+    - the give-way then backed away at the governor's deficit (w - v_stop(room)), which is zero
+      where it starts and grows as the walker closes: tracked with lag, 0.39 m. Once the mover
+      is inside the stopping distance of its closing speed the vehicle backs away at the whole
+      give-way speed (w + ``closing.OUTPACE_M_S``) while the approach is measured.
+
+    With both, the configured clearance (0.5 m, from the walker's true position) holds."""
+    from mavcore.mission.replan import ReplanConfig
+
+    rp = _scenario_replanning(
+        tmp_path,
+        "campaign: obstacles-mix\nscenario: 84\nmission: tilted-hexagon\nseed: 494333624\ncut_s: 45.0\n"
+        "control: companion\noverrides:\n  sim:\n    obstacles:\n"
+        "    - {type: cylinder, x: 12.379, y: 8.603, height: 0.947, radius: 0.092}\n"
+        "    movers:\n    - type: walker\n      path:\n      - [12.332, 15.269]\n      - [15.19, 9.994]\n"
+        "      speed_m_s: 0.955\n      loop: false\n      start_s: 35.819\n"
+        "    sensor_profile: icm42688p-bmm150-zedf9p\n  replan: {give_way: true}\n")
+    assert rp["min_clearance_m"] >= ReplanConfig.clearance_m

@@ -882,3 +882,31 @@ def test_a_rejoin_is_admitted_only_where_follow_would_not_stop_again_at_once(fie
     assert rp._trigger_m(1.0) > 2.0
     assert rp._retriggers(field.plan, t_short)
     assert not rp._retriggers(field.plan, t_past)
+
+
+def test_a_point_behind_is_a_threat_only_while_a_mover_approaches(field):
+    """``_threat`` passes over what is behind the vehicle: a still obstacle behind stays
+    behind. A measured approach (``closing``) is not located, and a walker closes from any
+    side: mix flight 84 (campaigns/obstacles-mix.yaml) came up behind a vehicle slowed to
+    0.1 m/s, ignored as behind until 1.1 m away (0.26 m of true clearance). So while an
+    approach is measured, a point behind within the trigger range is a threat."""
+    rp = Replanner(replace(ReplanConfig(), memory_s=1e3), field.known, field.plan)
+    rp.start(0.0)
+    p, v = (8.0, CORRIDOR_Y, 1.5), (1.0, 0.0, 0.0)
+    behind = (6.0, CORRIDOR_Y, 1.5)                    # 2 m behind, in the same corridor
+    rp.memory.add(behind)
+    rp._t_s = 0.0
+    assert rp._trigger_m(1.0) > 2.0                    # within range: only "behind" spares it
+    assert rp._threat(p, v, (1.0, 0.0)) is None
+    ahead = rp._threat((4.0, CORRIDOR_Y, 1.5), v, (1.0, 0.0))
+    assert ahead == pytest.approx(2.0, abs=0.1)        # the same point ahead: a threat (voxel centre)
+    # a walker coming up the corridor from behind at 1 m/s, on a level beam pointing back (-x)
+    axis = (-1.0, 0.0, 0.0)
+    for k in range(12):
+        rp.closing.on_hit(0.05 * k, 0, (5.0 + 0.05 * k, CORRIDOR_Y, 1.5), axis)
+    rp._t_s = 0.55
+    assert rp.closing.approach_m_s(0.55) == pytest.approx(1.0, abs=0.05)
+    assert rp._threat(p, v, (1.0, 0.0)) == pytest.approx(2.0, abs=0.1)
+    # the approach lapses (``closing.HOLD_S`` after the last): behind is safe again
+    rp._t_s = 0.55 + 1.1
+    assert rp._threat(p, v, (1.0, 0.0)) is None

@@ -588,6 +588,7 @@ class Replanner:
         self._max_lat = 0.0
         #: The side (+1 / -1 along the corridor) a stop gives way to a crossing mover (``_give_way``).
         self._give_way_sign: float | None = None
+        self._fleeing = False                     # a stop backs away from a mover at full speed
         self._max_agl: float | None = None
         self._min_range: float | None = None
         self.n_readings = self.n_unknown = self.n_ignored = 0
@@ -944,6 +945,8 @@ class Replanner:
         """Distance to the nearest remembered point within the trigger range (plus
         ``extra_m``) that is not behind (along the horizontal velocity, or ``leg_u``
         when hovering, at least -(clearance + body + ``extra_m``)); None if none.
+        Behind counts as safe only in a still world: while a mover's approach is
+        measured (``closing``), every point within the range is a threat.
         The same test starts an avoidance and (with ``REJOIN_HYSTERESIS_M``, and
         the leg ``follow`` will use) allows the rejoin, so the two cannot
         alternate. A point behind a row (the straight line to it crosses an
@@ -965,8 +968,12 @@ class Replanner:
             u = np.array([v[0] / vh, v[1] / vh])
         else:
             u = leg_u() if callable(leg_u) else leg_u
-        along = rel[:, :2] @ u
-        ok = (dist <= reach) & (along >= -self._keep_m - extra_m)
+        ok = dist <= reach
+        if self.closing.approach_m_s(getattr(self, "_t_s", None)) <= 0.0:
+            # a still world: what is behind stays behind. A measured approach is not
+            # located, and a mover closes from any side (mix flight 84: a walker came up
+            # behind a vehicle slowed to 0.1 m/s, ignored as behind until 1.1 m away)
+            ok &= rel[:, :2] @ u >= -self._keep_m - extra_m
         if ok.any():
             idx = np.flatnonzero(ok)
             ok[idx[self._behind_row(p, pts[idx])]] = False
@@ -1383,11 +1390,22 @@ class Replanner:
         """Velocity (ENU, m/s) of a stop: zero, or backing away (level) from an obstacle
         that comes closer than the vehicle could stop for (``companion.replan.closing``)."""
         if not len(pts) or self.closing.approach_m_s(getattr(self, "_t_s", None)) <= 0.0:
+            self._fleeing = False
             return np.zeros(3)
+        cap = give_way_speed_m_s(self.speed_m_s, self.closing.approach_m_s(getattr(self, "_t_s", None)))
         v = self._govern(P, np.zeros(3), pts, np.linalg.norm(pts - P, axis=1))
         u = self._leg_frame(self._avoid_leg)[2]            # along the corridor only: not into a row
         along = float(v[:2] @ u[:2])
         full = math.hypot(v[0], v[1])
+        if full > 0.0 or self._fleeing:
+            # once the mover is inside the stopping distance of its closing speed, the vehicle
+            # backs away at the whole give-way speed while the approach is measured: the
+            # governor's deficit alone (w - v_stop(room)) starts from zero there and a vehicle
+            # that tracks it with lag let a walker close to 0.39 m (mix flight 84)
+            self._fleeing = True
+            lean = along if abs(along) >= CROSSING_FRACTION * full else 0.0     # 0: crossing, or no push
+            full = cap
+            along = math.copysign(full, lean) if lean != 0.0 else 0.0
         if abs(along) < CROSSING_FRACTION * full:
             # a mover coming across the corridor: backing along it gains no distance now, but
             # it takes the vehicle out of the mover's path (a walker crossing straight at a
@@ -1402,7 +1420,6 @@ class Replanner:
             self._give_way_sign = math.copysign(1.0, along)
         v = along * np.array([u[0], u[1], 0.0])
         h = math.hypot(v[0], v[1])
-        cap = give_way_speed_m_s(self.speed_m_s, self.closing.approach_m_s(getattr(self, "_t_s", None)))
         v = v if h <= cap else v * (cap / h)
         v = self._govern_rows(P, v)
         # backing away from a mover never closes on anything faster than the stopping law
@@ -1419,6 +1436,7 @@ class Replanner:
         self.mode = "stop"
         self._stop_then = then
         self._give_way_sign = None
+        self._fleeing = False
         pts = self._points()
         P = np.array(self.shaper.p)
         self._event(events, "stop", self._nearest(np.linalg.norm(pts - P, axis=1)), detail)
