@@ -910,3 +910,39 @@ def test_a_point_behind_is_a_threat_only_while_a_mover_approaches(field):
     # the approach lapses (``closing.HOLD_S`` after the last): behind is safe again
     rp._t_s = 0.55 + 1.1
     assert rp._threat(p, v, (1.0, 0.0)) is None
+
+
+def test_giving_way_keeps_the_guards_speed_law_toward_what_a_reroute_added(field):
+    """A stop gives way to a mover at the whole give-way speed (w + ``closing.OUTPACE_M_S``),
+    bounded by the rows and by the still-obstacle law over the replanner's points. The
+    cells a re-route added to the known map are not among those points (the avoidance does
+    not react to what the new plan goes round), but the guard judges them: a give-way on a
+    (false) 2.1 m/s mover closed on such an obstacle at 1.48 m/s where 0.95 m/s was allowed,
+    and the gate ended the flight (campaigns/obstacles-mix.yaml, flight 0). The give-way's
+    speed along its direction is at most the guard's own ``speed_limits`` there."""
+    from companion.safety import Guard, GuardConfig, SafetyScene, known_obstacle_distance
+    from companion.replan.closing import OUTPACE_M_S
+
+    cfg = ReplanConfig(body_radius_m=0.442, memory_s=1e3)
+    rp = Replanner(cfg, field.known, field.plan)
+    rp.guard = Guard(GuardConfig(0.442, max(0.0, cfg.floor_agl_m - 0.442), 0.5, cfg.clearance_m, cfg.accel_m_s2),
+                     SafetyScene.from_known_map(field.known), known_obstacle_distance(rp.memory, lambda: rp.known))
+    P = np.array([8.0, CORRIDOR_Y, 1.5])
+    rp.start(0.0)
+    rp._avoid_leg = 0                                        # the first corridor, along +x
+    # a re-route went round a post 2.4 m behind: its cells are the map's now, not the points'
+    rp.known = field.known.with_obstacle(np.array([[5.6, CORRIDOR_Y]]), tops_z_m=np.array([2.0]))
+    behind = -np.array([1.0, 0.0, 0.0])
+    lim = float(rp.guard.speed_limits(P, behind)[0])
+    # a walker 1.4 m ahead coming down a level beam at 1 m/s
+    for k in range(12):
+        rp.closing.on_hit(0.05 * k, 0, (10.0 - 0.05 * k, CORRIDOR_Y, 1.5), (1.0, 0.0, 0.0))
+    rp._t_s = 0.55
+    w = rp.closing.approach_m_s(0.55)
+    pts = np.array([[9.4, CORRIDOR_Y, 1.5]])
+    assert len(rp._points()) == 0 or not np.any(np.abs(rp._points()[:, 0] - 5.6) < 0.3)   # not a point
+    assert 0.0 < lim < w + OUTPACE_M_S                       # the law binds below the give-way speed
+    v = rp._give_way(P, pts)
+    assert v @ behind > 0.0 and abs(v[1]) < 1e-9             # backing away, along the corridor
+    assert float(np.linalg.norm(v)) <= lim + 1e-9
+    assert float(np.linalg.norm(v)) == pytest.approx(lim, rel=1e-6)    # and no slower than it allows

@@ -1425,7 +1425,17 @@ class Replanner:
         # backing away from a mover never closes on anything faster than the stopping law
         # allows a still obstacle (the guard's rule): a give-way toward a post behind at
         # 0.70 m/s where 0.57 m/s was allowed ended a flight (obstacles-wide scenario 1)
-        return self._govern(P, v, pts, np.linalg.norm(pts - P, axis=1), scale_only=True, movers=False)
+        v = self._govern(P, v, pts, np.linalg.norm(pts - P, axis=1), scale_only=True, movers=False)
+        # ... nor on what the guard knows beyond these points (the cells a re-route added, the
+        # terrain): the guard's own speed law, along the command (a give-way at the whole
+        # give-way speed, on a false 2.1 m/s mover, closed on a re-routed obstacle at 1.48 m/s
+        # where 0.95 m/s was allowed and the gate refused the sample: mix flight 0)
+        h = math.sqrt(float(v @ v))
+        if self.guard is not None and h > 1e-9:
+            lim = float(self.guard.speed_limits(P, v / h)[0])
+            if h > lim:
+                v = v * (lim / h)
+        return v
 
     def _enter_stop(self, tau: float, events: list, then: str, detail: str) -> RefSample:
         """Brake to rest (the ``stop`` event says ``detail``), then ``then``: ``look`` (give
