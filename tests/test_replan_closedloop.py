@@ -946,3 +946,30 @@ def test_giving_way_keeps_the_guards_speed_law_toward_what_a_reroute_added(field
     assert v @ behind > 0.0 and abs(v[1]) < 1e-9             # backing away, along the corridor
     assert float(np.linalg.norm(v)) <= lim + 1e-9
     assert float(np.linalg.norm(v)) == pytest.approx(lim, rel=1e-6)    # and no slower than it allows
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_a_give_way_from_a_crossing_mover_goes_to_the_side_the_governor_leans_to(field, side):
+    """A mover coming across the corridor just ahead (or just behind) of a stopped vehicle:
+    the governor's push is mostly across the corridor, which a give-way never flies (into a
+    row), so the whole give-way speed goes along the corridor to the side the push leans to:
+    away from the mover's line. Fleeing at the whole speed once dropped that lean and went
+    forward, into the walker's line (campaigns/obstacles-mix.yaml flight 57: contact)."""
+    from companion.replan.closing import OUTPACE_M_S
+
+    rp = Replanner(replace(ReplanConfig(), memory_s=1e3), field.known, field.plan)
+    P = np.array([8.0, CORRIDOR_Y, 1.5])
+    rp.start(0.0)
+    rp._avoid_leg = 0                                        # the first corridor, along +x
+    mover = np.array([[8.0 + 0.2 * side, CORRIDOR_Y + 0.9, 1.5]])
+    for k in range(12):                                      # coming at 1 m/s down a level beam
+        rp.closing.on_hit(0.05 * k, 0, (8.0 + 0.2 * side, CORRIDOR_Y + 1.5 - 0.05 * k, 1.5), (0.0, 1.0, 0.0))
+    rp._t_s = 0.55
+    w = rp.closing.approach_m_s(0.55)
+    assert w > 0.0
+    push = rp._govern(P, np.zeros(3), mover, np.linalg.norm(mover - P, axis=1))
+    assert 0.0 < abs(push[0]) < 0.5 * np.hypot(push[0], push[1])     # a crossing push, leaning ...
+    assert np.sign(push[0]) == -side                         # ... away from the mover's line
+    v = rp._give_way(P, mover)
+    assert np.sign(v[0]) == -side and abs(v[1]) < 1e-9       # along the corridor, that side
+    assert abs(v[0]) == pytest.approx(w + OUTPACE_M_S)       # at the whole give-way speed

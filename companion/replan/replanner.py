@@ -1403,9 +1403,9 @@ class Replanner:
             # governor's deficit alone (w - v_stop(room)) starts from zero there and a vehicle
             # that tracks it with lag let a walker close to 0.39 m (mix flight 84)
             self._fleeing = True
-            lean = along if abs(along) >= CROSSING_FRACTION * full else 0.0     # 0: crossing, or no push
-            full = cap
-            along = math.copysign(full, lean) if lean != 0.0 else 0.0
+            if full > 0.0 and abs(along) >= CROSSING_FRACTION * full:
+                along = math.copysign(cap, along)        # along the corridor, away
+            full = cap                                   # else crossing: the side below, at this speed
         if abs(along) < CROSSING_FRACTION * full:
             # a mover coming across the corridor: backing along it gains no distance now, but
             # it takes the vehicle out of the mover's path (a walker crossing straight at a
