@@ -1389,10 +1389,11 @@ class Replanner:
     def _give_way(self, P, pts) -> np.ndarray:
         """Velocity (ENU, m/s) of a stop: zero, or backing away (level) from an obstacle
         that comes closer than the vehicle could stop for (``companion.replan.closing``)."""
-        if not len(pts) or self.closing.approach_m_s(getattr(self, "_t_s", None)) <= 0.0:
+        w = self.closing.approach_m_s(getattr(self, "_t_s", None))
+        if not len(pts) or w <= 0.0:
             self._fleeing = False
             return np.zeros(3)
-        cap = give_way_speed_m_s(self.speed_m_s, self.closing.approach_m_s(getattr(self, "_t_s", None)))
+        cap = give_way_speed_m_s(self.speed_m_s, w)
         v = self._govern(P, np.zeros(3), pts, np.linalg.norm(pts - P, axis=1))
         u = self._leg_frame(self._avoid_leg)[2]            # along the corridor only: not into a row
         along = float(v[:2] @ u[:2])
