@@ -140,3 +140,104 @@ def test_rows_are_walls_up_to_the_canopy():
     low = RouteScene(_known(occ), ObstacleMap(V), KEEP, 0.5, 2.8, STEP)
     assert find_route(low, (2.0, 5.0, 1.5), [(8.0, 5.0, 1.5)]) is None
     assert route_exists(low, (2.0, 5.0, 1.5), [(8.0, 5.0, 1.5)]) == [False]
+
+
+# --- the guard's clearance in the search (route3d.guard_keeps, edge_keep_m) ---------------
+
+
+def _diagonal_rows() -> np.ndarray:
+    # three rows 0.3 m wide at 30 degrees to the lattice's axes: their boxes fall between
+    # lattice nodes in every way the 0.25 m step allows
+    occ = np.zeros((240, 240), dtype=bool)
+    r, c = np.mgrid[0:240, 0:240]
+    x, y = -6.0 + 0.1 * (c + 0.5), -6.0 + 0.1 * (r + 0.5)
+    u = -np.sin(np.radians(30.0)) * x + np.cos(np.radians(30.0)) * y     # across the rows
+    for u0 in (2.0, 4.5, 7.0):
+        occ |= np.abs(u - u0) <= 0.15
+    return occ
+
+
+def _guarded_scene(keep=KEEP):
+    from companion.safety import Guard, GuardConfig, SafetyScene, known_obstacle_distance
+
+    known = _known(_diagonal_rows())
+    m = ObstacleMap(V)
+    _box(m, 7.05, 7.45, 1.05, 1.35, 1.3)             # a post, not on the lattice's axes
+    cfg = GuardConfig(airframe_radius_m=0.442, terrain_clearance_m=0.058, row_clearance_m=0.5,
+                      obstacle_clearance_m=0.5, accel_m_s2=1.0)
+    guard = Guard(cfg, SafetyScene.from_known_map(known), known_obstacle_distance(m, lambda: known))
+    return RouteScene(known, m, keep, 0.5, CEIL, STEP, guard=guard), guard
+
+
+def _moves_between(free: np.ndarray, lat, n: int = 9) -> np.ndarray:
+    """Points along every move (route3d.MOVES) between two free nodes, ends excluded."""
+    from companion.replan.route3d import MOVES
+
+    pts = []
+    nx, ny, nz = free.shape
+    tau = np.linspace(0.0, 1.0, n + 2)[1:-1, None]
+    for dx, dy, dz in MOVES:
+        a = free[max(0, -dx):nx - max(0, dx), max(0, -dy):ny - max(0, dy), max(0, -dz):nz - max(0, dz)]
+        b = free[max(0, dx):nx + min(0, dx), max(0, dy):ny + min(0, dy), max(0, dz):nz + min(0, dz)]
+        i, j, k = np.nonzero(a & b)
+        i, j, k = i + max(0, -dx), j + max(0, -dy), k + max(0, -dz)
+        p0 = np.stack([lat.x[i], lat.y[j], lat.z[k]], axis=1)
+        p1 = np.stack([lat.x[i + dx], lat.y[j + dy], lat.z[k + dz]], axis=1)
+        pts.append((p0[:, None, :] + tau[None] * (p1 - p0)[:, None, :]).reshape(-1, 3))
+    return np.vstack(pts)
+
+
+def test_without_the_guard_the_lattice_leaves_free_nodes_inside_the_guards_clearance():
+    # the premise of the next test: the blocked nodes alone (the rows' cells sampled at the
+    # lattice's nodes, the post's columns) leave nodes free that the guard, measuring to the
+    # surfaces themselves, finds inside the row clearance (as in mix flights 137 and 168)
+    from dataclasses import replace
+
+    from companion.replan.route3d import free_nodes, lattice_for
+
+    sc, guard = _guarded_scene(keep=0.442 + 0.4)
+    bare = replace(sc, guard=None)
+    lat = lattice_for(bare, [(0.0, 0.0, 1.5), (10.0, 8.0, 1.5)])
+    free = free_nodes(bare, lat)
+    i, j, k = np.nonzero(free)
+    d = guard.distances(np.stack([lat.x[i], lat.y[j], lat.z[k]], axis=1), terrain=False)
+    assert (d["row"] < guard.required_m("row")).any()
+
+
+@pytest.mark.parametrize("keep", [0.442 + 0.4, KEEP])
+def test_with_the_guard_every_move_between_free_nodes_keeps_the_guards_clearance(keep):
+    # route3d.edge_keep_m: any point of a set at least k from both ends of a move of length
+    # L is passed at sqrt(k^2 - L^2/4) or more; the moves are sampled here and measured by
+    # the guard itself, rows and obstacles
+    from companion.replan.route3d import free_nodes, lattice_for
+
+    sc, guard = _guarded_scene(keep)
+    lat = lattice_for(sc, [(0.0, 0.0, 1.5), (10.0, 8.0, 1.5)])
+    free = free_nodes(sc, lat)
+    assert free.sum() > 1000
+    d = guard.distances(_moves_between(free, lat), terrain=False)
+    for kind in ("row", "obstacle"):
+        assert d[kind].min() >= guard.required_m(kind) - 1e-9, kind
+
+
+def test_the_chord_allowance_is_the_closest_a_diagonal_move_passes_a_corner():
+    # hand-worked: a corner point c, the diagonal move's ends both exactly k from it; the
+    # move's midpoint is sqrt(k^2 - (s sqrt(2) / 2)^2) from c, which is the clearance
+    from companion.replan.route3d import edge_keep_m
+
+    req, s = 0.842, 0.25
+    k = edge_keep_m(req, s)
+    half = s * np.sqrt(2.0) / 2.0
+    assert np.isclose(np.sqrt(k * k - half * half), req, rtol=0, atol=1e-12)
+    assert k - req == pytest.approx(0.01836, abs=1e-5)     # sqrt(0.842^2 + 0.03125) - 0.842
+
+
+def test_a_route_searched_with_the_guard_passes_the_guards_path_rule():
+    # from beside the first row, over its canopy's edge (2 m; the ceiling 3 m leaves one
+    # layer of nodes over it) into the next corridor: the route climbs past the box's edge
+    sc, guard = _guarded_scene(keep=0.442 + 0.4)
+    r = find_route(sc, (0.5, 0.0, 1.5), [(4.0, 6.06, 3.0)])
+    assert r is not None and r.path_enu_m[:, 2].max() == pytest.approx(3.0)
+    path = _dense(r.path_enu_m[1:-1])             # the start's and goal's legs are off the lattice
+    verdict = guard.check_path(path)
+    assert verdict.ok, verdict.detail

@@ -1513,7 +1513,7 @@ class Replanner:
                     exit_leg = self._exit_leg(st.p)
                     if exit_leg is not None:
                         scene = RouteScene(res.known, self.memory, self._keep_m, self.cfg.floor_agl_m,
-                                           self.cfg.ceiling_agl_m)
+                                           self.cfg.ceiling_agl_m, guard=self.guard)
                         res = reroute_3d(self.plan, scene, exit_leg[1:], st, tau, self._wp_leave, blocking,
                                          travel, self.cfg.obstacle_depth_m, self.cfg.vertical_speed_m_s,
                                          self._keep_m + ROUTE_MARGIN_M, seen_others, over,
@@ -1544,7 +1544,7 @@ class Replanner:
                                      self._keep_m + ROUTE_MARGIN_M, self.cfg.voxel_m)
                 for margin in LEAVE_MARGINS_M if len(goals) else ():
                     scene = RouteScene(seen, self.memory, self._keep_m + margin, self.cfg.floor_agl_m,
-                                       self.cfg.ceiling_agl_m)
+                                       self.cfg.ceiling_agl_m, guard=self.guard)
                     # from inside a clearance, out first (the lattice route starts where the leg ends)
                     start = np.asarray(st.p, float) if exit_leg is None else exit_leg[1]
                     route = find_route(scene, start, goals)   # one lattice search per margin

@@ -20,6 +20,16 @@ away (``keep_m`` = airframe radius + clearance, from the vehicle's centre;
 the half step: a blocked node stands for the lattice cell round it). Moves
 join free nodes to their 6 axis neighbours and 4 horizontal diagonals.
 
+With the scene's ``guard`` (the one every reference passes), a free node also
+keeps the guard's own distance to the rows and the obstacles (``Guard.distances``
+on the scene's map), raised so that every move between two free nodes keeps it
+too (``edge_keep_m``): the blocked nodes sample the rows' boxes and the
+obstacle columns at the lattice step, so a node they leave free can lie inside
+the clearance the guard measures to the surfaces themselves (mix flights 137
+and 168: a route 5 cm inside a row's clearance, refused whole, and the vehicle
+held although the independent check found routes). The search's free space
+is then inside the guard's, by construction.
+
 ``find_route`` searches it (``scipy.ndimage.distance_transform_edt`` for the
 clearance, ``scipy.sparse.csgraph.dijkstra`` for the path).
 ``companion.replan.routecheck.route_exists`` answers the same question by
@@ -62,6 +72,9 @@ class RouteScene:
         Height band above the terrain (m).
     step_m : float
         Lattice spacing (m).
+    guard : Guard or None
+        The guard whose row and obstacle clearances every move between free nodes keeps
+        (module doc); None: the blocked nodes alone.
     """
 
     known: KnownMap
@@ -70,6 +83,7 @@ class RouteScene:
     floor_agl_m: float
     ceiling_agl_m: float
     step_m: float = 0.25
+    guard: object = None
 
 
 @dataclass(frozen=True)
@@ -202,7 +216,40 @@ def free_nodes(scene: RouteScene, lat: Lattice) -> np.ndarray:
     Z = lat.z[None, None, :]
     band = ((Z >= (ground + scene.floor_agl_m)[..., None] - 1e-9)
             & (Z <= (ground + scene.ceiling_agl_m)[..., None] + 1e-9))
-    return band & (clear >= scene.keep_m + 0.5 * s - 1e-9)
+    free = band & (clear >= scene.keep_m + 0.5 * s - 1e-9)
+    if scene.guard is not None and free.any():
+        free &= guard_keeps(scene, lat, free)
+    return free
+
+
+#: The guard's surfaces a free node keeps its distance from (the terrain: the band itself).
+GUARD_KINDS = ("row", "obstacle")
+
+
+def edge_keep_m(required_m: float, step_m: float) -> float:
+    """The distance (m) two nodes one move apart must keep from every point of a set for
+    the straight move between them to keep ``required_m``: any point ``c`` of the set is
+    at least ``k`` from both ends, so the move, a chord of the ball of radius ``k`` round
+    ``c`` at most ``L`` long, passes ``c`` at no less than ``sqrt(k^2 - L^2 / 4)``; with
+    ``L`` the longest move (a horizontal diagonal, ``step_m * sqrt(2)``) that is
+    ``required_m`` for ``k = sqrt(required_m^2 + L^2 / 4)``. Any set: rows' boxes,
+    voxels, their union."""
+    half = 0.5 * step_m * float(np.sqrt(2.0))
+    return float(np.sqrt(required_m * required_m + half * half))
+
+
+def guard_keeps(scene: RouteScene, lat: Lattice, candidates: np.ndarray) -> np.ndarray:
+    """(nx, ny, nz) bool: the ``candidates`` nodes that keep ``edge_keep_m`` of the guard's
+    clearance from the rows and the obstacles, measured by the guard on the scene's map."""
+    idx = np.nonzero(candidates)
+    P = np.stack([lat.x[idx[0]], lat.y[idx[1]], lat.z[idx[2]]], axis=1)
+    d = scene.guard.distances(P, terrain=False, known=scene.known)
+    ok = np.ones(len(P), dtype=bool)
+    for kind in GUARD_KINDS:
+        ok &= d[kind] >= edge_keep_m(scene.guard.required_m(kind), scene.step_m)
+    out = np.zeros(candidates.shape, dtype=bool)
+    out[idx] = ok
+    return out
 
 
 def _graph(free: np.ndarray, s: float):

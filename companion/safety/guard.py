@@ -218,15 +218,20 @@ class Guard:
 
     # --- distances -----------------------------------------------------------------------
 
-    def distances(self, points_enu_m: np.ndarray, terrain: bool = True) -> dict:
+    def distances(self, points_enu_m: np.ndarray, terrain: bool = True, known=None) -> dict:
         """{kind: (M,) distance (m)} of (M, 3) ENU points: height above the terrain, distance
-        to the rows, to the known obstacles (inf without; terrain inf when ``terrain`` is False)."""
+        to the rows, to the known obstacles (inf without; terrain inf when ``terrain`` is False).
+        ``known``: the replanner's map whose added obstacle cells count (default the one the
+        obstacle distance reads itself: ``known_obstacle_distance``'s ``known_map``)."""
         p = np.asarray(points_enu_m, float).reshape(-1, 3)
         inf = np.full(len(p), np.inf)
         out = {"terrain": p[:, 2] - self.scene.terrain.z(p[:, 0], p[:, 1]) if terrain else inf,
                "row": self.scene.rows.distance(p)}
         od = self.obstacle_distance
-        out["obstacle"] = inf if od is None else np.asarray(od(p), float).reshape(-1)
+        if od is None:
+            out["obstacle"] = inf
+        else:
+            out["obstacle"] = np.asarray(od(p) if known is None else od(p, known), float).reshape(-1)
         return out
 
     # --- rules ------------------------------------------------------------------------------

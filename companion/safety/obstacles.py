@@ -117,11 +117,13 @@ class _AddedCells:
 def known_obstacle_distance(memory, known_map: Callable[[], object] | None = None) -> ObstacleDistance:
     """``obstacle_distance`` over an ``ObstacleMemory`` (read at every call: the points
     it holds then) and, when ``known_map`` is given, the obstacle cells added to the
-    map it returns (``lambda: replanner.known``; module doc)."""
+    map it returns (``lambda: replanner.known``; module doc). A call may name the map
+    instead (``obstacle_distance(points, known)``: a route searched on a map it will
+    be flown on, ``companion.replan.route3d``)."""
     cells = _AddedCells()
     box_distance = getattr(memory, "distance", None)
 
-    def obstacle_distance(points_enu_m: np.ndarray) -> np.ndarray:
+    def obstacle_distance(points_enu_m: np.ndarray, known=None) -> np.ndarray:
         p = np.asarray(points_enu_m, float).reshape(-1, 3)
         if not len(memory):
             d = np.full(len(p), np.inf)
@@ -129,7 +131,9 @@ def known_obstacle_distance(memory, known_map: Callable[[], object] | None = Non
             d = np.asarray(box_distance(p), float)
         else:
             d = points_distance(p, memory.points())
-        if known_map is not None:
-            d = np.minimum(d, cells.distance(known_map(), p[:, 0], p[:, 1], p[:, 2]))
+        if known is None and known_map is not None:
+            known = known_map()
+        if known is not None:
+            d = np.minimum(d, cells.distance(known, p[:, 0], p[:, 1], p[:, 2]))
         return d
     return obstacle_distance
