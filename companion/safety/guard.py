@@ -200,6 +200,9 @@ class Guard:
     obstacle_distance : callable or None
         ``f((M, 3) ENU points) -> (M,) distance (m) to the nearest known obstacle
         surface, inf if none`` (``companion.safety.obstacles``); None: no obstacles.
+        ``distances(..., known=K)`` calls it as ``f(points, K)`` (the replanner's map
+        ``K`` whose added cells count: ``known_obstacle_distance`` takes it), for a 3-D
+        route searched on the map it will be flown on (``companion.replan.route3d``).
     """
 
     def __init__(self, cfg: GuardConfig, scene, obstacle_distance=None) -> None:

@@ -1,7 +1,8 @@
 """The guard's one window on the obstacles the vehicle knows (pure).
 
 The guard reads obstacles only through ``obstacle_distance(points) ->
-distances``: ``(M, 3)`` ENU points (m) in, ``(M,)`` distances (m) from each
+distances`` (``known_obstacle_distance``'s also takes the map whose added cells
+count, ``obstacle_distance(points, known)``, for ``Guard.distances(known=...)``): ``(M, 3)`` ENU points (m) in, ``(M,)`` distances (m) from each
 point to the nearest known obstacle surface out, ``inf`` where none is
 known. Any map can stand behind it. This module adapts the replanner's: its
 persistent ``ObstacleMap`` (``companion.replan.voxmap``: ``distance`` to the
