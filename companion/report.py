@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 #: report.json format written here ("MAJOR.MINOR", docs/README.md "Versions").
-REPORT_FORMAT_VERSION = "3.3"
+REPORT_FORMAT_VERSION = "3.4"
 
 
 @dataclass(frozen=True)

@@ -127,7 +127,7 @@ def test_schemas_are_draft_2020_12_and_describe_version_1():
     for schema in (PLAN_SCHEMA, REPORT_SCHEMA):
         assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
         Draft202012Validator.check_schema(schema)
-    assert PLAN_FORMAT_VERSION == "2.1" and REPORT_FORMAT_VERSION == "3.3"
+    assert PLAN_FORMAT_VERSION == "2.1" and REPORT_FORMAT_VERSION == "3.4"
     # the writers' version is one the schemas accept, the next major is not
     for validator, doc_version in ((PLAN, PLAN_FORMAT_VERSION), (REPORT, REPORT_FORMAT_VERSION)):
         version_schema = validator.schema["properties"]["format_version"]

@@ -95,10 +95,16 @@ from ..trajectory.reference import (RefSample, TrajectoryWindow, at_rest, climb_
                                     setpoint_yaw_enu, smooth_segment)
 
 PHASES = ("connect", "setup", "upload", "preflight", "takeoff", "hold", "trajectory", "hover", "landing", "done",
-          "holding", "released", "ended")
+          "holding", "released", "ended", "divert")
 PHASE_CODE = {p: i for i, p in enumerate(PHASES)}
 #: Phases in which the vehicle is meant to be flying under our reference.
-FLYING = ("takeoff", "hold", "trajectory", "hover")
+FLYING = ("takeoff", "hold", "trajectory", "hover", "divert")
+#: A refused landing is moved (``_landing_spot``) at most this many times, then the vehicle holds.
+LANDING_MOVES = 3
+#: After a move, the vehicle settles for up to this long (s) before its landing is checked again.
+MOVE_SETTLE_S = 3.0
+#: ... and is settled below this speed (m/s).
+MOVE_REST_M_S = 0.1
 
 #: A vehicle armed within this horizontal distance (m) of the trajectory's
 #: first point climbs straight to it (no separate level transfer).
@@ -329,6 +335,9 @@ class FlightCore:
         self._guard_plan = None         # the replanner's plan last checked whole
         self._guard_tau0 = 0.0          # its clock at the start of the trajectory phase
         self._guard_stopped = False
+        self._steering = False          # OFFBOARD/GUIDED set by us: our setpoints move the vehicle
+        self._launch = None             # where the vehicle armed (ENU): the home of a moved landing
+        self._move = None               # (t0, Divert, pointing) of a moved landing in flight
         self._next_sp_t = -math.inf
         self._sp_dt = 1.0 / cfg.setpoint_hz
         self._hb_t = None
@@ -617,6 +626,7 @@ class FlightCore:
         ap = self.view.autopilot
         yield from self._command(mavlink.MAV_CMD_DO_SET_MODE, ap.set_mode_params(ap.offboard_mode),
                                  f"set {ap.offboard_mode}", temp_retries=10)
+        self._steering = True
 
     def _guided_takeoff(self):
         """ArduCopter: armed in GUIDED on the ground, setpoints do not lift the
@@ -652,6 +662,7 @@ class FlightCore:
         cfg = self.cfg
         first = self._hold_first
         self._t_arm = t_arm
+        self._launch = tuple(float(c) for c in self.view.pos)
         self._segments = takeoff_segments(tuple(self.view.pos), first.p, self.inputs.transit_floor_z_m,
                                           cfg.climb_speed_m_s, cfg.transfer_speed_m_s)
         self._takeoff_T = sum(seg[2] for seg in self._segments)
@@ -676,7 +687,7 @@ class FlightCore:
     def _land(self):
         """NAV_LAND, then wait for the vehicle to land and disarm (disarm it if needed)."""
         cfg = self.cfg
-        if not self._guard_landing():
+        if not (yield from self._landing_spot()):
             yield from self._abort_hold()
             return
         self.phase = "landing"
@@ -845,7 +856,7 @@ class FlightCore:
             self._hb_t = t
             self._emit(self.heartbeat())
         self._advance_phase(t)
-        if self.replanner is not None and self.phase in ("hold", "trajectory", "hover"):
+        if self.replanner is not None and self.phase in ("hold", "trajectory", "hover", "divert"):
             self._replan_pose(t)
         ref = self._reference(t) if self.guard is None else self._guarded(t)
         cmd = None
@@ -923,6 +934,13 @@ class FlightCore:
             return self._hold_first
         if ph == "hover":
             return self._hold_last
+        if ph == "divert":
+            # a moved landing (``_landing_spot``), the heading kept: a target far along the pointing
+            if self._move is None:
+                return self._static_ref(self.view.pos)
+            t0, move, s = self._move
+            p, v, a, j, sn = move.sample(t - t0)
+            return RefSample(p, v, a, j, sn, s, (p[0] + 1e4 * s[0], p[1] + 1e4 * s[1], p[2] + 1e4 * s[2]))
         if ph == "takeoff":
             dt = t - self._t_arm
             rest = dt
@@ -1082,17 +1100,57 @@ class FlightCore:
             self._finish()
         return False
 
-    def _guard_landing(self) -> bool:
-        """May the vehicle land where it is (``GuardGate.check_landing``)? False: the
-        landing is refused (said on the wire, counted in report ``guard``), the
-        vehicle hovers instead (AUTO.LOITER) and the flight is not completed."""
+    def _landing_spot(self):
+        """(generator) True once the guard accepts a landing from where the vehicle is
+        (``GuardGate.check_landing``). A refused landing is moved: the guard's braked hover
+        brings the vehicle to rest, the gate finds the nearest spot whose landing and path it
+        accepts (``companion.safety.divert``), the vehicle flies there (phase ``divert``,
+        every frame disposed by the gate), settles, and the landing is checked again; at
+        most ``LANDING_MOVES`` times. False (said on the wire, counted in report ``guard``):
+        no spot found, or the companion does not steer the vehicle (attached, not in
+        OFFBOARD): the vehicle hovers instead (AUTO.LOITER) and the flight is not completed."""
         g = self.guard
         if g is None or self.view.pos is None or not self.view.armed:
             return True
-        v = g.check_landing(self.view.t_s, self.view.pos, self.view.vel if self.view.vel is not None else _Z3)
-        if v.ok:
-            return True
-        self._guard_say(v)
+        moves = 0
+        while True:
+            v = g.check_landing(self.view.t_s, self.view.pos, self.view.vel if self.view.vel is not None else _Z3)
+            if v.ok:
+                return True
+            self._guard_say(v)
+            if not self._steering or moves >= LANDING_MOVES:
+                break
+            moves += 1
+            # to rest on the guard's braked hover (the gate ends no flight for it: we land)
+            self._guard_stopped = True
+            if not g.engaged:
+                g.engage(self.view.t_s, self._static_ref(self.view.pos))
+            self._move = None
+            self.phase = "divert"
+            self._controlling = self.cfg.control in ("companion", "rates") and self.degraded is None
+            t_limit = self.view.t_s + self.cfg.landing_timeout_s
+            yield lambda: g.at_rest or self.view.t_s >= t_limit
+            if not g.at_rest:
+                break
+            d = g.find_landing(self.view.t_s, g.hold_point, self._launch, self.inputs.transit_floor_z_m,
+                               self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s)
+            if d is None:
+                break
+            self._emit(self.enc.statustext_encode(
+                mavlink.MAV_SEVERITY_WARNING,
+                f"{GUARD_PREFIX}landing moved {d.path_m:.2f} m ({d.kind})"[:50].encode()))
+            s = g.brake(self.view.t_s).s
+            g.release(self.view.t_s)
+            self._move = (self.view.t_s, d, s)
+            t_end = self.view.t_s + d.duration_s
+            yield lambda: g.engaged or self.view.t_s >= t_end
+            t_settle = self.view.t_s + MOVE_SETTLE_S
+
+            def settled() -> bool:
+                w = self.view.vel
+                return (g.engaged or self.view.t_s >= t_settle
+                        or (w is not None and math.hypot(w[0], w[1], w[2]) <= MOVE_REST_M_S))
+            yield settled
         self.monitor.fail(self.view.t_s, "guard", v.detail, "hold")
         return False
 

@@ -30,7 +30,7 @@ from ..link.obstacle_distance import ObstacleDistancePublisher, encode_obstacle_
 
 _SENSOR_DOWN = mavlink.MAV_SENSOR_ROTATION_PITCH_270
 #: Phases in which rangefinder readings count (the replanner's, the closest-reading statistic).
-RANGE_PHASES = ("trajectory", "hover", "hold")
+RANGE_PHASES = ("trajectory", "hover", "hold", "divert")
 #: STATUSTEXTs kept (the .tlog has them all).
 MAX_STATUSTEXTS = 200
 

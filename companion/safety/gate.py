@@ -24,6 +24,7 @@ import math
 
 from ..trajectory.reference import RefSample
 from ..replan.shaper import EMERGENCY_OMEGA_RAD_S, ReferenceShaper
+from .divert import Divert, candidates, find_landing
 from .guard import Guard, Verdict, grace_accepts
 
 #: Refusals kept for the report (the count goes on).
@@ -61,6 +62,7 @@ class GuardGate:
         self.n_trajectories = 0
         self.n_landings = 0
         self.n_landings_refused = 0
+        self.landing_moves: list[dict] = []
         self.n_refusals = 0
         self.n_braking = 0
         self._since: float | None = None
@@ -99,6 +101,33 @@ class GuardGate:
             self.n_landings_refused += 1
             self.refuse(t_s, v, "landing")
         return v
+
+    def find_landing(self, t_s: float, start, home, transit_z_m: float | None, climb_speed_m_s: float,
+                     transfer_speed_m_s: float) -> Divert | None:
+        """A checked move from the hover at ``start`` to the nearest spot whose landing the
+        guard accepts (``companion.safety.divert``); recorded for the report (``landing_moves``),
+        found or not."""
+        d = find_landing(self.guard, start, home, transit_z_m, climb_speed_m_s, transfer_speed_m_s)
+        if d is not None:
+            found = d.to_dict()
+        else:
+            n = len(candidates(start, home, transit_z_m, climb_speed_m_s, transfer_speed_m_s))
+            found = {"spot_enu_m": None, "path_m": None, "kind": None, "duration_s": None, "candidates_tried": n}
+        self.landing_moves.append({"t_s": float(t_s), "from_enu_m": [float(c) for c in start], **found})
+        return d
+
+    def release(self, t_s: float) -> None:
+        """Stop flying the braked hover (the flight core flies a checked move from its
+        rest point, ``find_landing``); the frames' references are disposed again."""
+        self.engaged = False
+        self._hold = None
+        self._since = None
+        self._t_prev = t_s
+
+    @property
+    def hold_point(self) -> tuple | None:
+        """Where the braked hover rests (None before it does)."""
+        return None if self._hold is None else tuple(float(c) for c in self._hold.p)
 
     def dispose(self, t_s: float, ref: RefSample | None, terrain: bool = True) -> tuple:
         """(the reference to fly, the refusal Verdict or None) for this frame's proposal."""
@@ -153,5 +182,6 @@ class GuardGate:
         """report.json ``guard`` (docs/report-json.md)."""
         return {"engaged": self.engaged, "samples_checked": self.n_samples, "samples_braking": self.n_braking,
                 "trajectories_checked": self.n_trajectories, "landings_checked": self.n_landings,
-                "landings_refused": self.n_landings_refused, "refusals": self.n_refusals,
+                "landings_refused": self.n_landings_refused, "landing_moves": list(self.landing_moves),
+                "refusals": self.n_refusals,
                 "refusal_list": list(self.refusals)}
