@@ -53,8 +53,8 @@ def test_moves_to_the_nearest_clear_column_beside_the_crate():
     assert d.path_m == pytest.approx(0.75) and d.tried == 2 * N_ANGLES + 1
     assert _column_clear(crate, d.spot)
     assert not _column_clear(crate, (8.2 + 0.75 * math.cos(math.pi / 8), 7.5 + 0.75 * math.sin(math.pi / 8), 1.5))
-    # the move itself: 0.75 m at the transfer speed's peak 35/16 of the mean, 3 s floor not met
-    assert d.segments[0][2] == pytest.approx(35.0 / 16.0 * 0.75 / 1.0)
+    # the move itself: 0.75 m with the climb speed (0.5 m/s here) its peak, 35/16 of the mean
+    assert d.segments[0][2] == pytest.approx(35.0 / 16.0 * 0.75 / 0.5)
 
 
 def test_goes_home_over_the_transit_height_when_no_ring_is_clear():
@@ -95,10 +95,12 @@ def test_a_clear_column_behind_a_wall_is_not_reached_through_it():
     assert both(a + s * (b - a)).min() >= R
 
 
-def _fly(core, t0: float, t_end: float, dt: float = 0.004):
-    """Frames of a perfect tracker: the vehicle is where the reference is; returns the
-    positions flown and the COMMAND_LONG ids in order."""
+def _fly(core, t0: float, t_end: float, dt: float = 0.004, body_rates=(0.0, 0.0, 0.0)):
+    """Frames of a perfect tracker: the vehicle is where the reference is, turning at
+    ``body_rates`` (its ATTITUDE); returns the positions flown, the COMMAND_LONG ids in
+    order and the time of the last frame."""
     t, flown, cmds = t0, [], []
+    core.view.att_w = body_rates
     core._drive()
     cmds += _commands(core)
     while t < t_end and core.phase != "landing" and not core.finished:
@@ -110,7 +112,7 @@ def _fly(core, t0: float, t_end: float, dt: float = 0.004):
             flown.append(ref.p)
         core._drive()
         cmds += _commands(core)
-    return np.array(flown), cmds
+    return np.array(flown), cmds, t
 
 
 def test_core_moves_a_refused_landing_then_lands():
@@ -120,8 +122,12 @@ def test_core_moves_a_refused_landing_then_lands():
     core, gate = _core_beside(crate, BESIDE)
     core._steering, core._launch = True, (0.0, 8.0, 0.0)
     core._react(core.monitor.fail(100.0, "no_route", "no route", "land"))
-    flown, cmds = _fly(core, 100.0, 130.0)
+    flown, cmds, t_land = _fly(core, 100.0, 130.0)
     assert cmds == [mavlink.MAV_CMD_NAV_LAND] and core.phase == "landing"
+    # the move (0.75 m, 35/16 * 0.75 s at the 1 m/s climb speed), then the plan end's 1 s hover,
+    # settled: the landing is handed over then, not before
+    t_move_end = 100.0 + 35.0 / 16.0 * 0.75
+    assert t_move_end + 1.0 <= t_land <= t_move_end + 1.0 + 0.02
     # landed from the hand-worked spot, 0.75 m east, and its column is clear
     assert core.view.pos == pytest.approx((8.95, 7.5, 1.5), abs=1e-9)
     assert gate.n_landings == 2 and gate.n_landings_refused == 1
@@ -130,6 +136,19 @@ def test_core_moves_a_refused_landing_then_lands():
     # every frame flown: away from the crate, never closer (the margin rule, measured directly)
     d = crate(flown)
     assert np.all(np.diff(d) >= -1e-9) and d[-1] >= REQ
+
+
+def test_core_hands_the_landing_over_only_once_the_vehicle_stops_turning():
+    # still turning at 0.5 rad/s (> 0.1): the landing waits the 3 s settle bound after the hover
+    from pymavlink.dialects.v20 import common as mavlink
+
+    core, gate = _core_beside(_box(*CRATE), BESIDE)
+    core._steering, core._launch = True, (0.0, 8.0, 0.0)
+    core._react(core.monitor.fail(100.0, "no_route", "no route", "land"))
+    flown, cmds, t_land = _fly(core, 100.0, 130.0, body_rates=(0.0, 0.0, 0.5))
+    assert cmds == [mavlink.MAV_CMD_NAV_LAND]
+    t_move_end = 100.0 + 35.0 / 16.0 * 0.75
+    assert t_move_end + 1.0 + 3.0 <= t_land <= t_move_end + 1.0 + 3.0 + 0.02
 
 
 def test_core_not_steering_still_hovers():
@@ -150,7 +169,7 @@ def test_core_holds_when_no_spot_is_found():
     core, gate = _core_beside(slab, (9.0, 7.5, 1.5))
     core._steering, core._launch = True, (10.0, 7.5, 0.0)
     core._react(core.monitor.fail(100.0, "no_route", "no route", "land"))
-    flown, cmds = _fly(core, 100.0, 110.0)
+    flown, cmds, _ = _fly(core, 100.0, 110.0)
     assert mavlink.MAV_CMD_NAV_LAND not in cmds and cmds[-1] == mavlink.MAV_CMD_DO_SET_MODE
     assert core.phase == "holding" and gate.landing_moves[0]["spot_enu_m"] is None
     assert np.allclose(flown, (9.0, 7.5, 1.5))                 # it stayed where it hovered

@@ -101,10 +101,16 @@ PHASE_CODE = {p: i for i, p in enumerate(PHASES)}
 FLYING = ("takeoff", "hold", "trajectory", "hover", "divert")
 #: A refused landing is moved (``_landing_spot``) at most this many times, then the vehicle holds.
 LANDING_MOVES = 3
-#: After a move, the vehicle settles for up to this long (s) before its landing is checked again.
+#: After a move the vehicle hovers ``hover_s`` (as at the plan's end), then up to this much
+#: longer (s) until it is settled, before its landing is checked again and the landing is
+#: handed to the vehicle...
 MOVE_SETTLE_S = 3.0
-#: ... and is settled below this speed (m/s).
+#: ... settled: below this speed (m/s) and this body rate (rad/s). A hand-over with the vehicle
+#: still turning left the stack's controller a yaw it saturated the motors on (fresh seed
+#: 20261219 flight 8: a 1.5 m move at 3 m/s, the landing handed over 0.04 s after it; the
+#: vehicle fell from 2.9 m).
 MOVE_REST_M_S = 0.1
+MOVE_REST_RAD_S = 0.1
 
 #: A vehicle armed within this horizontal distance (m) of the trajectory's
 #: first point climbs straight to it (no separate level transfer).
@@ -1144,12 +1150,15 @@ class FlightCore:
             self._move = (self.view.t_s, d, s)
             t_end = self.view.t_s + d.duration_s
             yield lambda: g.engaged or self.view.t_s >= t_end
-            t_settle = self.view.t_s + MOVE_SETTLE_S
+            t_hover = self.view.t_s + self.cfg.hover_s
+            t_settle = t_hover + MOVE_SETTLE_S
 
             def settled() -> bool:
-                w = self.view.vel
-                return (g.engaged or self.view.t_s >= t_settle
-                        or (w is not None and math.hypot(w[0], w[1], w[2]) <= MOVE_REST_M_S))
+                if g.engaged or self.view.t_s >= t_settle:
+                    return True
+                w, r = self.view.vel, self.view.att_w
+                return (self.view.t_s >= t_hover and w is not None and math.hypot(*w) <= MOVE_REST_M_S
+                        and math.hypot(*r) <= MOVE_REST_RAD_S)
             yield settled
         self.monitor.fail(self.view.t_s, "guard", v.detail, "hold")
         return False

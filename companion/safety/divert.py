@@ -6,7 +6,8 @@ the candidates are, shortest path first:
 
 - spots at the hover's height on rings round it, ``RING_STEP_M`` apart out to
   ``MAX_RING_M``, ``N_ANGLES`` on each (angle 0 east, counter-clockwise), reached by one
-  straight level segment;
+  straight level segment at the climb speed (the move starts beside what refused the
+  landing, often inside a clearance);
 - home (the launch point, whose column was checked before take-off and is checked again
   here): straight up to the transit height (when it is above the hover), across, and the
   landing from there.
@@ -85,7 +86,7 @@ def candidates(start, home, transit_z_m: float | None, climb_speed_m_s: float, t
         for k in range(N_ANGLES):
             a = 2.0 * math.pi * k / N_ANGLES
             q = (x + r * math.cos(a), y + r * math.sin(a), z)
-            out.append((r, "ring", (_level((x, y, z), q, transfer_speed_m_s),)))
+            out.append((r, "ring", (_level((x, y, z), q, climb_speed_m_s),)))
     if home is not None:
         hx, hy = float(home[0]), float(home[1])
         zt = max(z, transit_z_m if transit_z_m is not None else -math.inf)
