@@ -151,6 +151,29 @@ def test_core_hands_the_landing_over_only_once_the_vehicle_stops_turning():
     assert t_move_end + 1.0 + 3.0 <= t_land <= t_move_end + 1.0 + 3.0 + 0.02
 
 
+def test_the_report_of_a_move_and_of_none_found_follows_the_schema():
+    import json
+    from pathlib import Path
+
+    from jsonschema import Draft202012Validator
+
+    schema = json.loads((Path(__file__).parent.parent / "docs/schemas/report.schema.json").read_text())
+    guard = Draft202012Validator(schema["properties"]["guard"])
+    core, gate = _core_beside(_box(*CRATE), BESIDE)
+    core._steering, core._launch = True, (0.0, 8.0, 0.0)
+    core._react(core.monitor.fail(100.0, "no_route", "no route", "land"))
+    _fly(core, 100.0, 130.0)
+    slab = _box((6.0, 4.0, 0.0), (12.0, 11.0, 0.8))
+    core2, gate2 = _core_beside(slab, (9.0, 7.5, 1.5))
+    core2._steering, core2._launch = True, (10.0, 7.5, 0.0)
+    core2._react(core2.monitor.fail(100.0, "no_route", "no route", "land"))
+    _fly(core2, 100.0, 110.0)
+    for g in (gate, gate2):
+        doc = json.loads(json.dumps(g.to_dict()))
+        assert list(guard.iter_errors(doc)) == [] and len(doc["landing_moves"]) == 1
+    assert gate2.to_dict()["landing_moves"][0]["candidates_tried"] == 12 * 16 + 1
+
+
 def test_core_not_steering_still_hovers():
     # attached to a vehicle it did not put in OFFBOARD: it cannot move it; it hovers (AUTO.LOITER)
     from pymavlink.dialects.v20 import common as mavlink
