@@ -98,8 +98,9 @@ def test_a_clear_column_behind_a_wall_is_not_reached_through_it():
 def _fly(core, t0: float, t_end: float, dt: float = 0.004, body_rates=(0.0, 0.0, 0.0)):
     """Frames of a perfect tracker: the vehicle is where the reference is, turning at
     ``body_rates`` (its ATTITUDE); returns the positions flown, the COMMAND_LONG ids in
-    order and the time of the last frame."""
+    order and the time of the last frame (``_fly.times``: each position's frame time)."""
     t, flown, cmds = t0, [], []
+    _fly.times = []
     core.view.att_w = body_rates
     core._drive()
     cmds += _commands(core)
@@ -110,6 +111,7 @@ def _fly(core, t0: float, t_end: float, dt: float = 0.004, body_rates=(0.0, 0.0,
         if ref is not None:
             core.view.pos, core.view.vel = tuple(ref.p), tuple(ref.v)
             flown.append(ref.p)
+            _fly.times.append(t)
         core._drive()
         cmds += _commands(core)
     return np.array(flown), cmds, t
@@ -124,9 +126,14 @@ def test_core_moves_a_refused_landing_then_lands():
     core._react(core.monitor.fail(100.0, "no_route", "no route", "land"))
     flown, cmds, t_land = _fly(core, 100.0, 130.0)
     assert cmds == [mavlink.MAV_CMD_NAV_LAND] and core.phase == "landing"
+    # the search is spread over the frames: 32 candidates refused, 2 a frame (CANDIDATES_PER_FRAME),
+    # so the move starts 16 frames (4 ms) or more after the stop
+    moved = np.linalg.norm(flown - np.asarray(BESIDE), axis=1) > 0.0
+    t_start = _fly.times[int(np.argmax(moved))] - 0.004
+    assert t_start >= 100.0 + 16 * 0.004 - 1e-9
     # the move (0.75 m, 35/16 * 0.75 s at the 1 m/s climb speed), then the plan end's 1 s hover,
     # settled: the landing is handed over then, not before
-    t_move_end = 100.0 + 35.0 / 16.0 * 0.75
+    t_move_end = t_start + 35.0 / 16.0 * 0.75
     assert t_move_end + 1.0 <= t_land <= t_move_end + 1.0 + 0.02
     # landed from the hand-worked spot, 0.75 m east, and its column is clear
     assert core.view.pos == pytest.approx((8.95, 7.5, 1.5), abs=1e-9)
@@ -147,7 +154,8 @@ def test_core_hands_the_landing_over_only_once_the_vehicle_stops_turning():
     core._react(core.monitor.fail(100.0, "no_route", "no route", "land"))
     flown, cmds, t_land = _fly(core, 100.0, 130.0, body_rates=(0.0, 0.0, 0.5))
     assert cmds == [mavlink.MAV_CMD_NAV_LAND]
-    t_move_end = 100.0 + 35.0 / 16.0 * 0.75
+    moved = np.linalg.norm(flown - np.asarray(BESIDE), axis=1) > 0.0
+    t_move_end = _fly.times[int(np.argmax(moved))] - 0.004 + 35.0 / 16.0 * 0.75
     assert t_move_end + 1.0 + 3.0 <= t_land <= t_move_end + 1.0 + 3.0 + 0.02
 
 

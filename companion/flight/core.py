@@ -1138,8 +1138,16 @@ class FlightCore:
             yield lambda: g.at_rest or self.view.t_s >= t_limit
             if not g.at_rest:
                 break
-            d = g.find_landing(self.view.t_s, g.hold_point, self._launch, self.inputs.transit_floor_z_m,
-                               self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s)
+            steps = g.find_landing(self.view.t_s, g.hold_point, self._launch, self.inputs.transit_floor_z_m,
+                                   self.cfg.climb_speed_m_s, self.cfg.transfer_speed_m_s)
+            while True:               # a few candidates a frame, hovering meanwhile
+                try:
+                    next(steps)
+                except StopIteration as done:
+                    d = done.value
+                    break
+                t_frame = self.view.t_s
+                yield lambda: self.view.t_s > t_frame
             if d is None:
                 break
             self._emit(self.enc.statustext_encode(

@@ -24,7 +24,7 @@ import math
 
 from ..trajectory.reference import RefSample
 from ..replan.shaper import EMERGENCY_OMEGA_RAD_S, ReferenceShaper
-from .divert import Divert, candidates, find_landing
+from .divert import CANDIDATES_PER_FRAME, Divert, candidates, search
 from .guard import Guard, Verdict, grace_accepts
 
 #: Refusals kept for the report (the count goes on).
@@ -103,11 +103,13 @@ class GuardGate:
         return v
 
     def find_landing(self, t_s: float, start, home, transit_z_m: float | None, climb_speed_m_s: float,
-                     transfer_speed_m_s: float) -> Divert | None:
-        """A checked move from the hover at ``start`` to the nearest spot whose landing the
-        guard accepts (``companion.safety.divert``); recorded for the report (``landing_moves``),
-        found or not."""
-        d = find_landing(self.guard, start, home, transit_z_m, climb_speed_m_s, transfer_speed_m_s)
+                     transfer_speed_m_s: float):
+        """(generator: yields between ``CANDIDATES_PER_FRAME`` candidates, the caller's frames)
+        A checked move from the hover at ``start`` to the nearest spot whose landing the
+        guard accepts (``companion.safety.divert``), returned, or None; recorded for the
+        report (``landing_moves``), found or not."""
+        d = yield from search(self.guard, start, home, transit_z_m, climb_speed_m_s, transfer_speed_m_s,
+                              CANDIDATES_PER_FRAME)
         if d is not None:
             found = d.to_dict()
         else:

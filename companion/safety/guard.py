@@ -640,10 +640,13 @@ class Guard:
 
     def braking_footprint(self, p_enu_m, v_enu_m_s, n: int = 8) -> np.ndarray:
         """(n, 2) points from ``p`` along the horizontal velocity to where the vehicle
-        stops (``stopping_distance_m``)."""
+        stops (``stopping_distance_m``); at rest the one point under it (the n columns
+        would be the same column)."""
         p = np.asarray(p_enu_m, float)
         vh = np.asarray(v_enu_m_s, float)[:2]
         sp = float(np.hypot(*vh))
+        if sp <= REST_M_S:
+            return p[None, :2].copy()
         s = stopping_distance_m(sp, self.cfg.accel_m_s2, self.cfg.delay_s)
         u = vh / sp if sp > REST_M_S else np.zeros(2)
         return p[:2] + np.linspace(0.0, s, n)[:, None] * u
