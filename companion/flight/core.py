@@ -342,7 +342,7 @@ class FlightCore:
         self._guard_tau0 = 0.0          # its clock at the start of the trajectory phase
         self._guard_stopped = False
         self._steering = False          # OFFBOARD/GUIDED set by us: our setpoints move the vehicle
-        self._launch = None             # where the vehicle armed (ENU): the home of a moved landing
+        self._launch = None             # where the take-off (or a resume) began (ENU): a moved landing's home
         self._move = None               # (t0, Divert, pointing) of a moved landing in flight
         self._next_sp_t = -math.inf
         self._sp_dt = 1.0 / cfg.setpoint_hz

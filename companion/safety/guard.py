@@ -648,8 +648,7 @@ class Guard:
         if sp <= REST_M_S:
             return p[None, :2].copy()
         s = stopping_distance_m(sp, self.cfg.accel_m_s2, self.cfg.delay_s)
-        u = vh / sp if sp > REST_M_S else np.zeros(2)
-        return p[:2] + np.linspace(0.0, s, n)[:, None] * u
+        return p[:2] + np.linspace(0.0, s, n)[:, None] * (vh / sp)
 
     def check_landing(self, p_enu_m, v_enu_m_s) -> Verdict:
         """May the vehicle land from ``p`` (moving at ``v``)? Every point of the columns
