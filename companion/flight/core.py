@@ -92,7 +92,7 @@ from .param_check import check_params
 from .reporting import FlightRecorder
 from .setup_record import MAV_SEVERITY_DEBUG, SETUP_TEXT_ID, setup_chunks
 from ..trajectory.reference import (RefSample, TrajectoryWindow, at_rest, climb_duration_s, pointing_at,
-                                    setpoint_yaw_enu, smooth_segment)
+                                    segments_sample, setpoint_yaw_enu, smooth_segment)
 
 PHASES = ("connect", "setup", "upload", "preflight", "takeoff", "hold", "trajectory", "hover", "landing", "done",
           "holding", "released", "ended", "divert")
@@ -949,14 +949,7 @@ class FlightCore:
             return RefSample(p, v, a, j, sn, s, (p[0] + 1e4 * s[0], p[1] + 1e4 * s[1], p[2] + 1e4 * s[2]))
         if ph == "takeoff":
             dt = t - self._t_arm
-            rest = dt
-            for p0, p1, T in self._segments:
-                if rest < T:
-                    break
-                rest -= T
-            else:
-                rest = T      # past the last segment: its end
-            p, v, a, j, s = smooth_segment(p0, p1, T, rest)
+            p, v, a, j, s = segments_sample(self._segments, dt)
             # Turn the pointing direction smoothly from the heading at arming to
             # the trajectory's first pointing s0 and hand the controller a target
             # "at infinity" in that direction: the straight transfer may pass

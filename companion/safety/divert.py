@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..trajectory.reference import climb_duration_s, smooth_segment
+from ..trajectory.reference import climb_duration_s, segments_sample
 
 #: Ring spacing (m): the lattice step of the 3-D route search.
 RING_STEP_M = 0.25
@@ -61,14 +61,7 @@ class Divert:
     def sample(self, t_s: float) -> tuple:
         """(p, v, a, jerk, snap) of the move ``t_s`` after its start (``smooth_segment``
         of the segment under way; the spot, at rest, after the end)."""
-        rest = float(t_s)
-        for p0, p1, T in self.segments:
-            if rest < T:
-                break
-            rest -= T
-        else:
-            rest = T
-        return smooth_segment(p0, p1, T, rest)
+        return segments_sample(self.segments, float(t_s))
 
     def to_dict(self) -> dict:
         return {"spot_enu_m": [float(c) for c in self.spot], "path_m": float(self.path_m), "kind": self.kind,

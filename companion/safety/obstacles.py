@@ -2,7 +2,8 @@
 
 The guard reads obstacles only through ``obstacle_distance(points) ->
 distances`` (``known_obstacle_distance``'s also takes the map whose added cells
-count, ``obstacle_distance(points, known)``, for ``Guard.distances(known=...)``): ``(M, 3)`` ENU points (m) in, ``(M,)`` distances (m) from each
+count, ``obstacle_distance(points, known)``, for ``Guard.distances(known=...)``):
+``(M, 3)`` ENU points (m) in, ``(M,)`` distances (m) from each
 point to the nearest known obstacle surface out, ``inf`` where none is
 known. Any map can stand behind it. This module adapts the replanner's: its
 persistent ``ObstacleMap`` (``companion.replan.voxmap``: ``distance`` to the

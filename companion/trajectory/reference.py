@@ -77,6 +77,19 @@ def smooth_segment(p0, p1, duration_s: float, t_s: float):
     )
 
 
+def segments_sample(segments, t_s: float):
+    """``smooth_segment`` of rest-to-rest segments ``[(p0, p1, duration_s), ...]`` flown
+    back to back, ``t_s`` after the first one's start (past the last: its end, at rest)."""
+    rest = t_s
+    for p0, p1, T in segments:
+        if rest < T:
+            break
+        rest -= T
+    else:
+        rest = T      # past the last segment: its end
+    return smooth_segment(p0, p1, T, rest)
+
+
 def pointing_at(p, target) -> tuple:
     """Unit vector from ``p`` toward ``target`` (eq. 21), ENU; +y if they coincide."""
     u = (target[0] - p[0], target[1] - p[1], target[2] - p[2])
