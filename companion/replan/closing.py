@@ -142,16 +142,19 @@ class ClosingSpeed:
         self._hist: dict[int, list[tuple]] = {}
         self._w = 0.0
         self._t_w = -math.inf
+        self._at: tuple[float, float, float] | None = None
 
     def on_hit(self, t_s: float, sensor_id: int, hit_enu_m, axis_enu, still: bool = False,
-               origin_enu_m=None, field=None) -> None:
+               origin_enu_m=None, field=None, spread_m: float = 0.0) -> None:
         """An unknown return of ``sensor_id`` at vehicle time ``t_s``: the hit point
         (ENU, m) and the beam's unit axis (ENU, from the sensor outward); ``still``: the
         vehicle is still, so any motion of the return is the obstacle's; ``origin_enu_m``:
         the sensor's position (a return riding with it is no approach; None: not judged);
         ``field``: (sensor height m, measured range m, lowest and highest sine of
         elevation in its field of view; ``perception.field_sine_range``), for
-        ``still_plane`` (None: not judged) (module notes)."""
+        ``still_plane`` (None: not judged); ``spread_m``: how far (m) across the beam the
+        return may lie from ``hit_enu_m`` (the field of view at the measured range), kept
+        with the mover's place (``mover_at``) (module notes)."""
         # one history for all sensors: at rest a mover passes from beam to beam
         h = self._hist.setdefault(0, [])
         hit = (float(hit_enu_m[0]), float(hit_enu_m[1]), float(hit_enu_m[2]))
@@ -195,12 +198,19 @@ class ClosingSpeed:
                 if w >= self._w or t_s - self._t_w > HOLD_S:
                     self._w = w
                 self._t_w = t_s
+                self._at = (hit[0], hit[1], float(spread_m))
         h.append((t_s, hit, u, o, sensor_id, field))
 
     def approach_m_s(self, t_s: float | None) -> float:
         """The approach speed (m/s, >= 0) that the governor allows for at time ``t_s``
         (None: before the first step, 0)."""
         return self._w if t_s is not None and t_s - self._t_w <= HOLD_S else 0.0
+
+    def mover_at(self, t_s: float | None) -> tuple[float, float, float] | None:
+        """Where the mover was last measured coming closer, while ``approach_m_s`` counts it:
+        (east m, north m, spread m), the return of the last approach measured and how far
+        across its beam it may lie; None when no approach counts at ``t_s``."""
+        return self._at if self.approach_m_s(t_s) > 0.0 else None
 
 
 def continuous(history, sensor_id: int, t0_s: float, t_s: float, hit) -> bool:

@@ -177,9 +177,9 @@ EMERGENCY_EXIT_MARGIN_M = 0.1
 REJOIN_QUIET_S, REJOIN_CHECK_DT_S = 1.0, 0.1
 #: Soft-wall gain (1/s): the speed toward a wall is at most this times the distance left.
 WALL_GAIN_1_S = 2.0
-#: A give-way whose backing velocity lies less than this fraction along the corridor is a
-#: mover coming across it (``_give_way``): the vehicle moves out of its path along the corridor.
-CROSSING_FRACTION = 0.5
+#: A mover measured less than this far (m) along the corridor from the vehicle (or its return's
+#: spread, if more) does not choose the side a give-way backs away to (``_give_way_side``).
+MOVER_GAP_MIN_M = 0.1
 #: The lateral wall sits this far (m) inside ``lateral_limit_m`` (the shaper's lag).
 WALL_MARGIN_M = 0.1
 #: Progress along the leg smaller than this (m) does not count (stall detection).
@@ -763,7 +763,8 @@ class Replanner:
             if self.cfg.give_way:          # else no approach is ever measured: a still world
                 lo, hi = field_sine_range(ev)
                 self.closing.on_hit(t_s, reading.sensor_id, ev.hit, ev.axis, self._still, ev.origin,
-                                    (ev.origin[2], ev.distance_m, lo, hi))
+                                    (ev.origin[2], ev.distance_m, lo, hi),
+                                    ev.distance_m * math.tan(ev.half_max_rad))
 
     def _explained_within_attitude(self, reading, pose) -> bool:
         """The attitude allowance: the known map explains the return with the beam placed by
@@ -1395,33 +1396,16 @@ class Replanner:
             return np.zeros(3)
         cap = give_way_speed_m_s(self.speed_m_s, w)
         v = self._govern(P, np.zeros(3), pts, np.linalg.norm(pts - P, axis=1))
+        if math.hypot(v[0], v[1]) == 0.0 and not self._fleeing:
+            return np.zeros(3)                             # the mover is still beyond its stopping room
+        # once the mover is inside the stopping distance of its closing speed, the vehicle
+        # backs away at the whole give-way speed while the approach is measured: the
+        # governor's deficit alone (w - v_stop(room)) starts from zero there and a vehicle
+        # that tracks it with lag let a walker close to 0.39 m (mix flight 84)
+        self._fleeing = True
         u = self._leg_frame(self._avoid_leg)[2]            # along the corridor only: not into a row
-        along = float(v[:2] @ u[:2])
-        full = math.hypot(v[0], v[1])
-        if full > 0.0 or self._fleeing:
-            # once the mover is inside the stopping distance of its closing speed, the vehicle
-            # backs away at the whole give-way speed while the approach is measured: the
-            # governor's deficit alone (w - v_stop(room)) starts from zero there and a vehicle
-            # that tracks it with lag let a walker close to 0.39 m (mix flight 84)
-            self._fleeing = True
-            if full > 0.0 and abs(along) >= CROSSING_FRACTION * full:
-                along = math.copysign(cap, along)        # along the corridor, away
-            full = cap                                   # else crossing: the side below, at this speed
-        if abs(along) < CROSSING_FRACTION * full:
-            # a mover coming across the corridor: backing along it gains no distance now, but
-            # it takes the vehicle out of the mover's path (a walker crossing straight at a
-            # stopped vehicle walked into it, fresh seed 20261151 flight 3, while the governor's
-            # slight lean along the corridor flipped sign from frame to frame): the whole
-            # backing speed, to the side chosen first in this stop (the side the governor
-            # leaned to then, forward when it leaned to neither)
-            sign = self._give_way_sign if self._give_way_sign is not None else (
-                math.copysign(1.0, along) if along != 0.0 else 1.0)
-            along = sign * full
-        if along != 0.0:
-            self._give_way_sign = math.copysign(1.0, along)
+        along = self._give_way_side(P, u, float(v[:2] @ u[:2])) * cap
         v = along * np.array([u[0], u[1], 0.0])
-        h = math.hypot(v[0], v[1])
-        v = v if h <= cap else v * (cap / h)
         v = self._govern_rows(P, v)
         # backing away from a mover never closes on anything faster than the stopping law
         # allows a still obstacle (the guard's rule): a give-way toward a post behind at
@@ -1437,6 +1421,28 @@ class Replanner:
             if h > lim:
                 v = v * (lim / h)
         return v
+
+    def _give_way_side(self, P, u, lean: float) -> float:
+        """The side (+1: along the leg, -1: back) a give-way backs away to along the corridor:
+        away from where the mover was last measured (``ClosingSpeed.mover_at``), once it lies
+        farther along the corridor from the vehicle than its return's spread across the beam
+        (``MOVER_GAP_MIN_M`` at least). Backing away along the corridor faster than the
+        mover's own speed along it (the give-way speed outpaces the approach) then only
+        widens that gap, whichever way the mover walks: across the corridor it passes
+        behind (or ahead of) the vehicle, along it the vehicle leads it. The governor's
+        lean away from the points (``lean``) took the side before: a worker crossing 1.0 m
+        ahead, beside two posts, leaned it forward, into the worker's line (mix seed
+        20261200, flight 194: walked into). Nearer than that, the side chosen before in
+        this stop stays (a crossing mover's returns from beam to beam flipped the lean from
+        frame to frame: fresh seed 20261151, flight 3), the first time the lean's."""
+        at = self.closing.mover_at(getattr(self, "_t_s", None))
+        if at is not None:
+            gap = (P[0] - at[0]) * u[0] + (P[1] - at[1]) * u[1]
+            if abs(gap) > max(MOVER_GAP_MIN_M, at[2]):
+                self._give_way_sign = math.copysign(1.0, gap)
+        if self._give_way_sign is None:
+            self._give_way_sign = math.copysign(1.0, lean) if lean != 0.0 else 1.0
+        return self._give_way_sign
 
     def _enter_stop(self, tau: float, events: list, then: str, detail: str) -> RefSample:
         """Brake to rest (the ``stop`` event says ``detail``), then ``then``: ``look`` (give
