@@ -1430,8 +1430,8 @@ class Replanner:
         mover's own speed along it (the give-way speed outpaces the approach) then only
         widens that gap, whichever way the mover walks: across the corridor it passes
         behind (or ahead of) the vehicle, along it the vehicle leads it. The governor's
-        lean away from the points (``lean``) took the side before: a worker crossing 1.0 m
-        ahead, beside two posts, leaned it forward, into the worker's line (mix seed
+        lean away from the points (``lean``) took the side before: with a worker crossing
+        1.06 m ahead it leaned under 0.01 m/s, forward, into the worker's line (mix seed
         20261200, flight 194: walked into). Nearer than that, the side chosen before in
         this stop stays (a crossing mover's returns from beam to beam flipped the lean from
         frame to frame: fresh seed 20261151, flight 3), the first time the lean's."""
