@@ -159,3 +159,43 @@ def test_flight_core_keeps_no_message_handler_or_report():
                                "FlightRecorder")
     assert {"pos", "t_s", "armed", "truth"} <= view and {"log", "errors", "min_clearance"} <= recorder
     assert self_attributes(core_src, "FlightCore") & ((view | recorder) - shared) == set()
+
+
+def redefined(source: str) -> list:
+    """(scope, name, first line, second line) of every function a class body or the module
+    defines twice: the second binding replaces the first, which is then dead code that
+    still reads as if it ran (property setters and ``typing.overload`` stubs excepted)."""
+    out = []
+
+    def scan(body, scope):
+        seen = {}
+        for node in body:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                decos = [ast.unparse(d) for d in node.decorator_list]
+                if any(d.endswith((".setter", ".deleter")) or d.endswith("overload") for d in decos):
+                    continue
+                if node.name in seen:
+                    out.append((scope, node.name, seen[node.name], node.lineno))
+                seen[node.name] = node.lineno
+            elif isinstance(node, ast.ClassDef):
+                scan(node.body, node.name)
+
+    scan(ast.parse(source).body, "<module>")
+    return out
+
+
+def test_redefined_finds_a_method_defined_twice():
+    src = "class A:\n    def f(self):\n        return 1\n\n    def f(self):\n        return 2\n"
+    assert redefined(src) == [("A", "f", 2, 5)]
+    prop = ("class B:\n    @property\n    def x(self):\n        return 1\n\n"
+            "    @x.setter\n    def x(self, v):\n        pass\n")
+    assert redefined(prop) == []
+
+
+@pytest.mark.parametrize("package", ["companion", "mavcore", "sitl"])
+def test_no_function_is_defined_twice_in_one_scope(package):
+    """Replanner had two ``_calm`` methods 338 lines apart: the emergency brake's exit read
+    as "within the normal limits" and ran the rejoin's "within half of them"."""
+    found = [(str(p.relative_to(ROOT)),) + r for p in sorted((ROOT / package).rglob("*.py"))
+             for r in redefined(p.read_text())]
+    assert found == []

@@ -1310,10 +1310,11 @@ class Replanner:
             return sh.commit(st)
 
         if self.emergency and not self._evading and self._calm():
-            # back to the normal limits once the state is within them and their brake from here
-            # passes with EMERGENCY_EXIT_MARGIN_M more (the emergency brake is for what the
-            # normal one can no longer stop for; without the margin the two alternated from
-            # frame to frame beside a post: fresh seed 20261155 of obstacles-wide, flight 2)
+            # back to the normal limits once the state is well within them (``_calm``: half of
+            # them) and their brake from here passes with EMERGENCY_EXIT_MARGIN_M more (the
+            # emergency brake is for what the normal one can no longer stop for; without the
+            # margin the two alternated from frame to frame beside a post: fresh seed 20261155
+            # of obstacles-wide, flight 2)
             self._set_emergency(False)
             if not judged(sh.state(), STOP_MARGIN_M + EMERGENCY_EXIT_MARGIN_M)[1].ok:
                 self._set_emergency(True)
@@ -1376,11 +1377,6 @@ class Replanner:
             self.shaper.set_limits(*c.emergency_limits(), omega_rad_s=EMERGENCY_OMEGA_RAD_S)
         else:
             self.shaper.set_limits(c.accel_m_s2, c.jerk_m_s3)
-
-    def _calm(self) -> bool:
-        """The shaper's state is within the normal limits (acceleration and jerk, per axis)."""
-        sh = self.shaper
-        return max(abs(x) for x in sh.a) <= self.cfg.accel_m_s2 and max(abs(x) for x in sh.j) <= self.cfg.jerk_m_s3
 
     def _least_room(self, path) -> float:
         """Least (distance - the guard's clearance) (m) along (M, 3) points, over every surface."""
