@@ -1391,7 +1391,8 @@ class Replanner:
             self._fleeing = False
             return np.zeros(3)
         cap = give_way_speed_m_s(self.speed_m_s, w)
-        v = self._govern(P, np.zeros(3), pts, np.linalg.norm(pts - P, axis=1))
+        dist = np.linalg.norm(pts - P, axis=1)
+        v = self._govern(P, np.zeros(3), pts, dist)
         if math.hypot(v[0], v[1]) == 0.0 and not self._fleeing:
             return np.zeros(3)                             # the mover is still beyond its stopping room
         # once the mover is inside the stopping distance of its closing speed, the vehicle
@@ -1406,7 +1407,7 @@ class Replanner:
         # backing away from a mover never closes on anything faster than the stopping law
         # allows a still obstacle (the guard's rule): a give-way toward a post behind at
         # 0.70 m/s where 0.57 m/s was allowed ended a flight (obstacles-wide scenario 1)
-        v = self._govern(P, v, pts, np.linalg.norm(pts - P, axis=1), scale_only=True, movers=False)
+        v = self._govern(P, v, pts, dist, scale_only=True, movers=False)
         # ... nor on what the guard knows beyond these points (the cells a re-route added, the
         # terrain): the guard's own speed law, along the command (a give-way at the whole
         # give-way speed, on a false 2.1 m/s mover, closed on a re-routed obstacle at 1.48 m/s
