@@ -53,20 +53,23 @@ def test_a_walker_coming_down_a_level_beam_is_read_at_its_speed_along_its_track(
     assert c.approach_m_s(0.95) == pytest.approx(1.5, abs=1e-9)
 
 
-def _top_slide(c: ClosingSpeed, tilt_deg: float) -> float:
+def _top_slide(c: ClosingSpeed, tilt_deg: float, field: bool = True) -> float:
     """A beam ``tilt_deg`` down looking back (+x) from a vehicle flying west at 1.0 m/s and
     descending at 0.3 m/s from 2.3 m, over a still level top at z = 1.5 (x 0..20): the
     return is where the axis meets the plane, x = o_x + (o_z - 1.5) / tan(tilt), sliding
     toward the vehicle faster than it flies. Returns the return's level speed toward the
     sensor in the world, d/dt of -x: 1.0 + 0.3 / tan(tilt). Relative to the sensor it moves
-    at 0.3 / tan(tilt), above the riding rule's 0.3 m/s for a tilt under 45 deg."""
+    at 0.3 / tan(tilt), above the riding rule's 0.3 m/s for a tilt under 45 deg. ``field``:
+    the beam's (sensor height, range, lowest and highest sine of elevation), a narrow beam's
+    (both -sin(tilt)), as the replanner gives it."""
     e = math.radians(tilt_deg)
     axis = (math.cos(e), 0.0, -math.sin(e))
     for k in range(20):
         t = 0.05 * k
         o = (10.0 - 1.0 * t, 0.0, 2.3 - 0.3 * t)
         x = o[0] + (o[2] - 1.5) / math.tan(e)
-        c.on_hit(t, 30, (x, 0.0, 1.5), axis, origin_enu_m=o)
+        f = (o[2], (o[2] - 1.5) / math.sin(e), -math.sin(e), -math.sin(e)) if field else None
+        c.on_hit(t, 30, (x, 0.0, 1.5), axis, origin_enu_m=o, field=f)
     return 1.0 + 0.3 / math.tan(e)
 
 
@@ -76,12 +79,54 @@ def test_a_tilted_beam_sliding_over_a_still_top_is_no_mover(monkeypatch, tilt_de
     world_speed = _top_slide(c, tilt_deg)
     assert world_speed > closing.MIN_M_S + 1.0          # fast enough to be read, and not riding
     assert c.approach_m_s(0.95) == 0.0
-    # the tilt bound is what decides: allowed up to 60 deg (the old bound), the slide reads
-    # as a mover at the return's world speed along the beam's level axis
-    monkeypatch.setattr(closing, "MIN_LEVEL", 0.5)
+    c = ClosingSpeed()
+    _top_slide(c, tilt_deg, field=False)                # a field it cannot judge: not read at all
+    assert c.approach_m_s(0.95) == 0.0
+    # the plane rule is what decides: without it the slide reads as a mover at the return's
+    # world speed along the beam's level axis
+    monkeypatch.setattr(closing, "still_plane", lambda *a: False)
     c = ClosingSpeed()
     _top_slide(c, tilt_deg)
     assert c.approach_m_s(0.95) == pytest.approx(world_speed, rel=1e-9)
+
+
+@pytest.mark.parametrize("tilt_deg", [20.0, 45.0])
+def test_a_walker_coming_down_a_tilted_beam_is_read_at_its_speed(tilt_deg):
+    """Fresh seed 20261221 (walkers along the corridors), flight 8 (obstacle-tall): climbing at
+    2.13 m, the vehicle flew at 0.8 m/s toward a worker walking down the corridor at 1.33 m/s.
+    The suite's level ring (2 deg high) passes over a 1.8 m head there; only its 20 deg and
+    45 deg rings saw the worker, and beams over 15 deg read no movers: 0.124 m of true
+    clearance. Here the worker's face is at x = 6 - 1.3 t, the vehicle at x = 0.8 t, 2.13 m
+    up; the beam's return is where its axis meets the face. The plane rule does not explain
+    the pair (the range shrinks 2.1 m/s where a level surface keeps it), the return does not
+    ride with the sensor, so the approach reads 1.3 m/s."""
+    e = math.radians(tilt_deg)
+    axis = (math.cos(e), 0.0, -math.sin(e))
+    lo, hi = -math.sin(e + math.radians(1.0)), -math.sin(e - math.radians(1.0))
+    c = ClosingSpeed()
+    for k in range(20):
+        t = 0.05 * k
+        o = (0.8 * t, 0.0, 2.13)
+        d = (6.0 - 1.3 * t - o[0]) / math.cos(e)
+        hit = (o[0] + d * axis[0], 0.0, o[2] + d * axis[2])
+        c.on_hit(t, 20, hit, axis, origin_enu_m=o, field=(o[2], d, lo, hi))
+    assert c.approach_m_s(0.95) == pytest.approx(1.3, abs=1e-9)
+    # the place a give-way backs away from (``mover_at``) is the newest return
+    assert c.mover_at(0.95)[:2] == pytest.approx((6.0 - 1.3 * 0.95, 0.0))
+
+
+def test_a_beam_looking_down_reads_no_mover():
+    """Beyond ``MOVER_TILT_MAX_DEG`` (60 deg) a beam's level part is too small to read an
+    approach: the down rangefinder's return jumps as the vehicle passes over a crate."""
+    e = math.radians(70.0)
+    axis = (math.cos(e), 0.0, -math.sin(e))
+    c = ClosingSpeed()
+    for k in range(20):
+        t = 0.05 * k
+        d = 2.0 - 1.0 * t
+        c.on_hit(t, 40, (d * axis[0], 0.0, 2.0 + d * axis[2]), axis, origin_enu_m=(0.0, 0.0, 2.0),
+                 field=(2.0, d, axis[2], axis[2]))
+    assert c.approach_m_s(0.95) == 0.0
 
 
 def test_the_default_low_ring_still_reads_a_walker():

@@ -132,3 +132,40 @@ def test_with_the_emergency_brake_broken_the_same_worker_walks_into_the_vehicle(
     """The mutation: emergency limits equal to the normal ones."""
     rep = _step_out_flight(tmp_path, False)
     assert rep["replanning"]["min_clearance_m"] < 0.05
+
+
+def test_the_exit_judges_the_state_the_frame_falls_back_to():
+    """Leaving the emergency limits judges, at the normal limits and with
+    ``EMERGENCY_EXIT_MARGIN_M`` more, the state the frame falls back to when its command
+    fails: one frame at a zero command from the present state. Judging the present state
+    instead let the two disagree (the present state's brake passed, the step's failed), and
+    the limits alternated every frame at rest beside a row for 11.5 s (987 events; mix seed
+    20261200, flight 0). The reference here moves at 0.3 m/s, calm, far from the row
+    (tests/test_replan_stopping.py's scene): the first brake judged starts where the normal
+    limits' zero-command frame leaves it (a shaper of its own, stepped once), not at the
+    present point."""
+    import test_replan_stopping as scene
+
+    from companion.replan.replanner import EMERGENCY_EXIT_MARGIN_M, STOP_MARGIN_M
+
+    rp = scene._shaping(scene._guard())
+    state = ((1.0, 1.0, 1.0), (0.3, 0.0, 0.0), (0.2, 0.0, 0.0), (0.0, 0.0, 0.0))
+    rp.shaper.reset(*state)
+    rp._set_emergency(True)
+    judged = []
+    forecast = rp.guard.forecast_brake
+
+    def spy(here, P, V, A, dt, since, margin_m, *rest):
+        judged.append((np.array(P[0]), margin_m))
+        return forecast(here, P, V, A, dt, since, margin_m, *rest)
+
+    rp.guard.forecast_brake = spy
+    scene._step(rp, (0.5, 0.0, 0.0))
+    fallback = ReferenceShaper(A0, J0)                  # the normal limits, as _set_emergency(False) sets
+    fallback.reset(*state)
+    expected = np.array(fallback.step(scene.DT, (0.0, 0.0, 0.0)).p)
+    first, margin = judged[0]
+    assert margin == pytest.approx(STOP_MARGIN_M + EMERGENCY_EXIT_MARGIN_M)
+    assert np.abs(expected - np.array(state[0])).max() > 1e-3          # the frame moves it
+    assert first == pytest.approx(expected, abs=1e-12)
+    assert not rp.emergency and rp.n_emergency_brakes == 0              # left, not re-entered

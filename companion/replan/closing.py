@@ -52,21 +52,26 @@ to outpace it, which makes the "mover" faster still. A true chaser at exactly
 the vehicle's speed is not closing; it is counted as soon as it gains on the
 vehicle by ``MIN_M_S``.
 
-Movers are read only by beams within ``MOVER_TILT_MAX_DEG`` of level. A beam tilted down
-onto an obstacle's top slides its return along that top as the vehicle climbs, descends or
-pitches: level, along the beam, toward the vehicle, exactly what a mover coming down the
-beam does, and neither the riding rule nor the return's height tells them apart (the height
-of a return placed on the axis of a wide beam is off by up to its range times the sine of
-half its field). At 20 deg down, 1 deg of pitch moves a return on a top 0.8 m below by
-0.12 m; a 1.5 m post's top read as a 2.1 m/s mover behind a vehicle flying away, and a
-box's top as 1.5 m/s (45 deg beams; obstacles-wide seed 20261166, flight 20). The speed
-then pushed the vehicle through its corridor's corner wall (0.71 m off the path), and with
-that fixed, into the guard's speed rule ahead (the flight ended). Movers here stand on the
-ground with vertical faces, walkers 1.8 m tall and tractors taller: a level beam meets
-them wherever they can reach a vehicle at its flight height, and a vehicle high enough
-that no level beam meets one (0.94 m of clearance above a 1.8 m walker) is not within
-its reach. The default suite's low ring (9 deg) still reads them; the steeper rings of a
-mission's own suite see obstacles, not their speeds.
+Movers are read by beams within ``MOVER_TILT_MAX_DEG`` (60 deg) of level; one tilted more
+than ``PLANE_TILT_DEG`` (15 deg) only with its ``field`` given, only against its own earlier
+returns, and only by motion along it, even at rest. A beam tilted down onto an obstacle's
+top slides its return along that top as the vehicle climbs, descends or pitches: level,
+along the beam, toward the vehicle, what a mover coming down the beam does. At 20 deg down,
+1 deg of pitch moves a return on a top 0.8 m below by 0.12 m; a 1.5 m post's top read as a
+2.1 m/s mover behind a vehicle flying away, and a box's top as 1.5 m/s (45 deg beams;
+obstacles-wide seed 20261166, flight 20). The speed then pushed the vehicle through its
+corridor's corner wall (0.71 m off the path), and with that fixed, into the guard's speed
+rule ahead (the flight ended). That slide is what ``still_plane`` explains (the top's
+height fixed through the older return's lowest or highest ray, met by the newer one's at
+its measured range), so every pair of a tilted beam is judged by it. Until then only beams
+within 15 deg of level read movers, on the premise that a level beam meets a walker
+wherever it can reach the vehicle; true for the default suite's low ring (4-14 deg down),
+not for a suite whose level ring is 2 deg high and whose next ring looks 20 deg down:
+climbing at 2.13 m, a vehicle flew at 0.8 m/s toward a worker walking down the corridor,
+whom only the 20 and 45 deg rings saw, and kept 0.124 m (fresh seed 20261221, flight 8).
+Across a tilted beam a return also moves as the vehicle pitches (a beam looking sideways
+rolls), so a tilted beam counts only motion along it. Steeper than 60 deg, the level part
+of the axis is too small to read an approach.
 
 A speed is read only along a continuous track: between the pair's two returns of one
 beam, no return of that beam moved level farther than any mover could in the time
@@ -126,9 +131,13 @@ MAX_M_S = 6.0
 #: The return must have moved at least this fraction of its displacement along the beam.
 ALIGN_MIN = 0.8
 #: Beams tilted more than this (deg) from level do not read movers (module notes).
-MOVER_TILT_MAX_DEG = 15.0
+MOVER_TILT_MAX_DEG = 60.0
 #: ... as the level part of the unit axis: |u_xy| below this is too steep.
 MIN_LEVEL = math.cos(math.radians(MOVER_TILT_MAX_DEG))
+#: Beams tilted more than this (deg) read movers only along their own track, in flight's
+#: rule, with ``still_plane`` judging every pair (module notes).
+PLANE_TILT_DEG = 15.0
+PLANE_LEVEL = math.cos(math.radians(PLANE_TILT_DEG))
 #: A hit older than this (s) is not compared.
 _STALE_S = 1.5
 #: Level noise (m) allowed on top of ``MAX_M_S`` between two returns of one beam on one track.
@@ -155,12 +164,17 @@ class ClosingSpeed:
         ``still_plane`` (None: not judged); ``spread_m``: how far (m) across the beam the
         return may lie from ``hit_enu_m`` (the field of view at the measured range), kept
         with the mover's place (``mover_at``) (module notes)."""
-        # one history for all sensors: at rest a mover passes from beam to beam
-        h = self._hist.setdefault(0, [])
         hit = (float(hit_enu_m[0]), float(hit_enu_m[1]), float(hit_enu_m[2]))
         uh = math.hypot(float(axis_enu[0]), float(axis_enu[1]))
         if uh < MIN_LEVEL:
-            return                   # a tilted beam: its return slides over tops (module notes)
+            return                   # looking down: hardly any level part (module notes)
+        tilted = uh < PLANE_LEVEL
+        if tilted and field is None:
+            return                   # a tilted beam's top is judged by ``still_plane`` only
+        # one history for the level beams: at rest a mover passes from beam to beam; a
+        # tilted beam's own (its returns slide over tops; module notes)
+        h = self._hist.setdefault(-1 - int(sensor_id) if tilted else 0, [])
+        still = still and not tilted
         u = (float(axis_enu[0]) / uh, float(axis_enu[1]) / uh, 0.0)      # level: movers move level
         o = None if origin_enu_m is None else (float(origin_enu_m[0]), float(origin_enu_m[1]))
         while h and t_s - h[0][0] > _STALE_S:

@@ -1315,8 +1315,12 @@ class Replanner:
             # emergency brake is for what the normal one can no longer stop for; without the
             # margin the two alternated from frame to frame beside a post: fresh seed 20261155
             # of obstacles-wide, flight 2)
+            # the state judged is the normal limits' own next one at a zero command (what this
+            # frame falls back to), not the present state: the present state's brake passed
+            # while that step's failed, and the two alternated every frame at rest beside a row
+            # for 11.5 s (mix seed 20261200, flight 0, with tilted beams reading movers: 987 events)
             self._set_emergency(False)
-            if not judged(sh.state(), STOP_MARGIN_M + EMERGENCY_EXIT_MARGIN_M)[1].ok:
+            if not judged(sh.preview(dt, (0.0, 0.0, 0.0)), STOP_MARGIN_M + EMERGENCY_EXIT_MARGIN_M)[1].ok:
                 self._set_emergency(True)
 
         tried = []
