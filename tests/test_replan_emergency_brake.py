@@ -169,3 +169,30 @@ def test_the_exit_judges_the_state_the_frame_falls_back_to():
     assert np.abs(expected - np.array(state[0])).max() > 1e-3          # the frame moves it
     assert first == pytest.approx(expected, abs=1e-12)
     assert not rp.emergency and rp.n_emergency_brakes == 0              # left, not re-entered
+
+
+def test_the_exit_never_takes_the_emergency_brake_again_in_its_own_frame():
+    """The margin rule is not monotonic in its margin: a brake that starts inside the wider
+    band passes it by not closing there (``companion.safety.margin_rule``), where the narrower
+    one, once kept, must be kept. tests/test_replan_stopping.py's row: the frame's margin
+    (``STOP_MARGIN_M``, 0.05 m) keeps x <= 4.10 (0.85 + 0.05 m from the face at 5.0), the
+    exit's (0.15 m) x <= 4.00. A reference just inside x = 4.10, creeping toward the row at
+    5-10 mm/s, brakes to within 5 mm past it: the wider band passes (inside it, closing under
+    the 5 mm tolerance), the frame's fails. An exit judged at the wider margin alone left the
+    emergency limits there and took them again in the same frame, with a new emergency-brake
+    event (every frame at rest beside a row in mix seed 20261200 flight 0). Swept across
+    x = 4.090-4.105: no frame may count an emergency brake, and the sweep must cross the
+    boundary (the exit taken at some points, refused at others)."""
+    import test_replan_stopping as scene
+
+    taken = refused = 0
+    for x in np.arange(4.090, 4.1051, 0.0005):
+        for v in (0.005, 0.01):
+            rp = scene._shaping(scene._guard())
+            rp.shaper.reset((float(x), 1.0, 1.0), (v, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+            rp._set_emergency(True)
+            scene._step(rp, (0.0, 0.0, 0.0))
+            assert rp.n_emergency_brakes == 0, (x, v)
+            taken += not rp.emergency
+            refused += rp.emergency
+    assert taken > 0 and refused > 0

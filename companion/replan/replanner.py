@@ -1316,11 +1316,17 @@ class Replanner:
             # margin the two alternated from frame to frame beside a post: fresh seed 20261155
             # of obstacles-wide, flight 2)
             # the state judged is the normal limits' own next one at a zero command (what this
-            # frame falls back to), not the present state: the present state's brake passed
-            # while that step's failed, and the two alternated every frame at rest beside a row
-            # for 11.5 s (mix seed 20261200, flight 0, with tilted beams reading movers: 987 events)
+            # frame falls back to), not the present state, and at the frame's own margin too:
+            # the margin rule is not monotonic in its margin (a brake that starts inside the
+            # wider band passes by not closing there, where the narrower one, once kept, must
+            # be kept). Judged from the present state and at the wider margin only, the exit
+            # passed while the fallback's step failed, and the two alternated every frame at
+            # rest beside a row (mix seed 20261200, flight 0, with tilted beams reading movers:
+            # 987 events in 11.5 s; with the fallback's state but one margin, the same every
+            # frame from 122.05 s)
             self._set_emergency(False)
-            if not judged(sh.preview(dt, (0.0, 0.0, 0.0)), STOP_MARGIN_M + EMERGENCY_EXIT_MARGIN_M)[1].ok:
+            fallback = sh.preview(dt, (0.0, 0.0, 0.0))
+            if not (judged(fallback, STOP_MARGIN_M + EMERGENCY_EXIT_MARGIN_M)[1].ok and judged(fallback)[1].ok):
                 self._set_emergency(True)
 
         tried = []
