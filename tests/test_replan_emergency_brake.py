@@ -196,3 +196,35 @@ def test_the_exit_never_takes_the_emergency_brake_again_in_its_own_frame():
             taken += not rp.emergency
             refused += rp.emergency
     assert taken > 0 and refused > 0
+
+
+def test_the_emergency_brake_is_taken_only_when_the_normal_brake_would_enter_the_clearance():
+    """``STOP_MARGIN_M`` (0.05 m) is the prediction's allowance, not the clearance: a normal
+    brake that fails that band but keeps the clearance itself still stops for the surface,
+    and is flown; the emergency limits are for a brake that would enter the clearance
+    (tests/test_replan_stopping.py's row: the clearance begins at x = 4.15). Before, failing
+    the band alone took them, whenever a brake ridden along the band's edge closed a
+    millimetre more than the last (92 emergency brakes at rest beside a row in mix seed
+    20261200 flight 0). A reference between the band (x <= 4.10) and the clearance, creeping
+    or moving at up to 0.1 m/s toward the row, zero command: the emergency brake is counted
+    exactly where the normal brake from the start ends inside the clearance (its own stop,
+    ``brake_path`` at the normal limits, away from the boundary by 3 mm or more), and a
+    reference that did not take it never enters the clearance."""
+    import test_replan_stopping as scene
+
+    checked = {True: 0, False: 0}
+    for x in (4.102, 4.11, 4.12, 4.13):
+        for v in (0.01, 0.02, 0.05, 0.1):
+            end = brake_path((x, 1.0, 1.0), (v, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                             ReferenceShaper(A0, J0))[-1][0]
+            if abs(end - 4.15) < 0.003:
+                continue
+            rp = scene._shaping(scene._guard())
+            rp.shaper.reset((x, 1.0, 1.0), (v, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+            xs = [scene._step(rp, (0.0, 0.0, 0.0)).p[0] for _ in range(300)]
+            enters = end > 4.15
+            assert (rp.n_emergency_brakes > 0) == enters, (x, v, end)
+            if not enters:
+                assert max(xs) <= 4.15, (x, v)
+            checked[enters] += 1
+    assert checked[True] > 0 and checked[False] >= 4          # both sides of the boundary

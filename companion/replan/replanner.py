@@ -1350,6 +1350,14 @@ class Replanner:
         if verdict.ok:
             return commit(st, flags0)
         if not self.emergency:
+            # the normal brake that keeps the clearance itself (no STOP_MARGIN_M: that band is
+            # the prediction's allowance, and the next frame judges again) still stops for it:
+            # it is flown. Failing the band alone took the emergency brake whenever a brake
+            # ridden along the band's edge closed a millimetre more than the last one (mix seed
+            # 20261200 flight 0: 92 emergency brakes at rest beside a row, 125.6-127 s)
+            path0, verdict0, flags00 = judged(st, 0.0)
+            if verdict0.ok:
+                return commit(st, flags00)
             # the normal brake can no longer stop for it (it came into view inside that
             # stopping distance: a walker out of a row, fresh seed 20261152 flight 10, met at
             # 0.52 m/s by a brake at 1 m/s^2): the emergency brake, until calm (``_calm``)
