@@ -1292,13 +1292,20 @@ class Replanner:
 
         since = None if self._gate_since is None else self._gate_since - self._t_s
 
+        brakes = {}
+
         def judged(st, margin_m=STOP_MARGIN_M):
             # from where the reference is now, through the frame's step, to its stopping point;
             # the brake keeps STOP_MARGIN_M beyond the clearance (the prediction's error at
             # speed), and never enters the clearance itself nor closes inside it; and the gate
-            # flies every point of it (``Guard.forecast_brake``: the speed rule, braking, the grace)
+            # flies every point of it (``Guard.forecast_brake``: the speed rule, braking, the grace).
+            # A state judged again this frame (at another margin, or as the fallback after the
+            # exit's check) reuses its brake: it depends only on the state and the limits
             dt_brake = EMERGENCY_BRAKE_DT_S if self.emergency else BRAKE_DT_S
-            P, V, A = brake_states(st.p, st.v, st.a, st.jerk, sh, dt_brake)
+            key = (st, self.emergency)
+            if key not in brakes:
+                brakes[key] = brake_states(st.p, st.v, st.a, st.jerk, sh, dt_brake)
+            P, V, A = brakes[key]
             verdict, flags0, self._brake_stepped = self.guard.forecast_brake(
                 here, P, V, A, dt_brake, since, margin_m, STOP_TOL_M, self._brake_stepped)
             return np.vstack([here, P]), verdict, flags0
@@ -1355,7 +1362,7 @@ class Replanner:
             # it is flown. Failing the band alone took the emergency brake whenever a brake
             # ridden along the band's edge closed a millimetre more than the last one (mix seed
             # 20261200 flight 0: 92 emergency brakes at rest beside a row, 125.6-127 s)
-            path0, verdict0, flags00 = judged(st, 0.0)
+            _, verdict0, flags00 = judged(st, 0.0)
             if verdict0.ok:
                 return commit(st, flags00)
             # the normal brake can no longer stop for it (it came into view inside that
