@@ -312,7 +312,10 @@ def test_low_obstacle_is_climbed_over(low_flight):
     assert np.all(np.abs(np.diff(f.ref[:, 0:3], axis=0)) <= 1.05 * 1.0 * dt + 1e-9)
     assert np.all(np.abs(np.diff(f.ref[:, 3:6], axis=0)) <= 1.05 * cfg.accel_m_s2 * dt + 1e-9)
     assert np.all(np.abs(np.diff(f.ref[:, 6:9], axis=0)) <= 1.05 * cfg.jerk_m_s3 * dt + 1e-9)
-    assert np.abs(f.ref[:, 9:12]).max() <= cfg.jerk_m_s3 + 1e-9
+    # the jerk: per axis of the command's own horizontal axes (along it, across it) and the
+    # vertical (``companion.replan.shaper``), so at most sqrt(2) j_max across E and N together
+    assert np.hypot(f.ref[:, 9], f.ref[:, 10]).max() <= math.sqrt(2.0) * cfg.jerk_m_s3 + 1e-9
+    assert np.abs(f.ref[:, 11]).max() <= cfg.jerk_m_s3 + 1e-9
 
 
 def test_tall_obstacle_stop_then_reroute_and_finish(field):
@@ -429,7 +432,8 @@ def test_ablation_reference_shaping(field, low_flight):
     loose = fly(field, [LOW_POST], cfg=replace(ReplanConfig(), accel_m_s2=1e3, jerk_m_s3=1e4), stop_after=_after_rejoin())
     cfg = ReplanConfig()
     assert np.abs(shaped.ref[:, 6:9]).max() <= cfg.accel_m_s2 + 1e-6
-    assert np.abs(shaped.ref[:, 9:12]).max() <= cfg.jerk_m_s3 + 1e-6
+    assert np.hypot(shaped.ref[:, 9], shaped.ref[:, 10]).max() <= math.sqrt(2.0) * cfg.jerk_m_s3 + 1e-6
+    assert np.abs(shaped.ref[:, 11]).max() <= cfg.jerk_m_s3 + 1e-6
     assert np.abs(loose.ref[:, 6:9]).max() > 1.5 * cfg.accel_m_s2
     assert np.abs(loose.ref[:, 9:12]).max() > 4.0 * cfg.jerk_m_s3
 

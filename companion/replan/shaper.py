@@ -8,17 +8,36 @@ third-order reference model tracks the command with nested saturations::
     j_des = sat(k_a (a_des - a), j_max)
     snap  = sat(k_j (j_des - j), s_max)
 
-per axis (ENU; so the norms are within sqrt(3) of the limits), integrated
-exactly over each frame for constant snap. Per-axis limits keep the axes
-decoupled: with a shared (norm) limit, braking along the track uses up the
-jerk a climb needs to level off, and the vertical speed overshoots. Unsaturated, v follows v_cmd
+per axis, integrated exactly over each frame for constant snap. The
+horizontal axes are the command's own: along its direction and across it
+(E and N when the command is zero: the brake; ``planar_snap``), so from rest
+the across axis has nothing to do and the reference moves the way it is
+commanded, while a small correction across still has the whole of its own
+axis's limits when the along axis saturates. On fixed E and N axes, each
+saturated on its own, a command along a diagonal was flown at 45 deg until
+the slower axis caught up (fresh seed 20261222, flight 13: a give-way
+along a diagonal corridor flew into the row beside it, 2.5 m/s walker);
+saturating the horizontal pair by its norm instead keeps the direction but
+shares the limits, so a correction across a saturated motion along is
+slowed in proportion, and a reference inside a row's clearance could not
+take back its last millimetre per second toward the row fast enough to go
+on along it (tests/test_replan_stopping.py). For a command along E or N
+the two frames are the same axes. The vertical axis stays apart: with a shared
+limit, braking along the track uses up the jerk a climb needs to level
+off, and the vertical speed overshoots. Unsaturated, v follows v_cmd
 with the triple pole s = -omega (k_j = 3 omega, k_a = omega, k_v = omega / 3:
 s^3 + k_j s^2 + k_j k_a s + k_j k_a k_v = (s + omega)^3), so a step of the
 command gives no overshoot; saturated, the term a |a| / (2 j_max) (the
 speed still gained while the acceleration is ramped down at j_max) keeps
-the overshoot small (tested: below 2 % on speed steps). Per
-axis |a| <= a_max (up to one frame of jerk), |jerk| <= j_max and
-|snap| <= s_max. p, v, a and jerk are
+the overshoot small (tested: below 2 % on speed steps). Per axis of
+that frame |jerk| <= j_max and |snap| <= s_max, and for a command held
+|a| <= a_max (up to one frame of jerk); a component built on the axes of an
+earlier command may start beyond a limit on the new ones, and the jerk's
+then only comes back (tests/test_replan_shaper.py), while the acceleration
+can pass a_max as that jerk unwinds (random commands each held 0.2 s:
+horizontal |a| up to 1.53 a_max, against sqrt(2) a_max on fixed axes; the
+emergency limit is 3 a_max). The brake (a zero command) is on E and N, so
+its prediction is exact whatever the state. p, v, a and jerk are
 continuous by construction (the state is integrated, never reset, except
 by ``reset`` which takes the state to continue from).
 """
@@ -57,6 +76,28 @@ def axis_snap(v_cmd: float, v: float, a: float, j: float, dt_s: float, a_max: fl
     return si
 
 
+#: Below this horizontal speed (m/s) a command gives no direction (``planar_snap``): E-N axes.
+FRAME_EPS_M_S = 1e-9
+
+
+def planar_snap(cx: float, cy: float, vx: float, vy: float, ax: float, ay: float, jx: float, jy: float,
+                dt_s: float, a_max: float, j_max: float, s_max: float, k_v: float, k_a: float,
+                k_j: float) -> tuple:
+    """The horizontal snap (m/s^4, E and N) of the reference model over a frame of ``dt_s``
+    toward the command (cx, cy) from v, a, j: ``axis_snap`` along the command's direction and
+    across it (module doc). A zero command (the brake) is on E and N, as is a command along
+    E or N, to the last bit (a rotation by a multiple of 90 deg is exact): the brake's
+    prediction (``companion.replan.brake``) steps E and N on their own."""
+    n = math.hypot(cx, cy)
+    ux, uy = (cx / n, cy / n) if n > FRAME_EPS_M_S else (1.0, 0.0)
+    # along (u) and across (w = u turned +90 deg)
+    su = axis_snap(cx * ux + cy * uy, vx * ux + vy * uy, ax * ux + ay * uy, jx * ux + jy * uy,
+                   dt_s, a_max, j_max, s_max, k_v, k_a, k_j)
+    sw = axis_snap(cy * ux - cx * uy, vy * ux - vx * uy, ay * ux - ax * uy, jy * ux - jx * uy,
+                   dt_s, a_max, j_max, s_max, k_v, k_a, k_j)
+    return su * ux - sw * uy, su * uy + sw * ux
+
+
 @dataclass(frozen=True, slots=True)
 class ShapedState:
     """Reference state (ENU, float 3-tuples): p m, v m/s, a m/s^2, jerk m/s^3, snap m/s^4."""
@@ -74,7 +115,8 @@ class ReferenceShaper:
     Parameters
     ----------
     accel_m_s2, jerk_m_s3, snap_m_s4 : float
-        Per-axis limits of a, jerk and snap (default snap: 5 jerk_m_s3 per s).
+        Per-axis limits of a, jerk and snap, horizontally on the command's axes (module doc;
+        default snap: 5 jerk_m_s3 per s).
     omega_rad_s : float
         Pole of the unsaturated model.
     """
@@ -114,8 +156,9 @@ class ReferenceShaper:
         if dt_s <= 0.0:
             return self.state()
         p, v, a, j = self.p, self.v, self.a, self.j
-        s = [axis_snap(v_cmd[i], v[i], a[i], j[i], dt_s, self.a_max, self.j_max, self.s_max,
-                       self.k_v, self.k_a, self.k_j) for i in range(3)]
+        lim = (self.a_max, self.j_max, self.s_max, self.k_v, self.k_a, self.k_j)
+        s = [*planar_snap(v_cmd[0], v_cmd[1], v[0], v[1], a[0], a[1], j[0], j[1], dt_s, *lim),
+             axis_snap(v_cmd[2], v[2], a[2], j[2], dt_s, *lim)]
         h, h2, h3, h4 = dt_s, dt_s * dt_s / 2.0, dt_s ** 3 / 6.0, dt_s ** 4 / 24.0
         return ShapedState(tuple(p[i] + v[i] * h + a[i] * h2 + j[i] * h3 + s[i] * h4 for i in range(3)),
                            tuple(v[i] + a[i] * h + j[i] * h2 + s[i] * h3 for i in range(3)),
