@@ -19,17 +19,14 @@ obstacle already gone round).
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
 from companion.replan import Replanner
 from companion.replan.closing import BASELINE_S
-from mavcore import codec
 from mavcore.mission.replan import ReplanConfig
 
-from test_replan_closedloop import (CORRIDOR_Y, MAX_RANGE_M, ROW_BOXES, SENSOR_FANS, SENSOR_GEOMETRY, Cylinder,
-                                    build_field, cast, level_attitude)
+from test_replan_closedloop import CORRIDOR_Y, ROW_BOXES, Cylinder, build_field, feed_ring, level_attitude
 
 DT = 0.05            # frame (s); sensors every other frame: 0.1 s
 HOVER = (8.0, CORRIDOR_Y, 1.5)
@@ -46,7 +43,6 @@ def _watch(walks: bool, t_end: float = 3.0):
     known = field.known.with_obstacle(disc, None, np.full(len(disc), 1.8))
     rp = Replanner(dataclasses.replace(ReplanConfig(), give_way=True), known, field.plan)
     R = level_attitude((1.0, 0.0, 0.0))
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
     approach = unknown = None
     k = 0
     t = 0.0
@@ -55,15 +51,10 @@ def _watch(walks: bool, t_end: float = 3.0):
         bodies = ROW_BOXES + (Cylinder(x, CORRIDOR_Y, 0.25, 1.8),)
         rp.on_pose(t, HOVER, R)
         if k % 2 == 0:
-            for (sid, orient, Rs, h, v), fan in zip(SENSOR_GEOMETRY, SENSOR_FANS):
-                best = min(cast(HOVER, (r00 * a + r01 * b + r02 * c, r10 * a + r11 * b + r12 * c,
-                                        r20 * a + r21 * b + r22 * c), bodies) for a, b, c in fan)
-                none = not math.isfinite(best)
-                rp.on_range(t, codec.Range(int(round(t * 1000)), sid, math.nan if none else best, 0.1,
-                                           MAX_RANGE_M, orient, h, v, math.nan, none, Rs))
+            feed_ring(rp, t, HOVER, R, bodies)
         if approach is None and rp.closing.approach_m_s(t) > 0.0:
             approach = t
-        pts = rp.memory.points() if hasattr(rp.memory, "points") else np.asarray(rp._points())
+        pts = rp.memory.points()
         if unknown is None and len(pts) and (np.hypot(pts[:, 0] - x, pts[:, 1] - CORRIDOR_Y) < 0.5).any():
             unknown = t
         t = round(t + DT, 9)

@@ -204,6 +204,17 @@ class Flight:
         return np.array([min((o.clearance(p) for o in obstacles), default=math.inf) for p in self.ref[:, :3]])
 
 
+def feed_ring(rp: Replanner, t: float, p, R: np.ndarray, bodies) -> None:
+    """Every sensor's reading at vehicle time ``t`` from ``p`` with attitude ``R``, cast on ``bodies``."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+    for (sid, orient, Rs, h, v), fan in zip(SENSOR_GEOMETRY, SENSOR_FANS):
+        best = min(cast(p, (r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z,
+                            r20 * x + r21 * y + r22 * z), bodies) for x, y, z in fan)
+        none = not math.isfinite(best)
+        rp.on_range(t, codec.Range(int(round(t * 1000)), sid, math.nan if none else best, 0.1,
+                                   MAX_RANGE_M, orient, h, v, math.nan, none, Rs))
+
+
 def fly(field: Field, obstacles=(), cfg: ReplanConfig = ReplanConfig(), t_end_s: float = 200.0,
         dt_s: float = 0.05, sensor_every: int = 2, stop_after=None) -> Flight:
     rp = Replanner(cfg, field.known, field.plan)
@@ -218,13 +229,7 @@ def fly(field: Field, obstacles=(), cfg: ReplanConfig = ReplanConfig(), t_end_s:
         R = level_attitude(s)
         rp.on_pose(t, p, R)
         if k % sensor_every == 0:
-            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
-            for (sid, orient, Rs, h, v), fan in zip(SENSOR_GEOMETRY, SENSOR_FANS):
-                best = min(cast(p, (r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z,
-                                    r20 * x + r21 * y + r22 * z), bodies) for x, y, z in fan)
-                none = not math.isfinite(best)
-                rp.on_range(t, codec.Range(int(round(t * 1000)), sid, math.nan if none else best, 0.1,
-                                           MAX_RANGE_M, orient, h, v, math.nan, none, Rs))
+            feed_ring(rp, t, p, R, bodies)
         st = rp.step(t, p, (0.0, 0.0, 0.0))
         r = st.ref
         ts.append(t)
