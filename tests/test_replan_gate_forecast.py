@@ -105,8 +105,9 @@ def _shaping(guard):
     """What ``_shape`` reads, on a bare object (as tests/test_replan_stopping.py)."""
     rp = types.SimpleNamespace(guard=guard, shaper=ReferenceShaper(1.0, 2.0), n_stop_limited=0, _brake=0.5,
                                cfg=ReplanConfig(accel_m_s2=1.0, jerk_m_s3=2.0), emergency=False,
-                               n_emergency_brakes=0, _evading=False, _emergency_why="", _gate_since=None, _t_s=0.0, _brake_stepped=False)
-    for name in ("_shape", "_least_room", "_set_emergency", "_calm"):
+                               n_emergency_brakes=0, _evading=False, _emergency_why="", _gate_since=None, _t_s=0.0,
+                               _brake_stepped=False, known=types.SimpleNamespace(ground_z=lambda x, y: 0.0))
+    for name in ("_shape", "_least_room", "_set_emergency", "_calm", "_height_band", "_wall_speed", "_allowed_speed"):
         setattr(rp, name, types.MethodType(getattr(Replanner, name), rp))
     return rp
 

@@ -53,8 +53,10 @@ def _shaping(guard):
     rp = types.SimpleNamespace(guard=guard, shaper=ReferenceShaper(1.0, 2.0), n_stop_limited=0, _brake=0.5,
                                cfg=ReplanConfig(accel_m_s2=1.0, jerk_m_s3=2.0), emergency=False,
                                n_emergency_brakes=0, _evading=False, _emergency_why="",
-                               _gate_since=None, _t_s=0.0, _brake_stepped=False)
-    for name in ("_shape", "_govern_rows", "_allowed_speed", "_least_room", "_set_emergency", "_calm"):
+                               _gate_since=None, _t_s=0.0, _brake_stepped=False,
+                               known=types.SimpleNamespace(ground_z=lambda x, y: 0.0))     # flat, z = 0
+    for name in ("_shape", "_govern_rows", "_allowed_speed", "_least_room", "_set_emergency", "_calm",
+                 "_height_band", "_wall_speed"):
         setattr(rp, name, types.MethodType(getattr(Replanner, name), rp))
     return rp
 
@@ -159,3 +161,20 @@ def test_inside_the_clearance_the_reference_does_not_close():
     p = np.array([_step(rp, (0.02, 0.3, 0.0)).p for _ in range(int(3.0 / DT))])
     assert (FACE_X - p[:, 0]).min() >= REQ_ROW - 0.02 - 0.003
     assert p[-1, 1] - p[0, 1] > 0.5
+
+
+def test_no_command_takes_the_reference_over_the_ceiling():
+    # every mode's command passes the height band in ``_shape``, whatever pushed it (a
+    # give-way's row governor over a row's top pushed up through the 3 m ceiling: fresh seed
+    # 20261224 along, flight 16). Asked to climb at 0.5 m/s for 4 s from 2.5 m (flat ground,
+    # the ceiling at 3 m, its wall 0.1 m inside): it climbs to the wall and no higher than
+    # the ceiling; started 0.2 m over the ceiling with a level command, it comes back under
+    cfg = ReplanConfig()
+    rp = _shaping(_guard())
+    rp.shaper.reset((1.0, 1.0, 2.5), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    z = np.array([_step(rp, (0.0, 0.3, 0.5)).p[2] for _ in range(int(4.0 / DT))])
+    assert z.max() <= cfg.ceiling_agl_m
+    assert z[-1] >= cfg.ceiling_agl_m - 0.1 - 0.05                # it did climb, to the wall
+    rp.shaper.reset((1.0, 1.0, cfg.ceiling_agl_m + 0.2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    z = np.array([_step(rp, (0.0, 0.3, 0.0)).p[2] for _ in range(int(4.0 / DT))])
+    assert z[-1] <= cfg.ceiling_agl_m

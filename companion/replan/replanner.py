@@ -1220,14 +1220,21 @@ class Replanner:
         vn = min(max(vn, -wall(L + lat)), wall(L - lat))
         if math.isfinite(end_m):
             vt = min(vt, wall(end_m))
-        z_lo, z_hi = ground + cfg.floor_agl_m + WALL_MARGIN_M, ground + cfg.ceiling_agl_m - WALL_MARGIN_M
-        vz = min(max(vz, -cfg.vertical_speed_m_s, -wall(P[2] - z_lo)),
-                 cfg.vertical_speed_m_s, wall(z_hi - P[2]))
+        vz = self._height_band(float(P[2]), vz, ground)
         h = math.hypot(vt, vn)
         cap = give_way_speed_m_s(self.speed_m_s, self.closing.approach_m_s(getattr(self, "_t_s", None)))
         if h > cap:
             vt, vn = vt * cap / h, vn * cap / h
         return np.array([vt * u[0] + vn * n[0], vt * u[1] + vn * n[1], vz])
+
+    def _height_band(self, z: float, vz: float, ground: float) -> float:
+        """A vertical command (m/s) within the height band at height ``z`` (m) over ``ground``:
+        the floor and the ceiling are walls (``_wall_speed``, ``WALL_MARGIN_M`` inside them),
+        and the vertical speed limit."""
+        cfg = self.cfg
+        z_lo, z_hi = ground + cfg.floor_agl_m + WALL_MARGIN_M, ground + cfg.ceiling_agl_m - WALL_MARGIN_M
+        return min(max(vz, -cfg.vertical_speed_m_s, -self._wall_speed(z - z_lo)),
+                   cfg.vertical_speed_m_s, self._wall_speed(z_hi - z))
 
     def _allowed_speed(self, room_m):
         """Largest speed (m/s) that stops within ``room_m`` (scalar or array): braking at
@@ -1308,6 +1315,11 @@ class Replanner:
         second while the command moved away, and the guard refused the sample:
         obstacles-wide seed 20261127, flight 15). No guard, or no governor: as commanded."""
         sh = self.shaper
+        # the height band holds for every mode's command, whatever pushed it (a give-way's row
+        # governor over a row's top pushes up: fresh seed 20261224 along, flight 16, took the
+        # reference to 0.12 m over the 3 m ceiling, and the guard refused every re-route from there)
+        v_cmd = list(v_cmd)
+        v_cmd[2] = self._height_band(sh.p[2], float(v_cmd[2]), self.known.ground_z(sh.p[0], sh.p[1]))
         if self.guard is None or dt <= 0.0 or not self.cfg.clearance_governor:
             return sh.step(dt, v_cmd)
         cmd = np.asarray(v_cmd, dtype=float)
