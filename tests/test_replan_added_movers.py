@@ -1,4 +1,5 @@
-"""An added obstacle may move: its returns are read for an approach (``Replanner._place``).
+"""An added obstacle may move: its returns are read for an approach (``Replanner._place``),
+and stay explained while they lie on its cells.
 
 A re-route adds what it went round to the known map (``KnownMap.with_obstacle``), and the
 added cells then explain that obstacle's returns. A worker standing where a re-route went
@@ -9,9 +10,10 @@ cells (0.22 s at 1.3 m/s), and only then did the approach measurement start, nee
 Here (the closed-loop test's field and ring, cast analytically): a 0.25 m worker, 1.8 m
 tall, stands 2 m ahead of a vehicle hovering in the corridor, added to the known map as a
 re-route adds it; at t = 1 s it walks at the vehicle at 1.3 m/s. Hand: its approach counts
-once a beam has two returns ``BASELINE_S`` apart, so by 1.0 + 0.3 + two sensor periods
-(0.1 s each); and the vehicle knows it by the time its returns are unknown again. Without
-the rule the approach starts ``BASELINE_S`` after the first unknown return at the earliest.
+once a beam has two returns ``BASELINE_S`` apart (the older may be from before it walked),
+so by 1.0 + 0.3 + two sensor periods (0.1 s each); and the vehicle knows it by the time its
+returns are unknown again (they leave the added cells). Without the rule the approach starts
+``BASELINE_S`` after the first unknown return at the earliest.
 Standing, it is never a mover, and its returns stay explained (no avoidance loop round an
 obstacle already gone round).
 """

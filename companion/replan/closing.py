@@ -17,8 +17,8 @@ vehicle outward; h(t0) the nearest earlier hit within ``MATCH_M``, among
 those ``BASELINE_S`` to twice that old), taken over at least ``BASELINE_S`` (a 1 cm range noise
 then reads as 0.03 m/s). Only hits within ``MATCH_M`` of each other are
 compared (the same object), and only unknown returns (not a row) are fed, and
-those of an obstacle added in flight (a re-route's; ``Replanner._place``): the
-vehicle saw it still, it may walk.
+those of an obstacle added in flight (a re-route's; ``Replanner._place``, where
+they stay explained): the vehicle saw it still, it may walk.
 The largest w counts while approaches keep being measured (each at most
 ``HOLD_S`` after the last); speeds below
 ``MIN_M_S`` (noise, a beam sliding over a still post as the vehicle yaws)

@@ -101,7 +101,7 @@ from .knownmap import KNOWN_ADDED, KNOWN_GROUND, UNKNOWN, KnownMap
 from .lift import WALL_MARGIN_M as LIFT_WALL_MARGIN_M, Over
 from .margin_exit import margin_exit
 from .corner import leg_end_wall_m
-from .closing import MATCH_M, ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
+from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
 from .attitude_wait import AttitudeWait
@@ -752,15 +752,17 @@ class Replanner:
         if ev.hit is None:
             return
         unknown = not self._explained(ev) and not self._explained_within_attitude(reading, pose)
-        measured = False
         if not unknown and self.cfg.give_way and self.known.classify(*ev.hit) == KNOWN_ADDED:
             # an added obstacle is one the vehicle saw still, not one the survey mapped: it may
-            # move (a worker stands, then walks). Its returns are read for an approach like any
-            # unknown one's, and once it comes closer they are unknown again, so the modes see
-            # it. Explained by its added cells, a worker standing where a re-route went round it
-            # walked 0.38 m toward the hovering vehicle before a return left them; the vehicle
-            # then fled too late (fresh seed 20261224 along, flight 7: contact)
-            unknown, measured = self._added_approaches(t_s, reading.sensor_id, ev), True
+            # move (a worker stands, then walks). Its returns are read for an approach, so the
+            # measurement has its history when one leaves the added cells and is unknown again.
+            # Unread, a worker standing where a re-route went round it walked 0.38 m at the
+            # hovering vehicle before its return left the cells, and the approach then took its
+            # 0.3 s baseline more: fresh seed 20261224 along, flight 7, contact. Its returns stay
+            # explained: made unknown on an approach, the realistic sensor profile's false
+            # approaches on a still added obstacle stopped a flight 60 times in 400 s until the
+            # gate refused a sample (fresh seed 20261227 across, flight 4)
+            self._measure_approach(t_s, reading.sensor_id, ev)
         if unknown:
             # the return may come from anywhere in the field of view: keep the edge
             # points too where they are a voxel apart and not on a known feature, as
@@ -772,7 +774,7 @@ class Replanner:
                     if self.known.classify(*q) == UNKNOWN:
                         mem.add(q, L_CANDIDATE, t_s)
             self.n_unknown += 1
-            if self.cfg.give_way and not measured:      # else no approach is ever measured: a still world
+            if self.cfg.give_way:          # else no approach is ever measured: a still world
                 self._measure_approach(t_s, reading.sensor_id, ev)
 
     def _measure_approach(self, t_s: float, sensor_id: int, ev) -> None:
@@ -780,14 +782,6 @@ class Replanner:
         lo, hi = field_sine_range(ev)
         self.closing.on_hit(t_s, sensor_id, ev.hit, ev.axis, self._still, ev.origin,
                             (ev.origin[2], ev.distance_m, lo, hi), ev.distance_m * math.tan(ev.half_max_rad))
-
-    def _added_approaches(self, t_s: float, sensor_id: int, ev) -> bool:
-        """A return on an added obstacle, read for an approach: True when an approach counts
-        and the mover it was last measured at is this return (within ``closing.MATCH_M`` and
-        the return's spread across its beam): the obstacle moves toward the vehicle."""
-        self._measure_approach(t_s, sensor_id, ev)
-        at = self.closing.mover_at(t_s)
-        return at is not None and math.hypot(at[0] - ev.hit[0], at[1] - ev.hit[1]) <= MATCH_M + at[2]
 
     def _explained_within_attitude(self, reading, pose) -> bool:
         """The attitude allowance: the known map explains the return with the beam placed by
