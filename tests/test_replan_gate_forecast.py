@@ -19,20 +19,17 @@ neither passes nor brakes for longer than GRACE_S is refused.
 from __future__ import annotations
 
 import math
-import types
 
 import numpy as np
 import pytest
 
-from mavcore.mission.replan import ReplanConfig
 from companion.safety import gate_forecast
-from companion.replan.replanner import Replanner
-from companion.replan.shaper import ReferenceShaper
 from companion.safety import Guard, GuardConfig
 from companion.safety.gate import GuardGate
 from companion.safety.guard import DELAY_S, GRACE_S, grace_accepts
 from companion.safety.stopping import stopping_speed_m_s
 from companion.trajectory.reference import RefSample
+from test_replan_stopping import _shaping
 from test_safety_guard import _scene
 
 R, C = 0.4, 0.5
@@ -99,17 +96,6 @@ def test_the_premise_a_straight_pass_keeps_clear_yet_breaks_the_law():
     refused = [gate.dispose(DT * k, RefSample((X_PASS, 5.0 + SPEED * DT * k, 1.5), (0.0, SPEED, 0.0), Z, Z, Z,
                                               (0.0, 1.0, 0.0)))[1] for k in range(int(5.0 / DT))]
     assert any(v is not None for v in refused) and gate.refusals[0]["rule"] == "speed"
-
-
-def _shaping(guard):
-    """What ``_shape`` reads, on a bare object (as tests/test_replan_stopping.py)."""
-    rp = types.SimpleNamespace(guard=guard, shaper=ReferenceShaper(1.0, 2.0), n_stop_limited=0, _brake=0.5,
-                               cfg=ReplanConfig(accel_m_s2=1.0, jerk_m_s3=2.0), emergency=False,
-                               n_emergency_brakes=0, _evading=False, _emergency_why="", _gate_since=None, _t_s=0.0,
-                               _brake_stepped=False, known=types.SimpleNamespace(ground_z=lambda x, y: 0.0))
-    for name in ("_shape", "_least_room", "_set_emergency", "_calm", "_height_band", "_wall_speed", "_allowed_speed"):
-        setattr(rp, name, types.MethodType(getattr(Replanner, name), rp))
-    return rp
 
 
 def _pass_the_post(seconds=9.0):
