@@ -532,3 +532,24 @@ def test_a_walker_coming_up_behind_a_slow_vehicle_is_given_way_at_the_escape_spe
         "      speed_m_s: 0.955\n      loop: false\n      start_s: 35.819\n"
         "    sensor_profile: icm42688p-bmm150-zedf9p\n  replan: {give_way: true}\n")
     assert rp["min_clearance_m"] >= ReplanConfig.clearance_m
+
+
+def test_a_give_way_from_a_false_approach_behind_does_not_close_on_the_worker_it_watches(tmp_path):
+    """Campaign obstacles-mix (seed 20261200), scenario 71 (tilted-hexagon): rejoining after a
+    climb, the vehicle stopped to watch a worker standing 3.6 m ahead, and a rear beam read a
+    1.41 m/s approach from a box 5 m behind it (its field's edge swept over the box's top as
+    the vehicle descended and pitched: the range fell 5.08 -> 4.84 m while the vehicle flew
+    away). The give-way backed away from that "mover" at up to 1.3 m/s, toward the worker,
+    who then walked down the corridor into it (contact at 37.2 s). A give-way now comes no
+    nearer to another unknown obstacle than to the mover (``Replanner._govern_others``): the
+    vehicle brakes where it is, and gives way to the worker when it walks."""
+    from mavcore.mission.replan import ReplanConfig
+
+    rp = _scenario_replanning(
+        tmp_path,
+        "campaign: obstacles-mix\nscenario: 71\nmission: tilted-hexagon\nseed: 556997552\ncut_s: 45.0\n"
+        "control: companion\noverrides:\n  sim:\n    obstacles:\n"
+        "    - {type: box, x: 11.757, y: 7.033, height: 1.308, size_x: 0.473, size_y: 0.396, yaw_deg: 74.742}\n"
+        "    movers:\n    - type: walker\n      path:\n      - [12.557, 15.389]\n      - [15.327, 10.067]\n"
+        "      speed_m_s: 1.215\n      loop: false\n      start_s: 34.924\n  replan: {give_way: true}\n")
+    assert rp["min_clearance_m"] >= ReplanConfig.clearance_m

@@ -101,7 +101,7 @@ from .knownmap import KNOWN_ADDED, KNOWN_GROUND, UNKNOWN, KnownMap
 from .lift import WALL_MARGIN_M as LIFT_WALL_MARGIN_M, Over
 from .margin_exit import margin_exit
 from .corner import leg_end_wall_m
-from .closing import ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
+from .closing import MATCH_M, ClosingSpeed, allowed_approach_m_s, give_way_range_m, give_way_speed_m_s
 from .nodata import BeamFreshness, block_no_data
 from .pace import pace
 from .attitude_wait import AttitudeWait
@@ -1462,6 +1462,8 @@ class Replanner:
         # allows a still obstacle (the guard's rule): a give-way toward a post behind at
         # 0.70 m/s where 0.57 m/s was allowed ended a flight (obstacles-wide scenario 1)
         v = self._govern(P, v, pts, dist, scale_only=True, movers=False)
+        # ... nor nearer to another unknown obstacle than to the mover (``_govern_others``)
+        v = self._govern_others(P, v, pts)
         # ... nor on what the guard knows beyond these points (the cells a re-route added, the
         # terrain): the guard's own speed law, along the command (a give-way at the whole
         # give-way speed, on a false 2.1 m/s mover, closed on a re-routed obstacle at 1.48 m/s
@@ -1472,6 +1474,31 @@ class Replanner:
             if h > lim:
                 v = v * (lim / h)
         return v
+
+    def _govern_others(self, P, v, pts) -> np.ndarray:
+        """A give-way's command (level, m/s) shortened so that it brings the vehicle no nearer
+        to any other unknown obstacle than it is to the mover it backs away from: an obstacle
+        not seen moving may be a worker who starts walking, and backing away from one threat
+        to come nearer another is no safer. The approach to each point the command closes on
+        (not the mover's own: within ``closing.MATCH_M`` and its returns' spread of where it
+        was measured) is held to the stopping law's speed for its excess distance (level,
+        its distance less the mover's), none where it is nearer than the mover. Twice a false
+        approach 2-5 m behind the vehicle (a wide beam's edge sweeping over a box or a row's
+        end as the vehicle pitched) sent the give-way at 0.8-1.3 m/s toward a worker 3.5-4 m
+        ahead it had stopped to watch, and the worker walked into it (mix seed 20261200,
+        flight 71; fresh seed 20261226, flight 0)."""
+        at = self.closing.mover_at(getattr(self, "_t_s", None))
+        if at is None or not len(pts):
+            return v
+        off = pts[:, :2] - P[:2]
+        d = np.maximum(np.hypot(off[:, 0], off[:, 1]), 1e-9)
+        approach = (off @ v[:2]) / d                           # closing speed on each point
+        closing_on = (approach > 0.0) & (np.hypot(pts[:, 0] - at[0], pts[:, 1] - at[1]) > MATCH_M + at[2])
+        if not closing_on.any():
+            return v
+        room = np.maximum(0.0, d[closing_on] - math.hypot(P[0] - at[0], P[1] - at[1]))
+        k = float(np.min(self._allowed_speed(room) / approach[closing_on]))
+        return v * min(1.0, k)
 
     def _give_way_side(self, P, u, lean: float) -> float:
         """The side (+1: along the leg, -1: back) a give-way backs away to along the corridor:
