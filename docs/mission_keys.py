@@ -199,7 +199,7 @@ NOTES: dict[str, tuple[str, str, str]] = {
                            "terrain."),
     "replan.speed_m_s": ("m/s", "> 0 or null", "Speed limit while avoiding; null: flight.speed_m_s."),
     "replan.vertical_speed_m_s": ("m/s", "> 0", "Vertical speed limit while avoiding and rejoining."),
-    "replan.accel_m_s2": ("m/s^2", "> 0", "Acceleration limit of the avoidance reference (per axis: along the command, across it and vertical; E and N when braking; [replan.md](replan.md#the-guard))."),
+    "replan.accel_m_s2": ("m/s^2", "> 0", "Acceleration limit of the avoidance reference (per axis: along the command, across it and vertical; braking, along the last command and across it; [replan.md](replan.md#the-guard))."),
     "replan.jerk_m_s3": ("m/s^3", "> 0", "Jerk limit of the avoidance reference (per axis, as `replan.accel_m_s2`) and of a rejoin (per axis)."),
     "replan.emergency_accel_m_s2": ("m/s^2", "(0, 20]", "Acceleration limit of the emergency brake (per axis; never below `replan.accel_m_s2`): a surface the normal brake can no longer stop for, and the guard gate's braked hover ([replan.md](replan.md#the-emergency-brake))."),
     "replan.emergency_jerk_m_s3": ("m/s^3", "(0, 20]", "Jerk limit of the emergency brake (per axis; never below `replan.jerk_m_s3`) ([replan.md](replan.md#the-emergency-brake))."),

@@ -58,16 +58,16 @@ def test_a_diagonal_command_is_flown_along_its_own_line():
 
 
 @pytest.mark.parametrize("direction", [(1, 0), (-1, 0), (0, 1), (0, -1), (0, 0)])
-def test_along_e_or_n_and_braking_the_axes_are_e_and_n_to_the_last_bit(direction):
-    # a rotation by a multiple of 90 deg is exact: the brake's prediction (per ENU axis) and
-    # every axis-aligned command are the per-axis model's, bit for bit
+def test_along_e_or_n_and_braking_on_e_the_axes_are_e_and_n_to_the_last_bit(direction):
+    # a rotation by a multiple of 90 deg is exact: every axis-aligned command, and a brake
+    # (zero command) on the axis E, are the per-axis model's, bit for bit
     rng = np.random.default_rng(20261129)
     sh = ReferenceShaper(*LIMITS)
     lim = (sh.a_max, sh.j_max, sh.s_max, sh.k_v, sh.k_a, sh.k_j)
     for _ in range(200):
         c = rng.uniform(0.0, 3.0) * np.array(direction, dtype=float)
         v, a, j = rng.normal(0, 1, 2), rng.normal(0, 1, 2), rng.normal(0, 2, 2)
-        got = planar_snap(c[0], c[1], v[0], v[1], a[0], a[1], j[0], j[1], DT, *lim)
+        got = planar_snap(c[0], c[1], v[0], v[1], a[0], a[1], j[0], j[1], DT, *lim, brake_u=(1.0, 0.0))
         want = tuple(axis_snap(c[i], v[i], a[i], j[i], DT, *lim) for i in range(2))
         assert got == want
 

@@ -11,7 +11,10 @@ the shaped state; what it can still stop is the shaper's brake from that state.
 
 ``brake_path`` is that brake: the shaper with a zero velocity command from
 (p, v, a, jerk), each axis on its own (the model is per axis), stepped every
-``dt_s`` until at rest; the points it passes, the stopping point last. It is
+``dt_s`` until at rest; the points it passes, the stopping point last. The
+horizontal axes are the shaper's brake's: along the last command and across it
+(``ShapedState.brake_u``; from a state no command reached, its own motion's,
+``shaper.brake_frame``), so a brake turns with the field whatever its bearing. It is
 the distance the reference still flies with nothing but braking, the delay
 (the jerk ramp and the acceleration still toward the surface) included: the
 CP_DELAY and stopping distance of PX4's collision prevention, for the reference
@@ -22,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .shaper import axis_snap
+from .shaper import axis_snap, brake_frame
 
 #: Step (s) of the predicted brake: coarser than a frame (4 ms) for its cost; the
 #: stopping point agrees with the frame-stepped brake within 1 cm
@@ -63,27 +66,44 @@ def axis_brake(v: float, a: float, j: float, shaper, dt_s: float = BRAKE_DT_S,
     return (out, vs, acc) if states else out
 
 
-def brake_path(p, v, a, jerk, shaper, dt_s: float = BRAKE_DT_S) -> np.ndarray:
+def brake_path(p, v, a, jerk, shaper, dt_s: float = BRAKE_DT_S, brake_u: tuple | None = None) -> np.ndarray:
     """(M, 3) ENU points (m) of ``shaper``'s brake to rest from the state (p, v, a, jerk)
     (ENU 3-sequences), every ``dt_s``: the first row is ``p``, the last the stopping point
-    (module doc). ``shaper``: a ``ReferenceShaper`` (its limits and gains)."""
-    return brake_states(p, v, a, jerk, shaper, dt_s)[0]
+    (module doc). ``shaper``: a ``ReferenceShaper`` (its limits and gains); ``brake_u``: the
+    state's brake axis (``ShapedState.brake_u``), None for a state no command reached."""
+    return brake_states(p, v, a, jerk, shaper, dt_s, brake_u)[0]
 
 
-def brake_states(p, v, a, jerk, shaper, dt_s: float = BRAKE_DT_S) -> tuple:
+def brake_states(p, v, a, jerk, shaper, dt_s: float = BRAKE_DT_S, brake_u: tuple | None = None) -> tuple:
     """(P, V, A): (M, 3) ENU positions (m), velocities (m/s) and accelerations (m/s^2) of
     ``brake_path``'s points, every ``dt_s`` from the state (its first row) to rest (an axis
-    already at rest keeps its last speed and acceleration, within the rest thresholds)."""
-    axes = [axis_brake(float(v[i]), float(a[i]), float(jerk[i]), shaper, dt_s, states=True)
-            for i in range(3)]
+    already at rest keeps its last speed and acceleration, within the rest thresholds).
+    ``brake_u`` as ``brake_path``'s."""
+    v = [float(c) for c in v]
+    a = [float(c) for c in a]
+    jerk = [float(c) for c in jerk]
+    ux, uy = brake_u if brake_u is not None else brake_frame(v[0], v[1], a[0], a[1])
+
+    def along(vec):                    # the state's components on (u, w = u turned +90 deg, up)
+        return (vec[0] * ux + vec[1] * uy, vec[1] * ux - vec[0] * uy, vec[2])
+
+    vb, ab, jb = along(v), along(a), along(jerk)
+    axes = [axis_brake(vb[i], ab[i], jb[i], shaper, dt_s, states=True) for i in range(3)]
     m = max(len(x[0]) for x in axes)
-    P, V, A = np.empty((m + 1, 3)), np.empty((m + 1, 3)), np.empty((m + 1, 3))
+    X, Vb, Ab = np.zeros((m + 1, 3)), np.empty((m + 1, 3)), np.empty((m + 1, 3))
     for i, (x, vs, acc) in enumerate(axes):
-        P[:, i], V[:, i], A[:, i] = float(p[i]), float(v[i]), float(a[i])
+        Vb[:, i], Ab[:, i] = vb[i], ab[i]
         if x:
             n = len(x)
-            P[1:n + 1, i] += x
-            P[n + 1:, i] += x[-1]
-            V[1:n + 1, i], V[n + 1:, i] = vs, vs[-1]
-            A[1:n + 1, i], A[n + 1:, i] = acc, acc[-1]
+            X[1:n + 1, i] = x
+            X[n + 1:, i] = x[-1]
+            Vb[1:n + 1, i], Vb[n + 1:, i] = vs, vs[-1]
+            Ab[1:n + 1, i], Ab[n + 1:, i] = acc, acc[-1]
+
+    def enu(B):                        # back from (u, w, up) to ENU
+        return np.column_stack([B[:, 0] * ux - B[:, 1] * uy, B[:, 0] * uy + B[:, 1] * ux, B[:, 2]])
+
+    P = enu(X) + np.asarray(p, dtype=float)
+    V, A = enu(Vb), enu(Ab)
+    V[0], A[0] = v, a                  # the state itself, as given
     return P, V, A

@@ -1333,7 +1333,7 @@ class Replanner:
             dt_brake = EMERGENCY_BRAKE_DT_S if self.emergency else BRAKE_DT_S
             key = (st, self.emergency)
             if key not in brakes:
-                brakes[key] = brake_states(st.p, st.v, st.a, st.jerk, sh, dt_brake)
+                brakes[key] = brake_states(st.p, st.v, st.a, st.jerk, sh, dt_brake, st.brake_u)
             P, V, A = brakes[key]
             verdict, flags0, self._brake_stepped = self.guard.forecast_brake(
                 here, P, V, A, dt_brake, since, margin_m, STOP_TOL_M, self._brake_stepped)

@@ -10,7 +10,7 @@ third-order reference model tracks the command with nested saturations::
 
 per axis, integrated exactly over each frame for constant snap. The
 horizontal axes are the command's own: along its direction and across it
-(E and N when the command is zero: the brake; ``planar_snap``), so from rest
+(``planar_snap``), so from rest
 the across axis has nothing to do and the reference moves the way it is
 commanded, while a small correction across still has the whole of its own
 axis's limits when the along axis saturates. On fixed E and N axes, each
@@ -22,7 +22,24 @@ shares the limits, so a correction across a saturated motion along is
 slowed in proportion, and a reference inside a row's clearance could not
 take back its last millimetre per second toward the row fast enough to go
 on along it (tests/test_replan_stopping.py). For a command along E or N
-the two frames are the same axes. The vertical axis stays apart: with a shared
+the two frames are the same axes. The brake (a zero command) has no direction
+of its own: it stays on the axes of the last command (along it and across it),
+so a brake from motion along a command goes straight on, and what the state
+still has across the command (an approach the command had turned away from) is
+stopped on its own axis, soonest; from a state no command reached (``reset``),
+on the axes of its own motion (``brake_frame``). On E and N, a brake from a
+diagonal stopped each axis on its own, so the axis with more speed ran on after
+the other had stopped and the brake bent toward it: backing away at 1.3 m/s
+along a row at 30 deg, the stopping point lay 0.13 m nearer the row than the
+line flown. Near a row that bend was refused as an approach, the fallback
+brake drifted the reference into the row's margin, and there every motion
+along the row was refused until a walker reached the vehicle (fresh seed
+20261228 along, flight 5). A brake on the axes of the state's own velocity goes
+straight too, but along an approach the command has already turned from: its
+last millimetres per second toward a face ran on for the whole brake, and
+beside a face the reference could no longer go on along it
+(tests/test_replan_stopping.py). On the command's axes the brake turns with the
+field, whatever its bearing (tests/test_replan_brake.py). The vertical axis stays apart: with a shared
 limit, braking along the track uses up the jerk a climb needs to level
 off, and the vertical speed overshoots. Unsaturated, v follows v_cmd
 with the triple pole s = -omega (k_j = 3 omega, k_a = omega, k_v = omega / 3:
@@ -36,8 +53,8 @@ earlier command may start beyond a limit on the new ones, and the jerk's
 then only comes back (tests/test_replan_shaper.py), while the acceleration
 can pass a_max as that jerk unwinds (random commands each held 0.2 s:
 horizontal |a| up to 1.53 a_max, against sqrt(2) a_max on fixed axes; the
-emergency limit is 3 a_max). The brake (a zero command) is on E and N, so
-its prediction is exact whatever the state. p, v, a and jerk are
+emergency limit is 3 a_max). The brake's prediction (``companion.replan.brake``)
+steps the same axes. p, v, a and jerk are
 continuous by construction (the state is integrated, never reset, except
 by ``reset`` which takes the state to continue from).
 """
@@ -76,20 +93,37 @@ def axis_snap(v_cmd: float, v: float, a: float, j: float, dt_s: float, a_max: fl
     return si
 
 
-#: Below this horizontal speed (m/s) a command gives no direction (``planar_snap``): E-N axes.
+#: Below this horizontal speed (m/s) a command gives no direction (``planar_snap``): the
+#: brake's axes (``brake_frame``); below it a state's speed (m/s^2: its acceleration) neither.
 FRAME_EPS_M_S = 1e-9
+
+
+def brake_frame(vx: float, vy: float, ax: float, ay: float) -> tuple:
+    """The horizontal unit vector a brake stops along from a state no command reached (module
+    doc): the velocity's direction, the acceleration's from rest, E when neither has one.
+    Across it is the other axis of the brake."""
+    n = math.hypot(vx, vy)
+    if n > FRAME_EPS_M_S:
+        return vx / n, vy / n
+    n = math.hypot(ax, ay)
+    if n > FRAME_EPS_M_S:
+        return ax / n, ay / n
+    return 1.0, 0.0
 
 
 def planar_snap(cx: float, cy: float, vx: float, vy: float, ax: float, ay: float, jx: float, jy: float,
                 dt_s: float, a_max: float, j_max: float, s_max: float, k_v: float, k_a: float,
-                k_j: float) -> tuple:
+                k_j: float, brake_u: tuple | None = None) -> tuple:
     """The horizontal snap (m/s^4, E and N) of the reference model over a frame of ``dt_s``
     toward the command (cx, cy) from v, a, j: ``axis_snap`` along the command's direction and
-    across it (module doc). A zero command (the brake) is on E and N, as is a command along
-    E or N, to the last bit (a rotation by a multiple of 90 deg is exact): the brake's
-    prediction (``companion.replan.brake``) steps E and N on their own."""
+    across it (module doc). A zero command (the brake) is on the axes ``brake_u`` (a unit
+    vector and the one +90 deg from it; ``brake_frame`` of this state when None). A command
+    along E or N is on E and N to the last bit (a rotation by a multiple of 90 deg is exact)."""
     n = math.hypot(cx, cy)
-    ux, uy = (cx / n, cy / n) if n > FRAME_EPS_M_S else (1.0, 0.0)
+    if n > FRAME_EPS_M_S:
+        ux, uy = cx / n, cy / n
+    else:
+        ux, uy = brake_u if brake_u is not None else brake_frame(vx, vy, ax, ay)
     # along (u) and across (w = u turned +90 deg)
     su = axis_snap(cx * ux + cy * uy, vx * ux + vy * uy, ax * ux + ay * uy, jx * ux + jy * uy,
                    dt_s, a_max, j_max, s_max, k_v, k_a, k_j)
@@ -100,13 +134,16 @@ def planar_snap(cx: float, cy: float, vx: float, vy: float, ax: float, ay: float
 
 @dataclass(frozen=True, slots=True)
 class ShapedState:
-    """Reference state (ENU, float 3-tuples): p m, v m/s, a m/s^2, jerk m/s^3, snap m/s^4."""
+    """Reference state (ENU, float 3-tuples): p m, v m/s, a m/s^2, jerk m/s^3, snap m/s^4;
+    ``brake_u``: the horizontal axis (unit 2-tuple) a brake from it is on (the last command's
+    direction; module doc), None when no command reached it (``brake_frame`` of its own)."""
 
     p: tuple
     v: tuple
     a: tuple
     jerk: tuple
     snap: tuple
+    brake_u: tuple | None = None
 
 
 class ReferenceShaper:
@@ -129,6 +166,7 @@ class ReferenceShaper:
         self.a = [0.0, 0.0, 0.0]
         self.j = [0.0, 0.0, 0.0]
         self.s = [0.0, 0.0, 0.0]
+        self.brake_u: tuple | None = None
 
     def set_limits(self, accel_m_s2: float, jerk_m_s3: float, snap_m_s4: float | None = None,
                    omega_rad_s: float = OMEGA_RAD_S) -> None:
@@ -147,9 +185,11 @@ class ReferenceShaper:
         self.a = [float(x) for x in a]
         self.j = [float(x) for x in jerk]
         self.s = [0.0, 0.0, 0.0]
+        self.brake_u = None
 
     def state(self) -> ShapedState:
-        return ShapedState(tuple(self.p), tuple(self.v), tuple(self.a), tuple(self.j), tuple(self.s))
+        return ShapedState(tuple(self.p), tuple(self.v), tuple(self.a), tuple(self.j), tuple(self.s),
+                           self.brake_u)
 
     def preview(self, dt_s: float, v_cmd) -> ShapedState:
         """The state ``step(dt_s, v_cmd)`` would reach, without moving there."""
@@ -157,18 +197,25 @@ class ReferenceShaper:
             return self.state()
         p, v, a, j = self.p, self.v, self.a, self.j
         lim = (self.a_max, self.j_max, self.s_max, self.k_v, self.k_a, self.k_j)
-        s = [*planar_snap(v_cmd[0], v_cmd[1], v[0], v[1], a[0], a[1], j[0], j[1], dt_s, *lim),
+        # a zero command brakes on the last command's axes (module doc)
+        n = math.hypot(v_cmd[0], v_cmd[1])
+        if n > FRAME_EPS_M_S:
+            brake_u = (v_cmd[0] / n, v_cmd[1] / n)
+        else:
+            brake_u = self.brake_u if self.brake_u is not None else brake_frame(v[0], v[1], a[0], a[1])
+        s = [*planar_snap(v_cmd[0], v_cmd[1], v[0], v[1], a[0], a[1], j[0], j[1], dt_s, *lim, brake_u=brake_u),
              axis_snap(v_cmd[2], v[2], a[2], j[2], dt_s, *lim)]
         h, h2, h3, h4 = dt_s, dt_s * dt_s / 2.0, dt_s ** 3 / 6.0, dt_s ** 4 / 24.0
         return ShapedState(tuple(p[i] + v[i] * h + a[i] * h2 + j[i] * h3 + s[i] * h4 for i in range(3)),
                            tuple(v[i] + a[i] * h + j[i] * h2 + s[i] * h3 for i in range(3)),
                            tuple(a[i] + j[i] * h + s[i] * h2 for i in range(3)),
-                           tuple(j[i] + s[i] * h for i in range(3)), tuple(s))
+                           tuple(j[i] + s[i] * h for i in range(3)), tuple(s), brake_u)
 
     def commit(self, state: ShapedState) -> ShapedState:
         """Move to a state ``preview`` gave (the frame's step)."""
         self.p, self.v, self.a, self.j, self.s = (list(state.p), list(state.v), list(state.a),
                                                   list(state.jerk), list(state.snap))
+        self.brake_u = state.brake_u
         return state
 
     def step(self, dt_s: float, v_cmd) -> ShapedState:
