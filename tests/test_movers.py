@@ -553,3 +553,26 @@ def test_a_give_way_from_a_false_approach_behind_does_not_close_on_the_worker_it
         "    movers:\n    - type: walker\n      path:\n      - [12.557, 15.389]\n      - [15.327, 10.067]\n"
         "      speed_m_s: 1.215\n      loop: false\n      start_s: 34.924\n  replan: {give_way: true}\n")
     assert rp["min_clearance_m"] >= ReplanConfig.clearance_m
+
+
+def test_giving_way_along_a_row_at_30_deg_the_brake_does_not_bend_into_the_row(tmp_path):
+    """Fresh seed 20261228 along, flight 5 (tilted-hexagon, rows at 30 deg): a worker stands
+    2.6 m ahead in the outer pass, then walks down it at 1.25 m/s. The vehicle backs away
+    along the row at up to 1.3 m/s. With the brake on E and N, every predicted brake bent
+    toward the row (the axis with more speed ran on), was refused as an approach, and the
+    fallback brake drifted the reference into the row's margin band, where every motion
+    along the row was then refused: the worker walked into the vehicle (contact at 20 s).
+    With the brake on the command's axes (``companion.replan.shaper``) the vehicle backs out
+    of the pass: 0.78 m of true clearance, and the flight ends in a hold the independent
+    route check agrees with (the worker stands at the end of the pass)."""
+    rp = _scenario_replanning(
+        tmp_path,
+        "campaign: fresh23-along\nscenario: 5\nmission: tilted-hexagon\nseed: 967294313\ncut_s: 45.0\n"
+        "control: companion\noverrides:\n  sim:\n    obstacles:\n"
+        "    - {type: box, x: 12.961, y: 10.265, height: 1.123, size_x: 0.834, size_y: 0.41, yaw_deg: 60.377}\n"
+        "    - {type: cylinder, x: 13.49, y: 12.549, height: 1.494, radius: 0.114}\n"
+        "    movers:\n    - type: walker\n      path:\n      - [8.044, 6.435]\n      - [2.847, 3.435]\n"
+        "      speed_m_s: 1.245\n      loop: false\n      start_s: 16.737\n  replan: {give_way: true}\n")
+    assert rp["min_clearance_m"] >= 0.5
+    holds = [e for e in rp["event_list"] if e["action"] == "hold"]
+    assert all("independent check agrees" in e["detail"] for e in holds)
