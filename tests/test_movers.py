@@ -576,3 +576,65 @@ def test_giving_way_along_a_row_at_30_deg_the_brake_does_not_bend_into_the_row(t
     assert rp["min_clearance_m"] >= 0.5
     holds = [e for e in rp["event_list"] if e["action"] == "hold"]
     assert all("independent check agrees" in e["detail"] for e in holds)
+
+
+def test_a_walker_keeping_pace_with_the_vehicle_backing_away_from_it_stays_a_mover():
+    """A worker walks at 1.3 m/s after a vehicle that backs away from it, looking back (-x)
+    at it. While the vehicle is slower the walker gains: 1.3 m/s is measured. Once the
+    vehicle keeps pace (1.3 m/s from 1.0 s on), the return rides with the sensor: no speed
+    of its own, but where the mover was, so its approach holds for as long as it keeps
+    coming (here 3 s, three times ``HOLD_S``), at 1.3 m/s, not raised. Once its returns
+    stop, the approach lapses ``HOLD_S`` later. The same riding returns with no approach
+    measured first (the vehicle at 1.3 m/s from the start) are nothing: a return riding
+    with the vehicle starts no give-way (fresh seed 20261224 along, flight 7: with the
+    approach let go after a second of riding, the give-way braked and the worker walked
+    into the vehicle)."""
+    from companion.replan.closing import HOLD_S, ClosingSpeed
+
+    u = (-1.0, 0.0, 0.0)
+    walker = 1.3
+
+    def vehicle_x(t, from_start):
+        if from_start:
+            return walker * t
+        return 0.5 * t if t < 1.0 else 0.5 + walker * (t - 1.0)
+
+    for from_start in (False, True):
+        c = ClosingSpeed()
+        t = 0.0
+        while t < 4.0 - 1e-9:
+            o = (vehicle_x(t, from_start), 0.0, 1.5)
+            c.on_hit(t, 4, (-2.0 + walker * t, 0.0, 1.5), u, origin_enu_m=o)
+            t = round(t + 0.05, 10)
+        if from_start:
+            assert c.approach_m_s(3.95) == 0.0
+            continue
+        assert c.approach_m_s(3.95) == pytest.approx(walker, abs=1e-9)
+        assert c.approach_m_s(3.95 + HOLD_S - 0.01) == pytest.approx(walker, abs=1e-9)
+        assert c.approach_m_s(3.95 + HOLD_S + 0.01) == 0.0
+
+
+def test_a_held_approach_is_not_raised_by_returns_riding_with_the_vehicle():
+    """0.5 m/s measured while the vehicle hovers, then returns that keep their place relative
+    to the sensor while the vehicle backs away at 1.3 m/s from 1.0 s (read as a world speed:
+    1.3 m/s). The pairs that straddle the change and do not ride count: the last of them,
+    at 1.1 s against the return of 0.8 s (the return moved 0.23 m, the sensor 0.13 m: 0.33
+    m/s apart, over ``MIN_M_S``), reads 0.23 / 0.3 = 0.767 m/s. From then on the returns ride
+    (0.25 m/s apart or less): the approach holds at 0.767 m/s, not the vehicle's own speed
+    (which would raise the give-way's speed, and the riding "mover's" with it)."""
+    from companion.replan.closing import ClosingSpeed
+
+    u = (-1.0, 0.0, 0.0)
+    c = ClosingSpeed()
+    t = 0.0
+    while t < 3.0 - 1e-9:
+        if t < 1.0:
+            o, hit = (0.0, 0.0, 1.5), (-2.0 + 0.5 * t, 0.0, 1.5)
+        else:
+            o = (1.3 * (t - 1.0), 0.0, 1.5)
+            hit = (-1.5 + 1.3 * (t - 1.0), 0.0, 1.5)
+        c.on_hit(t, 4, hit, u, origin_enu_m=o)
+        t = round(t + 0.05, 10)
+    last_counted = ((-1.5 + 1.3 * 0.1) - (-2.0 + 0.5 * 0.8)) / 0.3
+    assert last_counted == pytest.approx(0.767, abs=1e-3)
+    assert c.approach_m_s(2.95) == pytest.approx(last_counted, abs=1e-9)

@@ -52,7 +52,15 @@ read as a world speed, a mover chasing it at its own speed. The give-way cap
 (``give_way_speed_m_s``) would then let the vehicle fly faster than its cruise
 to outpace it, which makes the "mover" faster still. A true chaser at exactly
 the vehicle's speed is not closing; it is counted as soon as it gains on the
-vehicle by ``MIN_M_S``.
+vehicle by ``MIN_M_S``. But a mover already measured coming is not let go
+because the vehicle backing away from it now keeps pace with it: a return that
+rides with the vehicle where that mover was (``following``: within ``MATCH_M``
+and the return's spread of ``mover_at``, while its approach counts) holds the
+approach it had, without raising it. A worker walking after a vehicle that
+backed away at 1.2-1.7 m/s, 1.1 m behind it, rode with it for a second; the
+approach lapsed (``HOLD_S``), the give-way braked, and the worker walked into
+it (fresh seed 20261224 along, flight 7). A riding return with no approach
+measured before it starts nothing.
 
 Movers are read by beams within ``MOVER_TILT_MAX_DEG`` (60 deg) of level; one tilted more
 than ``PLANE_TILT_DEG`` (15 deg) only with its ``field`` given, only against its own earlier
@@ -208,14 +216,28 @@ class ClosingSpeed:
                 # a mover coming down the beam moves its return along the axis; a beam sweeping
                 # over a still surface (the vehicle flying past a box) slides it across
                 w, aligned = -along / (t_s - t0), -along >= ALIGN_MIN * moved
-            if MIN_M_S <= w <= MAX_M_S and aligned and not riding(d, o, o0, t_s - t0) and \
-                    not (s0 == sensor_id and still_plane(e0, field, t_s - t0)):
+            counts = MIN_M_S <= w <= MAX_M_S and aligned and \
+                not (s0 == sensor_id and still_plane(e0, field, t_s - t0))
+            if counts and not riding(d, o, o0, t_s - t0):
                 # the largest speed while the mover keeps coming (conservative), fresh again
                 if w >= self._w or t_s - self._t_w > HOLD_S:
                     self._w = w
                 self._t_w = t_s
                 self._at = (hit[0], hit[1], float(spread_m))
+            elif counts and self.following(t_s, hit):
+                # riding with the vehicle, where the mover being given way to was: it keeps
+                # pace with the vehicle backing away from it (module notes). Its approach is
+                # held, not raised: a speed read from a return that rides with the vehicle
+                # grows with the vehicle's own
+                self._t_w = t_s
+                self._at = (hit[0], hit[1], float(spread_m))
         h.append((t_s, hit, u, o, sensor_id, field))
+
+    def following(self, t_s: float, hit) -> bool:
+        """An approach counts at ``t_s`` and ``hit`` (ENU m) lies where it was measured
+        (within ``MATCH_M`` and its return's spread of ``mover_at``)."""
+        at = self.mover_at(t_s)
+        return at is not None and math.hypot(hit[0] - at[0], hit[1] - at[1]) <= MATCH_M + at[2]
 
     def approach_m_s(self, t_s: float | None) -> float:
         """The approach speed (m/s, >= 0) that the governor allows for at time ``t_s``
