@@ -113,17 +113,14 @@ def brake_frame(vx: float, vy: float, ax: float, ay: float) -> tuple:
 
 def planar_snap(cx: float, cy: float, vx: float, vy: float, ax: float, ay: float, jx: float, jy: float,
                 dt_s: float, a_max: float, j_max: float, s_max: float, k_v: float, k_a: float,
-                k_j: float, brake_u: tuple | None = None) -> tuple:
+                k_j: float, brake_u: tuple) -> tuple:
     """The horizontal snap (m/s^4, E and N) of the reference model over a frame of ``dt_s``
     toward the command (cx, cy) from v, a, j: ``axis_snap`` along the command's direction and
     across it (module doc). A zero command (the brake) is on the axes ``brake_u`` (a unit
-    vector and the one +90 deg from it; ``brake_frame`` of this state when None). A command
+    vector and the one +90 deg from it; ``ReferenceShaper.preview`` chooses it). A command
     along E or N is on E and N to the last bit (a rotation by a multiple of 90 deg is exact)."""
     n = math.hypot(cx, cy)
-    if n > FRAME_EPS_M_S:
-        ux, uy = cx / n, cy / n
-    else:
-        ux, uy = brake_u if brake_u is not None else brake_frame(vx, vy, ax, ay)
+    ux, uy = (cx / n, cy / n) if n > FRAME_EPS_M_S else brake_u
     # along (u) and across (w = u turned +90 deg)
     su = axis_snap(cx * ux + cy * uy, vx * ux + vy * uy, ax * ux + ay * uy, jx * ux + jy * uy,
                    dt_s, a_max, j_max, s_max, k_v, k_a, k_j)
